@@ -1,0 +1,104 @@
+// trellis/core/data.hpp — the preallocated workspace that goes beside a Model.
+//
+// Every buffer an algorithm writes is sized here, once; after the first evaluation no algorithm
+// allocates (tests/core/test_no_allocation.cpp proves it with Eigen's malloc guard). One Data per
+// thread. Results are plain public members, documented with their dimensions.
+#pragma once
+
+#include "trellis/core/model.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/QR>
+
+#include <vector>
+
+namespace trellis {
+
+/// Outcome of an evaluation that solves the KKT system [M Aᵀ; A 0].
+struct DynamicsStatus {
+  enum class Code {
+    kOk,
+    kRedundantConstraints,   ///< A is rank deficient; q̈ is exact, λ is the minimum-norm choice
+    kSingularMassMatrix,     ///< M is not positive definite (a joint moves no mass); no result
+    kSingularConstraints,    ///< A M⁻¹ Aᵀ numerically singular in a way that makes q̈ unreliable
+    kNonFinite,              ///< an input or result is NaN/Inf
+  };
+  Code code = Code::kOk;
+  int constraintRank = 0;          ///< numerical rank of A (= nc when full)
+  double constraintConditioning = 1.0;  ///< reciprocal condition estimate of A M⁻¹ Aᵀ (1 if nc = 0)
+  std::string message;             ///< empty when ok; names the configuration / constraint otherwise
+  /// True when q̈ (and the linearization) are valid: kOk or kRedundantConstraints.
+  bool ok() const { return code == Code::kOk || code == Code::kRedundantConstraints; }
+};
+
+/// Kinetic and potential energy, T = ½ q̇ᵀ M q̇, V = gravity + springs.
+struct Energy {
+  double kinetic = 0.0;
+  double potential = 0.0;
+  double total() const { return kinetic + potential; }
+};
+
+class Data {
+ public:
+  explicit Data(const Model& model);
+
+  // ---- Results --------------------------------------------------------------------------------
+  /// World pose of every frame (model.frames() order).
+  std::vector<Eigen::Isometry3d> framePose;
+  /// Body velocity of every frame, [v_b; ω_b] in the frame's own axes.
+  std::vector<Vector6d> frameVelocity;
+  Eigen::MatrixXd M;                  ///< n×n mass matrix ∂²L/∂q̇∂q̇
+  Eigen::VectorXd bias;               ///< n: inverse dynamics at q̈ = 0 minus all forces, ID(q,q̇,0) − Q
+  Eigen::VectorXd constraintValue;    ///< nc: h(q) (0 for nonholonomic rows)
+  Eigen::MatrixXd constraintJacobian; ///< nc×n: A(q)
+  Eigen::VectorXd constraintDrift;    ///< nc: Ȧ q̇
+  Eigen::VectorXd qdd;                ///< n: forward dynamics q̈
+  Eigen::VectorXd lambda;             ///< nc: constraint forces, M q̈ = … + Aᵀ λ
+  Eigen::MatrixXd inputMatrix;        ///< n×m: ∂Q/∂u
+  Eigen::MatrixXd A;                  ///< 2n×2n: ∂ẋ/∂x, x = [q; q̇]
+  Eigen::MatrixXd B;                  ///< 2n×m:  ∂ẋ/∂u
+  Eigen::MatrixXd dqdd_dq, dqdd_ddq, dqdd_du;   ///< blocks of A and B (n×n, n×n, n×m)
+  Eigen::MatrixXd dlambda_dx;         ///< nc×(2n+m): ∂λ/∂[q; q̇; u]
+  Eigen::MatrixXd constraintVelocityJacobian;  ///< nc×n: ∂(A q̇)/∂q
+  /// Orthonormal basis (2n×d) of the tangent space of {h(q) = 0, A(q) q̇ = 0} at x, and the
+  /// linearization expressed on it: Ar = Tᵀ A T (d×d), Br = Tᵀ B (d×m).
+  Eigen::MatrixXd tangentBasis, reducedA, reducedB;
+  DynamicsStatus status;
+
+  // ---- Workspace (algorithms only) ------------------------------------------------------------
+  std::vector<Eigen::Matrix3d> jointR;   ///< world rotation of each joint body
+  std::vector<Eigen::Vector3d> jointP;   ///< world position of each joint body origin
+  std::vector<Vector6d> S;               ///< joint motion subspace (world spatial twist)
+  std::vector<Vector6d> v, a;            ///< body spatial velocity, acceleration (no gravity)
+  std::vector<Vector6d> f;               ///< per body: I(a − g) + v ×* I v − F_ext, then subtree sum
+  std::vector<Vector6d> fext;            ///< external wrench on each body
+  // world-frame inertia of each body: m, h = m c, I about the world origin
+  std::vector<double> wm;
+  std::vector<Eigen::Vector3d> wh;
+  std::vector<Eigen::Matrix3d> wI;
+  std::vector<Eigen::Vector3d> ch;       ///< composite (subtree) inertia for the mass matrix
+  std::vector<double> cm;
+  std::vector<Eigen::Matrix3d> cI;
+  // tangents of one directional derivative
+  std::vector<Vector6d> dTheta, dS, dv, da, df, dfext;
+  std::vector<Vector6d> Iv, Ia;          ///< I v and I (a − g) per body
+  Eigen::VectorXd u;                     ///< inputs of the current evaluation
+  Eigen::VectorXd qddZero;
+  Eigen::MatrixXd rhsX;                  ///< n×(2n+m): −∂r/∂[x; u]
+  Eigen::MatrixXd crhsX;                 ///< nc×(2n+m): −∂c/∂[x; u]
+  Eigen::LLT<Eigen::MatrixXd> massLLT;
+  Eigen::MatrixXd Y;                     ///< n×nc: L⁻¹ Aᵀ
+  Eigen::MatrixXd schur;                 ///< nc×nc: A M⁻¹ Aᵀ
+  Eigen::LLT<Eigen::MatrixXd> schurLLT;
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> schurEig;
+  Eigen::MatrixXd schurPinv;
+  bool schurUsesPinv = false;
+  Eigen::VectorXd tmpN, tmpC;
+  Eigen::MatrixXd tmpNX, tmpCX;
+  Eigen::MatrixXd constraintStateJacobian;  ///< rows of the map Φ(x) = [h(q); A q̇]
+  Eigen::FullPivHouseholderQR<Eigen::MatrixXd> basisQR;
+  Eigen::MatrixXd basisQ;
+};
+
+}  // namespace trellis

@@ -1,0 +1,30 @@
+// trellis/core/linearization.hpp — exact linearization of ẋ = [q̇; q̈(q, q̇, u)] (paper Sec. III).
+//
+// With q̈ and λ from computeDynamics, the residuals
+//   r(q, q̇, u) = ID(q, q̇, q̈) − Q(q, q̇, u) − A(q)ᵀ λ     (equations of motion)
+//   c(q, q̇)    = A(q) q̈ + Ȧ(q, q̇) q̇                     (constraint acceleration)
+// are differentiated analytically with q̈ and λ held fixed (one tangent Newton-Euler pass per
+// state direction, touching only the joints a coordinate moves), and
+//   [M Aᵀ; A 0] [∂q̈; −∂λ] = −[∂r; ∂c]
+// is solved with the factorization already used for the dynamics (ERRATA.md: this is the paper's
+// ∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂u, ∂λ/∂· written without expanding the inverse).
+#pragma once
+
+#include "trellis/core/data.hpp"
+
+namespace trellis {
+
+/// data.A = [[0, I], [∂q̈/∂q, ∂q̈/∂q̇]] (2n×2n), data.B = [[0], [∂q̈/∂u]] (2n×m), plus the blocks
+/// dqdd_dq, dqdd_ddq, dqdd_du, dlambda_dx, and everything computeDynamics computes.
+/// Returns the status of the KKT solve (also in data.status); A, B are valid when status.ok().
+DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen::VectorXd& q,
+                                    const Eigen::VectorXd& dq, const Eigen::VectorXd& u);
+
+/// Orthonormal basis T (data.tangentBasis, 2n×d) of the tangent space at x = [q; q̇] of the
+/// constraint manifold {h(q) = 0, A(q) q̇ = 0} — the null space of ∂Φ/∂x, Φ = [h; A q̇] (holonomic
+/// rows in both, nonholonomic rows only in A q̇) — and the linearization on it,
+/// data.reducedA = Tᵀ A T, data.reducedB = Tᵀ B. Requires computeLinearization at the same state.
+/// Returns d = 2n − rank(∂Φ/∂x). Without constraints T = I.
+int computeConstraintTangentBasis(const Model& model, Data& data);
+
+}  // namespace trellis

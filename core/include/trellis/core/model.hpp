@@ -1,0 +1,190 @@
+// trellis/core/model.hpp — the immutable description of a mechanical system.
+//
+// A Model is a tree of coordinate frames (paper Sec. II-A) reduced, when it is finalized by a
+// ModelBuilder, to what the algorithms need: one *joint* per configuration variable (a frame whose
+// local transform is driven by that variable) and constant placements for everything else.
+// Chains of constant transforms are folded together, so every cost follows the joints, not the
+// frames. Masses are lumped into one rigid-body inertia per joint; forces, potentials and
+// constraints refer to points fixed on joint bodies.
+//
+// Conventions used by every algorithm:
+//  - configuration order = pre-order of the frame tree (parent before children, children in the
+//    order they were added) of the frames that carry a configuration variable; a joint's subtree
+//    is therefore the contiguous index range [j, joint(j).subtreeEnd);
+//  - spatial vectors are 6-vectors expressed in world axes at the world origin, ordered
+//    (linear, angular): a twist [v_o; ω], a wrench [f; n].
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <array>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace trellis {
+
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+
+/// Index of the fixed world frame / of "no joint" (a point fixed in the world).
+inline constexpr int kWorld = -1;
+
+/// The six primitive transforms of the paper and a constant homogeneous transform.
+enum class TransformType { kTx, kTy, kTz, kRx, kRy, kRz, kConstSE3 };
+
+/// A frame's local transform g_local from the frame to its parent:
+/// g_world,k = g_world,parent · g_local. Either driven by a configuration variable or constant.
+struct Transform {
+  TransformType type = TransformType::kConstSE3;
+  std::string config;                                  ///< empty: constant transform
+  double value = 0.0;                                  ///< constant value (tx…rz only)
+  Eigen::Matrix4d matrix = Eigen::Matrix4d::Identity();  ///< kConstSE3 only
+
+  static Transform tx(double value);
+  static Transform ty(double value);
+  static Transform tz(double value);
+  static Transform rx(double angle);
+  static Transform ry(double angle);
+  static Transform rz(double angle);
+  static Transform tx(std::string config);
+  static Transform ty(std::string config);
+  static Transform tz(std::string config);
+  static Transform rx(std::string config);
+  static Transform ry(std::string config);
+  static Transform rz(std::string config);
+  static Transform constSE3(const Eigen::Matrix4d& matrix);
+
+  bool isDriven() const { return !config.empty(); }
+  /// The 4×4 homogeneous matrix of this transform at coordinate value `q` (ignored if constant).
+  Eigen::Isometry3d evaluate(double q) const;
+};
+
+/// A point mass at a frame's origin (its centre of mass) with rotational inertia about that point
+/// in the frame's own axes. Kinetic energy ½ m |v|² + ½ ω_bᵀ I ω_b.
+struct Mass {
+  double m = 0.0;
+  Eigen::Matrix3d inertia = Eigen::Matrix3d::Zero();
+};
+
+/// A point fixed on the body of `joint` (kWorld: fixed in the world), in that body's axes.
+struct BodyPoint {
+  int joint = kWorld;
+  Eigen::Vector3d local = Eigen::Vector3d::Zero();
+};
+
+/// One configuration variable and the rigid body it moves. The joint frame is placed at
+/// g_parent · (R0, p0) · motion(q), motion a rotation about or translation along axis `axis`.
+struct Joint {
+  std::string config;      ///< configuration variable name
+  std::string frame;       ///< name of the frame that carries it
+  int parent = kWorld;     ///< parent joint (kWorld if the chain starts at the world)
+  int subtreeEnd = 0;      ///< one past the last joint of this joint's subtree
+  int depth = 0;           ///< number of joints on the path to the world, this one included
+  bool revolute = true;
+  int axis = 2;            ///< 0 = x, 1 = y, 2 = z of the joint frame
+  Eigen::Matrix3d R0 = Eigen::Matrix3d::Identity();  ///< constant placement in the parent body
+  Eigen::Vector3d p0 = Eigen::Vector3d::Zero();
+  // Lumped rigid-body inertia of everything fixed to this joint's body, in the joint frame:
+  double mass = 0.0;
+  Eigen::Vector3d firstMoment = Eigen::Vector3d::Zero();  ///< h = m · c (c: centre of mass)
+  Eigen::Matrix3d inertiaAtOrigin = Eigen::Matrix3d::Zero();  ///< about the joint origin
+};
+
+/// Where a named frame sits: on which joint body, at which constant placement.
+struct FramePlacement {
+  std::string name;
+  int parentFrame = kWorld;  ///< the frame tree as given
+  int joint = kWorld;        ///< body the frame is fixed to
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  ///< frame axes in body axes
+  Eigen::Vector3d p = Eigen::Vector3d::Zero();      ///< frame origin in body coordinates
+};
+
+struct LinearSpring {            ///< V = ½ k (‖p1 − p2‖ − x0)²
+  BodyPoint a, b;
+  double k = 0.0, x0 = 0.0;
+};
+struct ConfigSpring {            ///< V = ½ k (q_i − q0)²
+  int config = 0;
+  double k = 0.0, q0 = 0.0;
+};
+struct ConfigForce {             ///< Q[config] += u[input]
+  int config = 0, input = 0;
+};
+struct BodyWrench {              ///< Q = J_bᵀ w, w = [f; τ] in the frame's axes at its origin
+  int joint = kWorld;
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  ///< frame axes in body axes
+  Eigen::Vector3d p = Eigen::Vector3d::Zero();      ///< frame origin in body coordinates
+  std::array<double, 6> constant{};                 ///< used where input[i] < 0
+  std::array<int, 6> input{-1, -1, -1, -1, -1, -1};
+};
+struct Tendon {                  ///< cable through points; Q = −(∂l/∂q)ᵀ u, l = Σ‖p_{i+1} − p_i‖
+  std::vector<BodyPoint> path;
+  int input = 0;
+};
+
+enum class ConstraintType {
+  kDistance,      ///< h = ‖p_a − p_b‖² − d²            (holonomic, one row)
+  kPoint,         ///< h = (p_a − p_b)·e_axis           (holonomic, one row)
+  kPointOnPlane,  ///< h = n_w·(p_a − p_b), n_w = R_a n  (holonomic; a = plane frame, b = point)
+  kKnifeEdge,     ///< e_w·ṗ_a = 0, e_w = R_a e          (nonholonomic A(q) q̇ = 0, one row)
+};
+struct Constraint {
+  ConstraintType type = ConstraintType::kDistance;
+  std::string name;                                   ///< for messages
+  BodyPoint a, b;
+  double distance = 0.0;                              ///< kDistance
+  int axis = 0;                                       ///< kPoint
+  Eigen::Vector3d direction = Eigen::Vector3d::UnitX();  ///< kPointOnPlane normal / kKnifeEdge axis, in a's body axes
+  bool holonomic() const { return type != ConstraintType::kKnifeEdge; }
+};
+
+/// The validated, immutable system. Built only by ModelBuilder::finalize() or loadScene().
+class Model {
+ public:
+  int nq() const { return static_cast<int>(joints_.size()); }   ///< configuration variables
+  int nu() const { return static_cast<int>(inputNames_.size()); }  ///< inputs
+  int nc() const { return static_cast<int>(constraints_.size()); }  ///< constraint rows
+  int nholonomic() const { return nholonomic_; }                    ///< rows of h(q) = 0
+  int nframes() const { return static_cast<int>(frames_.size()); }
+
+  const std::vector<std::string>& configNames() const { return configNames_; }
+  const std::vector<std::string>& inputNames() const { return inputNames_; }
+  const std::string& name() const { return name_; }
+
+  /// Index lookups; throw std::out_of_range naming the missing name.
+  int frameIndex(std::string_view name) const;
+  int configIndex(std::string_view name) const;
+  int inputIndex(std::string_view name) const;
+
+  const std::vector<Joint>& joints() const { return joints_; }
+  const std::vector<FramePlacement>& frames() const { return frames_; }
+  const Eigen::Vector3d& gravity() const { return gravity_; }
+  const std::vector<LinearSpring>& linearSprings() const { return linearSprings_; }
+  const std::vector<ConfigSpring>& configSprings() const { return configSprings_; }
+  const std::vector<ConfigForce>& configForces() const { return configForces_; }
+  const Eigen::VectorXd& damping() const { return damping_; }  ///< c_i per configuration
+  const std::vector<BodyWrench>& bodyWrenches() const { return bodyWrenches_; }
+  const std::vector<Tendon>& tendons() const { return tendons_; }
+  const std::vector<Constraint>& constraints() const { return constraints_; }
+  /// Constant placement of the fixed world frame's children that carry no joint, etc.: frames on
+  /// joint kWorld have their world pose in frames()[i].R, .p.
+
+ private:
+  friend class ModelBuilder;
+  std::string name_;
+  std::vector<Joint> joints_;
+  std::vector<FramePlacement> frames_;
+  std::vector<std::string> configNames_, inputNames_;
+  Eigen::Vector3d gravity_ = Eigen::Vector3d::Zero();
+  std::vector<LinearSpring> linearSprings_;
+  std::vector<ConfigSpring> configSprings_;
+  std::vector<ConfigForce> configForces_;
+  Eigen::VectorXd damping_;
+  std::vector<BodyWrench> bodyWrenches_;
+  std::vector<Tendon> tendons_;
+  std::vector<Constraint> constraints_;
+  int nholonomic_ = 0;
+};
+
+}  // namespace trellis

@@ -1,0 +1,98 @@
+// trellis/core/model_builder.hpp — builds and validates a Model.
+//
+// Every add* call checks its own arguments at once and throws trellis::ModelError naming the
+// element, the field and the offending value; finalize() checks cross references (frame and
+// configuration names), folds constant transforms and lumps masses into joint bodies.
+#pragma once
+
+#include "trellis/core/model.hpp"
+
+#include <map>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <variant>
+#include <vector>
+
+namespace trellis {
+
+/// Thrown for an invalid model description (builder or scene file). The message names the
+/// element (frame name or list position), the field and the value.
+class ModelError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// A body-wrench entry: a constant number or the name of an input.
+using WrenchEntry = std::variant<double, std::string>;
+
+class ModelBuilder {
+ public:
+  ModelBuilder() = default;
+  explicit ModelBuilder(std::string name) : name_(std::move(name)) {}
+
+  /// Adds frame `name` under `parent` ("world" or an earlier frame). Returns the frame's name.
+  /// Throws on a duplicate or reserved name, an unknown parent, a configuration name used twice,
+  /// a non-finite value, a const_se3 matrix that is not a rigid transform, a negative mass or an
+  /// inertia tensor that is not symmetric positive semidefinite.
+  const std::string& addFrame(const std::string& name, const std::string& parent,
+                              const Transform& transform, std::optional<Mass> mass = {});
+
+  void addGravity(const Eigen::Vector3d& g);
+  void addLinearSpring(const std::string& frame1, const std::string& frame2, double k, double x0);
+  void addConfigSpring(const std::string& config, double k, double q0);
+  void addConfigForce(const std::string& config, const std::string& input);
+  /// Q_i −= c_i q̇_i with c_i = coefficients[config] if listed, else `defaultCoefficient`.
+  void addDamping(double defaultCoefficient, const std::map<std::string, double>& coefficients = {});
+  /// w = [fx, fy, fz, τx, τy, τz] in `frame`'s axes at its origin; each entry a constant or input.
+  void addBodyWrench(const std::string& frame, const std::array<WrenchEntry, 6>& wrench);
+  /// A cable through the origins of `path` (≥ 2 frames) with tension u[input] ≥ 0.
+  void addTendon(const std::vector<std::string>& path, const std::string& input);
+  void addDistanceConstraint(const std::string& frame1, const std::string& frame2, double distance);
+  /// axis: 0 = x, 1 = y, 2 = z (world axes).
+  void addPointConstraint(const std::string& frame1, const std::string& frame2, int axis);
+  void addPointOnPlaneConstraint(const std::string& planeFrame, const Eigen::Vector3d& normal,
+                                 const std::string& pointFrame);
+  /// Nonholonomic knife edge: the velocity of `frame`'s origin along its own axis `axis` (in the
+  /// frame's axes) is zero, e_wᵀ ṗ = 0 — an A(q) q̇ = 0 row that is not the derivative of any h(q).
+  void addKnifeEdgeConstraint(const std::string& frame, const Eigen::Vector3d& axis);
+
+  /// Validates cross references and returns the immutable model. Throws ModelError.
+  Model finalize() &&;
+  Model finalize() const&;
+
+ private:
+  struct FrameSpec {
+    std::string name;
+    int parent;  // index into frames_, or kWorld
+    Transform transform;
+    std::optional<Mass> mass;
+  };
+  struct ElementSpec;  // defined in the .cpp
+  int frameId(const std::string& name, const std::string& element, const std::string& field) const;
+  int inputId(const std::string& input);
+
+  std::string name_;
+  std::vector<FrameSpec> frames_;
+  std::map<std::string, int> frameIds_;
+  std::map<std::string, int> configFrames_;
+  std::vector<std::string> inputNames_;
+  Eigen::Vector3d gravity_ = Eigen::Vector3d::Zero();
+  struct SpringSpec { int f1, f2; double k, x0; };
+  struct ConfigSpringSpec { std::string config; double k, q0; std::string element; };
+  struct ConfigForceSpec { std::string config; int input; std::string element; };
+  struct DampingSpec { double dflt; std::map<std::string, double> coeffs; std::string element; };
+  struct WrenchSpec { int frame; std::array<double, 6> constant; std::array<int, 6> input; };
+  struct TendonSpec { std::vector<int> path; int input; };
+  struct ConstraintSpec { ConstraintType type; int f1, f2; double distance; int axis;
+                          Eigen::Vector3d direction; std::string name; };
+  std::vector<SpringSpec> springs_;
+  std::vector<ConfigSpringSpec> configSprings_;
+  std::vector<ConfigForceSpec> configForces_;
+  std::vector<DampingSpec> dampings_;
+  std::vector<WrenchSpec> wrenches_;
+  std::vector<TendonSpec> tendons_;
+  std::vector<ConstraintSpec> constraints_;
+};
+
+}  // namespace trellis

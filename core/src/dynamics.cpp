@@ -1,0 +1,354 @@
+// Mass matrix (composite rigid bodies), Newton-Euler bias forces, constraints and the KKT solve.
+#include "trellis/core/dynamics.hpp"
+
+#include "internal.hpp"
+#include "point_kinematics.hpp"
+
+#include <cmath>
+#include <limits>
+#include <string>
+
+namespace trellis {
+namespace detail {
+
+using namespace spatial;
+
+void updateAccelerations(const Model& model, Data& data, const Eigen::VectorXd& dq, const Eigen::VectorXd& qdd) {
+  const auto& joints = model.joints();
+  for (int i = 0; i < model.nq(); ++i) {
+    const int p = joints[i].parent;
+    // a_i = a_p + S_i q̈_i + Ṡ_i q̇_i with Ṡ_i = v_i × S_i (S_i moves with body i).
+    data.a[i] = data.S[i] * qdd[i] + crossMotion(data.v[i], data.S[i]) * dq[i];
+    if (p != kWorld) data.a[i] += data.a[p];
+  }
+}
+
+namespace {
+
+/// Equal and opposite forces along the segment a → b: τ d on a, −τ d on b, d = p_b − p_a.
+inline void addSegmentForce(Data& data, const BodyPoint& a, const BodyPoint& b, const Vector3d& pa,
+                            const Vector3d& pb, double tau) {
+  const Vector3d f = tau * (pb - pa);
+  addBodyWrench(data, a.joint, forceAt(pa, f));
+  addBodyWrench(data, b.joint, forceAt(pb, -f));
+}
+
+}  // namespace
+
+void accumulateExternalWrenches(const Model& model, Data& data, const Eigen::VectorXd& u,
+                                bool conservative, bool nonConservative, const Eigen::VectorXd* lambda) {
+  for (auto& w : data.fext) w.setZero();
+  if (conservative) {
+    for (const LinearSpring& s : model.linearSprings()) {
+      const Vector3d pa = pointPosition(data, s.a), pb = pointPosition(data, s.b);
+      addSegmentForce(data, s.a, s.b, pa, pb, springTensionPerLength(s, (pb - pa).norm()));
+    }
+  }
+  if (nonConservative) {
+    for (const BodyWrench& bw : model.bodyWrenches()) {
+      if (bw.joint == kWorld) continue;
+      Eigen::Matrix<double, 6, 1> w;
+      for (int k = 0; k < 6; ++k) w[k] = bw.input[k] >= 0 ? u[bw.input[k]] : bw.constant[k];
+      addBodyWrench(data, bw.joint, bodyWrenchWorld(data, bw, w));
+    }
+    for (const Tendon& t : model.tendons()) {
+      const double tension = u[t.input];
+      for (size_t k = 0; k + 1 < t.path.size(); ++k) {
+        const Vector3d pa = pointPosition(data, t.path[k]), pb = pointPosition(data, t.path[k + 1]);
+        addSegmentForce(data, t.path[k], t.path[k + 1], pa, pb, tension / (pb - pa).norm());
+      }
+    }
+  }
+  if (lambda) {
+    const auto& cs = model.constraints();
+    for (int r = 0; r < model.nc(); ++r) addConstraintWrenches(data, cs[r], (*lambda)[r]);
+  }
+}
+
+void inverseDynamicsPass(const Model& model, Data& data, Eigen::VectorXd& tau) {
+  const auto& joints = model.joints();
+  const int n = model.nq();
+  const Vector6d g = make(model.gravity(), Vector3d::Zero());
+  for (int i = 0; i < n; ++i) {
+    data.Ia[i] = applyInertia(data.wm[i], data.wh[i], data.wI[i], data.a[i] - g);
+    data.Iv[i] = applyInertia(data.wm[i], data.wh[i], data.wI[i], data.v[i]);
+    data.f[i] = data.Ia[i] + crossForce(data.v[i], data.Iv[i]) - data.fext[i];
+  }
+  for (int i = n - 1; i >= 0; --i) {
+    tau[i] = data.S[i].dot(data.f[i]);
+    if (joints[i].parent != kWorld) data.f[joints[i].parent] += data.f[i];
+  }
+}
+
+void addConfigurationForces(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
+                            const Eigen::VectorXd& u, Eigen::VectorXd& Q) {
+  for (const ConfigForce& cf : model.configForces()) Q[cf.config] += u[cf.input];
+  for (const ConfigSpring& s : model.configSprings()) Q[s.config] -= s.k * (q[s.config] - s.q0);
+  Q.array() -= model.damping().array() * dq.array();
+}
+
+void evaluateConstraints(const Model& model, Data& data, Eigen::VectorXd* h, Eigen::VectorXd* hdot,
+                         Eigen::VectorXd* c, Eigen::MatrixXd* A) {
+  const auto& cs = model.constraints();
+  if (A) A->setZero();
+  for (int r = 0; r < model.nc(); ++r) {
+    const ConstraintEval e = evaluateConstraint(data, cs[r]);
+    if (h) (*h)[r] = e.h;
+    if (hdot) (*hdot)[r] = e.hdot;
+    if (c) (*c)[r] = e.c;
+    if (A) addConstraintJacobianRow(model, data, cs[r], A->row(r));
+  }
+}
+
+void factorizeKkt(const Model& model, Data& data) {
+  DynamicsStatus& st = data.status;
+  st.code = DynamicsStatus::Code::kOk;
+  st.message.clear();
+  const int n = model.nq(), nc = model.nc();
+  st.constraintRank = nc;
+  st.constraintConditioning = 1.0;
+  data.schurUsesPinv = false;
+  if (!data.M.allFinite()) {
+    st.code = DynamicsStatus::Code::kNonFinite;
+    st.message = "mass matrix has non-finite entries";
+    return;
+  }
+  data.massLLT.compute(data.M);
+  const double scale = std::max(data.M.diagonal().maxCoeff(), std::numeric_limits<double>::min());
+  bool singular = data.massLLT.info() != Eigen::Success;
+  if (!singular) {
+    const auto L = data.massLLT.matrixLLT().diagonal();
+    singular = (L.array().square() <= 1e-14 * scale).any();
+  }
+  if (singular) {
+    st.code = DynamicsStatus::Code::kSingularMassMatrix;
+    st.message = "mass matrix is not positive definite";
+    for (int i = 0; i < n; ++i)
+      if (data.M(i, i) <= 1e-14 * scale) {
+        st.message += ": configuration '" + model.configNames()[i] + "' moves no mass or inertia";
+        break;
+      }
+    return;
+  }
+  if (nc == 0) return;
+  data.Y = data.constraintJacobian.transpose();
+  data.massLLT.matrixL().solveInPlace(data.Y);
+  data.schur.noalias() = data.Y.transpose() * data.Y;
+  data.schurLLT.compute(data.schur);
+  const double sScale = data.schur.diagonal().maxCoeff();
+  if (data.schurLLT.info() == Eigen::Success && sScale > 0) {
+    st.constraintConditioning = data.schurLLT.rcond();
+    if (st.constraintConditioning > 1e-13) return;
+  }
+  // Rank-deficient A M⁻¹ Aᵀ (redundant or degenerate constraints): pseudo-inverse. q̈ is still
+  // unique when the constraints are consistent; λ becomes the minimum-norm choice.
+  data.schurEig.compute(data.schur);
+  const auto& ev = data.schurEig.eigenvalues();
+  const double tol = std::max(ev.cwiseAbs().maxCoeff(), std::numeric_limits<double>::min()) * 1e-12 * nc;
+  int rank = 0;
+  data.tmpC.setZero();
+  for (int k = 0; k < nc; ++k)
+    if (ev[k] > tol) {
+      data.tmpC[k] = 1.0 / ev[k];
+      ++rank;
+    }
+  data.schurPinv.noalias() = data.schurEig.eigenvectors() * data.tmpC.asDiagonal() * data.schurEig.eigenvectors().transpose();
+  data.schurUsesPinv = true;
+  st.constraintRank = rank;
+  st.constraintConditioning = ev.cwiseAbs().maxCoeff() > 0 ? std::max(ev[0], 0.0) / ev.cwiseAbs().maxCoeff() : 0.0;
+  st.code = DynamicsStatus::Code::kRedundantConstraints;
+  st.message = "constraint Jacobian has rank " + std::to_string(rank) + " < " + std::to_string(nc) +
+               " rows (redundant or singular constraints";
+  // Name a constraint whose row lies in the span of the others (smallest eigenvector's largest entry).
+  int worst = 0;
+  data.schurEig.eigenvectors().col(0).cwiseAbs().maxCoeff(&worst);
+  st.message += ", e.g. " + model.constraints()[worst].name + ")";
+}
+
+void solveKkt(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X, Eigen::Ref<Eigen::MatrixXd> Lambda) {
+  const int p = static_cast<int>(X.cols());
+  data.massLLT.solveInPlace(X);  // X = M⁻¹ R
+  if (model.nc() == 0) return;
+  Lambda.noalias() -= data.constraintJacobian * X;  // C − A M⁻¹ R
+  if (data.schurUsesPinv) {
+    Eigen::Ref<Eigen::MatrixXd> t = data.tmpCX.leftCols(p);
+    t.noalias() = data.schurPinv * Lambda;
+    Lambda = t;
+  } else {
+    data.schurLLT.solveInPlace(Lambda);
+  }
+  Eigen::Ref<Eigen::MatrixXd> t = data.tmpNX.leftCols(p);
+  t.noalias() = data.constraintJacobian.transpose() * Lambda;
+  data.massLLT.solveInPlace(t);
+  X += t;  // M⁻¹ (R + Aᵀ Λ)
+}
+
+void inputMatrixPass(const Model& model, Data& data) {
+  Eigen::MatrixXd& Bq = data.inputMatrix;
+  Bq.setZero();
+  for (const ConfigForce& cf : model.configForces()) Bq(cf.config, cf.input) += 1.0;
+  for (const BodyWrench& bw : model.bodyWrenches()) {
+    if (bw.joint == kWorld) continue;
+    const Eigen::Matrix3d R = data.jointR[bw.joint] * bw.R;
+    const Vector3d p = data.jointP[bw.joint] + data.jointR[bw.joint] * bw.p;
+    for (int k = 0; k < 6; ++k) {
+      if (bw.input[k] < 0) continue;
+      const Vector3d e = R.col(k % 3);
+      const Vector6d w = k < 3 ? forceAt(p, e) : make(Vector3d::Zero(), e);
+      for (int j = bw.joint; j != kWorld; j = model.joints()[j].parent) Bq(j, bw.input[k]) += data.S[j].dot(w);
+    }
+  }
+  for (const Tendon& t : model.tendons()) {
+    for (size_t k = 0; k + 1 < t.path.size(); ++k) {
+      const BodyPoint &a = t.path[k], &b = t.path[k + 1];
+      const Vector3d pa = pointPosition(data, a), pb = pointPosition(data, b);
+      const Vector3d e = (pb - pa).normalized();  // unit tension pulls a toward b and b toward a
+      addPointGradient(model, data, a.joint, pa, e, Bq.col(t.input));
+      addPointGradient(model, data, b.joint, pb, -e, Bq.col(t.input));
+    }
+  }
+}
+
+void massMatrixPass(const Model& model, Data& data) {
+  const auto& joints = model.joints();
+  const int n = model.nq();
+  for (int i = 0; i < n; ++i) {
+    data.cm[i] = data.wm[i];
+    data.ch[i] = data.wh[i];
+    data.cI[i] = data.wI[i];
+  }
+  for (int i = n - 1; i >= 0; --i) {
+    const int p = joints[i].parent;
+    if (p == kWorld) continue;
+    data.cm[p] += data.cm[i];
+    data.ch[p] += data.ch[i];
+    data.cI[p] += data.cI[i];
+  }
+  for (int i = 0; i < n; ++i) {
+    const Vector6d F = applyInertia(data.cm[i], data.ch[i], data.cI[i], data.S[i]);
+    data.M(i, i) = data.S[i].dot(F);
+    for (int j = joints[i].parent; j != kWorld; j = joints[j].parent) data.M(i, j) = data.M(j, i) = data.S[j].dot(F);
+  }
+}
+
+bool nonFinite(const Eigen::VectorXd& x, const char* name, const Model& model, const std::vector<std::string>& names,
+               DynamicsStatus& st) {
+  (void)model;
+  for (int i = 0; i < x.size(); ++i)
+    if (!std::isfinite(x[i])) {
+      st.code = DynamicsStatus::Code::kNonFinite;
+      st.message = std::string(name) + "[" + std::to_string(i) + "] ('" + names[i] + "') is not finite";
+      return true;
+    }
+  return false;
+}
+
+bool inputsAreFinite(const Model& model, Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
+                     const Eigen::VectorXd& u) {
+  return !(nonFinite(q, "q", model, model.configNames(), data.status) ||
+           nonFinite(dq, "dq", model, model.configNames(), data.status) ||
+           nonFinite(u, "u", model, model.inputNames(), data.status));
+}
+
+}  // namespace detail
+
+void computeMassMatrix(const Model& model, Data& data, const Eigen::VectorXd& q) {
+  detail::checkSize(q, model.nq(), "computeMassMatrix: q");
+  data.tmpN.setZero();
+  detail::updateJoints(model, data, q, data.tmpN);
+  detail::massMatrixPass(model, data);
+}
+
+void computeConstraints(const Model& model, Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq) {
+  detail::checkSize(q, model.nq(), "computeConstraints: q");
+  detail::checkSize(dq, model.nq(), "computeConstraints: dq");
+  detail::updateJoints(model, data, q, dq);
+  data.qddZero.setZero();
+  detail::updateAccelerations(model, data, dq, data.qddZero);
+  detail::evaluateConstraints(model, data, &data.constraintValue, nullptr, &data.constraintDrift,
+                              &data.constraintJacobian);
+}
+
+void computeInputMatrix(const Model& model, Data& data, const Eigen::VectorXd& q) {
+  detail::checkSize(q, model.nq(), "computeInputMatrix: q");
+  data.tmpN.setZero();
+  detail::updateJoints(model, data, q, data.tmpN);
+  detail::inputMatrixPass(model, data);
+}
+
+DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::VectorXd& q,
+                               const Eigen::VectorXd& dq, const Eigen::VectorXd& u) {
+  const int n = model.nq();
+  detail::checkSize(q, n, "computeDynamics: q");
+  detail::checkSize(dq, n, "computeDynamics: dq");
+  detail::checkSize(u, model.nu(), "computeDynamics: u");
+  if (!detail::inputsAreFinite(model, data, q, dq, u)) return data.status;
+  detail::updateJoints(model, data, q, dq);
+  detail::massMatrixPass(model, data);
+  data.qddZero.setZero();
+  detail::updateAccelerations(model, data, dq, data.qddZero);
+  detail::accumulateExternalWrenches(model, data, u, true, true, nullptr);
+  detail::inverseDynamicsPass(model, data, data.bias);  // ID(q, q̇, 0) − Q_wrenches
+  data.tmpN.setZero();
+  detail::addConfigurationForces(model, q, dq, u, data.tmpN);
+  data.bias -= data.tmpN;
+  detail::evaluateConstraints(model, data, &data.constraintValue, nullptr, &data.constraintDrift,
+                              &data.constraintJacobian);
+  detail::factorizeKkt(model, data);
+  if (!data.status.ok()) return data.status;
+  data.qdd = -data.bias;
+  data.lambda = -data.constraintDrift;
+  detail::solveKkt(model, data, data.qdd, data.lambda);
+  if (data.status.code == DynamicsStatus::Code::kRedundantConstraints && model.nc() > 0) {
+    // The pseudo-inverse solves consistent redundant rows exactly; inconsistent ones are not.
+    data.tmpC.noalias() = data.constraintJacobian * data.qdd;
+    data.tmpC += data.constraintDrift;
+    const double scale = 1.0 + data.constraintDrift.cwiseAbs().maxCoeff() +
+                         (data.constraintJacobian.cwiseAbs() * data.qdd.cwiseAbs()).maxCoeff();
+    int worst = 0;
+    if (data.tmpC.cwiseAbs().maxCoeff(&worst) > 1e-8 * scale) {
+      data.status.code = DynamicsStatus::Code::kSingularConstraints;
+      data.status.message = "constraints are singular and inconsistent at this state: A q̈ + Ȧ q̇ = " +
+                            std::to_string(data.tmpC[worst]) + " on " + model.constraints()[worst].name;
+    }
+  }
+  if (data.status.ok() && !(data.qdd.allFinite() && data.lambda.allFinite())) {
+    data.status.code = DynamicsStatus::Code::kNonFinite;
+    data.status.message = "forward dynamics produced non-finite values";
+  }
+  return data.status;
+}
+
+Energy computeEnergy(const Model& model, Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq) {
+  detail::checkSize(q, model.nq(), "computeEnergy: q");
+  detail::checkSize(dq, model.nq(), "computeEnergy: dq");
+  detail::updateJoints(model, data, q, dq);
+  Energy e;
+  for (int i = 0; i < model.nq(); ++i) {
+    e.kinetic += 0.5 * data.v[i].dot(spatial::applyInertia(data.wm[i], data.wh[i], data.wI[i], data.v[i]));
+    e.potential -= model.gravity().dot(data.wh[i]);  // V = −m g·c
+  }
+  for (const LinearSpring& s : model.linearSprings()) {
+    const double L = (detail::pointPosition(data, s.a) - detail::pointPosition(data, s.b)).norm();
+    e.potential += 0.5 * s.k * (L - s.x0) * (L - s.x0);
+  }
+  for (const ConfigSpring& s : model.configSprings())
+    e.potential += 0.5 * s.k * (q[s.config] - s.q0) * (q[s.config] - s.q0);
+  return e;
+}
+
+double computeNonConservativePower(const Model& model, Data& data, const Eigen::VectorXd& q,
+                                   const Eigen::VectorXd& dq, const Eigen::VectorXd& u) {
+  detail::checkSize(q, model.nq(), "computeNonConservativePower: q");
+  detail::checkSize(dq, model.nq(), "computeNonConservativePower: dq");
+  detail::checkSize(u, model.nu(), "computeNonConservativePower: u");
+  detail::updateJoints(model, data, q, dq);
+  detail::accumulateExternalWrenches(model, data, u, false, true, nullptr);
+  double power = 0.0;
+  for (int i = 0; i < model.nq(); ++i) power += data.fext[i].dot(data.v[i]);
+  for (const ConfigForce& cf : model.configForces()) power += u[cf.input] * dq[cf.config];
+  power -= (model.damping().array() * dq.array().square()).sum();
+  return power;
+}
+
+}  // namespace trellis

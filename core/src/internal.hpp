@@ -1,0 +1,53 @@
+// Internal passes shared by dynamics.cpp and linearization.cpp. Not installed.
+#pragma once
+
+#include "spatial.hpp"
+#include "trellis/core/data.hpp"
+
+namespace trellis::detail {
+
+/// Throws std::invalid_argument unless v has `expected` entries.
+void checkSize(const Eigen::VectorXd& v, int expected, const char* what);
+
+/// Joint poses, motion subspaces S, spatial velocities v and world inertias, O(n).
+void updateJoints(const Model& model, Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq);
+
+/// Spatial accelerations a_i = a_parent + S_i q̈_i + v_i × S_i q̇_i (no gravity), O(n).
+void updateAccelerations(const Model& model, Data& data, const Eigen::VectorXd& dq, const Eigen::VectorXd& qdd);
+
+/// data.fext: wrenches of springs, tendons and body wrenches at inputs u (conservative and not,
+/// selected by the flags), plus, with lambda non-null, the constraint forces Aᵀλ.
+void accumulateExternalWrenches(const Model& model, Data& data, const Eigen::VectorXd& u,
+                                bool conservative, bool nonConservative, const Eigen::VectorXd* lambda);
+
+/// Newton-Euler backward pass: tau = Σ S_iᵀ F_i with f_i = I(a − g) + v ×* I v − fext; leaves the
+/// subtree wrenches in data.f. Uses data.a as set by updateAccelerations.
+void inverseDynamicsPass(const Model& model, Data& data, Eigen::VectorXd& tau);
+
+/// Generalized forces of the configuration-level elements (config springs, config forces,
+/// damping) added to Q.
+void addConfigurationForces(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
+                            const Eigen::VectorXd& u, Eigen::VectorXd& Q);
+
+/// h, A q̇ and c = A q̈ + Ȧ q̇ (with the current accelerations) of every constraint, and A.
+void evaluateConstraints(const Model& model, Data& data, Eigen::VectorXd* h, Eigen::VectorXd* hdot,
+                         Eigen::VectorXd* c, Eigen::MatrixXd* A);
+
+/// data.M by composite rigid bodies (needs updateJoints).
+void massMatrixPass(const Model& model, Data& data);
+
+/// data.inputMatrix = ∂Q/∂u (needs updateJoints).
+void inputMatrixPass(const Model& model, Data& data);
+
+/// False (and data.status set to kNonFinite naming the entry) if q, dq or u has NaN/Inf.
+bool inputsAreFinite(const Model& model, Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
+                     const Eigen::VectorXd& u);
+
+/// Factorizes [M Aᵀ; A 0] from data.M and data.constraintJacobian; fills data.status.
+void factorizeKkt(const Model& model, Data& data);
+
+/// Solves M X = R + Aᵀ Λ, A X = C for X (n×p) and Λ (nc×p) with the current factorization.
+/// X may alias R; Λ may alias C. Workspace: data.tmpN/tmpC (p = 1) or data.tmpNX/tmpCX.
+void solveKkt(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X, Eigen::Ref<Eigen::MatrixXd> Lambda);
+
+}  // namespace trellis::detail

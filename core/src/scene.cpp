@@ -1,0 +1,592 @@
+// Scene files (SCENE_FORMAT.md, version 1): JSON text -> ModelBuilder calls -> Model + state.
+//
+// This file checks the *structure* of the file (types, required fields, names that refer to other
+// elements) and phrases every problem as "<source>: <element>: field '<field>': <value> <problem>";
+// the ModelBuilder checks the values again (and is the authority on them). Everything is read
+// iteratively, so a deep frame tree cannot overflow the stack.
+#include "trellis/core/scene.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <Eigen/Eigenvalues>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+namespace trellis {
+namespace {
+
+using Json = nlohmann::json;
+
+// Limits that keep hostile input cheap: nesting depth (a frame level costs two: the frame object
+// and its "children" list, so chains of ~500 frames fit) and text size.
+constexpr int kMaxNestingDepth = 1000;
+constexpr std::size_t kMaxSceneBytes = std::size_t{256} << 20;
+
+// Pre-checks mirror the builder's so that the message can name the JSON field; the builder stays
+// the authority (these tolerances are not tighter than its own).
+constexpr double kRotationTolerance = 1e-9;   // max |RᵀR − I| entry of a const_se3 rotation
+constexpr double kInertiaTolerance = 1e-12;   // relative, smallest eigenvalue of an inertia tensor
+
+/// The value as it appears in the file, shortened for messages.
+std::string show(const Json& value) {
+  std::string text = value.dump(-1, ' ', false, Json::error_handler_t::replace);
+  constexpr std::size_t kMax = 80;
+  if (text.size() > kMax) text = text.substr(0, kMax - 3) + "...";
+  return text;
+}
+
+std::string quote(std::string_view name) { return show(Json(std::string(name))); }
+
+std::string typeName(const Json& value) {
+  return value.is_number() ? "number" : std::string(value.type_name());
+}
+
+/// "a, b, c" (at most a few names) for "expected one of" hints.
+std::string listNames(const std::vector<std::string>& names) {
+  if (names.empty()) return "none";
+  std::string out;
+  constexpr std::size_t kMax = 12;
+  for (std::size_t i = 0; i < names.size() && i < kMax; ++i) out += (i ? ", " : "") + names[i];
+  if (names.size() > kMax) out += ", ...";
+  return out;
+}
+
+/// One element of the scene (a frame, "potentials[2] (linear_spring)", "state") and the JSON
+/// object that describes it. All field accessors throw ModelError naming element, field and value.
+class Element {
+ public:
+  Element(const Json& object, std::string label) : object_(object), label_(std::move(label)) {}
+
+  const std::string& label() const { return label_; }
+  void relabel(std::string label) { label_ = std::move(label); }
+
+  [[noreturn]] void fail(std::string_view field, const std::string& problem) const {
+    throw ModelError(label_ + ": field '" + std::string(field) + "': " + problem);
+  }
+  [[noreturn]] void failValue(std::string_view field, const Json& value,
+                              const std::string& problem) const {
+    fail(field, show(value) + " " + problem);
+  }
+
+  const Json* find(std::string_view key) const {
+    const auto it = object_.find(key);
+    return it == object_.end() ? nullptr : &*it;
+  }
+  const Json& require(std::string_view key) const {
+    if (const Json* value = find(key)) return *value;
+    fail(key, "missing");
+  }
+
+  double number(std::string_view key) const { return toNumber(require(key), key); }
+  std::optional<double> optionalNumber(std::string_view key) const {
+    const Json* value = find(key);
+    return value ? std::optional<double>(toNumber(*value, key)) : std::nullopt;
+  }
+  /// A non-empty string (a name).
+  std::string name(std::string_view key) const { return toName(require(key), key); }
+  std::optional<std::string> optionalName(std::string_view key) const {
+    const Json* value = find(key);
+    return value ? std::optional<std::string>(toName(*value, key)) : std::nullopt;
+  }
+  Eigen::Vector3d vector3(std::string_view key) const {
+    const Json& value = require(key);
+    if (!value.is_array() || value.size() != 3) failValue(key, value, "must be a list of 3 numbers");
+    Eigen::Vector3d v;
+    for (int i = 0; i < 3; ++i) v[i] = toNumber(value[i], std::string(key) + "[" + std::to_string(i) + "]");
+    return v;
+  }
+  const Json& list(std::string_view key) const {
+    const Json& value = require(key);
+    if (!value.is_array()) failValue(key, value, "must be a list");
+    return value;
+  }
+  const Json* optionalObject(std::string_view key) const {
+    const Json* value = find(key);
+    if (value && !value->is_object()) failValue(key, *value, "must be an object");
+    return value;
+  }
+
+  double toNumber(const Json& value, std::string_view field) const {
+    if (!value.is_number()) failValue(field, value, "must be a number, not a " + typeName(value));
+    const double x = value.get<double>();
+    if (!std::isfinite(x)) failValue(field, value, "must be finite");
+    return x;
+  }
+  std::string toName(const Json& value, std::string_view field) const {
+    if (!value.is_string()) failValue(field, value, "must be a string, not a " + typeName(value));
+    std::string text = value.get<std::string>();
+    if (text.empty()) failValue(field, value, "must not be empty");
+    return text;
+  }
+
+ private:
+  const Json& object_;
+  std::string label_;
+};
+
+/// Reads one scene; owns the builder and the names seen so far.
+class SceneReader {
+ public:
+  Scene read(const Json& root) {
+    if (!root.is_object()) {
+      throw ModelError("the scene must be a JSON object, not " + std::string(root.type_name()) +
+                       " " + show(root));
+    }
+    Element top(root, "scene");
+    Scene scene{Model{}, {}, {}, {}, {}, {}};
+    if (auto name = optionalText(top, "name")) scene.name = *name;
+    if (auto description = optionalText(top, "description")) scene.description = *description;
+    builder_ = ModelBuilder(scene.name);
+
+    readFrames(top.list("frames"));
+    readList(top, "potentials", [this](Element& e, const std::string& type) { readPotential(e, type); });
+    readList(top, "forces", [this](Element& e, const std::string& type) { readForce(e, type); });
+    readList(top, "constraints", [this](Element& e, const std::string& type) { readConstraint(e, type); });
+
+    call("scene", [&] { scene.model = std::move(builder_).finalize(); });
+    readState(top, scene);
+    return scene;
+  }
+
+ private:
+  // ---- helpers --------------------------------------------------------------------------------
+
+  static std::optional<std::string> optionalText(const Element& e, std::string_view key) {
+    const Json* value = e.find(key);
+    if (!value) return std::nullopt;
+    if (!value->is_string()) e.failValue(key, *value, "must be a string, not a " + typeName(*value));
+    return value->get<std::string>();
+  }
+
+  /// Runs a builder call; its messages gain the element's label unless they already name it
+  /// (by frame name or list position).
+  template <class F>
+  static void call(const std::string& label, F&& f) {
+    try {
+      f();
+    } catch (const ModelError& e) {
+      const std::string what = e.what();
+      const std::string position = label.substr(0, label.find(" ("));
+      throw ModelError(what.rfind(position, 0) == 0 ? what : label + ": " + what);
+    } catch (const std::exception& e) {
+      throw ModelError(label + ": " + e.what());
+    }
+  }
+
+  std::string frameRef(const Element& e, std::string_view key) const {
+    std::string name = e.name(key);
+    if (name != "world" && !frames_.count(name)) {
+      e.fail(key, "unknown frame " + quote(name));
+    }
+    return name;
+  }
+  std::string configRef(const Element& e, std::string_view key) const {
+    std::string name = e.name(key);
+    if (!configs_.count(name)) {
+      e.fail(key, "unknown configuration variable " + quote(name) + " (known: " +
+                      listNames(configOrder_) + ")");
+    }
+    return name;
+  }
+
+  template <class F>
+  void readList(const Element& top, const char* key, F&& readOne) {
+    const Json* list = top.find(key);
+    if (!list) return;
+    if (!list->is_array()) top.failValue(key, *list, "must be a list");
+    for (std::size_t i = 0; i < list->size(); ++i) {
+      const std::string position = std::string(key) + "[" + std::to_string(i) + "]";
+      const Json& item = (*list)[i];
+      if (!item.is_object()) {
+        throw ModelError(position + ": must be an object, not " + typeName(item) + " " + show(item));
+      }
+      Element e(item, position);
+      const std::string type = e.name("type");
+      e.relabel(position + " (" + type + ")");
+      readOne(e, type);
+    }
+  }
+
+  // ---- frames ---------------------------------------------------------------------------------
+
+  void readFrames(const Json& roots) {
+    struct Pending {
+      const Json* node;
+      std::string parent;
+      std::string position;
+    };
+    std::vector<Pending> stack;
+    auto pushChildren = [&stack](const Json& list, const std::string& parent, const std::string& at) {
+      for (std::size_t i = list.size(); i-- > 0;) {
+        stack.push_back({&list[i], parent, at + "[" + std::to_string(i) + "]"});
+      }
+    };
+    pushChildren(roots, "world", "frames");
+    // Depth-first, children in the order listed: the builder sees the frames in pre-order.
+    while (!stack.empty()) {
+      Pending next = std::move(stack.back());
+      stack.pop_back();
+      const std::string name = readFrame(*next.node, next.parent, next.position);
+      Element e(*next.node, "frame '" + name + "'");
+      if (const Json* children = e.find("children")) {
+        if (!children->is_array()) e.failValue("children", *children, "must be a list");
+        pushChildren(*children, name, next.position + ".children");
+      }
+    }
+  }
+
+  /// Reads and adds one frame; returns its name.
+  std::string readFrame(const Json& node, const std::string& parent, const std::string& position) {
+    if (!node.is_object()) {
+      throw ModelError(position + ": a frame must be an object, not " + typeName(node) + " " + show(node));
+    }
+    Element e(node, position);
+    const std::string name = e.name("name");
+    if (name == "world") e.fail("name", "\"world\" is reserved for the fixed world frame");
+    if (auto it = frames_.find(name); it != frames_.end()) {
+      e.fail("name", quote(name) + " is already used by " + it->second);
+    }
+    e.relabel("frame '" + name + "'");
+
+    const std::string type = e.name("type");
+    const Transform transform = readTransform(e, type);
+    if (transform.isDriven()) {
+      if (auto it = configs_.find(transform.config); it != configs_.end()) {
+        e.fail("config", quote(transform.config) + " is already used by " + it->second);
+      }
+    }
+    std::optional<Mass> mass;
+    if (const Json* massNode = e.optionalObject("mass")) mass = readMass(e, *massNode);
+
+    call(e.label(), [&] { builder_.addFrame(name, parent, transform, mass); });
+    frames_.emplace(name, "frame '" + name + "' (" + position + ")");
+    if (transform.isDriven()) {
+      configs_.emplace(transform.config, "frame '" + name + "'");
+      configOrder_.push_back(transform.config);
+    }
+    return name;
+  }
+
+  static Transform readTransform(const Element& e, const std::string& type) {
+    if (type == "const_se3") {
+      if (e.find("config")) e.fail("config", "a const_se3 frame has no configuration variable");
+      return Transform::constSE3(readMatrix4(e));
+    }
+    using ByValue = Transform (*)(double);
+    using ByConfig = Transform (*)(std::string);
+    struct Primitive {
+      const char* type;
+      ByValue byValue;
+      ByConfig byConfig;
+    };
+    static const std::array<Primitive, 6> kPrimitives{{
+        {"tx", &Transform::tx, &Transform::tx},
+        {"ty", &Transform::ty, &Transform::ty},
+        {"tz", &Transform::tz, &Transform::tz},
+        {"rx", &Transform::rx, &Transform::rx},
+        {"ry", &Transform::ry, &Transform::ry},
+        {"rz", &Transform::rz, &Transform::rz},
+    }};
+    for (const Primitive& p : kPrimitives) {
+      if (type != p.type) continue;
+      const bool hasConfig = e.find("config") != nullptr;
+      const bool hasValue = e.find("value") != nullptr;
+      if (hasConfig && hasValue) {
+        e.fail("config", "give either 'config' (a coordinate) or 'value' (a constant), not both");
+      }
+      if (hasConfig) return p.byConfig(e.name("config"));
+      if (hasValue) return p.byValue(e.number("value"));
+      e.fail("config", "missing: a " + type + " frame needs 'config' (a coordinate) or 'value' (a constant)");
+    }
+    e.failValue("type", Json(type), "is not one of tx, ty, tz, rx, ry, rz, const_se3");
+  }
+
+  static Eigen::Matrix4d readMatrix4(const Element& e) {
+    const Json& rows = e.require("matrix");
+    const auto badShape = [&] { e.failValue("matrix", rows, "must be a 4x4 matrix (a list of 4 rows of 4 numbers)"); };
+    if (!rows.is_array() || rows.size() != 4) badShape();
+    Eigen::Matrix4d m;
+    for (int i = 0; i < 4; ++i) {
+      if (!rows[i].is_array() || rows[i].size() != 4) badShape();
+      for (int j = 0; j < 4; ++j) {
+        m(i, j) = e.toNumber(rows[i][j], "matrix[" + std::to_string(i) + "][" + std::to_string(j) + "]");
+      }
+    }
+    if ((m.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > kRotationTolerance) {
+      e.failValue("matrix[3]", rows[3], "must be [0, 0, 0, 1]");
+    }
+    const Eigen::Matrix3d r = m.topLeftCorner<3, 3>();
+    const double orthoError = (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+    if (orthoError > kRotationTolerance || r.determinant() <= 0.0) {
+      std::ostringstream problem;
+      problem << "has a rotation part that is not orthonormal with determinant +1 (max |RᵀR − I| = "
+              << orthoError << ", det R = " << r.determinant() << ")";
+      e.failValue("matrix", rows, problem.str());
+    }
+    return m;
+  }
+
+  static Mass readMass(const Element& frame, const Json& node) {
+    Element e(node, frame.label());
+    Mass mass;
+    const Json& m = e.require("m");
+    mass.m = e.toNumber(m, "mass.m");
+    if (mass.m < 0.0) e.failValue("mass.m", m, "must be >= 0");
+    if (const Json* inertia = e.find("inertia")) {
+      if (!inertia->is_array() || inertia->size() != 6) {
+        e.failValue("mass.inertia", *inertia, "must be a list of 6 numbers [Ixx, Iyy, Izz, Ixy, Ixz, Iyz]");
+      }
+      std::array<double, 6> v{};
+      for (int i = 0; i < 6; ++i) v[i] = e.toNumber((*inertia)[i], "mass.inertia[" + std::to_string(i) + "]");
+      Eigen::Matrix3d& I = mass.inertia;
+      I << v[0], v[3], v[4],  //
+          v[3], v[1], v[5],   //
+          v[4], v[5], v[2];
+      const double scale = std::max(1.0, I.cwiseAbs().maxCoeff());
+      const double smallest = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(I, Eigen::EigenvaluesOnly)
+                                  .eigenvalues()
+                                  .minCoeff();
+      if (smallest < -kInertiaTolerance * scale) {
+        std::ostringstream problem;
+        problem << "is not positive semidefinite (smallest eigenvalue " << smallest << ")";
+        e.failValue("mass.inertia", *inertia, problem.str());
+      }
+    }
+    return mass;
+  }
+
+  // ---- potentials, forces, constraints --------------------------------------------------------
+
+  void readPotential(const Element& e, const std::string& type) {
+    if (type == "gravity") {
+      // Several gravity entries add up (V = −Σ m g·p for each), as the builder does.
+      const Eigen::Vector3d g = e.vector3("g");
+      call(e.label(), [&] { builder_.addGravity(g); });
+    } else if (type == "linear_spring") {
+      const std::string f1 = frameRef(e, "frame1"), f2 = frameRef(e, "frame2");
+      const double k = e.number("k"), x0 = e.number("x0");
+      if (x0 < 0.0) e.failValue("x0", e.require("x0"), "must be >= 0");
+      call(e.label(), [&] { builder_.addLinearSpring(f1, f2, k, x0); });
+    } else if (type == "config_spring") {
+      const std::string config = configRef(e, "config");
+      const double k = e.number("k"), q0 = e.number("q0");
+      call(e.label(), [&] { builder_.addConfigSpring(config, k, q0); });
+    } else {
+      e.failValue("type", Json(type), "is not one of gravity, linear_spring, config_spring");
+    }
+  }
+
+  void readForce(const Element& e, const std::string& type) {
+    if (type == "config_force") {
+      const std::string config = configRef(e, "config");
+      const std::string input = e.name("input");
+      call(e.label(), [&] { builder_.addConfigForce(config, input); });
+    } else if (type == "damping") {
+      const double dflt = e.optionalNumber("default").value_or(0.0);
+      std::map<std::string, double> coefficients;
+      if (const Json* node = e.optionalObject("coefficients")) {
+        for (const auto& [config, c] : node->items()) {
+          const std::string field = "coefficients." + config;
+          if (!configs_.count(config)) {
+            e.fail(field, "unknown configuration variable " + quote(config) + " (known: " +
+                              listNames(configOrder_) + ")");
+          }
+          coefficients[config] = e.toNumber(c, field);
+        }
+      }
+      call(e.label(), [&] { builder_.addDamping(dflt, coefficients); });
+    } else if (type == "body_wrench") {
+      const std::string frame = frameRef(e, "frame");
+      const Json& w = e.require("wrench");
+      if (!w.is_array() || w.size() != 6) {
+        e.failValue("wrench", w, "must be a list of 6 entries [fx, fy, fz, tx, ty, tz]");
+      }
+      std::array<WrenchEntry, 6> wrench;
+      for (int i = 0; i < 6; ++i) {
+        const std::string field = "wrench[" + std::to_string(i) + "]";
+        if (w[i].is_string()) {
+          wrench[i] = e.toName(w[i], field);
+        } else if (w[i].is_number()) {
+          wrench[i] = e.toNumber(w[i], field);
+        } else {
+          e.failValue(field, w[i], "must be a number or an input name, not a " + typeName(w[i]));
+        }
+      }
+      call(e.label(), [&] { builder_.addBodyWrench(frame, wrench); });
+    } else if (type == "tendon") {
+      const Json& path = e.list("path");
+      if (path.size() < 2) e.failValue("path", path, "must list at least 2 frames");
+      std::vector<std::string> frames;
+      for (std::size_t i = 0; i < path.size(); ++i) {
+        const std::string field = "path[" + std::to_string(i) + "]";
+        const std::string name = e.toName(path[i], field);
+        if (name != "world" && !frames_.count(name)) e.fail(field, "unknown frame " + quote(name));
+        frames.push_back(name);
+      }
+      const std::string input = e.name("input");
+      call(e.label(), [&] { builder_.addTendon(frames, input); });
+    } else {
+      e.failValue("type", Json(type), "is not one of config_force, damping, body_wrench, tendon");
+    }
+  }
+
+  void readConstraint(const Element& e, const std::string& type) {
+    if (type == "distance") {
+      const std::string f1 = frameRef(e, "frame1"), f2 = frameRef(e, "frame2");
+      const double d = e.number("distance");
+      if (d < 0.0) e.failValue("distance", e.require("distance"), "must be >= 0");
+      call(e.label(), [&] { builder_.addDistanceConstraint(f1, f2, d); });
+    } else if (type == "point") {
+      const std::string f1 = frameRef(e, "frame1"), f2 = frameRef(e, "frame2");
+      const Json& axisNode = e.require("axis");
+      const std::string axis = e.toName(axisNode, "axis");
+      if (axis != "x" && axis != "y" && axis != "z") e.failValue("axis", axisNode, "must be \"x\", \"y\" or \"z\"");
+      const int index = axis[0] - 'x';
+      call(e.label(), [&] { builder_.addPointConstraint(f1, f2, index); });
+    } else if (type == "point_on_plane") {
+      const std::string plane = frameRef(e, "plane_frame");
+      const Eigen::Vector3d normal = e.vector3("normal");
+      if (normal.isZero(0.0)) e.failValue("normal", e.require("normal"), "must not be zero");
+      const std::string point = frameRef(e, "point_frame");
+      call(e.label(), [&] { builder_.addPointOnPlaneConstraint(plane, normal, point); });
+    } else if (type == "knife_edge") {
+      // Extension beyond version 1 of the spec: the nonholonomic constraint the builder offers.
+      const std::string frame = frameRef(e, "frame");
+      const Eigen::Vector3d axis = e.vector3("axis");
+      if (axis.isZero(0.0)) e.failValue("axis", e.require("axis"), "must not be zero");
+      call(e.label(), [&] { builder_.addKnifeEdgeConstraint(frame, axis); });
+    } else {
+      e.failValue("type", Json(type), "is not one of distance, point, point_on_plane, knife_edge");
+    }
+  }
+
+  // ---- state ----------------------------------------------------------------------------------
+
+  static void readState(const Element& top, Scene& scene) {
+    const Model& model = scene.model;
+    scene.q = Eigen::VectorXd::Zero(model.nq());
+    scene.dq = Eigen::VectorXd::Zero(model.nq());
+    scene.u = Eigen::VectorXd::Zero(model.nu());
+    const Json* state = top.optionalObject("state");
+    if (!state) return;
+    Element e(*state, "state");
+    const auto readValues = [&e](const char* key, const std::vector<std::string>& names,
+                                 const char* what, Eigen::VectorXd& out) {
+      const Json* values = e.optionalObject(key);
+      if (!values) return;
+      for (const auto& [name, value] : values->items()) {
+        const std::string field = std::string(key) + "." + name;
+        const auto it = std::find(names.begin(), names.end(), name);
+        if (it == names.end()) {
+          e.fail(field, "unknown " + std::string(what) + " " + quote(name) + " (known: " +
+                            listNames(names) + ")");
+        }
+        out[it - names.begin()] = e.toNumber(value, field);
+      }
+    };
+    readValues("q", model.configNames(), "configuration variable", scene.q);
+    readValues("dq", model.configNames(), "configuration variable", scene.dq);
+    readValues("u", model.inputNames(), "input", scene.u);
+  }
+
+  ModelBuilder builder_;
+  std::map<std::string, std::string> frames_;   // name -> where it was defined, for messages
+  std::map<std::string, std::string> configs_;  // config -> frame that carries it
+  std::vector<std::string> configOrder_;
+};
+
+/// Rejects text nested deeper than kMaxNestingDepth before nlohmann builds a tree of it.
+void checkNesting(const std::string& text) {
+  int depth = 0;
+  bool inString = false, escaped = false;
+  int line = 1;
+  std::size_t lineStart = 0;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (c == '\n') {
+      ++line;
+      lineStart = i + 1;
+    }
+    if (inString) {
+      if (escaped) {
+        escaped = false;
+      } else if (c == '\\') {
+        escaped = true;
+      } else if (c == '"') {
+        inString = false;
+      }
+    } else if (c == '"') {
+      inString = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > kMaxNestingDepth) {
+        throw ModelError("invalid JSON at line " + std::to_string(line) + ", column " +
+                         std::to_string(i - lineStart + 1) + ": nested deeper than " +
+                         std::to_string(kMaxNestingDepth) + " levels");
+      }
+    } else if (c == ']' || c == '}') {
+      --depth;
+    }
+  }
+}
+
+/// nlohmann's message without its "[json.exception.parse_error.101] " prefix.
+std::string jsonMessage(const nlohmann::json::exception& e) {
+  std::string what = e.what();
+  if (const auto end = what.find("] "); what.rfind("[json.exception.", 0) == 0 && end != std::string::npos) {
+    what.erase(0, end + 2);
+  }
+  return what;
+}
+
+}  // namespace
+
+Scene parseScene(const std::string& jsonText, const std::string& source) {
+  try {
+    if (jsonText.size() > kMaxSceneBytes) {
+      throw ModelError("the scene is larger than " + std::to_string(kMaxSceneBytes >> 20) + " MiB");
+    }
+    checkNesting(jsonText);
+    Json root;
+    try {
+      root = Json::parse(jsonText);
+    } catch (const nlohmann::json::exception& e) {
+      throw ModelError("invalid JSON: " + jsonMessage(e));
+    }
+    return SceneReader().read(root);
+  } catch (const ModelError& e) {
+    throw ModelError(source + ": " + e.what());
+  } catch (const nlohmann::json::exception& e) {
+    // A structural check missed a type: still report it as a bad scene, never as a crash.
+    throw ModelError(source + ": " + jsonMessage(e));
+  }
+}
+
+Scene loadScene(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw ModelError(path + ": is a directory, not a scene file");
+  std::ifstream file(path, std::ios::binary);
+  if (!file) throw ModelError(path + ": cannot open the scene file");
+  file.seekg(0, std::ios::end);
+  const std::streamoff size = file.tellg();
+  if (size < 0) throw ModelError(path + ": cannot read the scene file");
+  if (static_cast<std::size_t>(size) > kMaxSceneBytes) {
+    throw ModelError(path + ": the scene is larger than " + std::to_string(kMaxSceneBytes >> 20) + " MiB");
+  }
+  file.seekg(0, std::ios::beg);
+  std::string text(static_cast<std::size_t>(size), '\0');
+  if (!file.read(text.data(), size)) throw ModelError(path + ": cannot read the scene file");
+  return parseScene(text, path);
+}
+
+}  // namespace trellis
