@@ -18,6 +18,7 @@ Data::Data(const Model& model) {
   lambda = Eigen::VectorXd::Zero(nc);
   inputMatrix = Eigen::MatrixXd::Zero(n, m);
   A = Eigen::MatrixXd::Zero(2 * n, 2 * n);
+  A.topRightCorner(n, n).setIdentity();  // constant rows of the linearization
   B = Eigen::MatrixXd::Zero(2 * n, m);
   dqdd_dq = Eigen::MatrixXd::Zero(n, n);
   dqdd_ddq = Eigen::MatrixXd::Zero(n, n);
@@ -31,8 +32,10 @@ Data::Data(const Model& model) {
 
   jointR.assign(n, Eigen::Matrix3d::Identity());
   jointP.assign(n, Eigen::Vector3d::Zero());
-  for (auto* vec : {&S, &v, &a, &f, &fext, &dTheta, &dS, &dv, &da, &df, &dfext, &Iv, &Ia})
+  for (auto* vec : {&S, &v, &a, &f, &fext, &Iv, &Ia, &inertialForce, &compositeMomentum,
+                    &tangentAlpha, &tangentBeta, &tangentGamma})
     vec->assign(n, Vector6d::Zero());
+  compositeD.assign(n, Eigen::Matrix<double, 6, 6>::Zero());
   wm.assign(n, 0.0);
   wh.assign(n, Eigen::Vector3d::Zero());
   wI.assign(n, Eigen::Matrix3d::Zero());
@@ -44,6 +47,7 @@ Data::Data(const Model& model) {
   rhsX = Eigen::MatrixXd::Zero(n, cols);
   crhsX = Eigen::MatrixXd::Zero(nc, cols);
   massLLT = Eigen::LLT<Eigen::MatrixXd>(n);
+  massInverse = Eigen::MatrixXd::Zero(n, n);
   Y = Eigen::MatrixXd::Zero(n, nc);
   schur = Eigen::MatrixXd::Zero(nc, nc);
   schurLLT = Eigen::LLT<Eigen::MatrixXd>(nc);

@@ -165,9 +165,27 @@ void factorizeKkt(const Model& model, Data& data) {
   st.message += ", e.g. " + model.constraints()[worst].name + ")";
 }
 
+namespace {
+/// X = M⁻¹ X. Many right-hand sides (the linearization's 2n + m) go through the explicit inverse
+/// and one matrix product, which for the sizes here costs fewer operations than two blocked
+/// triangular solves (measured with callgrind at n = 20); a few go through the factor.
+void solveMass(Data& data, Eigen::Ref<Eigen::MatrixXd> X) {
+  const Eigen::Index n = X.rows();
+  if (X.cols() <= n / 2 + 1) {
+    data.massLLT.solveInPlace(X);
+    return;
+  }
+  data.massInverse.setIdentity();
+  data.massLLT.solveInPlace(data.massInverse);
+  Eigen::Ref<Eigen::MatrixXd> t = data.tmpNX.leftCols(X.cols());
+  t.noalias() = data.massInverse * X;
+  X = t;
+}
+}  // namespace
+
 void solveKkt(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X, Eigen::Ref<Eigen::MatrixXd> Lambda) {
   const int p = static_cast<int>(X.cols());
-  data.massLLT.solveInPlace(X);  // X = M⁻¹ R
+  solveMass(data, X);  // X = M⁻¹ R
   if (model.nc() == 0) return;
   Lambda.noalias() -= data.constraintJacobian * X;  // C − A M⁻¹ R
   if (data.schurUsesPinv) {

@@ -10,19 +10,20 @@ namespace detail {
 namespace {
 
 /// Tangents of the force elements that move with q (springs, tendons, body wrenches, constraint
-/// forces at fixed λ) for the current body tangents; only elements touching [first, last) move.
-void forceTangents(const Model& model, Data& data, const Eigen::VectorXd& u, int first, int last) {
-  auto moves = [&](int joint) { return joint >= first && joint < last; };
+/// forces at fixed λ); each body wrench tangent δW goes to emit(joint, δW).
+template <class Emit>
+void forceTangents(const Model& model, const Data& data, const Direction& dir, const Eigen::VectorXd& u,
+                   Emit&& emit) {
   auto segment = [&](const BodyPoint& a, const BodyPoint& b, auto tauOfL, auto dtauOfL) {
-    if (!moves(a.joint) && !moves(b.joint)) return;
-    const PointKin ka{pointPosition(data, a)}, kb{pointPosition(data, b)};
-    const Vector3d dpa = pointTangent(data, a.joint, ka).p, dpb = pointTangent(data, b.joint, kb).p;
-    const Vector3d d = kb.p - ka.p, dd = dpb - dpa;
+    if (!dir.moves(a.joint) && !dir.moves(b.joint)) return;
+    const Vector3d pa = pointPosition(data, a), pb = pointPosition(data, b);
+    const Vector3d dpa = pointDisplacement(dir, a.joint, pa), dpb = pointDisplacement(dir, b.joint, pb);
+    const Vector3d d = pb - pa, dd = dpb - dpa;
     const double L = d.norm();
     const double tau = tauOfL(L), dL = d.dot(dd) / L;
     const Vector3d f = tau * d, df = dtauOfL(L) * dL * d + tau * dd;
-    addBodyWrenchTangent(data, a.joint, forceAtTangent(ka.p, dpa, f, df));
-    addBodyWrenchTangent(data, b.joint, forceAtTangent(kb.p, dpb, -f, -df));
+    emit(a.joint, forceAtTangent(pa, dpa, f, df));
+    emit(b.joint, forceAtTangent(pb, dpb, -f, -df));
   };
   for (const LinearSpring& s : model.linearSprings())
     segment(s.a, s.b, [&](double L) { return springTensionPerLength(s, L); },
@@ -33,104 +34,107 @@ void forceTangents(const Model& model, Data& data, const Eigen::VectorXd& u, int
       segment(t.path[k], t.path[k + 1], [&](double L) { return T / L; }, [&](double L) { return -T / (L * L); });
   }
   for (const BodyWrench& bw : model.bodyWrenches()) {
-    if (!moves(bw.joint)) continue;
+    if (!dir.moves(bw.joint)) continue;
     Vector6d w;
     for (int k = 0; k < 6; ++k) w[k] = bw.input[k] >= 0 ? u[bw.input[k]] : bw.constant[k];
-    // A wrench fixed in a body is carried along rigidly: δW = δθ ×* W.
-    addBodyWrenchTangent(data, bw.joint, crossForce(data.dTheta[bw.joint], bodyWrenchWorld(data, bw, w)));
+    // A wrench fixed in a body is carried along rigidly: δW = S_k ×* W.
+    emit(bw.joint, crossForce(dir.Sk, bodyWrenchWorld(data, bw, w)));
   }
   const auto& cs = model.constraints();
   for (int r = 0; r < model.nc(); ++r)
-    if (moves(cs[r].a.joint) || moves(cs[r].b.joint)) addConstraintWrenchTangents(data, cs[r], data.lambda[r]);
+    if (dir.moves(cs[r].a.joint) || dir.moves(cs[r].b.joint))
+      constraintWrenchTangents(data, dir, cs[r], data.lambda[r], emit);
 }
 
-/// One state direction: x_dir = q_k (velocity = false) or q̇_k (velocity = true). Writes the
-/// column ∂r/∂x_dir into `dr` (n), ∂c/∂x_dir into `dc` (nc) and, for q_k, ∂(A q̇)/∂q_k into
-/// `dhdot` (nc). Body tangents are nonzero only on the subtree of joint k.
-template <class ColR, class ColC, class ColH>
-void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& dq, const Eigen::VectorXd& u, int k,
-                 bool velocity, ColR&& dr, ColC&& dc, ColH&& dhdot) {
+/// Subtree sums used by tangentPass (after the nominal Newton-Euler pass at the solved q̈, λ).
+void compositePass(const Model& model, Data& data) {
   const auto& joints = model.joints();
   const int n = model.nq();
-  const int end = joints[k].subtreeEnd;
-  const Vector6d g = make(model.gravity(), Vector3d::Zero());
-
-  // Forward: δθ, δS, δv, δa on the subtree (zero elsewhere).
-  for (int i = k; i < end; ++i) {
-    const int p = joints[i].parent;
-    const bool root = (i == k);
-    const Vector6d dvParent = root ? Vector6d::Zero() : data.dv[p];
-    const Vector6d daParent = root ? Vector6d::Zero() : data.da[p];
-    if (!velocity) {
-      // The subtree turns rigidly with q_k: δθ_i = S_k, δS_i = S_k × S_i.
-      data.dTheta[i] = data.S[k];
-      data.dS[i] = crossMotion(data.S[k], data.S[i]);
-      data.dv[i] = dvParent + data.dS[i] * dq[i];
-      data.da[i] = daParent + data.dS[i] * data.qdd[i] + crossMotion(data.dv[i], data.S[i]) * dq[i] +
-                   crossMotion(data.v[i], data.dS[i]) * dq[i];
-    } else {
-      data.dv[i] = root ? Vector6d(data.S[k]) : dvParent;
-      data.da[i] = daParent + crossMotion(data.dv[i], data.S[i]) * dq[i];
-      if (root) data.da[i] += crossMotion(data.v[i], data.S[i]);
-    }
-  }
-
-  // External wrench tangents (positions do not depend on q̇).
-  for (auto& w : data.dfext) w.setZero();
-  if (!velocity) forceTangents(model, data, u, k, end);
-
-  // Inertial wrench tangents on the subtree: δ(I x) = δθ ×* (I x) − I (δθ × x) + I δx.
-  for (int i = 0; i < n; ++i) data.df[i] = -data.dfext[i];
-  for (int i = k; i < end; ++i) {
-    const double m = data.wm[i];
-    const Vector3d& h = data.wh[i];
-    const Eigen::Matrix3d& I = data.wI[i];
+  for (int i = 0; i < n; ++i) {
     const Vector6d& v = data.v[i];
-    Vector6d df = applyInertia(m, h, I, data.da[i]) + crossForce(data.dv[i], data.Iv[i]);
-    Vector6d dIv = applyInertia(m, h, I, data.dv[i]);
-    if (!velocity) {
-      const Vector6d& th = data.dTheta[i];
-      df += crossForce(th, data.Ia[i]) - applyInertia(m, h, I, crossMotion(th, data.a[i] - g));
-      dIv += crossForce(th, data.Iv[i]) - applyInertia(m, h, I, crossMotion(th, v));
-    }
-    data.df[i] += df + crossForce(v, dIv);
+    data.inertialForce[i] = data.Ia[i] + crossForce(v, data.Iv[i]);
+    data.compositeMomentum[i] = data.Iv[i];
+    // D_i = I crm(v) − crf(v) I = P + Pᵀ with P = I crm(v) (crf(v) = −crm(v)ᵀ, I symmetric), and
+    // with I = [[m E, −ĥ], [ĥ, Ī]], crm(v) = [[ω̂, v̂], [0, ω̂]]:
+    //   P = [[m ω̂, m v̂ − ĥ ω̂], [ĥ ω̂, ĥ v̂ + Ī ω̂]].
+    const Eigen::Matrix3d wh = skew(ang(v)), vh = skew(lin(v)), hh = skew(data.wh[i]);
+    const double m = data.wm[i];
+    Eigen::Matrix<double, 6, 6> P;
+    P.topLeftCorner<3, 3>() = m * wh;
+    P.topRightCorner<3, 3>().noalias() = m * vh - hh * wh;
+    P.bottomLeftCorner<3, 3>().noalias() = hh * wh;
+    P.bottomRightCorner<3, 3>().noalias() = hh * vh + data.wI[i] * wh;
+    data.compositeD[i] = P + P.transpose();
   }
-
-  // Backward: δτ_i = δS_iᵀ F_i + S_iᵀ δF_i.
+  // Subtree sums; data.fext is reused for the subtree sum of the external wrenches.
   for (int i = n - 1; i >= 0; --i) {
-    dr(i) = data.S[i].dot(data.df[i]);
-    if (!velocity && i >= k && i < end) dr(i) += data.dS[i].dot(data.f[i]);
-    if (joints[i].parent != kWorld) data.df[joints[i].parent] += data.df[i];
+    const int p = joints[i].parent;
+    if (p == kWorld) continue;
+    data.inertialForce[p] += data.inertialForce[i];
+    data.compositeMomentum[p] += data.compositeMomentum[i];
+    data.compositeD[p] += data.compositeD[i];
+    data.fext[p] += data.fext[i];
   }
-  // Configuration-level elements: r contains −Q_config.
-  if (!velocity) {
+  for (int j = 0; j < n; ++j) {
+    const Vector6d& S = data.S[j];
+    data.tangentAlpha[j] = crossForce(S, data.fext[j]);
+    data.tangentBeta[j] = applyInertia(data.cm[j], data.ch[j], data.cI[j], S);
+    data.tangentGamma[j] = data.compositeD[j] * S + crossForce(S, data.compositeMomentum[j]);
+  }
+}
+
+/// One state direction, ∂/∂q_k or ∂/∂q̇_k, with q̈ and λ fixed: the column ∂r (n) of the
+/// equations of motion, ∂c (nc) of the constraint accelerations and, for q_k, ∂(A q̇)/∂q_k.
+///
+/// The subtree of k moves; with the closed-form body tangents (point_kinematics.hpp) the
+/// tangent of its subtree wrench F_j (j in the subtree) is, with Ic, H, D the subtree sums of
+/// I, I v and I crm(v) − crf(v) I, w = S_k × v_p and c = S_k × (a_p − g) − w × v_p:
+///   ∂/∂q_k:  δF_j = S_k ×* F_j^inertial − Ic_j c + D_j w − w ×* H_j,   δS_j = S_k × S_j;
+///   ∂/∂q̇_k:  δF_j = −D_j S_k − 2 Ic_j w + S_k ×* H_j.
+/// Ancestors see δF_k; external wrench tangents are carried up their own paths. O(subtree+depth).
+template <class ColR, class ColC, class ColH>
+void tangentPass(const Model& model, const Data& data, const Eigen::VectorXd& u, const Direction& dir, ColR&& dr,
+                 ColC&& dc, ColH&& dhdot) {
+  const auto& joints = model.joints();
+  const int k = dir.k;
+  const Vector6d g = make(model.gravity(), Vector3d::Zero());
+  // With (a × b)·f = −b·(a ×* f) and D symmetric, δτ_j = δS_jᵀ F_j + S_jᵀ δF_j becomes
+  //   ∂/∂q_k:  δτ_j = −S_k·α_j − c·β_j + w·γ_j,     ∂/∂q̇_k:  δτ_j = −S_k·γ_j − 2 w·β_j
+  // for j in the subtree (external wrench tangents are added below), and S_j·δF_k above it.
+  dr.setZero();
+  Vector6d dFk;
+  if (!dir.velocity) {
+    const Vector6d c = crossMotion(dir.Sk, dir.aP - g) - crossMotion(dir.w, dir.vP);
+    for (int j = k; j < dir.end; ++j)
+      dr(j) = -dir.Sk.dot(data.tangentAlpha[j]) - c.dot(data.tangentBeta[j]) + dir.w.dot(data.tangentGamma[j]);
+    dFk = crossForce(dir.Sk, data.inertialForce[k]) - applyInertia(data.cm[k], data.ch[k], data.cI[k], c) +
+          data.compositeD[k] * dir.w - crossForce(dir.w, data.compositeMomentum[k]);
+  } else {
+    for (int j = k; j < dir.end; ++j)
+      dr(j) = -dir.Sk.dot(data.tangentGamma[j]) - 2.0 * dir.w.dot(data.tangentBeta[j]);
+    dFk = -(data.compositeD[k] * dir.Sk) - 2.0 * applyInertia(data.cm[k], data.ch[k], data.cI[k], dir.w) +
+          crossForce(dir.Sk, data.compositeMomentum[k]);
+  }
+  for (int j = joints[k].parent; j != kWorld; j = joints[j].parent) dr(j) = data.S[j].dot(dFk);
+
+  if (!dir.velocity) {
+    // External wrenches enter r with a minus sign; positions do not depend on q̇.
+    forceTangents(model, data, dir, u, [&](int joint, const Vector6d& dW) {
+      for (int j = joint; j != kWorld; j = joints[j].parent) dr(j) -= data.S[j].dot(dW);
+    });
     for (const ConfigSpring& s : model.configSprings())
-      if (s.config == k) dr(k) += s.k;
+      if (s.config == k) dr(k) += s.k;  // r contains −Q_config
   } else {
     dr(k) += model.damping()[k];
   }
 
-  // Constraint residual tangents.
   const auto& cs = model.constraints();
   for (int r = 0; r < model.nc(); ++r) {
     const Constraint& c = cs[r];
-    const bool touched = (c.a.joint >= k && c.a.joint < end) || (c.b.joint >= k && c.b.joint < end);
-    if (!touched) {
-      dc(r) = 0.0;
-      if (!velocity) dhdot(r) = 0.0;
-      continue;
-    }
-    const ConstraintEval e = constraintTangent(data, c);
+    ConstraintEval e;
+    if (dir.moves(c.a.joint) || dir.moves(c.b.joint)) e = constraintTangent(data, dir, c);
     dc(r) = e.c;
-    if (!velocity) dhdot(r) = e.hdot;
-  }
-
-  // Leave the tangents zero outside the next direction's subtree.
-  for (int i = k; i < end; ++i) {
-    data.dTheta[i].setZero();
-    data.dS[i].setZero();
-    data.dv[i].setZero();
-    data.da[i].setZero();
+    if (!dir.velocity) dhdot(r) = e.hdot;
   }
 }
 
@@ -149,18 +153,13 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
   detail::inverseDynamicsPass(model, data, data.tmpN);
   detail::inputMatrixPass(model, data);
 
-  for (int i = 0; i < n; ++i) {
-    data.dTheta[i].setZero();
-    data.dS[i].setZero();
-    data.dv[i].setZero();
-    data.da[i].setZero();
-  }
+  detail::compositePass(model, data);
   // Columns of −∂r/∂[q, q̇, u] and −∂c/∂[q, q̇, u]; c does not depend on u at fixed q̈.
   for (int k = 0; k < n; ++k) {
-    detail::tangentPass(model, data, dq, u, k, false, data.rhsX.col(k), data.crhsX.col(k),
-                        data.constraintVelocityJacobian.col(k));
-    detail::tangentPass(model, data, dq, u, k, true, data.rhsX.col(n + k), data.crhsX.col(n + k),
-                        data.constraintVelocityJacobian.col(k));
+    detail::tangentPass(model, data, u, detail::makeDirection(model, data, k, false), data.rhsX.col(k),
+                        data.crhsX.col(k), data.constraintVelocityJacobian.col(k));
+    detail::tangentPass(model, data, u, detail::makeDirection(model, data, k, true), data.rhsX.col(n + k),
+                        data.crhsX.col(n + k), data.constraintVelocityJacobian.col(k));
   }
   data.rhsX.leftCols(2 * n) *= -1.0;
   data.crhsX.leftCols(2 * n) *= -1.0;
@@ -172,11 +171,9 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
   data.dqdd_ddq = data.rhsX.middleCols(n, n);
   data.dqdd_du = data.rhsX.rightCols(m);
   if (nc > 0) data.dlambda_dx = data.crhsX;
-  data.A.setZero();
-  data.A.topRightCorner(n, n).setIdentity();
+  // The top rows of A = [[0, I], ·] and B = [[0], ·] were set when Data was built.
   data.A.bottomLeftCorner(n, n) = data.dqdd_dq;
   data.A.bottomRightCorner(n, n) = data.dqdd_ddq;
-  data.B.topRows(n).setZero();
   data.B.bottomRows(n) = data.dqdd_du;
   if (!(data.A.allFinite() && data.B.allFinite())) {
     data.status.code = DynamicsStatus::Code::kNonFinite;

@@ -46,27 +46,79 @@ inline PointKin directionKin(const Data& data, int joint, const Vector3d& local)
   return k;
 }
 
-/// Tangent of pointKin given the body tangents (zero for the world).
-inline PointKin pointTangent(const Data& data, int joint, const PointKin& k) {
-  PointKin d;
-  if (joint == kWorld) return d;
-  const Vector6d &th = data.dTheta[joint], &dv = data.dv[joint], &da = data.da[joint];
-  const Vector3d w = ang(data.v[joint]), al = ang(data.a[joint]);
-  d.p = lin(th) + ang(th).cross(k.p);
-  d.v = lin(dv) + ang(dv).cross(k.p) + w.cross(d.p);
-  d.a = lin(da) + ang(da).cross(k.p) + al.cross(d.p) + ang(dv).cross(k.v) + w.cross(d.v);
+/// The derivative of a body's motion along one state direction: δθ (the twist by which the body
+/// is displaced, δp = δθ_v + δθ_ω × p), δv and δa. Zero for bodies the direction does not move.
+struct BodyTangent {
+  Vector6d theta = Vector6d::Zero(), v = Vector6d::Zero(), a = Vector6d::Zero();
+};
+
+/// One state direction, ∂/∂q_k or ∂/∂q̇_k. It moves the subtree [k, end) of joint k only.
+struct Direction {
+  int k = 0, end = 0;
+  bool velocity = false;
+  Vector6d Sk, vP, aP;  ///< S_k and the parent's velocity and acceleration
+  Vector6d w;           ///< S_k × v_parent
+  bool moves(int joint) const { return joint >= k && joint < end; }
+};
+
+inline Direction makeDirection(const Model& model, const Data& data, int k, bool velocity) {
+  Direction d;
+  d.k = k;
+  d.end = model.joints()[k].subtreeEnd;
+  d.velocity = velocity;
+  d.Sk = data.S[k];
+  const int p = model.joints()[k].parent;
+  d.vP = p == kWorld ? Vector6d::Zero() : data.v[p];
+  d.aP = p == kWorld ? Vector6d::Zero() : data.a[p];
+  d.w = crossMotion(d.Sk, d.vP);
   return d;
 }
 
-/// Tangent of directionKin.
-inline PointKin directionTangent(const Data& data, int joint, const PointKin& k) {
+/// Closed forms of the body tangents on the subtree of k (parent p = λ(k), w = S_k × v_p):
+///  ∂/∂q_k:  δθ = S_k, δv = S_k × v − w, δa = S_k × (a − a_p) − w × (v − v_p);
+///  ∂/∂q̇_k:  δθ = 0,   δv = S_k,         δa = S_k × v − 2 w.
+inline BodyTangent bodyTangent(const Data& data, const Direction& d, int joint) {
+  BodyTangent t;
+  if (!d.moves(joint)) return t;
+  const Vector6d& v = data.v[joint];
+  if (!d.velocity) {
+    t.theta = d.Sk;
+    t.v = crossMotion(d.Sk, v) - d.w;
+    t.a = crossMotion(d.Sk, data.a[joint] - d.aP) - crossMotion(d.w, v - d.vP);
+  } else {
+    t.v = d.Sk;
+    t.a = crossMotion(d.Sk, v) - 2.0 * d.w;
+  }
+  return t;
+}
+
+/// Tangent of pointKin.
+inline PointKin pointTangent(const Data& data, const Direction& dir, int joint, const PointKin& k) {
   PointKin d;
-  if (joint == kWorld) return d;
-  const Vector3d thw = ang(data.dTheta[joint]), dw = ang(data.dv[joint]), da = ang(data.da[joint]);
+  if (!dir.moves(joint)) return d;
+  const BodyTangent t = bodyTangent(data, dir, joint);
   const Vector3d w = ang(data.v[joint]), al = ang(data.a[joint]);
-  d.p = thw.cross(k.p);
-  d.v = dw.cross(k.p) + w.cross(d.p);
-  d.a = da.cross(k.p) + al.cross(d.p) + dw.cross(k.v) + w.cross(d.v);
+  d.p = lin(t.theta) + ang(t.theta).cross(k.p);
+  d.v = lin(t.v) + ang(t.v).cross(k.p) + w.cross(d.p);
+  d.a = lin(t.a) + ang(t.a).cross(k.p) + al.cross(d.p) + ang(t.v).cross(k.v) + w.cross(d.v);
+  return d;
+}
+
+/// Displacement δp of a body point under direction dir (zero for q̇ directions).
+inline Vector3d pointDisplacement(const Direction& dir, int joint, const Vector3d& p) {
+  if (dir.velocity || !dir.moves(joint)) return Vector3d::Zero();
+  return lin(dir.Sk) + ang(dir.Sk).cross(p);
+}
+
+/// Tangent of directionKin.
+inline PointKin directionTangent(const Data& data, const Direction& dir, int joint, const PointKin& k) {
+  PointKin d;
+  if (!dir.moves(joint)) return d;
+  const BodyTangent t = bodyTangent(data, dir, joint);
+  const Vector3d w = ang(data.v[joint]), al = ang(data.a[joint]);
+  d.p = ang(t.theta).cross(k.p);
+  d.v = ang(t.v).cross(k.p) + w.cross(d.p);
+  d.a = ang(t.a).cross(k.p) + al.cross(d.p) + ang(t.v).cross(k.v) + w.cross(d.v);
   return d;
 }
 
@@ -131,14 +183,14 @@ inline ConstraintEval evaluateConstraint(const Data& data, const Constraint& c) 
 }
 
 /// Directional derivative of evaluateConstraint (uses the body tangents in data).
-inline ConstraintEval constraintTangent(const Data& data, const Constraint& c) {
+inline ConstraintEval constraintTangent(const Data& data, const Direction& dir, const Constraint& c) {
   ConstraintEval e;
   const PointKin a = pointKin(data, c.a);
-  const PointKin ta = pointTangent(data, c.a.joint, a);
+  const PointKin ta = pointTangent(data, dir, c.a.joint, a);
   switch (c.type) {
     case ConstraintType::kDistance: {
       const PointKin b = pointKin(data, c.b);
-      const PointKin tb = pointTangent(data, c.b.joint, b);
+      const PointKin tb = pointTangent(data, dir, c.b.joint, b);
       const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
       const Vector3d td = ta.p - tb.p, tdd = ta.v - tb.v, tddd = ta.a - tb.a;
       e.h = 2.0 * d.dot(td);
@@ -148,7 +200,7 @@ inline ConstraintEval constraintTangent(const Data& data, const Constraint& c) {
     }
     case ConstraintType::kPoint: {
       const PointKin b = pointKin(data, c.b);
-      const PointKin tb = pointTangent(data, c.b.joint, b);
+      const PointKin tb = pointTangent(data, dir, c.b.joint, b);
       const Vector3d ax = constraintAxis(c);
       e.h = ax.dot(ta.p - tb.p);
       e.hdot = ax.dot(ta.v - tb.v);
@@ -157,9 +209,9 @@ inline ConstraintEval constraintTangent(const Data& data, const Constraint& c) {
     }
     case ConstraintType::kPointOnPlane: {
       const PointKin b = pointKin(data, c.b);
-      const PointKin tb = pointTangent(data, c.b.joint, b);
+      const PointKin tb = pointTangent(data, dir, c.b.joint, b);
       const PointKin n = directionKin(data, c.a.joint, c.direction);
-      const PointKin tn = directionTangent(data, c.a.joint, n);
+      const PointKin tn = directionTangent(data, dir, c.a.joint, n);
       const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
       const Vector3d td = ta.p - tb.p, tdd = ta.v - tb.v, tddd = ta.a - tb.a;
       e.h = tn.p.dot(d) + n.p.dot(td);
@@ -169,7 +221,7 @@ inline ConstraintEval constraintTangent(const Data& data, const Constraint& c) {
     }
     case ConstraintType::kKnifeEdge: {
       const PointKin n = directionKin(data, c.a.joint, c.direction);
-      const PointKin tn = directionTangent(data, c.a.joint, n);
+      const PointKin tn = directionTangent(data, dir, c.a.joint, n);
       e.hdot = tn.p.dot(a.v) + n.p.dot(ta.v);
       e.c = tn.v.dot(a.v) + n.v.dot(ta.v) + tn.p.dot(a.a) + n.p.dot(ta.a);
       break;
@@ -222,10 +274,6 @@ inline void addConstraintJacobianRow(const Model& model, const Data& data, const
 inline void addBodyWrench(Data& data, int joint, const Vector6d& w) {
   if (joint != kWorld) data.fext[joint] += w;
 }
-inline void addBodyWrenchTangent(Data& data, int joint, const Vector6d& w) {
-  if (joint != kWorld) data.dfext[joint] += w;
-}
-
 /// Constraint forces Aᵀλ of one row as wrenches on the bodies (data.fext).
 inline void addConstraintWrenches(Data& data, const Constraint& c, double lambda) {
   const Vector3d pa = pointPosition(data, c.a);
@@ -263,44 +311,41 @@ inline Vector6d forceAtTangent(const Vector3d& p, const Vector3d& dp, const Vect
   return make(df, dp.cross(f) + p.cross(df));
 }
 
-/// Tangent of addConstraintWrenches at fixed λ (into data.dfext).
-inline void addConstraintWrenchTangents(Data& data, const Constraint& c, double lambda) {
+/// Tangent of addConstraintWrenches at fixed λ along a configuration direction; each body wrench
+/// tangent is handed to emit(joint, δW).
+template <class Emit>
+inline void constraintWrenchTangents(const Data& data, const Direction& dir, const Constraint& c, double lambda,
+                                     Emit&& emit) {
   const BodyPoint& A = c.a;
-  const Vector3d pa = pointPosition(data, A);
-  const Vector3d dpa = A.joint == kWorld ? Vector3d::Zero().eval()
-                                         : Vector3d(lin(data.dTheta[A.joint]) + ang(data.dTheta[A.joint]).cross(pa));
-  auto moved = [&](const BodyPoint& bp, const Vector3d& p) -> Vector3d {
-    if (bp.joint == kWorld) return Vector3d::Zero();
-    return lin(data.dTheta[bp.joint]) + ang(data.dTheta[bp.joint]).cross(p);
-  };
+  const Vector3d pa = pointPosition(data, A), dpa = pointDisplacement(dir, A.joint, pa);
   switch (c.type) {
     case ConstraintType::kDistance: {
-      const Vector3d pb = pointPosition(data, c.b), dpb = moved(c.b, pb);
+      const Vector3d pb = pointPosition(data, c.b), dpb = pointDisplacement(dir, c.b.joint, pb);
       const Vector3d f = 2.0 * lambda * (pa - pb), df = 2.0 * lambda * (dpa - dpb);
-      addBodyWrenchTangent(data, A.joint, forceAtTangent(pa, dpa, f, df));
-      addBodyWrenchTangent(data, c.b.joint, forceAtTangent(pb, dpb, -f, -df));
+      emit(A.joint, forceAtTangent(pa, dpa, f, df));
+      emit(c.b.joint, forceAtTangent(pb, dpb, -f, -df));
       break;
     }
     case ConstraintType::kPoint: {
-      const Vector3d pb = pointPosition(data, c.b), dpb = moved(c.b, pb);
+      const Vector3d pb = pointPosition(data, c.b), dpb = pointDisplacement(dir, c.b.joint, pb);
       const Vector3d f = lambda * constraintAxis(c);
-      addBodyWrenchTangent(data, A.joint, forceAtTangent(pa, dpa, f, Vector3d::Zero()));
-      addBodyWrenchTangent(data, c.b.joint, forceAtTangent(pb, dpb, -f, Vector3d::Zero()));
+      emit(A.joint, forceAtTangent(pa, dpa, f, Vector3d::Zero()));
+      emit(c.b.joint, forceAtTangent(pb, dpb, -f, Vector3d::Zero()));
       break;
     }
     case ConstraintType::kPointOnPlane: {
-      const Vector3d pb = pointPosition(data, c.b), dpb = moved(c.b, pb);
+      const Vector3d pb = pointPosition(data, c.b), dpb = pointDisplacement(dir, c.b.joint, pb);
       const Vector3d n = directionKin(data, A.joint, c.direction).p;
-      const Vector3d dn = A.joint == kWorld ? Vector3d::Zero().eval() : Vector3d(ang(data.dTheta[A.joint]).cross(n));
+      const Vector3d dn = dir.moves(A.joint) ? Vector3d(ang(dir.Sk).cross(n)) : Vector3d::Zero().eval();
       const Vector3d f = lambda * n, df = lambda * dn;
-      addBodyWrenchTangent(data, A.joint, forceAtTangent(pb, dpb, f, df));
-      addBodyWrenchTangent(data, c.b.joint, forceAtTangent(pb, dpb, -f, -df));
+      emit(A.joint, forceAtTangent(pb, dpb, f, df));
+      emit(c.b.joint, forceAtTangent(pb, dpb, -f, -df));
       break;
     }
     case ConstraintType::kKnifeEdge: {
       const Vector3d n = directionKin(data, A.joint, c.direction).p;
-      const Vector3d dn = A.joint == kWorld ? Vector3d::Zero().eval() : Vector3d(ang(data.dTheta[A.joint]).cross(n));
-      addBodyWrenchTangent(data, A.joint, forceAtTangent(pa, dpa, lambda * n, lambda * dn));
+      const Vector3d dn = dir.moves(A.joint) ? Vector3d(ang(dir.Sk).cross(n)) : Vector3d::Zero().eval();
+      emit(A.joint, forceAtTangent(pa, dpa, lambda * n, lambda * dn));
       break;
     }
   }

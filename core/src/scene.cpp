@@ -540,6 +540,19 @@ void checkNesting(const std::string& text) {
   }
 }
 
+/// " at line L, column C" of the first occurrence of the token quoted in `what` ('...'), if any.
+std::string locateToken(const std::string& text, const std::string& what) {
+  const auto open = what.find('\'');
+  const auto close = open == std::string::npos ? open : what.find('\'', open + 1);
+  if (close == std::string::npos || close == open + 1) return "";
+  const auto at = text.find(what.substr(open + 1, close - open - 1));
+  if (at == std::string::npos) return "";
+  const auto lineStart = text.rfind('\n', at);
+  const auto line = 1 + std::count(text.begin(), text.begin() + static_cast<std::ptrdiff_t>(at), '\n');
+  const auto column = at - (lineStart == std::string::npos ? 0 : lineStart + 1) + 1;
+  return " at line " + std::to_string(line) + ", column " + std::to_string(column);
+}
+
 /// nlohmann's message without its "[json.exception.parse_error.101] " prefix.
 std::string jsonMessage(const nlohmann::json::exception& e) {
   std::string what = e.what();
@@ -560,8 +573,11 @@ Scene parseScene(const std::string& jsonText, const std::string& source) {
     Json root;
     try {
       root = Json::parse(jsonText);
-    } catch (const nlohmann::json::exception& e) {
+    } catch (const nlohmann::json::parse_error& e) {
       throw ModelError("invalid JSON: " + jsonMessage(e));
+    } catch (const nlohmann::json::exception& e) {
+      // e.g. "number overflow parsing '1e999'" (a non-finite number), which carries no position.
+      throw ModelError("invalid JSON" + locateToken(jsonText, e.what()) + ": " + jsonMessage(e));
     }
     return SceneReader().read(root);
   } catch (const ModelError& e) {

@@ -17,6 +17,13 @@ inline Vector6d make(const Vector3d& l, const Vector3d& a) {
   return x;
 }
 
+/// The cross-product matrix: skew(a) b = a × b.
+inline Eigen::Matrix3d skew(const Vector3d& a) {
+  Eigen::Matrix3d m;
+  m << 0, -a.z(), a.y(), a.z(), 0, -a.x(), -a.y(), a.x(), 0;
+  return m;
+}
+
 /// m × n for twists (the Lie bracket): [ω × n_v + v × n_ω; ω × n_ω].
 inline Vector6d crossMotion(const Vector6d& m, const Vector6d& n) {
   const Vector3d v = lin(m), w = ang(m), nv = lin(n), nw = ang(n);

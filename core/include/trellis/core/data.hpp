@@ -80,14 +80,20 @@ class Data {
   std::vector<Eigen::Vector3d> ch;       ///< composite (subtree) inertia for the mass matrix
   std::vector<double> cm;
   std::vector<Eigen::Matrix3d> cI;
-  // tangents of one directional derivative
-  std::vector<Vector6d> dTheta, dS, dv, da, df, dfext;
   std::vector<Vector6d> Iv, Ia;          ///< I v and I (a − g) per body
+  // Subtree sums for the linearization: inertial wrench Σ I(a − g) + v ×* I v, momentum Σ I v,
+  // and D = Σ (I crm(v) − crf(v) I) (6×6), which make each tangent O(1) per joint pair.
+  std::vector<Vector6d> inertialForce, compositeMomentum;
+  std::vector<Eigen::Matrix<double, 6, 6>> compositeD;
+  // Per-joint vectors that reduce each (direction k, joint j) pair of the linearization to three
+  // dot products (linearization.cpp): α = S ×* F_ext, β = Ic S, γ = D S + S ×* H.
+  std::vector<Vector6d> tangentAlpha, tangentBeta, tangentGamma;
   Eigen::VectorXd u;                     ///< inputs of the current evaluation
   Eigen::VectorXd qddZero;
   Eigen::MatrixXd rhsX;                  ///< n×(2n+m): −∂r/∂[x; u]
   Eigen::MatrixXd crhsX;                 ///< nc×(2n+m): −∂c/∂[x; u]
   Eigen::LLT<Eigen::MatrixXd> massLLT;
+  Eigen::MatrixXd massInverse;           ///< n×n, M⁻¹ when many right-hand sides are solved
   Eigen::MatrixXd Y;                     ///< n×nc: L⁻¹ Aᵀ
   Eigen::MatrixXd schur;                 ///< nc×nc: A M⁻¹ Aᵀ
   Eigen::LLT<Eigen::MatrixXd> schurLLT;
