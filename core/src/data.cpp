@@ -50,6 +50,8 @@ Data::Data(const Model& model) {
   massInverse = Eigen::MatrixXd::Zero(n, n);
   Y = Eigen::MatrixXd::Zero(n, nc);
   schur = Eigen::MatrixXd::Zero(nc, nc);
+  constraintScale = Eigen::VectorXd::Ones(nc);
+  schurScale = Eigen::VectorXd::Ones(nc);
   schurLLT = Eigen::LLT<Eigen::MatrixXd>(nc);
   schurEig = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(nc);
   schurPinv = Eigen::MatrixXd::Zero(nc, nc);

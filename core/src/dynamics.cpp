@@ -96,7 +96,13 @@ void evaluateConstraints(const Model& model, Data& data, Eigen::VectorXd* h, Eig
     if (h) (*h)[r] = e.h;
     if (hdot) (*hdot)[r] = e.hdot;
     if (c) (*c)[r] = e.c;
-    if (A) addConstraintJacobianRow(model, data, cs[r], A->row(r));
+    if (A) {
+      // Kinematic conditioning of the row: ‖A_r‖ over the norm it would have if every joint moved
+      // the constraint's points along its gradient; → 0 at singular configurations.
+      data.tmpN.setZero();
+      addConstraintJacobianRow(model, data, cs[r], A->row(r), &data.tmpN);
+      data.constraintScale[r] = data.tmpN.norm();
+    }
   }
 }
 
@@ -131,14 +137,37 @@ void factorizeKkt(const Model& model, Data& data) {
     return;
   }
   if (nc == 0) return;
+  // Row-normalized Schur complement Ŝ = D A M⁻¹ Aᵀ D, D = diag(1/s_r): its conditioning is a
+  // property of the constraints, independent of how each h is scaled.
+  double kinematic = 1.0;
+  int worstRow = 0;
+  for (int r = 0; r < nc; ++r) {
+    const double s = data.constraintScale[r];
+    const double k = s > 0 ? data.constraintJacobian.row(r).norm() / s : 0.0;
+    data.schurScale[r] = s > 0 ? 1.0 / s : 1.0;
+    if (k < kinematic) {
+      kinematic = k;
+      worstRow = r;
+    }
+  }
   data.Y = data.constraintJacobian.transpose();
   data.massLLT.matrixL().solveInPlace(data.Y);
   data.schur.noalias() = data.Y.transpose() * data.Y;
+  data.schur = data.schurScale.asDiagonal() * data.schur * data.schurScale.asDiagonal();
   data.schurLLT.compute(data.schur);
   const double sScale = data.schur.diagonal().maxCoeff();
   if (data.schurLLT.info() == Eigen::Success && sScale > 0) {
-    st.constraintConditioning = data.schurLLT.rcond();
-    if (st.constraintConditioning > 1e-13) return;
+    st.constraintConditioning = std::min(kinematic, data.schurLLT.rcond());
+    if (data.schurLLT.rcond() > 1e-13 && kinematic > 0) {
+      // Relative errors of the constraint forces and their derivatives grow like eps / κ²;
+      // below κ = 1e-5 they may exceed 1e-6 and the configuration is reported as singular.
+      if (kinematic < 1e-5) {
+        st.code = DynamicsStatus::Code::kSingularConstraints;
+        st.message = "near-singular constraint configuration (kinematic conditioning " + std::to_string(kinematic) +
+                     ") at " + model.constraints()[worstRow].name;
+      }
+      return;
+    }
   }
   // Rank-deficient A M⁻¹ Aᵀ (redundant or degenerate constraints): pseudo-inverse. q̈ is still
   // unique when the constraints are consistent; λ becomes the minimum-norm choice.
@@ -188,6 +217,8 @@ void solveKkt(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X, Eig
   solveMass(data, X);  // X = M⁻¹ R
   if (model.nc() == 0) return;
   Lambda.noalias() -= data.constraintJacobian * X;  // C − A M⁻¹ R
+  // (A M⁻¹ Aᵀ)⁻¹ = D Ŝ⁻¹ D with the row-normalized Ŝ of factorizeKkt.
+  Lambda = data.schurScale.asDiagonal() * Lambda;
   if (data.schurUsesPinv) {
     Eigen::Ref<Eigen::MatrixXd> t = data.tmpCX.leftCols(p);
     t.noalias() = data.schurPinv * Lambda;
@@ -195,6 +226,7 @@ void solveKkt(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X, Eig
   } else {
     data.schurLLT.solveInPlace(Lambda);
   }
+  Lambda = data.schurScale.asDiagonal() * Lambda;
   Eigen::Ref<Eigen::MatrixXd> t = data.tmpNX.leftCols(p);
   t.noalias() = data.constraintJacobian.transpose() * Lambda;
   data.massLLT.solveInPlace(t);
@@ -313,11 +345,11 @@ DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::Vect
   detail::evaluateConstraints(model, data, &data.constraintValue, nullptr, &data.constraintDrift,
                               &data.constraintJacobian);
   detail::factorizeKkt(model, data);
-  if (!data.status.ok()) return data.status;
+  if (!detail::solvable(data.status)) return data.status;
   data.qdd = -data.bias;
   data.lambda = -data.constraintDrift;
   detail::solveKkt(model, data, data.qdd, data.lambda);
-  if (data.status.code == DynamicsStatus::Code::kRedundantConstraints && model.nc() > 0) {
+  if (data.status.code == DynamicsStatus::Code::kRedundantConstraints) {
     // The pseudo-inverse solves consistent redundant rows exactly; inconsistent ones are not.
     data.tmpC.noalias() = data.constraintJacobian * data.qdd;
     data.tmpC += data.constraintDrift;
@@ -330,7 +362,7 @@ DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::Vect
                             std::to_string(data.tmpC[worst]) + " on " + model.constraints()[worst].name;
     }
   }
-  if (data.status.ok() && !(data.qdd.allFinite() && data.lambda.allFinite())) {
+  if (!(data.qdd.allFinite() && data.lambda.allFinite())) {
     data.status.code = DynamicsStatus::Code::kNonFinite;
     data.status.message = "forward dynamics produced non-finite values";
   }

@@ -46,6 +46,12 @@ bool inputsAreFinite(const Model& model, Data& data, const Eigen::VectorXd& q, c
 /// Factorizes [M Aᵀ; A 0] from data.M and data.constraintJacobian; fills data.status.
 void factorizeKkt(const Model& model, Data& data);
 
+/// Whether the KKT factorization can be used at all (it can, with a warning status, for
+/// redundant and near-singular constraints; not for a singular M or non-finite input).
+inline bool solvable(const DynamicsStatus& s) {
+  return s.code != DynamicsStatus::Code::kSingularMassMatrix && s.code != DynamicsStatus::Code::kNonFinite;
+}
+
 /// Solves M X = R + Aᵀ Λ, A X = C for X (n×p) and Λ (nc×p) with the current factorization.
 /// X may alias R; Λ may alias C. Workspace: data.tmpN/tmpC (p = 1) or data.tmpNX/tmpCX.
 void solveKkt(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X, Eigen::Ref<Eigen::MatrixXd> Lambda);

@@ -145,7 +145,8 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
                                     const Eigen::VectorXd& dq, const Eigen::VectorXd& u) {
   const int n = model.nq(), m = model.nu(), nc = model.nc();
   computeDynamics(model, data, q, dq, u);
-  if (!data.status.ok()) return data.status;
+  // Near-singular or inconsistent constraints still give finite numbers, flagged by the status.
+  if (!detail::solvable(data.status)) return data.status;
 
   // Nominal pass at the solved q̈ and λ: subtree wrenches F_i, I v, I (a − g).
   detail::updateAccelerations(model, data, dq, data.qdd);
@@ -175,7 +176,7 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
   data.A.bottomLeftCorner(n, n) = data.dqdd_dq;
   data.A.bottomRightCorner(n, n) = data.dqdd_ddq;
   data.B.bottomRows(n) = data.dqdd_du;
-  if (!(data.A.allFinite() && data.B.allFinite())) {
+  if (detail::solvable(data.status) && !(data.A.allFinite() && data.B.allFinite())) {
     data.status.code = DynamicsStatus::Code::kNonFinite;
     data.status.message = "linearization produced non-finite values";
   }

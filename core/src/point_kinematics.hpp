@@ -230,42 +230,49 @@ inline ConstraintEval constraintTangent(const Data& data, const Direction& dir, 
   return e;
 }
 
-/// row(j) += g · ∂p/∂q_j for the joints j that move the body point at world position p.
+/// row(j) += g · ∂p/∂q_j for the joints j that move the body point at world position p; with a
+/// `bound` row, also bound(j) += |g| ‖∂p/∂q_j‖, the largest |row(j)| the point could give.
 template <class Row>
 inline void addPointGradient(const Model& model, const Data& data, int joint, const Vector3d& p,
-                             const Vector3d& g, Row&& row) {
-  for (int j = joint; j != kWorld; j = model.joints()[j].parent)
-    row(j) += g.dot(lin(data.S[j]) + ang(data.S[j]).cross(p));
+                             const Vector3d& g, Row&& row, Eigen::VectorXd* bound = nullptr) {
+  const double gn = bound ? g.norm() : 0.0;
+  for (int j = joint; j != kWorld; j = model.joints()[j].parent) {
+    const Vector3d dp = lin(data.S[j]) + ang(data.S[j]).cross(p);
+    row(j) += g.dot(dp);
+    if (bound) (*bound)[j] += gn * dp.norm();
+  }
 }
 
-/// The constraint's row of A = ∂(A q̇)/∂q̇ (for holonomic rows, ∂h/∂q).
+/// The constraint's row of A = ∂(A q̇)/∂q̇ (for holonomic rows, ∂h/∂q), and optionally the
+/// entry-wise bound of addPointGradient (used to measure how close the row is to singular).
 template <class Row>
-inline void addConstraintJacobianRow(const Model& model, const Data& data, const Constraint& c, Row&& row) {
+inline void addConstraintJacobianRow(const Model& model, const Data& data, const Constraint& c, Row&& row,
+                                     Eigen::VectorXd* bound = nullptr) {
   const Vector3d pa = pointPosition(data, c.a);
   switch (c.type) {
     case ConstraintType::kDistance: {
       const Vector3d d = pa - pointPosition(data, c.b);
-      addPointGradient(model, data, c.a.joint, pa, 2.0 * d, row);
-      addPointGradient(model, data, c.b.joint, pointPosition(data, c.b), -2.0 * d, row);
+      addPointGradient(model, data, c.a.joint, pa, 2.0 * d, row, bound);
+      addPointGradient(model, data, c.b.joint, pointPosition(data, c.b), -2.0 * d, row, bound);
       break;
     }
     case ConstraintType::kPoint: {
       const Vector3d ax = constraintAxis(c);
-      addPointGradient(model, data, c.a.joint, pa, ax, row);
-      addPointGradient(model, data, c.b.joint, pointPosition(data, c.b), -ax, row);
+      addPointGradient(model, data, c.a.joint, pa, ax, row, bound);
+      addPointGradient(model, data, c.b.joint, pointPosition(data, c.b), -ax, row, bound);
       break;
     }
     case ConstraintType::kPointOnPlane: {
       // The normal turns with the plane body: the plane body sees the force n at the point p_b.
       const Vector3d pb = pointPosition(data, c.b);
       const Vector3d n = directionKin(data, c.a.joint, c.direction).p;
-      addPointGradient(model, data, c.a.joint, pb, n, row);
-      addPointGradient(model, data, c.b.joint, pb, -n, row);
+      addPointGradient(model, data, c.a.joint, pb, n, row, bound);
+      addPointGradient(model, data, c.b.joint, pb, -n, row, bound);
       break;
     }
     case ConstraintType::kKnifeEdge: {
       const Vector3d n = directionKin(data, c.a.joint, c.direction).p;
-      addPointGradient(model, data, c.a.joint, pa, n, row);
+      addPointGradient(model, data, c.a.joint, pa, n, row, bound);
       break;
     }
   }

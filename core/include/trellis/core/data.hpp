@@ -21,12 +21,16 @@ struct DynamicsStatus {
     kOk,
     kRedundantConstraints,   ///< A is rank deficient; q̈ is exact, λ is the minimum-norm choice
     kSingularMassMatrix,     ///< M is not positive definite (a joint moves no mass); no result
-    kSingularConstraints,    ///< A M⁻¹ Aᵀ numerically singular in a way that makes q̈ unreliable
+    kSingularConstraints,    ///< a singular or near-singular constraint configuration: the results are
+                             ///< finite but inaccurate (or A q̈ + Ȧ q̇ = 0 has no solution)
     kNonFinite,              ///< an input or result is NaN/Inf
   };
   Code code = Code::kOk;
   int constraintRank = 0;          ///< numerical rank of A (= nc when full)
-  double constraintConditioning = 1.0;  ///< reciprocal condition estimate of A M⁻¹ Aᵀ (1 if nc = 0)
+  /// In [0, 1]: min of the constraints' kinematic conditioning (‖A_r‖ over its largest possible
+  /// value; 0 at a singular configuration) and the reciprocal condition estimate of the
+  /// row-normalized A M⁻¹ Aᵀ (0 for redundant rows). 1 without constraints.
+  double constraintConditioning = 1.0;
   std::string message;             ///< empty when ok; names the configuration / constraint otherwise
   /// True when q̈ (and the linearization) are valid: kOk or kRedundantConstraints.
   bool ok() const { return code == Code::kOk || code == Code::kRedundantConstraints; }
@@ -95,7 +99,9 @@ class Data {
   Eigen::LLT<Eigen::MatrixXd> massLLT;
   Eigen::MatrixXd massInverse;           ///< n×n, M⁻¹ when many right-hand sides are solved
   Eigen::MatrixXd Y;                     ///< n×nc: L⁻¹ Aᵀ
-  Eigen::MatrixXd schur;                 ///< nc×nc: A M⁻¹ Aᵀ
+  Eigen::MatrixXd schur;                 ///< nc×nc: D A M⁻¹ Aᵀ D, rows normalized by D
+  Eigen::VectorXd constraintScale;       ///< nc: largest possible ‖A_r‖ (see factorizeKkt)
+  Eigen::VectorXd schurScale;            ///< nc: D = 1 / constraintScale
   Eigen::LLT<Eigen::MatrixXd> schurLLT;
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> schurEig;
   Eigen::MatrixXd schurPinv;
