@@ -49,6 +49,7 @@ Data::Data(const Model& model) {
   massLLT = Eigen::LLT<Eigen::MatrixXd>(n);
   massInverse = Eigen::MatrixXd::Zero(n, n);
   Y = Eigen::MatrixXd::Zero(n, nc);
+  massInverseAt = Eigen::MatrixXd::Zero(n, nc);
   schur = Eigen::MatrixXd::Zero(nc, nc);
   constraintScale = Eigen::VectorXd::Ones(nc);
   schurScale = Eigen::VectorXd::Ones(nc);

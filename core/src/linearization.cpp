@@ -168,6 +168,10 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
   data.crhsX.rightCols(m).setZero();
   detail::solveKkt(model, data, data.rhsX, data.crhsX);
 
+  if (detail::solvable(data.status) && !(data.rhsX.allFinite() && data.crhsX.allFinite())) {
+    data.status.code = DynamicsStatus::Code::kNonFinite;
+    data.status.message = "linearization produced non-finite values";
+  }
   data.dqdd_dq = data.rhsX.leftCols(n);
   data.dqdd_ddq = data.rhsX.middleCols(n, n);
   data.dqdd_du = data.rhsX.rightCols(m);
@@ -176,10 +180,6 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
   data.A.bottomLeftCorner(n, n) = data.dqdd_dq;
   data.A.bottomRightCorner(n, n) = data.dqdd_ddq;
   data.B.bottomRows(n) = data.dqdd_du;
-  if (detail::solvable(data.status) && !(data.A.allFinite() && data.B.allFinite())) {
-    data.status.code = DynamicsStatus::Code::kNonFinite;
-    data.status.message = "linearization produced non-finite values";
-  }
   return data.status;
 }
 

@@ -29,8 +29,8 @@ namespace {
 using Json = nlohmann::json;
 
 // Limits that keep hostile input cheap: nesting depth (a frame level costs two: the frame object
-// and its "children" list, so chains of ~500 frames fit) and text size.
-constexpr int kMaxNestingDepth = 1000;
+// and its "children" list, so chains of ~5000 frames fit) and text size.
+constexpr int kMaxNestingDepth = 10000;
 constexpr std::size_t kMaxSceneBytes = std::size_t{256} << 20;
 
 // Pre-checks mirror the builder's so that the message can name the JSON field; the builder stays
@@ -340,7 +340,9 @@ class SceneReader {
   static Mass readMass(const Element& frame, const Json& node) {
     Element e(node, frame.label());
     Mass mass;
-    const Json& m = e.require("m");
+    const Json* mNode = e.find("m");
+    if (!mNode) e.fail("mass.m", "missing");
+    const Json& m = *mNode;
     mass.m = e.toNumber(m, "mass.m");
     if (mass.m < 0.0) e.failValue("mass.m", m, "must be >= 0");
     if (const Json* inertia = e.find("inertia")) {

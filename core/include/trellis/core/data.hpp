@@ -99,6 +99,7 @@ class Data {
   Eigen::LLT<Eigen::MatrixXd> massLLT;
   Eigen::MatrixXd massInverse;           ///< n×n, M⁻¹ when many right-hand sides are solved
   Eigen::MatrixXd Y;                     ///< n×nc: L⁻¹ Aᵀ
+  Eigen::MatrixXd massInverseAt;         ///< n×nc: M⁻¹ Aᵀ
   Eigen::MatrixXd schur;                 ///< nc×nc: D A M⁻¹ Aᵀ D, rows normalized by D
   Eigen::VectorXd constraintScale;       ///< nc: largest possible ‖A_r‖ (see factorizeKkt)
   Eigen::VectorXd schurScale;            ///< nc: D = 1 / constraintScale
