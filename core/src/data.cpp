@@ -3,7 +3,13 @@
 
 namespace trellis {
 
-Data::Data(const Model& model) {
+Data::Data(const Model& model)
+    // The factorizations are built at their size here (not assigned later) so that every member,
+    // including their status flags, is initialized.
+    : massLLT(model.nq()),
+      schurLLT(model.nc()),
+      schurLDLT(model.nc()),
+      basisQR(2 * model.nq(), model.nholonomic() + model.nc()) {
   const int n = model.nq(), m = model.nu(), nc = model.nc(), nf = model.nframes();
   const int nh = model.nholonomic();
   const int cols = 2 * n + m;
@@ -46,23 +52,22 @@ Data::Data(const Model& model) {
   qddZero = Eigen::VectorXd::Zero(n);
   rhsX = Eigen::MatrixXd::Zero(n, cols);
   crhsX = Eigen::MatrixXd::Zero(nc, cols);
-  massLLT = Eigen::LLT<Eigen::MatrixXd>(n);
   massInverse = Eigen::MatrixXd::Zero(n, n);
   Y = Eigen::MatrixXd::Zero(n, nc);
   massInverseAt = Eigen::MatrixXd::Zero(n, nc);
   schur = Eigen::MatrixXd::Zero(nc, nc);
   constraintScale = Eigen::VectorXd::Ones(nc);
   schurScale = Eigen::VectorXd::Ones(nc);
-  schurLLT = Eigen::LLT<Eigen::MatrixXd>(nc);
-  schurEig = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(nc);
-  schurPinv = Eigen::MatrixXd::Zero(nc, nc);
+  schurPivotInverse = Eigen::VectorXd::Zero(nc);
+  schurNullBasis = Eigen::MatrixXd::Zero(nc, nc);
   tmpN = Eigen::VectorXd::Zero(n);
   tmpC = Eigen::VectorXd::Zero(nc);
   tmpNX = Eigen::MatrixXd::Zero(n, cols + 1);
   tmpCX = Eigen::MatrixXd::Zero(nc, cols + 1);
   constraintStateJacobian = Eigen::MatrixXd::Zero(nh + nc, 2 * n);
-  basisQR = Eigen::FullPivHouseholderQR<Eigen::MatrixXd>(2 * n, nh + nc);
   basisQ = Eigen::MatrixXd::Zero(2 * n, 2 * n);
+  basisWorkspace = Eigen::VectorXd::Zero(2 * n);
+  basisWorkMatrix = Eigen::MatrixXd::Zero(2 * n, 2 * n);
 }
 
 }  // namespace trellis

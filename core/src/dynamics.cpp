@@ -119,6 +119,7 @@ void factorizeKkt(const Model& model, Data& data) {
     st.message = "mass matrix has non-finite entries";
     return;
   }
+  if (n == 0) return;  // nothing moves: q̈ and the linearization are empty
   data.massLLT.compute(data.M);
   const double scale = std::max(data.M.diagonal().maxCoeff(), std::numeric_limits<double>::min());
   bool singular = data.massLLT.info() != Eigen::Success;
@@ -137,14 +138,16 @@ void factorizeKkt(const Model& model, Data& data) {
     return;
   }
   if (nc == 0) return;
-  // Row-normalized Schur complement Ŝ = D A M⁻¹ Aᵀ D, D = diag(1/s_r): its conditioning is a
-  // property of the constraints, independent of how each h is scaled.
+  // Two separate questions. (1) Is a row close to a singular configuration? Its kinematic
+  // conditioning κ_r = ‖A_r‖ / s_r compares it with the norm it would have if every joint moved
+  // the constraint's points along the gradient (s_r from addConstraintJacobianRow). (2) Are the
+  // rows dependent? The Schur complement scaled to unit diagonal, Ŝ = D A M⁻¹ Aᵀ D, answers
+  // that independently of how each h is scaled.
   double kinematic = 1.0;
   int worstRow = 0;
   for (int r = 0; r < nc; ++r) {
     const double s = data.constraintScale[r];
     const double k = s > 0 ? data.constraintJacobian.row(r).norm() / s : 0.0;
-    data.schurScale[r] = s > 0 ? 1.0 / s : 1.0;
     if (k < kinematic) {
       kinematic = k;
       worstRow = r;
@@ -155,12 +158,17 @@ void factorizeKkt(const Model& model, Data& data) {
   data.schur.noalias() = data.Y.transpose() * data.Y;
   data.massInverseAt = data.Y;
   data.massLLT.matrixU().solveInPlace(data.massInverseAt);  // M⁻¹ Aᵀ = L⁻ᵀ Y
+  for (int r = 0; r < nc; ++r) data.schurScale[r] = data.schur(r, r) > 0 ? 1.0 / std::sqrt(data.schur(r, r)) : 1.0;
   data.schur = data.schurScale.asDiagonal() * data.schur * data.schurScale.asDiagonal();
   data.schurLLT.compute(data.schur);
   const double sScale = data.schur.diagonal().maxCoeff();
   if (data.schurLLT.info() == Eigen::Success && sScale > 0) {
-    st.constraintConditioning = std::min(kinematic, data.schurLLT.rcond());
-    if (data.schurLLT.rcond() > 1e-13 && kinematic > 0) {
+    // (min L_ii / max L_ii)² tracks λ_min/λ_max of Ŝ without the allocations of LLT::rcond().
+    const auto diag = data.schurLLT.matrixLLT().diagonal();
+    const double ratio = diag.minCoeff() / diag.maxCoeff();
+    const double rcond = ratio * ratio;
+    st.constraintConditioning = std::min(kinematic, rcond);
+    if (rcond > 1e-13 && kinematic > 0) {
       // Relative errors of the constraint forces and their derivatives grow like eps / κ²;
       // below κ = 1e-5 they may exceed 1e-6 and the configuration is reported as singular.
       if (kinematic < 1e-5) {
@@ -171,29 +179,53 @@ void factorizeKkt(const Model& model, Data& data) {
       return;
     }
   }
-  // Rank-deficient A M⁻¹ Aᵀ (redundant or degenerate constraints): pseudo-inverse. q̈ is still
-  // unique when the constraints are consistent; λ becomes the minimum-norm choice.
-  data.schurEig.compute(data.schur);
-  const auto& ev = data.schurEig.eigenvalues();
-  const double tol = std::max(ev.cwiseAbs().maxCoeff(), std::numeric_limits<double>::min()) * 1e-12 * nc;
-  int rank = 0;
-  data.tmpC.setZero();
-  for (int k = 0; k < nc; ++k)
-    if (ev[k] > tol) {
-      data.tmpC[k] = 1.0 / ev[k];
+  // Rank-deficient Ŝ (redundant or degenerate rows): pivoted LDLᵀ, dropping the pivots below
+  // 1e-12 (Ŝ has unit diagonal). q̈ stays exact when the rows are consistent; λ is one valid choice.
+  data.schurLDLT.compute(data.schur);
+  const auto D = data.schurLDLT.vectorD();
+  const double tol = 1e-12 * std::max(1.0, D.cwiseAbs().maxCoeff());
+  int rank = 0, dropped = -1;
+  for (int k = 0; k < nc; ++k) {
+    if (D[k] > tol) {
+      data.schurPivotInverse[k] = 1.0 / D[k];
       ++rank;
+    } else {
+      data.schurPivotInverse[k] = 0.0;
+      if (dropped < 0) dropped = k;
     }
-  data.schurPinv.noalias() = data.schurEig.eigenvectors() * data.tmpC.asDiagonal() * data.schurEig.eigenvectors().transpose();
+  }
+  // Orthonormal basis of null(Ŝ): x = Pᵀ L⁻ᵀ e_k for each dropped pivot k (then Ŝ x = 0), so that
+  // solveKkt can remove that component and return the minimum-norm λ̂.
+  int nullity = 0;
+  for (int k = 0; k < nc; ++k) {
+    if (data.schurPivotInverse[k] != 0.0) continue;
+    auto x = data.schurNullBasis.col(nullity);
+    x.setZero();
+    x[k] = 1.0;
+    data.schurLDLT.matrixU().solveInPlace(x);
+    x = data.schurLDLT.transpositionsP().transpose() * x;
+    for (int j = 0; j < nullity; ++j) x -= data.schurNullBasis.col(j).dot(x) * data.schurNullBasis.col(j);
+    const double norm = x.norm();
+    if (norm > 0) {
+      x /= norm;
+      ++nullity;
+    }
+  }
+  data.schurNullity = nullity;
   data.schurUsesPinv = true;
   st.constraintRank = rank;
-  st.constraintConditioning = ev.cwiseAbs().maxCoeff() > 0 ? std::max(ev[0], 0.0) / ev.cwiseAbs().maxCoeff() : 0.0;
+  st.constraintConditioning = 0.0;
   st.code = DynamicsStatus::Code::kRedundantConstraints;
+  // Which constraint the first dropped pivot belongs to: undo the row swaps (applied in order
+  // i = 0, 1, … as swap(i, indices[i])) for that one position.
+  int worst = std::max(dropped, 0);
+  const auto& swaps = data.schurLDLT.transpositionsP().indices();
+  for (int i = nc - 1; i >= 0; --i) {
+    if (worst == i) worst = swaps[i];
+    else if (worst == swaps[i]) worst = i;
+  }
   st.message = "constraint Jacobian has rank " + std::to_string(rank) + " < " + std::to_string(nc) +
-               " rows (redundant or singular constraints";
-  // Name a constraint whose row lies in the span of the others (smallest eigenvector's largest entry).
-  int worst = 0;
-  data.schurEig.eigenvectors().col(0).cwiseAbs().maxCoeff(&worst);
-  st.message += ", e.g. " + model.constraints()[worst].name + ")";
+               " rows (redundant or singular constraints, e.g. " + model.constraints()[worst].name + ")";
 }
 
 namespace {
@@ -221,16 +253,22 @@ void solveMass(Data& data, Eigen::Ref<Eigen::MatrixXd> X) {
 }  // namespace
 
 void solveKkt(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X, Eigen::Ref<Eigen::MatrixXd> Lambda) {
-  const int p = static_cast<int>(X.cols());
   solveMass(data, X);  // X = M⁻¹ R
   if (model.nc() == 0) return;
   Lambda.noalias() -= data.constraintJacobian * X;  // C − A M⁻¹ R
   // (A M⁻¹ Aᵀ)⁻¹ = D Ŝ⁻¹ D with the row-normalized Ŝ of factorizeKkt.
   Lambda = data.schurScale.asDiagonal() * Lambda;
   if (data.schurUsesPinv) {
-    Eigen::Ref<Eigen::MatrixXd> t = data.tmpCX.leftCols(p);
-    t.noalias() = data.schurPinv * Lambda;
-    Lambda = t;
+    Lambda = data.schurLDLT.transpositionsP() * Lambda;
+    data.schurLDLT.matrixL().solveInPlace(Lambda);
+    Lambda = data.schurPivotInverse.asDiagonal() * Lambda;
+    data.schurLDLT.matrixU().solveInPlace(Lambda);
+    Lambda = data.schurLDLT.transpositionsP().transpose() * Lambda;
+    // Minimum norm: remove the null-space component, Λ −= N (Nᵀ Λ).
+    const auto N = data.schurNullBasis.leftCols(data.schurNullity);
+    Eigen::Ref<Eigen::MatrixXd> t = data.tmpCX.topLeftCorner(data.schurNullity, Lambda.cols());
+    t.noalias() = N.transpose() * Lambda;
+    Lambda.noalias() -= N * t;
   } else {
     data.schurLLT.solveInPlace(Lambda);
   }
@@ -358,8 +396,9 @@ DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::Vect
     // The pseudo-inverse solves consistent redundant rows exactly; inconsistent ones are not.
     data.tmpC.noalias() = data.constraintJacobian * data.qdd;
     data.tmpC += data.constraintDrift;
-    const double scale = 1.0 + data.constraintDrift.cwiseAbs().maxCoeff() +
-                         (data.constraintJacobian.cwiseAbs() * data.qdd.cwiseAbs()).maxCoeff();
+    double scale = 1.0 + data.constraintDrift.cwiseAbs().maxCoeff();
+    for (int r = 0; r < model.nc(); ++r)
+      scale = std::max(scale, data.constraintJacobian.row(r).cwiseAbs().dot(data.qdd.cwiseAbs()));
     int worst = 0;
     if (data.tmpC.cwiseAbs().maxCoeff(&worst) > 1e-8 * scale) {
       data.status.code = DynamicsStatus::Code::kSingularConstraints;

@@ -203,10 +203,12 @@ int computeConstraintTangentBasis(const Model& model, Data& data) {
   }
   data.basisQR.compute(J.transpose());
   const int rank = static_cast<int>(data.basisQR.rank());
-  data.basisQ = data.basisQR.matrixQ();
+  data.basisQR.householderQ().evalTo(data.basisQ, data.basisWorkspace);  // no allocation
   const int d = 2 * n - rank;
   data.tangentBasis = data.basisQ.rightCols(d);
-  data.reducedA.noalias() = data.tangentBasis.transpose() * data.A * data.tangentBasis;
+  Eigen::Ref<Eigen::MatrixXd> AT = data.basisWorkMatrix.leftCols(d);
+  AT.noalias() = data.A * data.tangentBasis;
+  data.reducedA.noalias() = data.tangentBasis.transpose() * AT;
   data.reducedB.noalias() = data.tangentBasis.transpose() * data.B;
   return d;
 }

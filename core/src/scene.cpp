@@ -17,7 +17,6 @@
 #include <fstream>
 #include <map>
 #include <optional>
-#include <set>
 #include <sstream>
 #include <string_view>
 #include <utility>
@@ -48,8 +47,16 @@ std::string show(const Json& value) {
 
 std::string quote(std::string_view name) { return show(Json(std::string(name))); }
 
-std::string typeName(const Json& value) {
-  return value.is_number() ? "number" : std::string(value.type_name());
+/// The JSON type of a value with its article, for "must be a number, not a string".
+std::string kind(const Json& value) {
+  switch (value.type()) {
+    case Json::value_t::null: return "null";
+    case Json::value_t::object: return "an object";
+    case Json::value_t::array: return "an array";
+    case Json::value_t::string: return "a string";
+    case Json::value_t::boolean: return "a boolean";
+    default: return "a number";
+  }
 }
 
 /// "a, b, c" (at most a few names) for "expected one of" hints.
@@ -95,10 +102,6 @@ class Element {
   }
   /// A non-empty string (a name).
   std::string name(std::string_view key) const { return toName(require(key), key); }
-  std::optional<std::string> optionalName(std::string_view key) const {
-    const Json* value = find(key);
-    return value ? std::optional<std::string>(toName(*value, key)) : std::nullopt;
-  }
   Eigen::Vector3d vector3(std::string_view key) const {
     const Json& value = require(key);
     if (!value.is_array() || value.size() != 3) failValue(key, value, "must be a list of 3 numbers");
@@ -118,13 +121,13 @@ class Element {
   }
 
   double toNumber(const Json& value, std::string_view field) const {
-    if (!value.is_number()) failValue(field, value, "must be a number, not a " + typeName(value));
+    if (!value.is_number()) failValue(field, value, "must be a number, not " + kind(value));
     const double x = value.get<double>();
     if (!std::isfinite(x)) failValue(field, value, "must be finite");
     return x;
   }
   std::string toName(const Json& value, std::string_view field) const {
-    if (!value.is_string()) failValue(field, value, "must be a string, not a " + typeName(value));
+    if (!value.is_string()) failValue(field, value, "must be a string, not " + kind(value));
     std::string text = value.get<std::string>();
     if (text.empty()) failValue(field, value, "must not be empty");
     return text;
@@ -140,8 +143,7 @@ class SceneReader {
  public:
   Scene read(const Json& root) {
     if (!root.is_object()) {
-      throw ModelError("the scene must be a JSON object, not " + std::string(root.type_name()) +
-                       " " + show(root));
+      throw ModelError("the scene must be a JSON object, not " + kind(root) + " " + show(root));
     }
     Element top(root, "scene");
     Scene scene{Model{}, {}, {}, {}, {}, {}};
@@ -165,7 +167,7 @@ class SceneReader {
   static std::optional<std::string> optionalText(const Element& e, std::string_view key) {
     const Json* value = e.find(key);
     if (!value) return std::nullopt;
-    if (!value->is_string()) e.failValue(key, *value, "must be a string, not a " + typeName(*value));
+    if (!value->is_string()) e.failValue(key, *value, "must be a string, not " + kind(*value));
     return value->get<std::string>();
   }
 
@@ -209,7 +211,7 @@ class SceneReader {
       const std::string position = std::string(key) + "[" + std::to_string(i) + "]";
       const Json& item = (*list)[i];
       if (!item.is_object()) {
-        throw ModelError(position + ": must be an object, not " + typeName(item) + " " + show(item));
+        throw ModelError(position + ": must be an object, not " + kind(item) + " " + show(item));
       }
       Element e(item, position);
       const std::string type = e.name("type");
@@ -249,7 +251,7 @@ class SceneReader {
   /// Reads and adds one frame; returns its name.
   std::string readFrame(const Json& node, const std::string& parent, const std::string& position) {
     if (!node.is_object()) {
-      throw ModelError(position + ": a frame must be an object, not " + typeName(node) + " " + show(node));
+      throw ModelError(position + ": a frame must be an object, not " + kind(node) + " " + show(node));
     }
     Element e(node, position);
     const std::string name = e.name("name");
@@ -422,7 +424,7 @@ class SceneReader {
         } else if (w[i].is_number()) {
           wrench[i] = e.toNumber(w[i], field);
         } else {
-          e.failValue(field, w[i], "must be a number or an input name, not a " + typeName(w[i]));
+          e.failValue(field, w[i], "must be a number or an input name, not " + kind(w[i]));
         }
       }
       call(e.label(), [&] { builder_.addBodyWrench(frame, wrench); });

@@ -19,7 +19,8 @@ namespace trellis {
 struct DynamicsStatus {
   enum class Code {
     kOk,
-    kRedundantConstraints,   ///< A is rank deficient; q̈ is exact, λ is the minimum-norm choice
+    kRedundantConstraints,   ///< A is rank deficient; q̈ is exact, λ the minimum-norm choice
+                             ///< (in the row-normalized coordinates of A M⁻¹ Aᵀ)
     kSingularMassMatrix,     ///< M is not positive definite (a joint moves no mass); no result
     kSingularConstraints,    ///< a singular or near-singular constraint configuration: the results are
                              ///< finite but inaccurate (or A q̈ + Ȧ q̇ = 0 has no solution)
@@ -104,14 +105,18 @@ class Data {
   Eigen::VectorXd constraintScale;       ///< nc: largest possible ‖A_r‖ (see factorizeKkt)
   Eigen::VectorXd schurScale;            ///< nc: D = 1 / constraintScale
   Eigen::LLT<Eigen::MatrixXd> schurLLT;
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> schurEig;
-  Eigen::MatrixXd schurPinv;
+  Eigen::LDLT<Eigen::MatrixXd> schurLDLT;  ///< pivoted, for rank-deficient Ŝ
+  Eigen::VectorXd schurPivotInverse;     ///< 1/D_i of schurLDLT, 0 for the dropped pivots
+  Eigen::MatrixXd schurNullBasis;        ///< nc×nc, first schurNullity columns: null space of Ŝ
+  int schurNullity = 0;
   bool schurUsesPinv = false;
   Eigen::VectorXd tmpN, tmpC;
   Eigen::MatrixXd tmpNX, tmpCX;
   Eigen::MatrixXd constraintStateJacobian;  ///< rows of the map Φ(x) = [h(q); A q̇]
-  Eigen::FullPivHouseholderQR<Eigen::MatrixXd> basisQR;
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> basisQR;
   Eigen::MatrixXd basisQ;
+  Eigen::VectorXd basisWorkspace;
+  Eigen::MatrixXd basisWorkMatrix;       ///< 2n×2n scratch for A T
 };
 
 }  // namespace trellis

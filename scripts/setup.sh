@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# scripts/setup.sh — installs, with apt-get, the Debian 12 packages trellis needs to build, test,
+# benchmark and plot. Checks each package with dpkg-query first: when everything is present it
+# prints so and runs no apt command at all. Run as root (no sudo is assumed); safe to run twice.
+set -euo pipefail
+
+packages=(
+  # toolchain (a minimal Debian 12 has none of it)
+  g++ make cmake pkg-config
+  # libraries
+  libeigen3-dev          # Eigen 3.4: all of trellis's linear algebra
+  nlohmann-json3-dev     # scene files (JSON)
+  libsundials-dev        # CVODES: Riccati / trajectory integration (control, planned)
+  coinor-libipopt-dev    # Ipopt: trajectory optimization (optimization, planned)
+  catch2                 # Catch2 2.13: the test suite
+  libbenchmark-dev       # Google Benchmark: bench/
+  # plots of the benchmark results
+  python3 python3-matplotlib
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  if [[ $(dpkg-query -W -f='${db:Status-Status}' "$p" 2>/dev/null || true) != installed ]]; then
+    missing+=("$p")
+  fi
+done
+
+if [[ ${#missing[@]} -eq 0 ]]; then
+  echo "setup.sh: all ${#packages[@]} packages already installed; nothing to do."
+  exit 0
+fi
+
+if [[ $(id -u) -ne 0 ]]; then
+  echo "setup.sh: missing packages: ${missing[*]}" >&2
+  echo "setup.sh: run this script as root to install them (apt-get needs it)." >&2
+  exit 1
+fi
+
+echo "setup.sh: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+apt-get update -q
+# No recommends: none of these packages needs its recommended extras for building or plotting
+# (matplotlib draws with its bundled fonts and the Agg backend).
+apt-get install -y -q --no-install-recommends "${missing[@]}"
+echo "setup.sh: done."

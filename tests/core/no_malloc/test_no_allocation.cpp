@@ -1,0 +1,141 @@
+// tests/core/no_malloc/test_no_allocation.cpp — after set-up and one warm-up call, no algorithm
+// allocates (STYLE.md "No allocation after set-up, and a test that proves it").
+//
+// This program links a copy of trellis::core compiled with EIGEN_RUNTIME_NO_MALLOC and with
+// assertions on (tests/CMakeLists.txt). While Eigen::internal::set_is_malloc_allowed(false) is in
+// force, any heap allocation through Eigen fails an eigen_assert, which aborts the program: the
+// test program then exits non-zero and CTest reports the failure, with the assertion text naming
+// the allocation on stderr. (An abort rather than a Catch2 failure is accepted: eigen_assert is
+// compiled into the library, where the test cannot intercept it.) Allocations through std::string
+// or std::vector are not seen by Eigen's guard; the workspace's Eigen buffers are what it checks.
+//
+// Every state, input and output vector is created before the guard goes up, and results are
+// checked after it comes down, so nothing in the test itself allocates inside the guarded region.
+#ifndef EIGEN_RUNTIME_NO_MALLOC
+#error \
+    "test_no_allocation.cpp must be compiled with EIGEN_RUNTIME_NO_MALLOC (see tests/CMakeLists.txt)"
+#endif
+
+#include <catch2/catch.hpp>
+
+#include "support/random_state.hpp"
+#include "support/test_models.hpp"
+
+#include <trellis/core.hpp>
+
+#include <array>
+#include <vector>
+
+using namespace trellis;
+using namespace trellis::test;
+
+namespace {
+
+/// Lifts Eigen's malloc guard for the lifetime of the object (also if a REQUIRE throws).
+class MallocGuard {
+ public:
+  MallocGuard() { Eigen::internal::set_is_malloc_allowed(false); }
+  ~MallocGuard() { Eigen::internal::set_is_malloc_allowed(true); }
+  MallocGuard(const MallocGuard&) = delete;
+  MallocGuard& operator=(const MallocGuard&) = delete;
+};
+
+constexpr int kStates = 4;
+constexpr int kRepeats = 5;
+
+std::vector<State> makeStates(const Model& model, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::vector<State> states;
+  for (int k = 0; k < kStates; ++k) states.push_back(randomState(model, rng));
+  return states;
+}
+
+/// One call of every algorithm (the warm-up), so that any lazily sized buffer has its size.
+void warmUp(const Model& model, Data& data, const State& s) {
+  computeKinematics(model, data, s.q, s.dq);
+  computeMassMatrix(model, data, s.q);
+  computeConstraints(model, data, s.q, s.dq);
+  computeInputMatrix(model, data, s.q);
+  computeDynamics(model, data, s.q, s.dq, s.u);
+  computeEnergy(model, data, s.q, s.dq);
+  computeNonConservativePower(model, data, s.q, s.dq, s.u);
+  computeLinearization(model, data, s.q, s.dq, s.u);
+}
+
+/// The hot calls, repeatedly, at several states, under the guard. Returns how many calls reported
+/// a status that is not ok (checked by the caller outside the guarded region).
+int runGuarded(const Model& model, Data& data, const std::vector<State>& states) {
+  int notOk = 0;
+  double sink = 0.0;
+  {
+    MallocGuard guard;
+    for (int r = 0; r < kRepeats; ++r) {
+      for (const State& s : states) {
+        computeKinematics(model, data, s.q, s.dq);
+        if (!computeDynamics(model, data, s.q, s.dq, s.u).ok()) ++notOk;
+        if (!computeLinearization(model, data, s.q, s.dq, s.u).ok()) ++notOk;
+        computeMassMatrix(model, data, s.q);
+        computeConstraints(model, data, s.q, s.dq);
+        computeInputMatrix(model, data, s.q);
+        sink += computeEnergy(model, data, s.q, s.dq).total();
+        sink += computeNonConservativePower(model, data, s.q, s.dq, s.u);
+      }
+    }
+  }
+  (void)sink;
+  return notOk;
+}
+
+}  // namespace
+
+// One TEST_CASE per path, so that CTest (one process per test case) reports each separately: an
+// abort in one does not hide the others.
+TEST_CASE("No allocation after warm-up: every element type, unconstrained", "[no_malloc]") {
+  const Model model = kitchenSink(3, false).model;
+  const std::vector<State> states = makeStates(model, 4101);
+  Data data(model);
+  warmUp(model, data, states[0]);
+  CHECK(runGuarded(model, data, states) == 0);
+  CHECK(Eigen::internal::is_malloc_allowed());
+}
+
+TEST_CASE("No allocation after warm-up: holonomic and nonholonomic constraints", "[no_malloc]") {
+  const Model model = kitchenSink(3, true).model;
+  const std::vector<State> states = makeStates(model, 4102);
+  Data data(model);
+  warmUp(model, data, states[0]);
+  CHECK(runGuarded(model, data, states) == 0);
+  CHECK(data.status.code == DynamicsStatus::Code::kOk);
+}
+
+TEST_CASE("No allocation after warm-up: redundant constraints (rank-deficient solve)",
+          "[no_malloc]") {
+  const Model model = paperPendulum(2).model;
+  const std::vector<State> states = makeStates(model, 4103);
+  Data data(model);
+  warmUp(model, data, states[0]);
+  // Redundant constraints are ok() (kRedundantConstraints): no call may fail.
+  CHECK(runGuarded(model, data, states) == 0);
+  CHECK(data.status.code == DynamicsStatus::Code::kRedundantConstraints);
+}
+
+TEST_CASE("No allocation after warm-up: tangent basis", "[no_malloc][tangent]") {
+  const Model model = kitchenSink(3, true).model;
+  std::mt19937 rng(4201);
+  std::vector<State> states;
+  for (int k = 0; k < kStates; ++k) states.push_back(randomConsistentState(model, rng));
+  Data data(model);
+  warmUp(model, data, states[0]);
+  computeConstraintTangentBasis(model, data);
+  std::array<int, kStates> dims{};
+  {
+    MallocGuard guard;
+    for (int k = 0; k < kStates; ++k) {
+      computeLinearization(model, data, states[static_cast<std::size_t>(k)].q,
+                           states[static_cast<std::size_t>(k)].dq,
+                           states[static_cast<std::size_t>(k)].u);
+      dims[static_cast<std::size_t>(k)] = computeConstraintTangentBasis(model, data);
+    }
+  }
+  for (int d : dims) CHECK(d == 2 * model.nq() - 2 * 3 - 1);
+}

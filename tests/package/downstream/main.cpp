@@ -1,0 +1,40 @@
+// Builds a simple pendulum through the installed headers and checks its linearization:
+// θ̈ = −(g/l) sin θ, so A = [[0, 1], [−(g/l) cos θ, 0]].
+#include <trellis/core.hpp>
+
+#include <cmath>
+#include <iostream>
+#include <utility>
+
+int main() {
+  const double g = 9.81, l = 1.0, theta = 0.3;
+
+  trellis::ModelBuilder builder("pendulum");
+  builder.addFrame("pivot", "world", trellis::Transform::rz("theta"));
+  builder.addFrame("bob", "pivot", trellis::Transform::ty(-l), trellis::Mass{1.0});
+  builder.addGravity({0.0, -g, 0.0});
+  const trellis::Model model = std::move(builder).finalize();
+
+  trellis::Data data(model);
+  const Eigen::VectorXd q = Eigen::VectorXd::Constant(1, theta);
+  const Eigen::VectorXd dq = Eigen::VectorXd::Zero(1);
+  const Eigen::VectorXd u = Eigen::VectorXd::Zero(model.nu());
+  const trellis::DynamicsStatus status = trellis::computeLinearization(model, data, q, dq, u);
+
+  std::cout << "A =\n" << data.A << "\n";
+  if (!status.ok()) {
+    std::cerr << "computeLinearization failed: " << status.message << "\n";
+    return 1;
+  }
+  if (data.A.rows() != 2 || data.A.cols() != 2 || !data.A.allFinite()) {
+    std::cerr << "A is not a finite 2x2 matrix\n";
+    return 1;
+  }
+  const double expected = -g / l * std::cos(theta);
+  if (std::abs(data.A(1, 0) - expected) > 1e-9 * std::abs(expected) || data.A(0, 1) != 1.0) {
+    std::cerr << "A(1,0) = " << data.A(1, 0) << ", expected " << expected << "\n";
+    return 1;
+  }
+  std::cout << "downstream: ok\n";
+  return 0;
+}
