@@ -1,0 +1,145 @@
+// trellis/control/riccati.hpp — finite-horizon continuous time-varying LQR.
+//
+// Along ẋ ≈ A(t) δx + B(t) δu (δx: nx = 2n, δu: m) minimize
+//   J = ∫_{t0}^{T} δxᵀ Q(t) δx + δuᵀ R(t) δu dt + δx(T)ᵀ Qf δx(T).
+// The cost-to-go δxᵀ S(t) δx solves the Riccati differential equation
+//   −Ṡ = AᵀS + SA − S B R⁻¹ Bᵀ S + Q,   S(T) = Qf,
+// and the optimal feedback is δu = −K(t) δx, K = R⁻¹ Bᵀ S (m×nx).
+//
+// solveRiccati integrates it backward with SUNDIALS CVODES in reversed time τ = T − t, on the
+// nx(nx+1)/2 entries of the upper triangle of S (column by column), so S is symmetric by
+// construction. BDF uses Newton iterations with a dense linear solver and the exact Jacobian of
+// the right-hand side (the Lyapunov operator E ↦ A_clᵀE + E A_cl, A_cl = A − BK); Adams uses
+// fixed-point (functional) iterations and no Jacobian — suited to non-stiff problems only.
+//
+// Dense output: after every internal step the solution keeps CVODES' Nordsieck data (the
+// derivatives 0…q of the step's interpolating polynomial, from CVodeGetDky) so S(t) at any t is
+// the same polynomial CVODES itself would use for output: its error is of the order of the local
+// error the integrator accepted (≈ rtol·|S| + atol per entry), not an extra interpolation error.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace trellis {
+
+class Model;
+class Trajectory;
+
+/// Writes A(t) (nx×nx) and B(t) (nx×m) for the requested time. The matrices arrive sized;
+/// throwing is allowed (the solver catches it and reports kCallbackFailure with the message).
+using LinearizationCallback = std::function<void(double t, Eigen::MatrixXd& A, Eigen::MatrixXd& B)>;
+/// Writes a weight matrix W(t) (arrives sized).
+using WeightCallback = std::function<void(double t, Eigen::MatrixXd& W)>;
+
+/// The quadratic cost. Q (nx×nx, symmetric PSD) and R (m×m, symmetric PD) are constants unless the
+/// matching callback is set, in which case the callback wins. Qf (nx×nx, symmetric PSD) is required.
+struct LqrWeights {
+  Eigen::MatrixXd Q, R, Qf;
+  WeightCallback Qfun, Rfun;
+};
+
+enum class RiccatiMethod { kBDF, kAdams };
+
+/// Linear solver inside BDF's Newton iterations. kDense factors the exact N×N Jacobian
+/// (N = nx(nx+1)/2; O(N³) per factorization, only sensible for small nx); kKrylov is matrix-free
+/// GMRES (no preconditioner) with the exact Jacobian-vector product A_clᵀV + V A_cl (O(nx³) each).
+/// kAuto: kDense for nx ≤ 10, kKrylov above.
+enum class RiccatiLinearSolver { kAuto, kDense, kKrylov };
+
+struct RiccatiOptions {
+  double rtol = 1e-8;           ///< CVODES relative tolerance (> 0)
+  double atol = 1e-10;          ///< CVODES absolute tolerance on each entry of S (> 0)
+  RiccatiMethod method = RiccatiMethod::kBDF;
+  long maxSteps = 100000;       ///< total internal steps over the horizon (> 0)
+  double maxNorm = 1e15;        ///< max |S_ij| above which the solve stops with kBlowUp (> 0)
+  double initialStep = 0.0;     ///< first step size in τ; 0 lets CVODES choose (≥ 0)
+  double maxStep = 0.0;         ///< largest step size; 0 = unlimited (≥ 0)
+  RiccatiLinearSolver linearSolver = RiccatiLinearSolver::kAuto;  ///< BDF only
+  bool exactJacobian = true;    ///< BDF + dense: analytic Jacobian (false: difference quotients)
+  bool trackEigenvalues = true; ///< min/max eigenvalue of S over the stored steps (O(nx³) per step)
+  /// Throws std::invalid_argument naming the field and its value.
+  void validate() const;
+};
+
+enum class RiccatiStatus {
+  kOk,
+  kIntegratorFailure,  ///< CVODES returned an error (too much work, convergence, error test)
+  kNonFinite,          ///< S became NaN/Inf
+  kBlowUp,             ///< max |S_ij| exceeded options.maxNorm
+  kCallbackFailure,    ///< A/B/Q/R callback threw, returned a wrong size or non-finite values,
+                       ///< or R(t) was not positive definite
+};
+
+const char* toString(RiccatiStatus status);
+
+/// The solve's outcome and S(t) on [validFrom(), T] (the whole horizon when ok()).
+class RiccatiSolution {
+ public:
+  RiccatiStatus status = RiccatiStatus::kOk;
+  std::string message;              ///< empty when ok; otherwise what failed, at which t and ‖S‖
+  double failureTime = 0.0;         ///< t where the failure happened (not ok only)
+  double failureNorm = 0.0;         ///< max |S_ij| at the last accepted step before the failure
+  long steps = 0;                   ///< CVODES internal steps
+  long rhsEvaluations = 0;
+  long jacobianEvaluations = 0;
+  double minEigenvalue = 0.0;       ///< of S over the stored steps (if tracked)
+  double maxEigenvalue = 0.0;
+
+  bool ok() const { return status == RiccatiStatus::kOk; }
+  int nx() const { return nx_; }
+  int nu() const { return nu_; }
+  double startTime() const { return t0_; }
+  double endTime() const { return tf_; }
+  /// Earliest time where S is available: t0 when ok(), else the last accepted step's time.
+  double validFrom() const;
+  /// Times (ascending) of the stored step points, T included.
+  std::vector<double> stepTimes() const;
+
+  /// S(t) (nx×nx, symmetric). Throws std::out_of_range outside [validFrom(), T].
+  Eigen::MatrixXd S(double t) const;
+  void S(double t, Eigen::MatrixXd& out) const;
+  /// K(t) = R(t)⁻¹ B(t)ᵀ S(t) (m×nx); calls the linearization (and R) callback at t.
+  Eigen::MatrixXd K(double t) const;
+
+ private:
+  friend RiccatiSolution solveRiccati(double, double, int, int, const LinearizationCallback&,
+                                      const LqrWeights&, const RiccatiOptions&);
+  struct Step {
+    double tau;            // τ = T − t at the step end
+    Eigen::MatrixXd D;     // N × (q+1): derivatives d^k y/dτ^k at tau
+  };
+  int nx_ = 0, nu_ = 0;
+  double t0_ = 0.0, tf_ = 0.0;
+  std::vector<Step> steps_;  // ascending τ; steps_[0] is τ = 0 (S = Qf)
+  LinearizationCallback linearization_;
+  LqrWeights weights_;
+};
+
+/// Integrates the Riccati equation on [t0, T] (t0 < T). Throws std::invalid_argument for sizes,
+/// an invalid option, R not positive definite or Q, Qf not positive semidefinite (checked for
+/// constants; a callback is checked at t0, (t0+T)/2 and T), naming the matrix and the offending
+/// eigenvalue. Numerical trouble is reported in the returned status, never thrown.
+RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
+                             const LinearizationCallback& linearization, const LqrWeights& weights,
+                             const RiccatiOptions& options = {});
+
+/// A(t), B(t) from computeLinearization at the trajectory's interpolated x(t), u(t). The callback
+/// owns a copy of the trajectory and its own Data (not thread safe; one per solve). The trajectory
+/// must have state derivatives and match the model; the model must outlive the callback.
+/// Throws TrajectoryError / std::logic_error when it does not.
+LinearizationCallback makeTrajectoryLinearization(const Model& model, const Trajectory& trajectory);
+
+/// solveRiccati over the trajectory's time span with makeTrajectoryLinearization.
+RiccatiSolution solveRiccati(const Model& model, const Trajectory& trajectory,
+                             const LqrWeights& weights, const RiccatiOptions& options = {});
+
+/// Throws std::invalid_argument unless W is rows×cols, finite, symmetric (to 1e-10 relative) and
+/// its smallest eigenvalue is > 0 (definite) or ≥ −1e-12·max(1, ‖W‖) (semidefinite).
+void checkWeightMatrix(const Eigen::MatrixXd& W, const char* name, Eigen::Index size, bool definite);
+
+}  // namespace trellis

@@ -1,0 +1,92 @@
+// trellis/control/trajectory.hpp — a nominal trajectory: knot times, states x = [q; q̇], inputs u.
+//
+// Layout: N knots t_0 < t_1 < … < t_{N-1}; states() is 2n×N (column k = [q(t_k); q̇(t_k)]),
+// inputs() is m×N. CSV form, one row per knot:
+//   t, <config names…>, d<config names…>, <input names…>
+// e.g. `t,x,theta,dx,dtheta,push`.
+//
+// Interpolation rule (evaluate):
+//  - the state is a cubic Hermite spline through the knots using the knot derivatives
+//    ẋ_k = [q̇_k; q̈(q_k, q̇_k, u_k)] (computeStateDerivatives evaluates them with the core's forward
+//    dynamics, or setStateDerivatives supplies them). On a trajectory that satisfies the dynamics
+//    the error is O(h⁴) in the knot spacing h, and the spline is C¹;
+//  - the input is piecewise linear between knots (C⁰), exact at the knots.
+// Queries outside [t_0, t_{N-1}] throw std::out_of_range.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <iosfwd>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace trellis {
+
+class Model;
+class Data;
+
+/// Thrown for an invalid trajectory (file or arrays). The message names the row (1-based data
+/// row, and the file line) and the column (1-based, and its header name) when one is at fault.
+class TrajectoryError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+class Trajectory {
+ public:
+  Trajectory() = default;
+
+  /// times: N (strictly increasing, finite); states: 2n×N; inputs: m×N (m may be 0);
+  /// configNames: n, inputNames: m. Throws TrajectoryError naming the first offending row/column.
+  Trajectory(std::vector<std::string> configNames, std::vector<std::string> inputNames,
+             Eigen::VectorXd times, Eigen::MatrixXd states, Eigen::MatrixXd inputs);
+
+  int nq() const { return static_cast<int>(configNames_.size()); }  ///< n
+  int nx() const { return 2 * nq(); }                                ///< 2n
+  int nu() const { return static_cast<int>(inputNames_.size()); }   ///< m
+  int size() const { return static_cast<int>(times_.size()); }      ///< N knots
+  double startTime() const { return times_(0); }
+  double endTime() const { return times_(times_.size() - 1); }
+
+  const Eigen::VectorXd& times() const { return times_; }
+  const Eigen::MatrixXd& states() const { return states_; }   ///< 2n×N
+  const Eigen::MatrixXd& inputs() const { return inputs_; }   ///< m×N
+  const std::vector<std::string>& configNames() const { return configNames_; }
+  const std::vector<std::string>& inputNames() const { return inputNames_; }
+
+  /// Throws TrajectoryError unless the configuration and input names equal the model's (same order).
+  void checkCompatible(const Model& model) const;
+
+  /// ẋ_k = [q̇_k; q̈_k] at every knot from computeDynamics. Throws TrajectoryError if the model
+  /// does not match or the dynamics fail at a knot (the message names the knot and time).
+  void computeStateDerivatives(const Model& model, Data& data);
+  /// Supplies ẋ at the knots directly (2n×N, finite).
+  void setStateDerivatives(Eigen::MatrixXd stateDerivatives);
+  bool hasStateDerivatives() const { return stateDerivatives_.cols() == times_.size() && size() > 0; }
+  const Eigen::MatrixXd& stateDerivatives() const { return stateDerivatives_; }  ///< 2n×N
+
+  /// x(t) (2n) by cubic Hermite and u(t) (m) linearly; see the file comment. x and u are resized
+  /// if needed (no allocation when already sized). Throws std::logic_error without state
+  /// derivatives, std::out_of_range outside [t_0, t_{N-1}] (a relative slack of 1e-12 is clamped).
+  void evaluate(double t, Eigen::VectorXd& x, Eigen::VectorXd& u) const;
+  Eigen::VectorXd state(double t) const;
+  Eigen::VectorXd input(double t) const;
+
+  /// Reads the CSV layout above; the number of configurations n is inferred from the header as the
+  /// first n with columns 2n+1.. equal to "d" + columns 1..n. `source` names the stream in messages.
+  static Trajectory readCsv(std::istream& in, const std::string& source = "<stream>");
+  static Trajectory readCsvFile(const std::string& path);
+  /// Writes the CSV layout with 17 significant digits (round trip exact).
+  void writeCsv(std::ostream& out) const;
+  void writeCsvFile(const std::string& path) const;
+
+ private:
+  int intervalIndex(double& t) const;
+
+  std::vector<std::string> configNames_, inputNames_;
+  Eigen::VectorXd times_;
+  Eigen::MatrixXd states_, inputs_, stateDerivatives_;
+};
+
+}  // namespace trellis

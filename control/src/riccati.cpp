@@ -1,0 +1,567 @@
+// riccati.cpp — backward Riccati integration with CVODES (SUNDIALS stays in this file).
+#include "trellis/control/riccati.hpp"
+
+#include "sundials_raii.hpp"
+#include "trellis/control/trajectory.hpp"
+#include "trellis/core/data.hpp"
+#include "trellis/core/linearization.hpp"
+#include "trellis/core/model.hpp"
+
+#include <cvodes/cvodes_ls.h>
+#include <sunlinsol/sunlinsol_dense.h>
+#include <sunlinsol/sunlinsol_spgmr.h>
+#include <sunmatrix/sunmatrix_dense.h>
+#include <sunnonlinsol/sunnonlinsol_fixedpoint.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+#include <memory>
+#include <sstream>
+
+namespace trellis {
+
+const char* toString(RiccatiStatus status) {
+  switch (status) {
+    case RiccatiStatus::kOk: return "ok";
+    case RiccatiStatus::kIntegratorFailure: return "integrator failure";
+    case RiccatiStatus::kNonFinite: return "non-finite";
+    case RiccatiStatus::kBlowUp: return "blow-up";
+    case RiccatiStatus::kCallbackFailure: return "callback failure";
+  }
+  return "unknown";
+}
+
+void RiccatiOptions::validate() const {
+  auto bad = [](const char* field, double v, const char* rule) {
+    std::ostringstream m;
+    m << "RiccatiOptions." << field << " = " << v << " must be " << rule;
+    throw std::invalid_argument(m.str());
+  };
+  if (!(rtol > 0.0) || !std::isfinite(rtol)) bad("rtol", rtol, "> 0 and finite");
+  if (!(atol > 0.0) || !std::isfinite(atol)) bad("atol", atol, "> 0 and finite");
+  if (maxSteps <= 0) bad("maxSteps", static_cast<double>(maxSteps), "> 0");
+  if (!(maxNorm > 0.0)) bad("maxNorm", maxNorm, "> 0");
+  if (!(initialStep >= 0.0) || !std::isfinite(initialStep)) bad("initialStep", initialStep, ">= 0");
+  if (!(maxStep >= 0.0) || !std::isfinite(maxStep)) bad("maxStep", maxStep, ">= 0");
+}
+
+void checkWeightMatrix(const Eigen::MatrixXd& W, const char* name, Eigen::Index size,
+                       bool definite) {
+  std::ostringstream m;
+  if (W.rows() != size || W.cols() != size) {
+    m << name << " must be " << size << "x" << size << ", got " << W.rows() << "x" << W.cols();
+    throw std::invalid_argument(m.str());
+  }
+  if (size == 0) return;
+  if (!W.allFinite()) {
+    m << name << " has a non-finite entry";
+    throw std::invalid_argument(m.str());
+  }
+  const double scale = std::max(1.0, W.cwiseAbs().maxCoeff());
+  const double asym = (W - W.transpose()).cwiseAbs().maxCoeff();
+  if (asym > 1e-10 * scale) {
+    m << name << " is not symmetric: max |W - W^T| = " << asym;
+    throw std::invalid_argument(m.str());
+  }
+  const Eigen::MatrixXd Ws = 0.5 * (W + W.transpose());
+  const double lmin = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Ws, Eigen::EigenvaluesOnly)
+                          .eigenvalues()(0);
+  if (definite && !(lmin > 0.0)) {
+    m << name << " is not positive definite: smallest eigenvalue " << lmin << " (must be > 0)";
+    throw std::invalid_argument(m.str());
+  }
+  if (!definite && lmin < -1e-12 * scale) {
+    m << name << " is not positive semidefinite: smallest eigenvalue " << lmin
+      << " (must be >= 0)";
+    throw std::invalid_argument(m.str());
+  }
+}
+
+namespace {
+
+inline Eigen::Index packedIndex(Eigen::Index i, Eigen::Index j) {  // i <= j
+  return j * (j + 1) / 2 + i;
+}
+
+void unpack(const double* y, Eigen::Index n, Eigen::MatrixXd& S) {
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const double* col = y + j * (j + 1) / 2;
+    for (Eigen::Index i = 0; i <= j; ++i) S(i, j) = S(j, i) = col[i];
+  }
+}
+
+void pack(const Eigen::MatrixXd& S, Eigen::Index n, double* y) {
+  for (Eigen::Index j = 0; j < n; ++j) {
+    double* col = y + j * (j + 1) / 2;
+    for (Eigen::Index i = 0; i <= j; ++i) col[i] = S(i, j);
+  }
+}
+
+double maxAbs(const double* y, Eigen::Index N) {
+  double m = 0.0;
+  for (Eigen::Index i = 0; i < N; ++i) m = std::max(m, std::abs(y[i]));
+  return m;
+}
+
+}  // namespace
+
+/// Everything the CVODES callbacks need; scratch memory is allocated once here.
+struct RiccatiSolver {
+  int nx, nu;
+  double T;
+  const LinearizationCallback& lin;
+  const LqrWeights& w;
+  Eigen::MatrixXd A, B, Q, R, S, P, K, F, Acl;
+  Eigen::LLT<Eigen::MatrixXd> Rllt;
+  bool failed = false;
+  double failTime = 0.0;  // t of the evaluation that failed
+  RiccatiStatus failStatus = RiccatiStatus::kCallbackFailure;
+  std::string callbackMessage, cvodeMessage;
+
+  RiccatiSolver(int nx_, int nu_, double T_, const LinearizationCallback& l, const LqrWeights& w_)
+      : nx(nx_), nu(nu_), T(T_), lin(l), w(w_),
+        A(nx_, nx_), B(nx_, nu_), Q(nx_, nx_), R(nu_, nu_), S(nx_, nx_), P(nx_, nu_),
+        K(nu_, nx_), F(nx_, nx_), Acl(nx_, nx_), Rllt(nu_) {
+    if (!w.Qfun) Q = w.Q;
+    if (!w.Rfun) {
+      R = w.R;
+      Rllt.compute(R);
+    }
+  }
+
+  void fail(RiccatiStatus s, const std::string& msg) {
+    if (!failed) {
+      failed = true;
+      failTime = currentTime;
+      failStatus = s;
+      callbackMessage = msg;
+    }
+  }
+
+  template <class M>
+  bool checkSize(const M& X, Eigen::Index r, Eigen::Index c, const char* name, double t) {
+    if (X.rows() == r && X.cols() == c && X.allFinite()) return true;
+    std::ostringstream m;
+    if (X.rows() != r || X.cols() != c) {
+      m << name << "(t) callback returned " << X.rows() << "x" << X.cols() << ", expected " << r
+        << "x" << c << " at t = " << t;
+    } else {
+      m << name << "(t) has a non-finite entry at t = " << t;
+    }
+    fail(RiccatiStatus::kCallbackFailure, m.str());
+    return false;
+  }
+
+  /// A, B, Q, R, S and K = R⁻¹BᵀS at τ; false (with the message kept) on any failure.
+  double currentTime = 0.0;
+
+  bool evaluate(double tau, const double* y) {
+    const double t = T - tau;
+    currentTime = t;
+    try {
+      lin(t, A, B);
+      if (!checkSize(A, nx, nx, "A", t) || !checkSize(B, nx, nu, "B", t)) return false;
+      if (w.Qfun) {
+        w.Qfun(t, Q);
+        if (!checkSize(Q, nx, nx, "Q", t)) return false;
+      }
+      if (w.Rfun) {
+        w.Rfun(t, R);
+        if (!checkSize(R, nu, nu, "R", t)) return false;
+        Rllt.compute(R);
+        if (Rllt.info() != Eigen::Success) {
+          std::ostringstream m;
+          m << "R(t) is not positive definite at t = " << t;
+          fail(RiccatiStatus::kCallbackFailure, m.str());
+          return false;
+        }
+      }
+    } catch (const std::exception& e) {
+      std::ostringstream m;
+      m << "callback threw at t = " << t << ": " << e.what();
+      fail(RiccatiStatus::kCallbackFailure, m.str());
+      return false;
+    } catch (...) {
+      std::ostringstream m;
+      m << "callback threw an unknown exception at t = " << t;
+      fail(RiccatiStatus::kCallbackFailure, m.str());
+      return false;
+    }
+    unpack(y, nx, S);
+    if (!S.allFinite()) {
+      std::ostringstream m;
+      m << "S became non-finite at t = " << t;
+      fail(RiccatiStatus::kNonFinite, m.str());
+      return false;
+    }
+    P.noalias() = S * B;
+    K.noalias() = P.transpose();
+    Rllt.solveInPlace(K);
+    return true;
+  }
+
+  // dS/dτ = AᵀS + SA − S B R⁻¹ Bᵀ S + Q = AᵀS + SA − P K + Q.
+  static int rhs(double tau, N_Vector yv, N_Vector ydotv, void* user) {
+    auto& s = *static_cast<RiccatiSolver*>(user);
+    if (!s.evaluate(tau, N_VGetArrayPointer(yv))) return -1;
+    s.F.noalias() = s.A.transpose() * s.S;
+    s.Acl.noalias() = s.P * s.K;  // reuse Acl as scratch for P K
+    double* out = N_VGetArrayPointer(ydotv);
+    for (Eigen::Index j = 0; j < s.nx; ++j) {
+      double* col = out + j * (j + 1) / 2;
+      for (Eigen::Index i = 0; i <= j; ++i) {
+        col[i] = s.F(i, j) + s.F(j, i) - s.Acl(i, j) + s.Q(i, j);
+      }
+    }
+    return 0;
+  }
+
+  // ∂f/∂S · E = A_clᵀ E + E A_cl with A_cl = A − B K. For the packed unknown s_ij (i ≤ j) the
+  // direction is E = e_i e_jᵀ + e_j e_iᵀ (i < j) or e_i e_iᵀ; the image F has nonzeros only in rows
+  // and columns i, j: F(k, j) = Acl(i, k) + [k = i] Acl(j, j) + [k = j] Acl(i, j),
+  // F(k, i) = Acl(j, k) + [k = i] Acl(j, i) + [k = j] Acl(i, i)   (i < j),
+  // F(k, i) = Acl(i, k) + [k = i] Acl(i, i)                         (i = j).
+  static int jac(double tau, N_Vector yv, N_Vector, SUNMatrix J, void* user, N_Vector, N_Vector,
+                 N_Vector) {
+    auto& s = *static_cast<RiccatiSolver*>(user);
+    if (!s.evaluate(tau, N_VGetArrayPointer(yv))) return -1;
+    s.Acl = s.A;
+    s.Acl.noalias() -= s.B * s.K;
+    SUNMatZero(J);
+    const Eigen::Index n = s.nx;
+    const auto& C = s.Acl;
+    for (Eigen::Index j = 0; j < n; ++j) {
+      for (Eigen::Index i = 0; i <= j; ++i) {
+        double* col = SM_COLUMN_D(J, packedIndex(i, j));
+        if (i == j) {
+          for (Eigen::Index k = 0; k < n; ++k) {
+            col[packedIndex(std::min(k, i), std::max(k, i))] = C(i, k) + (k == i ? C(i, i) : 0.0);
+          }
+        } else {
+          for (Eigen::Index k = 0; k < n; ++k) {
+            col[packedIndex(std::min(k, j), std::max(k, j))] =
+                C(i, k) + (k == i ? C(j, j) : 0.0) + (k == j ? C(i, j) : 0.0);
+          }
+          for (Eigen::Index k = 0; k < n; ++k) {
+            if (k == j) continue;  // entry (i, j) already written (same value)
+            col[packedIndex(std::min(k, i), std::max(k, i))] =
+                C(j, k) + (k == i ? C(j, i) : 0.0) + (k == j ? C(i, i) : 0.0);
+          }
+        }
+      }
+    }
+    return 0;
+  }
+
+  // Matrix-free Newton: A_cl at (τ, y) once per setup, then Jv = A_clᵀV + V A_cl per product.
+  static int jtSetup(double tau, N_Vector yv, N_Vector, void* user) {
+    auto& s = *static_cast<RiccatiSolver*>(user);
+    if (!s.evaluate(tau, N_VGetArrayPointer(yv))) return -1;
+    s.Acl = s.A;
+    s.Acl.noalias() -= s.B * s.K;
+    return 0;
+  }
+  static int jtimes(N_Vector v, N_Vector Jv, double, N_Vector, N_Vector, void* user, N_Vector) {
+    auto& s = *static_cast<RiccatiSolver*>(user);
+    unpack(N_VGetArrayPointer(v), s.nx, s.S);  // S is free between right-hand sides
+    s.F.noalias() = s.Acl.transpose() * s.S;
+    double* out = N_VGetArrayPointer(Jv);
+    for (Eigen::Index j = 0; j < s.nx; ++j) {
+      double* col = out + j * (j + 1) / 2;
+      for (Eigen::Index i = 0; i <= j; ++i) col[i] = s.F(i, j) + s.F(j, i);
+    }
+    return 0;
+  }
+
+  static void errorHandler(int code, const char* module, const char* function, char* msg,
+                           void* user) {
+    auto& s = *static_cast<RiccatiSolver*>(user);
+    if (code < 0) {  // warnings (code > 0) are dropped; the last error is kept
+      s.cvodeMessage = std::string(module) + "::" + function + ": " + msg;
+    }
+  }
+};
+
+double RiccatiSolution::validFrom() const {
+  return steps_.empty() ? tf_ : tf_ - steps_.back().tau;
+}
+
+std::vector<double> RiccatiSolution::stepTimes() const {
+  std::vector<double> t;
+  t.reserve(steps_.size());
+  for (auto it = steps_.rbegin(); it != steps_.rend(); ++it) t.push_back(tf_ - it->tau);
+  return t;
+}
+
+void RiccatiSolution::S(double t, Eigen::MatrixXd& out) const {
+  if (steps_.empty()) throw std::out_of_range("RiccatiSolution: empty solution");
+  const double tauMax = steps_.back().tau;
+  double tau = tf_ - t;
+  const double slack = 1e-12 * std::max({1.0, std::abs(t0_), std::abs(tf_)});
+  if (!(tau >= -slack && tau <= tauMax + slack)) {
+    std::ostringstream m;
+    m << "RiccatiSolution: t = " << t << " is outside [" << tf_ - tauMax << ", " << tf_ << "]";
+    throw std::out_of_range(m.str());
+  }
+  tau = std::clamp(tau, 0.0, tauMax);
+  // First stored step with τ_k ≥ τ; its polynomial covers [τ_{k-1}, τ_k].
+  const auto it = std::lower_bound(steps_.begin(), steps_.end(), tau,
+                                   [](const Step& s, double v) { return s.tau < v; });
+  const Step& st = *it;
+  const double dt = tau - st.tau;
+  const Eigen::Index q = st.D.cols() - 1;
+  // Horner on Σ D_k dtᵏ / k!.
+  Eigen::VectorXd y = st.D.col(q);
+  for (Eigen::Index k = q; k-- > 0;) y = st.D.col(k) + (dt / static_cast<double>(k + 1)) * y;
+  out.resize(nx_, nx_);
+  unpack(y.data(), nx_, out);
+}
+
+Eigen::MatrixXd RiccatiSolution::S(double t) const {
+  Eigen::MatrixXd out;
+  S(t, out);
+  return out;
+}
+
+Eigen::MatrixXd RiccatiSolution::K(double t) const {
+  const Eigen::MatrixXd St = S(t);
+  Eigen::MatrixXd A(nx_, nx_), B(nx_, nu_), R = weights_.R;
+  linearization_(t, A, B);
+  if (weights_.Rfun) {
+    R.resize(nu_, nu_);
+    weights_.Rfun(t, R);
+  }
+  Eigen::LLT<Eigen::MatrixXd> llt(R);
+  if (llt.info() != Eigen::Success) {
+    throw std::runtime_error("RiccatiSolution::K: R(t) is not positive definite at t = " +
+                             std::to_string(t));
+  }
+  return llt.solve(B.transpose() * St);
+}
+
+RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
+                             const LinearizationCallback& linearization, const LqrWeights& weights,
+                             const RiccatiOptions& options) {
+  options.validate();
+  if (!(t0 < T) || !std::isfinite(t0) || !std::isfinite(T)) {
+    std::ostringstream m;
+    m << "solveRiccati: need finite t0 < T, got t0 = " << t0 << ", T = " << T;
+    throw std::invalid_argument(m.str());
+  }
+  if (nx <= 0 || nu < 0) {
+    throw std::invalid_argument("solveRiccati: need nx > 0 and nu >= 0, got nx = " +
+                                std::to_string(nx) + ", nu = " + std::to_string(nu));
+  }
+  if (!linearization) throw std::invalid_argument("solveRiccati: empty linearization callback");
+  checkWeightMatrix(weights.Qf, "Qf", nx, false);
+  for (double t : {t0, 0.5 * (t0 + T), T}) {
+    Eigen::MatrixXd Q = weights.Q, R = weights.R;
+    if (weights.Qfun) {
+      Q.setZero(nx, nx);
+      weights.Qfun(t, Q);
+    }
+    if (weights.Rfun) {
+      R.setZero(nu, nu);
+      weights.Rfun(t, R);
+    }
+    checkWeightMatrix(Q, weights.Qfun ? "Q(t)" : "Q", nx, false);
+    checkWeightMatrix(R, weights.Rfun ? "R(t)" : "R", nu, true);
+    if (!weights.Qfun && !weights.Rfun) break;
+  }
+
+  RiccatiSolution sol;
+  sol.nx_ = nx;
+  sol.nu_ = nu;
+  sol.t0_ = t0;
+  sol.tf_ = T;
+  sol.linearization_ = linearization;
+  sol.weights_ = weights;
+
+  const sunindextype N = static_cast<sunindextype>(nx) * (nx + 1) / 2;
+  const double tauEnd = T - t0;
+  RiccatiSolver solver(nx, nu, T, sol.linearization_, sol.weights_);
+
+  detail::CvodeSession cv;
+  cv.context.reset(detail::createContext());
+  SUNContext ctx = cv.context.get();
+  cv.y.reset(N_VNew_Serial(N, ctx));
+  cv.dky.reset(N_VNew_Serial(N, ctx));
+  if (!cv.y || !cv.dky) throw std::runtime_error("solveRiccati: N_VNew_Serial failed");
+  double* y = N_VGetArrayPointer(cv.y.get());
+  pack(weights.Qf, nx, y);
+
+  const bool bdf = options.method == RiccatiMethod::kBDF;
+  cv.cvode.reset(CVodeCreate(bdf ? CV_BDF : CV_ADAMS, ctx));
+  void* mem = cv.cvode.get();
+  if (!mem) throw std::runtime_error("solveRiccati: CVodeCreate failed");
+  auto check = [&](int flag, const char* call) {
+    if (flag < 0) {
+      throw std::runtime_error(std::string("solveRiccati: ") + call + " failed with flag " +
+                               std::to_string(flag) + ": " + solver.cvodeMessage);
+    }
+  };
+  check(CVodeSetErrHandlerFn(mem, &RiccatiSolver::errorHandler, &solver), "CVodeSetErrHandlerFn");
+  check(CVodeInit(mem, &RiccatiSolver::rhs, 0.0, cv.y.get()), "CVodeInit");
+  check(CVodeSStolerances(mem, options.rtol, options.atol), "CVodeSStolerances");
+  check(CVodeSetUserData(mem, &solver), "CVodeSetUserData");
+  check(CVodeSetMaxNumSteps(mem, options.maxSteps), "CVodeSetMaxNumSteps");
+  check(CVodeSetStopTime(mem, tauEnd), "CVodeSetStopTime");
+  if (options.initialStep > 0) check(CVodeSetInitStep(mem, options.initialStep), "CVodeSetInitStep");
+  if (options.maxStep > 0) check(CVodeSetMaxStep(mem, options.maxStep), "CVodeSetMaxStep");
+  const bool krylov =
+      options.linearSolver == RiccatiLinearSolver::kKrylov ||
+      (options.linearSolver == RiccatiLinearSolver::kAuto && nx > 10);
+  if (bdf && krylov) {
+    cv.linearSolver.reset(SUNLinSol_SPGMR(cv.y.get(), SUN_PREC_NONE, 0, ctx));
+    if (!cv.linearSolver) throw std::runtime_error("solveRiccati: SPGMR solver");
+    check(CVodeSetLinearSolver(mem, cv.linearSolver.get(), nullptr), "CVodeSetLinearSolver");
+    check(CVodeSetJacTimes(mem, &RiccatiSolver::jtSetup, &RiccatiSolver::jtimes), "CVodeSetJacTimes");
+  } else if (bdf) {
+    cv.jacobian.reset(SUNDenseMatrix(N, N, ctx));
+    cv.linearSolver.reset(SUNLinSol_Dense(cv.y.get(), cv.jacobian.get(), ctx));
+    if (!cv.jacobian || !cv.linearSolver) throw std::runtime_error("solveRiccati: dense solver");
+    check(CVodeSetLinearSolver(mem, cv.linearSolver.get(), cv.jacobian.get()),
+          "CVodeSetLinearSolver");
+    if (options.exactJacobian) check(CVodeSetJacFn(mem, &RiccatiSolver::jac), "CVodeSetJacFn");
+  } else {
+    cv.nonlinearSolver.reset(SUNNonlinSol_FixedPoint(cv.y.get(), 0, ctx));
+    if (!cv.nonlinearSolver) throw std::runtime_error("solveRiccati: fixed-point solver");
+    check(CVodeSetNonlinearSolver(mem, cv.nonlinearSolver.get()), "CVodeSetNonlinearSolver");
+  }
+
+  // τ = 0: S = Qf (a constant "polynomial").
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(nx);
+  sol.minEigenvalue = std::numeric_limits<double>::infinity();
+  sol.maxEigenvalue = -std::numeric_limits<double>::infinity();
+  Eigen::MatrixXd Sk(nx, nx);
+  auto trackEigen = [&](const double* yk) {
+    if (!options.trackEigenvalues) return;
+    unpack(yk, nx, Sk);
+    eig.compute(Sk, Eigen::EigenvaluesOnly);
+    sol.minEigenvalue = std::min(sol.minEigenvalue, eig.eigenvalues()(0));
+    sol.maxEigenvalue = std::max(sol.maxEigenvalue, eig.eigenvalues()(nx - 1));
+  };
+  sol.steps_.push_back({0.0, Eigen::Map<Eigen::VectorXd>(y, N)});
+  trackEigen(y);
+
+  double tau = 0.0;
+  double lastNorm = maxAbs(y, N);
+  long taken = 0;
+  while (tau < tauEnd) {
+    // CV_ONE_STEP applies CVodeSetMaxNumSteps per call, so the budget over the horizon is ours.
+    if (++taken > options.maxSteps) {
+      sol.status = RiccatiStatus::kIntegratorFailure;
+      sol.failureTime = T - tau;
+      sol.failureNorm = lastNorm;
+      std::ostringstream m;
+      m << "Riccati solve stopped at t = " << sol.failureTime << " (max |S_ij| = " << lastNorm
+        << "): more than maxSteps = " << options.maxSteps << " steps (too much work)";
+      sol.message = m.str();
+      break;
+    }
+    const int flag = CVode(mem, tauEnd, cv.y.get(), &tau, CV_ONE_STEP);
+    if (flag < 0) {
+      double tcur = tau;
+      CVodeGetCurrentTime(mem, &tcur);
+      // A failed callback names its own time (a trial point inside the step that failed);
+      // otherwise CVODES' current time, the last point it reached.
+      sol.failureTime = solver.failed ? solver.failTime : T - tcur;
+      sol.failureNorm = lastNorm;
+      sol.status = solver.failed ? solver.failStatus : RiccatiStatus::kIntegratorFailure;
+      char* name = CVodeGetReturnFlagName(flag);
+      std::ostringstream m;
+      m << "Riccati solve stopped at t = " << sol.failureTime << " (max |S_ij| = " << lastNorm
+        << " at the last accepted step): ";
+      if (solver.failed) m << solver.callbackMessage << "; ";
+      m << "CVODES " << (name ? name : "error") << " (" << flag << ")";
+      if (!solver.cvodeMessage.empty()) m << ": " << solver.cvodeMessage;
+      std::free(name);
+      sol.message = m.str();
+      break;
+    }
+    int q = 0;
+    CVodeGetLastOrder(mem, &q);
+    RiccatiSolution::Step st{tau, Eigen::MatrixXd(N, q + 1)};
+    for (int k = 0; k <= q; ++k) {
+      if (CVodeGetDky(mem, tau, k, cv.dky.get()) < 0) {
+        st.D.conservativeResize(N, k);
+        break;
+      }
+      st.D.col(k) = Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(cv.dky.get()), N);
+    }
+    const double norm = maxAbs(y, N);
+    if (!std::isfinite(norm) || !st.D.allFinite()) {
+      sol.status = RiccatiStatus::kNonFinite;
+      sol.failureTime = T - tau;
+      sol.failureNorm = lastNorm;
+      std::ostringstream m;
+      m << "S became non-finite at t = " << sol.failureTime << " (max |S_ij| = " << lastNorm
+        << " at the previous step)";
+      sol.message = m.str();
+      break;
+    }
+    sol.steps_.push_back(std::move(st));
+    trackEigen(y);
+    if (norm > options.maxNorm) {
+      sol.status = RiccatiStatus::kBlowUp;
+      sol.failureTime = T - tau;
+      sol.failureNorm = norm;
+      std::ostringstream m;
+      m << "S blew up at t = " << sol.failureTime << ": max |S_ij| = " << norm
+        << " > maxNorm = " << options.maxNorm;
+      sol.message = m.str();
+      break;
+    }
+    lastNorm = norm;
+    if (flag == CV_TSTOP_RETURN) break;
+  }
+  long v = 0;
+  if (CVodeGetNumSteps(mem, &v) >= 0) sol.steps = v;
+  if (CVodeGetNumRhsEvals(mem, &v) >= 0) sol.rhsEvaluations = v;
+  if (bdf && CVodeGetNumJacEvals(mem, &v) >= 0) sol.jacobianEvaluations = v;
+  if (!options.trackEigenvalues) sol.minEigenvalue = sol.maxEigenvalue = 0.0;
+  return sol;
+}
+
+LinearizationCallback makeTrajectoryLinearization(const Model& model, const Trajectory& trajectory) {
+  trajectory.checkCompatible(model);
+  if (!trajectory.hasStateDerivatives()) {
+    throw std::logic_error(
+        "makeTrajectoryLinearization: the trajectory has no state derivatives "
+        "(call computeStateDerivatives)");
+  }
+  struct State {
+    const Model* model;
+    Trajectory traj;
+    Data data;
+    Eigen::VectorXd x, u, q, dq;
+  };
+  auto st = std::make_shared<State>(State{&model, trajectory, Data(model), {}, {}, {}, {}});
+  return [st](double t, Eigen::MatrixXd& A, Eigen::MatrixXd& B) {
+    st->traj.evaluate(t, st->x, st->u);
+    const int n = st->traj.nq();
+    st->q = st->x.head(n);
+    st->dq = st->x.tail(n);
+    const DynamicsStatus s = computeLinearization(*st->model, st->data, st->q, st->dq, st->u);
+    if (!s.ok()) {
+      throw std::runtime_error("linearization failed at t = " + std::to_string(t) + ": " +
+                               s.message);
+    }
+    A = st->data.A;
+    B = st->data.B;
+  };
+}
+
+RiccatiSolution solveRiccati(const Model& model, const Trajectory& trajectory,
+                             const LqrWeights& weights, const RiccatiOptions& options) {
+  return solveRiccati(trajectory.startTime(), trajectory.endTime(), trajectory.nx(),
+                      trajectory.nu(), makeTrajectoryLinearization(model, trajectory), weights,
+                      options);
+}
+
+}  // namespace trellis

@@ -1,0 +1,319 @@
+// trajectory.cpp — validation, CSV I/O and Hermite interpolation of a nominal trajectory.
+#include "trellis/control/trajectory.hpp"
+
+#include "trellis/core/data.hpp"
+#include "trellis/core/dynamics.hpp"
+#include "trellis/core/model.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <iomanip>
+#include <istream>
+#include <limits>
+#include <ostream>
+#include <sstream>
+
+namespace trellis {
+namespace {
+
+std::vector<std::string> columnNames(const std::vector<std::string>& configs,
+                                     const std::vector<std::string>& inputs) {
+  std::vector<std::string> names{"t"};
+  for (const auto& c : configs) names.push_back(c);
+  for (const auto& c : configs) names.push_back("d" + c);
+  for (const auto& u : inputs) names.push_back(u);
+  return names;
+}
+
+std::string trim(const std::string& s) {
+  const auto b = s.find_first_not_of(" \t\r\n");
+  if (b == std::string::npos) return "";
+  const auto e = s.find_last_not_of(" \t\r\n");
+  return s.substr(b, e - b + 1);
+}
+
+std::vector<std::string> splitCsv(const std::string& line) {
+  std::vector<std::string> out;
+  std::string field;
+  std::istringstream ss(line);
+  while (std::getline(ss, field, ',')) out.push_back(trim(field));
+  if (!line.empty() && line.back() == ',') out.push_back("");
+  return out;
+}
+
+// Row numbering in messages: data rows from 1 (row 1 is the first knot).
+std::string where(int row, int col, const std::vector<std::string>& names) {
+  std::ostringstream m;
+  m << "row " << row << ", column " << col + 1;
+  if (col >= 0 && col < static_cast<int>(names.size())) m << " ('" << names[col] << "')";
+  return m.str();
+}
+
+}  // namespace
+
+Trajectory::Trajectory(std::vector<std::string> configNames, std::vector<std::string> inputNames,
+                       Eigen::VectorXd times, Eigen::MatrixXd states, Eigen::MatrixXd inputs)
+    : configNames_(std::move(configNames)),
+      inputNames_(std::move(inputNames)),
+      times_(std::move(times)),
+      states_(std::move(states)),
+      inputs_(std::move(inputs)) {
+  const Eigen::Index n = nq(), m = nu(), N = times_.size();
+  std::ostringstream err;
+  if (N < 1) throw TrajectoryError("trajectory: no knots (need at least 1 row)");
+  if (states_.rows() != 2 * n || states_.cols() != N) {
+    err << "trajectory: states must be " << 2 * n << "x" << N << " (2n x knots), got "
+        << states_.rows() << "x" << states_.cols();
+    throw TrajectoryError(err.str());
+  }
+  if (inputs_.cols() == 0 && m == 0) inputs_.resize(0, N);
+  if (inputs_.rows() != m || inputs_.cols() != N) {
+    err << "trajectory: inputs must be " << m << "x" << N << " (m x knots), got " << inputs_.rows()
+        << "x" << inputs_.cols();
+    throw TrajectoryError(err.str());
+  }
+  const auto names = columnNames(configNames_, inputNames_);
+  for (Eigen::Index k = 0; k < N; ++k) {
+    const int row = static_cast<int>(k) + 1;
+    if (!std::isfinite(times_(k))) {
+      throw TrajectoryError("trajectory: " + where(row, 0, names) + ": time is not finite");
+    }
+    if (k > 0 && !(times_(k) > times_(k - 1))) {
+      err << "trajectory: " << where(row, 0, names) << ": time " << times_(k)
+          << " is not greater than the previous time " << times_(k - 1)
+          << " (times must increase strictly)";
+      throw TrajectoryError(err.str());
+    }
+    for (Eigen::Index i = 0; i < 2 * n; ++i) {
+      if (!std::isfinite(states_(i, k))) {
+        err << "trajectory: " << where(row, static_cast<int>(1 + i), names) << ": value "
+            << states_(i, k) << " is not finite";
+        throw TrajectoryError(err.str());
+      }
+    }
+    for (Eigen::Index i = 0; i < m; ++i) {
+      if (!std::isfinite(inputs_(i, k))) {
+        err << "trajectory: " << where(row, static_cast<int>(1 + 2 * n + i), names) << ": value "
+            << inputs_(i, k) << " is not finite";
+        throw TrajectoryError(err.str());
+      }
+    }
+  }
+}
+
+void Trajectory::checkCompatible(const Model& model) const {
+  auto mismatch = [](const char* what, const std::vector<std::string>& got,
+                     const std::vector<std::string>& want) {
+    std::ostringstream m;
+    m << "trajectory: " << what << " names do not match the model: trajectory has " << got.size()
+      << " (";
+    for (std::size_t i = 0; i < got.size(); ++i) m << (i ? "," : "") << got[i];
+    m << "), model has " << want.size() << " (";
+    for (std::size_t i = 0; i < want.size(); ++i) m << (i ? "," : "") << want[i];
+    m << ")";
+    throw TrajectoryError(m.str());
+  };
+  if (configNames_ != model.configNames()) mismatch("configuration", configNames_, model.configNames());
+  if (inputNames_ != model.inputNames()) mismatch("input", inputNames_, model.inputNames());
+}
+
+void Trajectory::computeStateDerivatives(const Model& model, Data& data) {
+  checkCompatible(model);
+  const int n = nq();
+  Eigen::MatrixXd xd(2 * n, size());
+  Eigen::VectorXd q(n), dq(n), u(nu());
+  for (int k = 0; k < size(); ++k) {
+    q = states_.col(k).head(n);
+    dq = states_.col(k).tail(n);
+    u = inputs_.col(k);
+    const DynamicsStatus st = computeDynamics(model, data, q, dq, u);
+    if (!st.ok()) {
+      std::ostringstream m;
+      m << "trajectory: dynamics failed at knot " << k + 1 << " (t = " << times_(k)
+        << "): " << st.message;
+      throw TrajectoryError(m.str());
+    }
+    xd.col(k).head(n) = dq;
+    xd.col(k).tail(n) = data.qdd;
+  }
+  stateDerivatives_ = std::move(xd);
+}
+
+void Trajectory::setStateDerivatives(Eigen::MatrixXd stateDerivatives) {
+  if (stateDerivatives.rows() != nx() || stateDerivatives.cols() != size()) {
+    std::ostringstream m;
+    m << "trajectory: state derivatives must be " << nx() << "x" << size() << ", got "
+      << stateDerivatives.rows() << "x" << stateDerivatives.cols();
+    throw TrajectoryError(m.str());
+  }
+  if (!stateDerivatives.allFinite()) throw TrajectoryError("trajectory: state derivatives not finite");
+  stateDerivatives_ = std::move(stateDerivatives);
+}
+
+int Trajectory::intervalIndex(double& t) const {
+  const double t0 = startTime(), t1 = endTime();
+  const double slack = 1e-12 * std::max(1.0, std::max(std::abs(t0), std::abs(t1)));
+  if (!(t >= t0 - slack && t <= t1 + slack)) {
+    std::ostringstream m;
+    m << "trajectory: time " << t << " is outside [" << t0 << ", " << t1 << "]";
+    throw std::out_of_range(m.str());
+  }
+  t = std::clamp(t, t0, t1);
+  if (size() == 1) return 0;
+  const double* begin = times_.data();
+  const double* it = std::upper_bound(begin, begin + size(), t);
+  const int k = static_cast<int>(it - begin) - 1;
+  return std::min(k, size() - 2);
+}
+
+void Trajectory::evaluate(double t, Eigen::VectorXd& x, Eigen::VectorXd& u) const {
+  if (!hasStateDerivatives()) {
+    throw std::logic_error(
+        "trajectory: evaluate needs state derivatives (computeStateDerivatives or "
+        "setStateDerivatives)");
+  }
+  const int k = intervalIndex(t);
+  if (x.size() != nx()) x.resize(nx());
+  if (u.size() != nu()) u.resize(nu());
+  if (size() == 1) {
+    x = states_.col(0);
+    u = inputs_.col(0);
+    return;
+  }
+  const double h = times_(k + 1) - times_(k);
+  const double s = (t - times_(k)) / h;
+  const double s2 = s * s, s3 = s2 * s;
+  const double h00 = 2 * s3 - 3 * s2 + 1, h10 = s3 - 2 * s2 + s;
+  const double h01 = -2 * s3 + 3 * s2, h11 = s3 - s2;
+  x = h00 * states_.col(k) + (h10 * h) * stateDerivatives_.col(k) + h01 * states_.col(k + 1) +
+      (h11 * h) * stateDerivatives_.col(k + 1);
+  u = (1.0 - s) * inputs_.col(k) + s * inputs_.col(k + 1);
+}
+
+Eigen::VectorXd Trajectory::state(double t) const {
+  Eigen::VectorXd x, u;
+  evaluate(t, x, u);
+  return x;
+}
+
+Eigen::VectorXd Trajectory::input(double t) const {
+  Eigen::VectorXd x, u;
+  evaluate(t, x, u);
+  return u;
+}
+
+Trajectory Trajectory::readCsv(std::istream& in, const std::string& source) {
+  std::string line;
+  int lineNo = 0;
+  // Header: first non-empty line.
+  std::vector<std::string> header;
+  while (std::getline(in, line)) {
+    ++lineNo;
+    if (!trim(line).empty()) {
+      header = splitCsv(line);
+      break;
+    }
+  }
+  if (header.empty()) throw TrajectoryError(source + ": empty file (expected a header row)");
+  if (header[0] != "t") {
+    throw TrajectoryError(source + ": line " + std::to_string(lineNo) +
+                          ", column 1: header must start with 't', got '" + header[0] + "'");
+  }
+  for (std::size_t c = 0; c < header.size(); ++c) {
+    if (header[c].empty()) {
+      throw TrajectoryError(source + ": line " + std::to_string(lineNo) + ", column " +
+                            std::to_string(c + 1) + ": empty column name");
+    }
+  }
+  const int ncols = static_cast<int>(header.size()) - 1;
+  int n = -1;
+  for (int cand = 1; 2 * cand <= ncols && n < 0; ++cand) {
+    bool match = true;
+    for (int i = 0; i < cand && match; ++i) match = header[1 + cand + i] == "d" + header[1 + i];
+    if (match) n = cand;
+  }
+  if (n < 0) {
+    throw TrajectoryError(source + ": line " + std::to_string(lineNo) +
+                          ": cannot find the velocity columns: expected 't', the configuration "
+                          "names, then 'd' + each configuration name, then the input names");
+  }
+  std::vector<std::string> configs(header.begin() + 1, header.begin() + 1 + n);
+  std::vector<std::string> inputs(header.begin() + 1 + 2 * n, header.end());
+  const int width = 1 + 2 * n + static_cast<int>(inputs.size());
+
+  std::vector<std::vector<double>> rows;
+  int row = 0;
+  while (std::getline(in, line)) {
+    ++lineNo;
+    if (trim(line).empty()) continue;
+    ++row;
+    const auto fields = splitCsv(line);
+    const std::string at = source + ": row " + std::to_string(row) + " (line " +
+                           std::to_string(lineNo) + ")";
+    if (static_cast<int>(fields.size()) != width) {
+      throw TrajectoryError(at + ": expected " + std::to_string(width) + " columns, got " +
+                            std::to_string(fields.size()));
+    }
+    std::vector<double> values(width);
+    for (int c = 0; c < width; ++c) {
+      const std::string& f = fields[c];
+      const std::string col = ", column " + std::to_string(c + 1) + " ('" + header[c] + "')";
+      char* end = nullptr;
+      errno = 0;
+      const double v = f.empty() ? 0.0 : std::strtod(f.c_str(), &end);
+      if (f.empty() || end != f.c_str() + f.size()) {
+        throw TrajectoryError(at + col + ": '" + f + "' is not a number");
+      }
+      if (!std::isfinite(v)) throw TrajectoryError(at + col + ": value '" + f + "' is not finite");
+      values[c] = v;
+    }
+    if (!rows.empty() && !(values[0] > rows.back()[0])) {
+      std::ostringstream m;
+      m << at << ", column 1 ('t'): time " << values[0] << " is not greater than the previous time "
+        << rows.back()[0];
+      throw TrajectoryError(m.str());
+    }
+    rows.push_back(std::move(values));
+  }
+  if (rows.empty()) throw TrajectoryError(source + ": no data rows after the header");
+  const int N = static_cast<int>(rows.size());
+  Eigen::VectorXd t(N);
+  Eigen::MatrixXd x(2 * n, N), u(static_cast<Eigen::Index>(inputs.size()), N);
+  for (int k = 0; k < N; ++k) {
+    t(k) = rows[k][0];
+    for (int i = 0; i < 2 * n; ++i) x(i, k) = rows[k][1 + i];
+    for (std::size_t i = 0; i < inputs.size(); ++i) u(i, k) = rows[k][1 + 2 * n + i];
+  }
+  return Trajectory(std::move(configs), std::move(inputs), std::move(t), std::move(x), std::move(u));
+}
+
+Trajectory Trajectory::readCsvFile(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw TrajectoryError(path + ": cannot open for reading");
+  return readCsv(in, path);
+}
+
+void Trajectory::writeCsv(std::ostream& out) const {
+  const auto names = columnNames(configNames_, inputNames_);
+  for (std::size_t c = 0; c < names.size(); ++c) out << (c ? "," : "") << names[c];
+  out << "\n";
+  out << std::setprecision(17);
+  for (int k = 0; k < size(); ++k) {
+    out << times_(k);
+    for (int i = 0; i < nx(); ++i) out << "," << states_(i, k);
+    for (int i = 0; i < nu(); ++i) out << "," << inputs_(i, k);
+    out << "\n";
+  }
+}
+
+void Trajectory::writeCsvFile(const std::string& path) const {
+  std::ofstream out(path);
+  if (!out) throw TrajectoryError(path + ": cannot open for writing");
+  writeCsv(out);
+  if (!out) throw TrajectoryError(path + ": write failed");
+}
+
+}  // namespace trellis

@@ -1,0 +1,124 @@
+// Tests for trellis/control/trajectory.hpp: validation, CSV round trip, interpolation.
+#include "control_test_support.hpp"
+
+#include <trellis/control.hpp>
+
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <sstream>
+
+using Catch::Matchers::Contains;
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+using trellis::Trajectory;
+using trellis::TrajectoryError;
+
+namespace {
+
+Trajectory cubicTrajectory() {
+  // q(t) = t³ − 2t + 1, q̇ = 3t² − 2, q̈ = 6t; u(t) = 2t + 1.
+  VectorXd t(4);
+  t << 0.0, 0.4, 1.1, 2.0;
+  MatrixXd x(2, 4), u(1, 4), xd(2, 4);
+  for (int k = 0; k < 4; ++k) {
+    const double s = t(k);
+    x.col(k) << s * s * s - 2 * s + 1, 3 * s * s - 2;
+    xd.col(k) << 3 * s * s - 2, 6 * s;
+    u(0, k) = 2 * s + 1;
+  }
+  Trajectory traj({"q"}, {"f"}, t, x, u);
+  traj.setStateDerivatives(xd);
+  return traj;
+}
+
+}  // namespace
+
+TEST_CASE("trajectory CSV round trip", "[trajectory]") {
+  const Trajectory a = cubicTrajectory();
+  std::stringstream ss;
+  a.writeCsv(ss);
+  CHECK(ss.str().rfind("t,q,dq,f\n", 0) == 0);
+  const Trajectory b = Trajectory::readCsv(ss, "mem");
+  CHECK(b.configNames() == a.configNames());
+  CHECK(b.inputNames() == a.inputNames());
+  CHECK(b.times() == a.times());
+  CHECK(b.states() == a.states());
+  CHECK(b.inputs() == a.inputs());
+
+  std::istringstream two("t, x, theta, dx, dtheta, push\n0,1,2,3,4,5\n\n1,1,2,3,4,6\n");
+  const Trajectory c = Trajectory::readCsv(two);
+  CHECK(c.nq() == 2);
+  CHECK(c.nu() == 1);
+  CHECK(c.size() == 2);
+  CHECK(c.states()(3, 1) == 4.0);
+  std::istringstream noInputs("t,a,da\n0,1,2\n");
+  CHECK(Trajectory::readCsv(noInputs).nu() == 0);
+}
+
+TEST_CASE("trajectory CSV errors name the row and column", "[trajectory]") {
+  auto read = [](const std::string& s) {
+    std::istringstream in(s);
+    return Trajectory::readCsv(in, "traj.csv");
+  };
+  CHECK_THROWS_WITH(read("t,x,dx,u\n0,1,2,3\n0.5,1,2,3\n0.5,1,2,3\n"),
+                    Contains("row 3 (line 4), column 1 ('t')") && Contains("not greater"));
+  CHECK_THROWS_WITH(read("t,x,dx,u\n0,1,2,3\n1,1,nan,3\n"),
+                    Contains("row 2 (line 3), column 3 ('dx')") && Contains("not finite"));
+  CHECK_THROWS_WITH(read("t,x,dx,u\n0,1,2,3\n1,1,abc,3\n"),
+                    Contains("column 3 ('dx')") && Contains("not a number"));
+  CHECK_THROWS_WITH(read("t,x,dx,u\n0,1,2\n"), Contains("row 1 (line 2): expected 4 columns, got 3"));
+  CHECK_THROWS_WITH(read("time,x,dx\n0,1,2\n"), Contains("header must start with 't'"));
+  CHECK_THROWS_WITH(read("t,x,vx\n0,1,2\n"), Contains("velocity columns"));
+  CHECK_THROWS_WITH(read("t,x,dx\n"), Contains("no data rows"));
+  CHECK_THROWS_WITH(read(""), Contains("empty"));
+  CHECK_THROWS_AS(Trajectory::readCsvFile("/nonexistent/traj.csv"), TrajectoryError);
+}
+
+TEST_CASE("trajectory array validation", "[trajectory]") {
+  VectorXd t(3);
+  t << 0, 1, 1;
+  CHECK_THROWS_WITH(Trajectory({"q"}, {}, t, MatrixXd::Zero(2, 3), MatrixXd()),
+                    Contains("row 3, column 1 ('t')"));
+  t << 0, 1, 2;
+  MatrixXd x = MatrixXd::Zero(2, 3);
+  x(1, 2) = std::nan("");
+  CHECK_THROWS_WITH(Trajectory({"q"}, {}, t, x, MatrixXd()), Contains("row 3, column 3 ('dq')"));
+  CHECK_THROWS_WITH(Trajectory({"q"}, {"u"}, t, MatrixXd::Zero(2, 3), MatrixXd::Zero(2, 3)),
+                    Contains("inputs must be 1x3"));
+  CHECK_THROWS_WITH(Trajectory({"q"}, {}, t, MatrixXd::Zero(3, 3), MatrixXd()),
+                    Contains("states must be 2x3"));
+}
+
+TEST_CASE("trajectory interpolation: Hermite state, linear input", "[trajectory]") {
+  const Trajectory traj = cubicTrajectory();
+  for (double s : {0.0, 0.1, 0.4, 0.77, 1.5, 2.0}) {
+    const VectorXd x = traj.state(s);
+    // A cubic is reproduced exactly by cubic Hermite with exact derivatives.
+    CHECK(x(0) == Approx(s * s * s - 2 * s + 1).margin(1e-13));
+    CHECK(traj.input(s)(0) == Approx(2 * s + 1).margin(1e-13));
+  }
+  CHECK_THROWS_AS(traj.state(2.5), std::out_of_range);
+  CHECK_THROWS_AS(traj.state(-0.1), std::out_of_range);
+  Trajectory noDeriv({"q"}, {}, traj.times(), traj.states(), MatrixXd());
+  CHECK_THROWS_AS(noDeriv.state(0.5), std::logic_error);
+}
+
+TEST_CASE("trajectory state derivatives from the model", "[trajectory][model]") {
+  const trellis::Model model = trellis::ctest::makeCartPole();
+  trellis::Data data(model);
+  VectorXd t(2);
+  t << 0.0, 1.0;
+  MatrixXd x = MatrixXd::Zero(4, 2);
+  x(1, 0) = 0.1;  // pole tilted: it falls
+  Trajectory traj(model.configNames(), model.inputNames(), t, x, MatrixXd::Zero(1, 2));
+  traj.computeStateDerivatives(model, data);
+  const VectorXd q = x.col(0).head(2), dq = x.col(0).tail(2), u = VectorXd::Zero(1);
+  trellis::computeDynamics(model, data, q, dq, u);
+  CHECK(traj.stateDerivatives().col(0).tail(2) == data.qdd);
+  CHECK(traj.stateDerivatives()(3, 0) > 0.0);  // θ̈ > 0: tilting further
+
+  Trajectory wrong({"x", "phi"}, {"push"}, t, x, MatrixXd::Zero(1, 2));
+  CHECK_THROWS_WITH(wrong.computeStateDerivatives(model, data),
+                    Contains("configuration names do not match") && Contains("phi"));
+}
