@@ -324,9 +324,7 @@ void massMatrixPass(const Model& model, Data& data) {
   }
 }
 
-bool nonFinite(const Eigen::VectorXd& x, const char* name, const Model& model, const std::vector<std::string>& names,
-               DynamicsStatus& st) {
-  (void)model;
+bool nonFinite(const Eigen::VectorXd& x, const char* name, const std::vector<std::string>& names, DynamicsStatus& st) {
   for (int i = 0; i < x.size(); ++i)
     if (!std::isfinite(x[i])) {
       st.code = DynamicsStatus::Code::kNonFinite;
@@ -338,9 +336,9 @@ bool nonFinite(const Eigen::VectorXd& x, const char* name, const Model& model, c
 
 bool inputsAreFinite(const Model& model, Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
                      const Eigen::VectorXd& u) {
-  return !(nonFinite(q, "q", model, model.configNames(), data.status) ||
-           nonFinite(dq, "dq", model, model.configNames(), data.status) ||
-           nonFinite(u, "u", model, model.inputNames(), data.status));
+  return !(nonFinite(q, "q", model.configNames(), data.status) ||
+           nonFinite(dq, "dq", model.configNames(), data.status) ||
+           nonFinite(u, "u", model.inputNames(), data.status));
 }
 
 }  // namespace detail

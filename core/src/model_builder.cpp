@@ -31,10 +31,6 @@ int axisOf(TransformType t) {
     default: return 2;
   }
 }
-const char* typeName(TransformType t) {
-  static const char* names[] = {"tx", "ty", "tz", "rx", "ry", "rz", "const_se3"};
-  return names[static_cast<int>(t)];
-}
 
 Transform primitive(TransformType type, double value) {
   Transform t;

@@ -167,8 +167,6 @@ class Model {
   const std::vector<BodyWrench>& bodyWrenches() const { return bodyWrenches_; }
   const std::vector<Tendon>& tendons() const { return tendons_; }
   const std::vector<Constraint>& constraints() const { return constraints_; }
-  /// Constant placement of the fixed world frame's children that carry no joint, etc.: frames on
-  /// joint kWorld have their world pose in frames()[i].R, .p.
 
  private:
   friend class ModelBuilder;
