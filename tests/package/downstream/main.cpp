@@ -1,5 +1,6 @@
 // Builds a simple pendulum through the installed headers and checks its linearization:
 // θ̈ = −(g/l) sin θ, so A = [[0, 1], [−(g/l) cos θ, 0]].
+#include <trellis/control.hpp>
 #include <trellis/core.hpp>
 
 #include <cmath>
@@ -33,6 +34,17 @@ int main() {
   const double expected = -g / l * std::cos(theta);
   if (std::abs(data.A(1, 0) - expected) > 1e-9 * std::abs(expected) || data.A(0, 1) != 1.0) {
     std::cerr << "A(1,0) = " << data.A(1, 0) << ", expected " << expected << "\n";
+    return 1;
+  }
+  // trellis::control through the installed package: the double integrator's CARE in closed form,
+  // Q = I, R = 1 → S₁₂ = 1, S₂₂ = √3, K = [1, √3].
+  Eigen::MatrixXd Ad(2, 2), Bd(2, 1);
+  Ad << 0, 1, 0, 0;
+  Bd << 0, 1;
+  const trellis::LqrResult lqr = trellis::solveCare(Ad, Bd, Eigen::MatrixXd::Identity(2, 2),
+                                                    Eigen::MatrixXd::Identity(1, 1));
+  if (!lqr.ok() || std::abs(lqr.K(0, 0) - 1.0) > 1e-9 || std::abs(lqr.K(0, 1) - std::sqrt(3.0)) > 1e-9) {
+    std::cerr << "solveCare: " << lqr.message << " K = " << lqr.K << "\n";
     return 1;
   }
   std::cout << "downstream: ok\n";
