@@ -27,13 +27,17 @@ struct Command {
   int (*run)(std::span<const std::string> args, std::ostream& out);
 };
 
-/// Every subcommand, in the order `trellis --help` lists them.
+/// Every registered subcommand, sorted by name (the order `trellis --help` lists them).
 std::span<const Command> commands();
+
+/// Registers a subcommand at static-initialization time. Each subcommand's source file ends with
+///   const CommandRegistration kRegisterNAME{kNAMECommand};
+/// so adding a command is adding its file (cli/CMakeLists.txt compiles every cli/*.cpp).
+struct CommandRegistration {
+  explicit CommandRegistration(const Command& command);
+};
 
 /// True if `args` asks for help (-h or --help anywhere before a "--").
 bool wantsHelp(std::span<const std::string> args);
-
-// The subcommands (one source file each).
-extern const Command kLinearizeCommand;
 
 }  // namespace trellis::cli

@@ -1,16 +1,29 @@
-// cli/commands.cpp — the table of subcommands.
+// cli/commands.cpp — the registry of subcommands.
 #include "command.hpp"
 
-#include <array>
+#include <algorithm>
+#include <vector>
 
 namespace trellis::cli {
+namespace {
 
-std::span<const Command> commands() {
-  static const std::array<Command, 1> table{
-      kLinearizeCommand,
-  };
+// A function-local static: registrations from other translation units may run before any
+// namespace-scope object of this file is initialized.
+std::vector<Command>& registry() {
+  static std::vector<Command> table;
   return table;
 }
+
+}  // namespace
+
+CommandRegistration::CommandRegistration(const Command& command) {
+  std::vector<Command>& table = registry();
+  table.push_back(command);
+  std::sort(table.begin(), table.end(),
+            [](const Command& a, const Command& b) { return a.name < b.name; });
+}
+
+std::span<const Command> commands() { return registry(); }
 
 bool wantsHelp(std::span<const std::string> args) {
   for (const std::string& a : args) {

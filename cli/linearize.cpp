@@ -137,4 +137,6 @@ const Command kLinearizeCommand{
     &runLinearize,
 };
 
+const CommandRegistration kRegisterLinearize{kLinearizeCommand};
+
 }  // namespace trellis::cli
