@@ -1,39 +1,80 @@
 // riccati_bench — Riccati solve time against accuracy (Google Benchmark).
 //
-// System: a chain of nq unit masses joined by springs whose stiffness varies in time,
-// k(t) = 100 (1 + 0.3 sin 3t), light damping, one force input per mass — nx = 2 nq states
-// (2, 10, 20, 40), horizon 2 s, Q = I, R = I, Qf = I. For each method (BDF / Adams) and tolerance
-// rtol = atol·100 = 1e-3 … 1e-10 the counter max_rel_err is max |S − S_ref| / max |S_ref| over 21
-// times, S_ref from BDF with rtol 1e-13 (computed once, outside the timed loop).
+// System: the planar chain of bench/models.hpp with n = 2, 10, 20, 40 links (nx = 2n = 4, 20, 40,
+// 80 states), one torque per joint (m = n), gravity on. A(t), B(t) blend two exact
+// linearizations at fixed non-equilibrium states a and b (makeBenchModel with two seeds: random
+// q, q̇, u, not an equilibrium):
+//   A(t) = (1 − s(t)) A_a + s(t) A_b,   s(t) = ½(1 − cos(π t / T)),   same for B,
+// a smooth time-varying system with the magnitudes of a real chain linearization (not the
+// linearization along one dynamic trajectory: that would put a simulation and a computeLinearization
+// call inside every right-hand side and measure the core, not the Riccati solver).
+// Horizon T = 2 s; Q = I, R = I, Qf = I.
 //
-//   trellis_riccati_bench --benchmark_format=json > riccati.json
+// Methods (second argument):
+//   0 BDF          kAuto: dense exact Jacobian for nx ≤ 10, GMRES + Lyapunov preconditioner above
+//                  (so n = 2 uses the dense solver, n ≥ 10 the preconditioned GMRES)
+//   1 BDF-dense    dense exact Jacobian (N×N LU, N = nx(nx+1)/2)
+//   2 BDF-GMRES    GMRES without preconditioner (the solver before the preconditioner existed)
+//   3 Adams        functional iteration
+//   4 factored     Cholesky factor, kAuto linear solver (dense DQ ≤ 10, GMRES + preconditioner above)
+// Tolerance (third argument e): rtol = 10^−e, atol = rtol·1e-2.
+// Counters: rel_err_t0 = max|S(t0) − S_ref(t0)| / max|S_ref(t0)|, max_rel_err = the same over 21
+// times, steps, rhs (evaluations), ok. S_ref: BDF with rtol 1e-13, atol 1e-15 (computed once,
+// outside the timed loop; it agrees with the factored form at rtol 1e-12 to ≈1e-12).
+//
+//   trellis_bench_riccati --benchmark_min_time=0.05 [--benchmark_format=json]
+#include "models.hpp"
+
+#include "trellis/core/data.hpp"
+#include "trellis/core/linearization.hpp"
+
 #include <trellis/control.hpp>
 
 #include <benchmark/benchmark.h>
 
 #include <cmath>
 #include <map>
+#include <memory>
+#include <stdexcept>
 #include <utility>
+#include <vector>
 
 namespace {
 
 using Eigen::MatrixXd;
 
 constexpr double kHorizon = 2.0;
+constexpr double kPi = 3.14159265358979323846;
 
-trellis::LinearizationCallback chain(int nq) {
-  return [nq](double t, MatrixXd& A, MatrixXd& B) {
-    const double k = 100.0 * (1.0 + 0.3 * std::sin(3.0 * t));
-    A.setZero();
-    B.setZero();
-    A.topRightCorner(nq, nq).setIdentity();
-    for (int i = 0; i < nq; ++i) {
-      A(nq + i, i) = -2 * k;
-      if (i > 0) A(nq + i, i - 1) = k;
-      if (i + 1 < nq) A(nq + i, i + 1) = k;
-      A(nq + i, nq + i) = -0.1;
-      B(nq + i, i) = 1.0;
-    }
+struct ChainSystem {
+  MatrixXd Aa, Ab, Ba, Bb;
+};
+
+const ChainSystem& chainSystem(int n) {
+  static std::map<int, ChainSystem> cache;
+  auto it = cache.find(n);
+  if (it != cache.end()) return it->second;
+  trellis::bench::ModelSpec spec;
+  spec.kind = trellis::bench::ModelKind::kPlanarChain;
+  spec.links = n;
+  ChainSystem sys;
+  for (std::uint32_t seed : {20100503u, 7u}) {
+    const auto bm = trellis::bench::makeBenchModel(spec, seed);
+    trellis::Data data(bm.model);
+    const auto status = trellis::computeLinearization(bm.model, data, bm.q, bm.dq, bm.u);
+    if (!status.ok()) throw std::runtime_error("riccati_bench: linearization failed: " + status.message);
+    (seed == 7u ? sys.Ab : sys.Aa) = data.A;
+    (seed == 7u ? sys.Bb : sys.Ba) = data.B;
+  }
+  return cache.emplace(n, std::move(sys)).first->second;
+}
+
+trellis::LinearizationCallback blended(int n) {
+  const ChainSystem& sys = chainSystem(n);
+  return [&sys](double t, MatrixXd& A, MatrixXd& B) {
+    const double s = 0.5 * (1.0 - std::cos(kPi * t / kHorizon));
+    A = (1.0 - s) * sys.Aa + s * sys.Ab;
+    B = (1.0 - s) * sys.Ba + s * sys.Bb;
   };
 }
 
@@ -45,59 +86,89 @@ trellis::LqrWeights weights(int nx, int nu) {
   return w;
 }
 
-const std::vector<MatrixXd>& reference(int nq) {
+constexpr int kSamples = 20;
+
+const std::vector<MatrixXd>& reference(int n) {
   static std::map<int, std::vector<MatrixXd>> cache;
-  auto it = cache.find(nq);
+  auto it = cache.find(n);
   if (it != cache.end()) return it->second;
   trellis::RiccatiOptions o;
   o.rtol = 1e-13;
   o.atol = 1e-15;
   o.trackEigenvalues = false;
-  const auto sol = trellis::solveRiccati(0.0, kHorizon, 2 * nq, nq, chain(nq), weights(2 * nq, nq), o);
+  const auto sol = trellis::solveRiccati(0.0, kHorizon, 2 * n, n, blended(n), weights(2 * n, n), o);
+  if (!sol.ok()) throw std::runtime_error("riccati_bench: reference failed: " + sol.message);
   std::vector<MatrixXd> S;
-  for (int i = 0; i <= 20; ++i) S.push_back(sol.S(kHorizon * i / 20.0));
-  return cache.emplace(nq, std::move(S)).first->second;
+  for (int i = 0; i <= kSamples; ++i) S.push_back(sol.S(kHorizon * i / kSamples));
+  return cache.emplace(n, std::move(S)).first->second;
 }
 
-void BM_Riccati(benchmark::State& state) {
-  const int nq = static_cast<int>(state.range(0));
-  const auto method = state.range(1) == 0 ? trellis::RiccatiMethod::kBDF : trellis::RiccatiMethod::kAdams;
-  const double rtol = std::pow(10.0, -static_cast<double>(state.range(2)));
-  const auto& ref = reference(nq);
+const char* kMethodNames[] = {"BDF", "BDF-dense", "BDF-GMRES-noprec", "Adams", "factored"};
+
+trellis::RiccatiOptions optionsFor(int method, double rtol) {
   trellis::RiccatiOptions o;
-  o.method = method;
   o.rtol = rtol;
   o.atol = rtol * 1e-2;
   o.trackEigenvalues = false;
-  const auto lin = chain(nq);
-  const auto w = weights(2 * nq, nq);
+  switch (method) {
+    case 1: o.linearSolver = trellis::RiccatiLinearSolver::kDense; break;
+    case 2:
+      o.linearSolver = trellis::RiccatiLinearSolver::kKrylov;
+      o.krylovPreconditioner = false;
+      break;
+    case 3: o.method = trellis::RiccatiMethod::kAdams; break;
+    case 4: o.method = trellis::RiccatiMethod::kFactored; break;
+    default: break;
+  }
+  return o;
+}
+
+void BM_Riccati(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  const int method = static_cast<int>(state.range(1));
+  const double rtol = std::pow(10.0, -static_cast<double>(state.range(2)));
+  const auto& ref = reference(n);
+  const auto o = optionsFor(method, rtol);
+  const auto lin = blended(n);
+  const auto w = weights(2 * n, n);
   trellis::RiccatiSolution sol;
   for (auto _ : state) {
-    sol = trellis::solveRiccati(0.0, kHorizon, 2 * nq, nq, lin, w, o);
+    sol = trellis::solveRiccati(0.0, kHorizon, 2 * n, n, lin, w, o);
     benchmark::DoNotOptimize(sol);
   }
-  double err = 0.0, scale = 0.0;
+  double errMax = 0.0, err0 = 0.0;
   if (sol.ok()) {
-    for (int i = 0; i <= 20; ++i) {
-      err = std::max(err, (sol.S(kHorizon * i / 20.0) - ref[i]).cwiseAbs().maxCoeff());
-      scale = std::max(scale, ref[i].cwiseAbs().maxCoeff());
+    for (int i = 0; i <= kSamples; ++i) {
+      const double e = (sol.S(kHorizon * i / kSamples) - ref[i]).cwiseAbs().maxCoeff() /
+                       ref[i].cwiseAbs().maxCoeff();
+      errMax = std::max(errMax, e);
+      if (i == 0) err0 = e;
     }
   }
-  state.counters["nx"] = 2 * nq;
+  state.counters["nx"] = 2 * n;
   state.counters["rtol"] = rtol;
-  state.counters["max_rel_err"] = sol.ok() ? err / scale : -1.0;
+  state.counters["rel_err_t0"] = sol.ok() ? err0 : -1.0;
+  state.counters["max_rel_err"] = sol.ok() ? errMax : -1.0;
   state.counters["steps"] = static_cast<double>(sol.steps);
+  state.counters["rhs"] = static_cast<double>(sol.rhsEvaluations);
   state.counters["ok"] = sol.ok() ? 1 : 0;
-  state.SetLabel(method == trellis::RiccatiMethod::kBDF ? "BDF" : "Adams");
+  state.counters["lin_iters"] = static_cast<double>(sol.linearIterations);
+  state.counters["psolves"] = static_cast<double>(sol.preconditionerSolves);
+  state.counters["jac"] = static_cast<double>(sol.jacobianEvaluations);
+  state.SetLabel(kMethodNames[method]);
 }
 
 void args(benchmark::internal::Benchmark* b) {
-  for (int nq : {1, 5, 10, 20})
-    for (int m : {0, 1})
-      for (int e : {3, 4, 6, 8, 10}) b->Args({nq, m, e});
+  for (int n : {2, 10, 20, 40})
+    for (int m : {0, 1, 2, 3, 4})
+      for (int e : {3, 4, 5, 6, 7, 8, 10}) {
+        // Dense N×N LU (N = nx(nx+1)/2 = 820 at n = 20): three tolerances there, none at n = 40.
+        if (m == 1 && (n > 20 || (n == 20 && e != 3 && e != 6 && e != 10))) continue;
+        b->Args({n, m, e});
+      }
 }
 
-BENCHMARK(BM_Riccati)->Apply(args)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Riccati)->Apply(args)->Unit(benchmark::kMillisecond)->ArgNames({"n", "method", "tol"});
 
 }  // namespace
 

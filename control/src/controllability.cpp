@@ -1,12 +1,15 @@
 // controllability.cpp — rank and singular values of the (reduced) controllability matrix.
 #include "trellis/control/controllability.hpp"
 
+#include "trellis/control/trajectory.hpp"
 #include "trellis/core/data.hpp"
 #include "trellis/core/linearization.hpp"
+#include "trellis/core/model.hpp"
 
 #include <Eigen/SVD>
 
 #include <algorithm>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -51,6 +54,32 @@ ControllabilityReport computeControllabilityAt(const Model& model, Data& data,
   }
   computeConstraintTangentBasis(model, data);
   return computeControllability(data.reducedA, data.reducedB, relativeTolerance);
+}
+
+std::vector<ControllabilityReport> controllabilityAtKnots(const Model& model,
+                                                          const Trajectory& trajectory,
+                                                          double relativeTolerance) {
+  trajectory.checkCompatible(model);
+  Data data(model);
+  const int n = trajectory.nq();
+  std::vector<ControllabilityReport> reports;
+  reports.reserve(trajectory.size());
+  for (int k = 0; k < trajectory.size(); ++k) {
+    const Eigen::VectorXd q = trajectory.states().col(k).head(n);
+    const Eigen::VectorXd dq = trajectory.states().col(k).tail(n);
+    const Eigen::VectorXd u = trajectory.inputs().col(k);
+    try {
+      reports.push_back(computeControllabilityAt(model, data, q, dq, u, relativeTolerance));
+    } catch (const std::runtime_error& e) {  // the dynamics failed at this knot
+      ControllabilityReport r;
+      r.ok = false;
+      std::ostringstream m;
+      m << "knot " << k + 1 << " (t = " << trajectory.times()(k) << "): " << e.what();
+      r.message = m.str();
+      reports.push_back(std::move(r));
+    }
+  }
+  return reports;
 }
 
 }  // namespace trellis

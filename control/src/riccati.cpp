@@ -15,6 +15,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
+#include <Eigen/LU>
 
 #include <algorithm>
 #include <cmath>
@@ -22,6 +23,7 @@
 #include <limits>
 #include <memory>
 #include <sstream>
+#include <vector>
 
 namespace trellis {
 
@@ -48,6 +50,9 @@ void RiccatiOptions::validate() const {
   if (!(maxNorm > 0.0)) bad("maxNorm", maxNorm, "> 0");
   if (!(initialStep >= 0.0) || !std::isfinite(initialStep)) bad("initialStep", initialStep, ">= 0");
   if (!(maxStep >= 0.0) || !std::isfinite(maxStep)) bad("maxStep", maxStep, ">= 0");
+  if (!(factoredQfShift >= 0.0) || !std::isfinite(factoredQfShift)) {
+    bad("factoredQfShift", factoredQfShift, ">= 0 and finite");
+  }
 }
 
 void checkWeightMatrix(const Eigen::MatrixXd& W, const char* name, Eigen::Index size,
@@ -102,6 +107,26 @@ void pack(const Eigen::MatrixXd& S, Eigen::Index n, double* y) {
   }
 }
 
+// Upper triangle of U from the packed vector (the strict lower triangle of U is left alone: zero).
+void unpackUpper(const double* y, Eigen::Index n, Eigen::MatrixXd& U) {
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const double* col = y + j * (j + 1) / 2;
+    for (Eigen::Index i = 0; i <= j; ++i) U(i, j) = col[i];
+  }
+}
+
+// max |S_ij| of S = UᵀU is its largest diagonal entry max_j ‖U(:, j)‖² (Cauchy–Schwarz).
+double factorNorm(const double* y, Eigen::Index n) {
+  double m = 0.0;
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const double* col = y + j * (j + 1) / 2;
+    double d = 0.0;
+    for (Eigen::Index i = 0; i <= j; ++i) d += col[i] * col[i];
+    m = std::max(m, d);
+  }
+  return m;
+}
+
 double maxAbs(const double* y, Eigen::Index N) {
   double m = 0.0;
   for (Eigen::Index i = 0; i < N; ++i) m = std::max(m, std::abs(y[i]));
@@ -118,6 +143,17 @@ struct RiccatiSolver {
   const LqrWeights& w;
   Eigen::MatrixXd A, B, Q, R, S, P, K, F, Acl;
   Eigen::LLT<Eigen::MatrixXd> Rllt;
+  // Factored form: U (upper triangular, zero below), Ṡ, M = U⁻ᵀṠU⁻¹ and dU/dτ.
+  bool factored = false;
+  Eigen::MatrixXd U, Sdot, M, Udot, Upre;
+  // Preconditioner: real Schur form A_cl = Z T Zᵀ at the last Jacobian update (T quasi upper
+  // triangular: 1×1 blocks and 2×2 blocks for complex pairs, starting at blockStart[b]).
+  Eigen::RealSchur<Eigen::MatrixXd> schur;
+  Eigen::MatrixXd Z, Tschur, TF, TFt, Cs, Ys, Xr;
+  std::vector<Eigen::Index> blockStart;
+  bool schurOk = false;  // Schur form of the current A_cl computed (lazily, for stiff steps)
+  bool aclOk = false;    // A_cl and ‖A_cl‖_∞ set by the preconditioner set-up
+  double aclNorm = 0.0;
   bool failed = false;
   double failTime = 0.0;  // t of the evaluation that failed
   RiccatiStatus failStatus = RiccatiStatus::kCallbackFailure;
@@ -126,7 +162,11 @@ struct RiccatiSolver {
   RiccatiSolver(int nx_, int nu_, double T_, const LinearizationCallback& l, const LqrWeights& w_)
       : nx(nx_), nu(nu_), T(T_), lin(l), w(w_),
         A(nx_, nx_), B(nx_, nu_), Q(nx_, nx_), R(nu_, nu_), S(nx_, nx_), P(nx_, nu_),
-        K(nu_, nx_), F(nx_, nx_), Acl(nx_, nx_), Rllt(nu_) {
+        K(nu_, nx_), F(nx_, nx_), Acl(nx_, nx_), Rllt(nu_),
+        U(Eigen::MatrixXd::Zero(nx_, nx_)), Sdot(nx_, nx_), M(nx_, nx_), Udot(nx_, nx_),
+        Upre(Eigen::MatrixXd::Zero(nx_, nx_)), schur(nx_), Z(nx_, nx_), Tschur(nx_, nx_),
+        TF(nx_, nx_), TFt(nx_, nx_), Cs(nx_, nx_), Ys(nx_, nx_), Xr(nx_, nx_) {
+    blockStart.reserve(static_cast<std::size_t>(nx_) + 1);
     if (!w.Qfun) Q = w.Q;
     if (!w.Rfun) {
       R = w.R;
@@ -192,7 +232,12 @@ struct RiccatiSolver {
       fail(RiccatiStatus::kCallbackFailure, m.str());
       return false;
     }
-    unpack(y, nx, S);
+    if (factored) {
+      unpackUpper(y, nx, U);
+      S.noalias() = U.transpose() * U;
+    } else {
+      unpack(y, nx, S);
+    }
     if (!S.allFinite()) {
       std::ostringstream m;
       m << "S became non-finite at t = " << t;
@@ -219,6 +264,171 @@ struct RiccatiSolver {
       }
     }
     return 0;
+  }
+
+  // Factored: dU/dτ = Υ(U⁻ᵀ Ṡ U⁻¹) U (see the header). A zero on U's diagonal (a trial point
+  // where the factor lost rank) or a non-finite result is a recoverable error: CVODES retries
+  // with a smaller step, and reports a failure if that keeps happening.
+  static int rhsFactored(double tau, N_Vector yv, N_Vector ydotv, void* user) {
+    auto& s = *static_cast<RiccatiSolver*>(user);
+    if (!s.evaluate(tau, N_VGetArrayPointer(yv))) return -1;
+    s.F.noalias() = s.A.transpose() * s.S;
+    s.Sdot.noalias() = s.F + s.F.transpose();
+    s.Sdot.noalias() -= s.P * s.K;
+    s.Sdot += s.Q;
+    if ((s.U.diagonal().array() == 0.0).any()) return 1;
+    s.M = s.Sdot;
+    s.U.transpose().triangularView<Eigen::Lower>().solveInPlace(s.M);  // U⁻ᵀṠ
+    s.M.transposeInPlace();                                               // Ṡ U⁻¹ (Ṡ symmetric)
+    s.U.transpose().triangularView<Eigen::Lower>().solveInPlace(s.M);  // U⁻ᵀ Ṡ U⁻¹
+    s.M.diagonal() *= 0.5;
+    s.Udot.noalias() = s.M.triangularView<Eigen::Upper>() * s.U;
+    double* out = N_VGetArrayPointer(ydotv);
+    for (Eigen::Index j = 0; j < s.nx; ++j) {
+      double* col = out + j * (j + 1) / 2;
+      for (Eigen::Index i = 0; i <= j; ++i) col[i] = s.Udot(i, j);
+    }
+    return s.Udot.allFinite() ? 0 : 1;
+  }
+
+  // Preconditioner set-up: A_cl = A − BK at (τ, y) and its real Schur form A_cl = Z T Zᵀ,
+  // recomputed only when CVODES asks for a fresh Jacobian (jok false); γ enters in the solve.
+  static int precSetup(double tau, N_Vector yv, N_Vector, int jok, int* jcur, double, void* user) {
+    auto& s = *static_cast<RiccatiSolver*>(user);
+    if (jok && s.aclOk) {
+      *jcur = 0;
+      return 0;
+    }
+    if (!s.evaluate(tau, N_VGetArrayPointer(yv))) return -1;
+    s.Acl = s.A;
+    s.Acl.noalias() -= s.B * s.K;
+    if (s.factored) s.Upre = s.U;
+    // ‖E ↦ A_clᵀE + EA_cl‖ ≤ 2‖A_cl‖_∞ (in the ∞-norm on entries, up to symmetry): below
+    // γ·2‖A_cl‖_∞ < ½ the Newton matrix is within ½ of the identity, GMRES converges in a few
+    // iterations unpreconditioned, and the O(nx³) Schur form and solves are skipped.
+    s.aclNorm = s.Acl.cwiseAbs().rowwise().sum().maxCoeff();
+    s.aclOk = true;
+    s.schurOk = false;
+    *jcur = 1;
+    return 0;
+  }
+
+  bool computeSchur() {
+    auto& s = *this;
+    s.schur.compute(s.Acl);
+    if (s.schur.info() != Eigen::Success) return false;
+    s.Z = s.schur.matrixU();
+    s.Tschur = s.schur.matrixT();
+    s.blockStart.clear();
+    for (Eigen::Index k = 0; k < s.nx;) {
+      s.blockStart.push_back(k);
+      k += (k + 1 < s.nx && s.Tschur(k + 1, k) != 0.0) ? 2 : 1;
+    }
+    s.blockStart.push_back(s.nx);
+    s.schurOk = true;
+    return true;
+  }
+
+  // X solving (γA_cl − ½I)ᵀX + X(γA_cl − ½I) = −R, i.e. X − γ(A_clᵀX + X A_cl) = R, for symmetric
+  // R (in Xr on entry, X on exit). With F = γA_cl − ½I = Z T_F Zᵀ (T_F = γT − ½I, quasi upper
+  // triangular) and Y = ZᵀXZ: T_Fᵀ Y + Y T_F = C = −ZᵀRZ. Block (I, J) of Y (1×1 … 2×2) solves
+  //   T_F(I,I)ᵀ Y_IJ + Y_IJ T_F(J,J) = C_IJ − Σ_{L<I} T_F(L,I)ᵀ Y_LJ − Σ_{K<J} Y_IK T_F(K,J),
+  // a Kronecker system of at most 4 unknowns, taken in increasing I and J (Bartels–Stewart).
+  // All real: O(nx³) per application, no heap allocation.
+  bool lyapunovSolve(double gamma) {
+    const Eigen::Index n = nx;
+    TF = gamma * Tschur;
+    TF.diagonal().array() -= 0.5;
+    TFt = TF.transpose();
+    Cs.noalias() = Z.transpose() * Xr;
+    Ys.noalias() = -Cs * Z;  // C, overwritten by Y block by block
+    const std::size_t nb = blockStart.size() - 1;
+    for (std::size_t bj = 0; bj < nb; ++bj) {
+      const Eigen::Index j0 = blockStart[bj], sj = blockStart[bj + 1] - j0;
+      // − Σ_{K<J} Y_IK T_F(K,J) for every I at once.
+      if (j0 > 0) Ys.middleCols(j0, sj).noalias() -= Ys.leftCols(j0) * TF.block(0, j0, j0, sj);
+      for (std::size_t bi = 0; bi < nb; ++bi) {
+        const Eigen::Index i0 = blockStart[bi], si = blockStart[bi + 1] - i0;
+        // Ys(I, J) now holds the right-hand side (rows L < I were subtracted below).
+        // vec(T_IIᵀ Y + Y T_JJ) = (I ⊗ T_IIᵀ + T_JJᵀ ⊗ I) vec(Y), column-major vec.
+        const Eigen::Index m = si * sj;
+        if (m == 1) {
+          const double d = TF(i0, i0) + TF(j0, j0);
+          if (d == 0.0) return false;
+          Ys(i0, j0) /= d;
+        } else {
+          Eigen::Matrix4d K = Eigen::Matrix4d::Zero();
+          Eigen::Vector4d v = Eigen::Vector4d::Zero();
+          for (Eigen::Index c = 0; c < sj; ++c) {
+            for (Eigen::Index r = 0; r < si; ++r) {
+              const Eigen::Index row = c * si + r;
+              v(row) = Ys(i0 + r, j0 + c);
+              for (Eigen::Index l = 0; l < si; ++l) K(row, c * si + l) += TF(i0 + l, i0 + r);
+              for (Eigen::Index k = 0; k < sj; ++k) K(row, k * si + r) += TF(j0 + k, j0 + c);
+            }
+          }
+          if (m == 2) {
+            const Eigen::Vector2d y = K.topLeftCorner<2, 2>().partialPivLu().solve(v.head<2>());
+            v.head<2>() = y;
+          } else {
+            v = K.partialPivLu().solve(v);
+          }
+          if (!v.allFinite()) return false;
+          for (Eigen::Index c = 0; c < sj; ++c) {
+            for (Eigen::Index r = 0; r < si; ++r) Ys(i0 + r, j0 + c) = v(c * si + r);
+          }
+        }
+        // Rows below I: Ys(r, J) −= Σ_{l ∈ I} T_F(l, r) Y(l, J)  (T_F(l, r) = TFt(r, l), contiguous).
+        const Eigen::Index below = i0 + si;
+        for (Eigen::Index c = 0; c < sj; ++c) {
+          double* out = &Ys(0, j0 + c);
+          for (Eigen::Index l = 0; l < si; ++l) {
+            const double y = Ys(i0 + l, j0 + c);
+            const double* t = &TFt(0, i0 + l);
+            for (Eigen::Index r = below; r < n; ++r) out[r] -= t[r] * y;
+          }
+        }
+      }
+    }
+    Cs.noalias() = Z * Ys;
+    Xr.noalias() = Cs * Z.transpose();
+    return Xr.allFinite();
+  }
+
+  static int precSolve(double, N_Vector, N_Vector, N_Vector rv, N_Vector zv, double gamma, double,
+                       int, void* user) {
+    auto& s = *static_cast<RiccatiSolver*>(user);
+    const double* r = N_VGetArrayPointer(rv);
+    double* z = N_VGetArrayPointer(zv);
+    const Eigen::Index n = s.nx;
+    if (2.0 * gamma * s.aclNorm < 0.5) {  // non-stiff step: identity preconditioner
+      std::copy(r, r + N_VGetLength(rv), z);
+      return 0;
+    }
+    if (!s.schurOk && !s.computeSchur()) return 1;
+    if (!s.factored) {
+      unpack(r, n, s.Xr);
+      if (!s.lyapunovSolve(gamma)) return 1;
+      pack(s.Xr, n, z);
+      return 0;
+    }
+    // U coordinates: δS = UᵀδU + δUᵀU, Lyapunov solve in S, back by δU = Υ(U⁻ᵀ δS U⁻¹) U.
+    s.M.setZero();
+    unpackUpper(r, n, s.M);
+    s.F.noalias() = s.Upre.transpose() * s.M;
+    s.Xr = s.F + s.F.transpose();
+    if (!s.lyapunovSolve(gamma)) return 1;
+    s.M = s.Xr;
+    s.Upre.transpose().triangularView<Eigen::Lower>().solveInPlace(s.M);
+    s.M.transposeInPlace();
+    s.Upre.transpose().triangularView<Eigen::Lower>().solveInPlace(s.M);
+    s.M.diagonal() *= 0.5;
+    s.Udot.noalias() = s.M.triangularView<Eigen::Upper>() * s.Upre;
+    for (Eigen::Index j = 0; j < n; ++j) {
+      double* col = z + j * (j + 1) / 2;
+      for (Eigen::Index i = 0; i <= j; ++i) col[i] = s.Udot(i, j);
+    }
+    return s.Udot.allFinite() ? 0 : 1;
   }
 
   // ∂f/∂S · E = A_clᵀ E + E A_cl with A_cl = A − B K. For the packed unknown s_ij (i ≤ j) the
@@ -319,7 +529,13 @@ void RiccatiSolution::S(double t, Eigen::MatrixXd& out) const {
   Eigen::VectorXd y = st.D.col(q);
   for (Eigen::Index k = q; k-- > 0;) y = st.D.col(k) + (dt / static_cast<double>(k + 1)) * y;
   out.resize(nx_, nx_);
-  unpack(y.data(), nx_, out);
+  if (factored_) {
+    Eigen::MatrixXd U = Eigen::MatrixXd::Zero(nx_, nx_);
+    unpackUpper(y.data(), nx_, U);
+    out.noalias() = U.transpose() * U;  // symmetric PSD by construction
+  } else {
+    unpack(y.data(), nx_, out);
+  }
 }
 
 Eigen::MatrixXd RiccatiSolution::S(double t) const {
@@ -393,9 +609,31 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
   cv.dky.reset(N_VNew_Serial(N, ctx));
   if (!cv.y || !cv.dky) throw std::runtime_error("solveRiccati: N_VNew_Serial failed");
   double* y = N_VGetArrayPointer(cv.y.get());
-  pack(weights.Qf, nx, y);
+  const bool factored = options.method == RiccatiMethod::kFactored;
+  solver.factored = factored;
+  sol.factored_ = factored;
+  if (factored) {
+    // U(T) = chol(Qf + shift·I), upper triangular.
+    Eigen::MatrixXd Qf = 0.5 * (weights.Qf + weights.Qf.transpose());
+    Qf.diagonal().array() += options.factoredQfShift;
+    Eigen::LLT<Eigen::MatrixXd> llt(Qf);
+    Eigen::MatrixXd U0 = llt.matrixU();
+    if (llt.info() != Eigen::Success || !(U0.diagonal().array() > 0.0).all()) {
+      const double lmin = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(
+                              weights.Qf, Eigen::EigenvaluesOnly).eigenvalues()(0);
+      std::ostringstream m;
+      m << "solveRiccati: RiccatiMethod::kFactored needs Qf + factoredQfShift*I positive definite"
+        << " (Qf's smallest eigenvalue is " << lmin << ", factoredQfShift = "
+        << options.factoredQfShift << "); set RiccatiOptions.factoredQfShift > 0 to regularize";
+      throw std::invalid_argument(m.str());
+    }
+    pack(U0, nx, y);  // pack reads the upper triangle
+  } else {
+    pack(weights.Qf, nx, y);
+  }
+  auto normOf = [&](const double* yk) { return factored ? factorNorm(yk, nx) : maxAbs(yk, N); };
 
-  const bool bdf = options.method == RiccatiMethod::kBDF;
+  const bool bdf = options.method != RiccatiMethod::kAdams;
   cv.cvode.reset(CVodeCreate(bdf ? CV_BDF : CV_ADAMS, ctx));
   void* mem = cv.cvode.get();
   if (!mem) throw std::runtime_error("solveRiccati: CVodeCreate failed");
@@ -406,7 +644,9 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
     }
   };
   check(CVodeSetErrHandlerFn(mem, &RiccatiSolver::errorHandler, &solver), "CVodeSetErrHandlerFn");
-  check(CVodeInit(mem, &RiccatiSolver::rhs, 0.0, cv.y.get()), "CVodeInit");
+  check(CVodeInit(mem, factored ? &RiccatiSolver::rhsFactored : &RiccatiSolver::rhs, 0.0,
+                  cv.y.get()),
+        "CVodeInit");
   check(CVodeSStolerances(mem, options.rtol, options.atol), "CVodeSStolerances");
   check(CVodeSetUserData(mem, &solver), "CVodeSetUserData");
   check(CVodeSetMaxNumSteps(mem, options.maxSteps), "CVodeSetMaxNumSteps");
@@ -417,17 +657,29 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
       options.linearSolver == RiccatiLinearSolver::kKrylov ||
       (options.linearSolver == RiccatiLinearSolver::kAuto && nx > 10);
   if (bdf && krylov) {
-    cv.linearSolver.reset(SUNLinSol_SPGMR(cv.y.get(), SUN_PREC_NONE, 0, ctx));
+    const bool prec = options.krylovPreconditioner;
+    cv.linearSolver.reset(
+        SUNLinSol_SPGMR(cv.y.get(), prec ? SUN_PREC_LEFT : SUN_PREC_NONE, 0, ctx));
     if (!cv.linearSolver) throw std::runtime_error("solveRiccati: SPGMR solver");
     check(CVodeSetLinearSolver(mem, cv.linearSolver.get(), nullptr), "CVodeSetLinearSolver");
-    check(CVodeSetJacTimes(mem, &RiccatiSolver::jtSetup, &RiccatiSolver::jtimes), "CVodeSetJacTimes");
+    // Factored: CVODES' difference-quotient Jacobian-vector products (the default).
+    if (!factored) {
+      check(CVodeSetJacTimes(mem, &RiccatiSolver::jtSetup, &RiccatiSolver::jtimes),
+            "CVodeSetJacTimes");
+    }
+    if (prec) {
+      check(CVodeSetPreconditioner(mem, &RiccatiSolver::precSetup, &RiccatiSolver::precSolve),
+            "CVodeSetPreconditioner");
+    }
   } else if (bdf) {
     cv.jacobian.reset(SUNDenseMatrix(N, N, ctx));
     cv.linearSolver.reset(SUNLinSol_Dense(cv.y.get(), cv.jacobian.get(), ctx));
     if (!cv.jacobian || !cv.linearSolver) throw std::runtime_error("solveRiccati: dense solver");
     check(CVodeSetLinearSolver(mem, cv.linearSolver.get(), cv.jacobian.get()),
           "CVodeSetLinearSolver");
-    if (options.exactJacobian) check(CVodeSetJacFn(mem, &RiccatiSolver::jac), "CVodeSetJacFn");
+    if (options.exactJacobian && !factored) {
+      check(CVodeSetJacFn(mem, &RiccatiSolver::jac), "CVodeSetJacFn");
+    }
   } else {
     cv.nonlinearSolver.reset(SUNNonlinSol_FixedPoint(cv.y.get(), 0, ctx));
     if (!cv.nonlinearSolver) throw std::runtime_error("solveRiccati: fixed-point solver");
@@ -441,7 +693,13 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
   Eigen::MatrixXd Sk(nx, nx);
   auto trackEigen = [&](const double* yk) {
     if (!options.trackEigenvalues) return;
-    unpack(yk, nx, Sk);
+    if (factored) {
+      Eigen::MatrixXd Uk = Eigen::MatrixXd::Zero(nx, nx);
+      unpackUpper(yk, nx, Uk);
+      Sk.noalias() = Uk.transpose() * Uk;
+    } else {
+      unpack(yk, nx, Sk);
+    }
     eig.compute(Sk, Eigen::EigenvaluesOnly);
     sol.minEigenvalue = std::min(sol.minEigenvalue, eig.eigenvalues()(0));
     sol.maxEigenvalue = std::max(sol.maxEigenvalue, eig.eigenvalues()(nx - 1));
@@ -450,7 +708,7 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
   trackEigen(y);
 
   double tau = 0.0;
-  double lastNorm = maxAbs(y, N);
+  double lastNorm = normOf(y);
   long taken = 0;
   while (tau < tauEnd) {
     // CV_ONE_STEP applies CVodeSetMaxNumSteps per call, so the budget over the horizon is ours.
@@ -494,7 +752,7 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
       }
       st.D.col(k) = Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(cv.dky.get()), N);
     }
-    const double norm = maxAbs(y, N);
+    const double norm = normOf(y);
     if (!std::isfinite(norm) || !st.D.allFinite()) {
       sol.status = RiccatiStatus::kNonFinite;
       sol.failureTime = T - tau;
@@ -524,6 +782,8 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
   if (CVodeGetNumSteps(mem, &v) >= 0) sol.steps = v;
   if (CVodeGetNumRhsEvals(mem, &v) >= 0) sol.rhsEvaluations = v;
   if (bdf && CVodeGetNumJacEvals(mem, &v) >= 0) sol.jacobianEvaluations = v;
+  if (bdf && krylov && CVodeGetNumLinIters(mem, &v) >= 0) sol.linearIterations = v;
+  if (bdf && krylov && CVodeGetNumPrecSolves(mem, &v) >= 0) sol.preconditionerSolves = v;
   if (!options.trackEigenvalues) sol.minEigenvalue = sol.maxEigenvalue = 0.0;
   return sol;
 }

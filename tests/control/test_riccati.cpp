@@ -33,6 +33,15 @@ RiccatiOptions tight(RiccatiMethod method = RiccatiMethod::kBDF) {
   return o;
 }
 
+const char* methodName(RiccatiMethod m) {
+  switch (m) {
+    case RiccatiMethod::kBDF: return "BDF";
+    case RiccatiMethod::kAdams: return "Adams";
+    case RiccatiMethod::kFactored: return "factored";
+  }
+  return "?";
+}
+
 double minEig(const MatrixXd& S) {
   return Eigen::SelfAdjointEigenSolver<MatrixXd>(S, Eigen::EigenvaluesOnly).eigenvalues()(0);
 }
@@ -107,8 +116,8 @@ TEST_CASE("scalar Riccati equation matches its closed form", "[riccati]") {
   w.R = MatrixXd::Constant(1, 1, r);
   w.Qf = MatrixXd::Constant(1, 1, sf);
   const auto lin = constantSystem(MatrixXd::Constant(1, 1, a), MatrixXd::Constant(1, 1, b));
-  for (auto method : {RiccatiMethod::kBDF, RiccatiMethod::kAdams}) {
-    SECTION(method == RiccatiMethod::kBDF ? "BDF" : "Adams") {
+  for (auto method : {RiccatiMethod::kBDF, RiccatiMethod::kAdams, RiccatiMethod::kFactored}) {
+    SECTION(methodName(method)) {
       const auto sol = trellis::solveRiccati(0.0, T, 1, 1, lin, w, tight(method));
       REQUIRE(sol.ok());
       double worst = 0.0;
@@ -153,6 +162,18 @@ TEST_CASE("long horizon on a time-invariant system converges to the CARE solutio
   const auto care = trellis::solveCare(A, B, w.Q, w.R);
   REQUIRE(care.ok());
   CONTROL_CHECK_CLOSE(Sexact, care.S, 1e-12, 1.0);
+
+  // Factored form: Qf = 0 is rejected unless regularized; with Qf = 1e-10·I the extra terminal
+  // cost is carried back through the stable closed loop (|eig| ≥ 0.5 → factor e^{-40} at t = 0),
+  // so the CARE limit is reached to the same 1e-8.
+  RiccatiOptions f = tight(RiccatiMethod::kFactored);
+  CHECK_THROWS_WITH(trellis::solveRiccati(0.0, 40.0, 2, 1, constantSystem(A, B), w, f),
+                    Catch::Matchers::Contains("factoredQfShift"));
+  f.factoredQfShift = 1e-10;
+  const auto fs = trellis::solveRiccati(0.0, 40.0, 2, 1, constantSystem(A, B), w, f);
+  REQUIRE(fs.ok());
+  CONTROL_CHECK_CLOSE(Sexact, fs.S(0.0), 1e-8, 1.0);
+  CHECK(fs.minEigenvalue >= 0.0);  // S = UᵀU: PSD by construction, Qf + shift ≻ 0
 }
 
 TEST_CASE("manufactured time-varying solution is reproduced", "[riccati]") {
@@ -162,8 +183,8 @@ TEST_CASE("manufactured time-varying solution is reproduced", "[riccati]") {
     INFO("t = " << t);
     REQUIRE(minEig(manufacturedQ(t)) > 0.1);  // Q(t) is a valid (positive definite) weight
   }
-  for (auto method : {RiccatiMethod::kBDF, RiccatiMethod::kAdams}) {
-    SECTION(method == RiccatiMethod::kBDF ? "BDF" : "Adams") {
+  for (auto method : {RiccatiMethod::kBDF, RiccatiMethod::kAdams, RiccatiMethod::kFactored}) {
+    SECTION(methodName(method)) {
       const auto sol = trellis::solveRiccati(t0, T, 3, 2, manufacturedSystem(),
                                              manufacturedWeights(T), tight(method));
       REQUIRE(sol.ok());

@@ -2,6 +2,9 @@
 #pragma once
 
 #include "trellis/control/controllability.hpp"
+#include "trellis/control/gain_schedule.hpp"
 #include "trellis/control/lqr.hpp"
+#include "trellis/control/manifold_lqr.hpp"
 #include "trellis/control/riccati.hpp"
+#include "trellis/control/simulation.hpp"
 #include "trellis/control/trajectory.hpp"

@@ -6,14 +6,27 @@
 // controllable when rank C = d. On a constrained system the state is first reduced to the tangent
 // space of the constraint manifold (core's computeConstraintTangentBasis: Ar = TᵀAT, Br = TᵀB),
 // where the directions that leave the manifold — which no input can steer — are gone.
+//
+// Along a trajectory the reduced reachability Gramian on [t0, t1],
+//   W(t0, t1) = ∫_{t0}^{t1} Φr(t1, τ) Br(τ) Br(τ)ᵀ Φr(t1, τ)ᵀ dτ    (d×d, in the basis T(t1)),
+// with Φr the transition matrix of ż = Ar(t) z and Ar = TᵀAT, Br = TᵀB on the parallel-transported
+// tangent basis T(t) of manifold_lqr.hpp, solves Ẇ = Ar W + W Arᵀ + Br Brᵀ, W(t0) = 0. The
+// time-varying system is controllable on [t0, t1] iff W is positive definite; λ_min(W) measures
+// the least energy-efficient direction (reaching z from 0 needs ∫|u|² ≥ zᵀ W⁻¹ z).
 #pragma once
 
+#include "trellis/control/manifold_lqr.hpp"
+
 #include <Eigen/Core>
+
+#include <string>
+#include <vector>
 
 namespace trellis {
 
 class Model;
 class Data;
+class Trajectory;
 
 struct ControllabilityReport {
   int dimension = 0;                  ///< d, the (reduced) state dimension
@@ -22,7 +35,9 @@ struct ControllabilityReport {
   double largestSingularValue = 0.0;
   double scale = 1.0;                 ///< α used for Â = A/α
   Eigen::VectorXd singularValues;     ///< of C, descending
-  bool controllable() const { return rank == dimension; }
+  bool ok = true;                     ///< false when the linearization failed (controllabilityAtKnots)
+  std::string message;                ///< empty when ok; names the knot, time and cause
+  bool controllable() const { return ok && rank == dimension; }
 };
 
 /// Throws std::invalid_argument on inconsistent sizes.
@@ -35,5 +50,33 @@ ControllabilityReport computeControllabilityAt(const Model& model, Data& data,
                                                const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
                                                const Eigen::VectorXd& u,
                                                double relativeTolerance = 1e-10);
+
+/// computeControllabilityAt at every knot (x_k, u_k) of the trajectory (which must match the model).
+/// A knot where the dynamics fail gets ok = false and a message naming the knot and its time.
+std::vector<ControllabilityReport> controllabilityAtKnots(const Model& model,
+                                                          const Trajectory& trajectory,
+                                                          double relativeTolerance = 1e-10);
+
+struct GramianReport {
+  Eigen::MatrixXd W;                  ///< d×d reduced reachability Gramian (symmetric PSD)
+  double minEigenvalue = 0.0, maxEigenvalue = 0.0;
+  bool ok = false;                    ///< false on numerical failure (see message)
+  std::string message;                ///< empty when ok; otherwise the time and the cause
+  int dimension = 0;                  ///< d
+  /// ok and λ_min(W) > relTol · λ_max(W).
+  bool controllable(double relTol = 1e-10) const {
+    return ok && dimension > 0 && minEigenvalue > relTol * maxEigenvalue;
+  }
+};
+
+/// The Gramian above along the trajectory (which needs state derivatives), for
+/// reference.startTime() ≤ t0 < t1 ≤ reference.endTime(); integrated with CVODES (BDF, exact
+/// Jacobian, options.rtol/atol on each entry) on the packed d(d+1)/2 entries. The basis is
+/// transported over the whole trajectory first (transportTangentBasis). Throws
+/// std::invalid_argument / TrajectoryError for bad input; numerical failure is in the report.
+/// (Defined in manifold_lqr.cpp, beside the transport it uses.)
+GramianReport computeControllabilityGramian(const Model& model, const Trajectory& reference,
+                                            double t0, double t1,
+                                            const TangentTransportOptions& options = {});
 
 }  // namespace trellis

@@ -12,6 +12,44 @@
 // the right-hand side (the Lyapunov operator E ↦ A_clᵀE + E A_cl, A_cl = A − BK); Adams uses
 // fixed-point (functional) iterations and no Jacobian — suited to non-stiff problems only.
 //
+// Factored (square-root) form, RiccatiMethod::kFactored. The unknown is the upper-triangular
+// Cholesky factor U of S = UᵀU (U = Lᵀ, L lower-triangular), again nx(nx+1)/2 entries, packed
+// like S. With Ṡ = dS/dτ = AᵀS + SA − S B R⁻¹ Bᵀ S + Q evaluated at S = UᵀU,
+//   dU/dτ = Υ(M) U,   M = U⁻ᵀ Ṡ U⁻¹,   Υ(M) = strict upper triangle of M + ½ diag(M),
+// because U̇ᵀU + UᵀU̇ = Uᵀ(Υ(M)ᵀ + Υ(M))U = UᵀMU = Ṡ and Υ(M)·U stays upper triangular. S = UᵀU is
+// symmetric positive semidefinite for every U — at every step, at every trial point of the
+// Newton iterations and at every dense-output point (the polynomial interpolates U, not S) — so
+// round-off and step-size error can never make S indefinite, however stiff the problem, long
+// the horizon or small R. The diagonal obeys dU_ii/dτ = ½ M_ii U_ii, so it keeps its sign and
+// U stays invertible along the exact flow as long as S(τ) ≻ 0, which holds for every finite τ
+// when Qf ≻ 0 (the cost of any x ≠ 0 is positive: either u ≠ 0 or x(T) ≠ 0).
+// Choice (against the information form P = S⁻¹, which breaks down for Qf singular and for S
+// growing without bound, and against the Davison–Maki/Hamiltonian form S = Y X⁻¹, whose S is
+// symmetric and PSD only up to the integration error): the Cholesky ODE keeps N unknowns, costs
+// two triangular solves and one triangular product on top of the plain right-hand side
+// (still O(nx³)), and guarantees the structure by construction.
+// It needs Qf ≻ 0 (U(T) = chol(Qf)). When Qf is only PSD (e.g. Qf = 0), either solveRiccati
+// throws std::invalid_argument naming Qf and its smallest eigenvalue (factoredQfShift = 0, the
+// default), or it factors Qf + factoredQfShift·I (documented regularization: the terminal cost is
+// raised by factoredQfShift·|δx(T)|²; its effect on S(t) is factoredQfShift·‖Φ_cl(T, t)‖², which
+// decays where the closed loop is stable; a tiny shift makes dU/dτ ≈ Q/(2√shift) large near T —
+// a steep start that CVODES resolves with small first steps).
+// Integration: BDF (Newton) with the dense solver and a difference-quotient Jacobian, or
+// matrix-free GMRES with difference-quotient Jacobian-vector products; the preconditioner (if
+// enabled) maps the residual to S coordinates (δS = UᵀδU + δUᵀU), applies the exact Lyapunov
+// solve below and maps back (δU = Υ(U⁻ᵀ δS U⁻¹) U) — exact up to the terms proportional to Ṡ.
+//
+// Krylov preconditioner (plain BDF): the Newton matrix I − γJ acts on symmetric E as
+// E − γ(A_clᵀE + E A_cl), so solving with it is the Lyapunov equation FᵀX + XF = −R,
+// F = γA_cl − ½I. With the complex Schur form A_cl = Z T Zᴴ (computed once per Jacobian update,
+// O(nx³); γ changes only rescale T) it is a triangular Bartels–Stewart solve, O(nx³) per
+// application: GMRES then converges in one iteration and a Newton iteration costs O(nx³) instead
+// of the dense solver's O(N³) = O(nx⁶/8) factorization. When 2γ‖A_cl‖_∞ < ½ (a non-stiff step:
+// the Newton matrix is within ½ of the identity) the Schur form and the solve are skipped and the
+// preconditioner is the identity. On a non-stiff problem the preconditioner can cost more than
+// the GMRES iterations it saves (see bench/riccati_bench.cpp); on a stiff one unpreconditioned
+// GMRES stalls (tests/control/test_riccati_hard.cpp), so it is on by default.
+//
 // Dense output: after every internal step the solution keeps CVODES' Nordsieck data (the
 // derivatives 0…q of the step's interpolating polynomial, from CVodeGetDky) so S(t) at any t is
 // the same polynomial CVODES itself would use for output: its error is of the order of the local
@@ -43,12 +81,16 @@ struct LqrWeights {
   WeightCallback Qfun, Rfun;
 };
 
-enum class RiccatiMethod { kBDF, kAdams };
+/// kBDF and kAdams integrate the entries of S; kFactored integrates the Cholesky factor U of
+/// S = UᵀU with BDF (see the top of this header), so S is symmetric PSD by construction.
+enum class RiccatiMethod { kBDF, kAdams, kFactored };
 
 /// Linear solver inside BDF's Newton iterations. kDense factors the exact N×N Jacobian
 /// (N = nx(nx+1)/2; O(N³) per factorization, only sensible for small nx); kKrylov is matrix-free
-/// GMRES (no preconditioner) with the exact Jacobian-vector product A_clᵀV + V A_cl (O(nx³) each).
-/// kAuto: kDense for nx ≤ 10, kKrylov above.
+/// GMRES with the exact Jacobian-vector product A_clᵀV + V A_cl (O(nx³) each), preconditioned by
+/// the exact Lyapunov solve of the Newton matrix unless krylovPreconditioner is false.
+/// kAuto: kDense for nx ≤ 10, kKrylov above. kFactored uses the same choice (with
+/// difference-quotient Jacobians).
 enum class RiccatiLinearSolver { kAuto, kDense, kKrylov };
 
 struct RiccatiOptions {
@@ -62,6 +104,11 @@ struct RiccatiOptions {
   RiccatiLinearSolver linearSolver = RiccatiLinearSolver::kAuto;  ///< BDF only
   bool exactJacobian = true;    ///< BDF + dense: analytic Jacobian (false: difference quotients)
   bool trackEigenvalues = true; ///< min/max eigenvalue of S over the stored steps (O(nx³) per step)
+  /// BDF/kFactored + kKrylov: precondition GMRES with the exact Lyapunov (Bartels–Stewart) solve.
+  bool krylovPreconditioner = true;
+  /// kFactored only: U(T) = chol(Qf + factoredQfShift·I). 0 requires Qf ≻ 0 (otherwise
+  /// std::invalid_argument); > 0 is the documented regularization for a PSD Qf (≥ 0).
+  double factoredQfShift = 0.0;
   /// Throws std::invalid_argument naming the field and its value.
   void validate() const;
 };
@@ -87,6 +134,8 @@ class RiccatiSolution {
   long steps = 0;                   ///< CVODES internal steps
   long rhsEvaluations = 0;
   long jacobianEvaluations = 0;
+  long linearIterations = 0;        ///< GMRES iterations (Krylov solver only)
+  long preconditionerSolves = 0;    ///< Lyapunov preconditioner applications (Krylov only)
   double minEigenvalue = 0.0;       ///< of S over the stored steps (if tracked)
   double maxEigenvalue = 0.0;
 
@@ -116,6 +165,7 @@ class RiccatiSolution {
   int nx_ = 0, nu_ = 0;
   double t0_ = 0.0, tf_ = 0.0;
   std::vector<Step> steps_;  // ascending τ; steps_[0] is τ = 0 (S = Qf)
+  bool factored_ = false;    // steps_ hold the packed factor U (S = UᵀU) instead of S
   LinearizationCallback linearization_;
   LqrWeights weights_;
 };

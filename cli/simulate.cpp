@@ -1,0 +1,274 @@
+// cli/simulate.cpp — `trellis simulate SCENE.json --trajectory TRAJ.csv --gains GAINS.csv
+// --out CLOSED.csv`: the nonlinear closed loop u = u_ref − K(t)(x − x_ref) from a perturbed start.
+#include "cli_options.hpp"
+#include "command.hpp"
+
+#include "trellis/control/gain_schedule.hpp"
+#include "trellis/control/simulation.hpp"
+#include "trellis/control/trajectory.hpp"
+#include "trellis/core/scene.hpp"
+
+#include <cmath>
+#include <algorithm>
+#include <cstdint>
+#include <limits>
+#include <numbers>
+#include <random>
+#include <stdexcept>
+
+namespace trellis::cli {
+namespace {
+
+constexpr std::string_view kHelp = R"(usage: trellis simulate SCENE.json --trajectory TRAJ.csv --gains GAINS.csv --out CLOSED.csv
+                        [--perturb NAME=VALUE,...] [--perturb-random SIGMA [--seed N]] [options]
+
+Simulates the NONLINEAR scene (SCENE_FORMAT.md) under the time-varying feedback
+
+  u = sat( u_ref(t) - K(t) (x - x_ref(t)) ),   x = [q; q'],
+
+along the reference trajectory (x_ref: cubic Hermite through its knots, u_ref and K linear
+between knots and gain times), from x(t0) = x_ref(t0) + dx0, over the reference's time span,
+with SUNDIALS CVODES. GAINS.csv is a gain schedule as `trellis gains` writes it (header t,K_i_j;
+K is m x 2n and must cover the reference's time span). sat clips u to [--umin, --umax].
+
+Perturbation dx0 (the sum of both; default none):
+  --perturb NAME=VALUE[,NAME=VALUE...]   add VALUE to the state NAME, a column name of the
+                                         trajectory (a configuration or d<configuration>);
+                                         may be repeated
+  --perturb-random SIGMA                 add independent normal deviates of standard deviation
+                                         SIGMA to every state, from --seed N (default 1;
+                                         Mersenne Twister 64 and Box-Muller: the same seed gives
+                                         the same perturbation on every platform)
+For a scene with constraints the perturbed start is projected onto the constraints h(q) = 0,
+A(q) q' = 0 (least mass-weighted change), and so is the state at every integration segment end
+(knots, gain times, samples), unless --no-project.
+
+Output (--out): the closed-loop trajectory in the trajectory layout (t, <configs>,
+d<configs>, <inputs>; the inputs are the applied, saturated u), at the reference's knots or every
+--output-step. Then a summary on standard output: the perturbation, the tracking error
+|x - x_ref| (2-norm over the full state) at the start, at the end and its maximum, the constraint
+drift max(|h|, |A q'|) (before projection), the saturation (control evaluations with a clipped
+input), and the integrator's work.
+
+options:
+  --trajectory FILE      the reference trajectory (CSV; required)
+  --gains FILE           the gain schedule (CSV; required)
+  --out FILE             where to write the closed-loop trajectory (CSV; required)
+  --perturb ...          see above
+  --perturb-random SIGMA see above (SIGMA >= 0)
+  --seed N               seed of --perturb-random (default 1)
+  --rate HZ              sampled feedback: u computed at t0 + k/HZ and held (default:
+                         continuous feedback)
+  --umin U, --umax U     input bounds: one number for every input or a comma list of m
+                         (default: unbounded)
+  --no-project           do not project onto the constraints (the drift is still reported)
+  --output-step DT       output every DT (default: at the reference's knots)
+  --rtol X, --atol X     CVODES tolerances (defaults 1e-8, 1e-10)
+  --method M             adams (default; non-stiff) or bdf (stiff: stiff springs, high gains)
+  --max-steps N          limit on the integrator's internal steps (default 500000)
+  -h, --help             show this help
+
+Exit status: 0 on success; 1 if a file cannot be read or does not match the scene (trajectory
+names, gain size or time span) or the simulation fails (the message gives the time and the
+cause; the trajectory up to the failure is still written to --out); 2 on a usage error (unknown
+option or state name, malformed number, missing file argument). Errors are one line on standard
+error and nothing on standard output.
+)";
+
+/// Standard normal deviates by Box–Muller from a 64-bit Mersenne Twister, whose output sequence
+/// the C++ standard fixes (std::normal_distribution's algorithm is implementation-defined).
+class PortableNormal {
+ public:
+  explicit PortableNormal(std::uint64_t seed) : engine_(seed) {}
+  double operator()() {
+    if (haveSpare_) {
+      haveSpare_ = false;
+      return spare_;
+    }
+    // u1 in (0, 1] (log is finite), u2 in [0, 1): 53 random bits each.
+    const double u1 = (static_cast<double>(engine_() >> 11) + 1.0) * 0x1.0p-53;
+    const double u2 = static_cast<double>(engine_() >> 11) * 0x1.0p-53;
+    const double radius = std::sqrt(-2.0 * std::log(u1));
+    spare_ = radius * std::sin(2.0 * std::numbers::pi * u2);
+    haveSpare_ = true;
+    return radius * std::cos(2.0 * std::numbers::pi * u2);
+  }
+
+ private:
+  std::mt19937_64 engine_;
+  double spare_ = 0.0;
+  bool haveSpare_ = false;
+};
+
+/// δx0 from the --perturb items (names from the trajectory's header: configs, d<configs>).
+Eigen::VectorXd namedPerturbation(const ParsedOptions& options, const Trajectory& reference) {
+  std::vector<std::string> names = reference.configNames();
+  for (const std::string& c : reference.configNames()) names.push_back("d" + c);
+  Eigen::VectorXd delta = Eigen::VectorXd::Zero(reference.nx());
+  std::vector<bool> seen(names.size(), false);
+  for (const std::string& list : options.values("--perturb")) {
+    std::size_t start = 0;
+    while (true) {
+      const std::size_t comma = list.find(',', start);
+      const std::string item = list.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+      const std::size_t equals = item.find('=');
+      if (equals == std::string::npos || equals == 0) {
+        throw UsageError("simulate: --perturb: '" + item + "' is not NAME=VALUE");
+      }
+      const std::string name = item.substr(0, equals);
+      const auto it = std::find(names.begin(), names.end(), name);
+      if (it == names.end()) {
+        throw UsageError("simulate: --perturb: unknown state '" + name + "' (the states are " +
+                         joinNames(names) + ")");
+      }
+      const auto index = static_cast<std::size_t>(it - names.begin());
+      if (seen[index]) throw UsageError("simulate: --perturb: state '" + name + "' given more than once");
+      seen[index] = true;
+      delta(static_cast<Eigen::Index>(index)) = options.number("--perturb " + name, item.substr(equals + 1));
+      if (comma == std::string::npos) break;
+      start = comma + 1;
+    }
+  }
+  return delta;
+}
+
+int runSimulate(std::span<const std::string> args, std::ostream& out) {
+  const ParsedOptions options(
+      "simulate", args,
+      {.valued = {"--trajectory", "--gains", "--out", "--perturb", "--perturb-random", "--seed", "--rate",
+                  "--umin", "--umax", "--output-step", "--rtol", "--atol", "--method", "--max-steps"},
+       .flags = {"--no-project"},
+       .repeatable = {"--perturb"}});
+  const std::string scenePath = options.singlePositional("scene file");
+  const std::string trajectoryPath = options.required("--trajectory", "(the reference trajectory CSV)");
+  const std::string gainsPath = options.required("--gains", "(the gain schedule CSV from 'trellis gains')");
+  const std::string outPath = options.required("--out", "(the closed-loop trajectory CSV to write)");
+
+  SimulationOptions simulation;
+  if (auto v = options.value("--rtol")) simulation.rtol = options.positiveNumber("--rtol", *v);
+  if (auto v = options.value("--atol")) simulation.atol = options.positiveNumber("--atol", *v);
+  if (auto v = options.value("--rate")) simulation.sampleRate = options.positiveNumber("--rate", *v);
+  if (auto v = options.value("--output-step")) simulation.outputStep = options.positiveNumber("--output-step", *v);
+  if (auto v = options.value("--max-steps")) {
+    simulation.maxSteps = static_cast<long>(options.count("--max-steps", *v));
+    if (simulation.maxSteps <= 0) throw UsageError("simulate: --max-steps: must be > 0");
+  }
+  if (auto v = options.value("--method")) {
+    if (*v == "adams") {
+      simulation.method = IntegrationMethod::kAdams;
+    } else if (*v == "bdf") {
+      simulation.method = IntegrationMethod::kBDF;
+    } else {
+      throw UsageError("simulate: --method: '" + *v + "' is not one of adams, bdf");
+    }
+  }
+  if (options.flag("--no-project")) simulation.constraints = ConstraintHandling::kNone;
+  double sigma = 0.0;
+  if (auto v = options.value("--perturb-random")) sigma = options.positiveNumber("--perturb-random", *v, true);
+  std::uint64_t seed = 1;
+  if (auto v = options.value("--seed")) {
+    if (!options.has("--perturb-random")) throw UsageError("simulate: --seed needs --perturb-random");
+    seed = options.count("--seed", *v);
+  }
+
+  const Scene scene = loadScene(scenePath);
+  const Model& model = scene.model;
+  const int n = model.nq(), m = model.nu(), nx = 2 * n;
+  const Trajectory reference = loadReference(model, scenePath, trajectoryPath);
+  const GainSchedule gains = GainSchedule::readCsvFile(gainsPath);
+  if (gains.nu() != m || gains.nx() != nx) {
+    throw std::runtime_error(gainsPath + ": K is " + std::to_string(gains.nu()) + " x " +
+                             std::to_string(gains.nx()) + ", but the scene " + scenePath + " needs m x 2n = " +
+                             std::to_string(m) + " x " + std::to_string(nx));
+  }
+  // The same relative slack as GainSchedule::evaluate.
+  const double slack = 1e-12 * std::max({1.0, std::abs(reference.startTime()), std::abs(reference.endTime())});
+  if (gains.startTime() > reference.startTime() + slack || gains.endTime() < reference.endTime() - slack) {
+    throw std::runtime_error(gainsPath + ": the gains cover [" + formatNumber(gains.startTime(), 17) + ", " +
+                             formatNumber(gains.endTime(), 17) + "], but the reference " + trajectoryPath +
+                             " spans [" + formatNumber(reference.startTime(), 17) + ", " +
+                             formatNumber(reference.endTime(), 17) + "]");
+  }
+
+  if (options.has("--umin") || options.has("--umax")) {
+    const double inf = std::numeric_limits<double>::infinity();
+    simulation.inputLower = options.value("--umin")
+                                ? options.broadcastList("--umin", *options.value("--umin"), m, "inputs")
+                                : Eigen::VectorXd::Constant(m, -inf);
+    simulation.inputUpper = options.value("--umax")
+                                ? options.broadcastList("--umax", *options.value("--umax"), m, "inputs")
+                                : Eigen::VectorXd::Constant(m, inf);
+    for (int i = 0; i < m; ++i) {
+      if (!(simulation.inputLower(i) <= simulation.inputUpper(i))) {
+        throw UsageError("simulate: input '" + model.inputNames()[static_cast<std::size_t>(i)] + "': --umin " +
+                         formatNumber(simulation.inputLower(i), 17) + " > --umax " +
+                         formatNumber(simulation.inputUpper(i), 17));
+      }
+    }
+  }
+
+  Eigen::VectorXd delta = namedPerturbation(options, reference);
+  if (sigma > 0.0) {
+    PortableNormal normal(seed);
+    for (int i = 0; i < nx; ++i) delta(i) += sigma * normal();
+  }
+  const Eigen::VectorXd x0 = reference.state(reference.startTime()) + delta;
+
+  const SimulationResult result = simulateClosedLoop(model, reference, gains, x0, simulation);
+  if (result.trajectory.size() > 0) result.trajectory.writeCsvFile(outPath);
+  if (!result.ok()) {
+    throw std::runtime_error("simulate: the closed loop failed (" + std::string(toString(result.status)) +
+                             ") at t = " + formatNumber(result.failureTime) + ": " + result.message +
+                             (result.trajectory.size() > 0 ? " (the trajectory up to t = " +
+                                                                 formatNumber(result.trajectory.endTime()) +
+                                                                 " is in " + outPath + ")"
+                                                           : ""));
+  }
+
+  // The summary, after the file is written.
+  const Eigen::VectorXd& error = result.trackingError;
+  Eigen::Index worst = 0;
+  error.maxCoeff(&worst);
+  out << "wrote " << outPath << ": " << result.trajectory.size() << " rows on ["
+      << formatNumber(result.trajectory.startTime()) << ", " << formatNumber(result.trajectory.endTime())
+      << "], feedback "
+      << (simulation.sampleRate > 0.0 ? "sampled at " + formatNumber(simulation.sampleRate) + " Hz" : "continuous")
+      << "\n";
+  out << "perturbation: |dx0| = " << formatNumber(delta.norm()) << "\n";
+  out << "tracking error |x - x_ref|: initial " << formatNumber(error(0)) << ", final "
+      << formatNumber(error(error.size() - 1)) << ", max " << formatNumber(error(worst)) << " (at t = "
+      << formatNumber(result.trajectory.times()(worst)) << ")\n";
+  if (model.nc() > 0) {
+    // The drift at t0 is that of the perturbed start itself; after it, that of the integration.
+    const Eigen::VectorXd& drift = result.constraintDrift;
+    const double later = drift.size() > 1 ? drift.tail(drift.size() - 1).maxCoeff() : 0.0;
+    out << "constraint drift max(|h|, |A dq|): at the start " << formatNumber(drift(0), 3)
+        << ", max at later output times " << formatNumber(later, 3) << ", max overall "
+        << formatNumber(result.maxConstraintDrift, 3)
+        << (simulation.constraints == ConstraintHandling::kProject
+                ? " (before projection; " + std::to_string(result.projections) + " projections)"
+                : " (not projected)")
+        << "\n";
+  } else {
+    out << "constraint drift: none (the scene has no constraints)\n";
+  }
+  out << "saturation: " << result.saturatedSamples << " of " << result.controlSamples
+      << " control evaluations clipped (" << formatNumber(100.0 * result.saturatedFraction, 3) << "%)"
+      << (simulation.inputLower.size() == 0 ? ", no bounds" : "") << "\n";
+  out << "integrator: " << result.steps << " steps, " << result.rhsEvaluations << " right-hand-side evaluations, "
+      << result.restarts << " restarts\n";
+  return 0;
+}
+
+}  // namespace
+
+const Command kSimulateCommand{
+    "simulate",
+    "the nonlinear closed loop of a gain schedule about a reference, from a perturbed start",
+    kHelp,
+    &runSimulate,
+};
+
+const CommandRegistration kRegisterSimulate{kSimulateCommand};
+
+}  // namespace trellis::cli

@@ -1,0 +1,170 @@
+// trellis/control/simulation.hpp — open- and closed-loop simulation of the NONLINEAR plant.
+//
+// The state x = [q; q̇] (2n) evolves by ẋ = [q̇; q̈(q, q̇, u)], q̈ from computeDynamics (the KKT
+// solve that enforces A q̈ + Ȧ q̇ = 0), integrated with SUNDIALS CVODES. The input comes from a
+// policy u = π(t, x) (m), clipped to the box [inputLower, inputUpper]:
+//  - continuous feedback (sampleRate = 0): u(t) = sat(π(t, x(t))) inside every right-hand side;
+//  - sampled feedback (sampleRate = f > 0): u_k = sat(π(s_k, x(s_k))) at s_k = t0 + k/f, held
+//    constant (zero-order hold) on [s_k, s_{k+1}).
+// The closed loop about a reference (x_ref, u_ref) with a gain schedule K(t) is the policy
+//   π(t, x) = u_ref(t) − K(t) (x − x_ref(t)),
+// the open loop π(t, x) = u_ref(t). x_ref is the reference's cubic Hermite spline, u_ref and K are
+// piecewise linear (Trajectory::evaluate, GainSchedule::evaluate).
+//
+// Integration is split into segments at every time where the right-hand side is not smooth — the
+// reference knots, the gain-schedule times (or options.breakpoints), the sample times — and, when
+// projecting, at every output time. Each segment ends exactly on its end point (CVodeSetStopTime)
+// and the next starts with CVodeReInit, so no step straddles a kink or a jump of the held input.
+// Output times that are neither kinks nor projection points are interpolated by CVODES (its
+// dense output, of the accepted local error). The kinks created by saturation occur at unknown
+// times; there CVODES' error control shortens the step (the right-hand side stays continuous).
+//
+// Constraints (model.nc() > 0). The exact dynamics keep h(q) and A q̇ constant along the exact
+// solution, so they drift only by integration error. ConstraintHandling::kProject projects the
+// state back at the start and at the end of every segment:
+//  1. positions: Gauss–Newton on the holonomic rows, q ← q − W⁻¹A_hᵀ (A_h W⁻¹ A_hᵀ)⁺ h(q), i.e. the
+//     minimum-norm step in the metric W = M(q) (the mass matrix at the state before projecting),
+//     repeated until |h| stops decreasing (at most 10 iterations);
+//  2. velocities: q̇ ← q̇ − M⁻¹Aᵀ (A M⁻¹ Aᵀ)⁺ A q̇ over all rows (holonomic and nonholonomic), the
+//     M-orthogonal projection onto A q̇ = 0. It is the velocity change of a constraint impulse
+//     (M δq̇ = Aᵀ p), the correction of least kinetic energy; it never raises the kinetic energy and
+//     does not depend on the units of the coordinates (a Euclidean projection would weigh metres
+//     against radians arbitrarily).
+// Pseudo-inverses go through a complete orthogonal decomposition of A L⁻ᵀ (M = L Lᵀ), so redundant
+// rows are handled. The drift max(|h(q)|∞, |A q̇|∞) is measured before projecting. kNone never
+// changes the state (the drift is still reported).
+#pragma once
+
+#include "trellis/control/gain_schedule.hpp"
+#include "trellis/control/trajectory.hpp"
+
+#include <Eigen/Core>
+
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace trellis {
+
+class Model;
+
+/// What the simulator does about numerical constraint drift (see the file comment).
+enum class ConstraintHandling {
+  kNone,     ///< integrate as is; drift is reported only
+  kProject,  ///< project x0 and the state at every segment end onto h = 0, A q̇ = 0, then reinit
+};
+
+/// Linear multistep family used by CVODES.
+enum class IntegrationMethod {
+  kAdams,  ///< Adams–Moulton with fixed-point iterations: no Jacobian, for non-stiff systems
+  kBDF,    ///< BDF with Newton iterations and a dense difference-quotient Jacobian: stiff systems
+           ///< (stiff springs, very high gains)
+};
+
+struct SimulationOptions {
+  double rtol = 1e-8;      ///< CVODES relative tolerance (> 0)
+  double atol = 1e-10;     ///< CVODES absolute tolerance on each state entry (> 0)
+  long maxSteps = 500000;  ///< total internal steps over [t0, t1] (> 0); more is kIntegratorFailure
+  /// 0: continuous feedback u(t) = π(t, x(t)); > 0: sampled at this rate (Hz), from t0, u held
+  /// (zero-order hold) between samples.
+  double sampleRate = 0.0;
+  /// Input box: empty = unbounded; else size m each (±inf allowed, lower ≤ upper). u is clipped.
+  Eigen::VectorXd inputLower, inputUpper;
+  /// 0: output at the reference's knots inside [t0, t1] (plus t0 and t1; needs a reference);
+  /// > 0: t0, t0 + h, t0 + 2h, …, and t1.
+  double outputStep = 0.0;
+  ConstraintHandling constraints = ConstraintHandling::kProject;
+  IntegrationMethod method = IntegrationMethod::kAdams;
+  double maxStep = 0.0;  ///< largest internal step; 0 = unlimited (≥ 0)
+  /// Extra times where the policy has a kink or a jump (integration restarts there). Times outside
+  /// (t0, t1) are ignored. simulateClosedLoop adds the gain schedule's times.
+  std::vector<double> breakpoints;
+  int projectionIterations = 10;  ///< Gauss–Newton iterations per position projection (≥ 1)
+
+  /// Throws std::invalid_argument naming the field and its value (sizes against the model are
+  /// checked by simulate).
+  void validate() const;
+};
+
+/// A failing right-hand side (dynamics, policy returning NaN) is first reported to CVODES as
+/// recoverable, so a bad trial point only shortens the step; after 10 failures in one segment, or
+/// on a policy exception, the simulation stops with the last failure's time, state and message.
+enum class SimulationStatus {
+  kOk,
+  kIntegratorFailure,  ///< CVODES failed (too much work / maxSteps, error test, convergence)
+  kDynamicsFailure,    ///< computeDynamics returned a status that is not ok (singular M or
+                       ///< constraints)
+  kNonFinite,          ///< the state, the input or q̈ became NaN/Inf
+  kPolicyFailure,      ///< the policy threw (e.g. a time outside the reference)
+};
+
+const char* toString(SimulationStatus status);
+
+struct SimulationResult {
+  SimulationStatus status = SimulationStatus::kOk;
+  std::string message;           ///< empty when ok; names the time and the state of the failure
+  double failureTime = 0.0;      ///< t of the failure (not ok only)
+  Eigen::VectorXd failureState;  ///< x = [q; q̇] at failureTime (2n; not ok only)
+  /// Closed-loop x and the applied (saturated) u at the output times (names from the model), up to
+  /// the last output time reached before a failure. States are recorded after projection; the
+  /// state derivatives [q̇; q̈(q, q̇, u)] at the recorded points are set (so the result can serve as
+  /// a reference). For sampled feedback u is right-continuous (the new sample at a sample time; at
+  /// t1 the value held over the last interval).
+  Trajectory trajectory;
+  /// ‖x(t_k) − x_ref(t_k)‖₂ per output time; empty without a reference.
+  Eigen::VectorXd trackingError;
+  /// Per output time: max(|h(q)|∞, |A(q) q̇|∞) before any projection at that time; zeros if the
+  /// model has no constraints.
+  Eigen::VectorXd constraintDrift;
+  /// Max of the drift over every point where it was measured (the output times and, when
+  /// projecting, every segment end), before projection.
+  double maxConstraintDrift = 0.0;
+  /// Control evaluations in which any input was clipped: continuous feedback counts the
+  /// evaluations at the output times, sampled feedback counts the samples.
+  int saturatedSamples = 0;
+  int controlSamples = 0;          ///< the evaluations counted for saturatedSamples
+  double saturatedFraction = 0.0;  ///< saturatedSamples / controlSamples (0 if none)
+  long steps = 0;                  ///< CVODES internal steps, all segments
+  long rhsEvaluations = 0;         ///< right-hand sides (difference-quotient Jacobians included)
+  long restarts = 0;               ///< CVodeReInit calls (segment boundaries)
+  long projections = 0;            ///< projections that were applied
+  bool ok() const { return status == SimulationStatus::kOk; }
+};
+
+/// u = policy(t, x): x is 2n, u arrives sized m and must be overwritten. It may throw (reported as
+/// kPolicyFailure); it must not keep references to its arguments.
+using Policy = std::function<void(double t, const Eigen::VectorXd& x, Eigen::VectorXd& u)>;
+
+/// Simulates ẋ = [q̇; q̈(q, q̇, sat(u))] from x(t0) = x0 (2n, finite) to t1 > t0 under `policy`.
+/// `reference` (optional; must match the model and cover [t0, t1]) supplies the default output
+/// times, extra restart points (its knots) and the tracking error; its state derivatives are
+/// computed if missing. Throws std::invalid_argument for bad options, sizes or times, and
+/// TrajectoryError for a reference that does not match the model. Numerical failure is a status.
+SimulationResult simulate(const Model& model, const Eigen::VectorXd& x0, double t0, double t1,
+                          const Policy& policy, const SimulationOptions& options,
+                          const Trajectory* reference = nullptr);
+
+/// u = u_ref(t) − K(t)(x − x_ref(t)) over the reference's time span from x0 (e.g. the reference
+/// start + a perturbation). gains must be m×2n and cover the reference's span.
+SimulationResult simulateClosedLoop(const Model& model, const Trajectory& reference,
+                                    const GainSchedule& gains, const Eigen::VectorXd& x0,
+                                    const SimulationOptions& options = {});
+
+/// Open loop: u = u_ref(t) (piecewise linear as Trajectory::evaluate) over the reference's span.
+SimulationResult simulateOpenLoop(const Model& model, const Trajectory& reference,
+                                  const Eigen::VectorXd& x0, const SimulationOptions& options = {});
+
+/// Outcome of projectOntoConstraints.
+struct ConstraintProjection {
+  double driftBefore = 0.0;  ///< max(|h(q)|∞, |A q̇|∞) before
+  double driftAfter = 0.0;   ///< the same after
+  int iterations = 0;        ///< Gauss–Newton iterations on the positions
+};
+
+/// Projects x = [q; q̇] (2n) in place onto h(q) = 0, A(q) q̇ = 0 exactly as kProject does (see the
+/// file comment). A model without constraints leaves x unchanged. Throws std::invalid_argument for
+/// a wrong size; maxIterations ≥ 1.
+ConstraintProjection projectOntoConstraints(const Model& model, Eigen::VectorXd& x,
+                                            int maxIterations = 10);
+
+}  // namespace trellis

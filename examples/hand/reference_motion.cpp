@@ -1,0 +1,288 @@
+// reference_motion.cpp — designed motion on the hand's constraint manifold and its tensions.
+#include "reference_motion.hpp"
+
+#include <trellis/core/dynamics.hpp>
+
+#include <Eigen/QR>
+#include <Eigen/SVD>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <sstream>
+#include <stdexcept>
+
+namespace trellis::hand {
+
+NnlsResult solveNonNegativeLeastSquares(const Eigen::MatrixXd& C, const Eigen::VectorXd& d,
+                                        int maxIterations, double tolerance) {
+  const Eigen::Index rows = C.rows(), k = C.cols();
+  if (d.size() != rows) {
+    throw std::invalid_argument("solveNonNegativeLeastSquares: C has " + std::to_string(rows) +
+                                " rows but d has " + std::to_string(d.size()));
+  }
+  if (!C.allFinite() || !d.allFinite()) {
+    throw std::invalid_argument("solveNonNegativeLeastSquares: C or d has a non-finite entry");
+  }
+  if (maxIterations <= 0) maxIterations = static_cast<int>(3 * std::max<Eigen::Index>(k, 1));
+  NnlsResult r;
+  r.x = Eigen::VectorXd::Zero(k);
+  // isFree[j]: j is in the passive set P (unconstrained), otherwise held at its bound x_j = 0.
+  std::vector<bool> isFree(static_cast<std::size_t>(k), false);
+  // Tolerance on the multipliers w = Cᵀ(d − Cx): rounding of Cᵀ d is ~eps ‖C‖ ‖d‖ per entry.
+  const double tol = tolerance > 0.0 ? tolerance
+                                     : 10.0 * std::numeric_limits<double>::epsilon() *
+                                           static_cast<double>(k) * C.norm() * std::max(1.0, d.norm());
+  Eigen::VectorXd w = C.transpose() * (d - C * r.x);
+  Eigen::VectorXd z(k);
+  while (r.iterations < maxIterations) {
+    // Lawson–Hanson step 1: the bound variable with the largest positive multiplier is freed.
+    Eigen::Index t = -1;
+    double best = tol;
+    for (Eigen::Index j = 0; j < k; ++j) {
+      if (!isFree[j] && w(j) > best) best = w(j), t = j;
+    }
+    if (t < 0) {
+      r.converged = true;
+      break;
+    }
+    ++r.iterations;
+    isFree[t] = true;
+    for (int inner = 0; inner <= 3 * k; ++inner) {
+      // Least squares on the free columns; the bound ones stay at 0.
+      std::vector<Eigen::Index> cols;
+      for (Eigen::Index j = 0; j < k; ++j)
+        if (isFree[j]) cols.push_back(j);
+      Eigen::MatrixXd Cp(rows, static_cast<Eigen::Index>(cols.size()));
+      for (std::size_t c = 0; c < cols.size(); ++c) Cp.col(static_cast<Eigen::Index>(c)) = C.col(cols[c]);
+      const Eigen::VectorXd zp = Cp.colPivHouseholderQr().solve(d);
+      z.setZero();
+      for (std::size_t c = 0; c < cols.size(); ++c) z(cols[c]) = zp(static_cast<Eigen::Index>(c));
+      bool feasible = true;
+      for (Eigen::Index j : cols) feasible = feasible && z(j) > 0.0;
+      if (feasible) {
+        r.x = z;
+        break;
+      }
+      // Step 3: move from x towards z until the first free variable reaches its bound, and bind
+      // every free variable that is (numerically) at zero.
+      double alpha = 1.0;
+      for (Eigen::Index j : cols) {
+        if (z(j) <= 0.0) alpha = std::min(alpha, r.x(j) / (r.x(j) - z(j)));
+      }
+      r.x += alpha * (z - r.x);
+      for (Eigen::Index j : cols) {
+        if (r.x(j) <= 1e-15 * std::max(1.0, r.x.cwiseAbs().maxCoeff())) {
+          r.x(j) = 0.0;
+          isFree[j] = false;
+        }
+      }
+    }
+    w = C.transpose() * (d - C * r.x);
+  }
+  r.residualNorm = (C * r.x - d).norm();
+  return r;
+}
+
+TensionDistribution distributeTensions(const Model& model, Data& data, const Eigen::VectorXd& q,
+                                       const Eigen::VectorXd& dq, const Eigen::VectorXd& qdd,
+                                       const TensionDistributionOptions& options) {
+  const int n = model.nq(), m = model.nu(), nc = model.nc();
+  if (qdd.size() != n) {
+    throw std::invalid_argument("distributeTensions: qdd has " + std::to_string(qdd.size()) +
+                                " entries, the model " + std::to_string(n));
+  }
+  TensionDistribution out;
+  out.tension = Eigen::VectorXd::Zero(m);
+  out.lambda = Eigen::VectorXd::Zero(nc);
+  // M, b(q, q̇) with u = 0 (all forces but the tendons), A, from one dynamics evaluation.
+  const DynamicsStatus st = computeDynamics(model, data, q, dq, Eigen::VectorXd::Zero(m));
+  if (!st.ok()) {
+    out.message = "dynamics failed: " + st.message;
+    return out;
+  }
+  const Eigen::VectorXd rhs = data.M * qdd + data.bias;  // r = M q̈ + b
+  const Eigen::MatrixXd At = data.constraintJacobian.transpose();  // n×nc
+  computeInputMatrix(model, data, q);
+  const Eigen::MatrixXd& B = data.inputMatrix;  // n×m
+
+  // Orthonormal null-space basis N of A: the last n − rank columns of the full Q of Aᵀ's QR.
+  Eigen::MatrixXd N;
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qrAt(At);
+  if (nc > 0) {
+    const Eigen::Index rank = qrAt.rank();
+    const Eigen::MatrixXd Q = qrAt.householderQ() * Eigen::MatrixXd::Identity(n, n);
+    N = Q.rightCols(n - rank);
+  } else {
+    N = Eigen::MatrixXd::Identity(n, n);
+  }
+  const Eigen::MatrixXd NB = N.transpose() * B;
+  const Eigen::VectorXd Nr = N.transpose() * rhs;
+  // ε relative to the largest singular value of Nᵀ B, so the regularization is scale-free. The
+  // problem is solved in the equivalent scaling [W Nᵀ B; I] u ≈ [W Nᵀ r; u_rest], W = 1/ε, where
+  // the regularization rows are O(1): their multipliers (u_rest − u ~ 0.1 N) then stand far above
+  // the rounding of the W rows (~eps ‖W NᵀB‖ ‖W Nᵀr‖ ≲ 1e-8 here), and the tolerance 1e-10·(1 +
+  // u_rest) separates the two. (In the unscaled form ε² (u_rest − u) fell below the default
+  // tolerance and the tensions stayed on the bound.)
+  const double sigmaMax = NB.size() ? Eigen::JacobiSVD<Eigen::MatrixXd>(NB).singularValues()(0) : 0.0;
+  const double weight = sigmaMax > 0.0 ? 1.0 / (options.regularization * sigmaMax) : 1.0;
+  Eigen::MatrixXd C(NB.rows() + m, m);
+  C << weight * NB, Eigen::MatrixXd::Identity(m, m);
+  Eigen::VectorXd d(NB.rows() + m);
+  d << weight * Nr, Eigen::VectorXd::Constant(m, options.restingTension);
+  const NnlsResult nnls =
+      solveNonNegativeLeastSquares(C, d, 0, 1e-10 * (1.0 + std::abs(options.restingTension)));
+  out.tension = nnls.x;
+  const Eigen::VectorXd normal = rhs - B * out.tension;
+  if (nc > 0) out.lambda = qrAt.solve(normal);
+  const Eigen::VectorXd residual = B * out.tension + At * out.lambda - rhs;
+  out.residual = residual.cwiseAbs().maxCoeff();
+  const double scale = std::max({rhs.cwiseAbs().maxCoeff(),
+                                 B.cwiseAbs().maxCoeff() * out.tension.cwiseAbs().maxCoeff(), 1e-300});
+  out.relativeResidual = out.residual / scale;
+  out.converged = nnls.converged;
+  if (!nnls.converged) out.message = "non-negative least squares did not converge";
+  return out;
+}
+
+double projectOntoConstraints(const Model& model, Data& data, Eigen::VectorXd& q,
+                              const std::vector<int>& drivers, double tolerance, int maxIterations) {
+  const int n = model.nq();
+  std::vector<int> others;
+  for (int i = 0; i < n; ++i)
+    if (std::find(drivers.begin(), drivers.end(), i) == drivers.end()) others.push_back(i);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
+  Eigen::MatrixXd Ao(model.nc(), static_cast<Eigen::Index>(others.size()));
+  double err = 0.0;
+  for (int it = 0; it <= maxIterations; ++it) {
+    computeConstraints(model, data, q, zero);
+    err = model.nc() ? data.constraintValue.cwiseAbs().maxCoeff() : 0.0;
+    if (err <= tolerance || it == maxIterations || !std::isfinite(err)) break;
+    for (std::size_t c = 0; c < others.size(); ++c)
+      Ao.col(static_cast<Eigen::Index>(c)) = data.constraintJacobian.col(others[c]);
+    const Eigen::VectorXd step = Ao.colPivHouseholderQr().solve(-data.constraintValue);
+    for (std::size_t c = 0; c < others.size(); ++c) q(others[c]) += step(static_cast<Eigen::Index>(c));
+  }
+  return err;
+}
+
+namespace {
+
+std::string knotLabel(int k, double t) {
+  std::ostringstream s;
+  s << "knot " << k << " (t = " << t << " s)";
+  return s.str();
+}
+
+}  // namespace
+
+ReferenceMotion makeReferenceMotion(const Model& model, const Eigen::VectorXd& q0,
+                                    const ReferenceMotionOptions& options) {
+  const int n = model.nq(), m = model.nu(), nc = model.nc(), N = options.knots;
+  if (q0.size() != n) {
+    throw std::invalid_argument("makeReferenceMotion: q0 has " + std::to_string(q0.size()) +
+                                " entries, the model " + std::to_string(n));
+  }
+  if (N < 2 || !(options.duration > 0.0)) {
+    throw std::invalid_argument("makeReferenceMotion: need knots >= 2 and duration > 0, got knots " +
+                                std::to_string(N) + ", duration " + std::to_string(options.duration));
+  }
+  if (options.drivers.size() != options.amplitudes.size()) {
+    throw std::invalid_argument("makeReferenceMotion: " + std::to_string(options.drivers.size()) +
+                                " drivers but " + std::to_string(options.amplitudes.size()) +
+                                " amplitudes");
+  }
+  std::vector<int> drivers;
+  for (const std::string& name : options.drivers) {
+    try {
+      drivers.push_back(model.configIndex(name));
+    } catch (const std::out_of_range&) {
+      throw std::invalid_argument("makeReferenceMotion: unknown driver coordinate '" + name + "'");
+    }
+  }
+  std::vector<int> others;
+  for (int i = 0; i < n; ++i)
+    if (std::find(drivers.begin(), drivers.end(), i) == drivers.end()) others.push_back(i);
+
+  Data data(model);
+  ReferenceMotion out;
+  Eigen::VectorXd times(N);
+  Eigen::MatrixXd states(2 * n, N), inputs(m, N), derivatives(2 * n, N);
+  out.accelerations.resize(n, N);
+  out.lambda.resize(nc, N);
+  out.constraintResidual.resize(N);
+  out.velocityResidual.resize(N);
+  out.accelerationResidual.resize(N);
+  out.dynamicsResidual.resize(N);
+  out.forwardDynamicsError.resize(N);
+  out.ok = true;
+  auto fail = [&](const std::string& what) {
+    if (out.ok) out.message = what;
+    out.ok = false;
+  };
+
+  Eigen::VectorXd qStart = q0;
+  projectOntoConstraints(model, data, qStart, drivers);
+  Eigen::VectorXd q = qStart, dq(n), qdd(n);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
+  Eigen::MatrixXd Ao(nc, static_cast<Eigen::Index>(others.size()));
+  const double T = options.duration, w = 2.0 * std::numbers::pi / T;
+  for (int k = 0; k < N; ++k) {
+    const double t = T * k / (N - 1);
+    times(k) = t;
+    // Drivers: a_i (1 − cos ωt)/2 about their start values.
+    Eigen::VectorXd dqd(drivers.size()), ddqd(drivers.size());
+    for (std::size_t i = 0; i < drivers.size(); ++i) {
+      const double a = options.amplitudes[i];
+      q(drivers[i]) = qStart(drivers[i]) + 0.5 * a * (1.0 - std::cos(w * t));
+      dqd(static_cast<Eigen::Index>(i)) = 0.5 * a * w * std::sin(w * t);
+      ddqd(static_cast<Eigen::Index>(i)) = 0.5 * a * w * w * std::cos(w * t);
+    }
+    // q from the previous knot is the Newton start: the path is continuous.
+    out.constraintResidual(k) = projectOntoConstraints(model, data, q, drivers);
+    computeConstraints(model, data, q, zero);
+    for (std::size_t c = 0; c < others.size(); ++c)
+      Ao.col(static_cast<Eigen::Index>(c)) = data.constraintJacobian.col(others[c]);
+    Eigen::MatrixXd Ad(nc, static_cast<Eigen::Index>(drivers.size()));
+    for (std::size_t i = 0; i < drivers.size(); ++i)
+      Ad.col(static_cast<Eigen::Index>(i)) = data.constraintJacobian.col(drivers[i]);
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qrAo(Ao);
+    if (qrAo.rank() < static_cast<Eigen::Index>(others.size())) {
+      fail(knotLabel(k, t) + ": ∂h/∂q_others is singular (the drivers do not parameterize the "
+           "manifold here)");
+    }
+    const Eigen::VectorXd dqo = qrAo.solve(-Ad * dqd);
+    for (std::size_t i = 0; i < drivers.size(); ++i) dq(drivers[i]) = dqd(static_cast<Eigen::Index>(i));
+    for (std::size_t c = 0; c < others.size(); ++c) dq(others[c]) = dqo(static_cast<Eigen::Index>(c));
+    computeConstraints(model, data, q, dq);  // Ȧ q̇ at the final q̇
+    const Eigen::VectorXd ddqo = qrAo.solve(-Ad * ddqd - data.constraintDrift);
+    for (std::size_t i = 0; i < drivers.size(); ++i) qdd(drivers[i]) = ddqd(static_cast<Eigen::Index>(i));
+    for (std::size_t c = 0; c < others.size(); ++c) qdd(others[c]) = ddqo(static_cast<Eigen::Index>(c));
+    out.velocityResidual(k) = nc ? (data.constraintJacobian * dq).cwiseAbs().maxCoeff() : 0.0;
+    out.accelerationResidual(k) =
+        nc ? (data.constraintJacobian * qdd + data.constraintDrift).cwiseAbs().maxCoeff() : 0.0;
+    if (!(out.constraintResidual(k) < 1e-10)) {
+      fail(knotLabel(k, t) + ": Newton on h(q) = 0 stopped at ‖h‖∞ = " +
+           std::to_string(out.constraintResidual(k)));
+    }
+
+    const TensionDistribution td = distributeTensions(model, data, q, dq, qdd, options.tensions);
+    if (!td.converged) fail(knotLabel(k, t) + ": tension distribution: " + td.message);
+    out.dynamicsResidual(k) = td.relativeResidual;
+    const DynamicsStatus st = computeDynamics(model, data, q, dq, td.tension);
+    if (!st.ok()) fail(knotLabel(k, t) + ": forward dynamics: " + st.message);
+    out.forwardDynamicsError(k) = (data.qdd - qdd).cwiseAbs().maxCoeff();
+
+    states.col(k) << q, dq;
+    inputs.col(k) = td.tension;
+    derivatives.col(k) << dq, qdd;
+    out.accelerations.col(k) = qdd;
+    out.lambda.col(k) = td.lambda;
+  }
+  out.trajectory = Trajectory(model.configNames(), model.inputNames(), times, states, inputs);
+  out.trajectory.setStateDerivatives(derivatives);
+  return out;
+}
+
+}  // namespace trellis::hand

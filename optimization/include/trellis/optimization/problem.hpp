@@ -1,0 +1,103 @@
+// trellis/optimization/problem.hpp — an optimal control problem on a trellis model.
+//
+//   minimize    ∫₀ᵀ uᵀ R u + (x − x_goal)ᵀ Q (x − x_goal) dt + (x(T) − x_goal)ᵀ Q_f (x(T) − x_goal)
+//               + w_T · T
+//   subject to  ẋ = f(x, u) = [q̇; q̈(q, q̇, u)]            (the core's constrained forward dynamics)
+//               h(q) = 0, A(q) q̇ = 0                      (closed chains: at every knot)
+//               x_lower ≤ x(t) ≤ x_upper, u_lower ≤ u(t) ≤ u_upper
+//               x(0)_i = x_initial_i for the fixed entries, x(T)_i = x_final_i likewise
+//               T fixed, or T_min ≤ T ≤ T_max
+//
+// x = [q; q̇] (2n) in the model's configuration order, u (m) in its input order. The problem is
+// transcribed by direct collocation (transcription.hpp) and solved with Ipopt (optimizer.hpp).
+// A problem can also be read from a JSON problem file (optimization/README.md describes it).
+#pragma once
+
+#include "trellis/control/trajectory.hpp"
+#include "trellis/core/model.hpp"
+
+#include <Eigen/Core>
+
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace trellis {
+
+/// Bad problem description (C++ struct or problem file). The message names the field (for a
+/// file, the file and the JSON path, e.g. "cost.Q.dtheta") and the offending value.
+class ProblemError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// The collocation rule that turns ẋ = f(x, u) into algebraic defects (transcription.hpp).
+enum class CollocationMethod {
+  kHermiteSimpson,  ///< separated Hermite–Simpson, midpoint states and inputs are variables (O(h⁴))
+  kTrapezoidal,     ///< trapezoidal rule (O(h²)), the cheap option
+};
+
+struct OptimalControlProblem {
+  /// The model; shared so that the problem, its transcription and results can outlive the scene.
+  std::shared_ptr<const Model> model;
+
+  CollocationMethod method = CollocationMethod::kHermiteSimpson;
+  int knots = 41;  ///< N ≥ 2 knots t_k = k T / (N − 1)
+
+  /// Horizon T: fixed when minHorizon == maxHorizon (== horizon), otherwise free in
+  /// [minHorizon, maxHorizon] with `horizon` as its initial guess.
+  double horizon = 1.0;
+  double minHorizon = 1.0;
+  double maxHorizon = 1.0;
+  bool freeHorizon() const { return minHorizon < maxHorizon; }
+  /// Sets a fixed horizon T.
+  void setFixedHorizon(double T) { horizon = minHorizon = maxHorizon = T; }
+
+  /// Boundary states (2n each) and which entries are fixed (2n flags each, default all fixed).
+  Eigen::VectorXd initialState, finalState;
+  std::vector<bool> initialFixed, finalFixed;
+
+  /// Bounds (2n, m); ±infinity for none (the defaults set by resize()).
+  Eigen::VectorXd stateLower, stateUpper, inputLower, inputUpper;
+
+  /// Cost weights: R (m×m), Q, Qf (2n×2n), all symmetric positive semidefinite; goal state
+  /// (2n); w_T ≥ 0 weighs the horizon (minimum time when the other terms are small).
+  Eigen::MatrixXd R, Q, Qf;
+  Eigen::VectorXd goalState;
+  double timeWeight = 0.0;
+
+  /// Initial guess. Without one, the states are interpolated linearly from initialState to
+  /// finalState and the inputs are 0 (clamped into their bounds).
+  std::optional<Trajectory> initialGuess;
+
+  OptimalControlProblem() = default;
+  /// Sizes every vector for `model` with defaults: zero states, all boundary entries fixed, no
+  /// bounds, R = I, Q = Qf = 0, goal = 0.
+  explicit OptimalControlProblem(std::shared_ptr<const Model> model);
+
+  int nq() const;  ///< n
+  int nx() const { return 2 * nq(); }
+  int nu() const;  ///< m
+
+  /// Names of the state entries: the configuration names, then "d" + each name (the trajectory
+  /// CSV layout).
+  std::vector<std::string> stateNames() const;
+
+  /// Throws ProblemError naming the first bad field (size, non-finite value, lower > upper,
+  /// a fixed boundary value outside the state bounds, a non-symmetric or indefinite weight, a
+  /// nonholonomic constraint, which the transcription does not support).
+  void validate() const;
+};
+
+/// Parses a problem file (JSON text). `source` is the file name used in messages and `baseDir`
+/// the directory against which the "scene" path (and an "initial_guess" CSV path) is resolved.
+/// Throws ProblemError naming the field, or trellis::ModelError for a bad scene file.
+OptimalControlProblem parseProblem(const std::string& jsonText, const std::string& source,
+                                   const std::string& baseDir);
+
+/// Reads and parses a problem file; paths inside are relative to the file's directory.
+OptimalControlProblem loadProblem(const std::string& path);
+
+}  // namespace trellis

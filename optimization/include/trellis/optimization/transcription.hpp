@@ -1,0 +1,121 @@
+// trellis/optimization/transcription.hpp — direct collocation: the optimal control problem of
+// problem.hpp as a sparse nonlinear program
+//
+//   minimize J(z)   subject to   g(z) = 0,   z_lower ≤ z ≤ z_upper,
+//
+// with exact first derivatives: ∂g/∂z is assembled from the core's A = ∂f/∂x and B = ∂f/∂u
+// (computeLinearization) and ∂J/∂z is analytic. The NLP is independent of the solver; the Ipopt
+// adapter (optimizer.hpp) and the tests' finite-difference checker both call it.
+//
+// Knots t_k = k h, h = T/(N − 1), k = 0 … N − 1. Points p are where f is evaluated:
+//  - Hermite–Simpson (separated form, Betts' "HS separated"): the knots and the interval
+//    midpoints t_{k+½}, in time order (knot k is point 2k, midpoint k is point 2k + 1; P = 2N − 1).
+//    The midpoint state x_m and the midpoint input u_m are variables; per interval [a, b]:
+//      Simpson defect   x_b − x_a − h/6 (f_a + 4 f_m + f_b)       = 0   (2n rows)
+//      Hermite defect   x_m − (x_a + x_b)/2 − h/8 (f_a − f_b)     = 0   (2n rows)
+//    The state is the cubic Hermite spline of the knots, the input the quadratic through
+//    u_a, u_m, u_b; local error O(h⁵), global O(h⁴). The separated form costs more variables than
+//    the compressed one but keeps each row's Jacobian a few dense blocks (best for a sparse LDLᵀ).
+//  - trapezoidal: the knots only (P = N); per interval x_b − x_a − h/2 (f_a + f_b) = 0; the input
+//    is piecewise linear; global error O(h²).
+// The running cost uses the same quadrature (Simpson weights h/6, 4h/6, h/6, or h/2, h/2).
+//
+// Closed chains (nc holonomic rows h(q), Jacobian A_c = ∂h/∂q): every knot adds the rows
+//   h(q_k) = 0 (nc),  A_c(q_k) q̇_k = 0 (nc),
+// with ∂(A_c q̇)/∂q from the core (data.constraintVelocityJacobian). The discrete dynamics keep
+// these only to the collocation error, so imposing them at every knot over-determines the NLP; as
+// Posa, Kuindersma & Tedrake (2016) do, each interval gets slack γ_k, μ_k (nc each) that enter the
+// end knot's defect along the constraint normals:  Simpson (or trapezoidal) defect −
+// [A_c(q_b)ᵀ γ_k; A_c(q_b)ᵀ μ_k]. At a solution γ, μ are of the order of the collocation error.
+// ∂(A_cᵀ γ)/∂q = Σ_r γ_r ∇²h_r; the Hessians ∇²h_r are exact, from the core's constraint drift
+// Ȧ q̇ = q̇ᵀ ∇²h q̇ evaluated at unit and paired unit velocities (polarization).
+//
+// Variable layout: z = [x_0, u_0, x_1, u_1, …, x_{P−1}, u_{P−1}, γ_0, μ_0, …, γ_{N−2}, μ_{N−2}, T]
+// (slack only with constraints, T only when free). Constraint layout: the defects interval by
+// interval, then the knot constraints knot by knot.
+//
+// Evaluations are cached: f (and A, B for derivatives) are computed once per distinct z, whatever
+// the order of the calls: z is compared with the cached copy (a memcmp), which covers Ipopt's
+// new_x flag and also callers that do not pass one (the tests' checker).
+#pragma once
+
+#include "trellis/control/trajectory.hpp"
+#include "trellis/optimization/problem.hpp"
+
+#include <Eigen/Core>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace trellis {
+
+/// How ∂f/∂x, ∂f/∂u are obtained for the constraint Jacobian.
+enum class DerivativeMode {
+  kExact,             ///< the core's computeLinearization (the product)
+  kFiniteDifference,  ///< central differences of computeDynamics at every point, step
+                      ///< ε^(1/3)·max(1, |v|) (a baseline for the benchmark; same NLP, same pattern)
+};
+
+class Transcription {
+ public:
+  /// Validates the problem (throws ProblemError) and sizes every buffer.
+  explicit Transcription(OptimalControlProblem problem,
+                         DerivativeMode derivatives = DerivativeMode::kExact);
+  ~Transcription();
+  Transcription(Transcription&&) noexcept;
+  Transcription& operator=(Transcription&&) noexcept;
+
+  const OptimalControlProblem& problem() const;
+
+  // ---- Sizes and layout ----------------------------------------------------------------------
+  int numVariables() const;
+  int numConstraints() const;
+  int numPoints() const;       ///< P: knots (and midpoints for Hermite–Simpson)
+  int numKnots() const;        ///< N
+  int stateIndex(int point) const;   ///< index in z of x at point p (2n entries follow)
+  int inputIndex(int point) const;   ///< index in z of u at point p (m entries follow)
+  int slackIndex(int interval) const;  ///< index of γ_k (then μ_k); −1 without constraints
+  int horizonIndex() const;    ///< index of T in z, −1 when the horizon is fixed
+  int knotPoint(int knot) const;     ///< point index of knot k
+  /// Number of the first constraint row of knot k's constraint rows (2 nc rows), −1 without.
+  int knotConstraintRow(int knot) const;
+
+  /// The declared sparsity pattern of ∂g/∂z (row, column pairs; fixed for the problem).
+  const std::vector<int>& jacobianRows() const;
+  const std::vector<int>& jacobianCols() const;
+
+  /// Bounds on z (fixed boundary entries have equal bounds; no bound is ±infinity).
+  void variableBounds(Eigen::VectorXd& lower, Eigen::VectorXd& upper) const;
+  /// The initial guess z₀ (problem.initialGuess, else linear interpolation), inside the bounds.
+  Eigen::VectorXd initialGuess() const;
+
+  // ---- Evaluation: z has numVariables() entries. Each returns false when the dynamics cannot
+  // be evaluated at some point (lastError() names the point and the time); never throws. ------
+  bool evalCost(const double* z, double& cost);
+  bool evalCostGradient(const double* z, double* gradient);    ///< numVariables()
+  bool evalConstraints(const double* z, double* g);            ///< numConstraints()
+  bool evalJacobian(const double* z, double* values);          ///< in jacobianRows/Cols order
+  const std::string& lastError() const;
+
+  /// Number of core evaluations so far (computeDynamics and computeLinearization calls, per
+  /// point), a measure of the caching.
+  long dynamicsEvaluations() const;
+  long linearizationEvaluations() const;
+
+  // ---- Reading a solution --------------------------------------------------------------------
+  double horizon(const double* z) const;
+  /// The knots as a Trajectory (times, states 2n×N, inputs m×N, the model's names).
+  Trajectory trajectory(const double* z) const;
+  /// Hermite–Simpson midpoints: states 2n×(N−1) and inputs m×(N−1); empty for trapezoidal.
+  Eigen::MatrixXd midpointStates(const double* z) const;
+  Eigen::MatrixXd midpointInputs(const double* z) const;
+  /// max |γ|, |μ| over the intervals (0 without constraints).
+  double maxSlack(const double* z) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace trellis

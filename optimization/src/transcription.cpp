@@ -1,0 +1,574 @@
+// transcription.cpp — the direct-collocation NLP (layout and formulas in transcription.hpp).
+#include "trellis/optimization/transcription.hpp"
+
+#include "trellis/core/data.hpp"
+#include "trellis/core/dynamics.hpp"
+#include "trellis/core/linearization.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <sstream>
+
+namespace trellis {
+
+namespace {
+
+/// Writes the Jacobian in triplet form: in structure mode it records (row, col) and ignores the
+/// value; in value mode it writes the values in the same order. One routine for both keeps the
+/// pattern and the values consistent by construction.
+struct TripletWriter {
+  bool structure = false;
+  std::vector<int>* rows = nullptr;
+  std::vector<int>* cols = nullptr;
+  double* values = nullptr;
+  int next = 0;
+  void put(int r, int c, double v) {
+    if (structure) {
+      rows->push_back(r);
+      cols->push_back(c);
+    } else {
+      values[next++] = v;
+    }
+  }
+};
+
+}  // namespace
+
+struct Transcription::Impl {
+  OptimalControlProblem problem;
+  DerivativeMode derivatives;
+  const Model& model;
+  int n, nx, m, nc, N, P;
+  bool hermiteSimpson, freeT;
+  int stride;         // nx + m: one point's variables
+  int slackStart;     // first slack variable
+  int horizonIdx;     // −1 when fixed
+  int numVars, numCons, defectRows;
+
+  std::vector<int> jacRows, jacCols;
+
+  Data data, constraintData;
+  // Cache of the last point at which the dynamics were evaluated.
+  Eigen::VectorXd cachedZ;
+  bool haveDynamics = false, haveLinearization = false;
+  Eigen::MatrixXd F;                        // nx×P: f at every point
+  std::vector<Eigen::MatrixXd> Ap, Bp;      // P blocks: ∂f/∂x (nx×nx), ∂f/∂u (nx×m)
+  Eigen::MatrixXd hValue;                   // nc×N: h(q_k)
+  std::vector<Eigen::MatrixXd> Ac, Avq;     // N blocks nc×n: A_c(q_k), ∂(A_c q̇)/∂q at knot k
+  std::vector<Eigen::MatrixXd> hessian;     // N·nc blocks n×n: ∇²h_r(q_k)
+  Eigen::MatrixXd slackTop, slackBottom;    // n×n: Σ γ_r ∇²h_r, Σ μ_r ∇²h_r (scratch)
+  Eigen::VectorXd q, dq, u, qp, dqp, up, qddPlus;
+  std::string error;
+  long dynamicsCount = 0, linearizationCount = 0;
+
+  Impl(OptimalControlProblem p, DerivativeMode mode)
+      : problem((p.validate(), std::move(p))),
+        derivatives(mode),
+        model(*problem.model),
+        n(model.nq()),
+        nx(2 * n),
+        m(model.nu()),
+        nc(model.nc()),
+        N(problem.knots),
+        P(problem.method == CollocationMethod::kHermiteSimpson ? 2 * problem.knots - 1 : problem.knots),
+        hermiteSimpson(problem.method == CollocationMethod::kHermiteSimpson),
+        freeT(problem.freeHorizon()),
+        stride(2 * model.nq() + model.nu()),
+        data(model),
+        constraintData(model) {
+    slackStart = P * stride;
+    const int slackVars = nc > 0 ? (N - 1) * 2 * nc : 0;
+    horizonIdx = freeT ? slackStart + slackVars : -1;
+    numVars = slackStart + slackVars + (freeT ? 1 : 0);
+    defectRows = (N - 1) * (hermiteSimpson ? 2 : 1) * nx;
+    numCons = defectRows + N * 2 * nc;
+
+    cachedZ = Eigen::VectorXd::Constant(numVars, std::numeric_limits<double>::quiet_NaN());
+    F = Eigen::MatrixXd::Zero(nx, P);
+    Ap.assign(P, Eigen::MatrixXd::Zero(nx, nx));
+    Bp.assign(P, Eigen::MatrixXd::Zero(nx, m));
+    hValue = Eigen::MatrixXd::Zero(nc, N);
+    Ac.assign(N, Eigen::MatrixXd::Zero(nc, n));
+    Avq.assign(N, Eigen::MatrixXd::Zero(nc, n));
+    hessian.assign(static_cast<std::size_t>(N) * nc, Eigen::MatrixXd::Zero(n, n));
+    slackTop = Eigen::MatrixXd::Zero(n, n);
+    slackBottom = Eigen::MatrixXd::Zero(n, n);
+    q.resize(n); dq.resize(n); u.resize(m); qp.resize(n); dqp.resize(n); up.resize(m);
+    qddPlus.resize(n);
+
+    // The pattern: run the value routine in structure mode (values are not looked at).
+    const Eigen::VectorXd z = initialGuessVector();
+    TripletWriter w;
+    w.structure = true;
+    w.rows = &jacRows;
+    w.cols = &jacCols;
+    writeJacobian(z.data(), w);
+  }
+
+  double horizonOf(const double* z) const { return freeT ? z[horizonIdx] : problem.horizon; }
+  int knotPoint(int k) const { return hermiteSimpson ? 2 * k : k; }
+  double pointTime(int p, double T) const { return T * p / (P - 1); }
+
+  std::string describePoint(int p, double T) const {
+    std::ostringstream s;
+    if (hermiteSimpson && p % 2 == 1) {
+      s << "midpoint of interval " << p / 2;
+    } else {
+      s << "knot " << (hermiteSimpson ? p / 2 : p);
+    }
+    s << " (t = " << pointTime(p, T) << ")";
+    return s.str();
+  }
+
+  Eigen::VectorXd initialGuessVector() const {
+    Eigen::VectorXd z = Eigen::VectorXd::Zero(numVars);
+    const double T = problem.horizon;
+    for (int p = 0; p < P; ++p) {
+      const double s = static_cast<double>(p) / (P - 1);
+      Eigen::VectorXd x(nx), uu(m);
+      if (problem.initialGuess) {
+        // Linear interpolation of the guess's knots, its time span mapped onto [0, T].
+        const Trajectory& g = *problem.initialGuess;
+        const double t = g.startTime() + s * (g.endTime() - g.startTime());
+        int k = 0;
+        while (k + 2 < g.size() && g.times()(k + 1) <= t) ++k;
+        if (g.size() == 1) {
+          x = g.states().col(0);
+          uu = g.inputs().col(0);
+        } else {
+          const double a = std::clamp((t - g.times()(k)) / (g.times()(k + 1) - g.times()(k)), 0.0, 1.0);
+          x = (1 - a) * g.states().col(k) + a * g.states().col(k + 1);
+          uu = (1 - a) * g.inputs().col(k) + a * g.inputs().col(k + 1);
+        }
+      } else {
+        x = (1 - s) * problem.initialState + s * problem.finalState;
+        uu.setZero();
+      }
+      x = x.cwiseMax(problem.stateLower).cwiseMin(problem.stateUpper);
+      uu = uu.cwiseMax(problem.inputLower).cwiseMin(problem.inputUpper);
+      z.segment(p * stride, nx) = x;
+      z.segment(p * stride + nx, m) = uu;
+    }
+    // Fixed boundary entries exactly at their values.
+    const int last = knotPoint(N - 1) * stride;
+    for (int i = 0; i < nx; ++i) {
+      if (problem.initialFixed[i]) z(i) = problem.initialState(i);
+      if (problem.finalFixed[i]) z(last + i) = problem.finalState(i);
+    }
+    if (freeT) z(horizonIdx) = T;
+    return z;
+  }
+
+  void bounds(Eigen::VectorXd& lower, Eigen::VectorXd& upper) const {
+    constexpr double inf = std::numeric_limits<double>::infinity();
+    lower = Eigen::VectorXd::Constant(numVars, -inf);
+    upper = Eigen::VectorXd::Constant(numVars, inf);
+    for (int p = 0; p < P; ++p) {
+      lower.segment(p * stride, nx) = problem.stateLower;
+      upper.segment(p * stride, nx) = problem.stateUpper;
+      lower.segment(p * stride + nx, m) = problem.inputLower;
+      upper.segment(p * stride + nx, m) = problem.inputUpper;
+    }
+    const int last = knotPoint(N - 1) * stride;
+    for (int i = 0; i < nx; ++i) {
+      if (problem.initialFixed[i]) lower(i) = upper(i) = problem.initialState(i);
+      if (problem.finalFixed[i]) lower(last + i) = upper(last + i) = problem.finalState(i);
+    }
+    if (freeT) {
+      lower(horizonIdx) = problem.minHorizon;
+      upper(horizonIdx) = problem.maxHorizon;
+    }
+  }
+
+  // ---- Core evaluations ------------------------------------------------------------------------
+
+  bool statusOk(const DynamicsStatus& status, int p, double T) {
+    if (status.ok() && data.qdd.allFinite()) return true;
+    error = "the dynamics failed at " + describePoint(p, T) + ": " +
+            (status.message.empty() ? std::string("non-finite q''") : status.message);
+    return false;
+  }
+
+  /// ∂q̈/∂[x; u] by central differences of computeDynamics (DerivativeMode::kFiniteDifference).
+  bool finiteDifferenceBlocks(int p, double T) {
+    const double eps = std::cbrt(std::numeric_limits<double>::epsilon());
+    Eigen::MatrixXd& A = Ap[p];
+    Eigen::MatrixXd& B = Bp[p];
+    A.setZero();
+    B.setZero();
+    A.topRightCorner(n, n).setIdentity();
+    for (int j = 0; j < nx + m; ++j) {
+      double plus = 0.0, minus = 0.0;
+      for (int side = 0; side < 2; ++side) {
+        qp = q; dqp = dq; up = u;
+        double* v = j < n ? &qp(j) : (j < nx ? &dqp(j - n) : &up(j - nx));
+        const double step = eps * std::max(1.0, std::abs(*v));
+        const double base = *v;
+        *v = side == 0 ? base + step : base - step;
+        (side == 0 ? plus : minus) = *v;
+        ++dynamicsCount;
+        if (!statusOk(computeDynamics(model, data, qp, dqp, up), p, T)) return false;
+        if (side == 0) {
+          qddPlus = data.qdd;
+        } else {
+          if (j < nx) {
+            A.block(n, j, n, 1) = (qddPlus - data.qdd) / (plus - minus);
+          } else {
+            B.block(n, j - nx, n, 1) = (qddPlus - data.qdd) / (plus - minus);
+          }
+        }
+      }
+    }
+    return true;
+  }
+
+  /// ∇²h_r(q) for every constraint row, exactly: Ȧ q̇ = q̇ᵀ ∇²h q̇ (holonomic rows), so
+  /// ∇²h_ii = drift(e_i) and ∇²h_ij = (drift(e_i + e_j) − drift(e_i) − drift(e_j)) / 2.
+  void constraintHessians(int k) {
+    qp = q;
+    Eigen::VectorXd& v = dqp;
+    for (int i = 0; i < n; ++i) {
+      v.setZero();
+      v(i) = 1.0;
+      computeConstraints(model, constraintData, qp, v);
+      for (int r = 0; r < nc; ++r) hessian[k * nc + r](i, i) = constraintData.constraintDrift(r);
+    }
+    for (int i = 0; i < n; ++i) {
+      for (int j = i + 1; j < n; ++j) {
+        v.setZero();
+        v(i) = 1.0;
+        v(j) = 1.0;
+        computeConstraints(model, constraintData, qp, v);
+        for (int r = 0; r < nc; ++r) {
+          Eigen::MatrixXd& H = hessian[k * nc + r];
+          H(i, j) = H(j, i) = 0.5 * (constraintData.constraintDrift(r) - H(i, i) - H(j, j));
+        }
+      }
+    }
+  }
+
+  /// f (and with `linearize` A, B and the constraint derivatives) at every point, once per z.
+  bool evaluate(const double* z, bool linearize) {
+    if (std::memcmp(cachedZ.data(), z, sizeof(double) * numVars) != 0) {
+      std::memcpy(cachedZ.data(), z, sizeof(double) * numVars);
+      haveDynamics = haveLinearization = false;
+    }
+    if (linearize ? haveLinearization : (haveDynamics || haveLinearization)) return true;
+    const double T = horizonOf(z);
+    for (int p = 0; p < P; ++p) {
+      const double* x = z + p * stride;
+      q = Eigen::Map<const Eigen::VectorXd>(x, n);
+      dq = Eigen::Map<const Eigen::VectorXd>(x + n, n);
+      u = Eigen::Map<const Eigen::VectorXd>(x + nx, m);
+      const bool isKnot = !hermiteSimpson || p % 2 == 0;
+      const int k = hermiteSimpson ? p / 2 : p;
+      if (linearize && (derivatives == DerivativeMode::kExact || (isKnot && nc > 0))) {
+        ++linearizationCount;
+        if (!statusOk(computeLinearization(model, data, q, dq, u), p, T)) return false;
+        if (!data.A.allFinite() || !data.B.allFinite()) {
+          error = "the linearization is not finite at " + describePoint(p, T);
+          return false;
+        }
+        if (derivatives == DerivativeMode::kExact) {
+          Ap[p] = data.A;
+          Bp[p] = data.B;
+        }
+        if (isKnot && nc > 0) Avq[k] = data.constraintVelocityJacobian;
+      } else {
+        ++dynamicsCount;
+        if (!statusOk(computeDynamics(model, data, q, dq, u), p, T)) return false;
+      }
+      F.col(p).head(n) = dq;
+      F.col(p).tail(n) = data.qdd;
+      if (isKnot && nc > 0) {
+        hValue.col(k) = data.constraintValue;
+        Ac[k] = data.constraintJacobian;
+        if (linearize) constraintHessians(k);
+      }
+      if (linearize && derivatives == DerivativeMode::kFiniteDifference) {
+        if (!finiteDifferenceBlocks(p, T)) return false;
+      }
+    }
+    haveDynamics = true;
+    haveLinearization = haveLinearization || linearize;
+    return true;
+  }
+
+  // ---- Cost ------------------------------------------------------------------------------------
+
+  /// Quadrature weight of point p divided by h (Simpson 1/6, 4/6, 1/6 per interval; trapezoid ½, ½).
+  double weightOverH(int p) const {
+    if (hermiteSimpson) {
+      if (p % 2 == 1) return 4.0 / 6.0;
+      return (p == 0 || p == P - 1) ? 1.0 / 6.0 : 2.0 / 6.0;
+    }
+    return (p == 0 || p == P - 1) ? 0.5 : 1.0;
+  }
+
+  double cost(const double* z, double* gradient) const {
+    const double T = horizonOf(z);
+    const double h = T / (N - 1);
+    double running = 0.0;
+    if (gradient) std::fill(gradient, gradient + numVars, 0.0);
+    Eigen::VectorXd e(nx);
+    for (int p = 0; p < P; ++p) {
+      const Eigen::Map<const Eigen::VectorXd> x(z + p * stride, nx), uu(z + p * stride + nx, m);
+      e = x - problem.goalState;
+      const double w = weightOverH(p) * h;
+      running += w * (uu.dot(problem.R * uu) + e.dot(problem.Q * e));
+      if (gradient) {
+        Eigen::Map<Eigen::VectorXd>(gradient + p * stride, nx) = 2.0 * w * (problem.Q * e);
+        Eigen::Map<Eigen::VectorXd>(gradient + p * stride + nx, m) = 2.0 * w * (problem.R * uu);
+      }
+    }
+    const int last = knotPoint(N - 1) * stride;
+    e = Eigen::Map<const Eigen::VectorXd>(z + last, nx) - problem.goalState;
+    const double terminal = e.dot(problem.Qf * e);
+    if (gradient) {
+      Eigen::Map<Eigen::VectorXd>(gradient + last, nx) += 2.0 * (problem.Qf * e);
+      // The running cost is proportional to h = T/(N − 1): ∂/∂T = running / T.
+      if (freeT) gradient[horizonIdx] = running / T + problem.timeWeight;
+    }
+    return running + terminal + problem.timeWeight * T;
+  }
+
+  // ---- Constraints -----------------------------------------------------------------------------
+
+  Eigen::Map<const Eigen::VectorXd> state(const double* z, int p) const {
+    return Eigen::Map<const Eigen::VectorXd>(z + p * stride, nx);
+  }
+
+  void constraints(const double* z, double* g) const {
+    const double T = horizonOf(z);
+    const double h = T / (N - 1);
+    for (int k = 0; k < N - 1; ++k) {
+      const int a = knotPoint(k), b = knotPoint(k + 1);
+      Eigen::Map<Eigen::VectorXd> defect(g + k * (hermiteSimpson ? 2 : 1) * nx, nx);
+      if (hermiteSimpson) {
+        const int mid = a + 1;
+        defect = state(z, b) - state(z, a) - h / 6.0 * (F.col(a) + 4.0 * F.col(mid) + F.col(b));
+        Eigen::Map<Eigen::VectorXd>(g + (2 * k + 1) * nx, nx) =
+            state(z, mid) - 0.5 * (state(z, a) + state(z, b)) - h / 8.0 * (F.col(a) - F.col(b));
+      } else {
+        defect = state(z, b) - state(z, a) - h / 2.0 * (F.col(a) + F.col(b));
+      }
+      if (nc > 0) {
+        const Eigen::Map<const Eigen::VectorXd> gamma(z + slackStart + k * 2 * nc, nc);
+        const Eigen::Map<const Eigen::VectorXd> mu(z + slackStart + k * 2 * nc + nc, nc);
+        defect.head(n) -= Ac[k + 1].transpose() * gamma;
+        defect.tail(n) -= Ac[k + 1].transpose() * mu;
+      }
+    }
+    for (int k = 0; k < N && nc > 0; ++k) {
+      const Eigen::Map<const Eigen::VectorXd> dqk(z + knotPoint(k) * stride + n, n);
+      Eigen::Map<Eigen::VectorXd>(g + defectRows + k * 2 * nc, nc) = hValue.col(k);
+      Eigen::Map<Eigen::VectorXd>(g + defectRows + k * 2 * nc + nc, nc) = Ac[k] * dqk;
+    }
+  }
+
+  // ---- Constraint Jacobian ---------------------------------------------------------------------
+
+  /// Columns col0 … col0 + nx − 1, rows row0 … row0 + nx − 1: d·I + c·A (A = [[0, I], [·, ·]]),
+  /// plus `top`/`bottom` (n×n, added to the q columns of the q / q̇ rows) when given. Entries
+  /// that are structurally zero (d = 0 or c = 0) are not written.
+  void stateBlock(TripletWriter& w, int row0, int col0, double d, double c, const Eigen::MatrixXd& A,
+                  const Eigen::MatrixXd* top, const Eigen::MatrixXd* bottom) const {
+    for (int i = 0; i < n; ++i) {
+      if (top) {
+        for (int j = 0; j < n; ++j) w.put(row0 + i, col0 + j, (i == j ? d : 0.0) + (*top)(i, j));
+      } else if (d != 0.0) {
+        w.put(row0 + i, col0 + i, d);
+      }
+      if (c != 0.0) w.put(row0 + i, col0 + n + i, c);
+    }
+    for (int i = n; i < nx; ++i) {
+      if (c == 0.0) {
+        if (d != 0.0) w.put(row0 + i, col0 + i, d);
+        continue;
+      }
+      for (int j = 0; j < nx; ++j) {
+        double v = (i == j ? d : 0.0) + c * A(i, j);
+        if (bottom && j < n) v += (*bottom)(i - n, j);
+        w.put(row0 + i, col0 + j, v);
+      }
+    }
+  }
+
+  /// c·B in the q̇ rows (the q rows of B are zero).
+  void inputBlock(TripletWriter& w, int row0, int col0, double c, const Eigen::MatrixXd& B) const {
+    for (int i = n; i < nx; ++i)
+      for (int j = 0; j < m; ++j) w.put(row0 + i, col0 + j, c * B(i, j));
+  }
+
+  template <typename Vector>
+  void horizonColumn(TripletWriter& w, int row0, const Vector& v) const {
+    if (!freeT) return;
+    for (int i = 0; i < nx; ++i) w.put(row0 + i, horizonIdx, v(i));
+  }
+
+  void writeJacobian(const double* z, TripletWriter& w) {
+    const double T = horizonOf(z);
+    const double h = T / (N - 1);
+    const double dhdT = 1.0 / (N - 1);
+    for (int k = 0; k < N - 1; ++k) {
+      const int a = knotPoint(k), b = knotPoint(k + 1);
+      const int row0 = k * (hermiteSimpson ? 2 : 1) * nx;
+      const Eigen::MatrixXd* top = nullptr;
+      const Eigen::MatrixXd* bottom = nullptr;
+      if (nc > 0) {
+        // −∂(A_c(q_b)ᵀ γ)/∂q_b = −Σ_r γ_r ∇²h_r(q_b), likewise for μ.
+        slackTop.setZero();
+        slackBottom.setZero();
+        for (int r = 0; r < nc; ++r) {
+          slackTop -= z[slackStart + k * 2 * nc + r] * hessian[(k + 1) * nc + r];
+          slackBottom -= z[slackStart + k * 2 * nc + nc + r] * hessian[(k + 1) * nc + r];
+        }
+        top = &slackTop;
+        bottom = &slackBottom;
+      }
+      const double ws = hermiteSimpson ? h / 6.0 : h / 2.0;  // weight of f_a and f_b
+      stateBlock(w, row0, a * stride, -1.0, -ws, Ap[a], nullptr, nullptr);
+      inputBlock(w, row0, a * stride + nx, -ws, Bp[a]);
+      if (hermiteSimpson) {
+        stateBlock(w, row0, (a + 1) * stride, 0.0, -4.0 * ws, Ap[a + 1], nullptr, nullptr);
+        inputBlock(w, row0, (a + 1) * stride + nx, -4.0 * ws, Bp[a + 1]);
+      }
+      stateBlock(w, row0, b * stride, 1.0, -ws, Ap[b], top, bottom);
+      inputBlock(w, row0, b * stride + nx, -ws, Bp[b]);
+      if (hermiteSimpson) {
+        horizonColumn(w, row0, -dhdT / 6.0 * (F.col(a) + 4.0 * F.col(a + 1) + F.col(b)));
+      } else {
+        horizonColumn(w, row0, -dhdT / 2.0 * (F.col(a) + F.col(b)));
+      }
+      if (nc > 0) {
+        const int s = slackStart + k * 2 * nc;
+        for (int i = 0; i < n; ++i)
+          for (int r = 0; r < nc; ++r) w.put(row0 + i, s + r, -Ac[k + 1](r, i));
+        for (int i = 0; i < n; ++i)
+          for (int r = 0; r < nc; ++r) w.put(row0 + n + i, s + nc + r, -Ac[k + 1](r, i));
+      }
+      if (hermiteSimpson) {
+        const int row1 = row0 + nx;
+        stateBlock(w, row1, a * stride, -0.5, -h / 8.0, Ap[a], nullptr, nullptr);
+        inputBlock(w, row1, a * stride + nx, -h / 8.0, Bp[a]);
+        stateBlock(w, row1, (a + 1) * stride, 1.0, 0.0, Ap[a + 1], nullptr, nullptr);
+        stateBlock(w, row1, b * stride, -0.5, h / 8.0, Ap[b], nullptr, nullptr);
+        inputBlock(w, row1, b * stride + nx, h / 8.0, Bp[b]);
+        horizonColumn(w, row1, -dhdT / 8.0 * (F.col(a) - F.col(b)));
+      }
+    }
+    for (int k = 0; k < N && nc > 0; ++k) {
+      const int row0 = defectRows + k * 2 * nc;
+      const int col0 = knotPoint(k) * stride;
+      for (int r = 0; r < nc; ++r)
+        for (int j = 0; j < n; ++j) w.put(row0 + r, col0 + j, Ac[k](r, j));
+      for (int r = 0; r < nc; ++r) {
+        for (int j = 0; j < n; ++j) w.put(row0 + nc + r, col0 + j, Avq[k](r, j));
+        for (int j = 0; j < n; ++j) w.put(row0 + nc + r, col0 + n + j, Ac[k](r, j));
+      }
+    }
+  }
+};
+
+Transcription::Transcription(OptimalControlProblem problem, DerivativeMode derivatives)
+    : impl_(std::make_unique<Impl>(std::move(problem), derivatives)) {}
+Transcription::~Transcription() = default;
+Transcription::Transcription(Transcription&&) noexcept = default;
+Transcription& Transcription::operator=(Transcription&&) noexcept = default;
+
+const OptimalControlProblem& Transcription::problem() const { return impl_->problem; }
+int Transcription::numVariables() const { return impl_->numVars; }
+int Transcription::numConstraints() const { return impl_->numCons; }
+int Transcription::numPoints() const { return impl_->P; }
+int Transcription::numKnots() const { return impl_->N; }
+int Transcription::stateIndex(int point) const { return point * impl_->stride; }
+int Transcription::inputIndex(int point) const { return point * impl_->stride + impl_->nx; }
+int Transcription::slackIndex(int interval) const {
+  return impl_->nc > 0 ? impl_->slackStart + interval * 2 * impl_->nc : -1;
+}
+int Transcription::horizonIndex() const { return impl_->horizonIdx; }
+int Transcription::knotPoint(int knot) const { return impl_->knotPoint(knot); }
+int Transcription::knotConstraintRow(int knot) const {
+  return impl_->nc > 0 ? impl_->defectRows + knot * 2 * impl_->nc : -1;
+}
+const std::vector<int>& Transcription::jacobianRows() const { return impl_->jacRows; }
+const std::vector<int>& Transcription::jacobianCols() const { return impl_->jacCols; }
+
+void Transcription::variableBounds(Eigen::VectorXd& lower, Eigen::VectorXd& upper) const {
+  impl_->bounds(lower, upper);
+}
+Eigen::VectorXd Transcription::initialGuess() const { return impl_->initialGuessVector(); }
+
+bool Transcription::evalCost(const double* z, double& cost) {
+  cost = impl_->cost(z, nullptr);
+  return std::isfinite(cost);
+}
+
+bool Transcription::evalCostGradient(const double* z, double* gradient) {
+  impl_->cost(z, gradient);
+  return true;
+}
+
+bool Transcription::evalConstraints(const double* z, double* g) {
+  if (!impl_->evaluate(z, false)) return false;
+  impl_->constraints(z, g);
+  return true;
+}
+
+bool Transcription::evalJacobian(const double* z, double* values) {
+  if (!impl_->evaluate(z, true)) return false;
+  TripletWriter w;
+  w.values = values;
+  impl_->writeJacobian(z, w);
+  return true;
+}
+
+const std::string& Transcription::lastError() const { return impl_->error; }
+long Transcription::dynamicsEvaluations() const { return impl_->dynamicsCount; }
+long Transcription::linearizationEvaluations() const { return impl_->linearizationCount; }
+
+double Transcription::horizon(const double* z) const { return impl_->horizonOf(z); }
+
+Trajectory Transcription::trajectory(const double* z) const {
+  const Impl& s = *impl_;
+  const double T = s.horizonOf(z);
+  Eigen::VectorXd times(s.N);
+  Eigen::MatrixXd states(s.nx, s.N), inputs(s.m, s.N);
+  for (int k = 0; k < s.N; ++k) {
+    times(k) = T * k / (s.N - 1);
+    const int p = s.knotPoint(k);
+    states.col(k) = Eigen::Map<const Eigen::VectorXd>(z + p * s.stride, s.nx);
+    inputs.col(k) = Eigen::Map<const Eigen::VectorXd>(z + p * s.stride + s.nx, s.m);
+  }
+  return Trajectory(s.model.configNames(), s.model.inputNames(), std::move(times), std::move(states),
+                    std::move(inputs));
+}
+
+Eigen::MatrixXd Transcription::midpointStates(const double* z) const {
+  const Impl& s = *impl_;
+  if (!s.hermiteSimpson) return Eigen::MatrixXd(s.nx, 0);
+  Eigen::MatrixXd out(s.nx, s.N - 1);
+  for (int k = 0; k < s.N - 1; ++k) out.col(k) = Eigen::Map<const Eigen::VectorXd>(z + (2 * k + 1) * s.stride, s.nx);
+  return out;
+}
+
+Eigen::MatrixXd Transcription::midpointInputs(const double* z) const {
+  const Impl& s = *impl_;
+  if (!s.hermiteSimpson) return Eigen::MatrixXd(s.m, 0);
+  Eigen::MatrixXd out(s.m, s.N - 1);
+  for (int k = 0; k < s.N - 1; ++k) {
+    out.col(k) = Eigen::Map<const Eigen::VectorXd>(z + (2 * k + 1) * s.stride + s.nx, s.m);
+  }
+  return out;
+}
+
+double Transcription::maxSlack(const double* z) const {
+  const Impl& s = *impl_;
+  if (s.nc == 0) return 0.0;
+  const int count = (s.N - 1) * 2 * s.nc;
+  return Eigen::Map<const Eigen::VectorXd>(z + s.slackStart, count).cwiseAbs().maxCoeff();
+}
+
+}  // namespace trellis

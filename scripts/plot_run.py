@@ -1,0 +1,235 @@
+#!/usr/bin/env python3
+"""Plots of a trellis run from its CSV files: states, inputs, gains and tracking error against time.
+
+    plot_run.py --reference TRAJ.csv [--closed CLOSED.csv ...] [--gains GAINS.csv]
+                [--controllability CONTROLLABILITY.csv] --out DIR [--title NAME] [--configs a,b,...]
+
+TRAJ.csv and CLOSED.csv use the trajectory layout (t, configurations, d + configurations,
+inputs); GAINS.csv the gains layout (t, K_i_j row-major). Writes DIR/states.png, DIR/inputs.png,
+and, when given, DIR/gains.png, DIR/tracking_error.png and DIR/controllability.png (from a
+CSV t,dimension,rank,smallest_singular_value). Uses matplotlib's Agg backend (no
+display needed); Debian's python3-matplotlib is enough.
+"""
+import argparse
+import csv
+import math
+import os
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+
+def read_csv(path):
+    """Header and columns (lists of floats) of a CSV file; exits with a message on bad input."""
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.reader(f))
+    except OSError as e:
+        sys.exit(f"plot_run.py: cannot read {path}: {e.strerror}")
+    if len(rows) < 2:
+        sys.exit(f"plot_run.py: {path}: needs a header and at least one data row")
+    header = [h.strip() for h in rows[0]]
+    columns = [[] for _ in header]
+    for line, row in enumerate(rows[1:], start=2):
+        if not row:
+            continue
+        if len(row) != len(header):
+            sys.exit(f"plot_run.py: {path}:{line}: {len(row)} columns, header has {len(header)}")
+        for j, value in enumerate(row):
+            try:
+                columns[j].append(float(value))
+            except ValueError:
+                sys.exit(f"plot_run.py: {path}:{line}: column '{header[j]}' is not a number: {value!r}")
+    return header, columns
+
+
+class Trajectory:
+    """The trajectory CSV layout: t, n configurations, their d-prefixed velocities, then inputs."""
+
+    def __init__(self, path):
+        header, columns = read_csv(path)
+        if header[0] != "t":
+            sys.exit(f"plot_run.py: {path}: the first column must be 't', not '{header[0]}'")
+        names = header[1:]
+        n = None
+        for candidate in range(len(names) // 2, 0, -1):
+            if all(names[candidate + i] == "d" + names[i] for i in range(candidate)):
+                n = candidate
+                break
+        if n is None:
+            sys.exit(f"plot_run.py: {path}: no 'q..., dq...' block found in the header")
+        self.path = path
+        self.t = columns[0]
+        self.configs = names[:n]
+        self.inputs = names[2 * n:]
+        self.q = columns[1:1 + n]
+        self.dq = columns[1 + n:1 + 2 * n]
+        self.u = columns[1 + 2 * n:]
+
+    def state_at(self, t):
+        """x(t) by linear interpolation between knots (enough for an error plot)."""
+        ts = self.t
+        if t <= ts[0]:
+            k, s = 0, 0.0
+        elif t >= ts[-1]:
+            k, s = len(ts) - 2, 1.0
+        else:
+            lo, hi = 0, len(ts) - 1
+            while hi - lo > 1:
+                mid = (lo + hi) // 2
+                if ts[mid] <= t:
+                    lo = mid
+                else:
+                    hi = mid
+            k, s = lo, (t - ts[lo]) / (ts[lo + 1] - ts[lo])
+        if len(ts) == 1:
+            return [c[0] for c in self.q + self.dq]
+        return [c[k] + s * (c[k + 1] - c[k]) for c in self.q + self.dq]
+
+
+def plot_states(ref, closed, selected, out, title):
+    fig, axes = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, name in enumerate(ref.configs):
+        if selected and name not in selected:
+            continue
+        c = colors[i % len(colors)]
+        axes[0].plot(ref.t, ref.q[i], "--", color=c, lw=1.2, label=f"{name} (reference)")
+        axes[1].plot(ref.t, ref.dq[i], "--", color=c, lw=1.2)
+        for k, run in enumerate(closed):
+            axes[0].plot(run.t, run.q[i], color=c, lw=0.9, alpha=0.8,
+                         label=f"{name} (closed loop)" if k == 0 else None)
+            axes[1].plot(run.t, run.dq[i], color=c, lw=0.9, alpha=0.8)
+    axes[0].set_ylabel("configuration")
+    axes[1].set_ylabel("velocity")
+    axes[1].set_xlabel("t [s]")
+    axes[0].legend(fontsize=7, ncol=2)
+    axes[0].set_title(f"{title}: states")
+    for a in axes:
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "states.png"), dpi=110)
+    plt.close(fig)
+
+
+def plot_inputs(ref, closed, out, title):
+    if not ref.inputs:
+        return
+    fig, ax = plt.subplots(figsize=(9, 4))
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, name in enumerate(ref.inputs):
+        c = colors[i % len(colors)]
+        ax.plot(ref.t, ref.u[i], "--", color=c, lw=1.2, label=f"{name} (reference)")
+        for k, run in enumerate(closed):
+            ax.plot(run.t, run.u[i], color=c, lw=0.9, alpha=0.8,
+                    label=f"{name} (closed loop)" if k == 0 else None)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("input")
+    ax.set_title(f"{title}: inputs")
+    ax.grid(alpha=0.3)
+    if len(ref.inputs) <= 12:
+        ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "inputs.png"), dpi=110)
+    plt.close(fig)
+
+
+def plot_gains(path, out, title):
+    header, columns = read_csv(path)
+    t = columns[0]
+    rows = {}
+    for name, col in zip(header[1:], columns[1:]):
+        parts = name.split("_")
+        if len(parts) != 3 or parts[0] != "K":
+            sys.exit(f"plot_run.py: {path}: gain column '{name}' is not K_i_j")
+        rows.setdefault(int(parts[1]), []).append(col)
+    fig, ax = plt.subplots(figsize=(9, 4))
+    for i in sorted(rows):
+        norm = [math.sqrt(sum(c[k] ** 2 for c in rows[i])) for k in range(len(t))]
+        ax.plot(t, norm, lw=1.1, label=f"‖K row {i}‖")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("gain norm")
+    ax.set_title(f"{title}: feedback gains (row norms of K(t))")
+    ax.grid(alpha=0.3)
+    if len(rows) <= 12:
+        ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "gains.png"), dpi=110)
+    plt.close(fig)
+
+
+def plot_error(ref, closed, out, title):
+    fig, ax = plt.subplots(figsize=(9, 4))
+    for run in closed:
+        err = []
+        for k, t in enumerate(run.t):
+            x = [c[k] for c in run.q + run.dq]
+            xr = ref.state_at(t)
+            err.append(max(1e-16, math.sqrt(sum((a - b) ** 2 for a, b in zip(x, xr)))))
+        ax.semilogy(run.t, err, lw=0.9, alpha=0.8, label=os.path.splitext(os.path.basename(run.path))[0])
+    if len(closed) <= 12:
+        ax.legend(fontsize=7, ncol=2)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("‖x − x_ref‖₂")
+    ax.set_title(f"{title}: tracking error ({len(closed)} run(s))")
+    ax.grid(alpha=0.3, which="both")
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "tracking_error.png"), dpi=110)
+    plt.close(fig)
+
+
+def plot_controllability(path, out, title):
+    header, columns = read_csv(path)
+    needed = ["t", "dimension", "rank", "smallest_singular_value"]
+    if header != needed:
+        sys.exit(f"plot_run.py: {path}: expected the columns {needed}, got {header}")
+    t, dim, rank, sigma = columns
+    fig, axes = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
+    axes[0].semilogy(t, [max(s, 1e-300) for s in sigma], lw=1.1)
+    axes[0].set_ylabel("σ_min of [B, AB, …]")
+    axes[0].set_title(f"{title}: controllability on the constraint manifold")
+    axes[1].plot(t, dim, "--", lw=1.2, label="manifold dimension")
+    axes[1].plot(t, rank, lw=1.1, label="rank")
+    axes[1].set_ylabel("rank")
+    axes[1].set_xlabel("t [s]")
+    axes[1].legend(fontsize=8)
+    for a in axes:
+        a.grid(alpha=0.3, which="both")
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "controllability.png"), dpi=110)
+    plt.close(fig)
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--reference", required=True)
+    p.add_argument("--closed", action="append", default=[])
+    p.add_argument("--gains")
+    p.add_argument("--controllability", help="CSV: t,dimension,rank,smallest_singular_value")
+    p.add_argument("--out", required=True)
+    p.add_argument("--title", default="trellis")
+    p.add_argument("--configs", default="", help="comma-separated configurations to plot (default: all)")
+    args = p.parse_args()
+    os.makedirs(args.out, exist_ok=True)
+    ref = Trajectory(args.reference)
+    closed = [Trajectory(c) for c in args.closed]
+    for run in closed:
+        if run.configs != ref.configs:
+            sys.exit(f"plot_run.py: {run.path}: configurations {run.configs} differ from the reference's")
+    selected = [s for s in args.configs.split(",") if s]
+    plot_states(ref, closed, selected, args.out, args.title)
+    plot_inputs(ref, closed, args.out, args.title)
+    if args.gains:
+        plot_gains(args.gains, args.out, args.title)
+    if closed:
+        plot_error(ref, closed, args.out, args.title)
+    if args.controllability:
+        plot_controllability(args.controllability, args.out, args.title)
+    print(f"plot_run.py: plots written to {args.out}/")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,132 @@
+# tests/cli/tests_gains.cmake — `trellis gains` (and, to show a gain stabilizes, `trellis simulate`).
+# Included by tests/cli/CMakeLists.txt (_scenes, _data, trellis_cli_test).
+include("${CMAKE_CURRENT_LIST_DIR}/run_cli_files.cmake")
+set(_trajectories "${PROJECT_SOURCE_DIR}/examples/trajectories")
+set(_cart_pole "${_scenes}/cart_pole.json")
+set(_cart_pole_upright "${_trajectories}/cart_pole_upright.csv")
+set(_paper "${_scenes}/paper_pendulum.json")
+set(_paper_swing "${_trajectories}/paper_pendulum_swing.csv")
+set(_gain_header "t,K_0_0,K_0_1,K_0_2,K_0_3")  # m = 1, 2n = 4, row-major
+
+# ---- success ----------------------------------------------------------------------------------
+# Cart-pole held upright for 3 s (31 knots): one gain row per knot. The gain must stabilize the
+# nonlinear closed loop: from a 0.1 rad tilt the final error |x - x_ref| is below 0.005 (measured
+# 0.0017: the LQR's closed-loop poles decay well within 3 s; the bound leaves a factor 3 and is still
+# 20x below the perturbation). Step 3 is the control that shows the check can fail: with K = 0 the
+# pole falls (final error measured 7.9, bound > 0.1).
+trellis_cli_files_test(gains.cart_pole_upright_stabilizes
+  ARGS1 gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --Q 10,10,1,1 --R 0.1
+        --out @WORK@/gains.csv
+  CHECKS1 -DFILE=@WORK@/gains.csv "-DFILE_HEADER=${_gain_header}" -DFILE_ROWS=31 -DSTDERR_EMPTY=ON
+          "-DSTDOUT_REGEX=wrote .*gains.csv: 31 rows of K \\(1 x 4\\).*riccati: full state.*steps.*S: min eigenvalue [0-9].*controllability at t = 0: rank 4 of 4 \\(controllable\\).*gramian on \\[0, 3\\]: min eigenvalue"
+  ARGS2 simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}" --gains @WORK@/gains.csv
+        --perturb theta=0.1 --out @WORK@/closed.csv
+  CHECKS2 -DFILE=@WORK@/closed.csv "-DFILE_HEADER=t,x,theta,dx,dtheta,push" -DFILE_ROWS=31
+          "-DNUMBERS=initial :GREATER:0.0999999&&initial :LESS:0.1000001&&final :LESS:0.005"
+  ARGS3 simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}"
+        --gains "${_data}/cart_pole_zero_gains.csv" --perturb theta=0.1 --out @WORK@/open.csv
+  CHECKS3 "-DNUMBERS=final :GREATER:0.1")
+
+# --dt: a uniform grid 0, 0.25, ..., 2.75 and the end time 3 (13 rows); a full Q from a JSON file.
+trellis_cli_files_test(gains.uniform_grid_and_weight_file
+  ARGS1 gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --dt 0.25
+        --Q "${_data}/weights_cart_pole_Q.json" --R 0.1 --Qf 1 --method factored --out @WORK@/gains.csv
+  CHECKS1 -DFILE=@WORK@/gains.csv "-DFILE_HEADER=${_gain_header}" -DFILE_ROWS=13
+          "-DSTDOUT_REGEX=13 rows of K.*riccati: factored")
+
+# The paper's constrained pendulum (one distance constraint: 2n = 4, tangent dimension 2) along a
+# swing that satisfies its dynamics: the manifold path. The closed loop from a 0.05 rad error in
+# theta1 (projected onto the constraints: initial error 0.051) ends below 0.005 (measured 0.0011,
+# a factor 4 of margin) and, projected, the drift after the start stays below 1e-6 (the dynamics
+# keep the constraints to the integrator's tolerance); the control with K = 0 ends at 0.27
+# (bound > 0.1).
+trellis_cli_files_test(gains.paper_pendulum_manifold
+  ARGS1 gains "${_paper}" --trajectory "${_paper_swing}" --R 0.01 --out @WORK@/gains.csv
+  CHECKS1 -DFILE=@WORK@/gains.csv "-DFILE_HEADER=${_gain_header}" -DFILE_ROWS=41 -DSTDERR_EMPTY=ON
+          "-DSTDOUT_REGEX=riccati: on the constraint manifold \\(tangent dimension 2 of 4.*Sr: min eigenvalue.*rank 2 of 2 \\(controllable\\)"
+  ARGS2 simulate "${_paper}" --trajectory "${_paper_swing}" --gains @WORK@/gains.csv
+        --perturb theta1=0.05 --out @WORK@/closed.csv
+  CHECKS2 -DFILE=@WORK@/closed.csv "-DFILE_HEADER=t,theta1,theta2,dtheta1,dtheta2,u" -DFILE_ROWS=41
+          "-DNUMBERS=initial :GREATER:0.04&&final :LESS:0.005&&max at later output times :LESS:1e-6"
+  ARGS3 simulate "${_paper}" --trajectory "${_paper_swing}"
+        --gains "${_data}/paper_pendulum_zero_gains.csv" --perturb theta1=0.05 --out @WORK@/open.csv
+  CHECKS3 "-DNUMBERS=final :GREATER:0.1")
+
+# ---- help -------------------------------------------------------------------------------------
+trellis_cli_test(gains.help ARGS gains --help
+  CHECKS "-DSTDOUT_REGEX=usage: trellis gains SCENE.json --trajectory.*constraint manifold.*K_i_j.*--Q W +state weight \\(default 1\\).*--R W.*--Qf W"
+         -DSTDERR_EMPTY=ON)
+trellis_cli_test(gains.in_command_list ARGS --help CHECKS "-DSTDOUT_REGEX=  gains +TV-LQR")
+
+# ---- errors: exit 2 (command line) or 1 (files, solve), one line on stderr, nothing on stdout --
+set(_gains_args gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --out /dev/null)
+set(_e2 -DEXPECT_EXIT=2 -DSTDOUT_EMPTY=ON -DSTDERR_ONE_LINE=ON)
+set(_e1 -DEXPECT_EXIT=1 -DSTDOUT_EMPTY=ON -DSTDERR_ONE_LINE=ON)
+trellis_cli_test(gains.error.missing_trajectory
+  ARGS gains "${_cart_pole}" --out /dev/null
+  CHECKS ${_e2} "-DSTDERR_REGEX=gains: missing --trajectory")
+trellis_cli_test(gains.error.missing_out
+  ARGS gains "${_cart_pole}" --trajectory "${_cart_pole_upright}"
+  CHECKS ${_e2} "-DSTDERR_REGEX=gains: missing --out")
+trellis_cli_test(gains.error.missing_scene
+  ARGS gains --trajectory "${_cart_pole_upright}" --out /dev/null
+  CHECKS ${_e2} "-DSTDERR_REGEX=gains: missing the scene file")
+trellis_cli_test(gains.error.unknown_option
+  ARGS ${_gains_args} --bogus 1
+  CHECKS ${_e2} "-DSTDERR_REGEX=gains: unknown option '--bogus'")
+trellis_cli_test(gains.error.option_without_value
+  ARGS ${_gains_args} --Q
+  CHECKS ${_e2} "-DSTDERR_REGEX=option '--Q' needs a value")
+trellis_cli_test(gains.error.weight_list_length
+  ARGS ${_gains_args} --Q 1,2,3
+  CHECKS ${_e2} "-DSTDERR_REGEX=--Q: '1,2,3' has 3 numbers; expected 1 .* or 4 \\(the diagonal: 2n = 4 states\\)")
+trellis_cli_test(gains.error.input_weight_list_length
+  ARGS ${_gains_args} --R 1,2
+  CHECKS ${_e2} "-DSTDERR_REGEX=--R: '1,2' has 2 numbers; expected 1 .* or 1 \\(the diagonal: m = 1 inputs\\)")
+trellis_cli_test(gains.error.weight_list_item
+  ARGS ${_gains_args} --Q 1,,2,3
+  CHECKS ${_e2} "-DSTDERR_REGEX=--Q: item 2 of '1,,2,3' \\(''\\) is not a finite number")
+trellis_cli_test(gains.error.negative_Q
+  ARGS ${_gains_args} --Q 1,-1,1,1
+  CHECKS ${_e2} "-DSTDERR_REGEX=--Q: diagonal entry 2 = -1 must be >= 0")
+trellis_cli_test(gains.error.zero_R
+  ARGS ${_gains_args} --R 0
+  CHECKS ${_e2} "-DSTDERR_REGEX=--R: diagonal entry 1 = 0 must be > 0")
+trellis_cli_test(gains.error.bad_method
+  ARGS ${_gains_args} --method euler
+  CHECKS ${_e2} "-DSTDERR_REGEX=--method: 'euler' is not one of bdf, adams, factored")
+trellis_cli_test(gains.error.negative_dt
+  ARGS ${_gains_args} --dt -0.1
+  CHECKS ${_e2} "-DSTDERR_REGEX=--dt: -0.1 must be > 0")
+trellis_cli_test(gains.error.weight_file_not_found
+  ARGS ${_gains_args} --Qf "${_data}/no_such_weights.json"
+  CHECKS ${_e1} "-DSTDERR_REGEX=--Qf: weight file '.*no_such_weights.json' cannot be opened")
+trellis_cli_test(gains.error.weight_file_malformed
+  ARGS ${_gains_args} --Q "${_data}/weights_malformed.json"
+  CHECKS ${_e1} "-DSTDERR_REGEX=--Q: weight file '.*weights_malformed.json' is not valid JSON")
+trellis_cli_test(gains.error.weight_file_not_square
+  ARGS ${_gains_args} --Q "${_data}/weights_not_square.json"
+  CHECKS ${_e1} "-DSTDERR_REGEX=weights_not_square.json': row 1 has 3 entries; expected a list of 4 rows of 4 numbers")
+trellis_cli_test(gains.error.weight_file_asymmetric
+  ARGS ${_gains_args} --Q "${_data}/weights_asymmetric.json"
+  CHECKS ${_e1} "-DSTDERR_REGEX=weights_asymmetric.json': the matrix is not symmetric: entry \\(1, 2\\) = 1 but \\(2, 1\\) = 2")
+trellis_cli_test(gains.error.weight_file_indefinite
+  ARGS ${_gains_args} --Q "${_data}/weights_indefinite.json"
+  CHECKS ${_e1} "-DSTDERR_REGEX=weights_indefinite.json': the matrix is not positive semidefinite: smallest eigenvalue -1")
+trellis_cli_test(gains.error.weight_file_wrong_size_for_R
+  ARGS ${_gains_args} --R "${_data}/weights_cart_pole_Q.json"
+  CHECKS ${_e1} "-DSTDERR_REGEX=--R: weight file .*expected a list of 1 rows of 1 numbers \\(m = 1 inputs\\), got 4 rows")
+trellis_cli_test(gains.error.trajectory_not_found
+  ARGS gains "${_cart_pole}" --trajectory "${_data}/no_such_trajectory.csv" --out /dev/null
+  CHECKS ${_e1} "-DSTDERR_REGEX=no_such_trajectory.csv")
+# A trajectory of another scene: the error names both files, nothing is written.
+trellis_cli_files_test(gains.error.trajectory_columns_mismatch
+  ARGS1 gains "${_cart_pole}" --trajectory "${_trajectories}/pendulum_swing.csv" --out @WORK@/gains.csv
+  CHECKS1 -DEXIT=1 -DSTDOUT_EMPTY=ON -DSTDERR_ONE_LINE=ON -DABSENT=@WORK@/gains.csv
+          "-DSTDERR_REGEX=pendulum_swing.csv does not match the scene .*cart_pole.json")
+# Numerical failure of the solve (here: a step budget of 5) is exit 1 with the time and the cause,
+# and no gains file.
+trellis_cli_files_test(gains.error.solver_failure
+  ARGS1 gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --max-steps 5 --out @WORK@/gains.csv
+  CHECKS1 -DEXIT=1 -DSTDOUT_EMPTY=ON -DSTDERR_ONE_LINE=ON -DABSENT=@WORK@/gains.csv
+          "-DSTDERR_REGEX=gains: the Riccati solve failed: .*t = 3.*maxSteps = 5")

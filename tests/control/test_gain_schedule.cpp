@@ -1,0 +1,204 @@
+// Tests for trellis/control/gain_schedule.hpp: validation, interpolation, sampling, CSV I/O.
+#include <trellis/control/gain_schedule.hpp>
+#include <trellis/control/trajectory.hpp>
+
+#include <catch2/catch.hpp>
+
+#include <Eigen/Core>
+
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <random>
+#include <sstream>
+#include <string>
+
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+using trellis::GainSchedule;
+using trellis::TrajectoryError;
+
+namespace {
+
+// K(t) = K0 + t K1: linear in t, so piecewise-linear interpolation must reproduce it.
+MatrixXd linearGain(double t) {
+  MatrixXd K0(2, 3), K1(2, 3);
+  K0 << 1.0, -2.0, 0.5, 3.0, 0.25, -1.5;
+  K1 << 0.3, 1.1, -0.7, -2.0, 0.9, 0.05;
+  return K0 + t * K1;
+}
+
+GainSchedule randomSchedule(std::mt19937& rng, int N, int m, int nx) {
+  std::normal_distribution<double> normal(0.0, 10.0);
+  std::uniform_real_distribution<double> gap(1e-3, 1.0);
+  VectorXd t(N);
+  std::vector<MatrixXd> K;
+  double now = -0.37;
+  for (int k = 0; k < N; ++k) {
+    now += gap(rng);
+    t(k) = now;
+    MatrixXd G(m, nx);
+    for (int j = 0; j < nx; ++j) {
+      for (int i = 0; i < m; ++i) G(i, j) = normal(rng) * std::pow(10.0, (i + j) % 7 - 3);
+    }
+    K.push_back(G);
+  }
+  return GainSchedule(t, K);
+}
+
+std::string errorOf(const std::string& csv) {
+  std::istringstream in(csv);
+  try {
+    GainSchedule::readCsv(in, "gains.csv");
+  } catch (const TrajectoryError& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+}  // namespace
+
+TEST_CASE("gain schedule: construction validates and names the offending index",
+          "[gain_schedule]") {
+  const VectorXd t = (VectorXd(3) << 0.0, 0.5, 1.0).finished();
+  const std::vector<MatrixXd> K{linearGain(0.0), linearGain(0.5), linearGain(1.0)};
+  const GainSchedule g(t, K);
+  CHECK(g.nu() == 2);
+  CHECK(g.nx() == 3);
+  CHECK(g.size() == 3);
+  CHECK(g.startTime() == 0.0);
+  CHECK(g.endTime() == 1.0);
+
+  SECTION("non-increasing time") {
+    const VectorXd bad = (VectorXd(3) << 0.0, 0.5, 0.5).finished();
+    REQUIRE_THROWS_AS(GainSchedule(bad, K), TrajectoryError);
+    REQUIRE_THROWS_WITH(GainSchedule(bad, K), Catch::Contains("time 2"));
+  }
+  SECTION("non-finite time") {
+    VectorXd bad = t;
+    bad(1) = std::numeric_limits<double>::quiet_NaN();
+    REQUIRE_THROWS_WITH(GainSchedule(bad, K), Catch::Contains("time 1"));
+  }
+  SECTION("count mismatch") {
+    REQUIRE_THROWS_WITH(GainSchedule(t, {K[0], K[1]}), Catch::Contains("3 times but 2 gains"));
+  }
+  SECTION("size mismatch") {
+    std::vector<MatrixXd> bad = K;
+    bad[2] = MatrixXd::Zero(3, 2);
+    REQUIRE_THROWS_WITH(GainSchedule(t, bad), Catch::Contains("gain 2 is 3x2"));
+  }
+  SECTION("non-finite entry") {
+    std::vector<MatrixXd> bad = K;
+    bad[1](1, 2) = std::numeric_limits<double>::infinity();
+    REQUIRE_THROWS_WITH(GainSchedule(t, bad),
+                        Catch::Contains("gain 1") && Catch::Contains("(1,2)"));
+  }
+  SECTION("empty") { REQUIRE_THROWS_AS(GainSchedule(VectorXd(0), {}), TrajectoryError); }
+}
+
+TEST_CASE("gain schedule: interpolation is exact for gains linear in t", "[gain_schedule]") {
+  // Uneven spacing so that a wrong interval or weight cannot pass by symmetry.
+  const VectorXd t = (VectorXd(5) << -1.0, -0.3, 0.2, 1.7, 2.0).finished();
+  const GainSchedule g = GainSchedule::sample(linearGain, t);
+  MatrixXd K;
+  for (double s : {-1.0, -0.99, -0.3, 0.0, 0.19, 0.2, 1.0, 1.7, 1.95, 2.0}) {
+    g.evaluate(s, K);
+    // Rounding only: (1 − s)K_k + sK_{k+1} with |K| ≤ 5 and a few flops, so ~1e-15; 1e-13 leaves a
+    // margin.
+    CHECK((K - linearGain(s)).cwiseAbs().maxCoeff() < 1e-13);
+  }
+  // At the knots the stored gain comes back exactly.
+  for (int k = 0; k < t.size(); ++k) CHECK(g.evaluate(t(k)) == g.gains()[k]);
+  // A gain that is not linear (quadratic) is interpolated, not reproduced: midpoint error
+  // h²/4·|K''|/2.
+  const GainSchedule q =
+      GainSchedule::sample([](double s) { return MatrixXd::Constant(1, 1, s * s); },
+                           (VectorXd(2) << 0.0, 1.0).finished());
+  CHECK(q.evaluate(0.5)(0, 0) == Approx(0.5).epsilon(1e-15));  // chord, not 0.25
+
+  SECTION("outside the span throws, the relative slack is clamped") {
+    CHECK_THROWS_AS(g.evaluate(2.0 + 1e-9, K), std::out_of_range);
+    CHECK_THROWS_AS(g.evaluate(-1.0 - 1e-9, K), std::out_of_range);
+    CHECK_NOTHROW(g.evaluate(2.0 + 1e-13, K));
+    CHECK((K - linearGain(2.0)).cwiseAbs().maxCoeff() < 1e-13);
+  }
+  SECTION("a single time is a constant gain") {
+    const GainSchedule one((VectorXd(1) << 3.0).finished(), {linearGain(3.0)});
+    CHECK(one.evaluate(3.0) == linearGain(3.0));
+    CHECK_THROWS_AS(one.evaluate(3.1), std::out_of_range);
+  }
+  SECTION("an empty schedule throws") {
+    CHECK_THROWS_AS(GainSchedule().evaluate(0.0, K), std::logic_error);
+  }
+}
+
+TEST_CASE("gain schedule: CSV round trip is exact", "[gain_schedule]") {
+  std::mt19937 rng(20261122);
+  for (auto [m, nx] : {std::pair{1, 1}, std::pair{1, 4}, std::pair{2, 3}, std::pair{3, 12}}) {
+    const GainSchedule g = randomSchedule(rng, 7, m, nx);
+    std::stringstream ss;
+    g.writeCsv(ss);
+    const GainSchedule back = GainSchedule::readCsv(ss);
+    REQUIRE(back.nu() == m);
+    REQUIRE(back.nx() == nx);
+    REQUIRE(back.size() == g.size());
+    CHECK(back.times() == g.times());  // 17 significant digits: bit-exact doubles
+    for (int k = 0; k < g.size(); ++k) CHECK(back.gains()[k] == g.gains()[k]);
+  }
+  SECTION("header layout") {
+    const GainSchedule g((VectorXd(1) << 0.0).finished(), {MatrixXd::Zero(2, 2)});
+    std::ostringstream out;
+    g.writeCsv(out);
+    CHECK(out.str().substr(0, out.str().find('\n')) == "t,K_0_0,K_0_1,K_1_0,K_1_1");
+  }
+  SECTION("file round trip") {
+    const GainSchedule g = randomSchedule(rng, 3, 2, 2);
+    const std::string path = "trellis_test_gain_schedule_roundtrip.csv";
+    g.writeCsvFile(path);
+    const GainSchedule back = GainSchedule::readCsvFile(path);
+    std::remove(path.c_str());
+    CHECK(back.times() == g.times());
+    CHECK(back.gains()[2] == g.gains()[2]);
+    CHECK_THROWS_WITH(GainSchedule::readCsvFile("/nonexistent/dir/gains.csv"),
+                      Catch::Contains("cannot open"));
+  }
+}
+
+TEST_CASE("gain schedule: CSV errors name the row and the column", "[gain_schedule]") {
+  const std::string header = "t,K_0_0,K_0_1,K_1_0,K_1_1\n";
+  // A valid file parses (so the failures below come from the one defect each introduces).
+  CHECK(errorOf(header + "0,1,2,3,4\n1,5,6,7,8\n") == "no error");
+
+  CHECK_THAT(errorOf(""), Catch::Contains("empty file"));
+  CHECK_THAT(errorOf("time,K_0_0\n0,1\n"),
+             Catch::Contains("column 1") && Catch::Contains("'time'"));
+  CHECK_THAT(errorOf("t\n0\n"), Catch::Contains("no gain columns"));
+  CHECK_THAT(errorOf("t,K_1_0\n0,1\n"), Catch::Contains("column 2") && Catch::Contains("K_0_0"));
+  // Column-major order is rejected: after K_0_0, K_0_1 (nx = 2) the next column must be K_1_0.
+  CHECK_THAT(errorOf("t,K_0_0,K_0_1,K_1_1,K_1_0\n0,1,2,3,4\n"),
+             Catch::Contains("column 4") && Catch::Contains("'K_1_1'") &&
+                 Catch::Contains("expected 'K_1_0'"));
+  CHECK_THAT(errorOf("t,K_0_0,K_0_1,K_1_0\n0,1,2,3\n"),
+             Catch::Contains("not a multiple") && Catch::Contains("K_1_1"));
+  CHECK_THAT(errorOf("t,K_0_0,K_0_1,gain\n0,1,2,3\n"),
+             Catch::Contains("column 4") && Catch::Contains("'gain'"));
+
+  CHECK_THAT(errorOf(header + "0,1,2,3,4\n1,5,x6,7,8\n"),
+             Catch::Contains("row 2") && Catch::Contains("column 3") &&
+                 Catch::Contains("'K_0_1'") && Catch::Contains("not a number"));
+  CHECK_THAT(errorOf(header + "0,1,2,nan,4\n"), Catch::Contains("row 1") &&
+                                                    Catch::Contains("column 4") &&
+                                                    Catch::Contains("not finite"));
+  CHECK_THAT(errorOf(header + "0,1,2,3,4\n1,5,6,,8\n"), Catch::Contains("row 2") &&
+                                                            Catch::Contains("column 4") &&
+                                                            Catch::Contains("not a number"));
+  CHECK_THAT(errorOf(header + "0,1,2,3,4\n0,5,6,7,8\n"), Catch::Contains("row 2") &&
+                                                             Catch::Contains("column 1") &&
+                                                             Catch::Contains("not greater"));
+  CHECK_THAT(errorOf(header + "0,1,2,3,4\n1,5,6,7\n"),
+             Catch::Contains("row 2") && Catch::Contains("expected 5 columns, got 4"));
+  CHECK_THAT(errorOf(header), Catch::Contains("no data rows"));
+  // The file line is named too (blank lines are skipped but counted).
+  CHECK_THAT(errorOf(header + "\n0,1,2,3,4\n\n1,5,6,7,bad\n"),
+             Catch::Contains("row 2 (line 5)") && Catch::Contains("column 5"));
+}
