@@ -11,6 +11,7 @@
 // max|J − ref| / max(1, max|ref|) over J = ∂q̈/∂[q; q̇; u], the non-trivial rows of [A B]; the
 // col_ variants apply the same measure to each column and report the worst.
 #include "finite_differences.hpp"
+#include "fixture_cache.hpp"
 #include "models.hpp"
 
 #include "trellis/core/data.hpp"
@@ -97,36 +98,8 @@ struct Fixture {
   }
 };
 
-std::string caseName(const ModelSpec& spec) {
-  const int n = spec.kind == ModelKind::kHandTree ? 20 : spec.links;
-  const int nc = !spec.constrained ? 0 : spec.kind == ModelKind::kHandTree ? 3 : 1;
-  return std::string(trellis::bench::kindName(spec.kind)) + "/N:" + std::to_string(n) +
-         "/nc:" + std::to_string(nc);
-}
-
-/// Fixtures by case name, created lazily on first use so that a --benchmark_filter run builds
-/// only the models it times.
 Fixture* fixtureFor(const ModelSpec& spec, benchmark::State& state) {
-  static std::map<std::string, std::unique_ptr<Fixture>> fixtures;
-  const std::string key = caseName(spec);
-  auto it = fixtures.find(key);
-  if (it == fixtures.end()) {
-    try {
-      it = fixtures.emplace(key, std::make_unique<Fixture>(spec)).first;
-    } catch (const std::exception& e) {
-      state.SkipWithError(("building " + key + ": " + e.what()).c_str());
-      return nullptr;
-    }
-  }
-  Fixture* f = it->second.get();
-  if (!f->error.empty()) {
-    state.SkipWithError(f->error.c_str());
-    return nullptr;
-  }
-  state.counters["nq"] = f->bm.model.nq();
-  state.counters["nc"] = f->bm.model.nc();
-  state.counters["nu"] = f->bm.model.nu();
-  return f;
+  return trellis::bench::fixtureFor<Fixture>(spec, state);
 }
 
 void runDynamics(benchmark::State& state, ModelSpec spec) {

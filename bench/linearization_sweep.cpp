@@ -31,6 +31,7 @@
 //
 //   trellis_bench_linearization_sweep --benchmark_filter='Scaling/.*/hand' --benchmark_format=json
 #include "finite_differences.hpp"
+#include "fixture_cache.hpp"
 #include "models.hpp"
 
 #include "trellis/core/data.hpp"
@@ -163,36 +164,8 @@ struct Fixture {
   std::string error;  ///< non-empty: the model or its state is unusable
 };
 
-std::string caseName(const ModelSpec& spec) {
-  const bool hand = spec.kind == ModelKind::kHandTree;
-  const int n = hand ? 20 : spec.links;
-  const int nc = !spec.constrained ? 0 : hand ? 3 : 1;
-  return std::string(trellis::bench::kindName(spec.kind)) + "/N:" + std::to_string(n) +
-         "/nc:" + std::to_string(nc);
-}
-
-/// Fixtures by case name, built on first use so that a filtered run builds only what it times.
 Fixture* fixtureFor(const ModelSpec& spec, benchmark::State& state) {
-  static std::map<std::string, std::unique_ptr<Fixture>> fixtures;
-  const std::string key = caseName(spec);
-  auto it = fixtures.find(key);
-  if (it == fixtures.end()) {
-    try {
-      it = fixtures.emplace(key, std::make_unique<Fixture>(spec)).first;
-    } catch (const std::exception& e) {
-      state.SkipWithError(("building " + key + ": " + e.what()).c_str());
-      return nullptr;
-    }
-  }
-  Fixture* f = it->second.get();
-  if (!f->error.empty()) {
-    state.SkipWithError(f->error.c_str());
-    return nullptr;
-  }
-  state.counters["nq"] = f->bm.model.nq();
-  state.counters["nc"] = f->bm.model.nc();
-  state.counters["nu"] = f->bm.model.nu();
-  return f;
+  return trellis::bench::fixtureFor<Fixture>(spec, state);
 }
 
 void runMethod(benchmark::State& state, ModelSpec spec, Method method, double step) {

@@ -3,6 +3,8 @@
 
 #include "trellis/control/trajectory.hpp"
 
+#include "numeric_csv.hpp"
+
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -16,22 +18,6 @@
 
 namespace trellis {
 namespace {
-
-std::string trim(const std::string& s) {
-  const auto b = s.find_first_not_of(" \t\r\n");
-  if (b == std::string::npos) return "";
-  const auto e = s.find_last_not_of(" \t\r\n");
-  return s.substr(b, e - b + 1);
-}
-
-std::vector<std::string> splitCsv(const std::string& line) {
-  std::vector<std::string> out;
-  std::string field;
-  std::istringstream ss(line);
-  while (std::getline(ss, field, ',')) out.push_back(trim(field));
-  if (!line.empty() && line.back() == ',') out.push_back("");
-  return out;
-}
 
 std::string gainName(int i, int j) { return "K_" + std::to_string(i) + "_" + std::to_string(j); }
 
@@ -142,90 +128,47 @@ GainSchedule GainSchedule::sample(const std::function<Eigen::MatrixXd(double)>& 
 }
 
 GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) {
-  std::string line;
-  int lineNo = 0;
-  std::vector<std::string> header;
-  while (std::getline(in, line)) {
-    ++lineNo;
-    if (!trim(line).empty()) {
-      header = splitCsv(line);
-      break;
-    }
-  }
-  if (header.empty()) throw TrajectoryError(source + ": empty file (expected a header row)");
-  const std::string hat = source + ": header (line " + std::to_string(lineNo) + ")";
-  if (header[0] != "t") {
-    throw TrajectoryError(hat + ", column 1: must be 't', got '" + header[0] + "'");
-  }
-  const int ncols = static_cast<int>(header.size()) - 1;
-  if (ncols < 1) throw TrajectoryError(hat + ": no gain columns after 't' (expected K_0_0, ...)");
-  // nx = the number of leading K_0_j columns; then every column must be K_{c / nx}_{c % nx}.
-  int nx = 0;
-  for (int c = 0; c < ncols; ++c) {
-    int i = -1, j = -1;
-    if (!parseGainName(header[1 + c], i, j) || i != 0 || j != c) break;
-    ++nx;
-  }
-  if (nx == 0) {
-    throw TrajectoryError(hat + ", column 2 ('" + header[1] + "'): expected 'K_0_0'");
-  }
-  const int m = (ncols + nx - 1) / nx;
-  for (int c = 0; c < ncols; ++c) {
-    const std::string want = gainName(c / nx, c % nx);
-    if (header[1 + c] != want) {
-      throw TrajectoryError(hat + ", column " + std::to_string(c + 2) + " ('" + header[1 + c] +
-                            "'): expected '" + want + "' (row-major K_i_j, " + std::to_string(nx) +
-                            " state columns from the K_0_j names)");
-    }
-  }
-  if (ncols != m * nx) {
-    throw TrajectoryError(hat + ": " + std::to_string(ncols) +
-                          " gain columns is not a multiple of " + std::to_string(nx) +
-                          " (missing '" + gainName(m - 1, ncols % nx) + "' onwards)");
-  }
-  const int width = 1 + ncols;
-
+  int m = 0, nx = 0;
+  const detail::NumericCsv csv = detail::readNumericCsv(
+      in, source, [&](const std::vector<std::string>& header, int lineNo) {
+        const std::string hat = source + ": header (line " + std::to_string(lineNo) + ")";
+        if (header[0] != "t") {
+          throw TrajectoryError(hat + ", column 1: must be 't', got '" + header[0] + "'");
+        }
+        const int ncols = static_cast<int>(header.size()) - 1;
+        if (ncols < 1) throw TrajectoryError(hat + ": no gain columns after 't' (expected K_0_0, ...)");
+        // nx = the number of leading K_0_j columns; then every column must be K_{c / nx}_{c % nx}.
+        for (int c = 0; c < ncols; ++c) {
+          int i = -1, j = -1;
+          if (!parseGainName(header[1 + c], i, j) || i != 0 || j != c) break;
+          ++nx;
+        }
+        if (nx == 0) {
+          throw TrajectoryError(hat + ", column 2 ('" + header[1] + "'): expected 'K_0_0'");
+        }
+        m = (ncols + nx - 1) / nx;
+        for (int c = 0; c < ncols; ++c) {
+          const std::string want = gainName(c / nx, c % nx);
+          if (header[1 + c] != want) {
+            throw TrajectoryError(hat + ", column " + std::to_string(c + 2) + " ('" + header[1 + c] +
+                                  "'): expected '" + want + "' (row-major K_i_j, " +
+                                  std::to_string(nx) + " state columns from the K_0_j names)");
+          }
+        }
+        if (ncols != m * nx) {
+          throw TrajectoryError(hat + ": " + std::to_string(ncols) +
+                                " gain columns is not a multiple of " + std::to_string(nx) +
+                                " (missing '" + gainName(m - 1, ncols % nx) + "' onwards)");
+        }
+      });
   std::vector<double> times;
   std::vector<Eigen::MatrixXd> gains;
-  int row = 0;
-  while (std::getline(in, line)) {
-    ++lineNo;
-    if (trim(line).empty()) continue;
-    ++row;
-    const auto fields = splitCsv(line);
-    const std::string at =
-        source + ": row " + std::to_string(row) + " (line " + std::to_string(lineNo) + ")";
-    if (static_cast<int>(fields.size()) != width) {
-      throw TrajectoryError(at + ": expected " + std::to_string(width) + " columns, got " +
-                            std::to_string(fields.size()));
-    }
-    Eigen::MatrixXd K(m, nx);
-    double t = 0.0;
-    for (int c = 0; c < width; ++c) {
-      const std::string& f = fields[c];
-      const std::string col = ", column " + std::to_string(c + 1) + " ('" + header[c] + "')";
-      char* end = nullptr;
-      const double v = f.empty() ? 0.0 : std::strtod(f.c_str(), &end);
-      if (f.empty() || end != f.c_str() + f.size()) {
-        throw TrajectoryError(at + col + ": '" + f + "' is not a number");
-      }
-      if (!std::isfinite(v)) throw TrajectoryError(at + col + ": value '" + f + "' is not finite");
-      if (c == 0) {
-        t = v;
-      } else {
-        K((c - 1) / nx, (c - 1) % nx) = v;
-      }
-    }
-    if (!times.empty() && !(t > times.back())) {
-      std::ostringstream msg;
-      msg << std::setprecision(17) << at << ", column 1 ('t'): time " << t
-          << " is not greater than the previous time " << times.back();
-      throw TrajectoryError(msg.str());
-    }
-    times.push_back(t);
-    gains.push_back(std::move(K));
+  for (const std::vector<double>& values : csv.rows) {
+    times.push_back(values[0]);
+    // Row-major K_i_j after t: the m×nx gain of this row.
+    gains.push_back(Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
+        values.data() + 1, m, nx));
   }
-  if (times.empty()) throw TrajectoryError(source + ": no data rows after the header");
   return GainSchedule(
       Eigen::Map<const Eigen::VectorXd>(times.data(), static_cast<Eigen::Index>(times.size())),
       std::move(gains));

@@ -1,6 +1,8 @@
 // trajectory.cpp — validation, CSV I/O and Hermite interpolation of a nominal trajectory.
 #include "trellis/control/trajectory.hpp"
 
+#include "numeric_csv.hpp"
+
 #include "trellis/core/data.hpp"
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/model.hpp"
@@ -26,22 +28,6 @@ std::vector<std::string> columnNames(const std::vector<std::string>& configs,
   for (const auto& c : configs) names.push_back("d" + c);
   for (const auto& u : inputs) names.push_back(u);
   return names;
-}
-
-std::string trim(const std::string& s) {
-  const auto b = s.find_first_not_of(" \t\r\n");
-  if (b == std::string::npos) return "";
-  const auto e = s.find_last_not_of(" \t\r\n");
-  return s.substr(b, e - b + 1);
-}
-
-std::vector<std::string> splitCsv(const std::string& line) {
-  std::vector<std::string> out;
-  std::string field;
-  std::istringstream ss(line);
-  while (std::getline(ss, field, ',')) out.push_back(trim(field));
-  if (!line.empty() && line.back() == ',') out.push_back("");
-  return out;
 }
 
 // Row numbering in messages: data rows from 1 (row 1 is the first knot).
@@ -206,79 +192,36 @@ Eigen::VectorXd Trajectory::input(double t) const {
 }
 
 Trajectory Trajectory::readCsv(std::istream& in, const std::string& source) {
-  std::string line;
-  int lineNo = 0;
-  // Header: first non-empty line.
-  std::vector<std::string> header;
-  while (std::getline(in, line)) {
-    ++lineNo;
-    if (!trim(line).empty()) {
-      header = splitCsv(line);
-      break;
-    }
-  }
-  if (header.empty()) throw TrajectoryError(source + ": empty file (expected a header row)");
-  if (header[0] != "t") {
-    throw TrajectoryError(source + ": line " + std::to_string(lineNo) +
-                          ", column 1: header must start with 't', got '" + header[0] + "'");
-  }
-  for (std::size_t c = 0; c < header.size(); ++c) {
-    if (header[c].empty()) {
-      throw TrajectoryError(source + ": line " + std::to_string(lineNo) + ", column " +
-                            std::to_string(c + 1) + ": empty column name");
-    }
-  }
-  const int ncols = static_cast<int>(header.size()) - 1;
   int n = -1;
-  for (int cand = 1; 2 * cand <= ncols && n < 0; ++cand) {
-    bool match = true;
-    for (int i = 0; i < cand && match; ++i) match = header[1 + cand + i] == "d" + header[1 + i];
-    if (match) n = cand;
-  }
-  if (n < 0) {
-    throw TrajectoryError(source + ": line " + std::to_string(lineNo) +
-                          ": cannot find the velocity columns: expected 't', the configuration "
-                          "names, then 'd' + each configuration name, then the input names");
-  }
+  const detail::NumericCsv csv = detail::readNumericCsv(
+      in, source, [&](const std::vector<std::string>& header, int lineNo) {
+        if (header[0] != "t") {
+          throw TrajectoryError(source + ": line " + std::to_string(lineNo) +
+                                ", column 1: header must start with 't', got '" + header[0] + "'");
+        }
+        for (std::size_t c = 0; c < header.size(); ++c) {
+          if (header[c].empty()) {
+            throw TrajectoryError(source + ": line " + std::to_string(lineNo) + ", column " +
+                                  std::to_string(c + 1) + ": empty column name");
+          }
+        }
+        // n: the first count with columns n+1..2n equal to "d" + columns 1..n.
+        const int ncols = static_cast<int>(header.size()) - 1;
+        for (int cand = 1; 2 * cand <= ncols && n < 0; ++cand) {
+          bool match = true;
+          for (int i = 0; i < cand && match; ++i) match = header[1 + cand + i] == "d" + header[1 + i];
+          if (match) n = cand;
+        }
+        if (n < 0) {
+          throw TrajectoryError(source + ": line " + std::to_string(lineNo) +
+                                ": cannot find the velocity columns: expected 't', the configuration "
+                                "names, then 'd' + each configuration name, then the input names");
+        }
+      });
+  const std::vector<std::string>& header = csv.header;
   std::vector<std::string> configs(header.begin() + 1, header.begin() + 1 + n);
   std::vector<std::string> inputs(header.begin() + 1 + 2 * n, header.end());
-  const int width = 1 + 2 * n + static_cast<int>(inputs.size());
-
-  std::vector<std::vector<double>> rows;
-  int row = 0;
-  while (std::getline(in, line)) {
-    ++lineNo;
-    if (trim(line).empty()) continue;
-    ++row;
-    const auto fields = splitCsv(line);
-    const std::string at = source + ": row " + std::to_string(row) + " (line " +
-                           std::to_string(lineNo) + ")";
-    if (static_cast<int>(fields.size()) != width) {
-      throw TrajectoryError(at + ": expected " + std::to_string(width) + " columns, got " +
-                            std::to_string(fields.size()));
-    }
-    std::vector<double> values(width);
-    for (int c = 0; c < width; ++c) {
-      const std::string& f = fields[c];
-      const std::string col = ", column " + std::to_string(c + 1) + " ('" + header[c] + "')";
-      char* end = nullptr;
-      errno = 0;
-      const double v = f.empty() ? 0.0 : std::strtod(f.c_str(), &end);
-      if (f.empty() || end != f.c_str() + f.size()) {
-        throw TrajectoryError(at + col + ": '" + f + "' is not a number");
-      }
-      if (!std::isfinite(v)) throw TrajectoryError(at + col + ": value '" + f + "' is not finite");
-      values[c] = v;
-    }
-    if (!rows.empty() && !(values[0] > rows.back()[0])) {
-      std::ostringstream m;
-      m << at << ", column 1 ('t'): time " << values[0] << " is not greater than the previous time "
-        << rows.back()[0];
-      throw TrajectoryError(m.str());
-    }
-    rows.push_back(std::move(values));
-  }
-  if (rows.empty()) throw TrajectoryError(source + ": no data rows after the header");
+  const auto& rows = csv.rows;
   const int N = static_cast<int>(rows.size());
   Eigen::VectorXd t(N);
   Eigen::MatrixXd x(2 * n, N), u(static_cast<Eigen::Index>(inputs.size()), N);
