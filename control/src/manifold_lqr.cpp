@@ -213,7 +213,9 @@ struct ReferenceLinearization {
 struct TransportProblem {
   ReferenceLinearization lin;
   Eigen::Index nx, d;
-  Eigen::MatrixXd W;  // (I − P) A
+  Eigen::MatrixXd W;  // (I − P) A at preparedTime
+  bool prepared = false;
+  double preparedTime = 0.0;
   double failTime = 0.0;
   std::string failMessage;
 
@@ -229,6 +231,10 @@ struct TransportProblem {
   }
 
   bool prepare(double t) {
+    // CVODES asks for the Jacobian at the time of a right-hand side it just evaluated, and W
+    // depends on t only (the equation is linear in T): evaluate the core once per t.
+    if (prepared && t == preparedTime) return true;
+    prepared = false;
     try {
       lin.evaluate(t);
     } catch (const std::exception& e) {
@@ -244,6 +250,8 @@ struct TransportProblem {
     const Eigen::MatrixXd& Tc = lin.data.tangentBasis;
     W = lin.data.A;
     W.noalias() -= Tc * (Tc.transpose() * lin.data.A);
+    prepared = true;
+    preparedTime = t;
     return true;
   }
 

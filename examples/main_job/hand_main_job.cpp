@@ -117,33 +117,27 @@ std::string format(const char* fmt, double a, double b = 0.0, double c = 0.0) {
 void finiteDifferenceLinearization(const trellis::Model& model, trellis::Data& data,
                                    const Eigen::VectorXd& x, const Eigen::VectorXd& u, double step,
                                    Eigen::MatrixXd& A, Eigen::MatrixXd& B) {
+  // One loop over the columns of [A B], i.e. over z = [x; u]; the q-rows are [0 I | 0] exactly.
   const int n = model.nq(), m = model.nu();
-  A.resize(2 * n, 2 * n);
-  B.resize(2 * n, m);
-  auto qdd = [&](const Eigen::VectorXd& xx, const Eigen::VectorXd& uu) {
-    trellis::computeDynamics(model, data, xx.head(n), xx.tail(n), uu);
+  Eigen::MatrixXd AB = Eigen::MatrixXd::Zero(2 * n, 2 * n + m);
+  AB.topLeftCorner(n, 2 * n).rightCols(n).setIdentity();
+  Eigen::VectorXd z(2 * n + m);
+  z << x, u;
+  auto qdd = [&](const Eigen::VectorXd& zz) {
+    trellis::computeDynamics(model, data, zz.head(n), zz.segment(n, n), zz.tail(m));
     return Eigen::VectorXd(data.qdd);
   };
-  Eigen::VectorXd xp = x, up = u;
-  for (int k = 0; k < 2 * n; ++k) {
-    xp(k) = x(k) + step;
-    const Eigen::VectorXd fp = qdd(xp, u);
-    xp(k) = x(k) - step;
-    const Eigen::VectorXd fm = qdd(xp, u);
-    xp(k) = x(k);
-    A.col(k).head(n).setZero();
-    if (k >= n) A(k - n, k) = 1.0;
-    A.col(k).tail(n) = (fp - fm) / (2 * step);
+  Eigen::VectorXd zp = z;
+  for (int k = 0; k < z.size(); ++k) {
+    zp(k) = z(k) + step;
+    const Eigen::VectorXd fp = qdd(zp);
+    zp(k) = z(k) - step;
+    const Eigen::VectorXd fm = qdd(zp);
+    zp(k) = z(k);
+    AB.col(k).tail(n) = (fp - fm) / (2 * step);
   }
-  for (int k = 0; k < m; ++k) {
-    up(k) = u(k) + step;
-    const Eigen::VectorXd fp = qdd(x, up);
-    up(k) = u(k) - step;
-    const Eigen::VectorXd fm = qdd(x, up);
-    up(k) = u(k);
-    B.col(k).head(n).setZero();
-    B.col(k).tail(n) = (fp - fm) / (2 * step);
-  }
+  A = AB.leftCols(2 * n);
+  B = AB.rightCols(m);
 }
 
 }  // namespace
