@@ -1,0 +1,149 @@
+// python/src/bind_optimization.cpp — trellis::optimization: optimal control problems (from files or
+// built in Python), optimize_trajectory (Ipopt, GIL released) and its result.
+#include "common.hpp"
+#include "options.hpp"
+
+#include <pybind11/functional.h>
+
+#include "trellis/optimization/optimizer.hpp"
+#include "trellis/optimization/problem.hpp"
+
+namespace trellis::python {
+
+namespace {
+
+using Problem = OptimalControlProblem;
+
+/// A vector field of the problem as a property that copies in and out (a NumPy view of the C++
+/// buffer could dangle when the field is reassigned with another size).
+template <class Class, class T>
+void vectorProperty(Class& cls, const char* name, T Problem::*member, const char* doc) {
+  cls.def_property(
+      name, [member](const Problem& p) { return toArray(p.*member); },
+      [member](Problem& p, const T& value) { p.*member = value; }, doc);
+}
+
+}  // namespace
+
+void bindOptimization(py::module_& m) {
+  py::enum_<CollocationMethod>(m, "CollocationMethod")
+      .value("HERMITE_SIMPSON", CollocationMethod::kHermiteSimpson)
+      .value("TRAPEZOIDAL", CollocationMethod::kTrapezoidal);
+  py::enum_<DerivativeMode>(m, "DerivativeMode")
+      .value("EXACT", DerivativeMode::kExact)
+      .value("FINITE_DIFFERENCE", DerivativeMode::kFiniteDifference);
+  py::enum_<OptimizationStatus>(m, "OptimizationStatus")
+      .value("SOLVED", OptimizationStatus::kSolved)
+      .value("SOLVED_ACCEPTABLE", OptimizationStatus::kSolvedAcceptable)
+      .value("INFEASIBLE", OptimizationStatus::kInfeasible)
+      .value("ITERATION_LIMIT", OptimizationStatus::kIterationLimit)
+      .value("STOPPED", OptimizationStatus::kStopped)
+      .value("FAILED", OptimizationStatus::kFailed);
+
+  py::class_<Problem> problem(m, "OptimalControlProblem",
+      "minimize int_0^T u^T R u + (x - x_goal)^T Q (x - x_goal) dt + (x(T) - x_goal)^T Qf (x(T) - "
+      "x_goal) + w_T T subject to xdot = f(x, u), the constraints, bounds and boundary states; "
+      "x = [q; dq] (nx = 2n), u (nu). Made by load_problem / parse_problem or "
+      "OptimalControlProblem(model) (defaults: zero boundary states, all fixed, no bounds, R = I, "
+      "Q = Qf = 0). Vector and matrix fields are copied in and out.");
+  problem
+      .def(py::init([](ModelPtr model) { return Problem(std::const_pointer_cast<const Model>(model)); }),
+           py::arg("model"))
+      .def_property_readonly("model",
+                             [](const Problem& p) { return std::const_pointer_cast<Model>(p.model); })
+      .def_readwrite("method", &Problem::method)
+      .def_readwrite("knots", &Problem::knots, "N >= 2 knots t_k = k T / (N - 1)")
+      .def_readwrite("horizon", &Problem::horizon, "T (the initial guess when free)")
+      .def_readwrite("min_horizon", &Problem::minHorizon)
+      .def_readwrite("max_horizon", &Problem::maxHorizon)
+      .def_property_readonly("free_horizon", &Problem::freeHorizon)
+      .def("set_fixed_horizon", &Problem::setFixedHorizon, py::arg("T"))
+      .def_readwrite("initial_fixed", &Problem::initialFixed, "nx flags (list of bool)")
+      .def_readwrite("final_fixed", &Problem::finalFixed, "nx flags (list of bool)")
+      .def_readwrite("time_weight", &Problem::timeWeight)
+      .def_readwrite("initial_guess", &Problem::initialGuess, "a Trajectory or None")
+      .def_property_readonly("nq", &Problem::nq)
+      .def_property_readonly("nx", &Problem::nx)
+      .def_property_readonly("nu", &Problem::nu)
+      .def_property_readonly("state_names", &Problem::stateNames)
+      .def("validate", &Problem::validate, "Raises ProblemError naming the first bad field.");
+  vectorProperty(problem, "initial_state", &Problem::initialState, "(nx,)");
+  vectorProperty(problem, "final_state", &Problem::finalState, "(nx,)");
+  vectorProperty(problem, "state_lower", &Problem::stateLower, "(nx,), -inf for none");
+  vectorProperty(problem, "state_upper", &Problem::stateUpper, "(nx,), +inf for none");
+  vectorProperty(problem, "input_lower", &Problem::inputLower, "(nu,)");
+  vectorProperty(problem, "input_upper", &Problem::inputUpper, "(nu,)");
+  vectorProperty(problem, "goal_state", &Problem::goalState, "(nx,)");
+  vectorProperty(problem, "R", &Problem::R, "(nu, nu) symmetric PSD");
+  vectorProperty(problem, "Q", &Problem::Q, "(nx, nx) symmetric PSD");
+  vectorProperty(problem, "Qf", &Problem::Qf, "(nx, nx) symmetric PSD");
+
+  m.def("load_problem", &loadProblem, py::arg("path"),
+        "Reads a problem file (JSON, optimization/README.md); paths inside are relative to it. "
+        "Raises ProblemError (or ModelError for its scene).");
+  m.def("parse_problem", &parseProblem, py::arg("text"), py::arg("source") = "<problem>",
+        py::arg("base_dir") = ".", "Parses problem-file JSON text; base_dir resolves its paths.");
+
+  py::class_<IterationInfo>(m, "IterationInfo", "One Ipopt iteration (passed to on_iteration).")
+      .def_readonly("iteration", &IterationInfo::iteration)
+      .def_readonly("cost", &IterationInfo::cost)
+      .def_readonly("constraint_violation", &IterationInfo::constraintViolation)
+      .def_readonly("dual_infeasibility", &IterationInfo::dualInfeasibility)
+      .def_readonly("step_size", &IterationInfo::stepSize)
+      .def_readonly("restoration", &IterationInfo::restoration);
+
+  py::class_<OptimizerOptions>(m, "OptimizerOptions",
+      "Ipopt options (keywords): print_level, max_iterations, tolerance, constraint_tolerance, "
+      "max_cpu_time, limited_memory_size, derivatives (DerivativeMode), on_iteration (a callable "
+      "taking an IterationInfo and returning False to stop; an exception in it stops the solve).")
+      .def(py::init(&makeFromKwargs<OptimizerOptions>))
+      .def_readwrite("print_level", &OptimizerOptions::printLevel)
+      .def_readwrite("max_iterations", &OptimizerOptions::maxIterations)
+      .def_readwrite("tolerance", &OptimizerOptions::tolerance)
+      .def_readwrite("constraint_tolerance", &OptimizerOptions::constraintTolerance)
+      .def_readwrite("max_cpu_time", &OptimizerOptions::maxCpuTime)
+      .def_readwrite("limited_memory_size", &OptimizerOptions::limitedMemorySize)
+      .def_readwrite("derivatives", &OptimizerOptions::derivatives)
+      .def_readwrite("on_iteration", &OptimizerOptions::onIteration)
+      .def("validate", &OptimizerOptions::validate);
+
+  py::class_<OptimizationResult>(m, "OptimizationResult",
+      "status (OptimizationStatus), ipopt_status, message, iterations, cost, constraint_violation, "
+      "bound_violation, max_slack, solve_time, solve_cpu_time, horizon, evaluation counts, the "
+      "trajectory (knots), Hermite-Simpson midpoints and the NLP variables.")
+      .def_readonly("status", &OptimizationResult::status)
+      .def_readonly("ipopt_status", &OptimizationResult::ipoptStatus)
+      .def_readonly("message", &OptimizationResult::message)
+      .def_readonly("iterations", &OptimizationResult::iterations)
+      .def_readonly("cost", &OptimizationResult::cost)
+      .def_readonly("constraint_violation", &OptimizationResult::constraintViolation)
+      .def_readonly("bound_violation", &OptimizationResult::boundViolation)
+      .def_readonly("max_slack", &OptimizationResult::maxSlack)
+      .def_readonly("solve_time", &OptimizationResult::solveTime)
+      .def_readonly("solve_cpu_time", &OptimizationResult::solveCpuTime)
+      .def_readonly("horizon", &OptimizationResult::horizon)
+      .def_readonly("dynamics_evaluations", &OptimizationResult::dynamicsEvaluations)
+      .def_readonly("linearization_evaluations", &OptimizationResult::linearizationEvaluations)
+      .def_readonly("trajectory", &OptimizationResult::trajectory)
+      .def_property_readonly("midpoint_states",
+                             [](const OptimizationResult& r) { return toArray(r.midpointStates); })
+      .def_property_readonly("midpoint_inputs",
+                             [](const OptimizationResult& r) { return toArray(r.midpointInputs); })
+      .def_property_readonly("variables",
+                             [](const OptimizationResult& r) { return toArray(r.variables); })
+      .def_property_readonly("success", &OptimizationResult::success)
+      .def("__repr__", [](const OptimizationResult& r) {
+        return std::string("<OptimizationResult ") + toString(r.status) + ": " + r.message + ">";
+      });
+
+  m.def("optimize_trajectory",
+        [](const Problem& problem, const std::optional<OptimizerOptions>& options) {
+          py::gil_scoped_release release;
+          return optimizeTrajectory(problem, options.value_or(OptimizerOptions{}));
+        },
+        py::arg("problem"), py::kw_only(), py::arg("options") = py::none(),
+        "Transcribes (direct collocation) and solves with Ipopt, without the GIL. Bad problems or "
+        "options raise ProblemError / ValueError; a numerical failure is the result's status.");
+}
+
+}  // namespace trellis::python

@@ -1,0 +1,101 @@
+// python/src/common.hpp — conversions shared by the binding files (core, control, optimization).
+//
+// Arrays in: vectors and matrices are taken as Eigen::Ref<const …> or by value, so any array-like
+// convertible to float64 is accepted; a float64 array that is contiguous in the right order is
+// read in place, anything else (other dtype, C-order matrix where column-major is needed,
+// non-contiguous slices, lists) is copied first. Arrays out: fresh C-order float64 NumPy arrays
+// (copies — the result owns its memory), or, for the hot-loop `out` arguments, the caller's
+// float64 array of the exact shape in any memory order (strided writes, no allocation).
+#pragma once
+
+#include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include "trellis/core/data.hpp"
+#include "trellis/core/model.hpp"
+
+#include <Eigen/Core>
+
+#include <atomic>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+namespace trellis::python {
+
+namespace py = pybind11;
+
+using ModelPtr = std::shared_ptr<Model>;
+using VectorRef = Eigen::Ref<const Eigen::VectorXd>;
+using StridedMap = Eigen::Map<Eigen::MatrixXd, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
+
+/// The Python `Data`: the core workspace, the model it was sized for (kept alive), input buffers
+/// (so a call copies q, q̇, u into preallocated vectors instead of allocating), and a flag that
+/// refuses concurrent use from two threads (calls release the GIL).
+struct PyData {
+  explicit PyData(ModelPtr m)
+      : model(std::move(m)), data(*model), q(model->nq()), dq(model->nq()), u(model->nu()) {
+    q.setZero();
+    dq.setZero();
+    u.setZero();
+  }
+  ModelPtr model;
+  Data data;
+  Eigen::VectorXd q, dq, u;
+  std::atomic<bool> busy{false};
+};
+
+/// Two threads using one Data at once (translated to RuntimeError, not NumericalError).
+class DataInUseError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// Marks a PyData in use for the lifetime of the guard; throws if another thread holds it.
+class DataGuard {
+ public:
+  explicit DataGuard(PyData& d) : d_(d) {
+    if (d_.busy.exchange(true)) {
+      throw DataInUseError(
+          "Data is in use by another thread: use one Data per thread (trellis_mech.Data(model))");
+    }
+  }
+  ~DataGuard() { d_.busy.store(false); }
+  DataGuard(const DataGuard&) = delete;
+  DataGuard& operator=(const DataGuard&) = delete;
+
+ private:
+  PyData& d_;
+};
+
+/// Throws std::invalid_argument unless data was built for model (same object).
+void checkSameModel(const Model& model, const PyData& data);
+
+/// Copies v into dst (already sized `expected`) after checking its size; names the argument.
+void loadVector(const VectorRef& v, Eigen::VectorXd& dst, const char* name, const char* sizeName);
+/// Size check only (message names the argument and the model size it must match).
+void checkSize(Eigen::Index got, Eigen::Index expected, const char* name, const char* sizeName);
+
+/// A fresh NumPy array (C order) holding a copy of the matrix (2-D) or vector (1-D).
+py::array_t<double> toArray(const Eigen::Ref<const Eigen::MatrixXd>& m);
+py::array_t<double> toArray(const Eigen::Ref<const Eigen::VectorXd>& v);
+py::object toArrayComplex(const Eigen::VectorXcd& v);  // complex128 (a copy)
+/// N matrices of equal size as one (N, rows, cols) array.
+py::array_t<double> toArray3(const std::vector<Eigen::MatrixXd>& ms, Eigen::Index rows,
+                             Eigen::Index cols);
+
+/// The caller's output array as a strided Eigen map: must be a writeable float64 ndarray of
+/// exactly rows×cols (2-D) — or `rows` entries when cols < 0 (1-D) — in any memory order.
+/// Throws std::invalid_argument naming the argument otherwise.
+StridedMap outputMap(py::array& out, Eigen::Index rows, Eigen::Index cols, const char* name);
+
+/// Registers the exception types and the C++ → Python translation (module.cpp).
+void bindErrors(py::module_& m);
+void bindCore(py::module_& m);
+void bindControl(py::module_& m);
+void bindOptimization(py::module_& m);
+void bindHand(py::module_& m);
+
+}  // namespace trellis::python

@@ -1,0 +1,165 @@
+// python/src/module.cpp — the extension module _trellis_mech (imported by trellis_mech/__init__.py),
+// the shared conversion helpers, and the translation of C++ exceptions.
+//
+// Exceptions: bad input becomes ValueError — plain std::invalid_argument / std::out_of_range /
+// std::logic_error, and the descriptive trellis types ModelError, TrajectoryError, ProblemError,
+// which are ValueError subclasses here. A std::runtime_error the C++ throws for a numerical failure
+// (e.g. computeControllabilityAt when the dynamics fail, solveLyapunov when singular) becomes
+// trellis_mech.NumericalError (a RuntimeError). Failures the C++ reports as a status stay a status.
+#include "common.hpp"
+
+#include "trellis/control/trajectory.hpp"
+#include "trellis/core/model_builder.hpp"
+#include "trellis/optimization/problem.hpp"
+
+#include <cstring>
+#include <string>
+
+namespace trellis::python {
+
+void checkSameModel(const Model& model, const PyData& data) {
+  if (&model != data.model.get()) {
+    throw std::invalid_argument("data: this Data was made for another model ('" +
+                                data.model->name() + "'); make one with trellis_mech.Data(model)");
+  }
+}
+
+void checkSize(Eigen::Index got, Eigen::Index expected, const char* name, const char* sizeName) {
+  if (got != expected) {
+    throw std::invalid_argument(std::string(name) + ": expected " + std::to_string(expected) +
+                                " entries (" + sizeName + "), got " + std::to_string(got));
+  }
+}
+
+void loadVector(const VectorRef& v, Eigen::VectorXd& dst, const char* name, const char* sizeName) {
+  checkSize(v.size(), dst.size(), name, sizeName);
+  dst = v;  // same size: no allocation
+}
+
+py::array_t<double> toArray(const Eigen::Ref<const Eigen::MatrixXd>& m) {
+  py::array_t<double> a({m.rows(), m.cols()});
+  auto r = a.mutable_unchecked<2>();
+  for (Eigen::Index i = 0; i < m.rows(); ++i) {
+    for (Eigen::Index j = 0; j < m.cols(); ++j) r(i, j) = m(i, j);
+  }
+  return a;
+}
+
+py::array_t<double> toArray(const Eigen::Ref<const Eigen::VectorXd>& v) {
+  py::array_t<double> a(v.size());
+  if (v.size() > 0) std::memcpy(a.mutable_data(), v.data(), sizeof(double) * v.size());
+  return a;
+}
+
+py::object toArrayComplex(const Eigen::VectorXcd& v) {
+  // Returned as complex128 through pybind11's Eigen caster (a copy).
+  return py::cast(Eigen::VectorXcd(v));
+}
+
+py::array_t<double> toArray3(const std::vector<Eigen::MatrixXd>& ms, Eigen::Index rows,
+                             Eigen::Index cols) {
+  py::array_t<double> a({static_cast<Eigen::Index>(ms.size()), rows, cols});
+  auto r = a.mutable_unchecked<3>();
+  for (std::size_t k = 0; k < ms.size(); ++k) {
+    for (Eigen::Index i = 0; i < rows; ++i) {
+      for (Eigen::Index j = 0; j < cols; ++j) r(k, i, j) = ms[k](i, j);
+    }
+  }
+  return a;
+}
+
+StridedMap outputMap(py::array& out, Eigen::Index rows, Eigen::Index cols, const char* name) {
+  const std::string prefix = std::string("out ") + name + ": ";
+  if (!py::isinstance<py::array_t<double>>(out) || out.dtype().kind() != 'f' ||
+      out.itemsize() != sizeof(double)) {
+    throw std::invalid_argument(prefix + "must be a float64 numpy array, got dtype " +
+                                std::string(py::str(out.dtype())));
+  }
+  if (!out.writeable()) throw std::invalid_argument(prefix + "is read-only");
+  const bool vector = cols < 0;
+  const std::string expected =
+      vector ? "(" + std::to_string(rows) + ",)"
+             : "(" + std::to_string(rows) + ", " + std::to_string(cols) + ")";
+  if (out.ndim() != (vector ? 1 : 2) || out.shape(0) != rows || (!vector && out.shape(1) != cols)) {
+    std::string got = "(";
+    for (py::ssize_t i = 0; i < out.ndim(); ++i) got += (i ? ", " : "") + std::to_string(out.shape(i));
+    got += out.ndim() == 1 ? ",)" : ")";
+    throw std::invalid_argument(prefix + "expected shape " + expected + ", got " + got);
+  }
+  const auto rowStride = out.strides(0), colStride = vector ? 0 : out.strides(1);
+  if (rowStride % static_cast<py::ssize_t>(sizeof(double)) != 0 ||
+      colStride % static_cast<py::ssize_t>(sizeof(double)) != 0) {
+    throw std::invalid_argument(prefix + "strides are not multiples of 8 bytes");
+  }
+  // Eigen's Stride<outer, inner>: column-major map, outer = column step, inner = row step.
+  return StridedMap(static_cast<double*>(out.mutable_data()), rows, vector ? 1 : cols,
+                    Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(colStride / 8, rowStride / 8));
+}
+
+namespace {
+PyObject* gModelError = nullptr;
+PyObject* gTrajectoryError = nullptr;
+PyObject* gProblemError = nullptr;
+PyObject* gNumericalError = nullptr;
+
+PyObject* newError(py::module_& m, const char* name, PyObject* base, const char* doc) {
+  const std::string qualified = std::string("trellis_mech.") + name;
+  // One reference is kept for the life of the process (exception types are never unloaded).
+  PyObject* type = PyErr_NewExceptionWithDoc(qualified.c_str(), doc, base, nullptr);
+  if (!type) throw py::error_already_set();
+  m.attr(name) = py::handle(type);
+  return type;
+}
+}  // namespace
+
+void bindErrors(py::module_& m) {
+  gModelError = newError(m, "ModelError", PyExc_ValueError,
+                         "Invalid model description (builder call or scene file); the message names "
+                         "the element, the field and the value.");
+  gTrajectoryError = newError(m, "TrajectoryError", PyExc_ValueError,
+                              "Invalid trajectory or gain schedule (arrays or CSV); the message "
+                              "names the row and column.");
+  gProblemError = newError(m, "ProblemError", PyExc_ValueError,
+                           "Invalid optimal control problem (object or problem file); the message "
+                           "names the field and the value.");
+  gNumericalError = newError(m, "NumericalError", PyExc_RuntimeError,
+                             "A numerical failure that the C++ API throws (not a status): e.g. the "
+                             "dynamics fail where a function needs them, a singular Lyapunov "
+                             "equation.");
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const py::builtin_exception&) {
+      throw;  // pybind11's own (value_error, index_error, …): its default translation
+    } catch (const py::error_already_set&) {
+      throw;
+    } catch (const DataInUseError& e) {
+      PyErr_SetString(PyExc_RuntimeError, e.what());
+    } catch (const ModelError& e) {
+      PyErr_SetString(gModelError, e.what());
+    } catch (const TrajectoryError& e) {
+      PyErr_SetString(gTrajectoryError, e.what());
+    } catch (const ProblemError& e) {
+      PyErr_SetString(gProblemError, e.what());
+    } catch (const std::logic_error& e) {  // invalid_argument, out_of_range, domain_error, …
+      PyErr_SetString(PyExc_ValueError, e.what());
+    } catch (const std::runtime_error& e) {
+      PyErr_SetString(gNumericalError, e.what());
+    }
+  });
+}
+
+}  // namespace trellis::python
+
+PYBIND11_MODULE(_trellis_mech, m) {
+  namespace tp = trellis::python;
+  m.doc() = "trellis: exact linearizations of constrained mechanical systems, TV-LQR and "
+            "trajectory optimization (C++ core; see the trellis_mech package docstring)";
+  tp::bindErrors(m);
+  tp::bindCore(m);
+  tp::bindControl(m);
+  tp::bindOptimization(m);
+#ifdef TRELLIS_PYTHON_HAND
+  tp::bindHand(m);
+#endif
+}

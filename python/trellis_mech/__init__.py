@@ -1,0 +1,100 @@
+"""trellis_mech — Python interface to trellis (C++): exact linearizations of constrained
+mechanical systems, TV-LQR and trajectory optimization, with NumPy arrays.
+
+Import name: ``trellis_mech`` (PyPI's ``trellis`` and ``pytrellis`` are unrelated projects).
+
+Conventions (the C++ ones, in snake_case):
+
+* a ``Model`` is immutable (``load_scene``, ``parse_scene``, ``ModelBuilder.finalize``); a ``Data``
+  is its preallocated workspace, reused across calls, one per thread;
+* state ``x = [q; dq]`` (``nx = 2 nq``), input ``u`` (``nu``); a ``Trajectory`` stores states as
+  ``(nx, N)`` (column k at time ``t_k``) and inputs as ``(nu, N)``; a ``GainSchedule`` stores
+  gains as ``(N, nu, nx)``;
+* array arguments accept anything convertible to float64: a contiguous float64 array is read in
+  place, anything else (other dtype, Fortran/C order mismatch, a non-contiguous slice, a list) is
+  copied first. Results are fresh C-order float64 arrays that own their memory. The ``out``-style
+  keywords (``compute_linearization(..., A=, B=)``, ``compute_dynamics(..., qdd=, lambda_=)``)
+  write into the caller's float64 array of the exact shape, in any memory order (strided
+  writes), and raise ValueError for a wrong dtype, shape or a read-only array;
+* bad input raises ``ValueError`` (``ModelError``, ``TrajectoryError`` and ``ProblemError`` are
+  ValueError subclasses) with the C++ message naming the element, field and value; a numerical
+  failure the C++ reports as a status stays a status (``DynamicsStatus``, ``LqrResult.status``,
+  ``RiccatiSolution.status``, ``SimulationResult.status``, ``OptimizationResult.status``); where the
+  C++ throws for a numerical failure, ``NumericalError`` (a RuntimeError) is raised;
+* long computations (linearization, Riccati, simulation, optimization) release the GIL.
+"""
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from ._trellis_mech import *  # noqa: F401,F403
+from ._trellis_mech import (Data, DynamicsStatus, compute_constraint_tangent_basis,
+                            compute_dynamics, compute_linearization, solve_manifold_riccati,
+                            solve_riccati)
+
+__version__ = "0.1.0"
+
+
+@dataclass
+class Dynamics:
+    """Forward dynamics at a state: qdd (nq,), lambda_ (nc,), the mass matrix M (nq, nq)."""
+    qdd: np.ndarray
+    lambda_: np.ndarray
+    M: np.ndarray
+    status: DynamicsStatus
+
+
+@dataclass
+class Linearization:
+    """xdot ~ A dx + B du at a state: A (nx, nx), B (nx, nu), with qdd, lambda_, M; with
+    ``tangent=True`` also the tangent basis T (nx, d) of the constraint manifold and
+    reduced_A = T^T A T (d, d), reduced_B = T^T B (d, nu)."""
+    A: np.ndarray
+    B: np.ndarray
+    qdd: np.ndarray
+    lambda_: np.ndarray
+    M: np.ndarray
+    status: DynamicsStatus
+    tangent_basis: Optional[np.ndarray] = None
+    reduced_A: Optional[np.ndarray] = None
+    reduced_B: Optional[np.ndarray] = None
+
+
+def dynamics(model, q, dq, u=None, *, data=None):
+    """q̈ and λ at (q, dq, u) (u defaults to zeros); ``data`` is reused when given."""
+    data = Data(model) if data is None else data
+    u = np.zeros(model.nu) if u is None else u
+    status = compute_dynamics(model, data, q, dq, u)
+    return Dynamics(data.qdd, data.lambda_, data.M, status)
+
+
+def linearize(model, q, dq, u=None, *, data=None, tangent=False):
+    """The exact linearization A, B at (q, dq, u) as a ``Linearization`` (copies of the arrays);
+    ``data`` is reused when given. For hot loops call ``compute_linearization(model, data, q, dq,
+    u, A=A, B=B)`` with preallocated arrays instead (no allocation)."""
+    data = Data(model) if data is None else data
+    u = np.zeros(model.nu) if u is None else u
+    status = compute_linearization(model, data, q, dq, u)
+    result = Linearization(data.A, data.B, data.qdd, data.lambda_, data.M, status)
+    if tangent and status.ok:
+        compute_constraint_tangent_basis(model, data)
+        result.tangent_basis = data.tangent_basis
+        result.reduced_A = data.reduced_A
+        result.reduced_B = data.reduced_B
+    return result
+
+
+def tvlqr(model, reference, *, Q, R, Qf=None, options=None, transport=None):
+    """Continuous TV-LQR along ``reference`` (a Trajectory with state derivatives): on the
+    constraint manifold when the model has constraints (``solve_manifold_riccati``, as
+    ``trellis gains`` does), otherwise full state (``solve_riccati``). Weights: a number (times
+    I), a diagonal or a matrix; Qf defaults to Q. Returns the solution (``.ok``, ``.message``,
+    ``.K(t)``, ``.gain_schedule(times)``); it keeps the model alive."""
+    if model.nc > 0:
+        return solve_manifold_riccati(model, reference, Q=Q, R=R, Qf=Qf, options=options,
+                                      transport=transport)
+    if transport is not None:
+        raise ValueError("transport: only used for a model with constraints")
+    return solve_riccati(model, reference, Q=Q, R=R, Qf=Qf, options=options)

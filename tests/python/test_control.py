@@ -1,0 +1,308 @@
+"""trellis_mech control bindings: CARE/DARE, discretization, trajectories and gain schedules (NumPy
+and CSV), TV-LQR against `trellis gains`, simulation against `trellis simulate`, lifetimes, errors
+and the GIL."""
+import gc
+import math
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from conftest import SCENES, TRAJECTORIES
+
+
+def scalar_care(a, b, q, r):
+    """Positive root of 2 a s − s² b²/r + q = 0."""
+    return (a + math.sqrt(a * a + b * b * q / r)) * r / (b * b)
+
+
+def test_care_scalar_closed_form_and_residual(tm):
+    res = tm.solve_care([[1.5]], [[2.0]], [[3.0]], [[0.5]])
+    assert res.ok and res.status == tm.LqrStatus.OK
+    s = scalar_care(1.5, 2.0, 3.0, 0.5)
+    assert res.S[0, 0] == pytest.approx(s, rel=1e-12)
+    assert res.K[0, 0] == pytest.approx(2.0 * s / 0.5, rel=1e-12)
+    assert res.closed_loop_eigenvalues.dtype == np.complex128
+    # A larger system: the CARE residual and K = R⁻¹BᵀS.
+    rng = np.random.default_rng(3)
+    A = rng.standard_normal((4, 4))
+    B = rng.standard_normal((4, 2))
+    Q, R = np.eye(4), np.diag([1.0, 2.0])
+    res = tm.solve_care(A, B, Q, R, options=tm.CareOptions(tolerance=1e-13))
+    S = res.S
+    residual = A.T @ S + S @ A - S @ B @ np.linalg.solve(R, B.T) @ S + Q
+    assert np.abs(residual).max() < 1e-8 * np.abs(S).max()
+    np.testing.assert_allclose(res.K, np.linalg.solve(R, B.T @ S), rtol=1e-10, atol=1e-12)
+    assert (np.linalg.eigvals(A - B @ res.K).real < 0).all()
+
+
+def test_dare_and_zero_order_hold(tm):
+    a, b, h = -1.0, 1.0, 0.1
+    Ad, Bd = tm.discretize_zero_order_hold([[a]], [[b]], h)
+    assert Ad[0, 0] == pytest.approx(math.exp(a * h), rel=1e-14)
+    assert Bd[0, 0] == pytest.approx((math.exp(a * h) - 1) / a * b, rel=1e-13)
+    res = tm.solve_dare(Ad, Bd, [[1.0]], [[0.1]])
+    assert res.ok
+    ad, bd, q, r, s = Ad[0, 0], Bd[0, 0], 1.0, 0.1, res.S[0, 0]
+    assert s == pytest.approx(ad * s * ad - (ad * s * bd) ** 2 / (r + bd * s * bd) + q, rel=1e-12)
+    S, K = tm.solve_discrete_riccati_recursion(Ad, Bd, [[1.0]], [[0.1]], [[0.0]], 400)
+    assert S.shape == (401, 1, 1) and K.shape == (400, 1, 1)
+    assert S[0, 0, 0] == pytest.approx(s, rel=1e-10)  # the recursion converges to the DARE
+
+
+def test_lqr_failures_are_statuses_and_bad_input_raises(tm):
+    res = tm.solve_care([[1.0]], [[0.0]], [[1.0]], [[1.0]])  # unstable and uncontrollable
+    assert not res.ok and res.status == tm.LqrStatus.NOT_STABILIZABLE and res.message
+    with pytest.raises(ValueError, match="R"):
+        tm.solve_care([[1.0]], [[1.0]], [[1.0]], [[-1.0]])
+    with pytest.raises(ValueError):
+        tm.solve_care(np.eye(2), np.ones((3, 1)), np.eye(2), [[1.0]])
+    with pytest.raises(tm.NumericalError):
+        tm.solve_lyapunov(np.zeros((2, 2)), np.eye(2))
+    with pytest.raises(TypeError, match="unexpected keyword argument 'tolerence'"):
+        tm.CareOptions(tolerence=1e-3)
+
+
+def test_controllability(tm):
+    rep = tm.compute_controllability([[0.0, 1.0], [0.0, 0.0]], [[0.0], [1.0]])
+    assert rep.controllable and rep.rank == 2
+    rep = tm.compute_controllability([[1.0, 0.0], [0.0, 2.0]], [[1.0], [0.0]])
+    assert not rep.controllable and rep.rank == 1
+    scene = tm.load_scene(str(SCENES / "paper_pendulum.json"))
+    data = tm.Data(scene.model)
+    q = np.array([math.pi / 6, math.pi / 3])
+    rep = tm.compute_controllability_at(scene.model, data, q, [0.0, 0.0], [0.0])
+    assert rep.dimension == 2  # reduced to the tangent space
+
+
+def test_trajectory_numpy_and_csv_round_trip(tm, tmp_path):
+    model = tm.load_scene(str(SCENES / "cart_pole.json")).model
+    times = np.linspace(0.0, 1.0, 11)
+    states = np.vstack([np.sin(times), 0.1 * times, np.cos(times), 0.1 * np.ones_like(times)])
+    inputs = np.asfortranarray(0.5 * times[None, :])
+    traj = tm.Trajectory.for_model(model, times, states, inputs)
+    assert (traj.nx, traj.nu, len(traj)) == (4, 1, 11)
+    np.testing.assert_array_equal(traj.states, states)
+    path = tmp_path / "t.csv"
+    traj.write_csv(str(path))
+    assert path.read_text().splitlines()[0] == "t,x,theta,dx,dtheta,push"
+    back = tm.Trajectory.read_csv(str(path))
+    np.testing.assert_array_equal(back.states, states)
+    np.testing.assert_array_equal(back.inputs, inputs)
+    np.testing.assert_array_equal(back.times, times)
+    traj.compute_state_derivatives(model)
+    x, u = traj.evaluate(0.3)
+    np.testing.assert_allclose(x, traj.states[:, 3], rtol=1e-14)
+    X, U = traj.sample([0.0, 0.3, 1.0])
+    assert X.shape == (4, 3) and U.shape == (1, 3)
+
+
+def test_trajectory_errors(tm, tmp_path):
+    with pytest.raises(tm.TrajectoryError, match="row") as err:
+        tm.Trajectory(["a"], [], [0.0, 0.0], np.zeros((2, 2)), np.zeros((0, 2)))
+    assert isinstance(err.value, ValueError)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,theta,dtheta,torque\n0,0,0,0\n0.1,x,0,0\n")
+    with pytest.raises(tm.TrajectoryError, match=r"bad.csv.*theta"):
+        tm.Trajectory.read_csv(str(bad))
+    traj = tm.Trajectory(["a"], [], [0.0, 1.0], np.zeros((2, 2)), np.zeros((0, 2)))
+    with pytest.raises(ValueError):
+        traj.evaluate(0.5)  # no state derivatives: std::logic_error → ValueError
+
+
+def test_gain_schedule_numpy_and_csv(tm, tmp_path):
+    times = np.array([0.0, 1.0, 2.0])
+    gains = np.arange(3 * 2 * 4, dtype=float).reshape(3, 2, 4)
+    g = tm.GainSchedule(times, gains)
+    assert (g.nu, g.nx, len(g)) == (2, 4, 3)
+    np.testing.assert_array_equal(g.gains, gains)
+    np.testing.assert_allclose(g.evaluate(0.25), 0.75 * gains[0] + 0.25 * gains[1], rtol=1e-15)
+    path = tmp_path / "g.csv"
+    g.write_csv(str(path))
+    assert path.read_text().splitlines()[0].startswith("t,K_0_0,K_0_1,K_0_2,K_0_3,K_1_0")
+    np.testing.assert_array_equal(tm.GainSchedule.read_csv(str(path)).gains, gains)
+    sampled = tm.GainSchedule.sample(lambda t: np.full((1, 2), t), [0.0, 0.5])
+    np.testing.assert_array_equal(sampled.gains[:, 0, 0], [0.0, 0.5])
+    with pytest.raises(ValueError, match=r"\(N, nu, nx\)"):
+        tm.GainSchedule(times, np.zeros((3, 4)))
+    with pytest.raises(ValueError, match="t"):
+        g.evaluate(5.0)
+
+
+def reference(tm, model, name):
+    traj = tm.Trajectory.read_csv(str(TRAJECTORIES / name))
+    traj.compute_state_derivatives(model)
+    return traj
+
+
+@pytest.mark.parametrize("scene,trajectory,Q,R", [
+    ("cart_pole", "cart_pole_upright.csv", [10, 10, 1, 1], 0.1),      # full state
+    ("paper_pendulum", "paper_pendulum_swing.csv", 1.0, 1.0),          # on the constraint manifold
+])
+def test_tvlqr_matches_cli_gains(tm, cli, tmp_path, scene, trajectory, Q, R):
+    out = tmp_path / "gains.csv"
+    qtext = ",".join(map(str, Q)) if isinstance(Q, list) else str(Q)
+    cli("gains", SCENES / f"{scene}.json", "--trajectory", TRAJECTORIES / trajectory,
+        "--Q", qtext, "--R", str(R), "--out", out)
+    expected = tm.GainSchedule.read_csv(str(out))
+    model = tm.load_scene(str(SCENES / f"{scene}.json")).model
+    ref = reference(tm, model, trajectory)
+    sol = tm.tvlqr(model, ref, Q=np.array(Q, dtype=float) if isinstance(Q, list) else Q, R=R)
+    assert sol.ok, sol.message
+    assert isinstance(sol, tm.ManifoldRiccatiSolution if model.nc else tm.RiccatiSolution)
+    gains = sol.gain_schedule(ref.times)
+    # The same C++ solve on the same input; the CSV keeps 17 digits.
+    np.testing.assert_allclose(gains.gains, expected.gains, rtol=1e-13,
+                               atol=1e-13 * np.abs(expected.gains).max())
+
+
+def test_tvlqr_long_horizon_converges_to_care(tm):
+    """Pendulum held upright (constant reference, u = 0 at θ = π): K(0) → the CARE gain."""
+    model = tm.load_scene(str(SCENES / "pendulum.json")).model
+    times = np.linspace(0.0, 20.0, 21)
+    states = np.vstack([np.full_like(times, math.pi), np.zeros_like(times)])
+    ref = tm.Trajectory.for_model(model, times, states)
+    ref.compute_state_derivatives(model)
+    sol = tm.solve_riccati(model, ref, Q=np.diag([10.0, 1.0]), R=[[0.5]])
+    lin = tm.linearize(model, [math.pi], [0.0], [0.0])
+    care = tm.solve_care(lin.A, lin.B, np.diag([10.0, 1.0]), [[0.5]])
+    np.testing.assert_allclose(sol.K(0.0), care.K, rtol=1e-6)
+
+
+def test_solution_outlives_its_model(tm):
+    def solve():
+        model = tm.load_scene(str(SCENES / "cart_pole.json")).model
+        ref = reference(tm, model, "cart_pole_upright.csv")
+        return tm.solve_riccati(model, ref, Q=1.0, R=1.0), model.nq
+    sol, nq = solve()
+    gc.collect()  # nothing else refers to the model: the solution keeps it alive
+    K = sol.K(1.0)
+    assert K.shape == (1, 2 * nq) and np.isfinite(K).all()
+
+    def solve_manifold():
+        model = tm.load_scene(str(SCENES / "paper_pendulum.json")).model
+        return tm.tvlqr(model, reference(tm, model, "paper_pendulum_swing.csv"), Q=1.0, R=1.0)
+    msol = solve_manifold()
+    gc.collect()
+    reduced = msol.reduced
+    del msol
+    gc.collect()
+    assert np.isfinite(reduced.K(0.5)).all()  # the member keeps its parent (and the model) alive
+
+
+def test_simulation_matches_cli(tm, cli, tmp_path):
+    scene = SCENES / "cart_pole.json"
+    traj_path = TRAJECTORIES / "cart_pole_upright.csv"
+    gains_path, closed = tmp_path / "gains.csv", tmp_path / "closed.csv"
+    cli("gains", scene, "--trajectory", traj_path, "--Q", "10,10,1,1", "--R", "0.1", "--out", gains_path)
+    cli("simulate", scene, "--trajectory", traj_path, "--gains", gains_path, "--perturb", "theta=0.1",
+        "--out", closed)
+    expected = tm.Trajectory.read_csv(str(closed))
+    model = tm.load_scene(str(scene)).model
+    ref = reference(tm, model, "cart_pole_upright.csv")
+    gains = tm.GainSchedule.read_csv(str(gains_path))
+    x0 = ref.states[:, 0] + np.array([0.0, 0.1, 0.0, 0.0])
+    result = tm.simulate_closed_loop(model, ref, gains, x0)
+    assert result.ok, result.message
+    np.testing.assert_allclose(result.trajectory.states, expected.states, rtol=0, atol=1e-13)
+    assert result.tracking_error[-1] < 0.005  # stabilized (the CLI test's bound)
+
+    many = tm.simulate_closed_loop_many(model, ref, gains, np.vstack([x0, x0 * 0.5, x0]), threads=2)
+    assert [r.ok for r in many] == [True, True, True]
+    np.testing.assert_array_equal(many[0].trajectory.states, result.trajectory.states)
+    np.testing.assert_array_equal(many[2].trajectory.states, result.trajectory.states)
+
+
+def test_python_policy_and_its_errors(tm):
+    model = tm.load_scene(str(SCENES / "pendulum.json")).model
+    opts = tm.SimulationOptions(output_step=0.1, rtol=1e-10, atol=1e-12)
+    # u = 0 from rest at the bottom: stays at rest.
+    res = tm.simulate(model, [0.0, 0.0], 0.0, 1.0, lambda t, x: [0.0], options=opts)
+    assert res.ok and np.abs(res.trajectory.states).max() < 1e-12
+    # A constant torque u = g sin(θ*) holds θ* = 0.3 at rest.
+    hold = 9.81 * math.sin(0.3)
+    res = tm.simulate(model, [0.3, 0.0], 0.0, 1.0, lambda t, x: np.array([hold]), options=opts)
+    assert res.ok and np.abs(res.trajectory.states[0] - 0.3).max() < 1e-8
+
+    def bad(t, x):
+        if t > 0.5:
+            raise ArithmeticError("policy exploded at the half")
+        return [0.0]
+    res = tm.simulate(model, [0.1, 0.0], 0.0, 1.0, bad, options=opts)
+    assert res.status == tm.SimulationStatus.POLICY_FAILURE
+    assert "policy exploded at the half" in res.message
+    with pytest.raises(ValueError, match="rtol"):
+        tm.simulate(model, [0.1, 0.0], 0.0, 1.0, bad, options=tm.SimulationOptions(rtol=-1.0))
+
+
+def test_long_solves_release_the_gil(tm):
+    """A Python thread keeps running while simulations run in C++ (it would be frozen if the GIL
+    were held), and two threads finish the work of two simulations; times are printed, not asserted."""
+    model = tm.load_scene(str(SCENES / "cart_pole.json")).model
+    ref = reference(tm, model, "cart_pole_upright.csv")
+    sol = tm.solve_riccati(model, ref, Q=np.array([10.0, 10, 1, 1]), R=0.1)
+    gains = sol.gain_schedule(ref.times)
+    x0 = ref.states[:, 0] + np.array([0.0, 0.1, 0.0, 0.0])
+    opts = tm.SimulationOptions(rtol=1e-11, atol=1e-13)
+
+    def run():
+        return tm.simulate_closed_loop(model, ref, gains, x0, options=opts)
+
+    count = [0]
+    done = threading.Event()
+
+    def spin():
+        while not done.is_set():
+            count[0] += 1
+    spinner = threading.Thread(target=spin)
+    spinner.start()
+    start = time.perf_counter()
+    one = run()
+    one_time = time.perf_counter() - start
+    done.set()
+    spinner.join()
+    assert one.ok
+    assert count[0] > 100, count[0]
+
+    start = time.perf_counter()
+    serial = [run(), run()]
+    serial_time = time.perf_counter() - start
+    results = [None, None]
+    threads = [threading.Thread(target=lambda i=i: results.__setitem__(i, run())) for i in range(2)]
+    start = time.perf_counter()
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    threaded_time = time.perf_counter() - start
+    for r in results + serial:
+        np.testing.assert_array_equal(r.trajectory.states, one.trajectory.states)
+    print(f"\nGIL: one simulation {one_time * 1e3:.1f} ms (spinner ran {count[0]} loops meanwhile); "
+          f"two in sequence {serial_time * 1e3:.1f} ms, two threads {threaded_time * 1e3:.1f} ms "
+          f"(speed-up {serial_time / threaded_time:.2f}x)")
+
+
+def test_data_refuses_concurrent_use(tm):
+    """A Data used by two threads at once raises instead of racing (calls release the GIL)."""
+    model = tm.load_scene(str(SCENES / "hand.json")).model
+    scene = tm.load_scene(str(SCENES / "hand.json"))
+    data = tm.Data(model)
+    errors, stop = [], threading.Event()
+
+    def work():
+        try:
+            for _ in range(300):
+                if stop.is_set():
+                    break
+                tm.compute_linearization(model, data, scene.q, scene.dq, scene.u)
+        except RuntimeError as e:
+            errors.append(str(e))
+            stop.set()
+    threads = [threading.Thread(target=work) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    # Either the calls happened not to overlap, or the overlap was refused with this message.
+    assert all("one Data per thread" in e for e in errors)
