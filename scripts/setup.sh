@@ -16,6 +16,8 @@ packages=(
   libbenchmark-dev       # Google Benchmark: bench/
   # plots of the benchmark results
   python3 python3-matplotlib
+  # the Python module trellis_mech (python/) and its tests
+  pybind11-dev python3-dev python3-numpy python3-pytest
 )
 
 missing=()

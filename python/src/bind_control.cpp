@@ -377,6 +377,20 @@ void bindControl(py::module_& m) {
       .def_readwrite("atol", &TangentTransportOptions::atol)
       .def_readwrite("max_steps", &TangentTransportOptions::maxSteps);
 
+  m.def("compute_controllability_gramian",
+        [](const Model& model, const Trajectory& reference, std::optional<double> t0,
+           std::optional<double> t1, const std::optional<TangentTransportOptions>& transport) {
+          return withoutGil([&] {
+            return computeControllabilityGramian(model, reference, t0.value_or(reference.startTime()),
+                                                 t1.value_or(reference.endTime()),
+                                                 transport.value_or(TangentTransportOptions{}));
+          });
+        },
+        py::arg("model"), py::arg("reference"), py::arg("t0") = py::none(), py::arg("t1") = py::none(),
+        py::kw_only(), py::arg("transport") = py::none(),
+        "Reduced reachability Gramian W(t0, t1) = int Phi_r(t1, s) Br Br^T Phi_r^T ds (d, d) along "
+        "the reference (default: its whole span); numerical failure is in ok / message.");
+
   py::class_<RiccatiSolution>(m, "RiccatiSolution",
       "The TV-LQR solution: S(t) (nx, nx) from -dS/dt = A^T S + S A - S B R^-1 B^T S + Q, "
       "S(T) = Qf, and K(t) = R^-1 B(t)^T S(t) (nu, nx). Keeps its model alive. K and S are not "

@@ -8,6 +8,9 @@
 #include "trellis/core/model_builder.hpp"
 #include "trellis/core/scene.hpp"
 
+#include <algorithm>
+#include <chrono>
+
 namespace trellis::python {
 
 namespace {
@@ -394,6 +397,23 @@ void bindCore(py::module_& m) {
         },
         py::arg("model"), py::arg("data"), py::arg("q"), py::arg("dq"), py::arg("u"),
         "Q_nc^T dq: power of inputs, damping, wrenches and tendons.");
+
+  // For python/bench_overhead.py: the C++ time of the same call, in this process — `repeats`
+  // calls of computeLinearization in a C++ loop (GIL released), seconds per call.
+  m.def("_time_linearization_loop",
+        [](const Model& model, D& d, const VectorRef& q, const VectorRef& dq, const VectorRef& u,
+           int repeats) {
+          checkSameModel(model, d);
+          DataGuard guard(d);
+          loadState(d, q, dq, u);
+          py::gil_scoped_release release;
+          const auto start = std::chrono::steady_clock::now();
+          for (int i = 0; i < repeats; ++i) computeLinearization(model, d.data, d.q, d.dq, d.u);
+          return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() /
+                 std::max(repeats, 1);
+        },
+        py::arg("model"), py::arg("data"), py::arg("q"), py::arg("dq"), py::arg("u"),
+        py::arg("repeats"));
 }
 
 }  // namespace trellis::python

@@ -3,6 +3,7 @@ and CSV), TV-LQR against `trellis gains`, simulation against `trellis simulate`,
 and the GIL."""
 import gc
 import math
+import re
 import threading
 import time
 
@@ -143,8 +144,8 @@ def reference(tm, model, name):
 def test_tvlqr_matches_cli_gains(tm, cli, tmp_path, scene, trajectory, Q, R):
     out = tmp_path / "gains.csv"
     qtext = ",".join(map(str, Q)) if isinstance(Q, list) else str(Q)
-    cli("gains", SCENES / f"{scene}.json", "--trajectory", TRAJECTORIES / trajectory,
-        "--Q", qtext, "--R", str(R), "--out", out)
+    summary = cli("gains", SCENES / f"{scene}.json", "--trajectory", TRAJECTORIES / trajectory,
+                  "--Q", qtext, "--R", str(R), "--out", out)
     expected = tm.GainSchedule.read_csv(str(out))
     model = tm.load_scene(str(SCENES / f"{scene}.json")).model
     ref = reference(tm, model, trajectory)
@@ -155,6 +156,17 @@ def test_tvlqr_matches_cli_gains(tm, cli, tmp_path, scene, trajectory, Q, R):
     # The same C++ solve on the same input; the CSV keeps 17 digits.
     np.testing.assert_allclose(gains.gains, expected.gains, rtol=1e-13,
                                atol=1e-13 * np.abs(expected.gains).max())
+
+    # The CLI's controllability lines: rank at the first knot, Gramian eigenvalues (3 digits).
+    data = tm.Data(model)
+    x0 = ref.states[:, 0]
+    rank = tm.compute_controllability_at(model, data, x0[:model.nq], x0[model.nq:], ref.inputs[:, 0])
+    assert f"rank {rank.rank} of {rank.dimension}" in summary
+    gramian = tm.compute_controllability_gramian(model, ref)
+    m = re.search(r"gramian on \[[^]]*\]: min eigenvalue (\S+), max eigenvalue (\S+)", summary)
+    assert gramian.ok and m, summary
+    assert gramian.min_eigenvalue == pytest.approx(float(m.group(1)), rel=5e-3)
+    assert gramian.max_eigenvalue == pytest.approx(float(m.group(2).rstrip(",")), rel=5e-3)
 
 
 def test_tvlqr_long_horizon_converges_to_care(tm):

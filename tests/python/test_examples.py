@@ -1,0 +1,37 @@
+"""The Python examples end to end (examples/python/), each in a fresh interpreter: the same one
+that runs the tests (so the same build of trellis_mech)."""
+import subprocess
+import sys
+
+import pytest
+
+from conftest import SOURCE_DIR
+
+EXAMPLES = SOURCE_DIR / "examples" / "python"
+
+
+def run(script, *args):
+    done = subprocess.run([sys.executable, str(EXAMPLES / script), *map(str, args)],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stdout + done.stderr
+    return done.stdout
+
+
+def test_paper_example():
+    out = run("paper_example.py")
+    assert "PASS" in out
+
+
+def test_cart_pole(tmp_path):
+    out = run("cart_pole.py", tmp_path)
+    assert "optimize: SOLVED" in out
+    assert (tmp_path / "cart_pole.png").stat().st_size > 10000
+    assert (tmp_path / "gains.csv").read_text().startswith("t,K_0_0,K_0_1,K_0_2,K_0_3\n")
+
+
+def test_hand_gains(tmp_path, tm):
+    if not hasattr(tm, "hand"):
+        pytest.skip("built without the examples")
+    out = run("hand_gains.py", tmp_path)
+    assert "controllability at t = 0: rank 10 of 10" in out
+    assert (tmp_path / "hand_gains.png").exists()
