@@ -6,8 +6,10 @@ decimals); then the linearization on the constraint manifold at a consistent sta
 Exit status 0 when every entry agrees to 1e-6.
 
 usage: python3 examples/python/paper_example.py [path/to/ERRATA.md]
+(default: $TRELLIS_SHARED_DIR/paper/ERRATA.md, else ../shared/paper/ERRATA.md beside the repository)
 """
 import math
+import os
 import pathlib
 import re
 import sys
@@ -35,7 +37,8 @@ def errata_tables(path):
 
 
 def main():
-    errata = sys.argv[1] if len(sys.argv) > 1 else ROOT.parent / "shared" / "paper" / "ERRATA.md"
+    shared = pathlib.Path(os.environ.get("TRELLIS_SHARED_DIR", ROOT.parent / "shared"))
+    errata = sys.argv[1] if len(sys.argv) > 1 else shared / "paper" / "ERRATA.md"
     tables = errata_tables(errata)
     model = tm.load_scene(str(ROOT / "examples" / "scenes" / "paper_pendulum.json")).model
     data = tm.Data(model)

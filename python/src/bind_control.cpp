@@ -33,6 +33,7 @@ Eigen::MatrixXd weightMatrix(const py::object& w, Eigen::Index n, const char* na
   }
   const auto a = py::array_t<double, py::array::forcecast>::ensure(w);
   if (!a) throw std::invalid_argument(std::string(name) + ": expected a number or a float array");
+  if (a.ndim() == 0) return a.data()[0] * Eigen::MatrixXd::Identity(n, n);  // NumPy scalar
   if (a.ndim() == 1) {
     checkSize(a.shape(0), n, name, "diagonal entries");
     Eigen::VectorXd d(n);
@@ -85,11 +86,13 @@ auto withoutGil(F&& f) {
 
 /// A Python policy u = policy(t, x) as the C++ Policy; called with the GIL held. A Python error
 /// becomes a C++ exception with its message (the simulator reports it as POLICY_FAILURE).
+/// The std::function holds a pointer to the caller's py::function (alive for the whole call), so
+/// copies made by the simulator without the GIL never touch a Python reference count.
 Policy pythonPolicy(const py::function& policy, Eigen::Index nu) {
-  return [policy, nu](double t, const Eigen::VectorXd& x, Eigen::VectorXd& u) {
+  return [fn = &policy, nu](double t, const Eigen::VectorXd& x, Eigen::VectorXd& u) {
     py::gil_scoped_acquire acquire;
     try {
-      const auto result = py::array_t<double, py::array::forcecast>::ensure(policy(t, toArray(x)));
+      const auto result = py::array_t<double, py::array::forcecast>::ensure((*fn)(t, toArray(x)));
       if (!result || result.ndim() > 1 || result.size() != nu) {
         throw std::runtime_error("policy: expected " + std::to_string(nu) + " inputs");
       }
@@ -472,7 +475,7 @@ void bindControl(py::module_& m) {
            },
            py::arg("times"), "K sampled at the times, as a GainSchedule.")
       .def("__repr__", [](const ManifoldRiccatiSolution& s) {
-        return std::string("<ManifoldRiccatiSolution ") + (s.ok() ? "ok" : "FAILED: " + s.message) +
+        return std::string("<ManifoldRiccatiSolution ") + (s.ok() ? "ok" : "FAILED: " + s.message()) +
                ", d=" + std::to_string(s.dimension()) + ">";
       });
 

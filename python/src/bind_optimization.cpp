@@ -5,6 +5,8 @@
 
 #include <pybind11/functional.h>
 
+#include <mutex>
+
 #include "trellis/optimization/optimizer.hpp"
 #include "trellis/optimization/problem.hpp"
 
@@ -139,10 +141,15 @@ void bindOptimization(py::module_& m) {
   m.def("optimize_trajectory",
         [](const Problem& problem, const std::optional<OptimizerOptions>& options) {
           py::gil_scoped_release release;
+          // Ipopt with Debian's sequential MUMPS is not reentrant (two concurrent solves crash in
+          // the linear solver): solves are serialized here, while other Python threads run.
+          static std::mutex ipoptMutex;
+          const std::lock_guard<std::mutex> lock(ipoptMutex);
           return optimizeTrajectory(problem, options.value_or(OptimizerOptions{}));
         },
         py::arg("problem"), py::kw_only(), py::arg("options") = py::none(),
-        "Transcribes (direct collocation) and solves with Ipopt, without the GIL. Bad problems or "
+        "Transcribes (direct collocation) and solves with Ipopt, without the GIL (other Python threads "
+        "run meanwhile; concurrent solves are serialized: Ipopt/MUMPS is not reentrant). Bad problems or "
         "options raise ProblemError / ValueError; a numerical failure is the result's status.");
 }
 

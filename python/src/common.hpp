@@ -78,9 +78,21 @@ void loadVector(const VectorRef& v, Eigen::VectorXd& dst, const char* name, cons
 /// Size check only (message names the argument and the model size it must match).
 void checkSize(Eigen::Index got, Eigen::Index expected, const char* name, const char* sizeName);
 
-/// A fresh NumPy array (C order) holding a copy of the matrix (2-D) or vector (1-D).
-py::array_t<double> toArray(const Eigen::Ref<const Eigen::MatrixXd>& m);
-py::array_t<double> toArray(const Eigen::Ref<const Eigen::VectorXd>& v);
+/// A fresh NumPy array (C order) holding a copy of the matrix (2-D) or of the column vector
+/// (1-D: any expression with one column at compile time).
+template <class Derived>
+py::array_t<double> toArray(const Eigen::MatrixBase<Derived>& m) {
+  if constexpr (Derived::ColsAtCompileTime == 1) {
+    py::array_t<double> a(m.size());
+    Eigen::Map<Eigen::VectorXd>(a.mutable_data(), m.size()) = m;
+    return a;
+  } else {
+    py::array_t<double> a({m.rows(), m.cols()});
+    Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
+        a.mutable_data(), m.rows(), m.cols()) = m;
+    return a;
+  }
+}
 py::object toArrayComplex(const Eigen::VectorXcd& v);  // complex128 (a copy)
 /// N matrices of equal size as one (N, rows, cols) array.
 py::array_t<double> toArray3(const std::vector<Eigen::MatrixXd>& ms, Eigen::Index rows,

@@ -36,21 +36,6 @@ void loadVector(const VectorRef& v, Eigen::VectorXd& dst, const char* name, cons
   dst = v;  // same size: no allocation
 }
 
-py::array_t<double> toArray(const Eigen::Ref<const Eigen::MatrixXd>& m) {
-  py::array_t<double> a({m.rows(), m.cols()});
-  auto r = a.mutable_unchecked<2>();
-  for (Eigen::Index i = 0; i < m.rows(); ++i) {
-    for (Eigen::Index j = 0; j < m.cols(); ++j) r(i, j) = m(i, j);
-  }
-  return a;
-}
-
-py::array_t<double> toArray(const Eigen::Ref<const Eigen::VectorXd>& v) {
-  py::array_t<double> a(v.size());
-  if (v.size() > 0) std::memcpy(a.mutable_data(), v.data(), sizeof(double) * v.size());
-  return a;
-}
-
 py::object toArrayComplex(const Eigen::VectorXcd& v) {
   // Returned as complex128 through pybind11's Eigen caster (a copy).
   return py::cast(Eigen::VectorXcd(v));

@@ -115,8 +115,10 @@ def test_builder_errors_carry_the_message(tm):
     assert isinstance(err.value, ValueError)
     with pytest.raises(tm.ModelError, match="nowhere"):
         b.add_frame("x", "nowhere", tm.Transform.tx(1.0))
-    b.add_linear_spring("pivot", "missing_frame", 1.0, 0.0)
-    with pytest.raises(tm.ModelError, match="missing_frame"):
+    with pytest.raises(tm.ModelError, match="field 'frame2': unknown frame 'missing_frame'"):
+        b.add_linear_spring("pivot", "missing_frame", 1.0, 0.0)
+    b.add_config_spring("no_such_config", 1.0, 0.0)  # names of configurations: checked by finalize
+    with pytest.raises(tm.ModelError, match="no_such_config"):
         b.finalize()
 
 
@@ -131,7 +133,7 @@ def test_input_arrays_any_order_dtype_and_stride(tm):
     """Inputs: contiguous float64 read in place; other dtypes, orders, slices and lists copied."""
     model = tm.load_scene(str(SCENES / "acrobot.json")).model
     data = tm.Data(model)
-    q, dq = np.array([0.3, -0.4]), np.array([0.1, 0.2])
+    q, dq = np.array([0.25, -0.375]), np.array([0.125, 0.5])  # exact in float32 too
     u = np.zeros(model.nu)
     tm.compute_linearization(model, data, q, dq, u)
     A0 = data.A
@@ -139,10 +141,10 @@ def test_input_arrays_any_order_dtype_and_stride(tm):
     big[0, ::2] = q
     variants = [
         (q.tolist(), dq.tolist()),                                   # lists
-        (q.astype(np.float32).astype(np.float64), dq),               # exact after round trip
+        (q.astype(np.float32), dq),                                  # float32: converted (copied)
         (big[0, ::2], dq),                                           # non-contiguous slice
         (np.asfortranarray(q), np.ascontiguousarray(dq)),            # both orders (1-D: same)
-        (np.array([[0.3], [-0.4]])[:, 0], dq),                       # a column of a 2-D array
+        (np.array([[0.25], [-0.375]])[:, 0], dq),                    # a column of a 2-D array
     ]
     for qv, dqv in variants:
         tm.compute_linearization(model, data, qv, dqv, u)
