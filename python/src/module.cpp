@@ -12,6 +12,7 @@
 #include "trellis/core/model_builder.hpp"
 #include "trellis/optimization/problem.hpp"
 
+#include <bit>
 #include <cstring>
 #include <string>
 
@@ -54,30 +55,36 @@ py::array_t<double> toArray3(const std::vector<Eigen::MatrixXd>& ms, Eigen::Inde
 }
 
 StridedMap outputMap(py::array& out, Eigen::Index rows, Eigen::Index cols, const char* name) {
-  const std::string prefix = std::string("out ") + name + ": ";
-  if (!py::isinstance<py::array_t<double>>(out) || out.dtype().kind() != 'f' ||
-      out.itemsize() != sizeof(double)) {
-    throw std::invalid_argument(prefix + "must be a float64 numpy array, got dtype " +
-                                std::string(py::str(out.dtype())));
+  // Read straight from the array struct (no Python objects created: this is the hot path).
+  auto* arr = py::detail::array_proxy(out.ptr());
+  auto* descr = py::detail::array_descriptor_proxy(arr->descr);
+  const auto fail = [&](const std::string& what) {
+    return std::invalid_argument(std::string("out ") + name + ": " + what);
+  };
+  if (descr->type_num != py::detail::npy_api::NPY_DOUBLE_) {
+    throw fail("must be a float64 numpy array, got dtype " + std::string(py::str(out.dtype())));
   }
-  if (!out.writeable()) throw std::invalid_argument(prefix + "is read-only");
+  constexpr char kSwapped = std::endian::native == std::endian::little ? '>' : '<';
+  if (descr->byteorder == kSwapped) throw fail("must be in native byte order");
+  if (!(arr->flags & py::detail::npy_api::NPY_ARRAY_WRITEABLE_)) throw fail("is read-only");
   const bool vector = cols < 0;
-  const std::string expected =
-      vector ? "(" + std::to_string(rows) + ",)"
-             : "(" + std::to_string(rows) + ", " + std::to_string(cols) + ")";
-  if (out.ndim() != (vector ? 1 : 2) || out.shape(0) != rows || (!vector && out.shape(1) != cols)) {
+  if (arr->nd != (vector ? 1 : 2) || arr->dimensions[0] != rows ||
+      (!vector && arr->dimensions[1] != cols)) {
+    const std::string expected =
+        vector ? "(" + std::to_string(rows) + ",)"
+               : "(" + std::to_string(rows) + ", " + std::to_string(cols) + ")";
     std::string got = "(";
-    for (py::ssize_t i = 0; i < out.ndim(); ++i) got += (i ? ", " : "") + std::to_string(out.shape(i));
-    got += out.ndim() == 1 ? ",)" : ")";
-    throw std::invalid_argument(prefix + "expected shape " + expected + ", got " + got);
+    for (int i = 0; i < arr->nd; ++i) got += (i ? ", " : "") + std::to_string(arr->dimensions[i]);
+    got += arr->nd == 1 ? ",)" : ")";
+    throw fail("expected shape " + expected + ", got " + got);
   }
-  const auto rowStride = out.strides(0), colStride = vector ? 0 : out.strides(1);
+  const auto rowStride = arr->strides[0], colStride = vector ? 0 : arr->strides[1];
   if (rowStride % static_cast<py::ssize_t>(sizeof(double)) != 0 ||
       colStride % static_cast<py::ssize_t>(sizeof(double)) != 0) {
-    throw std::invalid_argument(prefix + "strides are not multiples of 8 bytes");
+    throw fail("strides are not multiples of 8 bytes");
   }
   // Eigen's Stride<outer, inner>: column-major map, outer = column step, inner = row step.
-  return StridedMap(static_cast<double*>(out.mutable_data()), rows, vector ? 1 : cols,
+  return StridedMap(reinterpret_cast<double*>(arr->data), rows, vector ? 1 : cols,
                     Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(colStride / 8, rowStride / 8));
 }
 
