@@ -8,6 +8,7 @@
 // reference to its model. The unified, plain-data TV-LQR (solveTvlqr) is bound in
 // bind_tvlqr.cpp when its header exists.
 #include "common.hpp"
+#include "control_common.hpp"
 #include "options.hpp"
 
 #include "trellis/control/controllability.hpp"
@@ -50,15 +51,6 @@ Eigen::MatrixXd weightMatrix(const py::object& w, Eigen::Index n, const char* na
   throw std::invalid_argument(std::string(name) + ": expected a number, " + std::to_string(n) +
                               " diagonal entries or a " + std::to_string(n) + "x" +
                               std::to_string(n) + " matrix");
-}
-
-LqrWeights makeWeights(const py::object& Q, const py::object& R, const py::object& Qf,
-                       Eigen::Index nx, Eigen::Index nu) {
-  LqrWeights w;
-  w.Q = weightMatrix(Q, nx, "Q");
-  w.R = weightMatrix(R, nu, "R");
-  w.Qf = Qf.is_none() ? w.Q : weightMatrix(Qf, nx, "Qf");
-  return w;
 }
 
 /// Gains as one (N, m, nx) array → the vector the C++ takes.
@@ -104,6 +96,15 @@ Policy pythonPolicy(const py::function& policy, Eigen::Index nu) {
 }
 
 }  // namespace
+
+LqrWeights makeWeights(const py::object& Q, const py::object& R, const py::object& Qf,
+                       Eigen::Index nx, Eigen::Index nu) {
+  LqrWeights w;
+  w.Q = weightMatrix(Q, nx, "Q");
+  w.R = weightMatrix(R, nu, "R");
+  w.Qf = Qf.is_none() ? w.Q : weightMatrix(Qf, nx, "Qf");
+  return w;
+}
 
 void bindControl(py::module_& m) {
   // ---- Trajectory ----------------------------------------------------------------------------

@@ -107,6 +107,7 @@ StridedMap outputMap(py::array& out, Eigen::Index rows, Eigen::Index cols, const
 void bindErrors(py::module_& m);
 void bindCore(py::module_& m);
 void bindControl(py::module_& m);
+void bindTvlqr(py::module_& m);  // bind_tvlqr.cpp: solveTvlqr when the control library has it
 void bindOptimization(py::module_& m);
 void bindHand(py::module_& m);
 

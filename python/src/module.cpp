@@ -150,6 +150,7 @@ PYBIND11_MODULE(_trellis_mech, m) {
   tp::bindErrors(m);
   tp::bindCore(m);
   tp::bindControl(m);
+  tp::bindTvlqr(m);
   tp::bindOptimization(m);
 #ifdef TRELLIS_PYTHON_HAND
   tp::bindHand(m);

@@ -318,3 +318,33 @@ def test_data_refuses_concurrent_use(tm):
         t.join()
     # Either the calls happened not to overlap, or the overlap was refused with this message.
     assert all("one Data per thread" in e for e in errors)
+
+
+def _has_solve_tvlqr():
+    import trellis_mech
+    return getattr(trellis_mech, "HAS_SOLVE_TVLQR", False)
+
+
+@pytest.mark.skipif(not _has_solve_tvlqr(), reason="solveTvlqr is not in this control library "
+                    "(it arrives with the sampled-data TV-LQR, branch i10-sampled)")
+@pytest.mark.parametrize("rate", [0.0, 10.0])
+def test_solve_tvlqr_matches_cli(tm, cli, tmp_path, rate):
+    scene = SCENES / "cart_pole.json"
+    out = tmp_path / "gains.csv"
+    args = ["gains", scene, "--trajectory", TRAJECTORIES / "cart_pole_upright.csv",
+            "--Q", "10,10,1,1", "--R", "0.1", "--out", out]
+    cli(*(args + (["--rate", str(rate)] if rate else [])))
+    expected = tm.GainSchedule.read_csv(str(out))
+
+    def solve():
+        model = tm.load_scene(str(scene)).model
+        ref = reference(tm, model, "cart_pole_upright.csv")
+        return tm.solve_tvlqr(model, ref, Q=np.array([10.0, 10, 1, 1]), R=0.1,
+                              options=tm.TvlqrOptions(sample_rate=rate))
+    sol = solve()
+    gc.collect()  # plain data: nothing refers to the model any more
+    assert sol.ok, sol.message
+    assert sol.gains.sample_rate == rate and sol.S.shape == (len(sol.gains), 4, 4)
+    np.testing.assert_allclose(sol.gains.times, expected.times, rtol=1e-15)
+    np.testing.assert_allclose(sol.gains.gains, expected.gains, rtol=1e-13,
+                               atol=1e-13 * np.abs(expected.gains).max())
