@@ -429,6 +429,7 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
   if (result.success()) {
     std::ostringstream m;
     m << result.message << "; " << result.consistency.message;
+    if (result.rounds.size() > 1) m << "; " << iterations << " iterations in all rounds";
     if (problem.model->nc() > 0) m << ", slack share " << fmt(result.maxSlackDefect);
     if (result.rounds.size() > 1) {
       m << " after " << result.rounds.size() - 1 << " refinement round(s), " << problem.knots << " knots";
