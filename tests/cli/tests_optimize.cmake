@@ -67,7 +67,7 @@ trellis_cli_test(optimize.error.off_manifold
 
 trellis_cli_test(optimize.trapezoidal_quiet
   ARGS optimize "${_problems}/cart_pole_swingup.json" --method trapezoidal --knots 21 --quiet
-  CHECKS "-DSTDOUT_REGEX=status: solved.*knots: 21\nmethod: trapezoidal" -DSTDERR_EMPTY=ON)
+  CHECKS "-DSTDOUT_REGEX=status: solved.*method: trapezoidal.*round_0: knots 21," -DSTDERR_EMPTY=ON)
 trellis_cli_test(optimize.finite_difference
   ARGS optimize "${_problems}/cart_pole_swingup.json" --finite-difference --quiet
   CHECKS "-DSTDOUT_REGEX=status: solved.*derivatives: finite_difference" -DSTDERR_EMPTY=ON)
