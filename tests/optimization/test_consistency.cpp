@@ -262,3 +262,45 @@ TEST_CASE("consistency: a knife edge in the optimizer keeps A q' = 0", "[consist
   // The skate turned (a straight push cannot reach y = 0.5).
   CHECK(r.trajectory.states().row(2).cwiseAbs().maxCoeff() > 0.1);
 }
+
+TEST_CASE("consistency: checkConsistency on a hand-made trajectory file names a corrupted knot",
+          "[consistency][check]") {
+  // The closed-form minimum-energy transfer written as a trajectory by hand (no optimizer): with
+  // its linear input the exact dynamics meet every knot (defect at CVODES' tolerance). A 0.01
+  // error in one knot's velocity is then found, in 'dx', next to that knot, with the size
+  // 0.01 / range(dx) = 0.01 / 0.75 (range of ẋ = 6d/T (s − s²): 0 … 1.5 d/T).
+  const auto model = doubleIntegrator();
+  const double d = 1.0, T = 2.0;
+  const int N = 11;
+  VectorXd times = VectorXd::LinSpaced(N, 0.0, T);
+  MatrixXd X(2, N), U(1, N);
+  for (int k = 0; k < N; ++k) {
+    const double s = times(k) / T;
+    X(0, k) = d * (3 * s * s - 2 * s * s * s);
+    X(1, k) = 6 * d / T * (s - s * s);
+    U(0, k) = 6 * d / (T * T) * (1 - 2 * s);
+  }
+  const trellis::Trajectory exact(model->configNames(), model->inputNames(), times, X, U);
+  const trellis::ConsistencyResult good = trellis::checkConsistency(*model, exact);
+  INFO(good.message);
+  CHECK(good.integrated);
+  CHECK(good.consistent);
+  CHECK(good.maxDefect < 1e-8);
+  CHECK(good.intervalDefects.size() == N - 1);
+
+  MatrixXd Xbad = X;
+  Xbad(1, 6) += 0.01;
+  const trellis::Trajectory corrupted(model->configNames(), model->inputNames(), times, Xbad, U);
+  const trellis::ConsistencyResult bad = trellis::checkConsistency(*model, corrupted);
+  INFO(bad.message);
+  CHECK(bad.integrated);
+  CHECK_FALSE(bad.consistent);
+  CHECK((bad.worstInterval == 5 || bad.worstInterval == 6));
+  CHECK(bad.worstStateName == "dx");
+  CHECK(bad.maxDefect == Approx(0.01 / 0.75).epsilon(1e-3));
+  CHECK_THAT(bad.message, Catch::Contains("inconsistent") && Catch::Contains("'dx'") &&
+                              Catch::Contains("interval " + std::to_string(bad.worstInterval)));
+  // Intervals away from the corrupted knot stay clean.
+  CHECK(bad.intervalDefects(0) < 1e-8);
+  CHECK(bad.intervalDefects(9) < 1e-8);
+}
