@@ -9,37 +9,15 @@
 namespace trellis::bench {
 
 FdWorkspace::FdWorkspace(const Model& model)
-    : q(model.nq()), dq(model.nq()), u(model.nu()), qddPlus(model.nq()),
-      coarse(model.nq(), 2 * model.nq() + model.nu()) {}
+    : numdiff(model), coarse(model.nq(), 2 * model.nq() + model.nu()) {}
 
 bool centralDifferences(const Model& model, Data& data, const Eigen::VectorXd& q,
                         const Eigen::VectorXd& dq, const Eigen::VectorXd& u, double relStep,
                         FdWorkspace& ws, Eigen::MatrixXd& J) {
-  ws.q = q;
-  ws.dq = dq;
-  ws.u = u;
-  bool ok = true;
-  int column = 0;
-  // Perturbs one block of z = [q; q̇; u] in place, restoring each entry afterwards.
-  auto sweep = [&](Eigen::VectorXd& x) {
-    for (Eigen::Index i = 0; i < x.size(); ++i, ++column) {
-      const double xi = x[i];
-      const double h = relStep * std::max(1.0, std::abs(xi));
-      x[i] = xi + h;
-      const double xPlus = x[i];
-      ok = computeDynamics(model, data, ws.q, ws.dq, ws.u).ok() && ok;
-      ws.qddPlus = data.qdd;
-      x[i] = xi - h;
-      const double xMinus = x[i];
-      ok = computeDynamics(model, data, ws.q, ws.dq, ws.u).ok() && ok;
-      J.col(column) = (ws.qddPlus - data.qdd) / (xPlus - xMinus);
-      x[i] = xi;
-    }
-  };
-  sweep(ws.q);
-  sweep(ws.dq);
-  sweep(ws.u);
-  return ok;
+  NumDiffOptions options;
+  options.scheme = DifferenceScheme::kCentral;
+  options.relativeStep = relStep;
+  return differenceDynamics(model, data, q, dq, u, options, ws.numdiff, J).ok();
 }
 
 bool richardsonDifferences(const Model& model, Data& data, const Eigen::VectorXd& q,

@@ -3,9 +3,12 @@
 // J = ∂q̈/∂z with z = [q; q̇; u] (n × (2n+m)) is the nontrivial part of the linearization:
 // A = [[0, I], [J_q, J_q̇]], B = [[0], [J_u]]. It is estimated from the project's own
 // computeDynamics, so the comparison is between two ways of differentiating the same function.
+// The differences themselves are the core's (trellis/core/numdiff.hpp); this file only adds the
+// benchmark's Richardson reference and error measures.
 #pragma once
 
 #include "trellis/core/data.hpp"
+#include "trellis/core/numdiff.hpp"
 
 #include <Eigen/Core>
 
@@ -14,13 +17,12 @@ namespace trellis::bench {
 /// Preallocated buffers for centralDifferences (no allocation inside the timed loop).
 struct FdWorkspace {
   explicit FdWorkspace(const Model& model);
-  Eigen::VectorXd q, dq, u;   ///< perturbed copies of the state
-  Eigen::VectorXd qddPlus;    ///< q̈ at z + h e_j
+  NumDiffWorkspace numdiff;   ///< the core's buffers
   Eigen::MatrixXd coarse;     ///< Richardson extrapolation: the estimate at step 2h
 };
 
-/// Central differences, column j: (q̈(z + h_j e_j) − q̈(z − h_j e_j)) / (z_j⁺ − z_j⁻) with
-/// h_j = relStep · max(1, |z_j|) (divided by the representable step actually taken). 2(2n+m)
+/// Central differences (trellis::differenceDynamics, DifferenceScheme::kCentral), column j:
+/// (q̈(z + h_j e_j) − q̈(z − h_j e_j)) / (z_j⁺ − z_j⁻) with h_j = relStep · max(1, |z_j|). 2(2n+m)
 /// evaluations of computeDynamics. J: n × (2n+m), resized by the caller. Returns false if any
 /// evaluation failed (data.status then says why).
 bool centralDifferences(const Model& model, Data& data, const Eigen::VectorXd& q,

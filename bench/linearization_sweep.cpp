@@ -73,30 +73,17 @@ const char* methodName(Method m) {
   return "?";
 }
 
-/// Forward differences, column j: (q̈(z + h_j e_j) − q̈(z)) / (z_j⁺ − z_j), h_j = relStep·max(1, |z_j|).
-/// 2n+m+1 evaluations of computeDynamics. Returns false if any evaluation failed.
+/// Forward differences (trellis::differenceDynamics, DifferenceScheme::kForward), column j:
+/// (q̈(z + h_j e_j) − q̈(z)) / (z_j⁺ − z_j), h_j = relStep·max(1, |z_j|). 2n+m+1 evaluations of
+/// computeDynamics; qddBase receives q̈(z). Returns false if any evaluation failed.
 bool forwardDifferences(const trellis::Model& model, trellis::Data& data, const Eigen::VectorXd& q,
                         const Eigen::VectorXd& dq, const Eigen::VectorXd& u, double relStep,
                         trellis::bench::FdWorkspace& ws, Eigen::VectorXd& qddBase, Eigen::MatrixXd& J) {
-  bool ok = trellis::computeDynamics(model, data, q, dq, u).ok();
-  qddBase = data.qdd;
-  ws.q = q;
-  ws.dq = dq;
-  ws.u = u;
-  int column = 0;
-  auto sweep = [&](Eigen::VectorXd& x) {
-    for (Eigen::Index i = 0; i < x.size(); ++i, ++column) {
-      const double xi = x[i];
-      x[i] = xi + relStep * std::max(1.0, std::abs(xi));
-      const double taken = x[i] - xi;
-      ok = trellis::computeDynamics(model, data, ws.q, ws.dq, ws.u).ok() && ok;
-      J.col(column) = (data.qdd - qddBase) / taken;
-      x[i] = xi;
-    }
-  };
-  sweep(ws.q);
-  sweep(ws.dq);
-  sweep(ws.u);
+  trellis::NumDiffOptions options;
+  options.scheme = trellis::DifferenceScheme::kForward;
+  options.relativeStep = relStep;
+  const bool ok = trellis::differenceDynamics(model, data, q, dq, u, options, ws.numdiff, J).ok();
+  qddBase = ws.numdiff.qddBase;
   return ok;
 }
 

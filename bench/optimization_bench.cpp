@@ -13,6 +13,14 @@
 // (No DoNotOptimize on result.cost: with Debian's Google Benchmark 1.7 and GCC 12 at -O3 it
 // corrupted the double it was given; the solve has side effects and cannot be elided.)
 //
+// The `solve` family measures one Ipopt solve (no refinement: maxRefinements = 0 and a tolerance
+// that any result meets; the a-posteriori check still runs and its defect is a counter).
+// The `refine` family measures "solved means consistent": the examples (two swing-ups and the
+// closed-chain transfer) from their files' knots, Hermite–Simpson and trapezoidal, to a relative
+// defect of 1e-3 and 1e-5, with refinement (up to 8 rounds) and without (one solve at the file's
+// knots, usually reported inconsistent). Counters: knots (final), rounds, defect (final relative
+// defect), slack (closed chains: the slack's share), success (1 = solved and consistent), cpu_ms.
+//
 // Run: build/bench/trellis_bench_optimization --benchmark_out=opt.json --benchmark_out_format=json
 #include <trellis/optimization.hpp>
 
@@ -30,6 +38,8 @@ void solve(benchmark::State& state) {
       std::string(TRELLIS_SOURCE_DIR) + "/examples/problems/" + name + ".json");
   problem.knots = static_cast<int>(state.range(1));
   trellis::OptimizerOptions options;
+  options.maxRefinements = 0;
+  options.consistencyTolerance = 1e30;
   options.derivatives = state.range(2) == 0 ? trellis::DerivativeMode::kExact
                                             : trellis::DerivativeMode::kFiniteDifference;
   trellis::OptimizationResult result;
@@ -43,7 +53,43 @@ void solve(benchmark::State& state) {
   state.counters["success"] = result.success() ? 1.0 : 0.0;
   state.counters["cost"] = result.cost;
   state.counters["viol"] = result.constraintViolation;
+  state.counters["defect"] = result.consistency.maxDefect;
   state.counters["cpu_ms"] = 1e3 * cpu / static_cast<double>(state.iterations());
+}
+
+const char* const kRefineProblems[] = {"cart_pole_swingup", "acrobot_swingup", "paper_pendulum_transfer"};
+
+void refine(benchmark::State& state) {
+  const std::string name = kRefineProblems[state.range(0)];
+  trellis::OptimalControlProblem problem = trellis::loadProblem(
+      std::string(TRELLIS_SOURCE_DIR) + "/examples/problems/" + name + ".json");
+  const bool hs = state.range(1) == 0;
+  problem.method = hs ? trellis::CollocationMethod::kHermiteSimpson : trellis::CollocationMethod::kTrapezoidal;
+  trellis::OptimizerOptions options;
+  options.consistencyTolerance = state.range(2) == 3 ? 1e-3 : 1e-5;
+  options.maxRefinements = state.range(3) == 0 ? 0 : 8;
+  trellis::OptimizationResult result;
+  double cpu = 0.0;
+  for (auto _ : state) {
+    result = trellis::optimizeTrajectory(problem, options);
+    cpu += result.solveCpuTime;
+  }
+  state.SetLabel(name + (hs ? " hermite_simpson" : " trapezoidal") +
+                 (state.range(3) == 0 ? " no refinement" : " refined"));
+  state.counters["knots"] = result.trajectory.size();
+  state.counters["rounds"] = static_cast<double>(result.rounds.size());
+  state.counters["iterations"] = result.iterations;
+  state.counters["defect"] = result.consistency.maxDefect;
+  state.counters["slack"] = result.maxSlackDefect;
+  state.counters["success"] = result.success() ? 1.0 : 0.0;
+  state.counters["cpu_ms"] = 1e3 * cpu / static_cast<double>(state.iterations());
+}
+
+void refineArguments(benchmark::internal::Benchmark* b) {
+  for (int problem = 0; problem < 3; ++problem)
+    for (int method = 0; method < 2; ++method)
+      for (int tolExponent : {3, 5})
+        for (int refined = 0; refined < 2; ++refined) b->Args({problem, method, tolExponent, refined});
 }
 
 void arguments(benchmark::internal::Benchmark* b) {
@@ -54,6 +100,8 @@ void arguments(benchmark::internal::Benchmark* b) {
 
 BENCHMARK(solve)->Apply(arguments)->ArgNames({"problem", "knots", "fd"})->Unit(benchmark::kMillisecond)
     ->Iterations(3)->UseRealTime();
+BENCHMARK(refine)->Apply(refineArguments)->ArgNames({"problem", "trap", "tol_exp", "refined"})
+    ->Unit(benchmark::kMillisecond)->Iterations(1)->UseRealTime();
 
 }  // namespace
 

@@ -15,16 +15,27 @@ constexpr std::string_view kHelp = R"(usage: trellis optimize PROBLEM.json [--ou
 Reads an optimal control problem file (optimization/README.md: a scene file, the horizon, knots,
 boundary states, bounds and cost weights), transcribes it by direct collocation (Hermite-Simpson
 or trapezoidal) with the exact derivatives of the dynamics, and solves it with Ipopt (MUMPS,
-limited-memory quasi-Newton Hessian).
+limited-memory quasi-Newton Hessian). The solution is then checked a posteriori: the exact
+dynamics are integrated (CVODES, rtol 1e-10) over every interval from every knot under the input
+as every trellis tool reads the CSV (linear between knots), and the worst miss of the next knot
+or of the Hermite reference at the interval's midpoint, relative to each state's range, must be
+below --consistency-tol (closed chains: the slack's share too). Otherwise the mesh is refined
+where the defect is large (warm start) and the problem solved again, up to --max-refinements
+rounds.
 
 While solving, one progress line per Ipopt iteration goes to standard error:
   iter  cost  constraint-violation  dual-infeasibility  step
 At the end a summary goes to standard output (key: value lines): status, ipopt_status,
-iterations, cost, constraint_violation, bound_violation, max_slack, horizon, knots, method,
-solve_time_ms (wall clock), solve_cpu_time_ms, and trajectory (the CSV written, if any).
+iterations (all rounds), cost, constraint_violation, bound_violation, max_slack, horizon, knots
+(of the returned solution), method, derivatives, consistency_defect (worst relative defect),
+consistency_where (state, interval, time), slack_defect (closed chains), refinement_rounds, one
+'round_K: knots N, iterations I, defect D' line per solve, solve_time_ms (wall clock, all
+rounds), solve_cpu_time_ms, and trajectory (the CSV written, if any).
 
 The trajectory CSV (the knots; trellis::Trajectory layout) has one row per knot:
   t, <configs...>, d<configs...>, <inputs...>
+and means what it says: the input is linear between knots (the Hermite-Simpson midpoint input is
+constrained to the knot average), the state the cubic Hermite spline of the knots.
 
 options:
   --out FILE            write the optimized trajectory (the last iterate if the solve failed)
@@ -34,20 +45,26 @@ options:
   --tol X               Ipopt's tol (default 1e-8)
   --print-level N       Ipopt's own log at print_level N (0-12) on standard output, in place of
                         the progress lines (5 is Ipopt's usual iteration log)
+  --consistency-tol X   tolerance of the a-posteriori check (default 1e-3 of each state's range)
+  --max-refinements N   rounds of mesh refinement (default 6; 0: check only)
   --finite-difference   build the constraint Jacobian from central differences of the dynamics
                         instead of the exact linearization (for comparison)
   --quiet               no progress lines
   -h, --help            show this help
 
-Exit status: 0 when Ipopt converges (Solve_Succeeded or Solved_To_Acceptable_Level); 3 when it
-does not (infeasible, iteration limit, failure): the summary and the CSV of the last iterate are
-still written, and one line 'trellis: optimize: ...' on standard error says why; 1 for a bad
-problem or scene file (the message names the field); 2 on a usage error.
+Exit status: 0 when Ipopt converges (Solve_Succeeded or Solved_To_Acceptable_Level) AND the
+solution passes the consistency check; 3 when Ipopt does not converge (infeasible, iteration
+limit, failure); 4 when it converges but the solution is not consistent after the allowed
+refinements (status: inconsistent; the message names the state, interval and time). With 3 and 4
+the summary and the CSV of the last iterate are still written, and one line 'trellis: optimize:
+...' on standard error says why; 1 for a bad problem or scene file (the message names the field,
+e.g. a fixed boundary state off the constraint manifold); 2 on a usage error.
 )";
 
 int runOptimize(std::span<const std::string> args, std::ostream& out) {
   OptionSpec spec;
-  spec.valued = {"--out", "--knots", "--method", "--max-iter", "--tol", "--print-level"};
+  spec.valued = {"--out", "--knots", "--method", "--max-iter", "--tol", "--print-level",
+                 "--consistency-tol", "--max-refinements"};
   spec.flags = {"--finite-difference", "--quiet"};
   const ParsedOptions options("optimize", args, spec);
   const std::string path = options.singlePositional("the problem file");
@@ -75,6 +92,14 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
     if (level > 12) throw UsageError("optimize: --print-level: '" + *v + "' must be in [0, 12]");
     solver.printLevel = static_cast<int>(level);
   }
+  if (auto v = options.value("--consistency-tol")) {
+    solver.consistencyTolerance = options.positiveNumber("--consistency-tol", *v);
+  }
+  if (auto v = options.value("--max-refinements")) {
+    const unsigned long long rounds = options.count("--max-refinements", *v);
+    if (rounds > 50) throw UsageError("optimize: --max-refinements: '" + *v + "' must be in [0, 50]");
+    solver.maxRefinements = static_cast<int>(rounds);
+  }
   if (options.flag("--finite-difference")) solver.derivatives = DerivativeMode::kFiniteDifference;
   if (!options.flag("--quiet") && solver.printLevel == 0) {
     std::cerr << "iter        cost      constr_viol   dual_infeas     step\n";
@@ -100,17 +125,30 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
       << "bound_violation: " << formatNumber(result.boundViolation, 3) << '\n'
       << "max_slack: " << formatNumber(result.maxSlack, 3) << '\n'
       << "horizon: " << formatNumber(result.horizon, 10) << '\n'
-      << "knots: " << problem.knots << '\n'
+      << "knots: " << result.trajectory.size() << '\n'
       << "method: "
       << (problem.method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : "trapezoidal") << '\n'
       << "derivatives: "
       << (solver.derivatives == DerivativeMode::kExact ? "exact" : "finite_difference") << '\n'
-      << "solve_time_ms: " << formatNumber(1e3 * result.solveTime, 4) << '\n'
+      << "consistency_defect: " << formatNumber(result.consistency.maxDefect, 3) << '\n';
+  if (result.consistency.worstInterval >= 0 && result.consistency.integrated) {
+    out << "consistency_where: " << result.consistency.worstStateName << " on interval "
+        << result.consistency.worstInterval << " at t = " << formatNumber(result.consistency.worstTime, 6)
+        << '\n';
+  }
+  if (problem.model->nc() > 0) out << "slack_defect: " << formatNumber(result.maxSlackDefect, 3) << '\n';
+  out << "refinement_rounds: " << (result.rounds.empty() ? 0 : result.rounds.size() - 1) << '\n';
+  for (std::size_t k = 0; k < result.rounds.size(); ++k) {
+    const RefinementRound& r = result.rounds[k];
+    out << "round_" << k << ": knots " << r.knots << ", iterations " << r.iterations << ", defect "
+        << formatNumber(r.maxDefect, 3) << '\n';
+  }
+  out << "solve_time_ms: " << formatNumber(1e3 * result.solveTime, 4) << '\n'
       << "solve_cpu_time_ms: " << formatNumber(1e3 * result.solveCpuTime, 4) << '\n';
   if (outPath) out << "trajectory: " << *outPath << '\n';
   if (!result.success()) {
     std::cerr << "trellis: optimize: " << result.message << '\n';
-    return 3;
+    return result.status == OptimizationStatus::kInconsistent ? 4 : 3;
   }
   return 0;
 }

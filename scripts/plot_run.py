@@ -1,19 +1,32 @@
 #!/usr/bin/env python3
 """Plots of a trellis run from its CSV files: states, inputs, gains and tracking error against time.
 
-    plot_run.py --reference TRAJ.csv [--closed CLOSED.csv ...] [--gains GAINS.csv]
-                [--controllability CONTROLLABILITY.csv] --out DIR [--title NAME] [--configs a,b,...]
+    plot_run.py --reference TRAJ.csv [--scene SCENE.json] [--closed CLOSED.csv ...]
+                [--gains GAINS.csv] [--controllability CONTROLLABILITY.csv] --out DIR
+                [--title NAME] [--configs a,b,...] [--trellis PROGRAM]
 
 TRAJ.csv and CLOSED.csv use the trajectory layout (t, configurations, d + configurations,
 inputs); GAINS.csv the gains layout (t, K_i_j row-major). Writes DIR/states.png, DIR/inputs.png,
 and, when given, DIR/gains.png, DIR/tracking_error.png and DIR/controllability.png (from a
 CSV t,dimension,rank,smallest_singular_value). Uses matplotlib's Agg backend (no
 display needed); Debian's python3-matplotlib is enough.
+
+The tracking error is measured against the reference as every trellis tool reads it
+(control/include/trellis/control/trajectory.hpp): the state is the cubic Hermite spline through
+the knots with the knot derivatives x'_k = [dq_k; q''(q_k, dq_k, u_k)], which is what
+`trellis simulate` reports. q'' comes from the scene's exact dynamics: with --scene, one
+`trellis linearize -` per knot (the scene with the knot as its state, on standard input). Without
+--scene the velocity part of the spline has no derivatives and the error plot falls back to linear
+interpolation between knots, says so in its title and on standard error (it overstates the error
+between knots by O(h²)).
 """
 import argparse
+import bisect
 import csv
+import json
 import math
 import os
+import subprocess
 import sys
 
 import matplotlib
@@ -69,25 +82,55 @@ class Trajectory:
         self.dq = columns[1 + n:1 + 2 * n]
         self.u = columns[1 + 2 * n:]
 
+        self.qdd = None  # q'' at the knots (n lists), from compute_accelerations
+
+    def compute_accelerations(self, scene_path, trellis):
+        """q''_k at every knot from the scene's exact dynamics (`trellis linearize -`)."""
+        try:
+            with open(scene_path) as f:
+                scene = json.load(f)
+        except (OSError, ValueError) as e:
+            sys.exit(f"plot_run.py: cannot read the scene {scene_path}: {e}")
+        qdd = [[] for _ in self.configs]
+        for k in range(len(self.t)):
+            scene["state"] = {
+                "q": {name: self.q[i][k] for i, name in enumerate(self.configs)},
+                "dq": {name: self.dq[i][k] for i, name in enumerate(self.configs)},
+                "u": {name: self.u[j][k] for j, name in enumerate(self.inputs)},
+            }
+            run = subprocess.run([trellis, "linearize", "--compact", "-"], input=json.dumps(scene),
+                                 capture_output=True, text=True)
+            if run.returncode != 0:
+                sys.exit(f"plot_run.py: trellis linearize failed at knot {k} (t = {self.t[k]}): "
+                         f"{run.stderr.strip()}")
+            values = json.loads(run.stdout)["qdd"]
+            for i in range(len(self.configs)):
+                qdd[i].append(float(values[i]))
+        self.qdd = qdd
+
     def state_at(self, t):
-        """x(t) by linear interpolation between knots (enough for an error plot)."""
+        """x(t): the cubic Hermite spline of trajectory.hpp when the knot accelerations are known
+        (the q part always uses the exact knot velocities), else linear between knots."""
         ts = self.t
-        if t <= ts[0]:
-            k, s = 0, 0.0
-        elif t >= ts[-1]:
-            k, s = len(ts) - 2, 1.0
-        else:
-            lo, hi = 0, len(ts) - 1
-            while hi - lo > 1:
-                mid = (lo + hi) // 2
-                if ts[mid] <= t:
-                    lo = mid
-                else:
-                    hi = mid
-            k, s = lo, (t - ts[lo]) / (ts[lo + 1] - ts[lo])
         if len(ts) == 1:
             return [c[0] for c in self.q + self.dq]
-        return [c[k] + s * (c[k + 1] - c[k]) for c in self.q + self.dq]
+        t = min(max(t, ts[0]), ts[-1])
+        k = min(max(bisect.bisect_right(ts, t) - 1, 0), len(ts) - 2)
+        h = ts[k + 1] - ts[k]
+        s = (t - ts[k]) / h
+        # Cubic Hermite basis on [0, 1].
+        h00 = 2 * s ** 3 - 3 * s ** 2 + 1
+        h10 = s ** 3 - 2 * s ** 2 + s
+        h01 = -2 * s ** 3 + 3 * s ** 2
+        h11 = s ** 3 - s ** 2
+
+        def hermite(c, d):
+            return h00 * c[k] + h10 * h * d[k] + h01 * c[k + 1] + h11 * h * d[k + 1]
+
+        if self.qdd is None:
+            return [c[k] + s * (c[k + 1] - c[k]) for c in self.q + self.dq]
+        return ([hermite(self.q[i], self.dq[i]) for i in range(len(self.q))] +
+                [hermite(self.dq[i], self.qdd[i]) for i in range(len(self.dq))])
 
 
 def plot_states(ref, closed, selected, out, title):
@@ -149,10 +192,13 @@ def plot_gains(path, out, title):
     fig, ax = plt.subplots(figsize=(9, 4))
     for i in sorted(rows):
         norm = [math.sqrt(sum(c[k] ** 2 for c in rows[i])) for k in range(len(t))]
-        ax.plot(t, norm, lw=1.1, label=f"‖K row {i}‖")
+        ax.semilogy(t, [max(v, 1e-12) for v in norm], lw=1.1, label=f"‖K row {i}‖")
+    # Logarithmic: the gains of a finite-horizon LQR spike near t_f (Q_f, the shrinking horizon),
+    # and on a linear axis the spike flattens everything before it.
     ax.set_xlabel("t [s]")
-    ax.set_ylabel("gain norm")
+    ax.set_ylabel("gain norm (log scale)")
     ax.set_title(f"{title}: feedback gains (row norms of K(t))")
+    ax.grid(alpha=0.3, which="both")
     ax.grid(alpha=0.3)
     if len(rows) <= 12:
         ax.legend(fontsize=7, ncol=2)
@@ -174,7 +220,8 @@ def plot_error(ref, closed, out, title):
         ax.legend(fontsize=7, ncol=2)
     ax.set_xlabel("t [s]")
     ax.set_ylabel("‖x − x_ref‖₂")
-    ax.set_title(f"{title}: tracking error ({len(closed)} run(s))")
+    how = "Hermite reference as in simulate" if ref.qdd is not None else "LINEAR reference (no --scene)"
+    ax.set_title(f"{title}: tracking error ({len(closed)} run(s); {how})")
     ax.grid(alpha=0.3, which="both")
     fig.tight_layout()
     fig.savefig(os.path.join(out, "tracking_error.png"), dpi=110)
@@ -208,6 +255,10 @@ def main():
     p.add_argument("--reference", required=True)
     p.add_argument("--closed", action="append", default=[])
     p.add_argument("--gains")
+    p.add_argument("--scene", help="scene of the reference: Hermite reference for the tracking error")
+    p.add_argument("--trellis", default=os.environ.get("TRELLIS", os.path.join(
+        os.path.dirname(os.path.abspath(__file__)), "..", "build", "cli", "trellis")),
+        help="the trellis program (default $TRELLIS or build/cli/trellis)")
     p.add_argument("--controllability", help="CSV: t,dimension,rank,smallest_singular_value")
     p.add_argument("--out", required=True)
     p.add_argument("--title", default="trellis")
@@ -225,6 +276,11 @@ def main():
     if args.gains:
         plot_gains(args.gains, args.out, args.title)
     if closed:
+        if args.scene:
+            ref.compute_accelerations(args.scene, args.trellis)
+        else:
+            print("plot_run.py: no --scene: the tracking error is measured against the reference "
+                  "interpolated LINEARLY, not as simulate does (Hermite)", file=sys.stderr)
         plot_error(ref, closed, args.out, args.title)
     if args.controllability:
         plot_controllability(args.controllability, args.out, args.title)

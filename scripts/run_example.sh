@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # scripts/run_example.sh NAME [OUTPUT_DIR] — one trajectory-optimization example end to end with the
 # `trellis` command-line tool:
-#   1. trellis optimize  examples/problems/NAME.json            → reference.csv (Ipopt, exact Jacobians)
+#   1. trellis optimize  examples/problems/NAME.json            → reference.csv (Ipopt, exact Jacobians,
+#      checked a posteriori against the exact dynamics and refined until consistent)
 #   2. trellis gains     SCENE --trajectory reference.csv       → gains.csv     (TV-LQR, CVODES)
 #   3. trellis simulate  SCENE ... --perturb-random σ --seed k  → closed_loop_k.csv (nonlinear plant)
 #      (and once without feedback: the same perturbation with zero gains, to show what feedback buys)
@@ -65,5 +66,5 @@ else
 fi
 step "4/4 plots"
 "$python" "$root/scripts/plot_run.py" --title "$name" --reference "$out/reference.csv" \
-  --gains "$out/gains.csv" "${closed[@]}" --out "$out"
+  --scene "$scene" --trellis "$trellis" --gains "$out/gains.csv" "${closed[@]}" --out "$out"
 printf '\n%s: done in %d s; files in %s/\n' "$name" "$SECONDS" "$out"

@@ -19,6 +19,7 @@
 
 #include "trellis/control.hpp"
 #include "trellis/core.hpp"
+#include "trellis/core/numdiff.hpp"
 
 #include <Eigen/Core>
 #include <Eigen/Eigenvalues>
@@ -33,6 +34,7 @@
 #include <fstream>
 #include <random>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -113,31 +115,22 @@ std::string format(const char* fmt, double a, double b = 0.0, double c = 0.0) {
   return buffer;
 }
 
-/// Central differences of ẋ = f(x, u) at x, u: the baseline that the exact method replaces.
+/// Central differences of ẋ = f(x, u) at x, u (the core's numdiff, step ε^(1/3)·max(1, |z|)):
+/// the baseline that the exact method replaces. The q-rows are [0 I | 0] exactly.
 void finiteDifferenceLinearization(const trellis::Model& model, trellis::Data& data,
-                                   const Eigen::VectorXd& x, const Eigen::VectorXd& u, double step,
+                                   const Eigen::VectorXd& x, const Eigen::VectorXd& u,
                                    Eigen::MatrixXd& A, Eigen::MatrixXd& B) {
-  // One loop over the columns of [A B], i.e. over z = [x; u]; the q-rows are [0 I | 0] exactly.
   const int n = model.nq(), m = model.nu();
-  Eigen::MatrixXd AB = Eigen::MatrixXd::Zero(2 * n, 2 * n + m);
-  AB.topLeftCorner(n, 2 * n).rightCols(n).setIdentity();
-  Eigen::VectorXd z(2 * n + m);
-  z << x, u;
-  auto qdd = [&](const Eigen::VectorXd& zz) {
-    trellis::computeDynamics(model, data, zz.head(n), zz.segment(n, n), zz.tail(m));
-    return Eigen::VectorXd(data.qdd);
-  };
-  Eigen::VectorXd zp = z;
-  for (int k = 0; k < z.size(); ++k) {
-    zp(k) = z(k) + step;
-    const Eigen::VectorXd fp = qdd(zp);
-    zp(k) = z(k) - step;
-    const Eigen::VectorXd fm = qdd(zp);
-    zp(k) = z(k);
-    AB.col(k).tail(n) = (fp - fm) / (2 * step);
-  }
-  A = AB.leftCols(2 * n);
-  B = AB.rightCols(m);
+  trellis::NumDiffWorkspace workspace(model);
+  Eigen::MatrixXd J;
+  const trellis::DynamicsStatus status =
+      trellis::differenceDynamics(model, data, x.head(n), x.tail(n), u, {}, workspace, J);
+  if (!status.ok()) throw std::runtime_error("finite differences of the dynamics: " + status.message);
+  A = Eigen::MatrixXd::Zero(2 * n, 2 * n);
+  A.topRightCorner(n, n).setIdentity();
+  A.bottomRows(n) = J.leftCols(2 * n);
+  B = Eigen::MatrixXd::Zero(2 * n, m);
+  B.bottomRows(n) = J.rightCols(m);
 }
 
 }  // namespace
@@ -190,7 +183,7 @@ int main(int argc, char** argv) try {
   const Eigen::MatrixXd Aexact = data.A, Bexact = data.B;
   Eigen::MatrixXd Afd, Bfd;
   const auto fdStart = Clock::now();
-  finiteDifferenceLinearization(model, data, x0, u0, 1e-6, Afd, Bfd);
+  finiteDifferenceLinearization(model, data, x0, u0, Afd, Bfd);
   const double fdTime = secondsSince(fdStart);
   const double fdError = std::max((Afd - Aexact).cwiseAbs().maxCoeff(), (Bfd - Bexact).cwiseAbs().maxCoeff()) /
                          std::max(1.0, std::max(Aexact.cwiseAbs().maxCoeff(), Bexact.cwiseAbs().maxCoeff()));

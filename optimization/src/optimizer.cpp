@@ -1,6 +1,8 @@
 // optimizer.cpp — Ipopt's TNLP over a Transcription (Ipopt stays in this file).
 #include "trellis/optimization/optimizer.hpp"
 
+#include "trellis/core/data.hpp"
+
 #include <IpIpoptApplication.hpp>
 #include <IpIpoptCalculatedQuantities.hpp>
 #include <IpIpoptData.hpp>
@@ -20,6 +22,7 @@ const char* toString(OptimizationStatus status) {
   switch (status) {
     case OptimizationStatus::kSolved: return "solved";
     case OptimizationStatus::kSolvedAcceptable: return "solved_acceptable";
+    case OptimizationStatus::kInconsistent: return "inconsistent";
     case OptimizationStatus::kInfeasible: return "infeasible";
     case OptimizationStatus::kIterationLimit: return "iteration_limit";
     case OptimizationStatus::kStopped: return "stopped";
@@ -38,6 +41,12 @@ void OptimizerOptions::validate() const {
   }
   if (!(maxCpuTime > 0.0)) bad("maxCpuTime must be > 0");
   if (limitedMemorySize < 1) bad("limitedMemorySize = " + std::to_string(limitedMemorySize) + " must be >= 1");
+  if (!(consistencyTolerance > 0.0) || !std::isfinite(consistencyTolerance)) {
+    bad("consistencyTolerance must be > 0 and finite");
+  }
+  if (maxRefinements < 0) bad("maxRefinements = " + std::to_string(maxRefinements) + " must be >= 0");
+  if (maxKnots < 2) bad("maxKnots = " + std::to_string(maxKnots) + " must be >= 2");
+  if (maxSplit < 2) bad("maxSplit = " + std::to_string(maxSplit) + " must be >= 2");
 }
 
 namespace {
@@ -196,9 +205,11 @@ class CollocationNlp : public Ipopt::TNLP {
 
 }  // namespace
 
-OptimizationResult optimizeTrajectory(const OptimalControlProblem& problem,
-                                      const OptimizerOptions& options) {
-  options.validate();
+namespace {
+
+/// One Ipopt solve of `problem` (no check, no refinement): the fields of OptimizationResult that
+/// describe the solve; `result.message` gets Ipopt's part of the story.
+OptimizationResult solveOnce(const OptimalControlProblem& problem, const OptimizerOptions& options) {
   Transcription transcription(problem, options.derivatives);  // validates the problem
 
   Ipopt::SmartPtr<CollocationNlp> nlp = new CollocationNlp(transcription, options);
@@ -222,11 +233,7 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& problem,
   OptimizationResult result;
   // "": no ipopt.opt from the working directory, so a solve depends only on its arguments.
   Ipopt::ApplicationReturnStatus status = app->Initialize("");
-  const auto start = std::chrono::steady_clock::now();
-  const std::clock_t cpuStart = std::clock();
   if (status == Ipopt::Solve_Succeeded) status = app->OptimizeTNLP(nlp);
-  result.solveTime = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  result.solveCpuTime = static_cast<double>(std::clock() - cpuStart) / CLOCKS_PER_SEC;
 
   result.ipoptStatus = applicationStatusName(status);
   result.status = classify(status);
@@ -249,6 +256,7 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& problem,
   result.maxSlack = transcription.maxSlack(z);
   result.dynamicsEvaluations = transcription.dynamicsEvaluations();
   result.linearizationEvaluations = transcription.linearizationEvaluations();
+  result.mesh = problem.meshFractions();
   std::string trajectoryError;
   try {
     result.trajectory = transcription.trajectory(z);
@@ -272,6 +280,162 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& problem,
   if (!nlp->callbackError().empty()) message << "; " << nlp->callbackError();
   if (!trajectoryError.empty()) message << "; no trajectory: " << trajectoryError;
   result.message = message.str();
+  return result;
+}
+
+std::string fmt(double v) {
+  std::ostringstream s;
+  s.precision(3);
+  s << v;
+  return s.str();
+}
+
+/// The slack's share of each interval's defect relative to the check's state scale (N − 1
+/// entries, zeros without constraints); sets r.maxSlackDefect and r.worstSlackInterval.
+Eigen::VectorXd measureSlack(const OptimalControlProblem& problem, const OptimizerOptions& options,
+                             OptimizationResult& r) {
+  Eigen::VectorXd share = Eigen::VectorXd::Zero(problem.knots - 1);
+  r.maxSlackDefect = 0.0;
+  r.worstSlackInterval = -1;
+  if (problem.model->nc() == 0 || r.consistency.stateScale.size() == 0) return share;
+  Transcription t(problem, options.derivatives);
+  const Eigen::MatrixXd slack = t.slackContributions(r.variables.data());
+  for (int k = 0; k < slack.cols(); ++k) {
+    share(k) = slack.col(k).cwiseAbs().cwiseQuotient(r.consistency.stateScale).maxCoeff();
+    if (share(k) > r.maxSlackDefect || r.worstSlackInterval < 0) {
+      r.maxSlackDefect = share(k);
+      r.worstSlackInterval = k;
+    }
+  }
+  return share;
+}
+
+/// The refined mesh and a warm start on it (file comment of optimizer.hpp). Returns false when
+/// the knot limit would be exceeded.
+bool refine(OptimalControlProblem& problem, const OptimizationResult& r, const Eigen::VectorXd& errors,
+            const OptimizerOptions& options) {
+  const double tol = options.consistencyTolerance;
+  const double order = problem.method == CollocationMethod::kHermiteSimpson ? 5.0 : 3.0;
+  const Eigen::VectorXd& tau = r.mesh;
+  std::vector<double> mesh{0.0};
+  for (int k = 0; k + 1 < tau.size(); ++k) {
+    int parts = 1;
+    if (errors(k) > tol) {
+      parts = static_cast<int>(std::ceil(std::pow(errors(k) / (0.5 * tol), 1.0 / order)));
+      parts = std::clamp(parts, 2, options.maxSplit);
+    }
+    for (int j = 1; j <= parts; ++j) {
+      mesh.push_back(j == parts ? tau(k + 1) : tau(k) + (tau(k + 1) - tau(k)) * j / parts);
+    }
+  }
+  const int N = static_cast<int>(mesh.size());
+  if (N > options.maxKnots || N == tau.size()) return false;
+  Trajectory previous = r.trajectory;
+  Data data(*problem.model);
+  previous.computeStateDerivatives(*problem.model, data);
+  Eigen::VectorXd times(N);
+  Eigen::MatrixXd states(problem.nx(), N), inputs(problem.nu(), N);
+  Eigen::VectorXd x, u;
+  for (int k = 0; k < N; ++k) {
+    times(k) = r.horizon * mesh[k];
+    previous.evaluate(std::min(times(k), previous.endTime()), x, u);
+    states.col(k) = x;
+    inputs.col(k) = u;
+  }
+  Trajectory guess(problem.model->configNames(), problem.model->inputNames(), times, states, inputs);
+  guess.computeStateDerivatives(*problem.model, data);
+  problem.initialGuess = std::move(guess);
+  problem.knots = N;
+  problem.mesh = Eigen::Map<const Eigen::VectorXd>(mesh.data(), N);
+  if (problem.freeHorizon()) problem.horizon = std::clamp(r.horizon, problem.minHorizon, problem.maxHorizon);
+  return true;
+}
+
+}  // namespace
+
+OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
+                                      const OptimizerOptions& options) {
+  options.validate();
+  input.validate();
+  OptimalControlProblem problem = input;
+  ConsistencyOptions check;
+  check.tolerance = options.consistencyTolerance;
+  const auto start = std::chrono::steady_clock::now();
+  const std::clock_t cpuStart = std::clock();
+  OptimizationResult result;
+  int iterations = 0;
+  long dynamics = 0, linearizations = 0;
+  std::vector<RefinementRound> rounds;
+  for (int round = 0;; ++round) {
+    const auto roundStart = std::chrono::steady_clock::now();
+    result = solveOnce(problem, options);
+    iterations += result.iterations;
+    dynamics += result.dynamicsEvaluations;
+    linearizations += result.linearizationEvaluations;
+    RefinementRound info;
+    info.knots = problem.knots;
+    info.iterations = result.iterations;
+    info.ipoptStatus = result.ipoptStatus;
+    info.maxDefect = std::numeric_limits<double>::quiet_NaN();
+    info.maxSlackDefect = std::numeric_limits<double>::quiet_NaN();
+    bool consistent = false;
+    Eigen::VectorXd errors;
+    if (result.success() && result.trajectory.size() > 0) {
+      result.consistency = checkConsistency(*problem.model, result.trajectory, check);
+      const Eigen::VectorXd slackShare = measureSlack(problem, options, result);
+      info.maxDefect = result.consistency.maxDefect;
+      info.maxSlackDefect = result.maxSlackDefect;
+      consistent = result.consistency.consistent && result.maxSlackDefect <= options.consistencyTolerance;
+      if (result.consistency.integrated) errors = result.consistency.intervalDefects.cwiseMax(slackShare);
+    }
+    info.solveTime = std::chrono::duration<double>(std::chrono::steady_clock::now() - roundStart).count();
+    rounds.push_back(info);
+    if (!result.success() || consistent) break;
+    // Ipopt converged but the result is not consistent: refine or report.
+    const bool canRefine = round < options.maxRefinements && errors.size() > 0 &&
+                           refine(problem, result, errors, options);
+    if (!canRefine) {
+      result.status = OptimizationStatus::kInconsistent;
+      std::ostringstream m;
+      m << "inconsistent (Ipopt: " << result.ipoptStatus << ") with " << problem.knots
+        << " knots after " << round << " refinement round(s): ";
+      if (!result.consistency.integrated) {
+        m << "the consistency check could not run: " << result.consistency.message;
+      } else if (!result.consistency.consistent) {
+        m << result.consistency.message;
+      } else {
+        m << "the closed-chain slack carries " << fmt(result.maxSlackDefect)
+          << " of the state's range (tolerance " << fmt(options.consistencyTolerance)
+          << ") on interval " << result.worstSlackInterval << " [" 
+          << fmt(result.trajectory.times()(result.worstSlackInterval)) << ", "
+          << fmt(result.trajectory.times()(result.worstSlackInterval + 1)) << "]";
+      }
+      if (round >= options.maxRefinements) {
+        m << " (refinement limit " << options.maxRefinements << " reached)";
+      } else {
+        m << " (the knot limit " << options.maxKnots << " would be exceeded)";
+      }
+      m << "; the last solution is returned";
+      result.message = m.str();
+      break;
+    }
+  }
+  result.iterations = iterations;
+  result.dynamicsEvaluations = dynamics;
+  result.linearizationEvaluations = linearizations;
+  result.rounds = std::move(rounds);
+  result.solveTime = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result.solveCpuTime = static_cast<double>(std::clock() - cpuStart) / CLOCKS_PER_SEC;
+  if (result.success()) {
+    std::ostringstream m;
+    m << result.message << "; " << result.consistency.message;
+    if (result.rounds.size() > 1) m << "; " << iterations << " iterations in all rounds";
+    if (problem.model->nc() > 0) m << ", slack share " << fmt(result.maxSlackDefect);
+    if (result.rounds.size() > 1) {
+      m << " after " << result.rounds.size() - 1 << " refinement round(s), " << problem.knots << " knots";
+    }
+    result.message = m.str();
+  }
   return result;
 }
 

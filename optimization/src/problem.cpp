@@ -1,12 +1,15 @@
 // problem.cpp — OptimalControlProblem: defaults, validation, and the JSON problem file.
 #include "trellis/optimization/problem.hpp"
 
+#include "trellis/core/data.hpp"
+#include "trellis/core/dynamics.hpp"
 #include "trellis/core/scene.hpp"
 
 #include <nlohmann/json.hpp>
 
 #include <Eigen/Eigenvalues>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -85,17 +88,66 @@ std::vector<std::string> OptimalControlProblem::stateNames() const {
   return names;
 }
 
+Eigen::VectorXd OptimalControlProblem::meshFractions() const {
+  if (mesh.size() > 0) return mesh;
+  return Eigen::VectorXd::LinSpaced(std::max(knots, 2), 0.0, 1.0);
+}
+
+namespace {
+
+/// A fixed boundary state must lie on the constraint manifold: checked before the NLP is built,
+/// so that a wrong fixed entry is named instead of surfacing as a generic Ipopt "infeasible".
+void checkBoundaryOnManifold(const OptimalControlProblem& p, const Eigen::VectorXd& x,
+                             const std::vector<bool>& fixed, const char* which, const char* freeField) {
+  const Model& model = *p.model;
+  const int n = model.nq();
+  if (model.nc() == 0) return;
+  bool configFixed = true, allFixed = true;
+  for (int i = 0; i < n; ++i) configFixed = configFixed && fixed[i];
+  for (int i = 0; i < 2 * n; ++i) allFixed = allFixed && fixed[i];
+  if (!configFixed) return;
+  Data data(model);
+  computeConstraints(model, data, x.head(n), x.tail(n));
+  const Eigen::VectorXd velocity = data.constraintJacobian * x.tail(n);
+  const double tol = OptimalControlProblem::kBoundaryTolerance;
+  for (int r = 0; r < model.nc(); ++r) {
+    const Constraint& c = model.constraints()[r];
+    const std::string name = "constraint '" + (c.name.empty() ? "#" + std::to_string(r) : c.name) +
+                             "' (row " + std::to_string(r) + ")";
+    if (c.holonomic() && !(std::abs(data.constraintValue(r)) <= tol)) {
+      fail(std::string("problem: the fixed ") + which + " configuration violates " + name +
+           ": h = " + str(data.constraintValue(r)) + " (tolerance " + str(tol) +
+           "); give a configuration on the constraint manifold or leave the dependent entries "
+           "free (" + freeField + ")");
+    }
+    if (allFixed && !(std::abs(velocity(r)) <= tol)) {
+      fail(std::string("problem: the fixed ") + which + " velocity violates " + name +
+           ": A q' = " + str(velocity(r)) + " (tolerance " + str(tol) +
+           "); give a velocity tangent to the constraints or leave entries free (" + freeField + ")");
+    }
+  }
+}
+
+}  // namespace
+
 void OptimalControlProblem::validate() const {
   if (!model) fail("problem: model is null");
   if (model->nq() == 0) fail("problem: the model has no configuration variables");
-  for (const Constraint& c : model->constraints()) {
-    if (!c.holonomic()) {
-      fail("problem: constraint '" + c.name +
-           "' is nonholonomic; the transcription supports holonomic constraints only");
-    }
-  }
   const int nxs = nx(), m = nu();
   if (knots < 2) fail("problem: knots = " + std::to_string(knots) + " must be >= 2");
+  if (mesh.size() > 0) {
+    if (mesh.size() != knots) {
+      fail("problem: mesh has " + std::to_string(mesh.size()) + " entries, expected knots = " +
+           std::to_string(knots));
+    }
+    if (mesh(0) != 0.0 || mesh(knots - 1) != 1.0) fail("problem: mesh must start at 0 and end at 1");
+    for (int k = 0; k + 1 < knots; ++k) {
+      if (!(mesh(k + 1) > mesh(k))) {
+        fail("problem: mesh is not strictly increasing at entry " + std::to_string(k + 1) + " (" +
+             str(mesh(k + 1)) + " after " + str(mesh(k)) + ")");
+      }
+    }
+  }
   if (!(minHorizon > 0.0) || !std::isfinite(minHorizon)) {
     fail("problem: minHorizon = " + str(minHorizon) + " must be > 0 and finite");
   }
@@ -153,6 +205,8 @@ void OptimalControlProblem::validate() const {
       fail(std::string("problem: initialGuess: ") + e.what());
     }
   }
+  checkBoundaryOnManifold(*this, initialState, initialFixed, "initial", "free_initial");
+  checkBoundaryOnManifold(*this, finalState, finalFixed, "final", "free_final");
 }
 
 // ---- Problem file -----------------------------------------------------------------------------

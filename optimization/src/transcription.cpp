@@ -4,6 +4,7 @@
 #include "trellis/core/data.hpp"
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/linearization.hpp"
+#include "trellis/core/numdiff.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -41,6 +42,11 @@ struct Transcription::Impl {
   DerivativeMode derivatives;
   const Model& model;
   int n, nx, m, nc, N, P;
+  int ncH;                 // holonomic rows (h rows and γ slack); all nc rows get A q̇ rows and μ
+  std::vector<int> holonomicRows;
+  bool nonholonomic = false;
+  Eigen::VectorXd tau;     // mesh τ_k (N)
+  int intervalRows;        // rows per interval block: nx (trapezoidal) or 2nx + m (Hermite–Simpson)
   bool hermiteSimpson, freeT;
   int stride;         // nx + m: one point's variables
   int slackStart;     // first slack variable
@@ -57,9 +63,12 @@ struct Transcription::Impl {
   std::vector<Eigen::MatrixXd> Ap, Bp;      // P blocks: ∂f/∂x (nx×nx), ∂f/∂u (nx×m)
   Eigen::MatrixXd hValue;                   // nc×N: h(q_k)
   std::vector<Eigen::MatrixXd> Ac, Avq;     // N blocks nc×n: A_c(q_k), ∂(A_c q̇)/∂q at knot k
-  std::vector<Eigen::MatrixXd> hessian;     // N·nc blocks n×n: ∇²h_r(q_k)
+  // N·nc blocks n×n: S_r(q_k)(i, j) = ∂A_{r,i}/∂q_j (= ∇²h_r for a holonomic row)
+  std::vector<Eigen::MatrixXd> hessian;
   Eigen::MatrixXd slackTop, slackBottom;    // n×n: Σ γ_r ∇²h_r, Σ μ_r ∇²h_r (scratch)
-  Eigen::VectorXd q, dq, u, qp, dqp, up, qddPlus;
+  Eigen::VectorXd q, dq, u, qp, dqp;
+  NumDiffWorkspace numdiff;
+  Eigen::MatrixXd fdJ;  // n×(2n + m)
   std::string error;
   long dynamicsCount = 0, linearizationCount = 0;
 
@@ -77,13 +86,24 @@ struct Transcription::Impl {
         freeT(problem.freeHorizon()),
         stride(2 * model.nq() + model.nu()),
         data(model),
-        constraintData(model) {
+        constraintData(model),
+        numdiff(model) {
+    for (int r = 0; r < nc; ++r) {
+      if (model.constraints()[r].holonomic()) {
+        holonomicRows.push_back(r);
+      } else {
+        nonholonomic = true;
+      }
+    }
+    ncH = static_cast<int>(holonomicRows.size());
+    tau = problem.meshFractions();
     slackStart = P * stride;
-    const int slackVars = nc > 0 ? (N - 1) * 2 * nc : 0;
+    const int slackVars = (N - 1) * (ncH + nc);
     horizonIdx = freeT ? slackStart + slackVars : -1;
     numVars = slackStart + slackVars + (freeT ? 1 : 0);
-    defectRows = (N - 1) * (hermiteSimpson ? 2 : 1) * nx;
-    numCons = defectRows + N * 2 * nc;
+    intervalRows = hermiteSimpson ? 2 * nx + m : nx;
+    defectRows = (N - 1) * intervalRows;
+    numCons = defectRows + N * (ncH + nc);
 
     cachedZ = Eigen::VectorXd::Constant(numVars, std::numeric_limits<double>::quiet_NaN());
     F = Eigen::MatrixXd::Zero(nx, P);
@@ -95,8 +115,8 @@ struct Transcription::Impl {
     hessian.assign(static_cast<std::size_t>(N) * nc, Eigen::MatrixXd::Zero(n, n));
     slackTop = Eigen::MatrixXd::Zero(n, n);
     slackBottom = Eigen::MatrixXd::Zero(n, n);
-    q.resize(n); dq.resize(n); u.resize(m); qp.resize(n); dqp.resize(n); up.resize(m);
-    qddPlus.resize(n);
+    q.resize(n); dq.resize(n); u.resize(m); qp.resize(n); dqp.resize(n);
+    fdJ.resize(n, nx + m);
 
     // The pattern: run the value routine in structure mode (values are not looked at).
     const Eigen::VectorXd z = initialGuessVector();
@@ -109,7 +129,14 @@ struct Transcription::Impl {
 
   double horizonOf(const double* z) const { return freeT ? z[horizonIdx] : problem.horizon; }
   int knotPoint(int k) const { return hermiteSimpson ? 2 * k : k; }
-  double pointTime(int p, double T) const { return T * p / (P - 1); }
+  double pointFraction(int p) const {
+    if (!hermiteSimpson) return tau(p);
+    return p % 2 == 0 ? tau(p / 2) : 0.5 * (tau(p / 2) + tau(p / 2 + 1));
+  }
+  double pointTime(int p, double T) const { return T * pointFraction(p); }
+  double intervalFraction(int k) const { return tau(k + 1) - tau(k); }  // h_k / T
+  int slackOf(int k) const { return slackStart + k * (ncH + nc); }       // γ_k (ncH), then μ_k (nc)
+  int knotRow(int k) const { return defectRows + k * (ncH + nc); }        // h rows, then A q̇ rows
 
   std::string describePoint(int p, double T) const {
     std::ostringstream s;
@@ -126,7 +153,7 @@ struct Transcription::Impl {
     Eigen::VectorXd z = Eigen::VectorXd::Zero(numVars);
     const double T = problem.horizon;
     for (int p = 0; p < P; ++p) {
-      const double s = static_cast<double>(p) / (P - 1);
+      const double s = pointFraction(p);
       Eigen::VectorXd x(nx), uu(m);
       if (problem.initialGuess) {
         // Linear interpolation of the guess's knots, its time span mapped onto [0, T].
@@ -137,6 +164,10 @@ struct Transcription::Impl {
         if (g.size() == 1) {
           x = g.states().col(0);
           uu = g.inputs().col(0);
+        } else if (g.hasStateDerivatives()) {
+          // A guess with knot derivatives (a previous solution, mesh refinement): the readers'
+          // Hermite spline for the state, linear input.
+          g.evaluate(std::clamp(t, g.startTime(), g.endTime()), x, uu);
         } else {
           const double a = std::clamp((t - g.times()(k)) / (g.times()(k + 1) - g.times()(k)), 0.0, 1.0);
           x = (1 - a) * g.states().col(k) + a * g.states().col(k + 1);
@@ -191,42 +222,46 @@ struct Transcription::Impl {
     return false;
   }
 
-  /// ∂q̈/∂[x; u] by central differences of computeDynamics (DerivativeMode::kFiniteDifference).
+  /// ∂q̈/∂[x; u] by central differences of computeDynamics (DerivativeMode::kFiniteDifference;
+  /// the core's numdiff, step ε^(1/3)·max(1, |v|)).
   bool finiteDifferenceBlocks(int p, double T) {
-    const double eps = std::cbrt(std::numeric_limits<double>::epsilon());
+    dynamicsCount += 2 * (nx + m);
+    const DynamicsStatus status = differenceDynamics(model, data, q, dq, u, NumDiffOptions{}, numdiff, fdJ);
+    if (!status.ok()) {
+      error = "the finite-difference dynamics failed at " + describePoint(p, T) + ": " + status.message;
+      return false;
+    }
     Eigen::MatrixXd& A = Ap[p];
     Eigen::MatrixXd& B = Bp[p];
     A.setZero();
-    B.setZero();
     A.topRightCorner(n, n).setIdentity();
-    for (int j = 0; j < nx + m; ++j) {
-      double plus = 0.0, minus = 0.0;
-      for (int side = 0; side < 2; ++side) {
-        qp = q; dqp = dq; up = u;
-        double* v = j < n ? &qp(j) : (j < nx ? &dqp(j - n) : &up(j - nx));
-        const double step = eps * std::max(1.0, std::abs(*v));
-        const double base = *v;
-        *v = side == 0 ? base + step : base - step;
-        (side == 0 ? plus : minus) = *v;
-        ++dynamicsCount;
-        if (!statusOk(computeDynamics(model, data, qp, dqp, up), p, T)) return false;
-        if (side == 0) {
-          qddPlus = data.qdd;
-        } else {
-          if (j < nx) {
-            A.block(n, j, n, 1) = (qddPlus - data.qdd) / (plus - minus);
-          } else {
-            B.block(n, j - nx, n, 1) = (qddPlus - data.qdd) / (plus - minus);
-          }
-        }
-      }
-    }
+    A.bottomRows(n) = fdJ.leftCols(nx);
+    B.setZero();
+    B.bottomRows(n) = fdJ.rightCols(m);
     return true;
   }
 
   /// ∇²h_r(q) for every constraint row, exactly: Ȧ q̇ = q̇ᵀ ∇²h q̇ (holonomic rows), so
   /// ∇²h_ii = drift(e_i) and ∇²h_ij = (drift(e_i + e_j) − drift(e_i) − drift(e_j)) / 2.
-  void constraintHessians(int k) {
+  bool constraintHessians(int k, double T) {
+    if (nonholonomic) {
+      // S_r(i, ·) = ∂(A q̇)_r/∂q at q̇ = e_i: the core's ∂(A q̇)/∂q, one unit velocity at a time.
+      for (int i = 0; i < n; ++i) {
+        dqp.setZero();
+        dqp(i) = 1.0;
+        ++linearizationCount;
+        const DynamicsStatus status = computeLinearization(model, constraintData, q, dqp, u);
+        if (!status.ok() || !constraintData.constraintVelocityJacobian.allFinite()) {
+          error = "the constraint derivatives failed at knot " + std::to_string(k) + " (t = " +
+                  std::to_string(T * tau(k)) + "): " + status.message;
+          return false;
+        }
+        for (int r = 0; r < nc; ++r) {
+          hessian[k * nc + r].row(i) = constraintData.constraintVelocityJacobian.row(r);
+        }
+      }
+      return true;
+    }
     qp = q;
     Eigen::VectorXd& v = dqp;
     for (int i = 0; i < n; ++i) {
@@ -247,6 +282,7 @@ struct Transcription::Impl {
         }
       }
     }
+    return true;
   }
 
   /// f (and with `linearize` A, B and the constraint derivatives) at every point, once per z.
@@ -285,7 +321,7 @@ struct Transcription::Impl {
       if (isKnot && nc > 0) {
         hValue.col(k) = data.constraintValue;
         Ac[k] = data.constraintJacobian;
-        if (linearize) constraintHessians(k);
+        if (linearize && !constraintHessians(k, T)) return false;
       }
       if (linearize && derivatives == DerivativeMode::kFiniteDifference) {
         if (!finiteDifferenceBlocks(p, T)) return false;
@@ -299,24 +335,27 @@ struct Transcription::Impl {
   // ---- Cost ------------------------------------------------------------------------------------
 
   /// Quadrature weight of point p divided by h (Simpson 1/6, 4/6, 1/6 per interval; trapezoid ½, ½).
-  double weightOverH(int p) const {
-    if (hermiteSimpson) {
-      if (p % 2 == 1) return 4.0 / 6.0;
-      return (p == 0 || p == P - 1) ? 1.0 / 6.0 : 2.0 / 6.0;
-    }
-    return (p == 0 || p == P - 1) ? 0.5 : 1.0;
+  /// Quadrature weight of point p divided by T (Simpson Δτ/6, 4Δτ/6, Δτ/6 per interval;
+  /// trapezoid Δτ/2, Δτ/2), Δτ_k = τ_{k+1} − τ_k.
+  double weightOverT(int p) const {
+    if (hermiteSimpson && p % 2 == 1) return 4.0 / 6.0 * intervalFraction(p / 2);
+    const int k = hermiteSimpson ? p / 2 : p;
+    const double c = hermiteSimpson ? 1.0 / 6.0 : 0.5;
+    double w = 0.0;
+    if (k > 0) w += c * intervalFraction(k - 1);
+    if (k < N - 1) w += c * intervalFraction(k);
+    return w;
   }
 
   double cost(const double* z, double* gradient) const {
     const double T = horizonOf(z);
-    const double h = T / (N - 1);
     double running = 0.0;
     if (gradient) std::fill(gradient, gradient + numVars, 0.0);
     Eigen::VectorXd e(nx);
     for (int p = 0; p < P; ++p) {
       const Eigen::Map<const Eigen::VectorXd> x(z + p * stride, nx), uu(z + p * stride + nx, m);
       e = x - problem.goalState;
-      const double w = weightOverH(p) * h;
+      const double w = weightOverT(p) * T;
       running += w * (uu.dot(problem.R * uu) + e.dot(problem.Q * e));
       if (gradient) {
         Eigen::Map<Eigen::VectorXd>(gradient + p * stride, nx) = 2.0 * w * (problem.Q * e);
@@ -328,7 +367,7 @@ struct Transcription::Impl {
     const double terminal = e.dot(problem.Qf * e);
     if (gradient) {
       Eigen::Map<Eigen::VectorXd>(gradient + last, nx) += 2.0 * (problem.Qf * e);
-      // The running cost is proportional to h = T/(N − 1): ∂/∂T = running / T.
+      // The running cost is proportional to T: ∂/∂T = running / T.
       if (freeT) gradient[horizonIdx] = running / T + problem.timeWeight;
     }
     return running + terminal + problem.timeWeight * T;
@@ -340,31 +379,38 @@ struct Transcription::Impl {
     return Eigen::Map<const Eigen::VectorXd>(z + p * stride, nx);
   }
 
+  Eigen::Map<const Eigen::VectorXd> input(const double* z, int p) const {
+    return Eigen::Map<const Eigen::VectorXd>(z + p * stride + nx, m);
+  }
+
   void constraints(const double* z, double* g) const {
     const double T = horizonOf(z);
-    const double h = T / (N - 1);
     for (int k = 0; k < N - 1; ++k) {
+      const double h = T * intervalFraction(k);
       const int a = knotPoint(k), b = knotPoint(k + 1);
-      Eigen::Map<Eigen::VectorXd> defect(g + k * (hermiteSimpson ? 2 : 1) * nx, nx);
+      Eigen::Map<Eigen::VectorXd> defect(g + k * intervalRows, nx);
       if (hermiteSimpson) {
         const int mid = a + 1;
         defect = state(z, b) - state(z, a) - h / 6.0 * (F.col(a) + 4.0 * F.col(mid) + F.col(b));
-        Eigen::Map<Eigen::VectorXd>(g + (2 * k + 1) * nx, nx) =
+        Eigen::Map<Eigen::VectorXd>(g + k * intervalRows + nx, nx) =
             state(z, mid) - 0.5 * (state(z, a) + state(z, b)) - h / 8.0 * (F.col(a) - F.col(b));
+        // The input is linear between knots (the rule every trajectory reader applies).
+        Eigen::Map<Eigen::VectorXd>(g + k * intervalRows + 2 * nx, m) =
+            input(z, mid) - 0.5 * (input(z, a) + input(z, b));
       } else {
         defect = state(z, b) - state(z, a) - h / 2.0 * (F.col(a) + F.col(b));
       }
       if (nc > 0) {
-        const Eigen::Map<const Eigen::VectorXd> gamma(z + slackStart + k * 2 * nc, nc);
-        const Eigen::Map<const Eigen::VectorXd> mu(z + slackStart + k * 2 * nc + nc, nc);
-        defect.head(n) -= Ac[k + 1].transpose() * gamma;
+        const double* gamma = z + slackOf(k);
+        const Eigen::Map<const Eigen::VectorXd> mu(z + slackOf(k) + ncH, nc);
+        for (int j = 0; j < ncH; ++j) defect.head(n) -= Ac[k + 1].row(holonomicRows[j]).transpose() * gamma[j];
         defect.tail(n) -= Ac[k + 1].transpose() * mu;
       }
     }
     for (int k = 0; k < N && nc > 0; ++k) {
       const Eigen::Map<const Eigen::VectorXd> dqk(z + knotPoint(k) * stride + n, n);
-      Eigen::Map<Eigen::VectorXd>(g + defectRows + k * 2 * nc, nc) = hValue.col(k);
-      Eigen::Map<Eigen::VectorXd>(g + defectRows + k * 2 * nc + nc, nc) = Ac[k] * dqk;
+      for (int j = 0; j < ncH; ++j) g[knotRow(k) + j] = hValue(holonomicRows[j], k);
+      Eigen::Map<Eigen::VectorXd>(g + knotRow(k) + ncH, nc) = Ac[k] * dqk;
     }
   }
 
@@ -410,20 +456,22 @@ struct Transcription::Impl {
 
   void writeJacobian(const double* z, TripletWriter& w) {
     const double T = horizonOf(z);
-    const double h = T / (N - 1);
-    const double dhdT = 1.0 / (N - 1);
     for (int k = 0; k < N - 1; ++k) {
+      const double dhdT = intervalFraction(k);
+      const double h = T * dhdT;
       const int a = knotPoint(k), b = knotPoint(k + 1);
-      const int row0 = k * (hermiteSimpson ? 2 : 1) * nx;
+      const int row0 = k * intervalRows;
       const Eigen::MatrixXd* top = nullptr;
       const Eigen::MatrixXd* bottom = nullptr;
       if (nc > 0) {
         // −∂(A_c(q_b)ᵀ γ)/∂q_b = −Σ_r γ_r ∇²h_r(q_b), likewise for μ.
         slackTop.setZero();
         slackBottom.setZero();
+        for (int j = 0; j < ncH; ++j) {
+          slackTop -= z[slackOf(k) + j] * hessian[(k + 1) * nc + holonomicRows[j]];
+        }
         for (int r = 0; r < nc; ++r) {
-          slackTop -= z[slackStart + k * 2 * nc + r] * hessian[(k + 1) * nc + r];
-          slackBottom -= z[slackStart + k * 2 * nc + nc + r] * hessian[(k + 1) * nc + r];
+          slackBottom -= z[slackOf(k) + ncH + r] * hessian[(k + 1) * nc + r];
         }
         top = &slackTop;
         bottom = &slackBottom;
@@ -443,11 +491,11 @@ struct Transcription::Impl {
         horizonColumn(w, row0, -dhdT / 2.0 * (F.col(a) + F.col(b)));
       }
       if (nc > 0) {
-        const int s = slackStart + k * 2 * nc;
+        const int s = slackOf(k);
         for (int i = 0; i < n; ++i)
-          for (int r = 0; r < nc; ++r) w.put(row0 + i, s + r, -Ac[k + 1](r, i));
+          for (int j = 0; j < ncH; ++j) w.put(row0 + i, s + j, -Ac[k + 1](holonomicRows[j], i));
         for (int i = 0; i < n; ++i)
-          for (int r = 0; r < nc; ++r) w.put(row0 + n + i, s + nc + r, -Ac[k + 1](r, i));
+          for (int r = 0; r < nc; ++r) w.put(row0 + n + i, s + ncH + r, -Ac[k + 1](r, i));
       }
       if (hermiteSimpson) {
         const int row1 = row0 + nx;
@@ -457,16 +505,22 @@ struct Transcription::Impl {
         stateBlock(w, row1, b * stride, -0.5, h / 8.0, Ap[b], nullptr, nullptr);
         inputBlock(w, row1, b * stride + nx, h / 8.0, Bp[b]);
         horizonColumn(w, row1, -dhdT / 8.0 * (F.col(a) - F.col(b)));
+        const int row2 = row1 + nx;  // u_m − (u_a + u_b)/2
+        for (int j = 0; j < m; ++j) {
+          w.put(row2 + j, a * stride + nx + j, -0.5);
+          w.put(row2 + j, (a + 1) * stride + nx + j, 1.0);
+          w.put(row2 + j, b * stride + nx + j, -0.5);
+        }
       }
     }
     for (int k = 0; k < N && nc > 0; ++k) {
-      const int row0 = defectRows + k * 2 * nc;
+      const int row0 = knotRow(k);
       const int col0 = knotPoint(k) * stride;
-      for (int r = 0; r < nc; ++r)
-        for (int j = 0; j < n; ++j) w.put(row0 + r, col0 + j, Ac[k](r, j));
+      for (int j = 0; j < ncH; ++j)
+        for (int c = 0; c < n; ++c) w.put(row0 + j, col0 + c, Ac[k](holonomicRows[j], c));
       for (int r = 0; r < nc; ++r) {
-        for (int j = 0; j < n; ++j) w.put(row0 + nc + r, col0 + j, Avq[k](r, j));
-        for (int j = 0; j < n; ++j) w.put(row0 + nc + r, col0 + n + j, Ac[k](r, j));
+        for (int j = 0; j < n; ++j) w.put(row0 + ncH + r, col0 + j, Avq[k](r, j));
+        for (int j = 0; j < n; ++j) w.put(row0 + ncH + r, col0 + n + j, Ac[k](r, j));
       }
     }
   }
@@ -486,12 +540,12 @@ int Transcription::numKnots() const { return impl_->N; }
 int Transcription::stateIndex(int point) const { return point * impl_->stride; }
 int Transcription::inputIndex(int point) const { return point * impl_->stride + impl_->nx; }
 int Transcription::slackIndex(int interval) const {
-  return impl_->nc > 0 ? impl_->slackStart + interval * 2 * impl_->nc : -1;
+  return impl_->nc > 0 ? impl_->slackOf(interval) : -1;
 }
 int Transcription::horizonIndex() const { return impl_->horizonIdx; }
 int Transcription::knotPoint(int knot) const { return impl_->knotPoint(knot); }
 int Transcription::knotConstraintRow(int knot) const {
-  return impl_->nc > 0 ? impl_->defectRows + knot * 2 * impl_->nc : -1;
+  return impl_->nc > 0 ? impl_->knotRow(knot) : -1;
 }
 const std::vector<int>& Transcription::jacobianRows() const { return impl_->jacRows; }
 const std::vector<int>& Transcription::jacobianCols() const { return impl_->jacCols; }
@@ -537,7 +591,7 @@ Trajectory Transcription::trajectory(const double* z) const {
   Eigen::VectorXd times(s.N);
   Eigen::MatrixXd states(s.nx, s.N), inputs(s.m, s.N);
   for (int k = 0; k < s.N; ++k) {
-    times(k) = T * k / (s.N - 1);
+    times(k) = T * s.tau(k);
     const int p = s.knotPoint(k);
     states.col(k) = Eigen::Map<const Eigen::VectorXd>(z + p * s.stride, s.nx);
     inputs.col(k) = Eigen::Map<const Eigen::VectorXd>(z + p * s.stride + s.nx, s.m);
@@ -567,8 +621,25 @@ Eigen::MatrixXd Transcription::midpointInputs(const double* z) const {
 double Transcription::maxSlack(const double* z) const {
   const Impl& s = *impl_;
   if (s.nc == 0) return 0.0;
-  const int count = (s.N - 1) * 2 * s.nc;
+  const int count = (s.N - 1) * (s.ncH + s.nc);
   return Eigen::Map<const Eigen::VectorXd>(z + s.slackStart, count).cwiseAbs().maxCoeff();
+}
+
+Eigen::MatrixXd Transcription::slackContributions(const double* z) const {
+  const Impl& s = *impl_;
+  Eigen::MatrixXd out = Eigen::MatrixXd::Zero(s.nx, s.N - 1);
+  if (s.nc == 0) return out;
+  Data data(s.model);
+  for (int k = 0; k + 1 < s.N; ++k) {
+    const Eigen::Map<const Eigen::VectorXd> xb(z + s.knotPoint(k + 1) * s.stride, s.nx);
+    computeConstraints(s.model, data, xb.head(s.n), xb.tail(s.n));
+    for (int j = 0; j < s.ncH; ++j) {
+      out.col(k).head(s.n) += data.constraintJacobian.row(s.holonomicRows[j]).transpose() * z[s.slackOf(k) + j];
+    }
+    out.col(k).tail(s.n) =
+        data.constraintJacobian.transpose() * Eigen::Map<const Eigen::VectorXd>(z + s.slackOf(k) + s.ncH, s.nc);
+  }
+  return out;
 }
 
 }  // namespace trellis

@@ -7,19 +7,67 @@ set(_problems "${PROJECT_SOURCE_DIR}/examples/problems")
 set(_optimize_dir "${CMAKE_CURRENT_BINARY_DIR}/optimize")
 file(MAKE_DIRECTORY "${_optimize_dir}")
 
-# Every example problem solves, prints the summary and writes the CSV.
+include("${CMAKE_CURRENT_LIST_DIR}/run_cli_files.cmake")
+
+# Every example problem solves consistently (the a-posteriori check passes), prints the summary
+# and writes the CSV. Then optimize → gains → simulate: the closed loop started exactly on a
+# reference made consistent to 1e-6 of each state's range stays on it. Its deviation is the
+# reference's remaining defect plus the integrators' error (simulate's CVODES at rtol 1e-8 over
+# an unstable swing-up): measured max |x - x_ref| 5.2e-6 (cart-pole), 1.9e-5 (acrobot), 1.5e-6
+# (paper pendulum) when the test was written; with a 1e-8 reference the acrobot's is 3.8e-6 (the
+# integrators' floor); with the default 1e-3 reference 1.2e-3, 2.5e-3, 1.4e-3. The bound 1e-4
+# leaves a margin of 5 and sits 10x below the default reference's deviation.
 file(GLOB _example_problems CONFIGURE_DEPENDS "${_problems}/*.json")
 foreach(_problem IN LISTS _example_problems)
   get_filename_component(_stem "${_problem}" NAME_WE)
   trellis_cli_test(optimize.example.${_stem}
     ARGS optimize "${_problem}" --out "${_optimize_dir}/${_stem}.csv"
-    CHECKS "-DSTDOUT_REGEX=status: solved\nipopt_status: Solve_Succeeded\niterations: [0-9]+\ncost: .*trajectory: .*${_stem}.csv"
+    CHECKS "-DSTDOUT_REGEX=status: solved\nipopt_status: Solve_Succeeded\niterations: [0-9]+\ncost: .*consistency_defect: .*refinement_rounds: [0-9]+\nround_0: knots .*trajectory: .*${_stem}.csv"
            "-DSTDERR_REGEX=^iter +cost.*\n +1 ")
+  file(READ "${_problem}" _problem_text)
+  string(REGEX MATCH "\"scene\": \"([^\"]+)\"" _ "${_problem_text}")
+  get_filename_component(_scene "${_problems}/${CMAKE_MATCH_1}" ABSOLUTE)
+  trellis_cli_files_test(optimize.closed_loop.${_stem}
+    ARGS1 optimize "${_problem}" --quiet --consistency-tol 1e-6 --out @WORK@/reference.csv
+    CHECKS1 "-DSTDOUT_REGEX=status: solved" "-DNUMBERS=consistency_defect: :LESS:0.0000010001"
+    ARGS2 gains "${_scene}" --trajectory @WORK@/reference.csv --Q 10 --R 0.1 --out @WORK@/gains.csv
+    ARGS3 simulate "${_scene}" --trajectory @WORK@/reference.csv --gains @WORK@/gains.csv
+          --out @WORK@/closed.csv
+    CHECKS3 "-DNUMBERS=initial :LESS:0.000000000001&&, max :LESS:0.0001")
 endforeach()
+
+# Without refinement a coarse mesh is reported, not passed: exit 4, status inconsistent, the
+# message names the state, the interval and the time; the CSV is still written.
+trellis_cli_test(optimize.inconsistent
+  ARGS optimize "${_problems}/cart_pole_swingup.json" --knots 8 --max-refinements 0 --quiet
+       --out "${_optimize_dir}/inconsistent.csv"
+  CHECKS -DEXPECT_EXIT=4 "-DSTDOUT_REGEX=status: inconsistent\nipopt_status: Solve_Succeeded.*consistency_where: [a-z]+ on interval [0-9]+ at t = .*refinement_rounds: 0"
+         "-DSTDERR_REGEX=^trellis: optimize: inconsistent .*worst defect .* on interval [0-9]+ .*refinement limit 0[^\n]*\n$")
+
+# Refinement from a coarse mesh: more knots, several rounds, solved.
+trellis_cli_test(optimize.refined
+  ARGS optimize "${_problems}/cart_pole_swingup.json" --knots 8 --quiet
+  CHECKS "-DSTDOUT_REGEX=status: solved.*refinement_rounds: [1-9]\nround_0: knots 8, .*round_1: knots [1-9][0-9]+"
+         -DSTDERR_EMPTY=ON)
+
+# The final state of the closed chain fixed off the constraint manifold ("forgot free_final"):
+# named before Ipopt runs, exit 1.
+file(WRITE "${_optimize_dir}/off_manifold.json" "{
+  \"scene\": \"${PROJECT_SOURCE_DIR}/examples/scenes/paper_pendulum.json\",
+  \"knots\": 11, \"horizon\": 2.0,
+  \"initial_state\": {\"theta1\": 0.5246, \"theta2\": 1.0451956794889683},
+  \"final_state\": {\"theta1\": 1.2, \"theta2\": 0.5},
+  \"free_initial\": [\"theta2\"]
+}
+")
+trellis_cli_test(optimize.error.off_manifold
+  ARGS optimize "${_optimize_dir}/off_manifold.json"
+  CHECKS -DEXPECT_EXIT=1 -DSTDOUT_EMPTY=ON -DSTDERR_ONE_LINE=ON
+         "-DSTDERR_REGEX=off_manifold.json: problem: the fixed final configuration violates constraint '[^']*' .row 0.: h = [-0-9.e]+ .*free_final")
 
 trellis_cli_test(optimize.trapezoidal_quiet
   ARGS optimize "${_problems}/cart_pole_swingup.json" --method trapezoidal --knots 21 --quiet
-  CHECKS "-DSTDOUT_REGEX=status: solved.*knots: 21\nmethod: trapezoidal" -DSTDERR_EMPTY=ON)
+  CHECKS "-DSTDOUT_REGEX=status: solved.*method: trapezoidal.*round_0: knots 21," -DSTDERR_EMPTY=ON)
 trellis_cli_test(optimize.finite_difference
   ARGS optimize "${_problems}/cart_pole_swingup.json" --finite-difference --quiet
   CHECKS "-DSTDOUT_REGEX=status: solved.*derivatives: finite_difference" -DSTDERR_EMPTY=ON)

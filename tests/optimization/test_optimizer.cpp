@@ -45,7 +45,8 @@ VectorXd stateDerivative(const trellis::Model& model, trellis::Data& data, const
 }
 
 /// The collocation's input on interval k at τ ∈ [0, 1]: the quadratic through u_a, u_m, u_b
-/// (Hermite–Simpson) or the line through u_a, u_b (trapezoidal).
+/// (Hermite–Simpson; u_m is constrained to the knot average, so this is the line as well, rebuilt
+/// from the returned u_m as an independent check) or the line through u_a, u_b (trapezoidal).
 VectorXd inputAt(const OptimizationResult& r, int k, double tau, bool hermiteSimpson) {
   const VectorXd ua = r.trajectory.inputs().col(k), ub = r.trajectory.inputs().col(k + 1);
   if (!hermiteSimpson) return (1 - tau) * ua + tau * ub;
@@ -80,6 +81,15 @@ double maxLocalError(const trellis::Model& model, const OptimizationResult& r, b
   return worst;
 }
 
+/// One Ipopt solve, no refinement, and a consistency tolerance any result meets (for tests of a
+/// single solve's properties: repeatability, order, warm starts).
+trellis::OptimizerOptions singleSolve() {
+  trellis::OptimizerOptions o;
+  o.maxRefinements = 0;
+  o.consistencyTolerance = 1e30;
+  return o;
+}
+
 void checkSolved(const OptimalControlProblem& p, const OptimizationResult& r) {
   INFO(r.message);
   REQUIRE(r.success());
@@ -92,10 +102,14 @@ void checkSolved(const OptimalControlProblem& p, const OptimizationResult& r) {
   const MatrixXd& X = r.trajectory.states();
   for (int i = 0; i < p.nx(); ++i) {
     if (p.initialFixed[i]) CHECK(X(i, 0) == Approx(p.initialState(i)).margin(1e-9));
-    if (p.finalFixed[i]) CHECK(X(i, p.knots - 1) == Approx(p.finalState(i)).margin(1e-9));
+    if (p.finalFixed[i]) CHECK(X(i, X.cols() - 1) == Approx(p.finalState(i)).margin(1e-9));
   }
-  CHECK(r.trajectory.size() == p.knots);
+  // Refinement may add knots; the first round starts from the problem's.
+  REQUIRE_FALSE(r.rounds.empty());
+  CHECK(r.rounds.front().knots == p.knots);
+  CHECK(r.trajectory.size() == r.rounds.back().knots);
   CHECK(r.trajectory.endTime() == Approx(r.horizon).epsilon(1e-14));
+  CHECK(r.consistency.consistent);
 }
 
 }  // namespace
@@ -105,14 +119,14 @@ TEST_CASE("optimizer: swing-ups converge from the default guess to a repeatable 
   for (const char* name : {"cart_pole_swingup", "acrobot_swingup"}) {
     DYNAMIC_SECTION(name) {
       const OptimalControlProblem p = trellis::loadProblem(problemPath(name));
-      const OptimizationResult first = trellis::optimizeTrajectory(p);
+      const OptimizationResult first = trellis::optimizeTrajectory(p, singleSolve());
       checkSolved(p, first);
       // The input bounds hold (to Ipopt's bound relaxation) and the swing-up uses them: a
       // swing-up from rest needs a non-zero input.
       CHECK(first.trajectory.inputs().maxCoeff() <= p.inputUpper(0) + 1e-6);
       CHECK(first.trajectory.inputs().minCoeff() >= p.inputLower(0) - 1e-6);
       CHECK(first.cost > 0.0);
-      const OptimizationResult second = trellis::optimizeTrajectory(p);
+      const OptimizationResult second = trellis::optimizeTrajectory(p, singleSolve());
       checkSolved(p, second);
       // Same problem, same guess, same deterministic solver: the same local optimum. Allow
       // rounding-level differences only (Ipopt's tol 1e-8 is on the KKT error, the cost at
@@ -138,7 +152,7 @@ TEST_CASE("optimizer: optimized trajectories are dynamically consistent", "[opti
         OptimalControlProblem p = base;
         p.method = method;
         p.knots = level == 0 ? 26 : 51;
-        const OptimizationResult r = trellis::optimizeTrajectory(p);
+        const OptimizationResult r = trellis::optimizeTrajectory(p, singleSolve());
         checkSolved(p, r);
         errors[level] = maxLocalError(*p.model, r, hs);
       }
@@ -173,7 +187,7 @@ TEST_CASE("optimizer: the closed chain keeps h = 0 and A q' = 0 at the knots", "
   // The slack absorbs only the collocation's drift off the manifold: small, but not zero.
   CHECK(r.maxSlack < 1e-3);
   // The free theta2 ended on the branch of the guess (the other branch is ~1.9 rad away).
-  CHECK(r.trajectory.states()(1, p.knots - 1) == Approx(p.finalState(1)).margin(1e-3));
+  CHECK(r.trajectory.states()(1, r.trajectory.size() - 1) == Approx(p.finalState(1)).margin(1e-3));
   CHECK(maxLocalError(*p.model, r, true) < 1e-3);
 }
 
@@ -281,7 +295,7 @@ TEST_CASE("optimizer: problem-file horizon bounds and a CSV initial guess", "[op
 
   SECTION("the solution as the guess of the same problem converges at once") {
     const OptimalControlProblem p = trellis::loadProblem(problemPath("cart_pole_swingup"));
-    const OptimizationResult cold = trellis::optimizeTrajectory(p);
+    const OptimizationResult cold = trellis::optimizeTrajectory(p, singleSolve());
     REQUIRE(cold.success());
     const std::string csv =
         (std::filesystem::temp_directory_path() / "trellis_optimization_guess.csv").string();
@@ -290,7 +304,7 @@ TEST_CASE("optimizer: problem-file horizon bounds and a CSV initial guess", "[op
     warmText.replace(warmText.rfind('}'), 1, ", \"initial_guess\": \"" + csv + "\"}");
     const OptimalControlProblem warmProblem = trellis::parseProblem(warmText, "warm.json", dir);
     REQUIRE(warmProblem.initialGuess.has_value());
-    const OptimizationResult warm = trellis::optimizeTrajectory(warmProblem);
+    const OptimizationResult warm = trellis::optimizeTrajectory(warmProblem, singleSolve());
     std::filesystem::remove(csv);
     checkSolved(warmProblem, warm);
     // The guess is the solution at the knots (the midpoints are interpolated linearly, so not

@@ -154,6 +154,55 @@ TEST_CASE("transcription: gradient and Jacobian agree with central differences",
   }
 }
 
+TEST_CASE("transcription: knife edge and non-uniform mesh derivatives agree with central differences",
+          "[transcription][derivatives][knife_edge]") {
+  // A skate whose blade sits off the centre of mass (the knife-edge row's ∂A/∂q is then not
+  // symmetric, unlike a Hessian), both methods, fixed and free T, on a non-uniform mesh.
+  using trellis::Transform;
+  trellis::ModelBuilder b("skate");
+  b.addFrame("sx", "world", Transform::tx("x"));
+  b.addFrame("sy", "sx", Transform::ty("y"));
+  b.addFrame("body", "sy", Transform::rz("theta"), trellis::Mass{1.2, Eigen::Matrix3d::Identity() * 0.1});
+  b.addFrame("blade", "body", Transform::tx(0.3));
+  b.addKnifeEdgeConstraint("blade", Eigen::Vector3d(0.0, 1.0, 0.0));
+  b.addConfigForce("theta", "steer");
+  b.addBodyWrench("body", {trellis::WrenchEntry{std::string("thrust")}, trellis::WrenchEntry{0.0},
+                           trellis::WrenchEntry{0.0}, trellis::WrenchEntry{0.0},
+                           trellis::WrenchEntry{0.0}, trellis::WrenchEntry{0.0}});
+  const auto model = std::make_shared<const trellis::Model>(std::move(b).finalize());
+  std::mt19937 rng(77);
+  for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
+    for (const bool freeHorizon : {false, true}) {
+      OptimalControlProblem p(model);
+      p.method = method;
+      p.knots = 5;
+      p.mesh.resize(5);
+      p.mesh << 0.0, 0.1, 0.45, 0.6, 1.0;
+      p.setFixedHorizon(2.0);
+      if (freeHorizon) {
+        p.minHorizon = 1.0;
+        p.maxHorizon = 3.0;
+        p.timeWeight = 0.2;
+      }
+      p.finalState << 1.0, 0.5, 0.3, 0.0, 0.0, 0.0;
+      p.Q = MatrixXd::Identity(6, 6) * 0.4;
+      p.goalState = p.finalState;
+      DYNAMIC_SECTION((method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : "trapezoidal")
+                      << (freeHorizon ? " free T" : " fixed T")) {
+        Transcription t(p);
+        // One knife-edge row: A q̇ rows at every knot, μ slack only (no h rows, no γ).
+        CHECK(t.numConstraints() ==
+              (p.knots - 1) * (method == CollocationMethod::kHermiteSimpson ? 2 * 6 + 2 : 6) + p.knots);
+        checkDerivatives(t, randomPoint(t, rng));
+        // The knots sit on the mesh.
+        const VectorXd z = t.initialGuess();
+        const trellis::Trajectory traj = t.trajectory(z.data());
+        CHECK(traj.times()(2) == Approx(0.45 * t.horizon(z.data())));
+      }
+    }
+  }
+}
+
 TEST_CASE("transcription: finite-difference mode matches the exact Jacobian to FD accuracy",
           "[transcription][derivatives]") {
   const OptimalControlProblem p = smaller(trellis::loadProblem(problemPath("acrobot_swingup")), 4);

@@ -9,41 +9,28 @@
 
 namespace trellis::test {
 
-double fdRelativeStep() { return std::cbrt(std::numeric_limits<double>::epsilon()); }
+// The step rules and stencils are the core's (trellis/core/numdiff.hpp); these wrappers keep
+// the tests' vocabulary.
+namespace {
+DifferenceScheme schemeOf(Stencil stencil) {
+  return stencil == Stencil::kSecondOrder ? DifferenceScheme::kCentral
+                                          : DifferenceScheme::kCentralFourthOrder;
+}
+}  // namespace
+
+double fdRelativeStep() { return defaultRelativeStep(DifferenceScheme::kCentral); }
 
 double fdStep(double x) { return fdRelativeStep() * std::max(1.0, std::abs(x)); }
 
-double fdBaseStep(Stencil stencil) {
-  const double eps = std::numeric_limits<double>::epsilon();
-  return stencil == Stencil::kSecondOrder ? std::cbrt(eps) : std::pow(eps, 0.2);
-}
+double fdBaseStep(Stencil stencil) { return defaultRelativeStep(schemeOf(stencil)); }
 
 Eigen::MatrixXd centralDifferenceJacobian(const VectorFunction& f, const Eigen::VectorXd& x,
                                           double stepScale, Stencil stencil) {
-  const Eigen::VectorXd f0 = f(x);
-  Eigen::MatrixXd J(f0.size(), x.size());
-  Eigen::VectorXd xp = x;
-  const auto eval = [&](Eigen::Index j, double offset) {
-    xp[j] = x[j] + offset;
-    Eigen::VectorXd fx = f(xp);
-    xp[j] = x[j];
-    if (fx.size() != f0.size()) {
-      throw std::logic_error("centralDifferenceJacobian: function changed its output size");
-    }
-    return fx;
-  };
-  for (Eigen::Index j = 0; j < x.size(); ++j) {
-    const double h = stepScale * fdBaseStep(stencil) * std::max(1.0, std::abs(x[j]));
-    if (stencil == Stencil::kSecondOrder) {
-      // Divide by the step actually taken, (x + h) − (x − h), which differs from 2h by rounding.
-      const double span = (x[j] + h) - (x[j] - h);
-      J.col(j) = (eval(j, h) - eval(j, -h)) / span;
-    } else {
-      J.col(j) =
-          (8.0 * (eval(j, h) - eval(j, -h)) - (eval(j, 2.0 * h) - eval(j, -2.0 * h))) / (12.0 * h);
-    }
-  }
-  return J;
+  NumDiffOptions options;
+  options.scheme = schemeOf(stencil);
+  options.relativeStep = stepScale * fdBaseStep(stencil);
+  return differenceJacobian([&](const Eigen::VectorXd& xx, Eigen::VectorXd& out) { out = f(xx); }, x,
+                            options);
 }
 
 Eigen::VectorXd centralDifferenceDirectional(const VectorFunction& f, const Eigen::VectorXd& x,

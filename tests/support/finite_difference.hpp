@@ -1,5 +1,6 @@
 // tests/support/finite_difference.hpp — central differences, the reference leg of every derivative
-// test (STYLE.md "Derivatives on three legs", leg 1).
+// test (STYLE.md "Derivatives on three legs", leg 1), on the core's finite differences
+// (trellis/core/numdiff.hpp: the same schemes and step rule the optimizer and benchmarks use).
 //
 // Step and error model. For a component x_i the step is
 //     h_i = eps^(1/3) · max(1, |x_i|),    eps = 2.2e-16  ⇒  eps^(1/3) ≈ 6.06e-6.
@@ -16,6 +17,7 @@
 #pragma once
 
 #include <trellis/core.hpp>
+#include <trellis/core/numdiff.hpp>
 
 #include <Eigen/Core>
 

@@ -1,6 +1,7 @@
 // trellis/control.hpp — everything in trellis::control.
 #pragma once
 
+#include "trellis/control/consistency.hpp"
 #include "trellis/control/controllability.hpp"
 #include "trellis/control/gain_schedule.hpp"
 #include "trellis/control/lqr.hpp"

@@ -22,6 +22,7 @@
 #include "support/test_models.hpp"
 
 #include <trellis/core.hpp>
+#include <trellis/core/numdiff.hpp>
 
 #include <array>
 #include <vector>
@@ -138,4 +139,26 @@ TEST_CASE("No allocation after warm-up: tangent basis", "[no_malloc][tangent]") 
     }
   }
   for (int d : dims) CHECK(d == 2 * model.nq() - 2 * 3 - 1);
+}
+
+TEST_CASE("no allocation: finite differences of the dynamics (numdiff)", "[no_malloc][numdiff]") {
+  // differenceDynamics is the optimizer's finite-difference mode at every collocation point: its
+  // workspace and J are sized once, then every scheme runs with the guard up.
+  const TestSystem sys = paperPendulum();
+  const Model& model = sys.model;
+  Data data(model);
+  NumDiffWorkspace ws(model);
+  Eigen::MatrixXd J(model.nq(), 2 * model.nq() + model.nu());
+  const std::vector<State> states = makeStates(model, 515);
+  bool ok = true;
+  for (const DifferenceScheme scheme :
+       {DifferenceScheme::kForward, DifferenceScheme::kCentral, DifferenceScheme::kCentralFourthOrder}) {
+    NumDiffOptions o;
+    o.scheme = scheme;
+    ok = differenceDynamics(model, data, states[0].q, states[0].dq, states[0].u, o, ws, J).ok() && ok;
+    MallocGuard guard;
+    for (const State& s : states) ok = differenceDynamics(model, data, s.q, s.dq, s.u, o, ws, J).ok() && ok;
+  }
+  CHECK(ok);
+  CHECK(J.allFinite());
 }

@@ -11,6 +11,9 @@
 //    dynamics, or setStateDerivatives supplies them). On a trajectory that satisfies the dynamics
 //    the error is O(h⁴) in the knot spacing h, and the spline is C¹;
 //  - the input is piecewise linear between knots (C⁰), exact at the knots.
+// This rule is the meaning of a trajectory file for the whole toolkit: `trellis optimize` writes
+// what it optimized under it (its Hermite–Simpson midpoint input is the knot average), `gains`
+// and `simulate` read by it, and checkConsistency (consistency.hpp) checks any file against it.
 // Queries outside [t_0, t_{N-1}] throw std::out_of_range.
 #pragma once
 

@@ -3,7 +3,8 @@
 //   minimize    ∫₀ᵀ uᵀ R u + (x − x_goal)ᵀ Q (x − x_goal) dt + (x(T) − x_goal)ᵀ Q_f (x(T) − x_goal)
 //               + w_T · T
 //   subject to  ẋ = f(x, u) = [q̇; q̈(q, q̇, u)]            (the core's constrained forward dynamics)
-//               h(q) = 0, A(q) q̇ = 0                      (closed chains: at every knot)
+//               h(q) = 0, A(q) q̇ = 0                      (closed chains: at every knot;
+//                                                          knife edges: A(q) q̇ = 0 only)
 //               x_lower ≤ x(t) ≤ x_upper, u_lower ≤ u(t) ≤ u_upper
 //               x(0)_i = x_initial_i for the fixed entries, x(T)_i = x_final_i likewise
 //               T fixed, or T_min ≤ T ≤ T_max
@@ -44,7 +45,12 @@ struct OptimalControlProblem {
   std::shared_ptr<const Model> model;
 
   CollocationMethod method = CollocationMethod::kHermiteSimpson;
-  int knots = 41;  ///< N ≥ 2 knots t_k = k T / (N − 1)
+  int knots = 41;  ///< N ≥ 2 knots t_k = T·τ_k
+  /// The mesh τ_0 = 0 < τ_1 < … < τ_{N−1} = 1 (N entries, knot k at t_k = T·τ_k); empty for the
+  /// uniform mesh τ_k = k/(N − 1). Mesh refinement (optimizer.hpp) produces non-uniform ones.
+  Eigen::VectorXd mesh;
+  /// τ_k: `mesh` or the uniform mesh.
+  Eigen::VectorXd meshFractions() const;
 
   /// Horizon T: fixed when minHorizon == maxHorizon (== horizon), otherwise free in
   /// [minHorizon, maxHorizon] with `horizon` as its initial guess.
@@ -87,8 +93,12 @@ struct OptimalControlProblem {
 
   /// Throws ProblemError naming the first bad field (size, non-finite value, lower > upper,
   /// a fixed boundary value outside the state bounds, a non-symmetric or indefinite weight, a
-  /// nonholonomic constraint, which the transcription does not support).
+  /// bad mesh). With constraints it also checks the fixed boundary states before any solve:
+  /// when every configuration entry of a boundary state is fixed, each holonomic row must have
+  /// |h_r(q)| ≤ kBoundaryTolerance, and when every entry is fixed, each row |A_r(q) q̇| ≤ it too;
+  /// the message names the boundary, the constraint, its row and the residual.
   void validate() const;
+  static constexpr double kBoundaryTolerance = 1e-8;
 };
 
 /// Parses a problem file (JSON text). `source` is the file name used in messages and `baseDir`

@@ -7,32 +7,41 @@
 // (computeLinearization) and ∂J/∂z is analytic. The NLP is independent of the solver; the Ipopt
 // adapter (optimizer.hpp) and the tests' finite-difference checker both call it.
 //
-// Knots t_k = k h, h = T/(N − 1), k = 0 … N − 1. Points p are where f is evaluated:
+// Knots t_k = T τ_k on the mesh τ (problem.mesh; uniform τ_k = k/(N − 1) by default), interval
+// k has length h_k = T (τ_{k+1} − τ_k). Points p are where f is evaluated:
 //  - Hermite–Simpson (separated form, Betts' "HS separated"): the knots and the interval
 //    midpoints t_{k+½}, in time order (knot k is point 2k, midpoint k is point 2k + 1; P = 2N − 1).
 //    The midpoint state x_m and the midpoint input u_m are variables; per interval [a, b]:
 //      Simpson defect   x_b − x_a − h/6 (f_a + 4 f_m + f_b)       = 0   (2n rows)
 //      Hermite defect   x_m − (x_a + x_b)/2 − h/8 (f_a − f_b)     = 0   (2n rows)
-//    The state is the cubic Hermite spline of the knots, the input the quadratic through
-//    u_a, u_m, u_b; local error O(h⁵), global O(h⁴). The separated form costs more variables than
-//    the compressed one but keeps each row's Jacobian a few dense blocks (best for a sparse LDLᵀ).
+//      linear input     u_m − (u_a + u_b)/2                       = 0   (m rows)
+//    The state is the cubic Hermite spline of the knots and the input is LINEAR between knots —
+//    the rule by which every trellis tool reads a trajectory CSV (trajectory.hpp), so the knots
+//    written are exactly what was optimized (a free u_m, the textbook choice, would make the
+//    optimized input a quadratic the CSV cannot carry). Local error O(h⁵), global O(h⁴) for
+//    the dynamics under that input. The separated form keeps each row's Jacobian a few dense
+//    blocks (best for a sparse LDLᵀ).
 //  - trapezoidal: the knots only (P = N); per interval x_b − x_a − h/2 (f_a + f_b) = 0; the input
 //    is piecewise linear; global error O(h²).
 // The running cost uses the same quadrature (Simpson weights h/6, 4h/6, h/6, or h/2, h/2).
 //
-// Closed chains (nc holonomic rows h(q), Jacobian A_c = ∂h/∂q): every knot adds the rows
-//   h(q_k) = 0 (nc),  A_c(q_k) q̇_k = 0 (nc),
+// Closed chains (nc rows, Jacobian A_c; the nH holonomic ones have h(q), A_c = ∂h/∂q; a knife
+// edge is a nonholonomic row A_c(q) q̇ = 0 without h): every knot adds the rows
+//   h(q_k) = 0 (nH holonomic rows),  A_c(q_k) q̇_k = 0 (nc),
 // with ∂(A_c q̇)/∂q from the core (data.constraintVelocityJacobian). The discrete dynamics keep
 // these only to the collocation error, so imposing them at every knot over-determines the NLP; as
-// Posa, Kuindersma & Tedrake (2016) do, each interval gets slack γ_k, μ_k (nc each) that enter the
-// end knot's defect along the constraint normals:  Simpson (or trapezoidal) defect −
-// [A_c(q_b)ᵀ γ_k; A_c(q_b)ᵀ μ_k]. At a solution γ, μ are of the order of the collocation error.
-// ∂(A_cᵀ γ)/∂q = Σ_r γ_r ∇²h_r; the Hessians ∇²h_r are exact, from the core's constraint drift
-// Ȧ q̇ = q̇ᵀ ∇²h q̇ evaluated at unit and paired unit velocities (polarization).
+// Posa, Kuindersma & Tedrake (2016) do, each interval gets slack γ_k (nH), μ_k (nc) that enter
+// the end knot's defect along the constraint normals:  Simpson (or trapezoidal) defect −
+// [A_H(q_b)ᵀ γ_k; A_c(q_b)ᵀ μ_k]. At a solution γ, μ are of the order of the collocation error
+// (the optimizer refuses "solved" when their contribution exceeds its consistency tolerance).
+// ∂(A_rᵀ γ_r)/∂q = γ_r S_r with S_r(i, j) = ∂A_{r,i}/∂q_j: for holonomic rows S_r = ∇²h_r,
+// exact from the core's drift Ȧ q̇ = q̇ᵀ ∇²h q̇ at unit and paired unit velocities
+// (polarization); with a knife edge, row i of every S_r is the core's ∂(A q̇)/∂q at q̇ = e_i.
 //
 // Variable layout: z = [x_0, u_0, x_1, u_1, …, x_{P−1}, u_{P−1}, γ_0, μ_0, …, γ_{N−2}, μ_{N−2}, T]
-// (slack only with constraints, T only when free). Constraint layout: the defects interval by
-// interval, then the knot constraints knot by knot.
+// (slack only with constraints, T only when free). Constraint layout: per interval the Simpson
+// (or trapezoidal) defect, then for Hermite–Simpson the Hermite defect and the m input rows;
+// then the knot constraints knot by knot (h rows, then A q̇ rows).
 //
 // Evaluations are cached: f (and A, B for derivatives) are computed once per distinct z, whatever
 // the order of the calls: z is compared with the cached copy (a memcmp), which covers Ipopt's
@@ -112,6 +121,9 @@ class Transcription {
   Eigen::MatrixXd midpointInputs(const double* z) const;
   /// max |γ|, |μ| over the intervals (0 without constraints).
   double maxSlack(const double* z) const;
+  /// What the slack adds to each interval's defect, [A_H(q_b)ᵀ γ_k; A_c(q_b)ᵀ μ_k] (2n×(N−1),
+  /// zero without constraints): the amount by which the knots depart from the discrete dynamics.
+  Eigen::MatrixXd slackContributions(const double* z) const;
 
  private:
   struct Impl;

@@ -1,0 +1,79 @@
+// trellis/core/numdiff.hpp — finite differences of the dynamics: the one numerical baseline the
+// exact linearization is checked and measured against (the optimizer's finite-difference mode,
+// the tests, the benchmarks and the hand's main job all call this).
+//
+// J = ∂q̈/∂z, z = [q; q̇; u] (n × (2n + m)) is the nontrivial part of the linearization:
+// A = [[0, I], [J_q, J_q̇]], B = [[0], [J_u]].
+//
+// Step rule: column j uses h_j = relativeStep · max(1, |z_j|) and divides by the step actually
+// taken ((z_j + h) − (z_j − h), which differs from 2h by rounding). Default relative steps balance
+// truncation against rounding (eps = 2.2e-16):
+//  - forward  (f(z + h) − f(z)) / h:               truncation h/2·|f''|, rounding eps|f|/h;
+//    h = eps^(1/2) ≈ 1.5e-8, error ~eps^(1/2) ≈ 1e-8 relative; 2n + m + 1 evaluations;
+//  - central  (f(z + h) − f(z − h)) / 2h:          truncation h²/6·|f'''|, rounding eps|f|/h;
+//    h = eps^(1/3) ≈ 6.1e-6, error ~eps^(2/3) ≈ 4e-11 relative; 2(2n + m) evaluations;
+//  - fourth-order central (−f(z+2h) + 8f(z+h) − 8f(z−h) + f(z−2h)) / 12h: truncation h⁴/30·|f⁽⁵⁾|;
+//    h = eps^(1/5) ≈ 7.4e-4, error ~eps^(4/5) ≈ 3e-13 relative; 4(2n + m) evaluations. For an
+//    ill-conditioned f (rounding κ·eps) the error is ~(κ eps)^(4/5) instead of ~(κ eps)^(2/3).
+#pragma once
+
+#include "trellis/core/data.hpp"
+
+#include <Eigen/Core>
+
+#include <functional>
+#include <string>
+
+namespace trellis {
+
+class Model;
+
+enum class DifferenceScheme { kForward, kCentral, kCentralFourthOrder };
+
+struct NumDiffOptions {
+  DifferenceScheme scheme = DifferenceScheme::kCentral;
+  double relativeStep = 0.0;  ///< 0: the scheme's default (defaultRelativeStep)
+  double step(double z) const;  ///< h = relativeStep · max(1, |z|)
+};
+
+/// eps^(1/2), eps^(1/3), eps^(1/5) (file comment).
+double defaultRelativeStep(DifferenceScheme scheme);
+
+/// Buffers for differenceDynamics (sized once; no allocation in the call).
+struct NumDiffWorkspace {
+  explicit NumDiffWorkspace(const Model& model);
+  Eigen::VectorXd q, dq, u;          ///< the perturbed point
+  Eigen::VectorXd qddBase, qddPlus, qddMinus;  ///< q̈ at z (forward), at z ± h e_j
+};
+
+/// J = ∂q̈/∂[q; q̇; u] (n × (2n + m); resized only if its size is wrong) by `options` from
+/// computeDynamics(model, data, ·). Returns ok, or the status of the first evaluation that
+/// failed (its message prefixed with the perturbed column). `data` holds the last evaluation.
+DynamicsStatus differenceDynamics(const Model& model, Data& data, const Eigen::VectorXd& q,
+                                  const Eigen::VectorXd& dq, const Eigen::VectorXd& u,
+                                  const NumDiffOptions& options, NumDiffWorkspace& workspace,
+                                  Eigen::MatrixXd& J);
+
+/// The Jacobian (p × k) of any f: R^k → R^p with the same schemes and step rule (allocates; for
+/// tests and tools). f writes its value into its second argument.
+using DifferenceFunction = std::function<void(const Eigen::VectorXd&, Eigen::VectorXd&)>;
+Eigen::MatrixXd differenceJacobian(const DifferenceFunction& f, const Eigen::VectorXd& x,
+                                   const NumDiffOptions& options = {});
+
+/// Exact A, B (computeLinearization) against differenceDynamics at one state. The error of
+/// column j is max_i |J_ij − D_ij| / max(1, max_i |D_ij|) (relative to the column's scale, so a
+/// light body's columns are not hidden by a heavy one's); the worst entry is named.
+struct LinearizationCheck {
+  bool evaluated = false;  ///< both paths evaluated (else `message` says which failed)
+  double maxError = 0.0;   ///< worst column-relative error
+  int row = -1, column = -1;     ///< the worst entry in J (row i: q̈_i; column j of [q; q̇; u])
+  std::string rowName, columnName;  ///< e.g. "ddtheta" and "dx" / an input name
+  double exact = 0.0, difference = 0.0;  ///< the two values at the worst entry
+  Eigen::MatrixXd exactJ, differenceJ;   ///< both n × (2n + m)
+  std::string message;     ///< one line: the worst entry, both values, the error
+};
+LinearizationCheck checkLinearization(const Model& model, const Eigen::VectorXd& q,
+                                      const Eigen::VectorXd& dq, const Eigen::VectorXd& u,
+                                      const NumDiffOptions& options = {});
+
+}  // namespace trellis
