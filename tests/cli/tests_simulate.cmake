@@ -94,7 +94,7 @@ trellis_cli_test(simulate.error.gains_not_found
 trellis_cli_test(simulate.error.gains_wrong_size
   ARGS simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}"
        --gains "${_data}/pendulum_gains_1x2.csv" --out /dev/null
-  CHECKS ${_e1} "-DSTDERR_REGEX=pendulum_gains_1x2.csv: K is 1 x 2, but the scene .*cart_pole.json needs m x 2n = 1 x 4")
+  CHECKS ${_e1} "-DSTDERR_REGEX=pendulum_gains_1x2.csv \\(for the scene .*cart_pole.json\\): K is 1 x 2, but the scene needs m x 2n = 1 x 4")
 trellis_cli_test(simulate.error.gains_too_short
   ARGS simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}"
        --gains "${_data}/cart_pole_short_gains.csv" --out /dev/null
