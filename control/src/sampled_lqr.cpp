@@ -8,10 +8,13 @@
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
 
+#include <cvodes/cvodes_ls.h>
 #include <sunlinsol/sunlinsol_spgmr.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 

@@ -47,6 +47,34 @@ trellis_cli_files_test(simulate.no_project
         --perturb theta1=0.05 --no-project --out @WORK@/closed.csv
   CHECKS2 "-DSTDOUT_REGEX=\\(not projected\\)" "-DNUMBERS=max at later output times :GREATER:0.01")
 
+# ---- the examples' swing-ups tracked by a 100 Hz controller ---------------------------------------
+# A new user's route from the CLI alone: optimize the example problem, compute zero-order-hold
+# gains for 100 Hz, simulate the sampled controller with the problem's input bounds from a seeded
+# perturbed start (--perturb-random 0.01). The tracking error at the end stays below the bound
+# (measured values in the comments of each test).
+if(TARGET trellis_optimization)
+  set(_problems "${PROJECT_SOURCE_DIR}/examples/problems")
+  foreach(_case IN ITEMS "cart_pole_swingup|cart_pole|20|3|@CART_FINAL@"
+                         "acrobot_swingup|acrobot|20|5|@ACRO_FINAL@"
+                         "paper_pendulum_transfer|paper_pendulum|40|7|@PAPER_FINAL@")
+    string(REPLACE "|" ";" _case "${_case}")
+    list(GET _case 0 _problem)
+    list(GET _case 1 _scene)
+    list(GET _case 2 _bound)
+    list(GET _case 3 _seed)
+    list(GET _case 4 _final)
+    trellis_cli_files_test(simulate.swingup_100hz.${_problem}
+      ARGS1 optimize "${_problems}/${_problem}.json" --quiet --out @WORK@/reference.csv
+      ARGS2 gains "${_scenes}/${_scene}.json" --trajectory @WORK@/reference.csv --Q 10 --R 0.1 --rate 100
+            --out @WORK@/gains.csv
+      CHECKS2 "-DSTDOUT_REGEX=zero-order-hold gains for a controller sampling at 100 Hz"
+      ARGS3 simulate "${_scenes}/${_scene}.json" --trajectory @WORK@/reference.csv --gains @WORK@/gains.csv
+            --rate 100 --umin -${_bound} --umax ${_bound} --perturb-random 0.01 --seed ${_seed}
+            --method bdf --out @WORK@/closed.csv
+      CHECKS3 -DSTDERR_EMPTY=ON "-DSTDOUT_REGEX=feedback sampled at 100 Hz" "-DNUMBERS=final :LESS:${_final}")
+  endforeach()
+endif()
+
 # ---- help -------------------------------------------------------------------------------------
 trellis_cli_test(simulate.help ARGS simulate --help
   CHECKS "-DSTDOUT_REGEX=usage: trellis simulate SCENE.json --trajectory.*--gains.*--perturb NAME=VALUE.*--perturb-random SIGMA.*--rate HZ.*--umin U.*--no-project"

@@ -12,8 +12,8 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
-#include <unsupported/Eigen/MatrixFunctions>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <sstream>
@@ -181,8 +181,8 @@ TEST_CASE("sampled LQR: the recursion with cross term minimizes the stacked cost
   const MatrixXd Qf = L * L.transpose();
   const auto rec = trellis::solveSampledRiccatiRecursion(ivs, Qf);
   REQUIRE(rec.ok);
-  REQUIRE(rec.S.size() == N + 1);
-  REQUIRE(rec.K.size() == N);
+  REQUIRE(rec.S.size() == std::size_t(N + 1));
+  REQUIRE(rec.K.size() == std::size_t(N));
 
   // x_k = Ex[k] x0 + Eu[k] u (u stacked), J = Σ [x_k; u_k]ᵀ W_k [x_k; u_k] + x_Nᵀ Qf x_N.
   std::vector<MatrixXd> Ex(N + 1), Eu(N + 1);
