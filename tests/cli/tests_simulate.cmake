@@ -50,13 +50,15 @@ trellis_cli_files_test(simulate.no_project
 # ---- the examples' swing-ups tracked by a 100 Hz controller ---------------------------------------
 # A new user's route from the CLI alone: optimize the example problem, compute zero-order-hold
 # gains for 100 Hz, simulate the sampled controller with the problem's input bounds from a seeded
-# perturbed start (--perturb-random 0.01). The tracking error at the end stays below the bound
-# (measured values in the comments of each test).
+# perturbed start (--perturb-random 0.01). The final tracking error stays below the bound (measured:
+# cart-pole 0.0091 from an initial 0.015, acrobot 0.0086 from 0.019, paper pendulum 0.0039 from
+# 0.027 — limited by the optimized reference itself, whose interpolation between collocation knots
+# does not satisfy the dynamics exactly; bounds about 3x the measured values).
 if(TARGET trellis_optimization)
   set(_problems "${PROJECT_SOURCE_DIR}/examples/problems")
-  foreach(_case IN ITEMS "cart_pole_swingup|cart_pole|20|3|@CART_FINAL@"
-                         "acrobot_swingup|acrobot|20|5|@ACRO_FINAL@"
-                         "paper_pendulum_transfer|paper_pendulum|40|7|@PAPER_FINAL@")
+  foreach(_case IN ITEMS "cart_pole_swingup|cart_pole|20|3|0.03"
+                         "acrobot_swingup|acrobot|20|5|0.03"
+                         "paper_pendulum_transfer|paper_pendulum|40|7|0.015")
     string(REPLACE "|" ";" _case "${_case}")
     list(GET _case 0 _problem)
     list(GET _case 1 _scene)

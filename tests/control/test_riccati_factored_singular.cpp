@@ -48,7 +48,10 @@ struct SingularCase {
 TEST_CASE("riccati: factored form with S tending to a singular matrix switches to the plain form",
           "[riccati][factored]") {
   const SingularCase c;
-  const double T = 60.0;  // e^{-2·60}: the null direction's entry of S decays far below rtol·|S|
+  // Measured (rtol 1e-8): plain BDF 313 steps; factored with the switch 291; without 22468.
+  // With the null direction along an axis (no rotation) the factor has no trouble (295 steps):
+  // the stiffness comes from U⁻¹ amplifying the cancellation error in the rotated Ṡ.
+  const double T = 200.0;  // e^{-2·200}: the null direction's part of S decays far below rtol·|S|
   trellis::RiccatiOptions plain;
   plain.rtol = 1e-8;
   plain.atol = 1e-10;
@@ -63,7 +66,7 @@ TEST_CASE("riccati: factored form with S tending to a singular matrix switches t
   REQUIRE(sol.ok());
   CHECK(std::isfinite(sol.switchedToPlainAt));
   CHECK(sol.steps < 3 * ref.steps);
-  for (double t : {0.0, 10.0, 30.0, 55.0, 59.9}) {
+  for (double t : {0.0, 50.0, 150.0, 195.0, 199.9}) {
     const MatrixXd d = ref.S(t) - sol.S(t);
     CHECK(d.cwiseAbs().maxCoeff() < 1e-5 * ref.S(t).cwiseAbs().maxCoeff());
   }
@@ -73,8 +76,8 @@ TEST_CASE("riccati: factored form with S tending to a singular matrix switches t
 
   // Without the switch the factored form needs far more steps (or fails with too much work).
   factored.factoredSwitchCondition = 0.0;
-  factored.maxSteps = 20 * ref.steps;
+  factored.maxSteps = 30 * ref.steps;
   const auto noSwitch = trellis::solveRiccati(0.0, T, 3, 1, c.lin(), c.w, factored);
   INFO("without switch: " << noSwitch.steps << " steps, " << noSwitch.message);
-  CHECK((!noSwitch.ok() || noSwitch.steps > 3 * ref.steps));
+  CHECK((!noSwitch.ok() || noSwitch.steps > 10 * ref.steps));
 }
