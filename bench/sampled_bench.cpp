@@ -6,7 +6,8 @@
 // gains for that rate.
 //
 // Weights as the main job: Q = diag(100·I_n, I_n), R = I, Qf = Q; the tangent basis by discrete
-// transport on the knots (kProjected, 2 substeps); continuous Riccati rtol 1e-6, atol 1e-8.
+// transport on the knots (kProjected, 2 substeps); continuous Riccati and interval discretization
+// rtol 1e-6, atol 1e-8.
 // Closed loop: BDF, rtol 1e-7, atol 1e-9, tensions clipped at 0, perturbation of norm --perturbation
 // along a seeded random tangent direction at t0.
 //
@@ -68,6 +69,7 @@ Args parse(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) try {
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);  // line by line, also into a pipe
   const Args args = parse(argc, argv);
   const trellis::Scene scene = trellis::loadScene(std::string(TRELLIS_EXAMPLE_SCENES_DIR) + "/hand.json");
   const trellis::Model& model = scene.model;
@@ -91,6 +93,8 @@ int main(int argc, char** argv) try {
   base.transport.substeps = 2;
   base.riccati.rtol = 1e-6;
   base.riccati.atol = 1e-8;
+  base.sampled.rtol = 1e-6;  // the same tolerances for the interval discretization
+  base.sampled.atol = 1e-8;
 
   auto timed = [&](const trellis::TvlqrOptions& o, double& best) {
     trellis::TvlqrSolution sol;
