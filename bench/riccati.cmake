@@ -5,3 +5,11 @@ if(TARGET trellis_control)
   target_link_libraries(trellis_bench_riccati PRIVATE trellis::control trellis_bench_support
                                                       benchmark::benchmark)
 endif()
+
+# Sampled-data (ZOH) TV-LQR along the hand's reference (needs the examples' hand reference).
+if(TARGET trellis_control AND TARGET trellis_hand_reference)
+  add_executable(trellis_bench_sampled ${CMAKE_CURRENT_LIST_DIR}/sampled_bench.cpp)
+  target_link_libraries(trellis_bench_sampled PRIVATE trellis::control trellis_hand_reference)
+  target_compile_definitions(trellis_bench_sampled PRIVATE
+    TRELLIS_EXAMPLE_SCENES_DIR="${PROJECT_SOURCE_DIR}/examples/scenes")
+endif()

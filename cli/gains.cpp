@@ -1,5 +1,6 @@
 // cli/gains.cpp — `trellis gains SCENE.json --trajectory TRAJ.csv --out GAINS.csv`: the TV-LQR
-// feedback gain K(t) along a reference trajectory, as a CSV gain schedule.
+// feedback gain K(t) along a reference trajectory, as a CSV gain schedule (a thin layer over
+// trellis::solveTvlqr: continuous, or sampled with --rate).
 #include "cli_options.hpp"
 #include "command.hpp"
 #include "weights.hpp"
@@ -9,6 +10,7 @@
 #include "trellis/control/manifold_lqr.hpp"
 #include "trellis/control/riccati.hpp"
 #include "trellis/control/trajectory.hpp"
+#include "trellis/control/tvlqr.hpp"
 #include "trellis/core/data.hpp"
 #include "trellis/core/scene.hpp"
 
@@ -45,13 +47,25 @@ Weights W (for --Q, --Qf: 2n x 2n, positive semidefinite; for --R: m x m, positi
                       (a file named like a number: ./NAME)
 Q and Qf are in the full state [q; q'] (order of the trajectory's columns).
 
-Output (--out): a CSV with the header t,K_i_j,... (K row-major, i < m, j < 2n), one row per
-output time: the trajectory's knots, or with --dt a uniform grid from t0 (T included).
-`trellis simulate --gains` reads it. Then a summary on standard output: the rows written, the
+Sampled controller (--rate HZ): for a controller that samples x at t_k = t0 + k/HZ and holds u
+until the next sample, the gains are computed for that controller, not sampled from K(t): over
+each sample interval the linearization is discretized exactly (transition matrix and input
+integral from the variational equation on the exact A(t), B(t)), the cost J above is integrated
+over the interval with the input held (which gives per-sample weights with a cross term), and the
+discrete Riccati recursion gives K_k at the sample times. The file's metadata line says
+"sample_rate_hz=HZ": `trellis simulate` applies such gains only with the same --rate.
+
+Output (--out): a CSV whose first line is metadata ("# trellis gain schedule: m=.. nx=.. " then
+"continuous" or "sample_rate_hz=HZ"), then the header t,K_<input>_<state>,... (K row-major: the
+inputs in order, each with the states [q; dq] in order, e.g. K_push_x, K_push_dtheta), one row per
+output time: the trajectory's knots, or with --dt a uniform grid from t0 (T included), or with
+--rate the sample times (T included, repeating the last sample's gain).
+`trellis simulate --gains` reads it and checks the names against the scene. Then a summary on standard output: the rows written, the
 Riccati solve (steps, right-hand-side evaluations, time taken), the smallest and largest
 eigenvalue of S over the solver's steps (of Sr on the tangent space for a constrained scene),
 the controllability of the linearization at the first knot (rank of the Krylov matrix) and the
-reachability Gramian over the whole trajectory (smallest and largest eigenvalue).
+reachability Gramian over the whole trajectory (smallest and largest eigenvalue). With --json the
+summary is one JSON object instead.
 
 options:
   --trajectory FILE   the reference trajectory (CSV; required)
@@ -59,10 +73,14 @@ options:
   --Q W               state weight (default 1)
   --R W               input weight (default 1)
   --Qf W              terminal weight (default: the value of --Q)
-  --dt DT             output on a uniform grid of step DT (default: at the trajectory's knots)
+  --dt DT             continuous gains written on a uniform grid of step DT (default: at the
+                      trajectory's knots). This only SAMPLES the continuous K(t): it does not
+                      make gains for a controller running at 1/DT; use --rate for that
+  --rate HZ           zero-order-hold gains for a controller sampling at HZ (see above)
+  --json              print the summary as one JSON object
   --rtol X, --atol X  CVODES tolerances on S (defaults 1e-8, 1e-10)
   --method M          bdf (default), adams (non-stiff problems only) or factored (Cholesky
-                      factor of S; needs Qf positive definite)
+                      factor of S; needs Qf positive definite); continuous gains only
   --max-steps N       limit on the integrator's internal steps (default 100000)
   -h, --help          show this help
 
@@ -71,22 +89,6 @@ scene, bad weight file) or the solve fails (the message gives the time and the c
 usage error (unknown option, missing file argument, malformed number or weight list). Errors are
 one line on standard error, nothing on standard output, and no output file.
 )";
-
-std::vector<double> outputTimes(const Trajectory& trajectory, std::optional<double> dt) {
-  const Eigen::VectorXd& knots = trajectory.times();
-  if (!dt) return {knots.data(), knots.data() + knots.size()};
-  const double t0 = trajectory.startTime(), T = trajectory.endTime();
-  std::vector<double> times;
-  // k·dt from t0 (no accumulated round-off); T itself closes the grid unless a grid point is
-  // already within a tiny fraction of a step of it.
-  for (long k = 0;; ++k) {
-    const double t = t0 + static_cast<double>(k) * *dt;
-    if (t >= T - 1e-9 * *dt) break;
-    times.push_back(t);
-  }
-  times.push_back(T);
-  return times;
-}
 
 /// W ≻ 0 is controllability; a ratio λmin/λmax below 1e-10 (GramianReport::controllable) is
 /// reported as ill-conditioned when λmin is still positive (typical of an unstable reference,
@@ -100,44 +102,45 @@ std::string gramianVerdict(const GramianReport& gramian) {
   return " (NOT controllable)";
 }
 
-RiccatiMethod parseMethod(const ParsedOptions& options) {
-  const std::string method = options.value("--method").value_or("bdf");
-  if (method == "bdf") return RiccatiMethod::kBDF;
-  if (method == "adams") return RiccatiMethod::kAdams;
-  if (method == "factored") return RiccatiMethod::kFactored;
-  throw UsageError("gains: --method: '" + method + "' is not one of bdf, adams, factored");
-}
-
-const char* methodName(RiccatiMethod method) {
-  switch (method) {
-    case RiccatiMethod::kBDF: return "bdf";
-    case RiccatiMethod::kAdams: return "adams";
-    case RiccatiMethod::kFactored: return "factored";
-  }
-  return "?";
-}
-
 int runGains(std::span<const std::string> args, std::ostream& out) {
   const ParsedOptions options(
       "gains", args,
-      {.valued = {"--trajectory", "--out", "--Q", "--R", "--Qf", "--dt", "--rtol", "--atol", "--method",
+      {.valued = {"--trajectory", "--out", "--Q", "--R", "--Qf", "--dt", "--rate", "--rtol", "--atol", "--method",
                   "--max-steps"},
-       .flags = {},
+       .flags = {"--json"},
        .repeatable = {}});
   const std::string scenePath = options.singlePositional("scene file");
   const std::string trajectoryPath = options.required("--trajectory", "(the reference trajectory CSV)");
   const std::string outPath = options.required("--out", "(the gains CSV to write)");
 
-  RiccatiOptions riccati;
-  riccati.method = parseMethod(options);
+  TvlqrOptions tvlqr;
+  RiccatiOptions& riccati = tvlqr.riccati;
+  if (auto v = options.value("--method")) {
+    try {
+      riccati.method = parseRiccatiMethod(*v);
+    } catch (const std::invalid_argument& e) {
+      throw UsageError(std::string("gains: --method: ") + e.what());
+    }
+  }
   if (auto v = options.value("--rtol")) riccati.rtol = options.positiveNumber("--rtol", *v);
   if (auto v = options.value("--atol")) riccati.atol = options.positiveNumber("--atol", *v);
   if (auto v = options.value("--max-steps")) {
     riccati.maxSteps = static_cast<long>(options.count("--max-steps", *v));
     if (riccati.maxSteps <= 0) throw UsageError("gains: --max-steps: must be > 0");
+    tvlqr.sampled.maxSteps = riccati.maxSteps;
   }
-  std::optional<double> dt;
-  if (auto v = options.value("--dt")) dt = options.positiveNumber("--dt", *v);
+  if (auto v = options.value("--dt")) tvlqr.outputStep = options.positiveNumber("--dt", *v);
+  if (auto v = options.value("--rate")) tvlqr.sampleRate = options.positiveNumber("--rate", *v);
+  if (options.has("--rate") && options.has("--dt")) {
+    throw UsageError("gains: --rate and --dt exclude each other (--rate writes the gains at the sample times)");
+  }
+  if (options.has("--rate") && options.has("--method")) {
+    throw UsageError("gains: --method applies to continuous gains only (--rate uses the exact discretization)");
+  }
+  if (options.has("--rate")) {
+    if (auto v = options.value("--rtol")) tvlqr.sampled.rtol = options.positiveNumber("--rtol", *v);
+    if (auto v = options.value("--atol")) tvlqr.sampled.atol = options.positiveNumber("--atol", *v);
+  }
 
   const Scene scene = loadScene(scenePath);
   const Model& model = scene.model;
@@ -157,55 +160,34 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
                    ? parseWeight("gains", "--Qf", *options.value("--Qf"), nx, states, WeightKind::kSemidefinite)
                    : weights.Q;
 
-  // The solve; on a constrained scene on the tangent space of the constraint manifold.
-  const bool constrained = model.nc() > 0;
-  const auto start = std::chrono::steady_clock::now();
-  std::optional<ManifoldRiccatiSolution> onManifold;
-  std::optional<RiccatiSolution> fullState;
-  if (constrained) {
-    onManifold = solveManifoldRiccati(model, trajectory, weights, riccati);
-    if (!onManifold->ok()) throw std::runtime_error("gains: the Riccati solve failed: " + onManifold->message());
-  } else {
-    fullState = solveRiccati(model, trajectory, weights, riccati);
-    if (!fullState->ok()) throw std::runtime_error("gains: the Riccati solve failed: " + fullState->message);
-  }
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  const RiccatiSolution& solution = constrained ? onManifold->reduced : *fullState;
-
-  const std::vector<double> times = outputTimes(trajectory, dt);
-  const GainSchedule schedule = GainSchedule::sample(
-      [&](double t) { return constrained ? onManifold->K(t) : fullState->K(t); },
-      Eigen::Map<const Eigen::VectorXd>(times.data(), static_cast<Eigen::Index>(times.size())));
-  if (!std::all_of(schedule.gains().begin(), schedule.gains().end(),
-                   [](const Eigen::MatrixXd& K) { return K.allFinite(); })) {
-    throw std::runtime_error("gains: the gain K(t) is not finite");
-  }
-  schedule.writeCsvFile(outPath);
+  // The solve (on the tangent space of the constraint manifold for a constrained scene).
+  const TvlqrSolution solution = solveTvlqr(model, trajectory, weights, tvlqr);
+  if (!solution.ok) throw std::runtime_error("gains: " + solution.message);
+  solution.gains.writeCsvFile(outPath);
 
   // The summary, after the file is written.
-  out << "wrote " << outPath << ": " << times.size() << " rows of K (" << m << " x " << nx
-      << ") on [" << formatNumber(trajectory.startTime()) << ", " << formatNumber(trajectory.endTime())
-      << "]\n";
-  if (constrained) {
-    out << "riccati: on the constraint manifold (tangent dimension " << onManifold->dimension() << " of "
-        << nx << "; basis transport " << onManifold->basis.steps() << " steps, max correction "
-        << formatNumber(onManifold->basis.maxCorrection(), 3) << ")\n";
-  } else {
-    out << "riccati: full state (no constraints)\n";
+  const bool json = options.flag("--json");
+  if (!json) {
+    out << "wrote " << outPath << ": " << solution.summary();
   }
-  out << "riccati: " << methodName(riccati.method) << ", " << solution.steps << " steps, "
-      << solution.rhsEvaluations << " right-hand-side evaluations, " << formatNumber(seconds, 3) << " s\n";
-  out << "S" << (constrained ? "r" : "") << ": min eigenvalue " << formatNumber(solution.minEigenvalue)
-      << ", max eigenvalue " << formatNumber(solution.maxEigenvalue) << "\n";
-
   const ControllabilityReport pointwise = computeControllabilityAt(
       model, data, trajectory.states().col(0).head(n), trajectory.states().col(0).tail(n),
       trajectory.inputs().col(0));
+  const GramianReport gramian =
+      computeControllabilityGramian(model, trajectory, trajectory.startTime(), trajectory.endTime());
+  if (json) {
+    std::string body = solution.json();
+    body.pop_back();  // the closing brace: append the file and the controllability checks
+    out << body << ", \"out\": " << jsonString(outPath) << ", \"controllable_at_t0\": "
+        << (pointwise.controllable() ? "true" : "false") << ", \"rank_at_t0\": " << pointwise.rank
+        << ", \"gramian_ok\": " << (gramian.ok ? "true" : "false")
+        << ", \"gramian_min_eigenvalue\": " << jsonNumber(gramian.ok ? gramian.minEigenvalue : NAN)
+        << ", \"gramian_max_eigenvalue\": " << jsonNumber(gramian.ok ? gramian.maxEigenvalue : NAN) << "}\n";
+    return 0;
+  }
   out << "controllability at t = " << formatNumber(trajectory.startTime()) << ": rank " << pointwise.rank
       << " of " << pointwise.dimension << (pointwise.controllable() ? " (controllable)" : " (NOT controllable)")
       << ", smallest singular value " << formatNumber(pointwise.smallestSingularValue, 3) << "\n";
-  const GramianReport gramian =
-      computeControllabilityGramian(model, trajectory, trajectory.startTime(), trajectory.endTime());
   if (gramian.ok) {
     out << "gramian on [" << formatNumber(trajectory.startTime()) << ", "
         << formatNumber(trajectory.endTime()) << "]: min eigenvalue " << formatNumber(gramian.minEigenvalue, 3)

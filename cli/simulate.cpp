@@ -6,11 +6,13 @@
 #include "trellis/control/gain_schedule.hpp"
 #include "trellis/control/simulation.hpp"
 #include "trellis/control/trajectory.hpp"
+#include "trellis/control/tvlqr.hpp"
 #include "trellis/core/scene.hpp"
 
 #include <cmath>
 #include <algorithm>
 #include <cstdint>
+#include <iostream>
 #include <limits>
 #include <numbers>
 #include <random>
@@ -28,8 +30,14 @@ Simulates the NONLINEAR scene (SCENE_FORMAT.md) under the time-varying feedback
 
 along the reference trajectory (x_ref: cubic Hermite through its knots, u_ref and K linear
 between knots and gain times), from x(t0) = x_ref(t0) + dx0, over the reference's time span,
-with SUNDIALS CVODES. GAINS.csv is a gain schedule as `trellis gains` writes it (header t,K_i_j;
-K is m x 2n and must cover the reference's time span). sat clips u to [--umin, --umax].
+with SUNDIALS CVODES. GAINS.csv is a gain schedule as `trellis gains` writes it (header
+t,K_<input>_<state>, checked against the scene's names; K is m x 2n and must cover the reference's
+time span). sat clips u to [--umin, --umax].
+
+Sampled gains: a file from `trellis gains --rate HZ` holds zero-order-hold gains for a controller
+sampling at HZ; it is applied only with the same --rate (u = the sample's value, held until the
+next sample). Running it continuously or at another rate is refused. Continuous gains with --rate
+are sampled (a warning on standard error says so: they were not designed for that rate).
 
 Perturbation dx0 (the sum of both; default none):
   --perturb NAME=VALUE[,NAME=VALUE...]   add VALUE to the state NAME, a column name of the
@@ -48,7 +56,7 @@ d<configs>, <inputs>; the inputs are the applied, saturated u), at the reference
 --output-step. Then a summary on standard output: the perturbation, the tracking error
 |x - x_ref| (2-norm over the full state) at the start, at the end and its maximum, the constraint
 drift max(|h|, |A q'|) (before projection), the saturation (control evaluations with a clipped
-input), and the integrator's work.
+input), and the integrator's work; with --json one JSON object instead.
 
 options:
   --trajectory FILE      the reference trajectory (CSV; required)
@@ -58,7 +66,8 @@ options:
   --perturb-random SIGMA see above (SIGMA >= 0)
   --seed N               seed of --perturb-random (default 1)
   --rate HZ              sampled feedback: u computed at t0 + k/HZ and held (default:
-                         continuous feedback)
+                         continuous feedback); must equal the rate of sampled gains
+  --json                 print the summary as one JSON object
   --umin U, --umax U     input bounds: one number for every input or a comma list of m
                          (default: unbounded)
   --no-project           do not project onto the constraints (the drift is still reported)
@@ -137,7 +146,7 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
       "simulate", args,
       {.valued = {"--trajectory", "--gains", "--out", "--perturb", "--perturb-random", "--seed", "--rate",
                   "--umin", "--umax", "--output-step", "--rtol", "--atol", "--method", "--max-steps"},
-       .flags = {"--no-project"},
+       .flags = {"--no-project", "--json"},
        .repeatable = {"--perturb"}});
   const std::string scenePath = options.singlePositional("scene file");
   const std::string trajectoryPath = options.required("--trajectory", "(the reference trajectory CSV)");
@@ -154,12 +163,10 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
     if (simulation.maxSteps <= 0) throw UsageError("simulate: --max-steps: must be > 0");
   }
   if (auto v = options.value("--method")) {
-    if (*v == "adams") {
-      simulation.method = IntegrationMethod::kAdams;
-    } else if (*v == "bdf") {
-      simulation.method = IntegrationMethod::kBDF;
-    } else {
-      throw UsageError("simulate: --method: '" + *v + "' is not one of adams, bdf");
+    try {
+      simulation.method = parseIntegrationMethod(*v);
+    } catch (const std::invalid_argument& e) {
+      throw UsageError(std::string("simulate: --method: ") + e.what());
     }
   }
   if (options.flag("--no-project")) simulation.constraints = ConstraintHandling::kNone;
@@ -176,10 +183,33 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
   const int n = model.nq(), m = model.nu(), nx = 2 * n;
   const Trajectory reference = loadReference(model, scenePath, trajectoryPath);
   const GainSchedule gains = GainSchedule::readCsvFile(gainsPath);
-  if (gains.nu() != m || gains.nx() != nx) {
-    throw std::runtime_error(gainsPath + ": K is " + std::to_string(gains.nu()) + " x " +
-                             std::to_string(gains.nx()) + ", but the scene " + scenePath + " needs m x 2n = " +
-                             std::to_string(m) + " x " + std::to_string(nx));
+  gains.checkNames(model.inputNames(), GainSchedule::stateNames(model.configNames()),
+                   gainsPath + " (for the scene " + scenePath + ")");
+  // Discrete gains are for one rate only; continuous gains at a rate are an approximation.
+  if (gains.isSampled()) {
+    const double rate = gains.sampleRate();
+    if (simulation.sampleRate == 0.0) {
+      throw std::runtime_error(gainsPath + ": zero-order-hold gains for a controller sampling at " +
+                               formatNumber(rate, 17) + " Hz cannot be applied continuously: add --rate " +
+                               formatNumber(rate, 17));
+    }
+    if (std::abs(simulation.sampleRate - rate) > 1e-12 * rate) {
+      throw std::runtime_error(gainsPath + ": zero-order-hold gains for " + formatNumber(rate, 17) +
+                               " Hz cannot be applied at --rate " + formatNumber(simulation.sampleRate, 17) +
+                               " (compute them for that rate: trellis gains --rate " +
+                               formatNumber(simulation.sampleRate, 17) + ")");
+    }
+    if (std::abs(gains.startTime() - reference.startTime()) >
+        1e-9 / rate) {
+      throw std::runtime_error(gainsPath + ": the sampled gains start at t = " + formatNumber(gains.startTime(), 17) +
+                               ", but the reference starts at t = " + formatNumber(reference.startTime(), 17) +
+                               " (the samples would not line up)");
+    }
+  } else if (simulation.sampleRate > 0.0) {
+    std::cerr << "simulate: warning: " << gainsPath << " holds continuous gains K(t); at --rate "
+              << formatNumber(simulation.sampleRate) << " they are only sampled (not designed for a "
+              << "sampled controller; trellis gains --rate " << formatNumber(simulation.sampleRate)
+              << " computes gains for it)\n";
   }
   // The same relative slack as GainSchedule::evaluate.
   const double slack = 1e-12 * std::max({1.0, std::abs(reference.startTime()), std::abs(reference.endTime())});
@@ -226,6 +256,14 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
   }
 
   // The summary, after the file is written.
+  if (options.flag("--json")) {
+    std::string body = simulationJson(result);
+    body.pop_back();
+    out << body << ", \"out\": " << jsonString(outPath) << ", \"sample_rate_hz\": "
+        << jsonNumber(simulation.sampleRate) << ", \"gains_sample_rate_hz\": " << jsonNumber(gains.sampleRate())
+        << ", \"perturbation_norm\": " << jsonNumber(delta.norm()) << "}\n";
+    return 0;
+  }
   const Eigen::VectorXd& error = result.trackingError;
   Eigen::Index worst = 0;
   error.maxCoeff(&worst);

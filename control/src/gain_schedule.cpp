@@ -127,24 +127,156 @@ GainSchedule GainSchedule::sample(const std::function<Eigen::MatrixXd(double)>& 
   return GainSchedule(times, std::move(gains));
 }
 
+void GainSchedule::setSampleRate(double hz) {
+  if (!(hz >= 0.0) || !std::isfinite(hz)) {
+    throw std::invalid_argument("gain schedule: sample rate " + std::to_string(hz) + " (must be finite and >= 0)");
+  }
+  sampleRate_ = hz;
+}
+
+std::vector<std::string> GainSchedule::stateNames(const std::vector<std::string>& configNames) {
+  std::vector<std::string> names = configNames;
+  for (const std::string& c : configNames) names.push_back("d" + c);
+  return names;
+}
+
+namespace {
+std::vector<std::string> namedColumns(const std::vector<std::string>& inputs,
+                                      const std::vector<std::string>& states) {
+  std::vector<std::string> cols;
+  for (const std::string& in : inputs) {
+    for (const std::string& st : states) cols.push_back("K_" + in + "_" + st);
+  }
+  return cols;
+}
+}  // namespace
+
+void GainSchedule::setColumnNames(const std::vector<std::string>& inputNames,
+                                  const std::vector<std::string>& stateNames) {
+  if (static_cast<int>(inputNames.size()) != nu_ || static_cast<int>(stateNames.size()) != nx_) {
+    throw std::invalid_argument("gain schedule: " + std::to_string(inputNames.size()) + " input and " +
+                                std::to_string(stateNames.size()) + " state names for K of size " +
+                                std::to_string(nu_) + "x" + std::to_string(nx_));
+  }
+  columnNames_ = namedColumns(inputNames, stateNames);
+}
+
+void GainSchedule::checkNames(const std::vector<std::string>& inputNames,
+                              const std::vector<std::string>& stateNames, const std::string& source) const {
+  if (static_cast<int>(inputNames.size()) != nu_ || static_cast<int>(stateNames.size()) != nx_) {
+    throw TrajectoryError(source + ": K is " + std::to_string(nu_) + " x " + std::to_string(nx_) +
+                          ", but the scene needs m x 2n = " + std::to_string(inputNames.size()) + " x " +
+                          std::to_string(stateNames.size()));
+  }
+  if (columnNames_.empty()) return;
+  const std::vector<std::string> want = namedColumns(inputNames, stateNames);
+  for (std::size_t c = 0; c < want.size(); ++c) {
+    if (columnNames_[c] != want[c]) {
+      throw TrajectoryError(source + ": column " + std::to_string(c + 2) + " is '" + columnNames_[c] +
+                            "', but the scene's gain column there is '" + want[c] +
+                            "' (a gain file for another scene?)");
+    }
+  }
+}
+
+namespace {
+// "# trellis gain schedule: m=1 nx=4 sample_rate_hz=100" → m, nx, rate; false if not that line.
+bool parseMetadata(const std::string& comment, int& m, int& nx, double& rate, bool& continuous) {
+  const std::string key = "trellis gain schedule:";
+  const auto at = comment.find(key);
+  if (at == std::string::npos) return false;
+  std::istringstream ss(comment.substr(at + key.size()));
+  std::string item;
+  bool haveM = false, haveNx = false, haveRate = false;
+  continuous = false;
+  while (ss >> item) {
+    const auto eq = item.find('=');
+    const std::string name = item.substr(0, eq == std::string::npos ? item.size() : eq);
+    const std::string value = eq == std::string::npos ? "" : item.substr(eq + 1);
+    char* end = nullptr;
+    if (name == "m" || name == "nx") {
+      const long v = std::strtol(value.c_str(), &end, 10);
+      if (value.empty() || *end != '\0' || v < 1 || v > 100000) return false;
+      (name == "m" ? m : nx) = static_cast<int>(v);
+      (name == "m" ? haveM : haveNx) = true;
+    } else if (name == "sample_rate_hz") {
+      rate = std::strtod(value.c_str(), &end);
+      if (value.empty() || *end != '\0' || !std::isfinite(rate) || !(rate > 0.0)) return false;
+      haveRate = true;
+    } else if (name == "continuous") {
+      continuous = true;
+    } else if (item == "(" || item.front() == '(') {
+      break;  // free text follows
+    }
+  }
+  return haveM && haveNx && (haveRate || continuous);
+}
+}  // namespace
+
 GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) {
   int m = 0, nx = 0;
+  double rate = 0.0;
+  bool haveMetadata = false;
+  std::vector<std::string> names;
+  // The comments precede the header, so peek at them first: readNumericCsv calls the header check
+  // after collecting them, but hands them over only at the end. Read the stream once into memory.
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  {
+    std::string line;
+    std::istringstream pre(buffer.str());
+    while (std::getline(pre, line)) {
+      const std::string t = detail::trimCsvField(line);
+      if (t.empty()) continue;
+      if (t[0] != '#') break;
+      int mm = 0, nn = 0;
+      double r = 0.0;
+      bool cont = false;
+      if (parseMetadata(t.substr(1), mm, nn, r, cont)) {
+        haveMetadata = true;
+        m = mm;
+        nx = nn;
+        rate = cont ? 0.0 : r;
+      }
+    }
+  }
   const detail::NumericCsv csv = detail::readNumericCsv(
-      in, source, [&](const std::vector<std::string>& header, int lineNo) {
+      buffer, source, [&](const std::vector<std::string>& header, int lineNo) {
         const std::string hat = source + ": header (line " + std::to_string(lineNo) + ")";
         if (header[0] != "t") {
           throw TrajectoryError(hat + ", column 1: must be 't', got '" + header[0] + "'");
         }
         const int ncols = static_cast<int>(header.size()) - 1;
         if (ncols < 1) throw TrajectoryError(hat + ": no gain columns after 't' (expected K_0_0, ...)");
-        // nx = the number of leading K_0_j columns; then every column must be K_{c / nx}_{c % nx}.
+        if (haveMetadata) {
+          if (ncols != m * nx) {
+            throw TrajectoryError(hat + ": " + std::to_string(ncols) + " gain columns, but the metadata line says m=" +
+                                  std::to_string(m) + " nx=" + std::to_string(nx) + " (" +
+                                  std::to_string(m * nx) + " columns)");
+          }
+          for (int c = 0; c < ncols; ++c) {
+            if (header[1 + c].rfind("K_", 0) != 0) {
+              throw TrajectoryError(hat + ", column " + std::to_string(c + 2) + " ('" + header[1 + c] +
+                                    "'): expected a gain name K_<input>_<state>");
+            }
+          }
+          // Index names K_i_j are the unnamed layout; anything else is kept as column names.
+          bool indexed = true;
+          for (int c = 0; c < ncols && indexed; ++c) indexed = header[1 + c] == gainName(c / nx, c % nx);
+          if (!indexed) names.assign(header.begin() + 1, header.end());
+          return;
+        }
+        // No metadata line (the older layout): nx = the number of leading K_0_j columns; then every
+        // column must be K_{c / nx}_{c % nx}.
         for (int c = 0; c < ncols; ++c) {
           int i = -1, j = -1;
           if (!parseGainName(header[1 + c], i, j) || i != 0 || j != c) break;
           ++nx;
         }
         if (nx == 0) {
-          throw TrajectoryError(hat + ", column 2 ('" + header[1] + "'): expected 'K_0_0'");
+          throw TrajectoryError(hat + ", column 2 ('" + header[1] +
+                                "'): expected 'K_0_0' (files with named columns K_<input>_<state> need the "
+                                "'# trellis gain schedule: m=.. nx=..' line that trellis gains writes)");
         }
         m = (ncols + nx - 1) / nx;
         for (int c = 0; c < ncols; ++c) {
@@ -169,9 +301,12 @@ GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) 
     gains.push_back(Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
         values.data() + 1, m, nx));
   }
-  return GainSchedule(
+  GainSchedule schedule(
       Eigen::Map<const Eigen::VectorXd>(times.data(), static_cast<Eigen::Index>(times.size())),
       std::move(gains));
+  schedule.sampleRate_ = rate;
+  schedule.columnNames_ = std::move(names);
+  return schedule;
 }
 
 GainSchedule GainSchedule::readCsvFile(const std::string& path) {
@@ -182,12 +317,21 @@ GainSchedule GainSchedule::readCsvFile(const std::string& path) {
 
 void GainSchedule::writeCsv(std::ostream& out) const {
   if (size() == 0) throw TrajectoryError("gain schedule: cannot write an empty schedule");
+  const auto oldPrecision = out.precision(17);
+  out << "# trellis gain schedule: m=" << nu_ << " nx=" << nx_;
+  if (sampleRate_ > 0.0) {
+    out << " sample_rate_hz=" << sampleRate_ << " (zero-order-hold gains: apply K at t0 + k/"
+        << sampleRate_ << " and hold u until the next sample)\n";
+  } else {
+    out << " continuous (K(t) linear between rows)\n";
+  }
   out << "t";
   for (int i = 0; i < nu_; ++i) {
-    for (int j = 0; j < nx_; ++j) out << "," << gainName(i, j);
+    for (int j = 0; j < nx_; ++j) {
+      out << "," << (columnNames_.empty() ? gainName(i, j) : columnNames_[static_cast<std::size_t>(i * nx_ + j)]);
+    }
   }
   out << "\n";
-  const auto oldPrecision = out.precision(17);
   for (int k = 0; k < size(); ++k) {
     out << times_(k);
     for (int i = 0; i < nu_; ++i) {

@@ -38,9 +38,11 @@ struct NumericCsv {
   std::vector<std::string> header;
   int headerLine = 0;                      ///< file line of the header (1-based)
   std::vector<std::vector<double>> rows;   ///< each of header.size() values; rows[k][0] = time
+  std::vector<std::string> comments;       ///< lines before the header starting with '#' ('#' removed)
 };
 
-/// Reads the header (the first non-empty line) and passes it to checkHeader(header, headerLine),
+/// Reads the header (the first non-empty line not starting with '#'; such comment lines before it
+/// are kept in `comments`) and passes it to checkHeader(header, headerLine),
 /// which throws TrajectoryError if the names are wrong; then the data rows (blank lines skipped).
 /// Throws for an empty file, no data rows, a wrong column count, a field that is not a number or
 /// not finite, and a time not greater than the previous one.
@@ -52,7 +54,12 @@ inline NumericCsv readNumericCsv(
   int lineNo = 0;
   while (std::getline(in, line)) {
     ++lineNo;
-    if (!trimCsvField(line).empty()) {
+    const std::string trimmed = trimCsvField(line);
+    if (!trimmed.empty() && trimmed[0] == '#') {
+      csv.comments.push_back(trimmed.substr(1));
+      continue;
+    }
+    if (!trimmed.empty()) {
       csv.header = splitCsvLine(line);
       csv.headerLine = lineNo;
       break;

@@ -38,6 +38,22 @@ const char* toString(RiccatiStatus status) {
   return "unknown";
 }
 
+const char* toString(RiccatiMethod method) {
+  switch (method) {
+    case RiccatiMethod::kBDF: return "bdf";
+    case RiccatiMethod::kAdams: return "adams";
+    case RiccatiMethod::kFactored: return "factored";
+  }
+  return "unknown";
+}
+
+RiccatiMethod parseRiccatiMethod(const std::string& text) {
+  for (RiccatiMethod m : {RiccatiMethod::kBDF, RiccatiMethod::kAdams, RiccatiMethod::kFactored}) {
+    if (text == toString(m)) return m;
+  }
+  throw std::invalid_argument("'" + text + "' is not one of bdf, adams, factored");
+}
+
 void RiccatiOptions::validate() const {
   auto bad = [](const char* field, double v, const char* rule) {
     std::ostringstream m;
@@ -50,6 +66,9 @@ void RiccatiOptions::validate() const {
   if (!(maxNorm > 0.0)) bad("maxNorm", maxNorm, "> 0");
   if (!(initialStep >= 0.0) || !std::isfinite(initialStep)) bad("initialStep", initialStep, ">= 0");
   if (!(maxStep >= 0.0) || !std::isfinite(maxStep)) bad("maxStep", maxStep, ">= 0");
+  if (!(factoredSwitchCondition >= 0.0) || std::isnan(factoredSwitchCondition)) {
+    bad("factoredSwitchCondition", factoredSwitchCondition, ">= 0");
+  }
   if (!(factoredQfShift >= 0.0) || !std::isfinite(factoredQfShift)) {
     bad("factoredQfShift", factoredQfShift, ">= 0 and finite");
   }
@@ -264,6 +283,12 @@ struct RiccatiSolver {
       }
     }
     return 0;
+  }
+
+  // The plain or the factored form, whichever is current (the factored solve may switch).
+  static int rhsDispatch(double tau, N_Vector yv, N_Vector ydotv, void* user) {
+    return static_cast<RiccatiSolver*>(user)->factored ? rhsFactored(tau, yv, ydotv, user)
+                                                       : rhs(tau, yv, ydotv, user);
   }
 
   // Factored: dU/dτ = Υ(U⁻ᵀ Ṡ U⁻¹) U (see the header). A zero on U's diagonal (a trial point
@@ -529,7 +554,7 @@ void RiccatiSolution::S(double t, Eigen::MatrixXd& out) const {
   Eigen::VectorXd y = st.D.col(q);
   for (Eigen::Index k = q; k-- > 0;) y = st.D.col(k) + (dt / static_cast<double>(k + 1)) * y;
   out.resize(nx_, nx_);
-  if (factored_) {
+  if (st.factored) {
     Eigen::MatrixXd U = Eigen::MatrixXd::Zero(nx_, nx_);
     unpackUpper(y.data(), nx_, U);
     out.noalias() = U.transpose() * U;  // symmetric PSD by construction
@@ -545,19 +570,26 @@ Eigen::MatrixXd RiccatiSolution::S(double t) const {
 }
 
 Eigen::MatrixXd RiccatiSolution::K(double t) const {
-  const Eigen::MatrixXd St = S(t);
-  Eigen::MatrixXd A(nx_, nx_), B(nx_, nu_), R = weights_.R;
-  linearization_(t, A, B);
-  if (weights_.Rfun) {
-    R.resize(nu_, nu_);
-    weights_.Rfun(t, R);
+  const Eigen::MatrixXd St = S(t);  // checks the range
+  const auto n = static_cast<std::ptrdiff_t>(gainTimes_.size());
+  if (n == 0) throw std::out_of_range("RiccatiSolution::K: no stored gain nodes");
+  if (n == 1) return gainNodes_[0] * St;
+  // The four nearest nodes (fewer when there are fewer): Lagrange cubic in t.
+  const auto it = std::lower_bound(gainTimes_.begin(), gainTimes_.end(), t);
+  std::ptrdiff_t hi = std::clamp<std::ptrdiff_t>(it - gainTimes_.begin(), 1, n - 1);
+  std::ptrdiff_t first = std::clamp<std::ptrdiff_t>(hi - 2, 0, std::max<std::ptrdiff_t>(0, n - 4));
+  const std::ptrdiff_t last = std::min<std::ptrdiff_t>(first + 3, n - 1);
+  Eigen::MatrixXd G = Eigen::MatrixXd::Zero(nu_, nx_);
+  for (std::ptrdiff_t i = first; i <= last; ++i) {
+    double w = 1.0;
+    for (std::ptrdiff_t j = first; j <= last; ++j) {
+      if (j != i) w *= (t - gainTimes_[static_cast<std::size_t>(j)]) /
+                       (gainTimes_[static_cast<std::size_t>(i)] - gainTimes_[static_cast<std::size_t>(j)]);
+    }
+    if (t == gainTimes_[static_cast<std::size_t>(i)]) return gainNodes_[static_cast<std::size_t>(i)] * St;
+    G += w * gainNodes_[static_cast<std::size_t>(i)];
   }
-  Eigen::LLT<Eigen::MatrixXd> llt(R);
-  if (llt.info() != Eigen::Success) {
-    throw std::runtime_error("RiccatiSolution::K: R(t) is not positive definite at t = " +
-                             std::to_string(t));
-  }
-  return llt.solve(B.transpose() * St);
+  return G * St;
 }
 
 RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
@@ -595,12 +627,10 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
   sol.nu_ = nu;
   sol.t0_ = t0;
   sol.tf_ = T;
-  sol.linearization_ = linearization;
-  sol.weights_ = weights;
 
   const sunindextype N = static_cast<sunindextype>(nx) * (nx + 1) / 2;
   const double tauEnd = T - t0;
-  RiccatiSolver solver(nx, nu, T, sol.linearization_, sol.weights_);
+  RiccatiSolver solver(nx, nu, T, linearization, weights);
 
   detail::CvodeSession cv;
   cv.context.reset(detail::createContext());
@@ -609,9 +639,8 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
   cv.dky.reset(N_VNew_Serial(N, ctx));
   if (!cv.y || !cv.dky) throw std::runtime_error("solveRiccati: N_VNew_Serial failed");
   double* y = N_VGetArrayPointer(cv.y.get());
-  const bool factored = options.method == RiccatiMethod::kFactored;
+  bool factored = options.method == RiccatiMethod::kFactored;
   solver.factored = factored;
-  sol.factored_ = factored;
   if (factored) {
     // U(T) = chol(Qf + shift·I), upper triangular.
     Eigen::MatrixXd Qf = 0.5 * (weights.Qf + weights.Qf.transpose());
@@ -644,8 +673,7 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
     }
   };
   check(CVodeSetErrHandlerFn(mem, &RiccatiSolver::errorHandler, &solver), "CVodeSetErrHandlerFn");
-  check(CVodeInit(mem, factored ? &RiccatiSolver::rhsFactored : &RiccatiSolver::rhs, 0.0,
-                  cv.y.get()),
+  check(CVodeInit(mem, &RiccatiSolver::rhsDispatch, 0.0, cv.y.get()),
         "CVodeInit");
   check(CVodeSStolerances(mem, options.rtol, options.atol), "CVodeSStolerances");
   check(CVodeSetUserData(mem, &solver), "CVodeSetUserData");
@@ -704,12 +732,51 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
     sol.minEigenvalue = std::min(sol.minEigenvalue, eig.eigenvalues()(0));
     sol.maxEigenvalue = std::max(sol.maxEigenvalue, eig.eigenvalues()(nx - 1));
   };
-  sol.steps_.push_back({0.0, Eigen::Map<Eigen::VectorXd>(y, N)});
+  sol.steps_.push_back({0.0, Eigen::Map<Eigen::VectorXd>(y, N), factored});
   trackEigen(y);
+  // G = R⁻¹Bᵀ at a node, so that K(t) needs neither the model nor the callbacks later.
+  Eigen::MatrixXd An(nx, nx), Bn(nx, nu), Rn = weights.R;
+  std::string nodeError;
+  auto storeGain = [&](double t) {
+    try {
+      linearization(t, An, Bn);
+      if (weights.Rfun) {
+        Rn.setZero(nu, nu);
+        weights.Rfun(t, Rn);
+      }
+      Eigen::LLT<Eigen::MatrixXd> llt(Rn);
+      if (An.rows() != nx || Bn.rows() != nx || Bn.cols() != nu || llt.info() != Eigen::Success ||
+          !Bn.allFinite()) {
+        nodeError = "B(t) or R(t) invalid (size, non-finite, R not positive definite) at t = " + std::to_string(t);
+        return false;
+      }
+      sol.gainTimes_.push_back(t);
+      sol.gainNodes_.push_back(llt.solve(Bn.transpose()));
+      return true;
+    } catch (const std::exception& e) {
+      nodeError = std::string("callback threw at t = ") + std::to_string(t) + ": " + e.what();
+      return false;
+    }
+  };
+  if (!storeGain(T)) {
+    sol.status = RiccatiStatus::kCallbackFailure;
+    sol.failureTime = T;
+    sol.message = "Riccati solve: " + nodeError;
+    return sol;
+  }
 
   double tau = 0.0;
   double lastNorm = normOf(y);
   long taken = 0;
+  // CVODES' counters restart at CVodeReInit (the switch below): accumulate them.
+  auto addCounters = [&] {
+    long v = 0;
+    if (CVodeGetNumSteps(mem, &v) >= 0) sol.steps += v;
+    if (CVodeGetNumRhsEvals(mem, &v) >= 0) sol.rhsEvaluations += v;
+    if (bdf && CVodeGetNumJacEvals(mem, &v) >= 0) sol.jacobianEvaluations += v;
+    if (bdf && krylov && CVodeGetNumLinIters(mem, &v) >= 0) sol.linearIterations += v;
+    if (bdf && krylov && CVodeGetNumPrecSolves(mem, &v) >= 0) sol.preconditionerSolves += v;
+  };
   while (tau < tauEnd) {
     // CV_ONE_STEP applies CVodeSetMaxNumSteps per call, so the budget over the horizon is ours.
     if (++taken > options.maxSteps) {
@@ -744,7 +811,7 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
     }
     int q = 0;
     CVodeGetLastOrder(mem, &q);
-    RiccatiSolution::Step st{tau, Eigen::MatrixXd(N, q + 1)};
+    RiccatiSolution::Step st{tau, Eigen::MatrixXd(N, q + 1), factored};
     for (int k = 0; k <= q; ++k) {
       if (CVodeGetDky(mem, tau, k, cv.dky.get()) < 0) {
         st.D.conservativeResize(N, k);
@@ -763,8 +830,21 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
       sol.message = m.str();
       break;
     }
+    const double tauPrev = sol.steps_.back().tau;
     sol.steps_.push_back(std::move(st));
     trackEigen(y);
+    if (!storeGain(T - 0.5 * (tauPrev + tau)) || !storeGain(T - tau)) {
+      sol.steps_.pop_back();
+      sol.status = RiccatiStatus::kCallbackFailure;
+      sol.failureTime = T - tau;
+      sol.failureNorm = lastNorm;
+      sol.message = "Riccati solve stopped: " + nodeError;
+      if (sol.gainTimes_.size() > 2 * sol.steps_.size() - 1) {
+        sol.gainTimes_.resize(2 * sol.steps_.size() - 1);
+        sol.gainNodes_.resize(2 * sol.steps_.size() - 1);
+      }
+      break;
+    }
     if (norm > options.maxNorm) {
       sol.status = RiccatiStatus::kBlowUp;
       sol.failureTime = T - tau;
@@ -777,14 +857,38 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
     }
     lastNorm = norm;
     if (flag == CV_TSTOP_RETURN) break;
+    // Factored form near a singular S: U⁻¹ amplifies the integration error of U's small diagonal
+    // entries, the problem turns stiff in U although S itself is smooth (thousands of steps, or
+    // too much work). Past cond(S) = (max U_ii / min U_ii)² > factoredSwitchCondition the rest of
+    // the horizon is integrated in the plain form on S = UᵀU (see the header).
+    if (factored && options.factoredSwitchCondition > 0.0) {
+      Eigen::MatrixXd Uk = Eigen::MatrixXd::Zero(nx, nx);
+      unpackUpper(y, nx, Uk);
+      const Eigen::ArrayXd d = Uk.diagonal().array().abs();
+      const double ratio = d.minCoeff() / d.maxCoeff();
+      if (!(ratio * ratio * options.factoredSwitchCondition > 1.0)) {
+        const Eigen::MatrixXd Sk2 = Uk.transpose() * Uk;
+        pack(Sk2, nx, y);
+        factored = false;
+        solver.factored = false;
+        solver.aclOk = false;
+        sol.switchedToPlainAt = T - tau;
+        addCounters();
+        check(CVodeReInit(mem, tau, cv.y.get()), "CVodeReInit");  // rhsDispatch now takes the plain form
+        check(CVodeSetStopTime(mem, tauEnd), "CVodeSetStopTime");
+        if (bdf && krylov) {
+          check(CVodeSetJacTimes(mem, &RiccatiSolver::jtSetup, &RiccatiSolver::jtimes), "CVodeSetJacTimes");
+        } else if (bdf && options.exactJacobian) {
+          check(CVodeSetJacFn(mem, &RiccatiSolver::jac), "CVodeSetJacFn");
+        }
+        lastNorm = normOf(y);
+      }
+    }
   }
-  long v = 0;
-  if (CVodeGetNumSteps(mem, &v) >= 0) sol.steps = v;
-  if (CVodeGetNumRhsEvals(mem, &v) >= 0) sol.rhsEvaluations = v;
-  if (bdf && CVodeGetNumJacEvals(mem, &v) >= 0) sol.jacobianEvaluations = v;
-  if (bdf && krylov && CVodeGetNumLinIters(mem, &v) >= 0) sol.linearIterations = v;
-  if (bdf && krylov && CVodeGetNumPrecSolves(mem, &v) >= 0) sol.preconditionerSolves = v;
+  addCounters();
   if (!options.trackEigenvalues) sol.minEigenvalue = sol.maxEigenvalue = 0.0;
+  std::reverse(sol.gainTimes_.begin(), sol.gainTimes_.end());
+  std::reverse(sol.gainNodes_.begin(), sol.gainNodes_.end());
   return sol;
 }
 

@@ -2,6 +2,7 @@
 #include "trellis/control/simulation.hpp"
 
 #include "sundials_raii.hpp"
+#include "trellis/control/tvlqr.hpp"
 #include "trellis/core/data.hpp"
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/model.hpp"
@@ -38,6 +39,39 @@ const char* toString(SimulationStatus status) {
       return "policy failure";
   }
   return "unknown";
+}
+
+const char* toString(IntegrationMethod method) {
+  return method == IntegrationMethod::kAdams ? "adams" : "bdf";
+}
+
+IntegrationMethod parseIntegrationMethod(const std::string& text) {
+  if (text == "adams") return IntegrationMethod::kAdams;
+  if (text == "bdf") return IntegrationMethod::kBDF;
+  throw std::invalid_argument("'" + text + "' is not one of adams, bdf");
+}
+
+std::string simulationJson(const SimulationResult& r) {
+  std::ostringstream o;
+  const Trajectory& tr = r.trajectory;
+  const bool have = tr.size() > 0;
+  const Eigen::VectorXd& e = r.trackingError;
+  Eigen::Index worst = 0;
+  if (e.size() > 0) e.maxCoeff(&worst);
+  o << "{\"ok\": " << (r.ok() ? "true" : "false") << ", \"status\": " << jsonString(toString(r.status))
+    << ", \"message\": " << jsonString(r.message) << ", \"rows\": " << tr.size()
+    << ", \"t0\": " << (have ? jsonNumber(tr.startTime()) : "null")
+    << ", \"t1\": " << (have ? jsonNumber(tr.endTime()) : "null")
+    << ", \"tracking_error_initial\": " << (e.size() > 0 ? jsonNumber(e(0)) : "null")
+    << ", \"tracking_error_final\": " << (e.size() > 0 ? jsonNumber(e(e.size() - 1)) : "null")
+    << ", \"tracking_error_max\": " << (e.size() > 0 ? jsonNumber(e(worst)) : "null")
+    << ", \"tracking_error_max_time\": " << (e.size() > 0 && have ? jsonNumber(tr.times()(worst)) : "null")
+    << ", \"max_constraint_drift\": " << jsonNumber(r.maxConstraintDrift)
+    << ", \"saturated_samples\": " << r.saturatedSamples << ", \"control_samples\": " << r.controlSamples
+    << ", \"saturated_fraction\": " << jsonNumber(r.saturatedFraction) << ", \"steps\": " << r.steps
+    << ", \"rhs_evaluations\": " << r.rhsEvaluations << ", \"restarts\": " << r.restarts
+    << ", \"projections\": " << r.projections << "}";
+  return o.str();
 }
 
 void SimulationOptions::validate() const {

@@ -238,8 +238,9 @@ int main(int argc, char** argv) try {
   riccatiOptions.atol = 1e-8;
   const trellis::ManifoldRiccatiSolution lqr = trellis::solveManifoldRiccati(model, trajectory, weights, riccatiOptions, transport);
   if (!lqr.ok()) throw std::runtime_error("manifold Riccati solve failed: " + lqr.message());
-  const trellis::GainSchedule gains =
+  trellis::GainSchedule gains =
       trellis::GainSchedule::sample([&](double t) { return lqr.K(t); }, trajectory.times());
+  gains.setColumnNames(model.inputNames(), trellis::GainSchedule::stateNames(model.configNames()));
   gains.writeCsvFile(options.out + "/gains.csv");
   double maxGain = 0.0;
   for (const Eigen::MatrixXd& K : gains.gains()) maxGain = std::max(maxGain, K.norm());

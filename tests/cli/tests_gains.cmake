@@ -6,7 +6,9 @@ set(_cart_pole "${_scenes}/cart_pole.json")
 set(_cart_pole_upright "${_trajectories}/cart_pole_upright.csv")
 set(_paper "${_scenes}/paper_pendulum.json")
 set(_paper_swing "${_trajectories}/paper_pendulum_swing.csv")
-set(_gain_header "t,K_0_0,K_0_1,K_0_2,K_0_3")  # m = 1, 2n = 4, row-major
+# The first line is the metadata (m, 2n, continuous or the sample rate); FILE_ROWS counts the
+# named header t,K_<input>_<state>,... and the data rows.
+set(_gain_header "# trellis gain schedule: m=1 nx=4 continuous .*")
 
 # ---- success ----------------------------------------------------------------------------------
 # Cart-pole held upright for 3 s (31 knots): one gain row per knot. The gain must stabilize the
@@ -17,7 +19,7 @@ set(_gain_header "t,K_0_0,K_0_1,K_0_2,K_0_3")  # m = 1, 2n = 4, row-major
 trellis_cli_files_test(gains.cart_pole_upright_stabilizes
   ARGS1 gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --Q 10,10,1,1 --R 0.1
         --out @WORK@/gains.csv
-  CHECKS1 -DFILE=@WORK@/gains.csv "-DFILE_HEADER=${_gain_header}" -DFILE_ROWS=31 -DSTDERR_EMPTY=ON
+  CHECKS1 -DFILE=@WORK@/gains.csv "-DFILE_HEADER=${_gain_header}" -DFILE_ROWS=32 -DSTDERR_EMPTY=ON
           "-DSTDOUT_REGEX=wrote .*gains.csv: 31 rows of K \\(1 x 4\\).*riccati: full state.*steps.*S: min eigenvalue [0-9].*controllability at t = 0: rank 4 of 4 \\(controllable\\).*gramian on \\[0, 3\\]: min eigenvalue"
   ARGS2 simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}" --gains @WORK@/gains.csv
         --perturb theta=0.1 --out @WORK@/closed.csv
@@ -31,7 +33,7 @@ trellis_cli_files_test(gains.cart_pole_upright_stabilizes
 trellis_cli_files_test(gains.uniform_grid_and_weight_file
   ARGS1 gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --dt 0.25
         --Q "${_data}/weights_cart_pole_Q.json" --R 0.1 --Qf 1 --method factored --out @WORK@/gains.csv
-  CHECKS1 -DFILE=@WORK@/gains.csv "-DFILE_HEADER=${_gain_header}" -DFILE_ROWS=13
+  CHECKS1 -DFILE=@WORK@/gains.csv "-DFILE_HEADER=${_gain_header}" -DFILE_ROWS=14
           "-DSTDOUT_REGEX=13 rows of K.*riccati: factored")
 
 # The paper's constrained pendulum (one distance constraint: 2n = 4, tangent dimension 2) along a
@@ -42,7 +44,7 @@ trellis_cli_files_test(gains.uniform_grid_and_weight_file
 # (bound > 0.1).
 trellis_cli_files_test(gains.paper_pendulum_manifold
   ARGS1 gains "${_paper}" --trajectory "${_paper_swing}" --R 0.01 --out @WORK@/gains.csv
-  CHECKS1 -DFILE=@WORK@/gains.csv "-DFILE_HEADER=${_gain_header}" -DFILE_ROWS=41 -DSTDERR_EMPTY=ON
+  CHECKS1 -DFILE=@WORK@/gains.csv "-DFILE_HEADER=${_gain_header}" -DFILE_ROWS=42 -DSTDERR_EMPTY=ON
           "-DSTDOUT_REGEX=riccati: on the constraint manifold \\(tangent dimension 2 of 4.*Sr: min eigenvalue.*rank 2 of 2 \\(controllable\\)"
   ARGS2 simulate "${_paper}" --trajectory "${_paper_swing}" --gains @WORK@/gains.csv
         --perturb theta1=0.05 --out @WORK@/closed.csv
@@ -52,9 +54,52 @@ trellis_cli_files_test(gains.paper_pendulum_manifold
         --gains "${_data}/paper_pendulum_zero_gains.csv" --perturb theta1=0.05 --out @WORK@/open.csv
   CHECKS3 "-DNUMBERS=final :GREATER:0.1")
 
+# ---- sampled (zero-order-hold) gains --------------------------------------------------------------
+# --rate 50 on the 3 s upright reference: gains at the 150 sample times 0, 0.02, ..., 2.98 and at T
+# (151 rows + the named header), the file and the summary say they are ZOH gains at 50 Hz. Applied
+# at 50 Hz with |push| <= 3 N from a 0.1 rad tilt the loop recovers (final error < 0.01); applied
+# continuously they are refused (exit 1, naming the rate to use).
+trellis_cli_files_test(gains.sampled_50hz
+  ARGS1 gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --Q 10,10,1,1 --R 0.1 --rate 50
+        --out @WORK@/gains.csv
+  CHECKS1 -DFILE=@WORK@/gains.csv "-DFILE_HEADER=# trellis gain schedule: m=1 nx=4 sample_rate_hz=50 .*"
+          -DFILE_ROWS=152 -DSTDERR_EMPTY=ON
+          "-DSTDOUT_REGEX=wrote .*gains.csv: 151 rows of K \\(1 x 4\\) on \\[0, 3\\], zero-order-hold gains for a controller sampling at 50 Hz.*riccati: sampled-zoh.*controllable"
+  ARGS2 simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}" --gains @WORK@/gains.csv
+        --perturb theta=0.1 --rate 50 --umin -3 --umax 3 --out @WORK@/closed.csv
+  CHECKS2 -DSTDERR_EMPTY=ON "-DSTDOUT_REGEX=feedback sampled at 50 Hz" "-DNUMBERS=final :LESS:0.01"
+  ARGS3 simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}" --gains @WORK@/gains.csv
+        --perturb theta=0.1 --out @WORK@/continuous.csv
+  CHECKS3 -DEXIT=1 -DSTDOUT_EMPTY=ON -DSTDERR_ONE_LINE=ON
+          "-DSTDERR_REGEX=zero-order-hold gains for a controller sampling at 50 Hz cannot be applied continuously: add --rate 50")
+# Discrete gains at another rate: refused; continuous gains at a rate: a warning on stderr.
+trellis_cli_files_test(gains.sampled_rate_mismatch
+  ARGS1 gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --Q 10,10,1,1 --R 0.1 --rate 50
+        --out @WORK@/sampled.csv
+  ARGS2 simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}" --gains @WORK@/sampled.csv
+        --rate 100 --out @WORK@/closed.csv
+  CHECKS2 -DEXIT=1 -DSTDOUT_EMPTY=ON -DSTDERR_ONE_LINE=ON
+          "-DSTDERR_REGEX=gains for 50 Hz cannot be applied at --rate 100 \\(compute them for that rate: trellis gains --rate 100\\)"
+  ARGS3 simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}"
+        --gains "${_data}/cart_pole_zero_gains.csv" --rate 100 --out @WORK@/closed.csv
+  CHECKS3 "-DSTDERR_REGEX=warning: .*cart_pole_zero_gains.csv holds continuous gains K\\(t\\); at --rate 100 they are only sampled")
+# A gain file of another scene with the same sizes (paper pendulum: 1 x 4 like the cart-pole) is
+# refused, naming the first column whose name differs; --json prints one JSON object.
+trellis_cli_files_test(gains.names_checked_and_json
+  ARGS1 gains "${_paper}" --trajectory "${_paper_swing}" --R 0.01 --rate 100 --json --out @WORK@/paper.csv
+  CHECKS1 -DSTDERR_EMPTY=ON
+          "-DSTDOUT_REGEX=^\\{\"ok\": true, \"message\": \"\", \"mode\": \"sampled\", \"sample_rate_hz\": 100, \"constrained\": true.*\"tangent_dimension\": 2.*\"out\": .*paper.csv.*\\}\n$"
+  ARGS2 simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}" --gains @WORK@/paper.csv
+        --rate 100 --out @WORK@/closed.csv
+  CHECKS2 -DEXIT=1 -DSTDOUT_EMPTY=ON -DSTDERR_ONE_LINE=ON
+          "-DSTDERR_REGEX=paper.csv \\(for the scene .*cart_pole.json\\): column 2 is 'K_u_theta1', but the scene's gain column there is 'K_push_x'"
+  ARGS3 simulate "${_paper}" --trajectory "${_paper_swing}" --gains @WORK@/paper.csv
+        --perturb theta1=0.05 --rate 100 --json --out @WORK@/closed.csv
+  CHECKS3 "-DSTDOUT_REGEX=^\\{\"ok\": true, \"status\": \"ok\".*\"tracking_error_final\": [0-9].*\"sample_rate_hz\": 100, \"gains_sample_rate_hz\": 100.*\\}\n$")
+
 # ---- help -------------------------------------------------------------------------------------
 trellis_cli_test(gains.help ARGS gains --help
-  CHECKS "-DSTDOUT_REGEX=usage: trellis gains SCENE.json --trajectory.*constraint manifold.*K_i_j.*--Q W +state weight \\(default 1\\).*--R W.*--Qf W"
+  CHECKS "-DSTDOUT_REGEX=usage: trellis gains SCENE.json --trajectory.*constraint manifold.*--rate HZ.*K_<input>_<state>.*--Q W +state weight \\(default 1\\).*--R W.*--Qf W"
          -DSTDERR_EMPTY=ON)
 trellis_cli_test(gains.in_command_list ARGS --help CHECKS "-DSTDOUT_REGEX=  gains +TV-LQR")
 
@@ -130,3 +175,9 @@ trellis_cli_files_test(gains.error.solver_failure
   ARGS1 gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --max-steps 5 --out @WORK@/gains.csv
   CHECKS1 -DEXIT=1 -DSTDOUT_EMPTY=ON -DSTDERR_ONE_LINE=ON -DABSENT=@WORK@/gains.csv
           "-DSTDERR_REGEX=gains: the Riccati solve failed: .*t = 3.*maxSteps = 5")
+trellis_cli_test(gains.error.rate_and_dt
+  ARGS gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --rate 50 --dt 0.1 --out /dev/null
+  CHECKS ${_e2} "-DSTDERR_REGEX=gains: --rate and --dt exclude each other")
+trellis_cli_test(gains.error.rate_not_positive
+  ARGS gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --rate -5 --out /dev/null
+  CHECKS ${_e2} "-DSTDERR_REGEX=--rate: -5 must be > 0")

@@ -149,7 +149,11 @@ TEST_CASE("gain schedule: CSV round trip is exact", "[gain_schedule]") {
     const GainSchedule g((VectorXd(1) << 0.0).finished(), {MatrixXd::Zero(2, 2)});
     std::ostringstream out;
     g.writeCsv(out);
-    CHECK(out.str().substr(0, out.str().find('\n')) == "t,K_0_0,K_0_1,K_1_0,K_1_1");
+    // A metadata line (sizes, continuous), then the unnamed header.
+    const std::string text = out.str();
+    const auto first = text.find('\n');
+    CHECK(text.substr(0, first) == "# trellis gain schedule: m=2 nx=2 continuous (K(t) linear between rows)");
+    CHECK(text.substr(first + 1, text.find('\n', first + 1) - first - 1) == "t,K_0_0,K_0_1,K_1_0,K_1_1");
   }
   SECTION("file round trip") {
     const GainSchedule g = randomSchedule(rng, 3, 2, 2);

@@ -7,5 +7,7 @@
 #include "trellis/control/lqr.hpp"
 #include "trellis/control/manifold_lqr.hpp"
 #include "trellis/control/riccati.hpp"
+#include "trellis/control/sampled_lqr.hpp"
 #include "trellis/control/simulation.hpp"
 #include "trellis/control/trajectory.hpp"
+#include "trellis/control/tvlqr.hpp"

@@ -5,9 +5,18 @@
 //   K(t) = (1 − s) K_k + s K_{k+1},   s = (t − t_k) / (t_{k+1} − t_k),
 // so a gain that is linear in t is reproduced exactly and K(t_k) = K_k.
 //
+// Discrete (zero-order-hold) gains: sampleRate() = f > 0 says the gains were computed for a
+// controller that samples at t_k = t0 + k/f and holds u until the next sample; K_k is the row at
+// t_k (the last row, at the end time, repeats the last sample's gain). Applying them continuously
+// or at another rate is not what they were designed for (trellis simulate refuses it).
+// sampleRate() = 0: continuous gains (K(t) along the horizon; sampling them is an approximation).
+//
 // CSV form, one row per time, 17 significant digits (round trip exact):
-//   t,K_0_0,K_0_1,…,K_0_{nx-1},K_1_0,…,K_{m-1}_{nx-1}
-// i.e. row-major: column K_i_j holds K(i, j) (i: input row, j: state column).
+//   # trellis gain schedule: m=<m> nx=<nx> sample_rate_hz=<f>   (or: continuous)
+//   t,K_<input>_<state>,…        (row-major: input by input, the states [q; dq] in order)
+// e.g. `t,K_push_x,K_push_theta,K_push_dx,K_push_dtheta`. Without names (setColumnNames not
+// called) the columns are K_<i>_<j> (i: input row, j: state column); such files without the
+// metadata line (the older layout) are read as continuous gains.
 #pragma once
 
 #include <Eigen/Core>
@@ -37,6 +46,26 @@ class GainSchedule {
   const Eigen::VectorXd& times() const { return times_; }
   const std::vector<Eigen::MatrixXd>& gains() const { return gains_; }
 
+  /// 0: continuous gains; f > 0: zero-order-hold gains for a controller sampling at f Hz.
+  double sampleRate() const { return sampleRate_; }
+  bool isSampled() const { return sampleRate_ > 0.0; }
+  /// Throws std::invalid_argument unless hz is finite and ≥ 0.
+  void setSampleRate(double hz);
+
+  /// Column names (m·nx, row-major), "K_<input>_<state>"; empty when unnamed.
+  const std::vector<std::string>& columnNames() const { return columnNames_; }
+  /// Names the columns K_<input>_<state> (inputs: m names; states: nx names, e.g. the
+  /// configuration names then "d" + each). Throws std::invalid_argument for wrong counts.
+  void setColumnNames(const std::vector<std::string>& inputNames,
+                      const std::vector<std::string>& stateNames);
+  /// The state names of a model's x = [q; dq]: configuration names, then "d" + each.
+  static std::vector<std::string> stateNames(const std::vector<std::string>& configNames);
+  /// Throws TrajectoryError (naming `source`, the first mismatching column and both names) unless
+  /// K is (inputNames.size()) × (stateNames.size()) and, when the schedule has column names, they
+  /// are K_<input>_<state> for these names. Unnamed (older) schedules pass on sizes alone.
+  void checkNames(const std::vector<std::string>& inputNames,
+                  const std::vector<std::string>& stateNames, const std::string& source) const;
+
   /// K(t) by linear interpolation (m×nx). t outside [start, end] beyond a relative slack of 1e-12
   /// throws std::out_of_range (inside the slack t is clamped). No allocation when K is already
   /// m×nx. Throws std::logic_error on an empty schedule.
@@ -48,8 +77,8 @@ class GainSchedule {
   static GainSchedule sample(const std::function<Eigen::MatrixXd(double)>& gain,
                              const Eigen::VectorXd& times);
 
-  /// Reads the CSV layout above; m and nx are inferred from the header, which must be exactly
-  /// t, K_i_j for i < m, j < nx, row-major. Throws TrajectoryError naming the row (1-based data row
+  /// Reads the CSV layout above. m, nx and the rate come from the metadata line; without it the
+  /// header must be exactly t, K_i_j for i < m, j < nx, row-major (m and nx inferred). Throws TrajectoryError naming the row (1-based data row
   /// and file line) and column (1-based and its header name) for a bad header, a value that is not
   /// a number or not finite, a time not greater than the previous one, or a wrong column count.
   static GainSchedule readCsv(std::istream& in, const std::string& source = "<stream>");
@@ -60,6 +89,8 @@ class GainSchedule {
 
  private:
   int nu_ = 0, nx_ = 0;
+  double sampleRate_ = 0.0;
+  std::vector<std::string> columnNames_;
   Eigen::VectorXd times_;
   std::vector<Eigen::MatrixXd> gains_;
 };

@@ -59,6 +59,7 @@
 #include <Eigen/Core>
 
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -85,6 +86,11 @@ struct LqrWeights {
 /// S = UᵀU with BDF (see the top of this header), so S is symmetric PSD by construction.
 enum class RiccatiMethod { kBDF, kAdams, kFactored };
 
+/// "bdf", "adams", "factored" (the names the CLI and the benchmarks use).
+const char* toString(RiccatiMethod method);
+/// The inverse of toString; throws std::invalid_argument "'TEXT' is not one of bdf, adams, factored".
+RiccatiMethod parseRiccatiMethod(const std::string& text);
+
 /// Linear solver inside BDF's Newton iterations. kDense factors the exact N×N Jacobian
 /// (N = nx(nx+1)/2; O(N³) per factorization, only sensible for small nx); kKrylov is matrix-free
 /// GMRES with the exact Jacobian-vector product A_clᵀV + V A_cl (O(nx³) each), preconditioned by
@@ -109,6 +115,13 @@ struct RiccatiOptions {
   /// kFactored only: U(T) = chol(Qf + factoredQfShift·I). 0 requires Qf ≻ 0 (otherwise
   /// std::invalid_argument); > 0 is the documented regularization for a PSD Qf (≥ 0).
   double factoredQfShift = 0.0;
+  /// kFactored only: when S becomes this ill-conditioned along the solve (estimated by
+  /// (max U_ii / min U_ii)², from the diagonal of its factor), the rest of the horizon is
+  /// integrated in the plain form on S itself (reported in RiccatiSolution::switchedToPlainAt).
+  /// Near a singular S the factor's ODE turns stiff — U⁻¹ amplifies the error of U's small
+  /// diagonal — while S stays smooth: a rank-deficient Q over a long horizon otherwise costs
+  /// ~100 times the steps of the plain form, or fails with too much work. 0 never switches (> 0 or 0).
+  double factoredSwitchCondition = 1e8;
   /// Throws std::invalid_argument naming the field and its value.
   void validate() const;
 };
@@ -136,6 +149,8 @@ class RiccatiSolution {
   long jacobianEvaluations = 0;
   long linearIterations = 0;        ///< GMRES iterations (Krylov solver only)
   long preconditionerSolves = 0;    ///< Lyapunov preconditioner applications (Krylov only)
+  double switchedToPlainAt = std::numeric_limits<double>::quiet_NaN();  ///< kFactored: the time t
+                                    ///< where the solve switched to the plain form (NaN: never)
   double minEigenvalue = 0.0;       ///< of S over the stored steps (if tracked)
   double maxEigenvalue = 0.0;
 
@@ -152,8 +167,14 @@ class RiccatiSolution {
   /// S(t) (nx×nx, symmetric). Throws std::out_of_range outside [validFrom(), T].
   Eigen::MatrixXd S(double t) const;
   void S(double t, Eigen::MatrixXd& out) const;
-  /// K(t) = R(t)⁻¹ B(t)ᵀ S(t) (m×nx); calls the linearization (and R) callback at t.
+  /// K(t) = G(t) S(t), G = R⁻¹Bᵀ (m×nx). The solution owns everything it needs (no reference to
+  /// the model or the callbacks: it may outlive them): G is stored at every step end and step
+  /// midpoint of the solve and interpolated by the cubic through the four nearest of these nodes
+  /// (error O(h⁴·max‖G⁗‖) for steps of size h; exact at the nodes, e.g. at the step times).
+  /// Throws std::out_of_range outside [validFrom(), T].
   Eigen::MatrixXd K(double t) const;
+  /// Times (ascending) where G = R⁻¹Bᵀ is stored.
+  std::vector<double> gainNodeTimes() const { return gainTimes_; }
 
  private:
   friend RiccatiSolution solveRiccati(double, double, int, int, const LinearizationCallback&,
@@ -161,13 +182,13 @@ class RiccatiSolution {
   struct Step {
     double tau;            // τ = T − t at the step end
     Eigen::MatrixXd D;     // N × (q+1): derivatives d^k y/dτ^k at tau
+    bool factored;         // D holds the packed factor U (S = UᵀU) instead of S
   };
   int nx_ = 0, nu_ = 0;
   double t0_ = 0.0, tf_ = 0.0;
   std::vector<Step> steps_;  // ascending τ; steps_[0] is τ = 0 (S = Qf)
-  bool factored_ = false;    // steps_ hold the packed factor U (S = UᵀU) instead of S
-  LinearizationCallback linearization_;
-  LqrWeights weights_;
+  std::vector<double> gainTimes_;           // ascending t
+  std::vector<Eigen::MatrixXd> gainNodes_;  // G = R⁻¹Bᵀ at gainTimes_
 };
 
 /// Integrates the Riccati equation on [t0, T] (t0 < T). Throws std::invalid_argument for sizes,

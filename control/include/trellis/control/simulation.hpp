@@ -61,6 +61,11 @@ enum class IntegrationMethod {
            ///< (stiff springs, very high gains)
 };
 
+/// "adams", "bdf".
+const char* toString(IntegrationMethod method);
+/// The inverse of toString; throws std::invalid_argument "'TEXT' is not one of adams, bdf".
+IntegrationMethod parseIntegrationMethod(const std::string& text);
+
 struct SimulationOptions {
   double rtol = 1e-8;      ///< CVODES relative tolerance (> 0)
   double atol = 1e-10;     ///< CVODES absolute tolerance on each state entry (> 0)
@@ -99,6 +104,11 @@ enum class SimulationStatus {
 };
 
 const char* toString(SimulationStatus status);
+
+struct SimulationResult;
+/// One JSON object summarizing a simulation: status, message, rows, t0, t1, tracking error
+/// (initial, final, max, time of max), constraint drift, saturation, integrator work.
+std::string simulationJson(const SimulationResult& result);
 
 struct SimulationResult {
   SimulationStatus status = SimulationStatus::kOk;

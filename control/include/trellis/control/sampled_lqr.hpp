@@ -1,0 +1,94 @@
+// trellis/control/sampled_lqr.hpp — sampled-data (zero-order-hold) LQR along a time-varying
+// linearization: the exact discretization of each sample interval and the discrete Riccati
+// recursion with the cross term.
+//
+// A controller running at rate f holds δu_k on [t_k, t_{k+1}) (t_k = t0 + k h, h = 1/f; the last
+// interval ends at T and may be shorter). Over one interval the linearization δẋ = A(t)δx + B(t)δu
+// gives exactly
+//   δx(t_{k+1}) = Φ_k δx_k + Γ_k δu_k,  Φ_k = Φ(t_{k+1}, t_k),  Γ_k = ∫_{t_k}^{t_{k+1}} Φ(t_{k+1}, s) B(s) ds,
+// and, for s in the interval, δx(s) = Φ(s, t_k) δx_k + Γ(s) δu_k, so the continuous cost of the
+// interval is the quadratic form
+//   ∫ δxᵀQδx + δuᵀRδu ds = [δx_k; δu_k]ᵀ [[Q_k, N_k], [N_kᵀ, R_k]] [δx_k; δu_k],
+//   [[Q_k, N_k], [N_kᵀ, R_k]] = ∫ [Φ(s,t_k) Γ(s)]ᵀ Q(s) [Φ(s,t_k) Γ(s)] ds + [[0, 0], [0, ∫R ds]].
+// discretizeSampledData integrates Y = [Φ(s, t_k) Γ(s)] from Y(t_k) = [I 0] by the variational
+// equation Ẏ = A(s) Y + [0 B(s)] with CVODES (BDF; GMRES with the exact Jacobian product A·V and
+// the exact block preconditioner (I − γA)⁻¹ per column), on the exact A(s), B(s) at every point
+// the integrator asks for, and the cost matrix as a CVODES quadrature (error-controlled, outside
+// the Newton iteration). Against the usual shortcut — ZOH of a frozen A(t_mid), B(t_mid) — this
+// removes the O(h³) local error per interval from Ȧ, Ḃ (O(h²) after N ~ 1/h intervals), which for
+// a fast-changing reference is the whole difference between the gains (tests/control/
+// test_sampled_lqr.cpp measures it).
+//
+// The finite-horizon discrete recursion with cross term (S_N = Qf):
+//   G_k = R_k + Γ_kᵀ S_{k+1} Γ_k,  H_k = Γ_kᵀ S_{k+1} Φ_k + N_kᵀ,  K_k = G_k⁻¹ H_k,
+//   S_k = Q_k + Φ_kᵀ S_{k+1} Φ_k − H_kᵀ K_k   (symmetrized),
+// minimizes Σ_k [δx_k; δu_k]ᵀ[[Q_k, N_k], [N_kᵀ, R_k]][δx_k; δu_k] + δx_Nᵀ Qf δx_N with δu_k = −K_k δx_k
+// — i.e. exactly the continuous cost of the sampled-data closed loop of the linearization.
+// As h → 0, K_k → K(t_k) of the continuous Riccati equation, with an O(h) difference.
+#pragma once
+
+#include "trellis/control/riccati.hpp"
+
+#include <Eigen/Core>
+
+#include <string>
+#include <vector>
+
+namespace trellis {
+
+/// One sample interval [t0, t1] of the exact discretization (see the file comment).
+struct SampledInterval {
+  double t0 = 0.0, t1 = 0.0;
+  Eigen::MatrixXd Phi;    ///< nx×nx, Φ(t1, t0)
+  Eigen::MatrixXd Gamma;  ///< nx×m
+  Eigen::MatrixXd Q;      ///< nx×nx, symmetric PSD
+  Eigen::MatrixXd N;      ///< nx×m cross term
+  Eigen::MatrixXd R;      ///< m×m, symmetric PD
+};
+
+struct SampledDiscretizationOptions {
+  double rtol = 1e-10;     ///< CVODES relative tolerance on Φ, Γ and the cost (> 0)
+  double atol = 1e-12;     ///< absolute tolerance on the entries of Φ, Γ (> 0); the cost's is
+                           ///< atol·h·max(1, max|Q|, max|R|)
+  long maxSteps = 100000;  ///< internal steps per interval (> 0)
+  void validate() const;   ///< throws std::invalid_argument naming the field
+};
+
+struct SampledDiscretization {
+  std::vector<SampledInterval> intervals;  ///< those completed (all of them when ok)
+  bool ok = true;
+  std::string message;       ///< empty when ok; the time and the cause otherwise
+  double failureTime = 0.0;
+  long steps = 0;            ///< CVODES internal steps over all intervals
+  long rhsEvaluations = 0;
+  long linearizations = 0;   ///< calls of the linearization callback
+};
+
+/// The exact discretization of δẋ = A(t)δx + B(t)δu on the intervals [times_k, times_{k+1}]
+/// (times strictly increasing, ≥ 2 entries) and the sampled-data cost of Q (constant or
+/// weights.Qfun) and R (constant or weights.Rfun); weights.Qf is not used. Throws
+/// std::invalid_argument for bad sizes/options; a failing callback or CVODES error is reported in
+/// the result (with the time), never thrown.
+SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx, int nu,
+                                            const LinearizationCallback& linearization,
+                                            const LqrWeights& weights,
+                                            const SampledDiscretizationOptions& options = {});
+
+/// Backward recursion with cross term (file comment) over the intervals, S_N = Qf. S has N+1
+/// entries, K N. ok = false (message naming the step and its time) when G_k is not positive
+/// definite or S_k is not finite.
+struct SampledRiccatiRecursion {
+  std::vector<Eigen::MatrixXd> S, K;
+  bool ok = true;
+  std::string message;
+};
+SampledRiccatiRecursion solveSampledRiccatiRecursion(const std::vector<SampledInterval>& intervals,
+                                                     const Eigen::MatrixXd& Qf);
+
+/// Sample times t0 + k/rate (k = 0, 1, …) below T, then T: the grid the sampled solvers use. The
+/// last interval is shorter when (T − t0)·rate is not an integer (a sample within 1e-9 of a period
+/// of T is dropped, so no interval is shorter than that). Throws std::invalid_argument for
+/// rate ≤ 0 or t0 ≥ T.
+Eigen::VectorXd sampleTimes(double t0, double T, double rate);
+
+}  // namespace trellis

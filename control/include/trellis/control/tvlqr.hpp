@@ -1,0 +1,86 @@
+// trellis/control/tvlqr.hpp — the one entry point for time-varying LQR along a reference:
+// constrained or not, continuous or sampled (zero-order hold at a rate).
+//
+//   TvlqrSolution sol = solveTvlqr(model, reference, weights, options);
+//   if (!sol.ok) … sol.message;  sol.gains (K, m×2n, at sol.gains.times());  sol.S[k] (2n×2n)
+//
+// Continuous (options.sampleRate = 0): the Riccati ODE (riccati.hpp) — on the tangent space of the
+// constraint manifold for a scene with constraints (manifold_lqr.hpp) — and K(t) tabulated at the
+// reference's knots or every options.outputStep (sampling continuous gains: between rows they are
+// interpolated linearly).
+// Sampled (options.sampleRate = f > 0): the sampled-data LQR of sampled_lqr.hpp at t_k = t0 + k/f:
+// the exact discretization of each interval of the (reduced) linearization, the cost of the
+// held input, the recursion with the cross term; K_k at the sample times (the last row, at T,
+// repeats the last sample's gain), S_k there. On a constrained scene the reduced system is that of
+// the transported basis T(t) (z = T(t)ᵀδx), and K_k = Kr_k T(t_k)ᵀ, S_k = T(t_k) Sr_k T(t_k)ᵀ.
+//
+// The result is plain data (it owns the gains and S; no reference to the model).
+#pragma once
+
+#include "trellis/control/gain_schedule.hpp"
+#include "trellis/control/manifold_lqr.hpp"
+#include "trellis/control/riccati.hpp"
+#include "trellis/control/sampled_lqr.hpp"
+
+#include <Eigen/Core>
+
+#include <string>
+#include <vector>
+
+namespace trellis {
+
+class Model;
+class Trajectory;
+
+struct TvlqrOptions {
+  double sampleRate = 0.0;  ///< 0: continuous gains; > 0: zero-order-hold gains at this rate (Hz)
+  double outputStep = 0.0;  ///< continuous only: tabulate K every outputStep from t0 (T included);
+                            ///< 0: at the reference's knots (≥ 0)
+  RiccatiOptions riccati;                 ///< the continuous solve
+  SampledDiscretizationOptions sampled;   ///< the sampled discretization
+  TangentTransportOptions transport;      ///< the tangent basis (scenes with constraints)
+  /// Throws std::invalid_argument naming the field and its value.
+  void validate() const;
+};
+
+struct TvlqrSolution {
+  bool ok = false;
+  std::string message;            ///< empty when ok; what failed, where, when
+  double sampleRate = 0.0;        ///< as requested (0 = continuous)
+  bool constrained = false;       ///< solved on the tangent space of the constraint manifold
+  int nx = 0, nu = 0;             ///< 2n, m
+  int dimension = 0;              ///< d: tangent dimension (2n without constraints)
+  /// K (m×2n) at its times, with the scene's column names and the sample rate set.
+  GainSchedule gains;
+  /// Full-state cost-to-go at gains.times() (2n×2n, symmetric PSD; rank ≤ d).
+  std::vector<Eigen::MatrixXd> S;
+  // Diagnostics.
+  double seconds = 0.0;           ///< wall time of the solve
+  long steps = 0;                 ///< CVODES internal steps (Riccati ODE, or all intervals)
+  long rhsEvaluations = 0;
+  long linearizations = 0;        ///< sampled: evaluations of the (reduced) linearization
+  long transportSteps = 0;        ///< basis transport steps (constrained)
+  double maxBasisCorrection = 0.0;  ///< TangentBasisTrajectory::maxCorrection (constrained)
+  double minEigenvalueS = 0.0, maxEigenvalueS = 0.0;  ///< of S (reduced Sr) over the solve
+  std::string method;             ///< "bdf", "adams", "factored" or "sampled-zoh"
+
+  /// A few lines for people (what was solved, work, S's spectrum).
+  std::string summary() const;
+  /// The same as one JSON object (keys: ok, message, mode, sample_rate_hz, constrained, nx, nu,
+  /// tangent_dimension, rows, t0, t1, seconds, steps, rhs_evaluations, linearizations,
+  /// transport_steps, max_basis_correction, min_eigenvalue_S, max_eigenvalue_S, method).
+  std::string json() const;
+};
+
+/// Throws std::invalid_argument / TrajectoryError for bad input (sizes, weights, options, a
+/// reference not matching the model or without state derivatives); numerical failure is in
+/// the result (ok = false, message), never thrown.
+TvlqrSolution solveTvlqr(const Model& model, const Trajectory& reference, const LqrWeights& weights,
+                         const TvlqrOptions& options = {});
+
+/// Escapes a string for JSON ("…", with \", \\, \n and control characters escaped).
+std::string jsonString(const std::string& text);
+/// A number for JSON: %.17g, or null when not finite.
+std::string jsonNumber(double value);
+
+}  // namespace trellis

@@ -1,0 +1,290 @@
+// tvlqr.cpp — solveTvlqr: the user entry point over the continuous (full-state or manifold)
+// Riccati solve and the sampled-data recursion; summary and JSON of the result.
+#include "trellis/control/tvlqr.hpp"
+
+#include "trellis/control/trajectory.hpp"
+#include "trellis/core/model.hpp"
+
+#include <Eigen/Eigenvalues>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <sstream>
+#include <stdexcept>
+
+namespace trellis {
+
+void TvlqrOptions::validate() const {
+  if (!(sampleRate >= 0.0) || !std::isfinite(sampleRate)) {
+    throw std::invalid_argument("TvlqrOptions.sampleRate = " + std::to_string(sampleRate) +
+                                " is invalid (0 for continuous gains, else finite and > 0)");
+  }
+  if (!(outputStep >= 0.0) || !std::isfinite(outputStep)) {
+    throw std::invalid_argument("TvlqrOptions.outputStep = " + std::to_string(outputStep) +
+                                " is invalid (must be finite and >= 0)");
+  }
+  riccati.validate();
+  sampled.validate();
+  transport.validate();
+}
+
+std::string jsonString(const std::string& text) {
+  std::string out = "\"";
+  for (const char c : text) {
+    switch (c) {
+      case '"': out += "\\\""; break;
+      case '\\': out += "\\\\"; break;
+      case '\n': out += "\\n"; break;
+      case '\t': out += "\\t"; break;
+      case '\r': out += "\\r"; break;
+      default:
+        if (static_cast<unsigned char>(c) < 0x20) {
+          char buf[8];
+          std::snprintf(buf, sizeof buf, "\\u%04x", static_cast<unsigned>(static_cast<unsigned char>(c)));
+          out += buf;
+        } else {
+          out += c;
+        }
+    }
+  }
+  return out + "\"";
+}
+
+std::string jsonNumber(double value) {
+  if (!std::isfinite(value)) return "null";
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.17g", value);
+  return buf;
+}
+
+namespace {
+
+std::string fmt(double v, int digits = 6) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%.*g", digits, v);
+  return buf;
+}
+
+Eigen::VectorXd outputGrid(const Trajectory& reference, double step) {
+  if (step <= 0.0) return reference.times();
+  // k·step from t0 (no accumulated round-off); T closes the grid unless a grid point is already
+  // within a tiny fraction of a step of it.
+  const double t0 = reference.startTime(), T = reference.endTime();
+  std::vector<double> times;
+  for (long k = 0;; ++k) {
+    const double t = t0 + static_cast<double>(k) * step;
+    if (t >= T - 1e-9 * step) break;
+    times.push_back(t);
+  }
+  times.push_back(T);
+  return Eigen::Map<Eigen::VectorXd>(times.data(), static_cast<Eigen::Index>(times.size()));
+}
+
+}  // namespace
+
+std::string TvlqrSolution::summary() const {
+  std::ostringstream o;
+  if (!ok) {
+    o << "tvlqr: FAILED: " << message << "\n";
+    return o.str();
+  }
+  const int rows = gains.size();
+  o << rows << " rows of K (" << nu << " x " << nx << ") on [" << fmt(gains.startTime()) << ", "
+    << fmt(gains.endTime()) << "], "
+    << (sampleRate > 0.0 ? "zero-order-hold gains for a controller sampling at " + fmt(sampleRate, 17) +
+                               " Hz (apply at t0 + k/" + fmt(sampleRate, 17) + ", hold between samples)"
+                         : std::string("continuous gains (K(t), linear between rows)"))
+    << "\n";
+  if (constrained) {
+    o << "riccati: on the constraint manifold (tangent dimension " << dimension << " of " << nx
+      << "; basis transport " << transportSteps << " steps, max correction " << fmt(maxBasisCorrection, 3)
+      << ")\n";
+  } else {
+    o << "riccati: full state (no constraints)\n";
+  }
+  o << "riccati: " << method << ", " << steps << " steps, " << rhsEvaluations << " right-hand-side evaluations";
+  if (sampleRate > 0.0) o << ", " << linearizations << " linearizations";
+  o << ", " << fmt(seconds, 3) << " s\n";
+  o << "S" << (constrained ? "r" : "") << ": min eigenvalue " << fmt(minEigenvalueS) << ", max eigenvalue "
+    << fmt(maxEigenvalueS) << "\n";
+  return o.str();
+}
+
+std::string TvlqrSolution::json() const {
+  std::ostringstream o;
+  const bool have = gains.size() > 0;
+  o << "{\"ok\": " << (ok ? "true" : "false") << ", \"message\": " << jsonString(message)
+    << ", \"mode\": " << jsonString(sampleRate > 0.0 ? "sampled" : "continuous")
+    << ", \"sample_rate_hz\": " << jsonNumber(sampleRate) << ", \"constrained\": " << (constrained ? "true" : "false")
+    << ", \"nx\": " << nx << ", \"nu\": " << nu << ", \"tangent_dimension\": " << dimension
+    << ", \"rows\": " << gains.size() << ", \"t0\": " << (have ? jsonNumber(gains.startTime()) : "null")
+    << ", \"t1\": " << (have ? jsonNumber(gains.endTime()) : "null") << ", \"seconds\": " << jsonNumber(seconds)
+    << ", \"steps\": " << steps << ", \"rhs_evaluations\": " << rhsEvaluations
+    << ", \"linearizations\": " << linearizations << ", \"transport_steps\": " << transportSteps
+    << ", \"max_basis_correction\": " << jsonNumber(maxBasisCorrection)
+    << ", \"min_eigenvalue_S\": " << jsonNumber(minEigenvalueS)
+    << ", \"max_eigenvalue_S\": " << jsonNumber(maxEigenvalueS) << ", \"method\": " << jsonString(method) << "}";
+  return o.str();
+}
+
+TvlqrSolution solveTvlqr(const Model& model, const Trajectory& reference, const LqrWeights& weights,
+                         const TvlqrOptions& options) {
+  options.validate();
+  reference.checkCompatible(model);
+  if (!reference.hasStateDerivatives()) {
+    throw std::logic_error("solveTvlqr: the reference has no state derivatives (call computeStateDerivatives)");
+  }
+  const int nx = reference.nx(), nu = reference.nu();
+  if (nu == 0) throw std::invalid_argument("solveTvlqr: the model has no inputs: there is nothing to control");
+  checkWeightMatrix(weights.Qf, "Qf", nx, false);
+  if (!weights.Qfun) checkWeightMatrix(weights.Q, "Q", nx, false);
+  if (!weights.Rfun) checkWeightMatrix(weights.R, "R", nu, true);
+
+  TvlqrSolution sol;
+  sol.sampleRate = options.sampleRate;
+  sol.constrained = model.nc() > 0;
+  sol.nx = nx;
+  sol.nu = nu;
+  sol.dimension = nx;
+  const std::vector<std::string> stateNames = GainSchedule::stateNames(model.configNames());
+  const auto start = std::chrono::steady_clock::now();
+  auto finish = [&](Eigen::VectorXd times, std::vector<Eigen::MatrixXd> K) {
+    sol.gains = GainSchedule(std::move(times), std::move(K));
+    sol.gains.setColumnNames(model.inputNames(), stateNames);
+    sol.gains.setSampleRate(options.sampleRate);
+    sol.ok = true;
+    sol.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
+
+  if (options.sampleRate == 0.0) {
+    // Continuous: the Riccati ODE, on the tangent space when there are constraints.
+    sol.method = toString(options.riccati.method);
+    const Eigen::VectorXd times = outputGrid(reference, options.outputStep);
+    std::vector<Eigen::MatrixXd> K;
+    const RiccatiSolution* riccati = nullptr;
+    std::optional<ManifoldRiccatiSolution> onManifold;
+    std::optional<RiccatiSolution> fullState;
+    if (sol.constrained) {
+      onManifold = solveManifoldRiccati(model, reference, weights, options.riccati, options.transport);
+      sol.transportSteps = onManifold->basis.steps();
+      sol.dimension = onManifold->dimension();
+      riccati = &onManifold->reduced;
+      if (!onManifold->ok()) {
+        sol.message = "the Riccati solve failed: " + onManifold->message();
+        return sol;
+      }
+    } else {
+      fullState = solveRiccati(model, reference, weights, options.riccati);
+      riccati = &*fullState;
+      if (!fullState->ok()) {
+        sol.message = "the Riccati solve failed: " + fullState->message;
+        return sol;
+      }
+    }
+    sol.steps = riccati->steps;
+    sol.rhsEvaluations = riccati->rhsEvaluations;
+    sol.minEigenvalueS = riccati->minEigenvalue;
+    sol.maxEigenvalueS = riccati->maxEigenvalue;
+    try {
+      for (Eigen::Index k = 0; k < times.size(); ++k) {
+        const double t = times(k);
+        K.push_back(sol.constrained ? onManifold->K(t) : fullState->K(t));
+        sol.S.push_back(sol.constrained ? onManifold->S(t) : fullState->S(t));
+        if (!K.back().allFinite() || !sol.S.back().allFinite()) {
+          sol.message = "the gain K(t) or S(t) is not finite at t = " + fmt(t, 17);
+          sol.S.clear();
+          return sol;
+        }
+      }
+    } catch (const std::exception& e) {
+      sol.message = std::string("evaluating the gains failed: ") + e.what();
+      sol.S.clear();
+      return sol;
+    }
+    if (sol.constrained) sol.maxBasisCorrection = onManifold->basis.maxCorrection();
+    finish(times, std::move(K));
+    return sol;
+  }
+
+  // Sampled: reduced system on the transported basis (T = I without constraints).
+  sol.method = "sampled-zoh";
+  const TangentBasisTrajectory basis = transportTangentBasis(model, reference, options.transport);
+  sol.transportSteps = basis.steps();
+  if (!basis.ok()) {
+    sol.message = "the tangent basis transport failed: " + basis.message();
+    return sol;
+  }
+  const int d = basis.dimension();
+  sol.dimension = d;
+  struct Shared {
+    TangentBasisTrajectory basis;
+    Eigen::MatrixXd T, Ar, Br, Q;
+  };
+  auto sh = std::make_shared<Shared>();
+  sh->basis = basis;
+  const LinearizationCallback lin = [sh](double t, Eigen::MatrixXd& A, Eigen::MatrixXd& B) {
+    sh->basis.reducedLinearization(t, sh->T, sh->Ar, sh->Br);
+    A = sh->Ar;
+    B = sh->Br;
+  };
+  LqrWeights reduced;
+  reduced.R = weights.R;
+  reduced.Rfun = weights.Rfun;
+  const Eigen::MatrixXd Qconst = weights.Q;
+  const WeightCallback Qfull = weights.Qfun;
+  reduced.Qfun = [sh, Qconst, Qfull, nx](double t, Eigen::MatrixXd& Qr) {
+    sh->basis.reducedLinearization(t, sh->T, sh->Ar, sh->Br);  // cached on t: no extra dynamics
+    if (Qfull) {
+      sh->Q.setZero(nx, nx);
+      Qfull(t, sh->Q);
+      Qr = sh->T.transpose() * sh->Q * sh->T;
+    } else {
+      Qr = sh->T.transpose() * Qconst * sh->T;
+    }
+    Qr = 0.5 * (Qr + Qr.transpose()).eval();
+  };
+  const Eigen::VectorXd times = sampleTimes(reference.startTime(), reference.endTime(), options.sampleRate);
+  const SampledDiscretization disc = discretizeSampledData(times, d, nu, lin, reduced, options.sampled);
+  sol.steps = disc.steps;
+  sol.rhsEvaluations = disc.rhsEvaluations;
+  sol.linearizations = disc.linearizations;
+  if (!disc.ok) {
+    sol.message = disc.message;
+    return sol;
+  }
+  std::vector<Eigen::MatrixXd> Tk;
+  try {
+    for (Eigen::Index k = 0; k < times.size(); ++k) Tk.push_back(basis.basis(times(k)));
+  } catch (const std::exception& e) {
+    sol.message = std::string("the tangent basis failed: ") + e.what();
+    return sol;
+  }
+  const Eigen::MatrixXd Qfr = Tk.back().transpose() * weights.Qf * Tk.back();
+  const SampledRiccatiRecursion rec = solveSampledRiccatiRecursion(disc.intervals, 0.5 * (Qfr + Qfr.transpose()));
+  if (!rec.ok) {
+    sol.message = rec.message;
+    return sol;
+  }
+  const std::size_t N = disc.intervals.size();
+  std::vector<Eigen::MatrixXd> K;
+  sol.minEigenvalueS = std::numeric_limits<double>::infinity();
+  sol.maxEigenvalueS = -std::numeric_limits<double>::infinity();
+  for (std::size_t k = 0; k <= N; ++k) {
+    // K at T repeats the last sample's gain (the input is held over the last interval).
+    K.push_back(rec.K[std::min(k, N - 1)] * Tk[k].transpose());
+    Eigen::MatrixXd S = Tk[k] * rec.S[k] * Tk[k].transpose();
+    sol.S.push_back(0.5 * (S + S.transpose()));
+    const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(rec.S[k], Eigen::EigenvaluesOnly).eigenvalues();
+    sol.minEigenvalueS = std::min(sol.minEigenvalueS, ev(0));
+    sol.maxEigenvalueS = std::max(sol.maxEigenvalueS, ev(ev.size() - 1));
+  }
+  sol.maxBasisCorrection = sol.constrained ? basis.maxCorrection() : 0.0;
+  finish(times, std::move(K));
+  return sol;
+}
+
+}  // namespace trellis

@@ -1,0 +1,466 @@
+// test_sampled_lqr.cpp — sampled-data (zero-order-hold) LQR: the exact discretization against an
+// independent fixed-step integration (and against the frozen-A shortcut), the recursion with cross
+// term against brute-force minimization, the DARE limit, convergence to the continuous gains, the
+// cart-pole held at 50 Hz with input bounds, constrained scenes, and solveTvlqr's result.
+#include "control_test_support.hpp"
+
+#include <trellis/control.hpp>
+#include <trellis/control/sampled_lqr.hpp>
+#include <trellis/control/tvlqr.hpp>
+
+#include <catch2/catch.hpp>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <sstream>
+
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+using trellis::GainSchedule;
+using trellis::LqrWeights;
+using trellis::Model;
+using trellis::SampledInterval;
+using trellis::SimulationOptions;
+using trellis::SimulationResult;
+using trellis::Trajectory;
+
+namespace {
+
+// A time-varying test system with fast-changing A(t), B(t) (nx = 2, m = 1).
+void tvSystem(double t, MatrixXd& A, MatrixXd& B) {
+  A.resize(2, 2);
+  B.resize(2, 1);
+  A << 0.0, 1.0, -(1.0 + 3.0 * std::sin(4.0 * t)), -0.2 + t;
+  B << 0.1 * t, 1.0 + 0.5 * std::cos(3.0 * t);
+}
+
+/// Independent reference: classical RK4 with `steps` fixed steps on Y = [Φ Γ] and the cost W.
+SampledInterval rk4Interval(double a, double b, const MatrixXd& Q, const MatrixXd& R, int steps) {
+  const int nx = 2, m = 1, c = nx + m;
+  auto f = [&](double t, const MatrixXd& Y, MatrixXd& dY, MatrixXd& dW) {
+    MatrixXd A, B;
+    tvSystem(t, A, B);
+    dY = A * Y;
+    dY.rightCols(m) += B;
+    dW = Y.transpose() * Q * Y;
+    dW.bottomRightCorner(m, m) += R;
+  };
+  MatrixXd Y = MatrixXd::Zero(nx, c), W = MatrixXd::Zero(c, c);
+  Y.leftCols(nx).setIdentity();
+  const double h = (b - a) / steps;
+  MatrixXd k1, k2, k3, k4, l1, l2, l3, l4;
+  for (int i = 0; i < steps; ++i) {
+    const double t = a + i * h;
+    f(t, Y, k1, l1);
+    f(t + h / 2, Y + h / 2 * k1, k2, l2);
+    f(t + h / 2, Y + h / 2 * k2, k3, l3);
+    f(t + h, Y + h * k3, k4, l4);
+    Y += h / 6 * (k1 + 2 * k2 + 2 * k3 + k4);
+    W += h / 6 * (l1 + 2 * l2 + 2 * l3 + l4);
+  }
+  SampledInterval iv;
+  iv.t0 = a;
+  iv.t1 = b;
+  iv.Phi = Y.leftCols(nx);
+  iv.Gamma = Y.rightCols(m);
+  iv.Q = W.topLeftCorner(nx, nx);
+  iv.N = W.topRightCorner(nx, m);
+  iv.R = W.bottomRightCorner(m, m);
+  return iv;
+}
+
+double relErr(const MatrixXd& ref, const MatrixXd& got) {
+  return (ref - got).cwiseAbs().maxCoeff() / std::max(1e-300, ref.cwiseAbs().maxCoeff());
+}
+
+Trajectory constantReference(const Model& model, const VectorXd& x, const VectorXd& u, double T) {
+  MatrixXd X(x.size(), 2), U(u.size(), 2);
+  X << x, x;
+  U << u, u;
+  Trajectory ref(model.configNames(), model.inputNames(), (VectorXd(2) << 0.0, T).finished(), X, U);
+  trellis::Data data(model);
+  ref.computeStateDerivatives(model, data);
+  return ref;
+}
+
+/// The cart-pole's free swing from θ = 2.5 rad (u = 0) on [0, T]: a time-varying reference.
+Trajectory swingReference(const Model& model, double T) {
+  SimulationOptions opt;
+  opt.rtol = 1e-11;
+  opt.atol = 1e-12;
+  opt.outputStep = 0.01;
+  const trellis::Policy zero = [](double, const VectorXd&, VectorXd& u) { u.setZero(); };
+  const SimulationResult r =
+      trellis::simulate(model, (VectorXd(4) << 0.0, 2.5, 0.0, 0.0).finished(), 0.0, T, zero, opt);
+  REQUIRE(r.ok());
+  return r.trajectory;
+}
+
+LqrWeights cartPoleWeights() {
+  LqrWeights w;
+  w.Q = VectorXd((VectorXd(4) << 10.0, 10.0, 1.0, 1.0).finished()).asDiagonal();
+  w.R = MatrixXd::Identity(1, 1);
+  w.Qf = w.Q;
+  return w;
+}
+
+}  // namespace
+
+TEST_CASE("sampled LQR: exact discretization of a time-varying system vs RK4 and frozen-A ZOH",
+          "[sampled]") {
+  const MatrixXd Q = (MatrixXd(2, 2) << 3.0, 0.5, 0.5, 1.0).finished();
+  const MatrixXd R = MatrixXd::Constant(1, 1, 0.7);
+  LqrWeights w;
+  w.Q = Q;
+  w.R = R;
+  const double h = 0.1;
+  const VectorXd times = (VectorXd(3) << 0.3, 0.3 + h, 0.3 + 2 * h).finished();
+  const auto disc = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w);
+  REQUIRE(disc.ok);
+  REQUIRE(disc.intervals.size() == 2);
+  double exactErr = 0.0, frozenErr = 0.0;
+  for (const SampledInterval& iv : disc.intervals) {
+    const SampledInterval ref = rk4Interval(iv.t0, iv.t1, Q, R, 4000);
+    INFO("interval [" << iv.t0 << ", " << iv.t1 << "]");
+    CHECK(relErr(ref.Phi, iv.Phi) < 1e-9);
+    CHECK(relErr(ref.Gamma, iv.Gamma) < 1e-9);
+    CHECK(relErr(ref.Q, iv.Q) < 1e-8);
+    CHECK(relErr(ref.N, iv.N) < 1e-8);
+    CHECK(relErr(ref.R, iv.R) < 1e-8);
+    exactErr = std::max({exactErr, relErr(ref.Phi, iv.Phi), relErr(ref.Gamma, iv.Gamma)});
+    // The shortcut: ZOH of A, B frozen at the interval's midpoint.
+    MatrixXd A, B;
+    tvSystem(0.5 * (iv.t0 + iv.t1), A, B);
+    const auto zoh = trellis::discretizeZeroOrderHold(A, B, iv.t1 - iv.t0);
+    frozenErr = std::max({frozenErr, relErr(ref.Phi, zoh.Ad), relErr(ref.Gamma, zoh.Bd)});
+  }
+  INFO("exact " << exactErr << ", frozen midpoint " << frozenErr);
+  // The frozen-A error is the O(h³) term of Ȧ, Ḃ (here ~1e-3): what the exact integration removes.
+  CHECK(frozenErr > 1e-4);
+  CHECK(frozenErr > 1e4 * exactErr);
+  // The joint cost matrix is symmetric PSD (it is an integral of Gram matrices + R).
+  for (const SampledInterval& iv : disc.intervals) {
+    MatrixXd M(3, 3);
+    M << iv.Q, iv.N, iv.N.transpose(), iv.R;
+    CHECK(Eigen::SelfAdjointEigenSolver<MatrixXd>(M).eigenvalues().minCoeff() > -1e-12);
+  }
+}
+
+TEST_CASE("sampled LQR: the recursion with cross term minimizes the stacked cost (manufactured)",
+          "[sampled]") {
+  // Random intervals (nx = 3, m = 2, 4 steps) with a PSD joint cost; the optimal cost
+  // x0ᵀ S0 x0 and the first input against the brute-force minimization over all inputs.
+  std::mt19937 rng(11);
+  std::normal_distribution<double> g;
+  auto rnd = [&](int r, int c) {
+    MatrixXd M(r, c);
+    for (int i = 0; i < r; ++i)
+      for (int j = 0; j < c; ++j) M(i, j) = g(rng);
+    return M;
+  };
+  const int nx = 3, m = 2, N = 4;
+  std::vector<SampledInterval> ivs(N);
+  for (int k = 0; k < N; ++k) {
+    SampledInterval& iv = ivs[k];
+    iv.t0 = k;
+    iv.t1 = k + 1;
+    iv.Phi = rnd(nx, nx);
+    iv.Gamma = rnd(nx, m);
+    const MatrixXd L = rnd(nx + m, nx + m);
+    MatrixXd J = L * L.transpose();
+    J.bottomRightCorner(m, m) += 0.5 * MatrixXd::Identity(m, m);
+    iv.Q = J.topLeftCorner(nx, nx);
+    iv.N = J.topRightCorner(nx, m);
+    iv.R = J.bottomRightCorner(m, m);
+  }
+  const MatrixXd L = rnd(nx, nx);
+  const MatrixXd Qf = L * L.transpose();
+  const auto rec = trellis::solveSampledRiccatiRecursion(ivs, Qf);
+  REQUIRE(rec.ok);
+  REQUIRE(rec.S.size() == std::size_t(N + 1));
+  REQUIRE(rec.K.size() == std::size_t(N));
+
+  // x_k = Ex[k] x0 + Eu[k] u (u stacked), J = Σ [x_k; u_k]ᵀ W_k [x_k; u_k] + x_Nᵀ Qf x_N.
+  std::vector<MatrixXd> Ex(N + 1), Eu(N + 1);
+  Ex[0] = MatrixXd::Identity(nx, nx);
+  Eu[0] = MatrixXd::Zero(nx, N * m);
+  MatrixXd H = MatrixXd::Zero(N * m, N * m), Lx = MatrixXd::Zero(N * m, nx), P = MatrixXd::Zero(nx, nx);
+  for (int k = 0; k < N; ++k) {
+    Ex[k + 1] = ivs[k].Phi * Ex[k];
+    Eu[k + 1] = ivs[k].Phi * Eu[k];
+    Eu[k + 1].middleCols(k * m, m) += ivs[k].Gamma;
+    MatrixXd Su = Eu[k];  // [x_k; u_k] = Zx x0 + Zu u
+    MatrixXd Zx(nx + m, nx), Zu(nx + m, N * m);
+    Zx << Ex[k], MatrixXd::Zero(m, nx);
+    Zu << Su, MatrixXd::Zero(m, N * m);
+    Zu.block(nx, k * m, m, m).setIdentity();
+    MatrixXd W(nx + m, nx + m);
+    W << ivs[k].Q, ivs[k].N, ivs[k].N.transpose(), ivs[k].R;
+    H += Zu.transpose() * W * Zu;
+    Lx += Zu.transpose() * W * Zx;
+    P += Zx.transpose() * W * Zx;
+  }
+  H += Eu[N].transpose() * Qf * Eu[N];
+  Lx += Eu[N].transpose() * Qf * Ex[N];
+  P += Ex[N].transpose() * Qf * Ex[N];
+  // min over u of uᵀHu + 2uᵀLx x0 + x0ᵀPx0 = x0ᵀ(P − Lxᵀ H⁻¹ Lx)x0, u* = −H⁻¹ Lx x0.
+  const Eigen::LLT<MatrixXd> llt(H);
+  REQUIRE(llt.info() == Eigen::Success);
+  const MatrixXd S0 = P - Lx.transpose() * llt.solve(Lx);
+  const MatrixXd Ustar = -llt.solve(Lx);  // columns: u* for x0 = e_j
+  CHECK(relErr(S0, rec.S[0]) < 1e-10);
+  CHECK(relErr(Ustar.topRows(m), -rec.K[0]) < 1e-10);
+  // Along the optimal sequence the feedback reproduces every input.
+  const VectorXd x0 = rnd(nx, 1);
+  VectorXd x = x0;
+  const VectorXd ustar = Ustar * x0;
+  for (int k = 0; k < N; ++k) {
+    const VectorXd u = -rec.K[k] * x;
+    CHECK((u - ustar.segment(k * m, m)).norm() < 1e-9 * (1.0 + ustar.norm()));
+    x = ivs[k].Phi * x + ivs[k].Gamma * u;
+  }
+}
+
+TEST_CASE("sampled LQR: a long horizon on a time-invariant system converges to the DARE",
+          "[sampled]") {
+  // The cart-pole's upright linearization (unstable), h = 0.02.
+  const Model model = trellis::ctest::makeCartPole();
+  trellis::Data data(model);
+  const VectorXd z2 = VectorXd::Zero(2), u = VectorXd::Zero(1);
+  REQUIRE(trellis::computeLinearization(model, data, z2, z2, u).ok());
+  const MatrixXd A = data.A, B = data.B;
+  const LqrWeights w = cartPoleWeights();
+  const double h = 0.02;
+  const trellis::LinearizationCallback lin = [&](double, MatrixXd& Am, MatrixXd& Bm) {
+    Am = A;
+    Bm = B;
+  };
+  const auto disc = trellis::discretizeSampledData((VectorXd(2) << 0.0, h).finished(), 4, 1, lin, w);
+  REQUIRE(disc.ok);
+  const SampledInterval iv = disc.intervals[0];
+  // Time invariant: Φ, Γ are the matrix-exponential ZOH.
+  const auto zoh = trellis::discretizeZeroOrderHold(A, B, h);
+  CHECK(relErr(zoh.Ad, iv.Phi) < 1e-9);
+  CHECK(relErr(zoh.Bd, iv.Gamma) < 1e-9);
+  // Cost by Van Loan's block exponential: exp([[−Aᵀ, Q, 0], [0, A, B], [0, 0, 0]]·h)... checked
+  // here more simply at h → the midpoint rule: Q_k ≈ h Q, R_k ≈ h R to O(h²).
+  CHECK(relErr(h * w.Q, iv.Q) < 0.1);
+  CHECK(relErr(h * w.R, iv.R) < 0.01);
+
+  const std::vector<SampledInterval> ivs(3000, iv);  // 60 s
+  const auto rec = trellis::solveSampledRiccatiRecursion(ivs, w.Qf);
+  REQUIRE(rec.ok);
+  // The DARE with cross term equals the plain DARE of (Φ − ΓR⁻¹Nᵀ, Γ, Q − NR⁻¹Nᵀ, R), with
+  // K = K̃ + R⁻¹Nᵀ.
+  const MatrixXd RiNt = iv.R.llt().solve(iv.N.transpose());
+  const MatrixXd At = iv.Phi - iv.Gamma * RiNt;
+  MatrixXd Qt = iv.Q - iv.N * RiNt;
+  Qt = 0.5 * (Qt + Qt.transpose());
+  const auto dare = trellis::solveDare(At, iv.Gamma, Qt, iv.R);
+  REQUIRE(dare.ok());
+  CHECK(relErr(dare.S, rec.S[0]) < 1e-8);
+  CHECK(relErr(dare.K + RiNt, rec.K[0]) < 1e-8);
+  // And the sampled gain differs from the continuous CARE gain by O(h) (the reason to compute it).
+  const auto care = trellis::solveCare(A, B, w.Q, w.R);
+  REQUIRE(care.ok());
+  const double diff = relErr(care.K, rec.K[0]);
+  INFO("|K_sampled - K_care| / |K_care| = " << diff);
+  CHECK(diff > 1e-3);
+  CHECK(diff < 0.5);
+}
+
+TEST_CASE("sampled LQR: gains approach the continuous gains as the rate grows, at O(h)",
+          "[sampled]") {
+  const Model model = trellis::ctest::makeCartPole();
+  const Trajectory ref = swingReference(model, 1.5);
+  const LqrWeights w = cartPoleWeights();
+  trellis::RiccatiOptions ro;
+  ro.rtol = 1e-11;
+  ro.atol = 1e-12;
+  const trellis::RiccatiSolution cont = trellis::solveRiccati(model, ref, w, ro);
+  REQUIRE(cont.ok());
+  std::vector<double> errors;
+  std::ostringstream table;
+  for (double rate : {50.0, 100.0, 200.0, 400.0}) {
+    trellis::TvlqrOptions opt;
+    opt.sampleRate = rate;
+    const trellis::TvlqrSolution sol = trellis::solveTvlqr(model, ref, w, opt);
+    REQUIRE(sol.ok);
+    REQUIRE(sol.gains.isSampled());
+    double err = 0.0, scale = 0.0;
+    for (int k = 0; k + 1 < sol.gains.size(); ++k) {
+      const MatrixXd Kc = cont.K(sol.gains.times()(k));
+      err = std::max(err, (Kc - sol.gains.gains()[k]).cwiseAbs().maxCoeff());
+      scale = std::max(scale, Kc.cwiseAbs().maxCoeff());
+    }
+    errors.push_back(err / scale);
+    table << rate << " Hz: " << err / scale << "\n";
+  }
+  INFO("max |K_k - K(t_k)| / max |K|:\n" << table.str());
+  for (std::size_t i = 1; i < errors.size(); ++i) {
+    const double ratio = errors[i - 1] / errors[i];
+    INFO("ratio " << ratio);
+    CHECK(ratio > 1.7);  // first order: halving h halves the difference
+    CHECK(ratio < 2.3);
+  }
+  CHECK(errors.back() < 0.02);
+}
+
+TEST_CASE("sampled LQR: the cart-pole held upright by a 50 Hz controller with input bounds",
+          "[sampled]") {
+  const Model model = trellis::ctest::makeCartPole();
+  const double T = 8.0;
+  const Trajectory ref = constantReference(model, VectorXd::Zero(4), VectorXd::Zero(1), T);
+  trellis::TvlqrOptions opt;
+  opt.sampleRate = 50.0;
+  const trellis::TvlqrSolution sol = trellis::solveTvlqr(model, ref, cartPoleWeights(), opt);
+  REQUIRE(sol.ok);
+  CHECK(sol.gains.size() == 401);  // 0, 0.02, …, 7.98 and T
+  CHECK(sol.gains.sampleRate() == 50.0);
+  CHECK(sol.S.size() == 401);
+  const double limit = 4.0;
+  SimulationOptions so;
+  so.sampleRate = 50.0;
+  so.outputStep = 0.02;
+  so.inputLower = VectorXd::Constant(1, -limit);
+  so.inputUpper = VectorXd::Constant(1, limit);
+  for (double angle : {0.15, -0.2}) {
+    const VectorXd x0 = (VectorXd(4) << 0.1, angle, 0.0, 0.0).finished();
+    const SimulationResult r = trellis::simulateClosedLoop(model, ref, sol.gains, x0, so);
+    REQUIRE(r.ok());
+    INFO("angle " << angle << ": final error " << r.trackingError(r.trackingError.size() - 1));
+    CHECK(r.trackingError(r.trackingError.size() - 1) < 1e-2 * r.trackingError(0));
+    CHECK(r.saturatedSamples > 0);  // the bound was active
+    CHECK(r.trajectory.inputs().cwiseAbs().maxCoeff() <= limit);
+    // u at a sample time is clip(−K_k x_k) with the sample's own gain.
+    for (int k = 0; k < r.trajectory.size() - 1; k += 37) {
+      const double uk = std::clamp(-(sol.gains.gains()[k] * r.trajectory.states().col(k))(0), -limit, limit);
+      CHECK(r.trajectory.inputs()(0, k) == Approx(uk).epsilon(1e-10).margin(1e-12));
+    }
+  }
+}
+
+TEST_CASE("sampled LQR: on a constrained scene, on the tangent space", "[sampled]") {
+  const Model model = trellis::ctest::makeConstrainedCarts();
+  const double T = 3.0;
+  const Trajectory ref = constantReference(model, VectorXd::Zero(4), VectorXd::Zero(1), T);
+  LqrWeights w;
+  w.Q = MatrixXd::Identity(4, 4);
+  w.R = MatrixXd::Identity(1, 1);
+  w.Qf = w.Q;
+  trellis::TvlqrOptions opt;
+  opt.sampleRate = 100.0;
+  const trellis::TvlqrSolution sol = trellis::solveTvlqr(model, ref, w, opt);
+  REQUIRE(sol.ok);
+  CHECK(sol.constrained);
+  CHECK(sol.dimension == 2);
+  // The gain ignores the direction that leaves the manifold (x1 − x2 ≠ 0), and S is singular there.
+  const VectorXd normalPos = (VectorXd(4) << 1.0, -1.0, 0.0, 0.0).finished().normalized();
+  const VectorXd normalVel = (VectorXd(4) << 0.0, 0.0, 1.0, -1.0).finished().normalized();
+  for (int k = 0; k < sol.gains.size(); k += 50) {
+    CHECK((sol.gains.gains()[k] * normalPos).norm() < 1e-10);
+    CHECK((sol.gains.gains()[k] * normalVel).norm() < 1e-10);
+    CHECK((sol.S[k] * normalPos).norm() < 1e-10);
+  }
+  // Two unit masses moving together: the reduced system is a double integrator of mass 2; the
+  // gains converge (as the rate grows) to those of the continuous manifold solve.
+  opt.sampleRate = 0.0;
+  opt.riccati.rtol = 1e-11;
+  opt.riccati.atol = 1e-12;
+  const trellis::TvlqrSolution cont = trellis::solveTvlqr(model, ref, w, opt);
+  REQUIRE(cont.ok);
+  const MatrixXd K0c = cont.gains.gains()[0];
+  const MatrixXd K0d = sol.gains.gains()[0];
+  INFO("continuous K0 " << K0c << ", sampled K0 " << K0d);
+  CHECK(relErr(K0c, K0d) < 0.05);
+  CHECK(relErr(K0c, K0d) > 1e-5);
+}
+
+namespace {
+
+/// Loads its own model, solves, returns the solution; the model dies on return.
+trellis::RiccatiSolution solveWithOwnModel(std::vector<std::pair<double, MatrixXd>>& alive) {
+  const Model model = trellis::ctest::makeCartPole();
+  const Trajectory ref = swingReference(model, 1.0);
+  trellis::RiccatiSolution sol = trellis::solveRiccati(model, ref, cartPoleWeights());
+  REQUIRE(sol.ok());
+  // K with the model alive, by an independent path (R⁻¹ Bᵀ S from a fresh linearization), at
+  // step times and between them.
+  const auto lin = trellis::makeTrajectoryLinearization(model, ref);
+  for (double t : {0.0, 0.1234, 0.5, 0.777, 1.0}) {
+    MatrixXd A(4, 4), B(4, 1);
+    lin(t, A, B);
+    alive.emplace_back(t, B.transpose() * sol.S(t));  // R = 1
+  }
+  return sol;
+}
+
+}  // namespace
+
+TEST_CASE("riccati: a solution outlives its model (run under asan)", "[sampled][lifetime]") {
+  std::vector<std::pair<double, MatrixXd>> alive;
+  trellis::RiccatiSolution copy;
+  {
+    const trellis::RiccatiSolution returned = solveWithOwnModel(alive);
+    copy = returned;  // copy, then the original dies too
+  }
+  REQUIRE(copy.ok());
+  for (const auto& [t, K] : alive) {
+    INFO("t = " << t);
+    // Between nodes the stored R⁻¹Bᵀ is interpolated by a cubic: error O(h⁴) in the step size.
+    CHECK(relErr(K, copy.K(t)) < 1e-5);
+    CHECK(copy.S(t).allFinite());
+  }
+  // At the stored nodes the gain is exact.
+  const std::vector<double> nodes = copy.gainNodeTimes();
+  REQUIRE(nodes.size() >= 3);
+  CHECK(nodes.front() == Approx(0.0).margin(1e-12));
+  CHECK(nodes.back() == 1.0);
+}
+
+TEST_CASE("gain schedule: named columns, sample rate, checks against the scene", "[sampled]") {
+  const Model model = trellis::ctest::makeCartPole();
+  const Trajectory ref = constantReference(model, VectorXd::Zero(4), VectorXd::Zero(1), 1.0);
+  trellis::TvlqrOptions opt;
+  opt.sampleRate = 20.0;
+  const trellis::TvlqrSolution sol = trellis::solveTvlqr(model, ref, cartPoleWeights(), opt);
+  REQUIRE(sol.ok);
+  std::stringstream csv;
+  sol.gains.writeCsv(csv);
+  const std::string text = csv.str();
+  INFO(text.substr(0, 200));
+  CHECK(text.find("# trellis gain schedule: m=1 nx=4 sample_rate_hz=20") == 0);
+  CHECK(text.find("t,K_push_x,K_push_theta,K_push_dx,K_push_dtheta\n") != std::string::npos);
+  const GainSchedule back = GainSchedule::readCsv(csv, "mem");
+  CHECK(back.sampleRate() == 20.0);
+  CHECK(back.size() == sol.gains.size());
+  CHECK((back.gains()[3] - sol.gains.gains()[3]).norm() == 0.0);
+  const auto states = GainSchedule::stateNames(model.configNames());
+  CHECK_NOTHROW(back.checkNames(model.inputNames(), states, "mem"));
+  // Same sizes, other names: refused, naming the column.
+  const std::vector<std::string> other = {"y", "phi", "dy", "dphi"};
+  try {
+    back.checkNames(model.inputNames(), other, "mem");
+    FAIL("expected a name mismatch");
+  } catch (const trellis::TrajectoryError& e) {
+    CHECK(std::string(e.what()).find("column 2 is 'K_push_x', but the scene's gain column there is 'K_push_y'") !=
+          std::string::npos);
+  }
+  // The older layout (no metadata line, K_i_j) is read as continuous gains.
+  std::stringstream old("t,K_0_0,K_0_1\n0,1,2\n1,3,4\n");
+  const GainSchedule legacy = GainSchedule::readCsv(old, "old");
+  CHECK(legacy.sampleRate() == 0.0);
+  CHECK(legacy.columnNames().empty());
+  CHECK(legacy.nx() == 2);
+  // Named columns without the metadata line: a clear refusal.
+  std::stringstream named("t,K_push_x,K_push_theta\n0,1,2\n");
+  CHECK_THROWS_WITH(GainSchedule::readCsv(named, "named"),
+                    Catch::Contains("need the '# trellis gain schedule: m=.. nx=..' line"));
+  // The summary and JSON say what the gains are.
+  CHECK(sol.summary().find("zero-order-hold gains for a controller sampling at 20 Hz") != std::string::npos);
+  CHECK(sol.json().find("\"mode\": \"sampled\", \"sample_rate_hz\": 20") != std::string::npos);
+}
