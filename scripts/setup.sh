@@ -10,6 +10,7 @@ packages=(
   # libraries
   libeigen3-dev          # Eigen 3.4: all of trellis's linear algebra
   nlohmann-json3-dev     # scene files (JSON)
+  libtinyxml2-dev        # URDF import (XML with line numbers)
   libsundials-dev        # CVODES: Riccati / trajectory integration (control, planned)
   coinor-libipopt-dev    # Ipopt: trajectory optimization (optimization, planned)
   catch2                 # Catch2 2.13: the test suite

@@ -32,6 +32,52 @@ int axisOf(TransformType t) {
   }
 }
 
+bool isAxisType(TransformType t) { return t == TransformType::kRotAxis || t == TransformType::kTransAxis; }
+
+Transform axisTransform(TransformType type, const Eigen::Vector3d& axis, const Eigen::Matrix4d& origin) {
+  Transform t;
+  t.type = type;
+  t.axis = axis;
+  t.matrix = origin;
+  return t;
+}
+
+/// A rotation Ra with Ra e_z = a (a unit). Built from basis vectors so that a = ±e_i gives an
+/// exact signed permutation: x = the basis vector least aligned with a, made orthogonal to a.
+Eigen::Matrix3d axisFrame(const Eigen::Vector3d& a) {
+  int k = 0;
+  a.cwiseAbs().minCoeff(&k);
+  const Eigen::Vector3d x = (Eigen::Vector3d::Unit(k) - a[k] * a).normalized();
+  Eigen::Matrix3d R;
+  R << x, a.cross(x), a;
+  return R;
+}
+
+/// The index i if a is exactly e_i (then the joint is a plain rx…tz), else -1.
+int basisIndex(const Eigen::Vector3d& a) {
+  for (int i = 0; i < 3; ++i)
+    if (a == Eigen::Vector3d::Unit(i)) return i;
+  return -1;
+}
+
+std::string showVector(const Eigen::Vector3d& v) {
+  return "[" + fmt(v.x()) + ", " + fmt(v.y()) + ", " + fmt(v.z()) + "]";
+}
+
+/// Throws unless m is a rigid homogeneous transform (last row [0 0 0 1], R orthonormal, det +1).
+void checkRigid(const Eigen::Matrix4d& m, const std::string& element, const char* field) {
+  if (!m.allFinite()) throw ModelError(element + ": field '" + field + "': entries must be finite");
+  const Eigen::RowVector4d lastRow(0, 0, 0, 1);
+  if ((m.row(3) - lastRow).cwiseAbs().maxCoeff() > 1e-9)
+    throw ModelError(element + ": field '" + field + "': last row must be [0, 0, 0, 1], got [" +
+                     fmt(m(3, 0)) + ", " + fmt(m(3, 1)) + ", " + fmt(m(3, 2)) + ", " + fmt(m(3, 3)) + "]");
+  const Eigen::Matrix3d R = m.topLeftCorner<3, 3>();
+  const double err = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+  if (err > 1e-9 || R.determinant() < 0)
+    throw ModelError(element + ": field '" + field + "': rotation part is not orthonormal and right-handed "
+                     "(max |RᵀR − I| = " + fmt(err) + ", det = " + fmt(R.determinant()) + ")");
+}
+
 Transform primitive(TransformType type, double value) {
   Transform t;
   t.type = type;
@@ -59,6 +105,36 @@ Transform Transform::tz(std::string c) { return primitive(TransformType::kTz, st
 Transform Transform::rx(std::string c) { return primitive(TransformType::kRx, std::move(c)); }
 Transform Transform::ry(std::string c) { return primitive(TransformType::kRy, std::move(c)); }
 Transform Transform::rz(std::string c) { return primitive(TransformType::kRz, std::move(c)); }
+Transform Transform::rotAxis(const Eigen::Vector3d& a, std::string c, const Eigen::Matrix4d& g) {
+  Transform t = axisTransform(TransformType::kRotAxis, a, g);
+  t.config = std::move(c);
+  return t;
+}
+Transform Transform::rotAxis(const Eigen::Vector3d& a, double v, const Eigen::Matrix4d& g) {
+  Transform t = axisTransform(TransformType::kRotAxis, a, g);
+  t.value = v;
+  return t;
+}
+Transform Transform::transAxis(const Eigen::Vector3d& a, std::string c, const Eigen::Matrix4d& g) {
+  Transform t = axisTransform(TransformType::kTransAxis, a, g);
+  t.config = std::move(c);
+  return t;
+}
+Transform Transform::transAxis(const Eigen::Vector3d& a, double v, const Eigen::Matrix4d& g) {
+  Transform t = axisTransform(TransformType::kTransAxis, a, g);
+  t.value = v;
+  return t;
+}
+
+Eigen::Matrix4d poseFromXyzRpy(const Eigen::Vector3d& xyz, const Eigen::Vector3d& rpy) {
+  Eigen::Matrix4d g = Eigen::Matrix4d::Identity();
+  // Products of the three rotation matrices (not of quaternions): a zero angle is an exact
+  // identity factor, so an origin with one angle is exactly that elementary rotation.
+  g.topLeftCorner<3, 3>() = axisRotation(2, rpy.z()) * axisRotation(1, rpy.y()) * axisRotation(0, rpy.x());
+  g.topRightCorner<3, 1>() = xyz;
+  return g;
+}
+
 Transform Transform::constSE3(const Eigen::Matrix4d& m) {
   Transform t;
   t.type = TransformType::kConstSE3;
@@ -74,6 +150,16 @@ Eigen::Isometry3d Transform::evaluate(double q) const {
     return g;
   }
   const double x = isDriven() ? q : value;
+  if (isAxisType(type)) {
+    g.linear() = matrix.topLeftCorner<3, 3>();
+    g.translation() = matrix.topRightCorner<3, 1>();
+    if (type == TransformType::kRotAxis) {
+      g.linear() = g.linear() * Eigen::AngleAxisd(x, axis).toRotationMatrix();
+    } else {
+      g.translation() += g.linear() * (x * axis);
+    }
+    return g;
+  }
   if (isTranslation(type)) {
     g.translation()[axisOf(type)] = x;
   } else {
@@ -131,19 +217,18 @@ const std::string& ModelBuilder::addFrame(const std::string& name, const std::st
       throw ModelError(element + ": field 'config': configuration '" + transform.config +
                        "' is already used by frame '" + frames_[it->second].name + "'");
   } else if (transform.type == TransformType::kConstSE3) {
-    const Eigen::Matrix4d& m = transform.matrix;
-    if (!m.allFinite()) throw ModelError(element + ": field 'matrix': entries must be finite");
-    const Eigen::RowVector4d lastRow(0, 0, 0, 1);
-    if ((m.row(3) - lastRow).cwiseAbs().maxCoeff() > 1e-9)
-      throw ModelError(element + ": field 'matrix': last row must be [0, 0, 0, 1], got [" +
-                       fmt(m(3, 0)) + ", " + fmt(m(3, 1)) + ", " + fmt(m(3, 2)) + ", " + fmt(m(3, 3)) + "]");
-    const Eigen::Matrix3d R = m.topLeftCorner<3, 3>();
-    const double err = (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
-    if (err > 1e-9 || R.determinant() < 0)
-      throw ModelError(element + ": field 'matrix': rotation part is not orthonormal and right-handed "
-                       "(max |RᵀR − I| = " + fmt(err) + ", det = " + fmt(R.determinant()) + ")");
+    checkRigid(transform.matrix, element, "matrix");
   } else if (!std::isfinite(transform.value)) {
     throw ModelError(element + ": field 'value': " + fmt(transform.value) + " is not finite");
+  }
+  Transform checked = transform;
+  if (isAxisType(transform.type)) {
+    checkRigid(transform.matrix, element, "origin");
+    const double norm = transform.axis.norm();
+    if (!transform.axis.allFinite() || std::abs(norm - 1.0) > 1e-9)
+      throw ModelError(element + ": field 'axis': " + showVector(transform.axis) +
+                       " must be a unit vector (norm " + fmt(norm) + ")");
+    checked.axis = transform.axis / norm;
   }
   if (mass) {
     if (!std::isfinite(mass->m) || mass->m < 0)
@@ -159,7 +244,7 @@ const std::string& ModelBuilder::addFrame(const std::string& name, const std::st
                        "(smallest eigenvalue " + fmt(minEig) + ")");
   }
   const int id = static_cast<int>(frames_.size());
-  frames_.push_back({name, parentId, transform, mass});
+  frames_.push_back({name, parentId, std::move(checked), mass});
   frameIds_[name] = id;
   if (transform.isDriven()) configFrames_[transform.config] = id;
   return frames_.back().name;
@@ -293,14 +378,31 @@ Model ModelBuilder::finalize() && {
     p.name = spec.name;
     p.parentFrame = spec.parent;
     if (spec.transform.isDriven()) {
+      const Transform& t = spec.transform;
       Joint j;
-      j.config = spec.transform.config;
+      j.config = t.config;
       j.frame = spec.name;
       j.parent = parent.joint;
-      j.revolute = !isTranslation(spec.transform.type);
-      j.axis = axisOf(spec.transform.type);
       j.R0 = parent.R;
       j.p0 = parent.p;
+      if (isAxisType(t.type)) {
+        // g_local = G · exp(q [a]) = (G · Ra) · exp(q [e_z]) · Raᵀ: the joint body is turned by
+        // G·Ra (z along a) and the frame sits on it at the constant rotation Raᵀ.
+        j.revolute = t.type == TransformType::kRotAxis;
+        j.R0 = parent.R * t.matrix.topLeftCorner<3, 3>();
+        j.p0 = parent.p + parent.R * t.matrix.topRightCorner<3, 1>();
+        if (const int i = basisIndex(t.axis); i >= 0) {
+          j.axis = i;
+        } else {
+          const Eigen::Matrix3d Ra = axisFrame(t.axis);
+          j.axis = 2;
+          j.R0 = j.R0 * Ra;
+          p.R = Ra.transpose();
+        }
+      } else {
+        j.revolute = !isTranslation(t.type);
+        j.axis = axisOf(t.type);
+      }
       j.depth = (j.parent == kWorld ? 0 : model.joints_[j.parent].depth) + 1;
       model.joints_.push_back(j);
       model.configNames_.push_back(j.config);

@@ -6,6 +6,8 @@
 // iteratively, so a deep frame tree cannot overflow the stack.
 #include "trellis/core/scene.hpp"
 
+#include "trellis/core/urdf.hpp"
+
 #include <nlohmann/json.hpp>
 
 #include <Eigen/Eigenvalues>
@@ -141,17 +143,26 @@ class Element {
 /// Reads one scene; owns the builder and the names seen so far.
 class SceneReader {
  public:
+  /// `baseDir`: the directory a "urdf" include is relative to.
+  explicit SceneReader(std::filesystem::path baseDir) : baseDir_(std::move(baseDir)) {}
+
   Scene read(const Json& root) {
     if (!root.is_object()) {
       throw ModelError("the scene must be a JSON object, not " + kind(root) + " " + show(root));
     }
     Element top(root, "scene");
-    Scene scene{Model{}, {}, {}, {}, {}, {}};
+    Scene scene{Model{}, {}, {}, {}, {}, {}, {}};
     if (auto name = optionalText(top, "name")) scene.name = *name;
     if (auto description = optionalText(top, "description")) scene.description = *description;
     builder_ = ModelBuilder(scene.name);
 
-    readFrames(top.list("frames"));
+    if (top.find("urdf")) {
+      readUrdfInclude(top, scene);
+      if (top.find("frames")) readFrames(top.list("frames"));
+    } else {
+      if (top.find("urdf_options")) top.fail("urdf_options", "given without \"urdf\"");
+      readFrames(top.list("frames"));
+    }
     readList(top, "potentials", [this](Element& e, const std::string& type) { readPotential(e, type); });
     readList(top, "forces", [this](Element& e, const std::string& type) { readForce(e, type); });
     readList(top, "constraints", [this](Element& e, const std::string& type) { readConstraint(e, type); });
@@ -234,7 +245,7 @@ class SceneReader {
         stack.push_back({&list[i], parent, at + "[" + std::to_string(i) + "]"});
       }
     };
-    pushChildren(roots, "world", "frames");
+    pushChildren(roots, "", "frames");  // "": the frame's own "parent", else the world
     // Depth-first, children in the order listed: the builder sees the frames in pre-order.
     while (!stack.empty()) {
       Pending next = std::move(stack.back());
@@ -249,7 +260,7 @@ class SceneReader {
   }
 
   /// Reads and adds one frame; returns its name.
-  std::string readFrame(const Json& node, const std::string& parent, const std::string& position) {
+  std::string readFrame(const Json& node, std::string parent, const std::string& position) {
     if (!node.is_object()) {
       throw ModelError(position + ": a frame must be an object, not " + kind(node) + " " + show(node));
     }
@@ -260,6 +271,11 @@ class SceneReader {
       e.fail("name", quote(name) + " is already used by " + it->second);
     }
     e.relabel("frame '" + name + "'");
+    if (parent.empty()) {
+      parent = e.find("parent") ? frameRef(e, "parent") : "world";
+    } else if (e.find("parent")) {
+      e.fail("parent", "only a top-level frame names its parent (a child's parent is the frame that lists it)");
+    }
 
     const std::string type = e.name("type");
     const Transform transform = readTransform(e, type);
@@ -281,6 +297,7 @@ class SceneReader {
   }
 
   static Transform readTransform(const Element& e, const std::string& type) {
+    if (type == "r_axis" || type == "t_axis") return readAxisTransform(e, type);
     if (type == "const_se3") {
       if (e.find("config")) e.fail("config", "a const_se3 frame has no configuration variable");
       return Transform::constSE3(readMatrix4(e));
@@ -311,7 +328,45 @@ class SceneReader {
       if (hasValue) return p.byValue(e.number("value"));
       e.fail("config", "missing: a " + type + " frame needs 'config' (a coordinate) or 'value' (a constant)");
     }
-    e.failValue("type", Json(type), "is not one of tx, ty, tz, rx, ry, rz, const_se3");
+    e.failValue("type", Json(type), "is not one of tx, ty, tz, rx, ry, rz, r_axis, t_axis, const_se3");
+  }
+
+  /// r_axis / t_axis: "axis" (unit 3-vector), "config" or "value", optional "origin" {"xyz", "rpy"}
+  /// (URDF convention, R = Rz(yaw) Ry(pitch) Rx(roll)) placed before the motion.
+  static Transform readAxisTransform(const Element& e, const std::string& type) {
+    const Eigen::Vector3d axis = e.vector3("axis");
+    const double norm = axis.norm();
+    if (std::abs(norm - 1.0) > 1e-9) {
+      std::ostringstream problem;
+      problem << "must be a unit vector (norm " << norm << ")";
+      e.failValue("axis", e.require("axis"), problem.str());
+    }
+    Eigen::Matrix4d origin = Eigen::Matrix4d::Identity();
+    if (const Json* node = e.optionalObject("origin")) {
+      Element o(*node, e.label());
+      for (const auto& [key, value] : node->items()) {
+        if (key != "xyz" && key != "rpy") o.fail("origin." + key, "unknown field (known: xyz, rpy)");
+      }
+      const auto read3 = [&](const char* key) -> Eigen::Vector3d {
+        const Json* v = o.find(key);
+        if (!v) return Eigen::Vector3d::Zero();
+        const std::string field = std::string("origin.") + key;
+        if (!v->is_array() || v->size() != 3) o.failValue(field, *v, "must be a list of 3 numbers");
+        return {o.toNumber((*v)[0], field + "[0]"), o.toNumber((*v)[1], field + "[1]"), o.toNumber((*v)[2], field + "[2]")};
+      };
+      origin = poseFromXyzRpy(read3("xyz"), read3("rpy"));
+    }
+    const bool hasConfig = e.find("config") != nullptr, hasValue = e.find("value") != nullptr;
+    if (hasConfig && hasValue) e.fail("config", "give either 'config' (a coordinate) or 'value' (a constant), not both");
+    if (!hasConfig && !hasValue) {
+      e.fail("config", "missing: a " + type + " frame needs 'config' (a coordinate) or 'value' (a constant)");
+    }
+    if (type == "r_axis") {
+      return hasConfig ? Transform::rotAxis(axis, e.name("config"), origin)
+                       : Transform::rotAxis(axis, e.number("value"), origin);
+    }
+    return hasConfig ? Transform::transAxis(axis, e.name("config"), origin)
+                     : Transform::transAxis(axis, e.number("value"), origin);
   }
 
   static Eigen::Matrix4d readMatrix4(const Element& e) {
@@ -475,6 +530,44 @@ class SceneReader {
     }
   }
 
+  // ---- URDF include ---------------------------------------------------------------------------
+
+  /// {"urdf": "arm.urdf", "urdf_options": {"gravity": [gx, gy, gz], "joint_inputs": true}}: the
+  /// robot's frames and configuration variables come first; the path is relative to the scene.
+  void readUrdfInclude(const Element& top, Scene& scene) {
+    const std::string file = top.name("urdf");
+    UrdfOptions options;
+    if (const Json* node = top.optionalObject("urdf_options")) {
+      Element o(*node, "urdf_options");
+      for (const auto& [key, value] : node->items()) {
+        if (key != "gravity" && key != "joint_inputs") o.fail(key, "unknown option (known: gravity, joint_inputs)");
+      }
+      if (o.find("gravity")) options.gravity = o.vector3("gravity");
+      if (const Json* inputs = o.find("joint_inputs")) {
+        if (!inputs->is_boolean()) o.failValue("joint_inputs", *inputs, "must be true or false, not " + kind(*inputs));
+        options.jointInputs = inputs->get<bool>();
+      }
+    }
+    std::filesystem::path path(file);
+    if (path.is_relative()) path = baseDir_ / path;
+    std::ifstream in(path, std::ios::binary);
+    std::error_code ec;
+    if (!in || std::filesystem::is_directory(path, ec)) {
+      top.failValue("urdf", Json(file), "cannot be opened (looked for " + path.string() + ")");
+    }
+    std::ostringstream text;
+    text << in.rdbuf();
+    UrdfImport robot = importUrdf(text.str(), path.string(), options);
+    builder_ = std::move(robot.builder);
+    for (const auto& f : robot.frames) frames_.emplace(f, "frame '" + f + "' of " + file);
+    for (const auto& c : robot.configs) {
+      configs_.emplace(c, "a joint of " + file);
+      configOrder_.push_back(c);
+    }
+    scene.visuals = std::move(robot.visuals);
+    if (scene.name.empty()) scene.name = robot.robotName;
+  }
+
   // ---- state ----------------------------------------------------------------------------------
 
   static void readState(const Element& top, Scene& scene) {
@@ -504,6 +597,7 @@ class SceneReader {
     readValues("u", model.inputNames(), "input", scene.u);
   }
 
+  std::filesystem::path baseDir_;
   ModelBuilder builder_;
   std::map<std::string, std::string> frames_;   // name -> where it was defined, for messages
   std::map<std::string, std::string> configs_;  // config -> frame that carries it
@@ -569,6 +663,10 @@ std::string jsonMessage(const nlohmann::json::exception& e) {
 }  // namespace
 
 Scene parseScene(const std::string& jsonText, const std::string& source) {
+  // A URDF robot (XML) loads wherever a scene does.
+  if (const auto first = jsonText.find_first_not_of(" \t\r\n"); first != std::string::npos && jsonText[first] == '<') {
+    return sceneFromUrdf(importUrdf(jsonText, source));
+  }
   try {
     if (jsonText.size() > kMaxSceneBytes) {
       throw ModelError("the scene is larger than " + std::to_string(kMaxSceneBytes >> 20) + " MiB");
@@ -583,7 +681,10 @@ Scene parseScene(const std::string& jsonText, const std::string& source) {
       // e.g. "number overflow parsing '1e999'" (a non-finite number), which carries no position.
       throw ModelError("invalid JSON" + locateToken(jsonText, e.what()) + ": " + jsonMessage(e));
     }
-    return SceneReader().read(root);
+    // A "urdf" include is relative to the scene file (to the working directory for "<stdin>").
+    const bool isPath = !source.empty() && source.front() != '<';
+    return SceneReader(isPath ? std::filesystem::path(source).parent_path() : std::filesystem::path())
+        .read(root);
   } catch (const ModelError& e) {
     throw ModelError(source + ": " + e.what());
   } catch (const nlohmann::json::exception& e) {

@@ -60,7 +60,8 @@ std::vector<TestSystem> assortedSystems() {
   out.push_back(planarChain(12));
   for (TransformType t :
        {TransformType::kTx, TransformType::kTy, TransformType::kTz, TransformType::kRx,
-        TransformType::kRy, TransformType::kRz, TransformType::kConstSE3})
+        TransformType::kRy, TransformType::kRz, TransformType::kConstSE3, TransformType::kRotAxis,
+        TransformType::kTransAxis})
     out.push_back(transformChain(t));
   return out;
 }

@@ -46,6 +46,8 @@ Eigen::Matrix4d specMatrix(TransformType type, double t) {
       g.block<3, 3>(0, 0) << c, -s, 0, s, c, 0, 0, 0, 1;
       break;
     case TransformType::kConstSE3:
+    case TransformType::kRotAxis:  // not primitives of the spec (test_axis_transforms.cpp)
+    case TransformType::kTransAxis:
       break;
   }
   return g;

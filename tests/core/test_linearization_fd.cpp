@@ -47,7 +47,8 @@ TEST_CASE("Linearization matches central differences for every transform type",
           "[linearization][fd]") {
   const std::vector<TransformType> types = {
       TransformType::kTx, TransformType::kTy, TransformType::kTz,      TransformType::kRx,
-      TransformType::kRy, TransformType::kRz, TransformType::kConstSE3};
+      TransformType::kRy, TransformType::kRz, TransformType::kConstSE3,
+      TransformType::kRotAxis, TransformType::kTransAxis};
   for (TransformType t : types) {
     // transformChain: the type appears once driven (except const_se3) and once constant, between
     // two other joints, with masses before, on and after it, in skewed gravity.

@@ -55,8 +55,21 @@ inline const char* transformTypeName(TransformType t) {
       return "rz";
     case TransformType::kConstSE3:
       return "const_se3";
+    case TransformType::kRotAxis:
+      return "r_axis";
+    case TransformType::kTransAxis:
+      return "t_axis";
   }
   return "?";
+}
+
+/// The tilted unit axis and origin the tests give r_axis / t_axis transforms.
+inline Eigen::Vector3d testAxis() { return Eigen::Vector3d(0.3, -0.5, 0.8).normalized(); }
+inline Eigen::Matrix4d testAxisOrigin() {
+  Eigen::Matrix4d g = Eigen::Matrix4d::Identity();
+  g.topLeftCorner<3, 3>() = Eigen::AngleAxisd(0.6, Eigen::Vector3d(0.2, 1.0, -0.4).normalized()).toRotationMatrix();
+  g.topRightCorner<3, 1>() << 0.1, 0.25, -0.15;
+  return g;
 }
 
 /// A driven transform of one of the six primitive types.
@@ -74,6 +87,10 @@ inline Transform drivenTransform(TransformType t, const std::string& config) {
       return Transform::ry(config);
     case TransformType::kRz:
       return Transform::rz(config);
+    case TransformType::kRotAxis:
+      return Transform::rotAxis(testAxis(), config, testAxisOrigin());
+    case TransformType::kTransAxis:
+      return Transform::transAxis(testAxis(), config, testAxisOrigin());
     case TransformType::kConstSE3:
       break;
   }
@@ -95,6 +112,10 @@ inline Transform constantTransform(TransformType t, double value, const Eigen::M
       return Transform::ry(value);
     case TransformType::kRz:
       return Transform::rz(value);
+    case TransformType::kRotAxis:
+      return Transform::rotAxis(testAxis(), value, testAxisOrigin());
+    case TransformType::kTransAxis:
+      return Transform::transAxis(testAxis(), value, testAxisOrigin());
     case TransformType::kConstSE3:
       return Transform::constSE3(se3);
   }

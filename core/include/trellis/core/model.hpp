@@ -30,16 +30,24 @@ using Vector6d = Eigen::Matrix<double, 6, 1>;
 /// Index of the fixed world frame / of "no joint" (a point fixed in the world).
 inline constexpr int kWorld = -1;
 
-/// The six primitive transforms of the paper and a constant homogeneous transform.
-enum class TransformType { kTx, kTy, kTz, kRx, kRy, kRz, kConstSE3 };
+/// The six primitive transforms of the paper, a constant homogeneous transform, and a rotation
+/// about / translation along an arbitrary unit axis (after an optional constant placement).
+enum class TransformType { kTx, kTy, kTz, kRx, kRy, kRz, kConstSE3, kRotAxis, kTransAxis };
 
 /// A frame's local transform g_local from the frame to its parent:
 /// g_world,k = g_world,parent · g_local. Either driven by a configuration variable or constant.
+///
+/// kRotAxis / kTransAxis: g_local = G · exp(x [a]) with G = `matrix` (constant, identity by
+/// default), a = `axis` (unit, in the axes of G) and x the coordinate or `value`: a rotation by x
+/// about a through G's origin, or a translation by x along a. The builder turns one such frame
+/// into one joint (a rotation about or translation along the joint body's z axis, body chosen so
+/// that z = a), so it costs what rz/tz cost, with the same exact derivatives.
 struct Transform {
   TransformType type = TransformType::kConstSE3;
   std::string config;                                  ///< empty: constant transform
-  double value = 0.0;                                  ///< constant value (tx…rz only)
-  Eigen::Matrix4d matrix = Eigen::Matrix4d::Identity();  ///< kConstSE3 only
+  double value = 0.0;                                  ///< constant value (all but kConstSE3)
+  Eigen::Matrix4d matrix = Eigen::Matrix4d::Identity();  ///< kConstSE3: the transform; axis types: G
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();     ///< kRotAxis / kTransAxis only
 
   static Transform tx(double value);
   static Transform ty(double value);
@@ -54,6 +62,16 @@ struct Transform {
   static Transform ry(std::string config);
   static Transform rz(std::string config);
   static Transform constSE3(const Eigen::Matrix4d& matrix);
+  /// Rotation about / translation along the unit vector `axis` (given in the axes of `origin`),
+  /// after the constant placement `origin`; driven by `config` or constant (`value`).
+  static Transform rotAxis(const Eigen::Vector3d& axis, std::string config,
+                           const Eigen::Matrix4d& origin = Eigen::Matrix4d::Identity());
+  static Transform rotAxis(const Eigen::Vector3d& axis, double angle,
+                           const Eigen::Matrix4d& origin = Eigen::Matrix4d::Identity());
+  static Transform transAxis(const Eigen::Vector3d& axis, std::string config,
+                             const Eigen::Matrix4d& origin = Eigen::Matrix4d::Identity());
+  static Transform transAxis(const Eigen::Vector3d& axis, double distance,
+                             const Eigen::Matrix4d& origin = Eigen::Matrix4d::Identity());
 
   bool isDriven() const { return !config.empty(); }
   /// The 4×4 homogeneous matrix of this transform at coordinate value `q` (ignored if constant).
@@ -73,8 +91,10 @@ struct BodyPoint {
   Eigen::Vector3d local = Eigen::Vector3d::Zero();
 };
 
-/// One configuration variable and the rigid body it moves. The joint frame is placed at
+/// One configuration variable and the rigid body it moves. The joint body is placed at
 /// g_parent · (R0, p0) · motion(q), motion a rotation about or translation along axis `axis`.
+/// (For kRotAxis / kTransAxis frames the body's axes are turned so that `axis` = z is the
+/// frame's unit axis; the frame itself then sits on the body at a constant rotation.)
 struct Joint {
   std::string config;      ///< configuration variable name
   std::string frame;       ///< name of the frame that carries it

@@ -26,6 +26,10 @@ class ModelError : public std::runtime_error {
 /// A body-wrench entry: a constant number or the name of an input.
 using WrenchEntry = std::variant<double, std::string>;
 
+/// The homogeneous transform of a URDF-style origin: translation xyz, rotation from fixed-axis
+/// roll-pitch-yaw, R = Rz(yaw) · Ry(pitch) · Rx(roll).
+Eigen::Matrix4d poseFromXyzRpy(const Eigen::Vector3d& xyz, const Eigen::Vector3d& rpy);
+
 class ModelBuilder {
  public:
   ModelBuilder() = default;
@@ -33,8 +37,9 @@ class ModelBuilder {
 
   /// Adds frame `name` under `parent` ("world" or an earlier frame). Returns the frame's name.
   /// Throws on a duplicate or reserved name, an unknown parent, a configuration name used twice,
-  /// a non-finite value, a const_se3 matrix that is not a rigid transform, a negative mass or an
-  /// inertia tensor that is not symmetric positive semidefinite.
+  /// a non-finite value, a const_se3 matrix (or axis-transform origin) that is not a rigid
+  /// transform, an axis that is not a unit vector (|‖a‖ − 1| > 1e-9; it is then normalized
+  /// exactly), a negative mass or an inertia tensor that is not symmetric positive semidefinite.
   const std::string& addFrame(const std::string& name, const std::string& parent,
                               const Transform& transform, std::optional<Mass> mass = {});
 

@@ -4,21 +4,39 @@
 #include "trellis/core/model_builder.hpp"
 
 #include <string>
+#include <vector>
 
 namespace trellis {
+
+/// Visual geometry of a frame (kept from URDF <visual> elements for viewers; no effect on the
+/// dynamics). `size`: box: edge lengths; cylinder: (radius, length, 0); sphere: (radius, 0, 0);
+/// mesh: scale. `pose`: the shape's placement in the frame's axes.
+struct VisualGeometry {
+  enum class Shape { kBox, kCylinder, kSphere, kMesh };
+  std::string frame;
+  Shape shape = Shape::kBox;
+  Eigen::Vector3d size = Eigen::Vector3d::Zero();
+  std::string mesh;  ///< file name as written (kMesh only)
+  Eigen::Matrix4d pose = Eigen::Matrix4d::Identity();
+};
 
 /// A model together with the state stored in its scene file (missing names are 0).
 struct Scene {
   Model model;
   Eigen::VectorXd q, dq, u;  ///< n, n, m
   std::string name, description;
+  std::vector<VisualGeometry> visuals;  ///< from an imported URDF; empty otherwise
 };
 
-/// Parses a scene from JSON text. `source` names the file in messages. Throws ModelError whose
-/// message names the element (frame name or list position), the field and the offending value.
+/// Parses a scene from JSON text. `source` names the file in messages (and, when it is a path,
+/// the directory a "urdf" include is relative to). Text whose first non-blank character is '<'
+/// is read as a URDF robot with the default UrdfOptions (trellis/core/urdf.hpp). Throws
+/// ModelError whose message names the element (frame name or list position), the field and the
+/// offending value.
 Scene parseScene(const std::string& jsonText, const std::string& source = "<scene>");
 
-/// Reads and parses a scene file; throws ModelError (also when the file cannot be read).
+/// Reads and parses a scene file or a URDF file (as parseScene); throws ModelError (also when the
+/// file cannot be read).
 Scene loadScene(const std::string& path);
 
 }  // namespace trellis

@@ -1,0 +1,58 @@
+// trellis/core/urdf.hpp — URDF robots as trellis models (docs/urdf.md).
+//
+// The root link is the world (a fixed base). Every link becomes a frame named as the link; a
+// revolute, continuous or prismatic joint becomes one frame of type r_axis / t_axis (its origin
+// and unit axis) driven by a configuration variable named as the joint; a fixed joint a constant
+// frame (folded away by the builder); <inertial> a mass; <dynamics damping> damping. floating and
+// planar joints become documented sequences of primitive coordinates; mimic joints and Coulomb
+// friction are refused. Parsed with tinyxml2, so every message carries the line number.
+#pragma once
+
+#include "trellis/core/scene.hpp"
+
+#include <string>
+#include <vector>
+
+namespace trellis {
+
+struct UrdfOptions {
+  /// Gravity in the root link's (= world) axes; zero adds none.
+  Eigen::Vector3d gravity = Eigen::Vector3d(0.0, 0.0, -9.81);
+  /// A generalized-force input per configuration variable, named as it (for a revolute,
+  /// continuous or prismatic joint: the joint's name), so that B = [0; M⁻¹] without constraints.
+  bool jointInputs = true;
+};
+
+/// A movable URDF joint as read (its <limit> is kept as metadata; trellis does not enforce it).
+struct UrdfJoint {
+  std::string name, type;              ///< type as written: revolute, continuous, prismatic, ...
+  std::vector<std::string> configs;    ///< its configuration variables (one, or 3/6 for planar/floating)
+  bool hasLimits = false;
+  double lower = 0.0, upper = 0.0, effort = 0.0, velocity = 0.0;
+};
+
+/// A URDF robot as builder calls, ready for more elements (constraints, forces) or finalize().
+struct UrdfImport {
+  ModelBuilder builder;
+  std::string robotName, rootLink;
+  std::vector<std::string> frames;  ///< every frame added: the links, "<link>:inertial" frames
+                                    ///< and the intermediate frames of planar/floating joints
+  std::vector<std::string> configs; ///< every configuration variable, in the order of the file
+  std::vector<UrdfJoint> joints;    ///< the movable joints
+  std::vector<VisualGeometry> visuals;
+};
+
+/// Reads URDF XML text. `source` names the file in messages ("<source>:<line>: joint 'j':
+/// attribute 'xyz': value '1 2' ..."). Throws ModelError on malformed XML, a missing or bad
+/// element or attribute, a link with two parents, several roots or a cycle, and on unsupported
+/// features (mimic, nonzero friction, damping on planar/floating joints).
+UrdfImport importUrdf(const std::string& xmlText, const std::string& source = "<urdf>",
+                      const UrdfOptions& options = {});
+
+/// Reads a URDF file into a Scene (state all zero, visuals kept). Throws ModelError.
+Scene loadUrdf(const std::string& path, const UrdfOptions& options = {});
+
+/// The finalized scene of an import (state all zero).
+Scene sceneFromUrdf(UrdfImport&& robot);
+
+}  // namespace trellis

@@ -1,0 +1,436 @@
+// URDF robots as ModelBuilder calls (urdf.hpp, docs/urdf.md), parsed with tinyxml2.
+//
+// tinyxml2 rather than urdfdom: urdfdom reports a bad file through console_bridge log lines and a
+// null pointer (no line numbers, and some errors only as warnings), and it fills in defaults and
+// drops what it does not know before we could refuse it. tinyxml2 gives every element's line, so
+// each message here reads "<file>:<line>: joint 'j': attribute 'xyz': value '…' <problem>", and we
+// decide ourselves what is supported. It is also one small library with a CMake config.
+#include "trellis/core/urdf.hpp"
+
+#include <tinyxml2.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <optional>
+#include <set>
+#include <sstream>
+
+namespace trellis {
+namespace {
+
+using tinyxml2::XMLElement;
+
+std::string fmt(double x) {
+  std::ostringstream s;
+  s.precision(10);
+  s << x;
+  return s.str();
+}
+
+struct LinkSpec {
+  const XMLElement* xml = nullptr;
+  std::string name;
+};
+
+struct JointSpec {
+  const XMLElement* xml = nullptr;
+  std::string name, type, parent, child;
+};
+
+class UrdfReader {
+ public:
+  UrdfReader(std::string source, const UrdfOptions& options) : source_(std::move(source)), options_(options) {}
+
+  UrdfImport read(const std::string& text) {
+    tinyxml2::XMLDocument doc;
+    if (doc.Parse(text.data(), text.size()) != tinyxml2::XML_SUCCESS) {
+      throw ModelError(source_ + ":" + std::to_string(doc.ErrorLineNum()) + ": invalid XML: " + doc.ErrorStr());
+    }
+    const XMLElement* robot = doc.RootElement();
+    if (!robot || std::string(robot->Name()) != "robot") {
+      throw ModelError(source_ + ":" + std::to_string(robot ? robot->GetLineNum() : 1) +
+                       ": the root element must be <robot>, not <" + (robot ? robot->Name() : "") + ">");
+    }
+    const std::string robotLabel = "robot";
+    out_.robotName = attribute(robot, "name", robotLabel, false);
+    out_.builder = ModelBuilder(out_.robotName);
+    readLinks(robot);
+    readJoints(robot);
+    build();
+    return std::move(out_);
+  }
+
+ private:
+  // ---- messages and attributes ----------------------------------------------------------------
+
+  [[noreturn]] void fail(const XMLElement* at, const std::string& element, const std::string& problem) const {
+    throw ModelError(source_ + ":" + std::to_string(at->GetLineNum()) + ": " + element + ": " + problem);
+  }
+
+  /// The attribute's text; missing: "" if optional, else an error.
+  std::string attribute(const XMLElement* e, const char* name, const std::string& element, bool required) const {
+    const char* value = e->Attribute(name);
+    if (!value) {
+      if (required) fail(e, element, "<" + std::string(e->Name()) + "> attribute '" + name + "': missing");
+      return "";
+    }
+    return value;
+  }
+
+  /// `count` finite numbers separated by blanks.
+  std::vector<double> numbers(const XMLElement* e, const char* name, const std::string& element,
+                              std::size_t count) const {
+    const std::string text = attribute(e, name, element, true);
+    std::vector<double> values;
+    const char* p = text.c_str();
+    char* end = nullptr;
+    while (true) {
+      while (*p == ' ' || *p == '\t' || *p == '\n' || *p == '\r') ++p;
+      if (!*p) break;
+      errno = 0;
+      const double x = std::strtod(p, &end);
+      if (end == p || !std::isfinite(x) || errno == ERANGE) {
+        values.clear();
+        break;
+      }
+      values.push_back(x);
+      p = end;
+    }
+    if (values.size() != count) {
+      fail(e, element, "<" + std::string(e->Name()) + "> attribute '" + name + "': value '" + text +
+                           "' must be " + std::to_string(count) + " finite number" + (count > 1 ? "s" : ""));
+    }
+    return values;
+  }
+  double number(const XMLElement* e, const char* name, const std::string& element) const {
+    return numbers(e, name, element, 1)[0];
+  }
+  double optionalNumber(const XMLElement* e, const char* name, const std::string& element, double dflt) const {
+    return e->Attribute(name) ? number(e, name, element) : dflt;
+  }
+  Eigen::Vector3d vector3(const XMLElement* e, const char* name, const std::string& element,
+                          const Eigen::Vector3d& dflt) const {
+    if (!e->Attribute(name)) return dflt;
+    const auto v = numbers(e, name, element, 3);
+    return {v[0], v[1], v[2]};
+  }
+
+  /// The <origin xyz rpy> child of e (identity if absent).
+  Eigen::Matrix4d origin(const XMLElement* e, const std::string& element) const {
+    const XMLElement* o = e->FirstChildElement("origin");
+    if (!o) return Eigen::Matrix4d::Identity();
+    return poseFromXyzRpy(vector3(o, "xyz", element, Eigen::Vector3d::Zero()),
+                          vector3(o, "rpy", element, Eigen::Vector3d::Zero()));
+  }
+
+  /// Runs a builder call; its message gains the file, line and element.
+  template <class F>
+  void call(const XMLElement* at, const std::string& element, F&& f) const {
+    try {
+      f();
+    } catch (const ModelError& e) {
+      fail(at, element, e.what());
+    }
+  }
+
+  // ---- links and joints -----------------------------------------------------------------------
+
+  void readLinks(const XMLElement* robot) {
+    for (const XMLElement* l = robot->FirstChildElement("link"); l; l = l->NextSiblingElement("link")) {
+      LinkSpec link{l, attribute(l, "name", "link", true)};
+      if (link.name.empty()) fail(l, "link", "attribute 'name': empty");
+      if (link.name == "world") {
+        fail(l, "link 'world'", "the name 'world' is reserved for the fixed world frame (the root link is the world)");
+      }
+      if (linkIndex_.count(link.name)) fail(l, "link '" + link.name + "'", "duplicate link name");
+      linkIndex_[link.name] = static_cast<int>(links_.size());
+      links_.push_back(link);
+    }
+    if (links_.empty()) fail(robot, "robot", "has no <link>");
+  }
+
+  void readJoints(const XMLElement* robot) {
+    for (const XMLElement* j = robot->FirstChildElement("joint"); j; j = j->NextSiblingElement("joint")) {
+      JointSpec joint;
+      joint.xml = j;
+      joint.name = attribute(j, "name", "joint", true);
+      const std::string element = "joint '" + joint.name + "'";
+      if (joint.name.empty()) fail(j, "joint", "attribute 'name': empty");
+      if (jointNames_.count(joint.name)) fail(j, element, "duplicate joint name");
+      jointNames_.insert(joint.name);
+      joint.type = attribute(j, "type", element, true);
+      const XMLElement* parent = j->FirstChildElement("parent");
+      const XMLElement* child = j->FirstChildElement("child");
+      if (!parent) fail(j, element, "<parent> missing");
+      if (!child) fail(j, element, "<child> missing");
+      joint.parent = attribute(parent, "link", element, true);
+      joint.child = attribute(child, "link", element, true);
+      if (!linkIndex_.count(joint.parent)) fail(parent, element, "<parent> attribute 'link': unknown link '" + joint.parent + "'");
+      if (!linkIndex_.count(joint.child)) fail(child, element, "<child> attribute 'link': unknown link '" + joint.child + "'");
+      if (joint.parent == joint.child) fail(child, element, "link '" + joint.child + "' is its own parent");
+      if (auto it = parentJoint_.find(joint.child); it != parentJoint_.end()) {
+        fail(child, element, "link '" + joint.child + "' already has a parent joint '" +
+                                 joints_[it->second].name + "' (line " +
+                                 std::to_string(joints_[it->second].xml->GetLineNum()) +
+                                 "): closed chains are added in a scene as constraints");
+      }
+      parentJoint_[joint.child] = static_cast<int>(joints_.size());
+      joints_.push_back(joint);
+    }
+  }
+
+  /// Adds a mass for link `l` (not the root): on the link frame, or on a constant child frame
+  /// "<link>:inertial" when the inertial origin is not the identity.
+  void addInertial(const LinkSpec& l) {
+    const XMLElement* in = l.xml->FirstChildElement("inertial");
+    if (!in) return;
+    const std::string element = "link '" + l.name + "' <inertial>";
+    const XMLElement* massXml = in->FirstChildElement("mass");
+    const XMLElement* inertiaXml = in->FirstChildElement("inertia");
+    if (!massXml) fail(in, element, "<mass> missing");
+    if (!inertiaXml) fail(in, element, "<inertia> missing");
+    Mass mass;
+    mass.m = number(massXml, "value", element);
+    if (mass.m < 0) fail(massXml, element, "<mass> attribute 'value': value '" + fmt(mass.m) + "' must be >= 0");
+    const char* names[6] = {"ixx", "iyy", "izz", "ixy", "ixz", "iyz"};
+    double v[6];
+    for (int i = 0; i < 6; ++i) v[i] = number(inertiaXml, names[i], element);
+    mass.inertia << v[0], v[3], v[4], v[3], v[1], v[5], v[4], v[5], v[2];
+    const Eigen::Matrix4d g = origin(in, element);
+    if (g.isIdentity(0.0)) {
+      pendingMass_[l.name] = mass;
+      return;
+    }
+    inertialFrames_[l.name] = {l.name, g, mass, inertiaXml};
+  }
+
+  void build() {
+    // The root: the one link without a parent joint. It is the world (fixed base).
+    std::vector<std::string> roots;
+    for (const auto& l : links_)
+      if (!parentJoint_.count(l.name)) roots.push_back(l.name);
+    if (roots.size() != 1) {
+      std::string list;
+      for (const auto& r : roots) list += (list.empty() ? "'" : ", '") + r + "'";
+      const XMLElement* at = roots.empty() ? links_[0].xml : links_[linkIndex_.at(roots[1])].xml;
+      fail(at, "robot", roots.empty() ? "no root link (the joints form a cycle)"
+                                      : "several root links (" + list + "); a URDF is one tree");
+    }
+    out_.rootLink = roots[0];
+    for (const auto& l : links_)
+      if (l.name != out_.rootLink) addInertial(l);
+    for (const auto& [link, f] : inertialFrames_)
+      if (linkIndex_.count(f.link + ":inertial"))
+        fail(f.at, "link '" + f.link + "' <inertial>", "frame name '" + f.link + ":inertial' clashes with a link");
+
+    std::map<std::string, std::vector<int>> children;  // link -> child joints, in file order
+    for (int i = 0; i < static_cast<int>(joints_.size()); ++i) children[joints_[i].parent].push_back(i);
+
+    ModelBuilder& b = out_.builder;
+    b.addFrame(out_.rootLink, "world", Transform::constSE3(Eigen::Matrix4d::Identity()));
+    out_.frames.push_back(out_.rootLink);
+    std::map<std::string, double> damping;
+    // Depth first from the root, children in file order: the builder sees the tree in pre-order.
+    std::vector<int> stack;
+    auto push = [&](const std::string& link) {
+      const auto& c = children[link];
+      for (auto it = c.rbegin(); it != c.rend(); ++it) stack.push_back(*it);
+    };
+    push(out_.rootLink);
+    int visited = 0;
+    while (!stack.empty()) {
+      const JointSpec& j = joints_[stack.back()];
+      stack.pop_back();
+      ++visited;
+      addJoint(j, damping);
+      push(j.child);
+    }
+    if (visited != static_cast<int>(joints_.size())) {
+      for (const auto& j : joints_)
+        if (std::find(out_.frames.begin(), out_.frames.end(), j.child) == out_.frames.end())
+          fail(j.xml, "joint '" + j.name + "'", "not connected to the root link '" + out_.rootLink + "' (a cycle)");
+    }
+    for (const auto& l : links_) readVisuals(l);
+
+    if (!damping.empty()) b.addDamping(0.0, damping);
+    if (options_.jointInputs)
+      for (const auto& c : out_.configs) b.addConfigForce(c, c);
+    if (!options_.gravity.isZero(0.0)) b.addGravity(options_.gravity);
+  }
+
+  void addJoint(const JointSpec& j, std::map<std::string, double>& damping) {
+    const std::string element = "joint '" + j.name + "'";
+    const XMLElement* x = j.xml;
+    if (const XMLElement* m = x->FirstChildElement("mimic")) {
+      fail(m, element, "<mimic> (joint '" + attribute(m, "joint", element, false) +
+                           "') is not supported: a coupling q = m·q' + o is not a trellis constraint; "
+                           "remove <mimic> to make the joint independent");
+    }
+    const Eigen::Matrix4d g = origin(x, element);
+    std::optional<Mass> mass;
+    if (auto it = pendingMass_.find(j.child); it != pendingMass_.end()) mass = it->second;
+    const bool movable = j.type == "revolute" || j.type == "continuous" || j.type == "prismatic";
+    const bool compound = j.type == "floating" || j.type == "planar";
+    if (j.type != "fixed" && !movable && !compound) {
+      fail(x, element, "attribute 'type': value '" + j.type +
+                           "' is not one of revolute, continuous, prismatic, fixed, floating, planar");
+    }
+    // <dynamics>: damping is modelled, Coulomb friction is not (refused rather than dropped).
+    double d = 0.0;
+    if (const XMLElement* dyn = x->FirstChildElement("dynamics")) {
+      d = optionalNumber(dyn, "damping", element, 0.0);
+      if (d < 0) fail(dyn, element, "<dynamics> attribute 'damping': value '" + fmt(d) + "' must be >= 0");
+      const double friction = optionalNumber(dyn, "friction", element, 0.0);
+      if (friction != 0.0) {
+        fail(dyn, element, "<dynamics> attribute 'friction': value '" + fmt(friction) +
+                               "': Coulomb friction is not modelled (set it to 0 or remove it)");
+      }
+      if (d != 0.0 && !movable) {
+        fail(dyn, element, "<dynamics> attribute 'damping': value '" + fmt(d) + "' on a " + j.type +
+                               " joint is not supported");
+      }
+    }
+    Eigen::Vector3d axis = Eigen::Vector3d::UnitX();  // the URDF default
+    if (movable || j.type == "planar") {
+      if (const XMLElement* a = x->FirstChildElement("axis")) {
+        axis = vector3(a, "xyz", element, axis);
+        if (axis.norm() < 1e-12) {
+          fail(a, element, "<axis> attribute 'xyz': value '" + attribute(a, "xyz", element, true) +
+                               "' is zero (the axis must be a nonzero vector; it is used normalized)");
+        }
+        axis.normalize();
+      }
+    }
+    UrdfJoint info{j.name, j.type, {}, false, 0, 0, 0, 0};
+    if (const XMLElement* lim = x->FirstChildElement("limit")) {
+      info.hasLimits = true;
+      info.lower = optionalNumber(lim, "lower", element, 0.0);
+      info.upper = optionalNumber(lim, "upper", element, 0.0);
+      info.effort = optionalNumber(lim, "effort", element, 0.0);
+      info.velocity = optionalNumber(lim, "velocity", element, 0.0);
+    }
+
+    ModelBuilder& b = out_.builder;
+    auto frame = [&](const std::string& name, const std::string& parent, const Transform& t,
+                     std::optional<Mass> m = {}) {
+      call(x, element, [&] { b.addFrame(name, parent, t, m); });
+      out_.frames.push_back(name);
+      if (t.isDriven()) {
+        out_.configs.push_back(t.config);
+        info.configs.push_back(t.config);
+      }
+    };
+    if (j.type == "fixed") {
+      frame(j.child, j.parent, Transform::constSE3(g), mass);
+    } else if (j.type == "prismatic") {
+      frame(j.child, j.parent, Transform::transAxis(axis, j.name, g), mass);
+    } else if (movable) {
+      frame(j.child, j.parent, Transform::rotAxis(axis, j.name, g), mass);
+    } else if (j.type == "floating") {
+      // p = origin · T(x, y, z) · Rz(yaw) Ry(pitch) Rx(roll): singular at pitch = ±π/2.
+      const std::string n = j.name + ".";
+      frame(n + "x", j.parent, Transform::transAxis(Eigen::Vector3d::UnitX(), n + "x", g));
+      frame(n + "y", n + "x", Transform::ty(n + "y"));
+      frame(n + "z", n + "y", Transform::tz(n + "z"));
+      frame(n + "yaw", n + "z", Transform::rz(n + "yaw"));
+      frame(n + "pitch", n + "yaw", Transform::ry(n + "pitch"));
+      frame(j.child, n + "pitch", Transform::rx(n + "roll"), mass);
+    } else {  // planar: translations along two unit vectors u, v ⟂ axis, then the rotation about it.
+      int k = 0;
+      axis.cwiseAbs().minCoeff(&k);
+      const Eigen::Vector3d u = (Eigen::Vector3d::Unit(k) - axis[k] * axis).normalized();
+      const Eigen::Vector3d v = axis.cross(u);
+      const std::string n = j.name + ".";
+      frame(n + "u", j.parent, Transform::transAxis(u, n + "u", g));
+      frame(n + "v", n + "u", Transform::transAxis(v, n + "v"));
+      frame(j.child, n + "v", Transform::rotAxis(axis, n + "theta"), mass);
+    }
+    // The child's mass at its inertial origin, right after the child (pre-order of the frames).
+    if (auto it = inertialFrames_.find(j.child); it != inertialFrames_.end()) {
+      const InertialFrame& f = it->second;
+      call(f.at, "link '" + f.link + "' <inertial>",
+           [&] { b.addFrame(f.link + ":inertial", f.link, Transform::constSE3(f.origin), f.mass); });
+      out_.frames.push_back(f.link + ":inertial");
+    }
+    if (d != 0.0) damping[j.name] = d;
+    if (j.type != "fixed") out_.joints.push_back(std::move(info));
+  }
+
+  void readVisuals(const LinkSpec& l) {
+    for (const XMLElement* v = l.xml->FirstChildElement("visual"); v; v = v->NextSiblingElement("visual")) {
+      const std::string element = "link '" + l.name + "' <visual>";
+      const XMLElement* geometry = v->FirstChildElement("geometry");
+      const XMLElement* shape = geometry ? geometry->FirstChildElement() : nullptr;
+      if (!shape) continue;  // nothing to draw
+      VisualGeometry vg;
+      vg.frame = l.name;
+      vg.pose = origin(v, element);
+      const std::string kind = shape->Name();
+      if (kind == "box") {
+        vg.shape = VisualGeometry::Shape::kBox;
+        vg.size = vector3(shape, "size", element, Eigen::Vector3d::Zero());
+      } else if (kind == "cylinder") {
+        vg.shape = VisualGeometry::Shape::kCylinder;
+        vg.size << number(shape, "radius", element), number(shape, "length", element), 0.0;
+      } else if (kind == "sphere") {
+        vg.shape = VisualGeometry::Shape::kSphere;
+        vg.size << number(shape, "radius", element), 0.0, 0.0;
+      } else if (kind == "mesh") {
+        vg.shape = VisualGeometry::Shape::kMesh;
+        vg.mesh = attribute(shape, "filename", element, true);
+        vg.size = vector3(shape, "scale", element, Eigen::Vector3d::Ones());
+      } else {
+        continue;  // other shapes (e.g. capsule extensions) have no dynamics; not kept
+      }
+      out_.visuals.push_back(std::move(vg));
+    }
+  }
+
+  struct InertialFrame {
+    std::string link;
+    Eigen::Matrix4d origin;
+    Mass mass;
+    const XMLElement* at;
+  };
+
+  std::string source_;
+  UrdfOptions options_;
+  UrdfImport out_;
+  std::vector<LinkSpec> links_;
+  std::map<std::string, int> linkIndex_;
+  std::vector<JointSpec> joints_;
+  std::set<std::string> jointNames_;
+  std::map<std::string, int> parentJoint_;  // child link -> joint
+  std::map<std::string, Mass> pendingMass_;  // link -> mass at the link origin
+  std::map<std::string, InertialFrame> inertialFrames_;  // link -> its offset mass
+};
+
+}  // namespace
+
+UrdfImport importUrdf(const std::string& xmlText, const std::string& source, const UrdfOptions& options) {
+  if (!options.gravity.allFinite()) throw ModelError(source + ": UrdfOptions.gravity must be finite");
+  return UrdfReader(source, options).read(xmlText);
+}
+
+Scene sceneFromUrdf(UrdfImport&& robot) {
+  Scene scene{std::move(robot.builder).finalize(), {}, {}, {}, robot.robotName, "URDF robot", std::move(robot.visuals)};
+  scene.q = Eigen::VectorXd::Zero(scene.model.nq());
+  scene.dq = Eigen::VectorXd::Zero(scene.model.nq());
+  scene.u = Eigen::VectorXd::Zero(scene.model.nu());
+  return scene;
+}
+
+Scene loadUrdf(const std::string& path, const UrdfOptions& options) {
+  std::ifstream file(path, std::ios::binary);
+  if (!file || std::filesystem::is_directory(path)) throw ModelError(path + ": cannot open the URDF file");
+  std::ostringstream text;
+  text << file.rdbuf();
+  return sceneFromUrdf(importUrdf(text.str(), path, options));
+}
+
+}  // namespace trellis
