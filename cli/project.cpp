@@ -15,8 +15,9 @@ constexpr std::string_view kHelp = R"(usage: trellis project [--state STATE.json
 
 Projects a state x = [q; q'] of the scene (its stored state, or --state) onto the constraint
 manifold {h(q) = 0, A(q) q' = 0}, in the metric of the mass matrix M:
-  positions   q* = argmin (q - q0)^T M(q0) (q - q0)  subject to h(q) = 0 (holonomic rows), by
-              Gauss-Newton on this closest-point problem;
+  positions   q* = argmin (q - q0)^T M(q0) (q - q0)  subject to h(q) = 0 (holonomic rows):
+              minimum-norm Newton steps onto h = 0, then descent along the manifold to the
+              closest point (core/include/trellis/core/projection.hpp);
   velocities  q'* = q' - M^-1 A^T (A M^-1 A^T)^+ A q' at q* (all rows, nonholonomic included): the
               correction of least kinetic energy.
 Coordinates listed in --fix keep their value and velocity (the others move). Without
@@ -25,7 +26,7 @@ metric is used ("mass_weighted": false).
 
 Output: one JSON object with the keys
   status                 "ok" (always, on exit 0)
-  iterations             Gauss-Newton steps
+  iterations             Newton steps onto h = 0, in all
   h_before, h_after      max |h(q)| over the holonomic rows, before and after
   Adq_before, Adq_after  max |A q'| over all rows, before and after
   mass_weighted          whether the metric was M
@@ -38,7 +39,7 @@ options:
   --fix LIST             comma-separated configuration variables held fixed
   --positions-only       leave q' unchanged
   --tolerance TOL        max |h| accepted (default 1e-12; units of h)
-  --max-iterations N     Gauss-Newton iterations (default 50)
+  --max-iterations N     Newton steps per restoration, and descent steps (default 50)
   --compact              print the object on one line
   -h, --help             show this help
 

@@ -80,7 +80,10 @@ EquilibriumResult findEquilibrium(const Model& model, Data& data, const Eigen::V
     if (converged()) break;
     if (k == options.maxIterations) {
       r.status = EquilibriumStatus::kNotConverged;
-      r.message = "no equilibrium within " + std::to_string(k) + " Newton iterations";
+      std::ostringstream m;
+      m << "no equilibrium within " << k << " Newton iterations: |q''|inf = " << r.accelerationResidual
+        << ", |h|inf = " << r.constraintResidual << " (rank of dF/dq " << r.jacobianRank << " of " << n << ")";
+      r.message = m.str();
       break;
     }
     const Eigen::VectorXd step = -cod.solve(F);

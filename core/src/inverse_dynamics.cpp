@@ -21,9 +21,12 @@ const char* toString(InverseDynamicsStatus status) {
   return "unknown";
 }
 
-InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, const Eigen::VectorXd& q,
-                                             const Eigen::VectorXd& dq, const Eigen::VectorXd& qdd,
+InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, const Eigen::VectorXd& qIn,
+                                             const Eigen::VectorXd& dqIn, const Eigen::VectorXd& qddIn,
                                              const InverseDynamicsOptions& options) {
+  // Copies: the arguments may be members of `data` (data.qdd after a forward solve), which the
+  // evaluation below overwrites.
+  const Eigen::VectorXd q = qIn, dq = dqIn, qdd = qddIn;
   const int n = model.nq(), m = model.nu(), nc = model.nc();
   if (q.size() != n || dq.size() != n || qdd.size() != n) {
     throw std::invalid_argument("computeInverseDynamics: q, dq, qdd have " + std::to_string(q.size()) +

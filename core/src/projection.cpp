@@ -17,11 +17,12 @@ namespace {
 /// positive definite there.
 struct Metric {
   Eigen::LLT<Eigen::MatrixXd> llt;
+  Eigen::MatrixXd W;  ///< the metric itself (M on the free coordinates, or I)
   bool massWeighted = false;
 
   void compute(const Eigen::MatrixXd& M, const std::vector<int>& free) {
     const auto nf = static_cast<Eigen::Index>(free.size());
-    Eigen::MatrixXd W(nf, nf);
+    W.resize(nf, nf);
     for (Eigen::Index i = 0; i < nf; ++i)
       for (Eigen::Index j = 0; j < nf; ++j) W(i, j) = M(free[i], free[j]);
     llt.compute(W);
@@ -29,6 +30,7 @@ struct Metric {
     massWeighted = W.allFinite() && nf > 0 && llt.info() == Eigen::Success &&
                    llt.matrixL().toDenseMatrix().diagonal().minCoeff() >
                        1e-8 * std::sqrt(W.diagonal().cwiseAbs().maxCoeff());
+    if (!massWeighted) W.setIdentity(nf, nf);
   }
   /// δ of least δᵀWδ with J δ = rhs (least squares if inconsistent): δ = L⁻ᵀ (J L⁻ᵀ)⁺ rhs.
   Eigen::VectorXd minimumNormStep(const Eigen::MatrixXd& J, const Eigen::VectorXd& rhs) const {
@@ -127,33 +129,77 @@ ProjectionResult projectState(const Model& model, Data& data, const Eigen::Vecto
       return r;
     }
     r.positionResidualBefore = h.cwiseAbs().maxCoeff();
-    Eigen::VectorXd e(nf), qNext = r.q;
-    for (int k = 0;; ++k) {
-      const double residual = h.cwiseAbs().maxCoeff();
-      r.positionResidual = residual;
-      const bool stepSmall = k == 0 || r.lastStep <= options.stepTolerance * (1.0 + r.q.cwiseAbs().maxCoeff());
-      if (residual <= options.tolerance && stepSmall) break;
-      if (k == options.maxIterations) {
-        fail(ProjectionStatus::kNotConverged,
-             "Gauss-Newton did not converge in " + std::to_string(k) + " iterations: |h|inf = " +
-                 format(residual) + ", last step " + format(r.lastStep) +
-                 " (are the constraints reachable from this q?)");
-        break;
+    // Restoration: minimum-W-norm Newton steps q ← q − W⁻¹Aᵀ(A W⁻¹ Aᵀ)⁺ h (quadratic near the
+    // manifold). Returns false (q left at the last finite iterate) if |h| ≤ tolerance is not
+    // reached; leaves h, Ah evaluated at q.
+    bool nonFinite = false;
+    const auto restore = [&](Eigen::VectorXd& q) {
+      for (int k = 0;; ++k) {
+        if (h.cwiseAbs().maxCoeff() <= options.tolerance) return true;
+        if (k == options.maxIterations) return false;
+        const Eigen::VectorXd step = metric.minimumNormStep(Ah, h);
+        Eigen::VectorXd next = q;
+        for (Eigen::Index j = 0; j < nf; ++j) next(free[j]) -= step(j);
+        ++r.iterations;
+        if (!next.allFinite() || !evaluate(next)) {
+          evaluate(q);
+          nonFinite = true;
+          return false;
+        }
+        q = next;
       }
-      for (Eigen::Index j = 0; j < nf; ++j) e(j) = r.q(free[j]) - q0(free[j]);
-      // Minimizer of the metric distance to q0 over the manifold linearized at q_k.
-      const Eigen::VectorXd y = metric.minimumNormStep(Ah, Ah * e - h);
-      qNext = r.q;
-      for (Eigen::Index j = 0; j < nf; ++j) qNext(free[j]) = q0(free[j]) + y(j);
-      if (!qNext.allFinite() || !evaluate(qNext)) {
+    };
+    const auto distance = [&](const Eigen::VectorXd& q) {  // ½ (q − q0)ᵀ W (q − q0) over free
+      Eigen::VectorXd e(nf);
+      for (Eigen::Index j = 0; j < nf; ++j) e(j) = q(free[j]) - q0(free[j]);
+      return 0.5 * e.dot(metric.W * e);
+    };
+    const auto scale = [&] { return options.stepTolerance * (1.0 + r.q.cwiseAbs().maxCoeff()); };
+    if (!restore(r.q)) {
+      r.positionResidual = h.cwiseAbs().maxCoeff();
+      fail(nonFinite ? ProjectionStatus::kNonFinite : ProjectionStatus::kNotConverged,
+           nonFinite ? std::string("a Gauss-Newton step produced a non-finite q, h(q) or Jacobian")
+                     : "Gauss-Newton did not reach |h| <= " + format(options.tolerance) + " in " +
+                           std::to_string(options.maxIterations) + " iterations: |h|inf = " +
+                           format(r.positionResidual) + " (are the constraints reachable from this q?)");
+    } else if (std::isfinite(options.stepTolerance)) {
+      // Closest point: descend ½ (q − q0)ᵀ W (q − q0) along the manifold. The direction is minus
+      // the W-orthogonal tangent component of q − q0, d = −(I − W⁻¹Aᵀ(A W⁻¹ Aᵀ)⁺ A) (q − q0)
+      // (zero exactly at the first-order conditions W (q − q0) = Aᵀ ν); each trial point is
+      // restored onto h = 0 and accepted when the distance decreases (step halved otherwise).
+      Eigen::VectorXd e(nf);
+      bool converged = false;
+      for (int outer = 0; outer < options.maxIterations && !converged; ++outer) {
+        for (Eigen::Index j = 0; j < nf; ++j) e(j) = r.q(free[j]) - q0(free[j]);
+        const Eigen::VectorXd d = metric.minimumNormStep(Ah, Ah * e) - e;
+        if (d.cwiseAbs().maxCoeff() <= scale()) {
+          converged = true;
+          break;
+        }
+        const double d0 = distance(r.q);
+        bool accepted = false;
+        for (double alpha = 1.0; alpha >= 1.0 / 1024.0; alpha *= 0.5) {
+          Eigen::VectorXd trial = r.q;
+          for (Eigen::Index j = 0; j < nf; ++j) trial(free[j]) += alpha * d(j);
+          if (trial.allFinite() && evaluate(trial) && restore(trial) && distance(trial) < d0) {
+            r.lastStep = (trial - r.q).cwiseAbs().maxCoeff();
+            r.q = trial;
+            accepted = true;
+            break;
+          }
+        }
         evaluate(r.q);
-        fail(ProjectionStatus::kNonFinite, "Gauss-Newton step " + std::to_string(k + 1) +
-                                               " produced a non-finite q, h(q) or Jacobian");
-        break;
+        // No decrease along a descent direction: q is a minimum to the precision of the steps.
+        if (!accepted) converged = true;
       }
-      r.lastStep = (qNext - r.q).cwiseAbs().maxCoeff();
-      r.q = qNext;
-      r.iterations = k + 1;
+      r.positionResidual = h.cwiseAbs().maxCoeff();
+      if (!converged) {
+        fail(ProjectionStatus::kNotConverged,
+             "on the manifold (|h|inf = " + format(r.positionResidual) + ") but the closest point was not reached in " +
+                 std::to_string(options.maxIterations) + " descent steps (last step " + format(r.lastStep) + ")");
+      }
+    } else {
+      r.positionResidual = h.cwiseAbs().maxCoeff();
     }
   }
 

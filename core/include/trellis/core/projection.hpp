@@ -3,13 +3,13 @@
 // the simulator's drift correction and the hand's reference motion use it).
 //
 // Positions: q* is the point of {h = 0} closest to the given q0 in the kinetic-energy metric
-// W = M(q0),  min ½ (q − q0)ᵀ W (q − q0)  s.t.  h(q) = 0  (holonomic rows only). Gauss–Newton on
-// this problem linearizes h at the iterate q_k and takes the exact minimizer of the quadratic over
-// the linearized manifold:
-//   q_{k+1} = q0 + W⁻¹ A_kᵀ (A_k W⁻¹ A_kᵀ)⁺ (A_k (q_k − q0) − h(q_k)),
-// a fixed point of which satisfies h(q*) = 0 and W (q* − q0) = A(q*)ᵀ ν — the first-order
-// conditions of the closest point (not only a point on the manifold). Feasibility converges
-// quadratically, the closest-point condition linearly at a rate ~ (distance × curvature of h).
+// W = M(q0),  min ½ (q − q0)ᵀ W (q − q0)  s.t.  h(q) = 0  (holonomic rows only). First restoration,
+// minimum-W-norm Newton steps q ← q − W⁻¹Aᵀ (A W⁻¹ Aᵀ)⁺ h(q) (quadratic convergence near the
+// manifold); then descent along the manifold: d = −(I − W⁻¹Aᵀ (A W⁻¹ Aᵀ)⁺ A)(q − q0), the
+// W-orthogonal tangent component of the displacement, each trial point restored onto h = 0 and
+// accepted when the distance decreases (halved otherwise). d = 0 exactly where W (q − q0) = Aᵀ ν,
+// the first-order conditions of the closest point. (The plain Gauss–Newton iteration on the KKT
+// conditions, which ignores the curvature of h, oscillates when q0 is far from the manifold.)
 // Velocities: q̇* = q̇ − W*⁻¹ Aᵀ (A W*⁻¹ Aᵀ)⁺ A q̇ over all rows (holonomic and nonholonomic) with
 // W* = M(q*): the velocity change of a constraint impulse, the correction of least kinetic energy.
 // Pseudo-inverses go through a complete orthogonal decomposition of A L⁻ᵀ (W = L Lᵀ), so redundant
@@ -31,10 +31,10 @@ struct ProjectionOptions {
   /// Positions count as on the manifold when |h(q)|∞ ≤ tolerance (units of h; a distance
   /// constraint's h is a squared length). > 0.
   double tolerance = 1e-12;
-  /// The closest-point condition: converged when additionally the last Gauss–Newton step has
-  /// ‖Δq‖∞ ≤ stepTolerance · (1 + ‖q‖∞). +infinity: feasibility only (any point with h = 0).
+  /// The closest-point condition: converged when the descent direction has
+  /// ‖d‖∞ ≤ stepTolerance · (1 + ‖q‖∞). +infinity: feasibility only (the restoration's point).
   double stepTolerance = 1e-10;
-  int maxIterations = 50;  ///< Gauss–Newton iterations (≥ 1)
+  int maxIterations = 50;  ///< restoration steps per restoration, and descent steps (≥ 1)
   std::vector<int> fixed;  ///< indices of coordinates held at their given q and q̇
   bool velocities = true;  ///< also project q̇ onto A(q*) q̇ = 0
   /// Throws std::invalid_argument naming the field and value.
@@ -54,12 +54,12 @@ struct ProjectionResult {
   ProjectionStatus status = ProjectionStatus::kOk;
   std::string message;               ///< empty when ok
   Eigen::VectorXd q, dq;             ///< the projected state (n each)
-  int iterations = 0;                ///< Gauss–Newton steps taken
+  int iterations = 0;                ///< restoration (Newton) steps taken in all
   double positionResidualBefore = 0; ///< |h(q0)|∞ over the holonomic rows
   double positionResidual = 0;       ///< |h(q*)|∞
   double velocityResidualBefore = 0; ///< |A(q0) q̇0|∞ over all rows
   double velocityResidual = 0;       ///< |A(q*) q̇*|∞
-  double lastStep = 0;               ///< ‖Δq‖∞ of the last Gauss–Newton step
+  double lastStep = 0;               ///< ‖Δq‖∞ of the last accepted descent step
   bool massWeighted = true;          ///< false: M was not positive definite, Euclidean metric used
   bool ok() const { return status == ProjectionStatus::kOk; }
 };
