@@ -1,21 +1,24 @@
-// cli/linearize.cpp — `trellis linearize SCENE.json`: the exact linearization at the scene's state.
+// cli/linearize.cpp — `trellis linearize SCENE.json`: the exact linearization at the scene's
+// state, at a given state (--state) or at every knot of a trajectory (--trajectory).
+#include "cli_options.hpp"
 #include "command.hpp"
 #include "json_output.hpp"
+#include "model_questions.hpp"
 
 #include "trellis/core/linearization.hpp"
 #include "trellis/core/scene.hpp"
 
-#include <iostream>
-#include <iterator>
+#include <stdexcept>
 
 namespace trellis::cli {
 namespace {
 
-constexpr std::string_view kHelp = R"(usage: trellis linearize [--compact] SCENE.json
-       trellis linearize [--compact] -          (read the scene from standard input)
+constexpr std::string_view kHelp = R"(usage: trellis linearize [--compact] [--state STATE.json] SCENE.json
+       trellis linearize --trajectory TRAJ.csv SCENE.json
+       trellis linearize [options] -          (read the scene from standard input)
 
-Loads a scene (SCENE_FORMAT.md, version 1) and evaluates, at the state stored in its "state"
-(missing names are 0), the constrained Euler-Lagrange equations
+Loads a scene (docs/scene_format.md) and evaluates, at the state stored in its "state" (missing
+names are 0), or at the state of --state, the constrained Euler-Lagrange equations
 
   M(q) q'' = Q(q, q', u) + dL/dq - (d2L/dq dq') q' + J(q)^T lambda,    J q'' + J' q' = 0,
 
@@ -25,7 +28,8 @@ with J = dh/dq the constraint Jacobian, then prints their exact linearization
   A = [[0, I], [dq''/dq, dq''/dq']]   (2n x 2n),   B = [[0], [dq''/du]]   (2n x m).
 
 The state is used as written, not projected onto the constraints: off the constraint manifold
-the result depends on how a constraint is written (see h and hdot in the output).
+the result depends on how a constraint is written (see h and hdot in the output; `trellis
+project` moves a state onto the constraints).
 
 Output: one JSON object on standard output, with the keys
   status    "ok", or "redundant_constraints" (J is rank deficient: q'' is exact, lambda is the
@@ -41,90 +45,75 @@ Output: one JSON object on standard output, with the keys
   A, B      the linearization (2n x 2n, 2n x m)
 Matrices are lists of rows; numbers are printed with 17 significant digits.
 
-options:
-  --compact   print the object on one line
-  -h, --help  show this help
+With --trajectory: the linearization at every knot of the trajectory, as JSON Lines — one object
+per knot and line, in knot order, with the keys above preceded by "knot" (0-based) and "t".
 
-Exit status: 0 on success; 1 if the scene cannot be read or is invalid, or if the dynamics
-cannot be solved at its state (singular mass matrix, singular constraints, non-finite values);
-2 on a usage error. Errors are one line on standard error and nothing on standard output.
+options:
+  --state FILE       a state object {"q": {name: value}, "dq": {...}, "u": {...}} (the form of a
+                     scene's "state"); names it does not list keep the scene's stored values;
+                     unknown names or keys are errors
+  --trajectory FILE  a trajectory CSV: t, <configs>, d<configs>, <inputs> (the layout of
+                     `trellis simulate --out`; names equal to the scene's, in order; >= 1 row)
+  --compact          print the object on one line (always so with --trajectory)
+  -h, --help         show this help
+
+Exit status: 0 on success; 1 if the scene, state or trajectory cannot be read or is invalid, or
+if the dynamics cannot be solved at a state (singular mass matrix, singular constraints,
+non-finite values; the message names the knot and time); 2 on a usage error. Errors are one line
+on standard error and nothing on standard output.
 )";
 
-std::string statusName(DynamicsStatus::Code code) {
-  switch (code) {
-    case DynamicsStatus::Code::kOk: return "ok";
-    case DynamicsStatus::Code::kRedundantConstraints: return "redundant_constraints";
-    case DynamicsStatus::Code::kSingularMassMatrix: return "singular_mass_matrix";
-    case DynamicsStatus::Code::kSingularConstraints: return "singular_constraints";
-    case DynamicsStatus::Code::kNonFinite: return "non_finite";
-  }
-  return "unknown";
-}
-
-OutputJson names(const std::vector<std::string>& list) {
-  OutputJson out = OutputJson::array();
-  for (const std::string& name : list) out.push_back(name);
-  return out;
-}
-
-int runLinearize(std::span<const std::string> args, std::ostream& out) {
-  bool compact = false;
-  std::string path;
-  bool havePath = false;
-  bool optionsDone = false;
-  for (const std::string& arg : args) {
-    if (!optionsDone && arg == "--") {
-      optionsDone = true;
-    } else if (!optionsDone && arg == "--compact") {
-      compact = true;
-    } else if (!optionsDone && arg.size() > 1 && arg[0] == '-') {
-      throw UsageError("linearize: unknown option '" + arg + "'");
-    } else if (havePath) {
-      throw UsageError("linearize: more than one scene file ('" + path + "', '" + arg + "')");
-    } else {
-      path = arg;
-      havePath = true;
-    }
-  }
-  if (!havePath) throw UsageError("linearize: missing the scene file");
-
-  const bool fromStdin = path == "-";
-  Scene scene = [&] {
-    if (!fromStdin) return loadScene(path);
-    const std::string text{std::istreambuf_iterator<char>(std::cin), std::istreambuf_iterator<char>()};
-    return parseScene(text, "<stdin>");
-  }();
-  if (fromStdin) path = "<stdin>";  // for the messages below
-  const Model& model = scene.model;
-  if (model.nq() == 0) {
-    throw std::runtime_error(path + ": the scene has no configuration variables: nothing to linearize");
-  }
-  Data data(model);
-  const DynamicsStatus status = computeLinearization(model, data, scene.q, scene.dq, scene.u);
-  if (!status.ok()) {
-    throw std::runtime_error(path + ": the dynamics cannot be solved at the scene's state (" +
-                             statusName(status.code) + ")" +
-                             (status.message.empty() ? "" : ": " + status.message));
-  }
-  if (!data.A.allFinite() || !data.B.allFinite() || !data.qdd.allFinite() || !data.lambda.allFinite()) {
-    throw std::runtime_error(path + ": the linearization at the scene's state is not finite");
-  }
-
-  OutputJson result = OutputJson::object();
-  result["status"] = statusName(status.code);
-  result["configs"] = names(model.configNames());
-  result["inputs"] = names(model.inputNames());
-  result["q"] = toJson(scene.q);
-  result["dq"] = toJson(scene.dq);
-  result["u"] = toJson(scene.u);
+OutputJson linearizationJson(const Model& model, const Data& data, const DynamicsStatus& status,
+                             const Eigen::VectorXd& q, const Eigen::VectorXd& dq, const Eigen::VectorXd& u,
+                             OutputJson result) {
+  result["status"] = dynamicsStatusName(status.code);
+  result["configs"] = nameList(model.configNames());
+  result["inputs"] = nameList(model.inputNames());
+  result["q"] = toJson(q);
+  result["dq"] = toJson(dq);
+  result["u"] = toJson(u);
   result["qdd"] = toJson(data.qdd);
   result["lambda"] = toJson(data.lambda);
   result["h"] = toJson(data.constraintValue);
-  result["hdot"] = toJson(Eigen::VectorXd(data.constraintJacobian * scene.dq));
+  result["hdot"] = toJson(Eigen::VectorXd(data.constraintJacobian * dq));
   result["M"] = toJson(data.M);
   result["A"] = toJson(data.A);
   result["B"] = toJson(data.B);
-  writeJson(out, result, compact);
+  return result;
+}
+
+int runLinearize(std::span<const std::string> args, std::ostream& out) {
+  const ParsedOptions options("linearize", args, {{"--state", "--trajectory"}, {"--compact"}, {}});
+  const LoadedScene loaded = loadSceneArgument(options.singlePositional("scene file"));
+  const Model& model = loaded.scene.model;
+  if (model.nq() == 0) {
+    throw std::runtime_error(loaded.path + ": the scene has no configuration variables: nothing to linearize");
+  }
+  if (options.has("--state") && options.has("--trajectory")) {
+    throw UsageError("linearize: give --state or --trajectory, not both");
+  }
+  Data data(model);
+  if (const auto path = options.value("--trajectory")) {
+    const Trajectory trajectory = readTrajectoryFor(loaded, *path);
+    const int n = model.nq();
+    for (int k = 0; k < trajectory.size(); ++k) {
+      const Eigen::VectorXd q = trajectory.states().col(k).head(n), dq = trajectory.states().col(k).tail(n);
+      const Eigen::VectorXd u = trajectory.inputs().col(k);
+      const DynamicsStatus status = computeLinearization(model, data, q, dq, u);
+      requireLinearization(status, data,
+                           *path + ": knot " + std::to_string(k) + " (t = " + formatNumber(trajectory.times()(k), 17) + ")");
+      OutputJson head = OutputJson::object();
+      head["knot"] = k;
+      head["t"] = trajectory.times()(k);
+      writeJson(out, linearizationJson(model, data, status, q, dq, u, std::move(head)), true);
+    }
+    return 0;
+  }
+  const ModelState state = stateFromFile(loaded, options.value("--state"));
+  const DynamicsStatus status = computeLinearization(model, data, state.q, state.dq, state.u);
+  requireLinearization(status, data, loaded.path + (options.has("--state") ? " at " + *options.value("--state") : " at the scene's state"));
+  writeJson(out, linearizationJson(model, data, status, state.q, state.dq, state.u, OutputJson::object()),
+            options.flag("--compact"));
   return 0;
 }
 
@@ -132,7 +121,7 @@ int runLinearize(std::span<const std::string> args, std::ostream& out) {
 
 const Command kLinearizeCommand{
     "linearize",
-    "the exact linearization A, B of a scene at its stored state, as JSON",
+    "the exact linearization A, B at a state or along a trajectory, as JSON",
     kHelp,
     &runLinearize,
 };

@@ -7,6 +7,7 @@
 #include "trellis/core/scene.hpp"
 
 #include "trellis/core/urdf.hpp"
+#include "state_json.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -571,30 +572,13 @@ class SceneReader {
   // ---- state ----------------------------------------------------------------------------------
 
   static void readState(const Element& top, Scene& scene) {
-    const Model& model = scene.model;
-    scene.q = Eigen::VectorXd::Zero(model.nq());
-    scene.dq = Eigen::VectorXd::Zero(model.nq());
-    scene.u = Eigen::VectorXd::Zero(model.nu());
-    const Json* state = top.optionalObject("state");
-    if (!state) return;
-    Element e(*state, "state");
-    const auto readValues = [&e](const char* key, const std::vector<std::string>& names,
-                                 const char* what, Eigen::VectorXd& out) {
-      const Json* values = e.optionalObject(key);
-      if (!values) return;
-      for (const auto& [name, value] : values->items()) {
-        const std::string field = std::string(key) + "." + name;
-        const auto it = std::find(names.begin(), names.end(), name);
-        if (it == names.end()) {
-          e.fail(field, "unknown " + std::string(what) + " " + quote(name) + " (known: " +
-                            listNames(names) + ")");
-        }
-        out[it - names.begin()] = e.toNumber(value, field);
-      }
-    };
-    readValues("q", model.configNames(), "configuration variable", scene.q);
-    readValues("dq", model.configNames(), "configuration variable", scene.dq);
-    readValues("u", model.inputNames(), "input", scene.u);
+    ModelState state = zeroState(scene.model);
+    if (const Json* node = top.optionalObject("state")) {
+      detail::readStateObject(scene.model, *node, "state", false, false, state);  // state_json.hpp
+    }
+    scene.q = std::move(state.q);
+    scene.dq = std::move(state.dq);
+    scene.u = std::move(state.u);
   }
 
   std::filesystem::path baseDir_;

@@ -2,6 +2,7 @@
 #include "reference_motion.hpp"
 
 #include <trellis/core/dynamics.hpp>
+#include <trellis/core/projection.hpp>
 
 #include <Eigen/QR>
 #include <Eigen/SVD>
@@ -146,26 +147,24 @@ TensionDistribution distributeTensions(const Model& model, Data& data, const Eig
   return out;
 }
 
-double projectOntoConstraints(const Model& model, Data& data, Eigen::VectorXd& q,
-                              const std::vector<int>& drivers, double tolerance, int maxIterations) {
-  const int n = model.nq();
-  std::vector<int> others;
-  for (int i = 0; i < n; ++i)
-    if (std::find(drivers.begin(), drivers.end(), i) == drivers.end()) others.push_back(i);
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
-  Eigen::MatrixXd Ao(model.nc(), static_cast<Eigen::Index>(others.size()));
-  double err = 0.0;
-  for (int it = 0; it <= maxIterations; ++it) {
-    computeConstraints(model, data, q, zero);
-    err = model.nc() ? data.constraintValue.cwiseAbs().maxCoeff() : 0.0;
-    if (err <= tolerance || it == maxIterations || !std::isfinite(err)) break;
-    for (std::size_t c = 0; c < others.size(); ++c)
-      Ao.col(static_cast<Eigen::Index>(c)) = data.constraintJacobian.col(others[c]);
-    const Eigen::VectorXd step = Ao.colPivHouseholderQr().solve(-data.constraintValue);
-    for (std::size_t c = 0; c < others.size(); ++c) q(others[c]) += step(static_cast<Eigen::Index>(c));
-  }
-  return err;
+namespace {
+
+/// h(q) = 0 by Newton over the coordinates not in `drivers` (core projectState with the drivers
+/// fixed: the free coordinates are as many as the constraint rows, so its closest-point step is
+/// the Newton step). q is updated in place; returns the final ‖h(q)‖∞.
+double projectWithDriversFixed(const Model& model, Data& data, Eigen::VectorXd& q,
+                              const std::vector<int>& drivers) {
+  ProjectionOptions options;
+  options.fixed = drivers;
+  options.velocities = false;
+  options.tolerance = 1e-14;
+  options.stepTolerance = std::numeric_limits<double>::infinity();  // feasibility only
+  const ProjectionResult projected = projectState(model, data, q, Eigen::VectorXd::Zero(model.nq()), options);
+  q = projected.q;
+  return projected.positionResidual;
 }
+
+}  // namespace
 
 namespace {
 
@@ -223,7 +222,7 @@ ReferenceMotion makeReferenceMotion(const Model& model, const Eigen::VectorXd& q
   };
 
   Eigen::VectorXd qStart = q0;
-  projectOntoConstraints(model, data, qStart, drivers);
+  projectWithDriversFixed(model, data, qStart, drivers);
   Eigen::VectorXd q = qStart, dq(n), qdd(n);
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
   Eigen::MatrixXd Ao(nc, static_cast<Eigen::Index>(others.size()));
@@ -240,7 +239,7 @@ ReferenceMotion makeReferenceMotion(const Model& model, const Eigen::VectorXd& q
       ddqd(static_cast<Eigen::Index>(i)) = 0.5 * a * w * w * std::cos(w * t);
     }
     // q from the previous knot is the Newton start: the path is continuous.
-    out.constraintResidual(k) = projectOntoConstraints(model, data, q, drivers);
+    out.constraintResidual(k) = projectWithDriversFixed(model, data, q, drivers);
     computeConstraints(model, data, q, zero);
     for (std::size_t c = 0; c < others.size(); ++c)
       Ao.col(static_cast<Eigen::Index>(c)) = data.constraintJacobian.col(others[c]);

@@ -70,12 +70,6 @@ TensionDistribution distributeTensions(const Model& model, Data& data, const Eig
                                        const Eigen::VectorXd& dq, const Eigen::VectorXd& qdd,
                                        const TensionDistributionOptions& options = {});
 
-/// Newton's method on h(q) = 0 over the coordinates not in `drivers` (q is updated in place).
-/// Returns the final ‖h(q)‖∞; stops at tolerance or after maxIterations.
-double projectOntoConstraints(const Model& model, Data& data, Eigen::VectorXd& q,
-                              const std::vector<int>& drivers, double tolerance = 1e-14,
-                              int maxIterations = 50);
-
 struct ReferenceMotionOptions {
   double duration = 3.0;  ///< s
   int knots = 301;        ///< N ≥ 2, uniform in [0, duration]

@@ -7,3 +7,7 @@
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/linearization.hpp"
 #include "trellis/core/scene.hpp"
+#include "trellis/core/state.hpp"
+#include "trellis/core/projection.hpp"
+#include "trellis/core/inverse_dynamics.hpp"
+#include "trellis/core/equilibrium.hpp"

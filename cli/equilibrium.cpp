@@ -1,0 +1,146 @@
+// cli/equilibrium.cpp — `trellis equilibrium SCENE.json`: a configuration at rest under given
+// inputs (core/equilibrium.hpp), or with --hold the inputs that hold a given pose.
+#include "cli_options.hpp"
+#include "command.hpp"
+#include "model_questions.hpp"
+
+#include "trellis/core/equilibrium.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+
+namespace trellis::cli {
+namespace {
+
+constexpr std::string_view kHelp = R"(usage: trellis equilibrium [--state STATE.json] [--inputs a=1,b=2] [options] SCENE.json
+       trellis equilibrium --hold [--state STATE.json] [--allow-residual] SCENE.json
+
+Without --hold: searches a static equilibrium, a q with q' = 0 and q''(q, 0, u) = 0 on the
+holonomic constraints h(q) = 0, under fixed inputs u, by Gauss-Newton on F(q) = [q''; h] with
+the exact Jacobian [dq''/dq; dh/dq] of the linearization and a backtracking line search. The
+start is q of the scene's stored state (or --state); u is the state's u with --inputs applied.
+Output keys: status ("ok"), iterations, qdd_residual (max |q''|), h_residual (max |h|),
+isolated (false: a continuum of equilibria passes through q, e.g. a free coordinate),
+max_real_eigenvalue (largest real part of the eigenvalues of the linearization on the
+constraint tangent space: < 0 asymptotically stable, > 0 unstable, ~0 marginal — an undamped
+stable equilibrium has eigenvalues +- i w), configs, q, inputs, u, lambda, state (a state object
+--state reads back).
+
+With --hold: the inputs that hold the pose q (of the state) still, i.e. inverse dynamics with
+q' = 0, q'' = 0: B_u u + A^T lambda = b(q) (the generalized forces of gravity, springs and
+constant wrenches at rest, with the sign of M q'' + b = Q_u + A^T lambda), least squares of
+minimum norm.
+Output keys: status ("ok", or "unreachable" with --allow-residual when no inputs can hold the
+pose), residual (max |B_u u + A^T lambda - r|, generalized forces), unique, inputs, u, lambda,
+state.
+
+options:
+  --state FILE           the start (or the pose to hold); see `trellis linearize --help`
+  --inputs LIST          name=value,... overrides of the inputs (not with --hold)
+  --hold                 the inputs that hold the pose instead of a pose for the inputs
+  --allow-residual       with --hold: print the least-squares inputs (exit 0) when no inputs hold
+                         the pose exactly
+  --tolerance TOL        on max |q''| and max |h| (default 1e-10)
+  --max-iterations N     Newton iterations (default 50)
+  --compact              print the object on one line
+  -h, --help             show this help
+
+Exit status: 0 on success; 1 if the scene or state cannot be read, the search does not converge
+or the dynamics fail (the message gives the residuals), or with --hold when the pose cannot be
+held (without --allow-residual); 2 on a usage error.
+)";
+
+Eigen::VectorXd applyInputs(const Model& model, const ParsedOptions& options, Eigen::VectorXd u) {
+  const auto list = options.value("--inputs");
+  if (!list) return u;
+  std::size_t start = 0;
+  while (start <= list->size()) {
+    const std::size_t comma = list->find(',', start);
+    const std::string item = list->substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    const std::size_t eq = item.find('=');
+    if (eq == std::string::npos || eq == 0) {
+      throw UsageError("equilibrium: --inputs: '" + item + "' is not name=value");
+    }
+    const std::string name = item.substr(0, eq);
+    const auto& names = model.inputNames();
+    const auto it = std::find(names.begin(), names.end(), name);
+    if (it == names.end()) {
+      throw UsageError("equilibrium: --inputs: unknown input '" + name + "' (known: " + joinNames(names) + ")");
+    }
+    u(it - names.begin()) = options.number("--inputs", item.substr(eq + 1));
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
+  return u;
+}
+
+int runEquilibrium(std::span<const std::string> args, std::ostream& out) {
+  const ParsedOptions options("equilibrium", args,
+                              {{"--state", "--inputs", "--tolerance", "--max-iterations"},
+                               {"--hold", "--allow-residual", "--compact"}, {}});
+  const LoadedScene loaded = loadSceneArgument(options.singlePositional("scene file"));
+  const Model& model = loaded.scene.model;
+  const ModelState state = stateFromFile(loaded, options.value("--state"));
+  Data data(model);
+  OutputJson result = OutputJson::object();
+  if (options.flag("--hold")) {
+    for (const char* o : {"--inputs", "--max-iterations"})
+      if (options.has(o)) throw UsageError(std::string("equilibrium: ") + o + " does not apply to --hold");
+    InverseDynamicsOptions io;
+    if (const auto v = options.value("--tolerance")) io.tolerance = options.positiveNumber("--tolerance", *v);
+    const InverseDynamicsResult r = computeHoldingInputs(model, data, state.q, io);
+    const bool accepted = r.ok() || (r.status == InverseDynamicsStatus::kUnreachable && options.flag("--allow-residual"));
+    if (!accepted) {
+      throw std::runtime_error(loaded.path + ": the pose cannot be held (" + toString(r.status) + "): " + r.message);
+    }
+    result["status"] = toString(r.status);
+    result["residual"] = r.residualNorm;
+    result["unique"] = r.unique;
+    result["inputs"] = nameList(model.inputNames());
+    result["u"] = toJson(r.u);
+    result["lambda"] = toJson(r.lambda);
+    result["state"] = stateObject(model, state.q, Eigen::VectorXd::Zero(model.nq()), r.u);
+  } else {
+    if (options.flag("--allow-residual")) throw UsageError("equilibrium: --allow-residual needs --hold");
+    EquilibriumOptions eo;
+    if (const auto v = options.value("--tolerance")) eo.tolerance = options.positiveNumber("--tolerance", *v);
+    if (const auto v = options.value("--max-iterations")) {
+      const unsigned long long k = options.count("--max-iterations", *v);
+      if (k < 1 || k > 100000) throw UsageError("equilibrium: --max-iterations: " + *v + " must be in [1, 100000]");
+      eo.maxIterations = static_cast<int>(k);
+    }
+    if (model.nq() == 0) throw std::runtime_error(loaded.path + ": the scene has no configuration variables");
+    const Eigen::VectorXd u = applyInputs(model, options, state.u);
+    const EquilibriumResult r = findEquilibrium(model, data, state.q, u, eo);
+    if (!r.ok()) {
+      throw std::runtime_error(loaded.path + ": no equilibrium found (" + toString(r.status) + "): " + r.message);
+    }
+    result["status"] = toString(r.status);
+    result["iterations"] = r.iterations;
+    result["qdd_residual"] = r.accelerationResidual;
+    result["h_residual"] = r.constraintResidual;
+    result["isolated"] = r.isolated;
+    result["max_real_eigenvalue"] = r.maxRealEigenvalue;
+    result["configs"] = nameList(model.configNames());
+    result["q"] = toJson(r.q);
+    result["inputs"] = nameList(model.inputNames());
+    result["u"] = toJson(r.u);
+    result["lambda"] = toJson(r.lambda);
+    result["state"] = stateObject(model, r.q, Eigen::VectorXd::Zero(model.nq()), r.u);
+  }
+  writeJson(out, result, options.flag("--compact"));
+  return 0;
+}
+
+}  // namespace
+
+const Command kEquilibriumCommand{
+    "equilibrium",
+    "a configuration at rest under given inputs, or (--hold) the inputs that hold a pose",
+    kHelp,
+    &runEquilibrium,
+};
+
+const CommandRegistration kRegisterEquilibrium{kEquilibriumCommand};
+
+}  // namespace trellis::cli

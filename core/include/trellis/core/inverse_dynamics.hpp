@@ -1,0 +1,56 @@
+// trellis/core/inverse_dynamics.hpp — the inputs (and constraint forces) that produce a given
+// acceleration: solve the equations of motion for u and λ instead of q̈.
+//
+// The generalized forces are affine in the inputs, Q(q, q̇, u) = Q(q, q̇, 0) + B_u(q) u with
+// B_u = ∂Q/∂u (data.inputMatrix), so the equations of motion at a given (q, q̇, q̈) read
+//   B_u u + Aᵀ λ = r,   r = M(q) q̈ + b(q, q̇),   b = ID(q, q̇, 0) − Q(q, q̇, 0)   (n equations),
+// linear in z = [u; λ] (m + nc unknowns). z is the least-squares solution of minimum norm
+// (complete orthogonal decomposition of G = [B_u  Aᵀ]): exact when q̈ is reachable (fully actuated,
+// or an under-actuated system along a feasible motion), otherwise the residual G z − r reports by
+// how much the equations miss (it is orthogonal to every column of G). The acceleration must
+// also satisfy the constraints, A q̈ + Ȧ q̇ = 0; its residual is reported and checked.
+// The inputs that hold a pose still are computeInverseDynamics(q, 0, 0) (see equilibrium.hpp).
+#pragma once
+
+#include "trellis/core/data.hpp"
+
+#include <string>
+
+namespace trellis {
+
+struct InverseDynamicsOptions {
+  /// Exact when ‖G z − r‖∞ ≤ tolerance · max(1, ‖r‖∞, ‖G‖∞ ‖z‖∞), and likewise for the
+  /// constraint acceleration ‖A q̈ + Ȧ q̇‖∞ ≤ tolerance · max(1, ‖A‖∞ ‖q̈‖∞, ‖Ȧ q̇‖∞).
+  double tolerance = 1e-9;
+};
+
+enum class InverseDynamicsStatus {
+  kOk,                      ///< u, λ reproduce q̈ exactly (to tolerance)
+  kUnreachable,             ///< no u, λ give this q̈ (under-actuated): least squares, see residual
+  kInadmissibleAcceleration,///< q̈ violates A q̈ + Ȧ q̇ = 0; u, λ are still the least squares
+  kNonFinite,               ///< an input or a result is NaN/Inf
+};
+
+const char* toString(InverseDynamicsStatus status);
+
+struct InverseDynamicsResult {
+  InverseDynamicsStatus status = InverseDynamicsStatus::kOk;
+  std::string message;              ///< empty when ok; names the worst coordinate or constraint
+  Eigen::VectorXd u;                ///< m inputs
+  Eigen::VectorXd lambda;           ///< nc constraint forces (M q̈ = … + Aᵀ λ)
+  Eigen::VectorXd residual;         ///< n: G z − r (generalized forces; 0 when reachable)
+  double residualNorm = 0.0;        ///< ‖residual‖∞
+  double constraintResidual = 0.0;  ///< ‖A q̈ + Ȧ q̇‖∞
+  int rank = 0;                     ///< numerical rank of G = [B_u  Aᵀ]
+  bool unique = true;               ///< rank = m + nc: u and λ are determined (else minimum norm)
+  bool ok() const { return status == InverseDynamicsStatus::kOk; }
+};
+
+/// u and λ for the acceleration qdd at (q, dq) (n-vectors each). Uses `data` as workspace (its
+/// M, bias, inputMatrix and constraint members are left at (q, dq)). Throws std::invalid_argument
+/// on a size mismatch; numerical outcomes are a status.
+InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, const Eigen::VectorXd& q,
+                                             const Eigen::VectorXd& dq, const Eigen::VectorXd& qdd,
+                                             const InverseDynamicsOptions& options = {});
+
+}  // namespace trellis

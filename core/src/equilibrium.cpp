@@ -1,0 +1,137 @@
+// Static equilibria (equilibrium.hpp).
+#include "trellis/core/equilibrium.hpp"
+
+#include "trellis/core/dynamics.hpp"
+#include "trellis/core/linearization.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/QR>
+
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+namespace trellis {
+
+const char* toString(EquilibriumStatus status) {
+  switch (status) {
+    case EquilibriumStatus::kOk: return "ok";
+    case EquilibriumStatus::kNotConverged: return "not_converged";
+    case EquilibriumStatus::kDynamicsFailure: return "dynamics_failure";
+  }
+  return "unknown";
+}
+
+EquilibriumResult findEquilibrium(const Model& model, Data& data, const Eigen::VectorXd& q0,
+                                  const Eigen::VectorXd& u, const EquilibriumOptions& options) {
+  const int n = model.nq(), nc = model.nc();
+  if (q0.size() != n || u.size() != model.nu()) {
+    throw std::invalid_argument("findEquilibrium: q has " + std::to_string(q0.size()) + " entries (n = " +
+                                std::to_string(n) + "), u " + std::to_string(u.size()) +
+                                " (m = " + std::to_string(model.nu()) + ")");
+  }
+  if (!(options.tolerance > 0.0) || options.maxIterations < 1) {
+    throw std::invalid_argument("EquilibriumOptions: tolerance must be > 0 and maxIterations >= 1");
+  }
+  std::vector<int> holonomic;
+  for (int c = 0; c < nc; ++c)
+    if (model.constraints()[c].holonomic()) holonomic.push_back(c);
+  const int nh = static_cast<int>(holonomic.size());
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
+
+  EquilibriumResult r;
+  r.u = u;
+  r.q = q0;
+  Eigen::VectorXd F(n + nh);
+  DynamicsStatus dyn;
+  // F(q) and, with jacobian, ∂F/∂q in J; false if the dynamics cannot be solved at q.
+  Eigen::MatrixXd J(n + nh, n);
+  const auto evaluate = [&](const Eigen::VectorXd& q, bool jacobian) {
+    dyn = jacobian ? computeLinearization(model, data, q, zero, u) : computeDynamics(model, data, q, zero, u);
+    if (!dyn.ok() || !data.qdd.allFinite()) return false;
+    F.head(n) = data.qdd;
+    for (int i = 0; i < nh; ++i) F(n + i) = data.constraintValue(holonomic[i]);
+    if (jacobian) {
+      J.topRows(n) = data.dqdd_dq;
+      for (int i = 0; i < nh; ++i) J.row(n + i) = data.constraintJacobian.row(holonomic[i]);
+    }
+    return F.allFinite();
+  };
+  const auto converged = [&] {
+    r.accelerationResidual = n ? F.head(n).cwiseAbs().maxCoeff() : 0.0;
+    r.constraintResidual = nh ? F.tail(nh).cwiseAbs().maxCoeff() : 0.0;
+    return r.accelerationResidual <= options.tolerance && r.constraintResidual <= options.tolerance;
+  };
+  const auto dynamicsFailure = [&](const char* where) {
+    r.status = EquilibriumStatus::kDynamicsFailure;
+    r.message = std::string("the dynamics cannot be solved ") + where + ": " +
+                (dyn.message.empty() ? "status " + std::to_string(static_cast<int>(dyn.code)) : dyn.message);
+  };
+
+  if (!evaluate(r.q, true)) {
+    dynamicsFailure("at the initial guess");
+    return r;
+  }
+  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod;
+  for (int k = 0;; ++k) {
+    cod.compute(J);
+    r.jacobianRank = static_cast<int>(cod.rank());
+    if (converged()) break;
+    if (k == options.maxIterations) {
+      r.status = EquilibriumStatus::kNotConverged;
+      std::ostringstream m;
+      m << "no equilibrium within " << k << " Newton iterations: |q''|inf = " << r.accelerationResidual
+        << ", |h|inf = " << r.constraintResidual << " (rank of dF/dq " << r.jacobianRank << " of " << n << ")";
+      r.message = m.str();
+      break;
+    }
+    const Eigen::VectorXd step = -cod.solve(F);
+    const double merit = F.squaredNorm();
+    const Eigen::VectorXd qk = r.q;
+    bool accepted = false;
+    for (double alpha = 1.0; alpha > 1e-6; alpha *= 0.5) {
+      const Eigen::VectorXd trial = qk + alpha * step;
+      if (trial.allFinite() && evaluate(trial, false) && F.squaredNorm() < (1.0 - 1e-4 * alpha) * merit) {
+        r.q = trial;
+        accepted = true;
+        break;
+      }
+    }
+    if (!accepted) {
+      evaluate(qk, true);
+      converged();
+      r.status = EquilibriumStatus::kNotConverged;
+      std::ostringstream m;
+      m << "the Newton step does not reduce |F| at iteration " << k + 1
+        << " (a minimum of |q''|^2 + |h|^2 that is not an equilibrium?): |q''|inf = "
+        << r.accelerationResidual << ", |h|inf = " << r.constraintResidual;
+      r.message = m.str();
+      break;
+    }
+    r.iterations = k + 1;
+    if (!evaluate(r.q, true)) {
+      dynamicsFailure("at an iterate");
+      return r;
+    }
+  }
+  r.isolated = r.jacobianRank == n;
+  r.lambda = data.lambda;
+  // Stability from the linearization on the constraint tangent space at the final q.
+  computeConstraintTangentBasis(model, data);
+  if (data.reducedA.size() > 0 && data.reducedA.allFinite()) {
+    const Eigen::EigenSolver<Eigen::MatrixXd> eig(data.reducedA, false);
+    r.maxRealEigenvalue = eig.eigenvalues().real().maxCoeff();
+  } else {
+    r.maxRealEigenvalue = data.reducedA.size() ? std::numeric_limits<double>::quiet_NaN() : 0.0;
+  }
+  return r;
+}
+
+InverseDynamicsResult computeHoldingInputs(const Model& model, Data& data, const Eigen::VectorXd& q,
+                                           const InverseDynamicsOptions& options) {
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nq());
+  return computeInverseDynamics(model, data, q, zero, zero, options);
+}
+
+}  // namespace trellis
