@@ -727,6 +727,10 @@ def write_report(args):
            "```", "",
            "The raw Google Benchmark JSON and console logs are not kept by default; `--keep-json` copies "
            "them to `performance/raw/` beside the report.",
+           "",
+           "Times on a shared machine are noisy; the load-independent measure is instructions per call "
+           "(callgrind on `trellis_bench_profile`, recipe and figures in bench/README.md, including "
+           "the effect of the `TRELLIS_NATIVE` build option, -march=native, off by default).",
            ""]
     if failures:
         md += ["## Failures", ""] + [f"- {f}" for f in failures] + [""]

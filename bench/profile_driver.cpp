@@ -3,11 +3,13 @@
 // calibration runs around it.
 //
 //   trellis_bench_profile <planar|spatial|hand> <N> <nc:0|1> <lin|dyn|fd> [iterations]
+//   trellis_bench_profile scene <file.json> 0 <lin|dyn|fd> [iterations]   (the scene's stored state)
 #include "finite_differences.hpp"
 #include "models.hpp"
 
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/linearization.hpp"
+#include "trellis/core/scene.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -30,13 +32,13 @@ int main(int argc, char** argv) {
     spec.kind = ModelKind::kPlanarChain;
   } else if (kind == "spatial") {
     spec.kind = ModelKind::kSpatialChain;
-  } else if (kind == "hand") {
+  } else if (kind == "hand" || kind == "scene") {
     spec.kind = ModelKind::kHandTree;
   } else {
     std::fprintf(stderr, "unknown model '%s' (planar, spatial, hand)\n", kind.c_str());
     return 2;
   }
-  spec.links = std::atoi(argv[2]);
+  spec.links = kind == "scene" ? 0 : std::atoi(argv[2]);
   spec.constrained = std::atoi(argv[3]) != 0;
   const long iterations = argc > 5 ? std::atol(argv[5]) : 1000;
   if (what != "lin" && what != "dyn" && what != "fd") {
@@ -45,7 +47,13 @@ int main(int argc, char** argv) {
   }
 
   try {
-    trellis::bench::BenchModel bm = trellis::bench::makeBenchModel(spec);
+    trellis::bench::BenchModel bm;
+    if (kind == "scene") {
+      trellis::Scene scene = trellis::loadScene(argv[2]);
+      bm = trellis::bench::BenchModel{std::move(scene.model), scene.q, scene.dq, scene.u, "scene"};
+    } else {
+      bm = trellis::bench::makeBenchModel(spec);
+    }
     trellis::Data data(bm.model);
     trellis::bench::FdWorkspace ws(bm.model);
     Eigen::MatrixXd J(bm.model.nq(), 2 * bm.model.nq() + bm.model.nu());

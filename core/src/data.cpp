@@ -1,13 +1,90 @@
 // Sizes every buffer of the workspace once (see data.hpp).
 #include "trellis/core/data.hpp"
 
+#include <algorithm>
+
 namespace trellis {
+
+namespace {
+/// The top-level tree (block) that contains joint j, as [first, end); the world is no block.
+std::pair<int, int> blockOf(const Model& model, int j) {
+  if (j == kWorld) return {model.nq(), 0};  // empty: neutral for min/max
+  while (model.joints()[j].parent != kWorld) j = model.joints()[j].parent;
+  return {j, model.joints()[j].subtreeEnd};
+}
+}  // namespace
+
+void Data::describeTree(const Model& model) {
+  const int n = model.nq(), nc = model.nc(), m = model.nu();
+  treeParent.resize(n);
+  runStart.resize(n);
+  blockStart.clear();
+  for (int i = 0; i < n; ++i) {
+    const int p = model.joints()[i].parent;
+    treeParent[i] = p;
+    runStart[i] = (p != kWorld && p == i - 1) ? runStart[i - 1] : i;
+    if (p == kWorld) blockStart.push_back(i);
+  }
+  treeRoot.resize(n);
+  for (int i = 0; i < n; ++i) treeRoot[i] = treeParent[i] == kWorld ? i : treeRoot[treeParent[i]];
+  tendonFirst.assign(1, 0);
+  tendonJointLo.clear();
+  tendonJointHi.clear();
+  for (const Tendon& t : model.tendons()) {
+    int lo = n, hi = -1;
+    for (const BodyPoint& bp : t.path)
+      if (bp.joint != kWorld) {
+        lo = std::min(lo, bp.joint);
+        hi = std::max(hi, bp.joint);
+      }
+    tendonJointLo.push_back(lo);
+    tendonJointHi.push_back(hi);
+    tendonFirst.push_back(tendonFirst.back() + static_cast<int>(t.path.size()));
+  }
+  tendonPoint.assign(static_cast<size_t>(tendonFirst.back()), Eigen::Vector3d::Zero());
+  blockStart.push_back(n);
+  // Row r of A (and column r of M⁻¹Aᵀ) lives on the blocks of the constraint's two bodies.
+  rowLo.assign(nc, 0);
+  rowHi.assign(nc, 0);
+  for (int r = 0; r < nc; ++r) {
+    const Constraint& c = model.constraints()[r];
+    const auto [a0, a1] = blockOf(model, c.a.joint);
+    const auto [b0, b1] = blockOf(model, c.b.joint);
+    rowLo[r] = std::min(a0, b0);
+    rowHi[r] = std::max(a1, b1);
+    if (rowHi[r] <= rowLo[r]) rowLo[r] = rowHi[r] = 0;  // touches no coordinate
+  }
+  // Groups of consecutive rows: a boundary t is kept when no row before it shares a coordinate
+  // with a row after it; A M⁻¹ Aᵀ is then block diagonal over the groups.
+  schurGroupStart.assign(1, 0);
+  for (int t = 1; t < nc; ++t) {
+    bool split = true;
+    for (int r = 0; r < t && split; ++r)
+      for (int s = t; s < nc && split; ++s)
+        split = std::min(rowHi[r], rowHi[s]) <= std::max(rowLo[r], rowLo[s]);
+    if (split) schurGroupStart.push_back(t);
+  }
+  if (nc > 0) schurGroupStart.push_back(nc);
+  // Inputs that are generalized forces on one coordinate: their column of B is a column of M⁻¹.
+  unitInputConfig.assign(m, -2);
+  unitInputGain.assign(m, 0.0);
+  for (const ConfigForce& cf : model.configForces()) {
+    int& c = unitInputConfig[cf.input];
+    c = (c == -2 || c == cf.config) ? cf.config : -1;
+    unitInputGain[cf.input] += 1.0;
+  }
+  for (const BodyWrench& bw : model.bodyWrenches())
+    for (int k : bw.input)
+      if (k >= 0 && bw.joint != kWorld) unitInputConfig[k] = -1;
+  for (const Tendon& t : model.tendons()) unitInputConfig[t.input] = -1;
+  for (int& c : unitInputConfig)
+    if (c == -2) c = -1;
+}
 
 Data::Data(const Model& model)
     // The factorizations are built at their size here (not assigned later) so that every member,
     // including their status flags, is initialized.
-    : massLLT(model.nq()),
-      schurLLT(model.nc()),
+    : schurLLT(model.nc()),
       schurLDLT(model.nc()),
       basisQR(2 * model.nq(), model.nholonomic() + model.nc()) {
   const int n = model.nq(), m = model.nu(), nc = model.nc(), nf = model.nframes();
@@ -39,7 +116,7 @@ Data::Data(const Model& model)
   jointR.assign(n, Eigen::Matrix3d::Identity());
   jointP.assign(n, Eigen::Vector3d::Zero());
   for (auto* vec : {&S, &v, &a, &f, &fext, &Iv, &Ia, &inertialForce, &compositeMomentum,
-                    &tangentAlpha, &tangentBeta, &tangentGamma})
+                    &tangentAlpha, &tangentBeta, &tangentGamma, &tangentWrench})
     vec->assign(n, Vector6d::Zero());
   compositeD.assign(n, Eigen::Matrix<double, 6, 6>::Zero());
   wm.assign(n, 0.0);
@@ -53,7 +130,10 @@ Data::Data(const Model& model)
   rhsX = Eigen::MatrixXd::Zero(n, cols);
   crhsX = Eigen::MatrixXd::Zero(nc, cols);
   massInverse = Eigen::MatrixXd::Zero(n, n);
-  Y = Eigen::MatrixXd::Zero(n, nc);
+  massFactor = Eigen::MatrixXd::Zero(n, n);
+  massInverseFactor = Eigen::MatrixXd::Zero(n, n);
+  massPivotInvSqrt = Eigen::VectorXd::Zero(n);
+  describeTree(model);
   massInverseAt = Eigen::MatrixXd::Zero(n, nc);
   schur = Eigen::MatrixXd::Zero(nc, nc);
   constraintScale = Eigen::VectorXd::Ones(nc);

@@ -2,6 +2,7 @@
 #include "trellis/core/dynamics.hpp"
 
 #include "internal.hpp"
+#include "mass_factor.hpp"
 #include "point_kinematics.hpp"
 
 #include <cmath>
@@ -120,14 +121,10 @@ void factorizeKkt(const Model& model, Data& data) {
     return;
   }
   if (n == 0) return;  // nothing moves: q̈ and the linearization are empty
-  data.massLLT.compute(data.M);
   const double scale = std::max(data.M.diagonal().maxCoeff(), std::numeric_limits<double>::min());
-  bool singular = data.massLLT.info() != Eigen::Success;
-  if (!singular) {
-    const auto L = data.massLLT.matrixLLT().diagonal();
-    singular = (L.array().square() <= 1e-14 * scale).any();
-  }
-  if (singular) {
+  // The tree factor M = Lᵀ D L (mass_factor.hpp); a pivot D_i ≤ 1e-14 max M_ii means M is
+  // singular to working precision.
+  if (factorMass(model, data, 1e-14 * scale) >= 0) {
     st.code = DynamicsStatus::Code::kSingularMassMatrix;
     st.message = "mass matrix is not positive definite";
     for (int i = 0; i < n; ++i)
@@ -153,11 +150,28 @@ void factorizeKkt(const Model& model, Data& data) {
       worstRow = r;
     }
   }
-  data.Y = data.constraintJacobian.transpose();
-  data.massLLT.matrixL().solveInPlace(data.Y);
-  data.schur.noalias() = data.Y.transpose() * data.Y;
-  data.massInverseAt = data.Y;
-  data.massLLT.matrixU().solveInPlace(data.massInverseAt);  // M⁻¹ Aᵀ = L⁻ᵀ Y
+  // M⁻¹ Aᵀ by one tree solve per row, inside the blocks the row touches; then A M⁻¹ Aᵀ, whose
+  // entries between groups of rows on disjoint blocks are exactly zero.
+  for (int r = 0; r < nc; ++r) {
+    auto x = data.massInverseAt.col(r);
+    x.setZero();
+    const int lo = data.rowLo[r], len = data.rowHi[r] - lo;
+    x.segment(lo, len) = data.constraintJacobian.row(r).segment(lo, len).transpose();
+    solveMassVector(data, x, lo, lo + len);
+  }
+  data.schur.setZero();
+  for (size_t g = 0; g + 1 < data.schurGroupStart.size(); ++g) {
+    for (int r = data.schurGroupStart[g]; r < data.schurGroupStart[g + 1]; ++r) {
+      for (int s = data.schurGroupStart[g]; s <= r; ++s) {
+        const int lo = std::max(data.rowLo[r], data.rowLo[s]), hi = std::min(data.rowHi[r], data.rowHi[s]);
+        const double v =
+            hi > lo ? data.constraintJacobian.row(r).segment(lo, hi - lo).dot(data.massInverseAt.col(s).segment(lo, hi - lo))
+                    : 0.0;
+        data.schur(r, s) = v;
+        data.schur(s, r) = v;
+      }
+    }
+  }
   for (int r = 0; r < nc; ++r) data.schurScale[r] = data.schur(r, r) > 0 ? 1.0 / std::sqrt(data.schur(r, r)) : 1.0;
   data.schur = data.schurScale.asDiagonal() * data.schur * data.schurScale.asDiagonal();
   data.schurLLT.compute(data.schur);
@@ -228,34 +242,23 @@ void factorizeKkt(const Model& model, Data& data) {
                " rows (redundant or singular constraints, e.g. " + model.constraints()[worst].name + ")";
 }
 
-namespace {
-/// X = M⁻¹ X. Many right-hand sides (the linearization's 2n + m) go through the explicit inverse
-/// and one matrix product, which for the sizes here costs fewer operations than two blocked
-/// triangular solves (measured with callgrind at n = 20); a few go through the factor.
-void solveMass(Data& data, Eigen::Ref<Eigen::MatrixXd> X) {
-  const Eigen::Index n = X.rows();
-  if (X.cols() == 1) {  // Eigen's vector substitution, not its blocked matrix kernels
-    auto x = X.col(0);
-    data.massLLT.matrixL().solveInPlace(x);
-    data.massLLT.matrixU().solveInPlace(x);
+void solveMass(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X) {
+  if (data.massInverseCurrent && X.cols() > 1) {
+    applyMassInverse(data, X);
     return;
   }
-  if (X.cols() <= n / 2 + 1) {
-    data.massLLT.solveInPlace(X);
-    return;
-  }
-  data.massInverse.setIdentity();
-  data.massLLT.solveInPlace(data.massInverse);
-  Eigen::Ref<Eigen::MatrixXd> t = data.tmpNX.leftCols(X.cols());
-  t.noalias() = data.massInverse * X;
-  X = t;
+  for (Eigen::Index c = 0; c < X.cols(); ++c) solveMassVector(data, X.col(c), 0, model.nq());
 }
-}  // namespace
 
-void solveKkt(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X, Eigen::Ref<Eigen::MatrixXd> Lambda) {
-  solveMass(data, X);  // X = M⁻¹ R
-  if (model.nc() == 0) return;
-  Lambda.noalias() -= data.constraintJacobian * X;  // C − A M⁻¹ R
+void correctForConstraints(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X,
+                           Eigen::Ref<Eigen::MatrixXd> Lambda) {
+  const int nc = model.nc();
+  if (nc == 0) return;
+  // C − A M⁻¹ R, each row of A over the coordinates it touches.
+  for (int r = 0; r < nc; ++r) {
+    const int lo = data.rowLo[r], len = data.rowHi[r] - lo;
+    if (len > 0) Lambda.row(r) -= data.constraintJacobian.row(r).segment(lo, len).lazyProduct(X.middleRows(lo, len));
+  }
   // (A M⁻¹ Aᵀ)⁻¹ = D Ŝ⁻¹ D with the row-normalized Ŝ of factorizeKkt.
   Lambda = data.schurScale.asDiagonal() * Lambda;
   if (data.schurUsesPinv) {
@@ -270,10 +273,27 @@ void solveKkt(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X, Eig
     t.noalias() = N.transpose() * Lambda;
     Lambda.noalias() -= N * t;
   } else {
-    data.schurLLT.solveInPlace(Lambda);
+    // Ŝ is block diagonal over the row groups, and so is its Cholesky factor: solve group by group.
+    const Eigen::MatrixXd& LL = data.schurLLT.matrixLLT();
+    for (size_t g = 0; g + 1 < data.schurGroupStart.size(); ++g) {
+      const int g0 = data.schurGroupStart[g], ng = data.schurGroupStart[g + 1] - g0;
+      const auto Lg = LL.block(g0, g0, ng, ng).triangularView<Eigen::Lower>();
+      auto Lam = Lambda.middleRows(g0, ng);
+      Lg.solveInPlace(Lam);
+      Lg.adjoint().solveInPlace(Lam);
+    }
   }
   Lambda = data.schurScale.asDiagonal() * Lambda;
-  X.noalias() += data.massInverseAt * Lambda;  // M⁻¹ (R + Aᵀ Λ), a rank-nc update
+  // M⁻¹ (R + Aᵀ Λ): one rank-1 update per row, on the blocks of that row.
+  for (int r = 0; r < nc; ++r) {
+    const int lo = data.rowLo[r], len = data.rowHi[r] - lo;
+    if (len > 0) X.middleRows(lo, len).noalias() += data.massInverseAt.col(r).segment(lo, len) * Lambda.row(r);
+  }
+}
+
+void solveKkt(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X, Eigen::Ref<Eigen::MatrixXd> Lambda) {
+  solveMass(model, data, X);  // X = M⁻¹ R
+  correctForConstraints(model, data, X, Lambda);
 }
 
 void inputMatrixPass(const Model& model, Data& data) {

@@ -56,4 +56,12 @@ inline bool solvable(const DynamicsStatus& s) {
 /// X may alias R; Λ may alias C. Workspace: data.tmpN/tmpC (p = 1) or data.tmpNX/tmpCX.
 void solveKkt(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X, Eigen::Ref<Eigen::MatrixXd> Lambda);
 
+/// X ← M⁻¹ X through the tree factor (column by column), or with data.massInverse when it is
+/// current and X has several columns.
+void solveMass(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X);
+
+/// The second half of solveKkt: given X = M⁻¹ R and Λ = C, returns the KKT solution in (X, Λ).
+void correctForConstraints(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X,
+                           Eigen::Ref<Eigen::MatrixXd> Lambda);
+
 }  // namespace trellis::detail

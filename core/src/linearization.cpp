@@ -3,7 +3,11 @@
 
 #include "trellis/core/dynamics.hpp"
 #include "internal.hpp"
+#include "mass_factor.hpp"
 #include "point_kinematics.hpp"
+
+#include <algorithm>
+#include <cmath>
 
 namespace trellis {
 namespace detail {
@@ -14,9 +18,9 @@ namespace {
 template <class Emit>
 void forceTangents(const Model& model, const Data& data, const Direction& dir, const Eigen::VectorXd& u,
                    Emit&& emit) {
-  auto segment = [&](const BodyPoint& a, const BodyPoint& b, auto tauOfL, auto dtauOfL) {
+  auto segment = [&](const BodyPoint& a, const BodyPoint& b, const Vector3d& pa, const Vector3d& pb, auto tauOfL,
+                     auto dtauOfL) {
     if (!dir.moves(a.joint) && !dir.moves(b.joint)) return;
-    const Vector3d pa = pointPosition(data, a), pb = pointPosition(data, b);
     const Vector3d dpa = pointDisplacement(dir, a.joint, pa), dpb = pointDisplacement(dir, b.joint, pb);
     const Vector3d d = pb - pa, dd = dpb - dpa;
     const double L = d.norm();
@@ -26,12 +30,19 @@ void forceTangents(const Model& model, const Data& data, const Direction& dir, c
     emit(b.joint, forceAtTangent(pb, dpb, -f, -df));
   };
   for (const LinearSpring& s : model.linearSprings())
-    segment(s.a, s.b, [&](double L) { return springTensionPerLength(s, L); },
+    segment(s.a, s.b, pointPosition(data, s.a), pointPosition(data, s.b),
+            [&](double L) { return springTensionPerLength(s, L); },
             [&](double L) { return springTensionPerLengthDerivative(s, L); });
-  for (const Tendon& t : model.tendons()) {
+  const auto& tendons = model.tendons();
+  for (size_t i = 0; i < tendons.size(); ++i) {
+    // Ancestor rule: only the segments with an end on a body in the subtree [k, end) move.
+    if (data.tendonJointHi[i] < dir.k || data.tendonJointLo[i] >= dir.end) continue;
+    const Tendon& t = tendons[i];
+    const Vector3d* p = &data.tendonPoint[static_cast<size_t>(data.tendonFirst[i])];
     const double T = u[t.input];
     for (size_t k = 0; k + 1 < t.path.size(); ++k)
-      segment(t.path[k], t.path[k + 1], [&](double L) { return T / L; }, [&](double L) { return -T / (L * L); });
+      segment(t.path[k], t.path[k + 1], p[k], p[k + 1], [&](double L) { return T / L; },
+              [&](double L) { return -T / (L * L); });
   }
   for (const BodyWrench& bw : model.bodyWrenches()) {
     if (!dir.moves(bw.joint)) continue;
@@ -93,7 +104,7 @@ void compositePass(const Model& model, Data& data) {
 ///   ∂/∂q̇_k:  δF_j = −D_j S_k − 2 Ic_j w + S_k ×* H_j.
 /// Ancestors see δF_k; external wrench tangents are carried up their own paths. O(subtree+depth).
 template <class ColR, class ColC, class ColH>
-void tangentPass(const Model& model, const Data& data, const Eigen::VectorXd& u, const Direction& dir, ColR&& dr,
+void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const Direction& dir, ColR&& dr,
                  ColC&& dc, ColH&& dhdot) {
   const auto& joints = model.joints();
   const int k = dir.k;
@@ -119,9 +130,21 @@ void tangentPass(const Model& model, const Data& data, const Eigen::VectorXd& u,
 
   if (!dir.velocity) {
     // External wrenches enter r with a minus sign; positions do not depend on q̇.
+    // The wrench tangents are gathered per body, then carried to the root in one sweep (each
+    // joint j sees the sum over its subtree), instead of walking up from every element.
+    int hi = -1, lo = model.nq();
     forceTangents(model, data, dir, u, [&](int joint, const Vector6d& dW) {
-      for (int j = joint; j != kWorld; j = joints[j].parent) dr(j) -= data.S[j].dot(dW);
+      if (joint == kWorld) return;
+      data.tangentWrench[joint] += dW;
+      hi = std::max(hi, joint);
+      lo = std::min(lo, data.treeRoot[joint]);
     });
+    for (int j = hi; j >= lo; --j) {
+      Vector6d& w = data.tangentWrench[j];
+      dr(j) -= data.S[j].dot(w);
+      if (joints[j].parent != kWorld) data.tangentWrench[joints[j].parent] += w;
+      w.setZero();
+    }
     for (const ConfigSpring& s : model.configSprings())
       if (s.config == k) dr(k) += s.k;  // r contains −Q_config
   } else {
@@ -155,6 +178,11 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
   detail::inputMatrixPass(model, data);
 
   detail::compositePass(model, data);
+  {
+    Eigen::Vector3d* p = data.tendonPoint.data();
+    for (const Tendon& t : model.tendons())
+      for (const BodyPoint& bp : t.path) *p++ = detail::pointPosition(data, bp);
+  }
   // Columns of −∂r/∂[q, q̇, u] and −∂c/∂[q, q̇, u]; c does not depend on u at fixed q̈.
   for (int k = 0; k < n; ++k) {
     detail::tangentPass(model, data, u, detail::makeDirection(model, data, k, false), data.rhsX.col(k),
@@ -164,11 +192,28 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
   }
   data.rhsX.leftCols(2 * n) *= -1.0;
   data.crhsX.leftCols(2 * n) *= -1.0;
-  data.rhsX.rightCols(m) = data.inputMatrix;
   data.crhsX.rightCols(m).setZero();
-  detail::solveKkt(model, data, data.rhsX, data.crhsX);
+  // X = M⁻¹ R block by block with the explicit block-diagonal M⁻¹ (its columns are themselves
+  // wanted: an input that is a force on one coordinate has M⁻¹ e_c as its column of ∂q̈/∂u).
+  detail::invertMass(data);
+  detail::applyMassInverse(data, data.rhsX.leftCols(2 * n));
+  for (int k = 0; k < m;) {
+    const int c = data.unitInputConfig[k];
+    if (c >= 0) {
+      data.rhsX.col(2 * n + k) = data.unitInputGain[k] * data.massInverse.col(c);
+      ++k;
+      continue;
+    }
+    int e = k + 1;  // a run of inputs with general columns ∂Q/∂u_k
+    while (e < m && data.unitInputConfig[e] < 0) ++e;
+    data.rhsX.middleCols(2 * n + k, e - k) = data.inputMatrix.middleCols(k, e - k);
+    detail::applyMassInverse(data, data.rhsX.middleCols(2 * n + k, e - k));
+    k = e;
+  }
+  detail::correctForConstraints(model, data, data.rhsX, data.crhsX);
 
-  if (detail::solvable(data.status) && !(data.rhsX.allFinite() && data.crhsX.allFinite())) {
+  // A sum is NaN or ±Inf if any term is (or if finite terms overflow, which is no result either).
+  if (detail::solvable(data.status) && !(std::isfinite(data.rhsX.sum()) && std::isfinite(data.crhsX.sum()))) {
     data.status.code = DynamicsStatus::Code::kNonFinite;
     data.status.message = "linearization produced non-finite values";
   }

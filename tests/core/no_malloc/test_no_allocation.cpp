@@ -25,6 +25,7 @@
 #include <trellis/core/numdiff.hpp>
 
 #include <array>
+#include <string>
 #include <vector>
 
 using namespace trellis;
@@ -161,4 +162,30 @@ TEST_CASE("no allocation: finite differences of the dynamics (numdiff)", "[no_ma
   }
   CHECK(ok);
   CHECK(J.allFinite());
+}
+
+TEST_CASE("No allocation after warm-up: a long chain (dense Cholesky block)", "[no_malloc]") {
+  // 14 joints in one unbranched block: the mass matrix goes through the dense-chain path.
+  const Model model = planarChain(14).model;
+  const std::vector<State> states = makeStates(model, 4104);
+  Data data(model);
+  warmUp(model, data, states[0]);
+  CHECK(runGuarded(model, data, states) == 0);
+}
+
+TEST_CASE("No allocation after warm-up: the hand scene (tree blocks, tendons, grouped rows)",
+          "[no_malloc][hand]") {
+  // Five digit blocks factored along the tree, 23 tendons, 15 constraint rows in five groups of
+  // A M⁻¹ Aᵀ; the stored state lies on the constraint manifold.
+  const Scene scene = loadScene(std::string(TRELLIS_SOURCE_DIR) + "/examples/scenes/hand.json");
+  const Model& model = scene.model;
+  std::vector<State> states(2);
+  states[0].q = scene.q;
+  states[0].dq = scene.dq;
+  states[0].u = Eigen::VectorXd::Constant(model.nu(), 2.0);
+  states[1] = states[0];
+  states[1].u = Eigen::VectorXd::Constant(model.nu(), 5.0);
+  Data data(model);
+  warmUp(model, data, states[0]);
+  CHECK(runGuarded(model, data, states) == 0);
 }

@@ -93,13 +93,28 @@ class Data {
   // Per-joint vectors that reduce each (direction k, joint j) pair of the linearization to three
   // dot products (linearization.cpp): α = S ×* F_ext, β = Ic S, γ = D S + S ×* H.
   std::vector<Vector6d> tangentAlpha, tangentBeta, tangentGamma;
+  std::vector<Vector6d> tangentWrench;   ///< per body: external wrench tangents of one direction
+  std::vector<int> treeRoot;             ///< n: the top-level joint of i's tree
+  std::vector<int> tendonFirst;          ///< per tendon: offset of its path in tendonPoint, then the total
+  std::vector<int> tendonJointLo, tendonJointHi;  ///< per tendon: lowest and highest joint on its path
+  std::vector<Eigen::Vector3d> tendonPoint;       ///< world positions of every tendon path point
   Eigen::VectorXd u;                     ///< inputs of the current evaluation
   Eigen::VectorXd qddZero;
   Eigen::MatrixXd rhsX;                  ///< n×(2n+m): −∂r/∂[x; u]
   Eigen::MatrixXd crhsX;                 ///< nc×(2n+m): −∂c/∂[x; u]
-  Eigen::LLT<Eigen::MatrixXd> massLLT;
-  Eigen::MatrixXd massInverse;           ///< n×n, M⁻¹ when many right-hand sides are solved
-  Eigen::MatrixXd Y;                     ///< n×nc: L⁻¹ Aᵀ
+  // The joint tree's structure, fixed at construction (core/src/mass_factor.hpp):
+  std::vector<int> treeParent;           ///< n: parent joint (kWorld for a root)
+  std::vector<int> runStart;             ///< n: first index of the unbranched run of ancestors ending at i
+  std::vector<int> blockStart;           ///< starts of the top-level trees (M is block diagonal over them), then n
+  std::vector<int> rowLo, rowHi;         ///< nc: the coordinates row r of A can touch (whole blocks)
+  std::vector<int> schurGroupStart;      ///< starts of the groups of rows that share no block, then nc
+  std::vector<int> unitInputConfig;      ///< m: c when input k only adds unitInputGain[k]·u_k to Q_c, else −1
+  std::vector<double> unitInputGain;
+  Eigen::MatrixXd massFactor;            ///< n×n: M = Lᵀ D L, D on the diagonal, L(i, j) at (j, i)
+  Eigen::VectorXd massPivotInvSqrt;      ///< n: D^(−1/2)
+  Eigen::MatrixXd massInverseFactor;     ///< n×n: rows of L⁻¹ D^(−1/2), stored as columns
+  Eigen::MatrixXd massInverse;           ///< n×n, block diagonal M⁻¹ when many right-hand sides are solved
+  bool massInverseCurrent = false;       ///< massInverse belongs to the current factor
   Eigen::MatrixXd massInverseAt;         ///< n×nc: M⁻¹ Aᵀ
   Eigen::MatrixXd schur;                 ///< nc×nc: D A M⁻¹ Aᵀ D, rows normalized by D
   Eigen::VectorXd constraintScale;       ///< nc: largest possible ‖A_r‖ (see factorizeKkt)
@@ -117,6 +132,9 @@ class Data {
   Eigen::MatrixXd basisQ;
   Eigen::VectorXd basisWorkspace;
   Eigen::MatrixXd basisWorkMatrix;       ///< 2n×2n scratch for A T
+
+ private:
+  void describeTree(const Model& model);  ///< fills the tree structure above
 };
 
 }  // namespace trellis
