@@ -130,12 +130,9 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
 
   RiccatiOptions riccati;
   riccati.method = parseMethod(options);
-  if (auto v = options.value("--rtol")) riccati.rtol = options.positiveNumber("--rtol", *v);
-  if (auto v = options.value("--atol")) riccati.atol = options.positiveNumber("--atol", *v);
-  if (auto v = options.value("--max-steps")) {
-    riccati.maxSteps = static_cast<long>(options.count("--max-steps", *v));
-    if (riccati.maxSteps <= 0) throw UsageError("gains: --max-steps: must be > 0");
-  }
+  if (auto v = options.value("--rtol")) riccati.rtol = options.relativeTolerance("--rtol", *v);
+  if (auto v = options.value("--atol")) riccati.atol = options.absoluteTolerance("--atol", *v);
+  if (auto v = options.value("--max-steps")) riccati.maxSteps = options.integer<long>("--max-steps", *v, 1);
   std::optional<double> dt;
   if (auto v = options.value("--dt")) dt = options.positiveNumber("--dt", *v);
 
@@ -145,6 +142,7 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   if (m == 0) throw std::runtime_error(scenePath + ": the scene has no inputs: there is nothing to control");
 
   const Trajectory trajectory = loadReference(model, scenePath, trajectoryPath);
+  if (dt) options.gridPoints("--dt", *dt, trajectory.endTime() - trajectory.startTime(), kMaxOutputRows, "output rows");
   Data data(model);
 
   const std::string states = "2n = " + std::to_string(nx) + " states";
@@ -171,6 +169,7 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const RiccatiSolution& solution = constrained ? onManifold->reduced : *fullState;
+  checkSemidefinite("gains", constrained ? "Sr" : "S", solution.minEigenvalue, solution.maxEigenvalue);
 
   const std::vector<double> times = outputTimes(trajectory, dt);
   const GainSchedule schedule = GainSchedule::sample(

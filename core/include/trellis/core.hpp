@@ -7,3 +7,4 @@
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/linearization.hpp"
 #include "trellis/core/scene.hpp"
+#include "trellis/core/io.hpp"
