@@ -5,10 +5,13 @@
 
 #include "trellis/control/trajectory.hpp"
 #include "trellis/core/data.hpp"
+#include "trellis/core/dynamics.hpp"
+#include "trellis/core/model.hpp"
 
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <stdexcept>
 
 namespace trellis::cli {
 namespace {
@@ -111,13 +114,36 @@ double ParsedOptions::positiveNumber(const std::string& option, const std::strin
   return v;
 }
 
-unsigned long long ParsedOptions::count(const std::string& option, const std::string& text) const {
-  unsigned long long value = 0;
-  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (text.empty() || error != std::errc() || end != text.data() + text.size()) {
-    throw UsageError(command_ + ": " + option + ": '" + text + "' is not a non-negative integer");
+double ParsedOptions::numberInRange(const std::string& option, const std::string& text, double min,
+                                    double max, const std::string& why) const {
+  const double v = number(option, text);
+  if (!(v >= min && v <= max)) {
+    throw UsageError(command_ + ": " + option + ": " + text + " is outside [" + formatNumber(min) + ", " +
+                     formatNumber(max) + "] (" + why + ")");
   }
-  return value;
+  return v;
+}
+
+void ParsedOptions::integerOutOfRange(const std::string& option, const std::string& text,
+                                      const std::string& min, const std::string& max) const {
+  throw UsageError(command_ + ": " + option + ": '" + text + "' is out of the range [" + min + ", " + max + "]");
+}
+
+void ParsedOptions::notAnInteger(const std::string& option, const std::string& text) const {
+  throw UsageError(command_ + ": " + option + ": '" + text + "' is not an integer");
+}
+
+long long ParsedOptions::gridPoints(const std::string& option, double step, double span, long long limit,
+                                    const std::string& what) const {
+  // span/step + 1 points (the end closes the grid); computed in double, so a huge count is
+  // compared, never converted.
+  const double points = std::floor(span / step) + 2.0;
+  if (!(points <= static_cast<double>(limit))) {
+    throw UsageError(command_ + ": " + option + ": a step of " + formatNumber(step) + " over " +
+                     formatNumber(span) + " gives " + formatNumber(points, 3) + " " + what +
+                     "; the limit is " + std::to_string(limit) + " (use a larger step)");
+  }
+  return static_cast<long long>(points);
 }
 
 std::vector<double> parseNumberList(const std::string& command, const std::string& option,
@@ -173,8 +199,44 @@ Trajectory loadReference(const Model& model, const std::string& scenePath,
                              std::to_string(trajectory.size()));
   }
   Data data(model);
+  if (model.nc() > 0) {
+    // h(q) and A(q) q' at each knot, each relative to the size of its terms (‖A_r‖·‖q'‖ for the
+    // velocity rows; 1 + the constraint's own scale for h, which for a distance row is d²).
+    for (int k = 0; k < trajectory.size(); ++k) {
+      const Eigen::VectorXd q = trajectory.states().col(k).head(model.nq());
+      const Eigen::VectorXd dq = trajectory.states().col(k).tail(model.nq());
+      computeConstraints(model, data, q, dq);
+      const Eigen::VectorXd hdot = data.constraintJacobian * dq;
+      for (int r = 0; r < model.nc(); ++r) {
+        const Constraint& c = model.constraints()[static_cast<std::size_t>(r)];
+        const double hScale = 1.0 + (c.type == ConstraintType::kDistance ? c.distance * c.distance : 0.0);
+        const double vScale = std::max(1.0, data.constraintJacobian.row(r).norm() * dq.norm());
+        const bool hBad = !(std::abs(data.constraintValue(r)) <= kReferenceConstraintTolerance * hScale);
+        const bool vBad = !(std::abs(hdot(r)) <= kReferenceConstraintTolerance * vScale);
+        if (hBad || vBad) {
+          throw std::runtime_error(
+              trajectoryPath + ": row " + std::to_string(k + 1) + " (t = " + formatNumber(trajectory.times()(k)) +
+              ") violates the constraint '" + c.name + "' of " + scenePath + ": " +
+              (hBad ? "h(q) = " + formatNumber(data.constraintValue(r), 3)
+                    : "A(q) q' = " + formatNumber(hdot(r), 3)) +
+              " (tolerance " + formatNumber(kReferenceConstraintTolerance, 3) +
+              " relative); a reference must lie on the constraints");
+        }
+      }
+    }
+  }
   trajectory.computeStateDerivatives(model, data);
   return trajectory;
+}
+
+void checkSemidefinite(const std::string& command, const std::string& what, double minEigenvalue,
+                       double maxEigenvalue) {
+  const double scale = std::max(std::abs(minEigenvalue), std::abs(maxEigenvalue));
+  if (minEigenvalue < -1e-6 * scale || !std::isfinite(scale)) {
+    throw std::runtime_error(command + ": " + what + " is indefinite beyond round-off: smallest eigenvalue " +
+                             formatNumber(minEigenvalue) + ", largest " + formatNumber(maxEigenvalue) +
+                             " (the integration did not resolve the Riccati equation; tighten --rtol/--atol)");
+  }
 }
 
 std::string joinNames(const std::vector<std::string>& names) {

@@ -6,11 +6,15 @@
 
 #include <Eigen/Core>
 
+#include <charconv>
+#include <limits>
 #include <map>
 #include <optional>
 #include <set>
 #include <span>
 #include <string>
+#include <string_view>
+#include <type_traits>
 #include <vector>
 
 namespace trellis {
@@ -19,6 +23,11 @@ class Trajectory;
 }  // namespace trellis
 
 namespace trellis::cli {
+
+/// Limits on the sizes a command-line option controls (a step of 1e-12 s must not fill memory):
+/// rows of an output file, and samples of a sampled feedback.
+inline constexpr long long kMaxOutputRows = 1'000'000;
+inline constexpr long long kMaxFeedbackSamples = 100'000'000;
 
 /// What a command accepts. Options listed in `repeatable` may be given more than once (their
 /// values are kept in order); any other option given twice is a usage error.
@@ -52,8 +61,47 @@ class ParsedOptions {
   double number(const std::string& option, const std::string& text) const;
   /// number() that must be > 0 (or ≥ 0 when allowZero).
   double positiveNumber(const std::string& option, const std::string& text, bool allowZero = false) const;
-  /// A non-negative integer (seeds, step counts).
-  unsigned long long count(const std::string& option, const std::string& text) const;
+  /// number() within [min, max], else UsageError "COMMAND: OPTION: TEXT is outside [min, max]
+  /// (WHY)": a value outside a meaningful range (an absolute tolerance of 1e300) is refused, not
+  /// passed on to a solver that would return a meaningless result.
+  double numberInRange(const std::string& option, const std::string& text, double min, double max,
+                       const std::string& why) const;
+  /// The one integer parser of the command line: `text` as an integer of type T (decimal, an
+  /// optional sign) within [min, max], which default to T's own range, so that a count never wraps
+  /// around ("--max-iter 4294967296" is refused, not read as 0). UsageError naming the option,
+  /// the text and the range otherwise.
+  template <class T>
+  T integer(const std::string& option, const std::string& text, T min = std::numeric_limits<T>::min(),
+            T max = std::numeric_limits<T>::max()) const {
+    static_assert(std::is_integral_v<T>);
+    std::string_view digits = text;
+    if (!digits.empty() && digits.front() == '+') digits.remove_prefix(1);
+    T value{};
+    const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
+    const bool whole = !digits.empty() && end == digits.data() + digits.size();
+    const bool negativeForUnsigned = std::is_unsigned_v<T> && digits.size() > 1 && digits.front() == '-' &&
+                                     digits.find_first_not_of("0123456789", 1) == std::string_view::npos;
+    if (negativeForUnsigned || (whole && error == std::errc::result_out_of_range) ||
+        (whole && error == std::errc() && (value < min || value > max))) {
+      integerOutOfRange(option, text, std::to_string(min), std::to_string(max));
+    }
+    if (!whole || error != std::errc()) notAnInteger(option, text);
+    return value;
+  }
+  /// An integrator's relative tolerance: [1e-14, 0.1] (below, round-off; above, no accuracy).
+  double relativeTolerance(const std::string& option, const std::string& text) const {
+    return numberInRange(option, text, 1e-14, 0.1, "a relative tolerance: below, round-off; above, no accuracy");
+  }
+  /// An integrator's absolute tolerance: [1e-20, 1] (the results are compared with it; beyond 1
+  /// an error-free step is accepted whatever it computes).
+  double absoluteTolerance(const std::string& option, const std::string& text) const {
+    return numberInRange(option, text, 1e-20, 1.0, "an absolute tolerance: larger values accept any step");
+  }
+  /// A grid of steps `step` over a span `span` (output rows, feedback samples): the number of
+  /// points it implies, or UsageError naming the option and that number if it exceeds `limit`
+  /// (the work and memory grow with it: `--dt 1e-12` must not run until memory is exhausted).
+  long long gridPoints(const std::string& option, double step, double span, long long limit,
+                       const std::string& what) const;
   /// "a" or "a,b,c": a list of finite numbers (empty items are errors).
   std::vector<double> numberList(const std::string& option, const std::string& text) const;
   /// A number (broadcast to `size`) or a list of exactly `size` numbers; `what` names the entries
@@ -62,6 +110,10 @@ class ParsedOptions {
                                 const std::string& what) const;
 
  private:
+  [[noreturn]] void integerOutOfRange(const std::string& option, const std::string& text,
+                                      const std::string& min, const std::string& max) const;
+  [[noreturn]] void notAnInteger(const std::string& option, const std::string& text) const;
+
   std::string command_;
   std::vector<std::string> positionals_;
   std::map<std::string, std::vector<std::string>> values_;
@@ -77,10 +129,24 @@ std::vector<double> parseNumberList(const std::string& command, const std::strin
 std::string formatNumber(double value, int digits = 6);
 
 /// Reads the reference trajectory CSV at `trajectoryPath`, checks that its names match the model
-/// of `scenePath` and that it has ≥ 2 knots, and computes its state derivatives. Throws
-/// std::runtime_error naming the file and the problem (exit status 1).
+/// of `scenePath`, that it has ≥ 2 knots and, for a scene with constraints, that every knot
+/// satisfies them (|h(q)| and |A(q) q'| within kReferenceConstraintTolerance, relative to the
+/// size of the terms), and computes its state derivatives. Throws std::runtime_error naming the
+/// file and the problem (exit status 1): a reference off the constraint manifold has no
+/// meaningful linearization and would be tracked with a drift as large as its violation.
 Trajectory loadReference(const Model& model, const std::string& scenePath,
                          const std::string& trajectoryPath);
+
+/// The bound of loadReference's constraint check: 1e-6 relative (written trajectories carry 17
+/// digits; an optimized or integrated one satisfies its constraints to its solver's tolerance).
+inline constexpr double kReferenceConstraintTolerance = 1e-6;
+
+/// Throws std::runtime_error "COMMAND: WHAT is indefinite ..." when the smallest eigenvalue of a
+/// Riccati solution S over its steps is negative beyond round-off: below −1e-6·max|eigenvalue|
+/// (S is a sum of positive semidefinite terms; a clearly negative eigenvalue means the integrator
+/// did not resolve it). `minEigenvalue` = `maxEigenvalue` = 0 means "not tracked" (no check).
+void checkSemidefinite(const std::string& command, const std::string& what, double minEigenvalue,
+                       double maxEigenvalue);
 
 /// "a, b, c" for messages.
 std::string joinNames(const std::vector<std::string>& names);

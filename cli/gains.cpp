@@ -122,11 +122,10 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
       throw UsageError(std::string("gains: --method: ") + e.what());
     }
   }
-  if (auto v = options.value("--rtol")) riccati.rtol = options.positiveNumber("--rtol", *v);
-  if (auto v = options.value("--atol")) riccati.atol = options.positiveNumber("--atol", *v);
+  if (auto v = options.value("--rtol")) riccati.rtol = options.relativeTolerance("--rtol", *v);
+  if (auto v = options.value("--atol")) riccati.atol = options.absoluteTolerance("--atol", *v);
   if (auto v = options.value("--max-steps")) {
-    riccati.maxSteps = static_cast<long>(options.count("--max-steps", *v));
-    if (riccati.maxSteps <= 0) throw UsageError("gains: --max-steps: must be > 0");
+    riccati.maxSteps = options.integer<long>("--max-steps", *v, 1);
     tvlqr.sampled.maxSteps = riccati.maxSteps;
   }
   if (auto v = options.value("--dt")) tvlqr.outputStep = options.positiveNumber("--dt", *v);
@@ -138,8 +137,8 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
     throw UsageError("gains: --method applies to continuous gains only (--rate uses the exact discretization)");
   }
   if (options.has("--rate")) {
-    if (auto v = options.value("--rtol")) tvlqr.sampled.rtol = options.positiveNumber("--rtol", *v);
-    if (auto v = options.value("--atol")) tvlqr.sampled.atol = options.positiveNumber("--atol", *v);
+    if (auto v = options.value("--rtol")) tvlqr.sampled.rtol = options.relativeTolerance("--rtol", *v);
+    if (auto v = options.value("--atol")) tvlqr.sampled.atol = options.absoluteTolerance("--atol", *v);
   }
 
   const Scene scene = loadScene(scenePath);
@@ -148,6 +147,8 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   if (m == 0) throw std::runtime_error(scenePath + ": the scene has no inputs: there is nothing to control");
 
   const Trajectory trajectory = loadReference(model, scenePath, trajectoryPath);
+  if (tvlqr.outputStep > 0.0) options.gridPoints("--dt", tvlqr.outputStep, trajectory.endTime() - trajectory.startTime(), kMaxOutputRows, "output rows");
+  if (tvlqr.sampleRate > 0.0) options.gridPoints("--rate", 1.0 / tvlqr.sampleRate, trajectory.endTime() - trajectory.startTime(), kMaxOutputRows, "output rows");
   Data data(model);
 
   const std::string states = "2n = " + std::to_string(nx) + " states";
@@ -163,6 +164,7 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   // The solve (on the tangent space of the constraint manifold for a constrained scene).
   const TvlqrSolution solution = solveTvlqr(model, trajectory, weights, tvlqr);
   if (!solution.ok) throw std::runtime_error("gains: " + solution.message);
+  checkSemidefinite("gains", model.nc() > 0 ? "Sr" : "S", solution.minEigenvalueS, solution.maxEigenvalueS);
   solution.gains.writeCsvFile(outPath);
 
   // The summary, after the file is written.

@@ -2,7 +2,9 @@
 // on stderr ("trellis: error: ...") with nothing on stdout.
 #include "command.hpp"
 
+#include <csignal>
 #include <iostream>
+#include <new>
 #include <sstream>
 
 namespace {
@@ -49,6 +51,9 @@ int fail(const std::string& message, int status) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Under a file-size limit (ulimit -f) a write beyond it must fail with EFBIG, which the writer
+  // reports, instead of SIGXFSZ killing the process with a partial file.
+  std::signal(SIGXFSZ, SIG_IGN);
   const std::vector<std::string> args(argv + 1, argv + argc);
   if (args.empty()) {
     printUsage(std::cerr);
@@ -88,6 +93,8 @@ int main(int argc, char** argv) {
     status = command->run(rest, out);
   } catch (const trellis::cli::UsageError& e) {
     return fail(std::string(e.what()) + " (see 'trellis " + name + " --help')", 2);
+  } catch (const std::bad_alloc&) {
+    return fail(name + ": out of memory (the input implies more memory than is available)", 1);
   } catch (const std::exception& e) {
     return fail(e.what(), 1);
   } catch (...) {

@@ -71,9 +71,7 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
 
   OptimalControlProblem problem = loadProblem(path);
   if (auto v = options.value("--knots")) {
-    const unsigned long long knots = options.count("--knots", *v);
-    if (knots < 2 || knots > 100000) throw UsageError("optimize: --knots: '" + *v + "' must be in [2, 100000]");
-    problem.knots = static_cast<int>(knots);
+    problem.knots = options.integer<int>("--knots", *v, 2, 100000);
   }
   if (auto v = options.value("--method")) {
     if (*v == "hermite_simpson") {
@@ -85,12 +83,10 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
     }
   }
   OptimizerOptions solver;
-  if (auto v = options.value("--max-iter")) solver.maxIterations = static_cast<int>(options.count("--max-iter", *v));
+  if (auto v = options.value("--max-iter")) solver.maxIterations = options.integer<int>("--max-iter", *v, 0);
   if (auto v = options.value("--tol")) solver.tolerance = options.positiveNumber("--tol", *v);
   if (auto v = options.value("--print-level")) {
-    const unsigned long long level = options.count("--print-level", *v);
-    if (level > 12) throw UsageError("optimize: --print-level: '" + *v + "' must be in [0, 12]");
-    solver.printLevel = static_cast<int>(level);
+    solver.printLevel = options.integer<int>("--print-level", *v, 0, 12);
   }
   if (auto v = options.value("--consistency-tol")) {
     solver.consistencyTolerance = options.positiveNumber("--consistency-tol", *v);

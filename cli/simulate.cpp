@@ -154,14 +154,11 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
   const std::string outPath = options.required("--out", "(the closed-loop trajectory CSV to write)");
 
   SimulationOptions simulation;
-  if (auto v = options.value("--rtol")) simulation.rtol = options.positiveNumber("--rtol", *v);
-  if (auto v = options.value("--atol")) simulation.atol = options.positiveNumber("--atol", *v);
+  if (auto v = options.value("--rtol")) simulation.rtol = options.relativeTolerance("--rtol", *v);
+  if (auto v = options.value("--atol")) simulation.atol = options.absoluteTolerance("--atol", *v);
   if (auto v = options.value("--rate")) simulation.sampleRate = options.positiveNumber("--rate", *v);
   if (auto v = options.value("--output-step")) simulation.outputStep = options.positiveNumber("--output-step", *v);
-  if (auto v = options.value("--max-steps")) {
-    simulation.maxSteps = static_cast<long>(options.count("--max-steps", *v));
-    if (simulation.maxSteps <= 0) throw UsageError("simulate: --max-steps: must be > 0");
-  }
+  if (auto v = options.value("--max-steps")) simulation.maxSteps = options.integer<long>("--max-steps", *v, 1);
   if (auto v = options.value("--method")) {
     try {
       simulation.method = parseIntegrationMethod(*v);
@@ -175,13 +172,16 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
   std::uint64_t seed = 1;
   if (auto v = options.value("--seed")) {
     if (!options.has("--perturb-random")) throw UsageError("simulate: --seed needs --perturb-random");
-    seed = options.count("--seed", *v);
+    seed = options.integer<std::uint64_t>("--seed", *v);
   }
 
   const Scene scene = loadScene(scenePath);
   const Model& model = scene.model;
   const int n = model.nq(), m = model.nu(), nx = 2 * n;
   const Trajectory reference = loadReference(model, scenePath, trajectoryPath);
+  const double span = reference.endTime() - reference.startTime();
+  if (simulation.outputStep > 0.0) options.gridPoints("--output-step", simulation.outputStep, span, kMaxOutputRows, "output rows");
+  if (simulation.sampleRate > 0.0) options.gridPoints("--rate", 1.0 / simulation.sampleRate, span, kMaxFeedbackSamples, "feedback samples");
   const GainSchedule gains = GainSchedule::readCsvFile(gainsPath);
   gains.checkNames(model.inputNames(), GainSchedule::stateNames(model.configNames()),
                    gainsPath + " (for the scene " + scenePath + ")");
@@ -243,6 +243,7 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
     for (int i = 0; i < nx; ++i) delta(i) += sigma * normal();
   }
   const Eigen::VectorXd x0 = reference.state(reference.startTime()) + delta;
+  if (!x0.allFinite()) throw UsageError("simulate: the perturbed start x_ref(t0) + dx0 is not finite (--perturb, --perturb-random)");
 
   const SimulationResult result = simulateClosedLoop(model, reference, gains, x0, simulation);
   if (result.trajectory.size() > 0) result.trajectory.writeCsvFile(outPath);
@@ -272,7 +273,7 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
       << "], feedback "
       << (simulation.sampleRate > 0.0 ? "sampled at " + formatNumber(simulation.sampleRate) + " Hz" : "continuous")
       << "\n";
-  out << "perturbation: |dx0| = " << formatNumber(delta.norm()) << "\n";
+  out << "perturbation: |dx0| = " << formatNumber(delta.stableNorm()) << "\n";  // no overflow of the squares
   out << "tracking error |x - x_ref|: initial " << formatNumber(error(0)) << ", final "
       << formatNumber(error(error.size() - 1)) << ", max " << formatNumber(error(worst)) << " (at t = "
       << formatNumber(result.trajectory.times()(worst)) << ")\n";

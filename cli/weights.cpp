@@ -5,6 +5,7 @@
 #include "command.hpp"
 
 #include "trellis/control/riccati.hpp"
+#include "trellis/core/io.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -27,6 +28,15 @@ bool looksNumeric(const std::string& text) {
   return true;
 }
 
+/// nlohmann's message without its "[json.exception.KIND.ID] " prefix.
+std::string jsonErrorText(const nlohmann::json::exception& e) {
+  std::string what = e.what();
+  if (const auto end = what.find("] "); what.rfind("[json.exception.", 0) == 0 && end != std::string::npos) {
+    what.erase(0, end + 2);
+  }
+  return what;
+}
+
 std::string stripBlanks(const std::string& text) {
   std::string out;
   for (const char c : text)
@@ -37,18 +47,19 @@ std::string stripBlanks(const std::string& text) {
 Eigen::MatrixXd readWeightFile(const std::string& option, const std::string& path, int size,
                                const std::string& sizeMeaning) {
   const std::string where = option + ": weight file '" + path + "'";
-  std::ifstream file(path);
-  if (!file) {
-    throw std::runtime_error(where + " cannot be opened (a weight is a number, a comma-separated "
-                             "diagonal or a JSON file)");
+  std::string text;
+  try {
+    text = readTextFile(path, std::size_t{64} << 20, "weight file");
+  } catch (const FileError& e) {
+    throw std::runtime_error(where + " cannot be opened or read: " + e.what() +
+                             " (a weight is a number, a comma-separated diagonal or a JSON file)");
   }
-  std::stringstream buffer;
-  buffer << file.rdbuf();
   nlohmann::json json;
   try {
-    json = nlohmann::json::parse(buffer.str());
-  } catch (const nlohmann::json::parse_error& e) {
-    throw std::runtime_error(where + " is not valid JSON: " + e.what());
+    json = nlohmann::json::parse(text);
+  } catch (const nlohmann::json::exception& e) {
+    // parse_error (syntax) and out_of_range.406 (a number such as 1e999 that overflows a double).
+    throw std::runtime_error(where + " is not valid JSON: " + jsonErrorText(e));
   }
   const std::string expected = "a list of " + std::to_string(size) + " rows of " +
                                std::to_string(size) + " numbers (" + sizeMeaning + ")";

@@ -15,6 +15,8 @@ packages=(
   coinor-libipopt-dev    # Ipopt: trajectory optimization (optimization, planned)
   catch2                 # Catch2 2.13: the test suite
   libbenchmark-dev       # Google Benchmark: bench/
+  # clang with its sanitizer runtimes and libFuzzer: the presets asan-clang and fuzz
+  clang-14 libclang-rt-14-dev libfuzzer-14-dev
   # plots of the benchmark results
   python3 python3-matplotlib
   # the Python module trellis_mech (python/) and its tests

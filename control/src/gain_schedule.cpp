@@ -5,6 +5,8 @@
 
 #include "numeric_csv.hpp"
 
+#include "trellis/core/io.hpp"
+
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -310,8 +312,8 @@ GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) 
 }
 
 GainSchedule GainSchedule::readCsvFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw TrajectoryError(path + ": cannot open for reading");
+  std::ifstream in;
+  detail::openCsvFile(in, path, "gain schedule");
   return readCsv(in, path);
 }
 
@@ -343,10 +345,9 @@ void GainSchedule::writeCsv(std::ostream& out) const {
 }
 
 void GainSchedule::writeCsvFile(const std::string& path) const {
-  std::ofstream out(path);
-  if (!out) throw TrajectoryError(path + ": cannot open for writing");
+  std::ostringstream out;
   writeCsv(out);
-  if (!out) throw TrajectoryError(path + ": write failed");
+  writeFileAtomically(path, out.str());  // complete or absent; FileError names path and OS error
 }
 
 }  // namespace trellis

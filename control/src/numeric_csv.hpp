@@ -2,12 +2,20 @@
 // header row of names, then rows of finite numbers whose first column (time) increases strictly.
 // Every error is a TrajectoryError naming the source, the data row (1-based), the file line and
 // the column (1-based, with its header name).
+//
+// Limits keep an endless or hostile stream (/dev/zero, a file of blank lines) from growing memory
+// or time without bound: a line is at most kMaxCsvLineLength characters, a file at most
+// kMaxCsvLines lines and kMaxCsvValues numbers (8 bytes each: 512 MiB).
 #pragma once
 
 #include "trellis/control/trajectory.hpp"
 
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <fstream>
 #include <cstdlib>
+#include <filesystem>
 #include <functional>
 #include <iomanip>
 #include <istream>
@@ -16,6 +24,49 @@
 #include <vector>
 
 namespace trellis::detail {
+
+inline constexpr std::size_t kMaxCsvLineLength = std::size_t{1} << 20;  // 1 MiB
+inline constexpr long long kMaxCsvLines = 10'000'000;
+inline constexpr long long kMaxCsvValues = 64'000'000;
+
+/// Opens `path` for reading, or TrajectoryError naming it, what it should be, and the reason
+/// (the OS error, or that it is a directory).
+inline void openCsvFile(std::ifstream& in, const std::string& path, const std::string& what) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    throw TrajectoryError(path + ": is a directory, not a " + what + " CSV file");
+  }
+  errno = 0;
+  in.open(path);
+  if (!in) {
+    const int error = errno;
+    throw TrajectoryError(path + ": cannot open the " + what + " file for reading" +
+                          (error != 0 ? " (" + std::string(std::strerror(error)) + ")" : std::string()));
+  }
+}
+
+/// std::getline with a length limit: false at the end of the stream; TrajectoryError naming the
+/// source and line number for a line longer than kMaxCsvLineLength or beyond kMaxCsvLines.
+inline bool readCsvLine(std::istream& in, std::string& line, long long& lineNo, const std::string& source) {
+  line.clear();
+  if (++lineNo > kMaxCsvLines && in.rdbuf()->sgetc() != std::char_traits<char>::eof()) {
+    throw TrajectoryError(source + ": more than " + std::to_string(kMaxCsvLines) + " lines (the limit)");
+  }
+  std::streambuf* buffer = in.rdbuf();
+  while (true) {
+    const int c = buffer->sbumpc();
+    if (c == std::char_traits<char>::eof()) {
+      if (line.empty()) in.setstate(std::ios::eofbit);
+      return !line.empty();
+    }
+    if (c == '\n') return true;
+    if (line.size() >= kMaxCsvLineLength) {
+      throw TrajectoryError(source + ": line " + std::to_string(lineNo) + " is longer than " +
+                            std::to_string(kMaxCsvLineLength) + " characters (the limit)");
+    }
+    line.push_back(static_cast<char>(c));
+  }
+}
 
 inline std::string trimCsvField(const std::string& s) {
   const auto b = s.find_first_not_of(" \t\r\n");
@@ -51,9 +102,8 @@ inline NumericCsv readNumericCsv(
     const std::function<void(const std::vector<std::string>&, int)>& checkHeader) {
   NumericCsv csv;
   std::string line;
-  int lineNo = 0;
-  while (std::getline(in, line)) {
-    ++lineNo;
+  long long lineNo = 0;
+  while (readCsvLine(in, line, lineNo, source)) {
     const std::string trimmed = trimCsvField(line);
     if (!trimmed.empty() && trimmed[0] == '#') {
       csv.comments.push_back(trimmed.substr(1));
@@ -61,7 +111,7 @@ inline NumericCsv readNumericCsv(
     }
     if (!trimmed.empty()) {
       csv.header = splitCsvLine(line);
-      csv.headerLine = lineNo;
+      csv.headerLine = static_cast<int>(lineNo);
       break;
     }
   }
@@ -69,8 +119,7 @@ inline NumericCsv readNumericCsv(
   checkHeader(csv.header, csv.headerLine);
   const int width = static_cast<int>(csv.header.size());
   int row = 0;
-  while (std::getline(in, line)) {
-    ++lineNo;
+  while (readCsvLine(in, line, lineNo, source)) {
     if (trimCsvField(line).empty()) continue;
     ++row;
     const auto fields = splitCsvLine(line);
@@ -97,6 +146,9 @@ inline NumericCsv readNumericCsv(
       m << std::setprecision(17) << at << ", column 1 ('t'): time " << values[0]
         << " is not greater than the previous time " << csv.rows.back()[0];
       throw TrajectoryError(m.str());
+    }
+    if (static_cast<long long>(csv.rows.size() + 1) * width > kMaxCsvValues) {
+      throw TrajectoryError(at + ": more than " + std::to_string(kMaxCsvValues) + " numbers in the file (the limit)");
     }
     csv.rows.push_back(std::move(values));
   }

@@ -5,6 +5,7 @@
 
 #include "trellis/core/data.hpp"
 #include "trellis/core/dynamics.hpp"
+#include "trellis/core/io.hpp"
 #include "trellis/core/model.hpp"
 
 #include <algorithm>
@@ -213,9 +214,26 @@ Trajectory Trajectory::readCsv(std::istream& in, const std::string& source) {
           if (match) n = cand;
         }
         if (n < 0) {
-          throw TrajectoryError(source + ": line " + std::to_string(lineNo) +
-                                ": cannot find the velocity columns: expected 't', the configuration "
-                                "names, then 'd' + each configuration name, then the input names");
+          // Name the missing velocity column: the configurations are the columns before the
+          // first name 'd' + an earlier column ("t, x, theta, dx, push": x, theta), and the first
+          // of them without its 'd' column in place is the one missing ('dtheta').
+          std::string missing;
+          for (int c = 2; c <= ncols; ++c) {
+            const std::string& name = header[c];
+            if (name.size() < 2 || name[0] != 'd' ||
+                std::find(header.begin() + 1, header.begin() + c, name.substr(1)) == header.begin() + c) {
+              continue;
+            }
+            for (int i = 0; i < c - 1 && missing.empty(); ++i) {
+              if (c + i > ncols || header[c + i] != "d" + header[1 + i]) missing = "d" + header[1 + i];
+            }
+            break;
+          }
+          throw TrajectoryError(source + ": line " + std::to_string(lineNo) + ": " +
+                                (missing.empty() ? std::string("cannot find the velocity columns")
+                                                 : "missing the velocity column '" + missing + "'") +
+                                ": expected 't', the configuration names, then 'd' + each "
+                                "configuration name, then the input names");
         }
       });
   const std::vector<std::string>& header = csv.header;
@@ -234,8 +252,8 @@ Trajectory Trajectory::readCsv(std::istream& in, const std::string& source) {
 }
 
 Trajectory Trajectory::readCsvFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw TrajectoryError(path + ": cannot open for reading");
+  std::ifstream in;
+  detail::openCsvFile(in, path, "trajectory");
   return readCsv(in, path);
 }
 
@@ -253,10 +271,9 @@ void Trajectory::writeCsv(std::ostream& out) const {
 }
 
 void Trajectory::writeCsvFile(const std::string& path) const {
-  std::ofstream out(path);
-  if (!out) throw TrajectoryError(path + ": cannot open for writing");
+  std::ostringstream out;
   writeCsv(out);
-  if (!out) throw TrajectoryError(path + ": write failed");
+  writeFileAtomically(path, out.str());  // complete or absent; FileError names path and OS error
 }
 
 }  // namespace trellis

@@ -224,7 +224,8 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
   // The top rows of A = [[0, I], ·] and B = [[0], ·] were set when Data was built.
   data.A.bottomLeftCorner(n, n) = data.dqdd_dq;
   data.A.bottomRightCorner(n, n) = data.dqdd_ddq;
-  data.B.bottomRows(n) = data.dqdd_du;
+  // No inputs: B is 2n×0 with no storage, and a block of it would offset a null pointer (UB).
+  if (m > 0) data.B.bottomRows(n) = data.dqdd_du;
   return data.status;
 }
 

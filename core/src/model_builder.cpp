@@ -319,7 +319,8 @@ void ModelBuilder::addTendon(const std::vector<std::string>& path, const std::st
 void ModelBuilder::addDistanceConstraint(const std::string& f1, const std::string& f2, double d) {
   const std::string element = "constraints[" + std::to_string(constraints_.size()) + "] (distance " + f1 + "–" + f2 + ")";
   requireFinite(d, element, "distance");
-  if (d < 0) throw ModelError(element + ": field 'distance': " + fmt(d) + " must be >= 0");
+  // d = 0: the gradient of h = |p1 - p2|^2 vanishes wherever h = 0 (a degenerate row).
+  if (!(d > 0)) throw ModelError(element + ": field 'distance': " + fmt(d) + " must be > 0 (at 0 the gradient vanishes where the constraint holds)");
   constraints_.push_back({ConstraintType::kDistance, frameId(f1, element, "frame1"), frameId(f2, element, "frame2"),
                           d, 0, Eigen::Vector3d::Zero(), element});
 }

@@ -34,6 +34,12 @@ using Json = nlohmann::json;
 // and its "children" list, so chains of ~5000 frames fit) and text size.
 constexpr int kMaxNestingDepth = 10000;
 constexpr std::size_t kMaxSceneBytes = std::size_t{256} << 20;
+// Limits on the size of the model, checked while reading (before any n×n matrix exists): the
+// workspace of the linearization (Data) holds about 25 dense n×n matrices (M, its inverse, A and
+// the tangent-space blocks of 2n×2n, the right-hand sides of 2n + m columns), ≈ 200·n² bytes:
+// 200 MB at the limit of 1000 configuration variables, 5 GB at 5000.
+constexpr std::size_t kMaxSceneConfigs = 1000;
+constexpr std::size_t kMaxSceneFrames = 20000;
 
 // Pre-checks mirror the builder's so that the message can name the JSON field; the builder stays
 // the authority (these tolerances are not tighter than its own).
@@ -288,6 +294,14 @@ class SceneReader {
     std::optional<Mass> mass;
     if (const Json* massNode = e.optionalObject("mass")) mass = readMass(e, *massNode);
 
+    if (frames_.size() >= kMaxSceneFrames) {
+      e.fail("name", "the scene has more than " + std::to_string(kMaxSceneFrames) + " frames (the limit)");
+    }
+    if (transform.isDriven() && configOrder_.size() >= kMaxSceneConfigs) {
+      e.fail("config", "the scene has more than " + std::to_string(kMaxSceneConfigs) +
+                           " configuration variables (the limit: the dense matrices of the linearization "
+                           "take about 200 n^2 bytes, 200 MB at n = " + std::to_string(kMaxSceneConfigs) + ")");
+    }
     call(e.label(), [&] { builder_.addFrame(name, parent, transform, mass); });
     frames_.emplace(name, "frame '" + name + "' (" + position + ")");
     if (transform.isDriven()) {
@@ -505,7 +519,9 @@ class SceneReader {
     if (type == "distance") {
       const std::string f1 = frameRef(e, "frame1"), f2 = frameRef(e, "frame2");
       const double d = e.number("distance");
-      if (d < 0.0) e.failValue("distance", e.require("distance"), "must be >= 0");
+      // d = 0: h = |p1 - p2|^2 has a vanishing gradient wherever it holds, a degenerate row whose
+      // constraint force is undetermined (use three "point" constraints to join two points).
+      if (!(d > 0.0)) e.failValue("distance", e.require("distance"), "must be > 0 (a distance of 0 makes the constraint's gradient vanish wherever it holds; join two points with \"point\" constraints)");
       call(e.label(), [&] { builder_.addDistanceConstraint(f1, f2, d); });
     } else if (type == "point") {
       const std::string f1 = frameRef(e, "frame1"), f2 = frameRef(e, "frame2");

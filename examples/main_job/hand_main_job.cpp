@@ -27,6 +27,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
@@ -136,6 +137,7 @@ void finiteDifferenceLinearization(const trellis::Model& model, trellis::Data& d
 }  // namespace
 
 int main(int argc, char** argv) try {
+  std::signal(SIGXFSZ, SIG_IGN);  // beyond a file-size limit a write fails (EFBIG) and is reported
   const Options options = parseOptions(argc, argv);
   const auto jobStart = Clock::now();
   Progress progress(7);
@@ -199,7 +201,7 @@ int main(int argc, char** argv) try {
   int minRank = nx, dimension = 0;
   double minSigma = INFINITY;
   {
-    std::ofstream csv(options.out + "/controllability.csv");
+    std::ostringstream csv;
     csv << "t,dimension,rank,smallest_singular_value\n";
     for (int k = 0; k < N; ++k) {
       const auto& r = knots[k];
@@ -208,6 +210,7 @@ int main(int argc, char** argv) try {
       minSigma = std::min(minSigma, r.smallestSingularValue);
       csv << trajectory.times()(k) << ',' << r.dimension << ',' << r.rank << ',' << r.smallestSingularValue << '\n';
     }
+    trellis::writeFileAtomically(options.out + "/controllability.csv", csv.str());  // complete or absent
   }
   // The tensions come from a per-knot inverse-dynamics distribution and are interpolated linearly,
   // so between knots the reference satisfies the dynamics only approximately — amplified by the
@@ -333,7 +336,7 @@ int main(int argc, char** argv) try {
                     worstDrift, 100 * meanSaturated);
   summary << "  files: " << std::filesystem::absolute(options.out).string() << "/\n";
   std::printf("%s", summary.str().c_str());
-  std::ofstream(options.out + "/summary.txt") << summary.str();
+  trellis::writeFileAtomically(options.out + "/summary.txt", summary.str());
   return (failed == 0 && pointwise && gramian.controllable() && converged == options.runs) ? 0 : 1;
 } catch (const std::exception& e) {
   std::fprintf(stderr, "hand_main_job: error: %s\n", e.what());

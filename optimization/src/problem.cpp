@@ -3,6 +3,8 @@
 
 #include "trellis/core/data.hpp"
 #include "trellis/core/dynamics.hpp"
+#include "trellis/core/io.hpp"
+#include "trellis/core/json_integer.hpp"
 #include "trellis/core/scene.hpp"
 
 #include <nlohmann/json.hpp>
@@ -215,6 +217,10 @@ namespace {
 
 using Json = nlohmann::json;
 
+// The knots a problem file may ask for (the same bound as `trellis optimize --knots`): the NLP
+// grows linearly with them, and a count beyond the range of int must not wrap around.
+constexpr int kMaxKnots = 100000;
+
 class FileParser {
  public:
   FileParser(std::string source, std::string baseDir)
@@ -231,9 +237,12 @@ class FileParser {
     return v;
   }
 
-  int integer(const Json& j, const std::string& path) const {
-    if (!j.is_number_integer()) bad(path, "expected an integer, got " + j.dump());
-    return j.get<int>();
+  /// An integer in [min, max] (range-checked before any conversion: 4294967298 does not wrap).
+  int integer(const Json& j, const std::string& path, int min, int max) const {
+    long long value = 0;
+    std::string problem;
+    if (!jsonInteger(j, min, max, value, problem)) bad(path, problem);
+    return static_cast<int>(value);
   }
 
   std::string string(const Json& j, const std::string& path) const {
@@ -336,8 +345,14 @@ class FileParser {
     Json root;
     try {
       root = Json::parse(text);
-    } catch (const Json::parse_error& e) {
-      fail(source_ + ": invalid JSON: " + e.what());
+    } catch (const Json::exception& e) {
+      // parse_error, and out_of_range.406 for a number that overflows a double (1e999); the
+      // library's "[json.exception.KIND.ID] " prefix names nothing the user wrote.
+      std::string what = e.what();
+      if (const auto end = what.find("] "); what.rfind("[json.exception.", 0) == 0 && end != std::string::npos) {
+        what.erase(0, end + 2);
+      }
+      fail(source_ + ": invalid JSON: " + what);
     }
     if (!root.is_object()) fail(source_ + ": expected a JSON object at the top level");
     checkKeys(root, "", {"description", "scene", "method", "knots", "horizon", "initial_state",
@@ -361,8 +376,7 @@ class FileParser {
       }
     }
     if (root.contains("knots")) {
-      problem.knots = integer(root["knots"], "knots");
-      if (problem.knots < 2) bad("knots", std::to_string(problem.knots) + " must be >= 2");
+      problem.knots = integer(root["knots"], "knots", 2, kMaxKnots);
     }
     if (!root.contains("horizon")) bad("horizon", "missing (seconds, or {\"min\", \"max\", \"guess\"})");
     const Json& h = root["horizon"];
@@ -444,12 +458,14 @@ OptimalControlProblem parseProblem(const std::string& jsonText, const std::strin
 }
 
 OptimalControlProblem loadProblem(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) fail(path + ": cannot open the problem file");
-  std::stringstream text;
-  text << in.rdbuf();
+  std::string text;
+  try {
+    text = readTextFile(path, std::size_t{64} << 20, "problem file");  // names a directory as such
+  } catch (const FileError& e) {
+    fail(e.what());
+  }
   const std::filesystem::path p(path);
-  return parseProblem(text.str(), path, p.parent_path().string());
+  return parseProblem(text, path, p.parent_path().string());
 }
 
 }  // namespace trellis

@@ -75,6 +75,20 @@ TEST_CASE("trajectory CSV errors name the row and column", "[trajectory]") {
   CHECK_THROWS_AS(Trajectory::readCsvFile("/nonexistent/traj.csv"), TrajectoryError);
 }
 
+TEST_CASE("trajectory CSV: the missing velocity column is named; endless input is cut off", "[trajectory]") {
+  auto read = [](const std::string& s) {
+    std::istringstream in(s);
+    return Trajectory::readCsv(in, "traj.csv");
+  };
+  CHECK_THROWS_WITH(read("t,x,theta,dx,push\n0,0,0,0,0\n"), Contains("missing the velocity column 'dtheta'"));
+  CHECK_THROWS_WITH(read("t,a,b,db,u\n0,0,0,0,0\n"), Contains("missing the velocity column 'da'"));
+  // A line without end (as from /dev/zero) and a stream of blank lines stop at the limits.
+  CHECK_THROWS_WITH(read("t,x,dx\n" + std::string(2 << 20, '0')),
+                    Contains("traj.csv: line 2 is longer than 1048576 characters"));
+  CHECK_THROWS_WITH(read("t,x,dx\n" + std::string(10'000'001, '\n')), Contains("more than 10000000 lines"));
+  CHECK_THROWS_WITH(Trajectory::readCsvFile("/"), Contains("/: is a directory, not a trajectory CSV file"));
+}
+
 TEST_CASE("trajectory array validation", "[trajectory]") {
   VectorXd t(3);
   t << 0, 1, 1;

@@ -11,3 +11,4 @@
 #include "trellis/core/projection.hpp"
 #include "trellis/core/inverse_dynamics.hpp"
 #include "trellis/core/equilibrium.hpp"
+#include "trellis/core/io.hpp"
