@@ -253,7 +253,8 @@ TEST_CASE("optimizer: bad problems and files name the field", "[optimizer][error
     CHECK_THROWS_WITH(trellis::parseProblem(bad, "bad.json", dir), Catch::Contains(fragment));
   };
   expectError("\"knots\": 31", "\"knots\": \"many\"", "field 'knots': expected an integer");
-  expectError("\"knots\": 31", "\"knots\": 1", "field 'knots': 1 must be >= 2");
+  expectError("\"knots\": 31", "\"knots\": 1", "field 'knots': 1 is out of the range [2, 100000]");
+  expectError("\"knots\": 31", "\"knots\": 4294967298", "field 'knots': 4294967298 is out of the range [2, 100000]");
   expectError("\"horizon\": 2.0", "\"horizn\": 2.0", "field 'horizn': unknown field");
   expectError("\"theta\": 0.0, \"dx\"", "\"thetaa\": 0.0, \"dx\"", "field 'final_state.thetaa': unknown state 'thetaa'");
   expectError("\"push\": [-20.0, 20.0]", "\"push\": [20.0, -20.0]", "field 'input_bounds.push'");

@@ -45,7 +45,9 @@ void checkLinearizationAgainstFd(const Model& model, const State& s, double tole
                        Scale::kAbsolute);
   TRELLIS_CHECK_MATRIX(data.dqdd_ddq, Eigen::MatrixXd(data.A.block(n, n, n, n)), 0.0,
                        Scale::kAbsolute);
-  TRELLIS_CHECK_MATRIX(data.dqdd_du, Eigen::MatrixXd(data.B.bottomRows(n)), 0.0, Scale::kAbsolute);
+  if (data.B.cols() > 0) {  // a block of a 2n×0 matrix offsets a null pointer (clang UBSan)
+    TRELLIS_CHECK_MATRIX(data.dqdd_du, Eigen::MatrixXd(data.B.bottomRows(n)), 0.0, Scale::kAbsolute);
+  }
 
   // The q̈ the linearization is taken at is the one computeDynamics returns. Both are the same
   // computation; allow rounding differences in case of a different evaluation order (1e-13
