@@ -105,9 +105,7 @@ int runEquilibrium(std::span<const std::string> args, std::ostream& out) {
     EquilibriumOptions eo;
     if (const auto v = options.value("--tolerance")) eo.tolerance = options.positiveNumber("--tolerance", *v);
     if (const auto v = options.value("--max-iterations")) {
-      const unsigned long long k = options.count("--max-iterations", *v);
-      if (k < 1 || k > 100000) throw UsageError("equilibrium: --max-iterations: " + *v + " must be in [1, 100000]");
-      eo.maxIterations = static_cast<int>(k);
+      eo.maxIterations = options.integer<int>("--max-iterations", *v, 1, 100000);
     }
     if (model.nq() == 0) throw std::runtime_error(loaded.path + ": the scene has no configuration variables");
     const Eigen::VectorXd u = applyInputs(model, options, state.u);

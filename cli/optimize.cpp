@@ -92,9 +92,7 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
     solver.consistencyTolerance = options.positiveNumber("--consistency-tol", *v);
   }
   if (auto v = options.value("--max-refinements")) {
-    const unsigned long long rounds = options.count("--max-refinements", *v);
-    if (rounds > 50) throw UsageError("optimize: --max-refinements: '" + *v + "' must be in [0, 50]");
-    solver.maxRefinements = static_cast<int>(rounds);
+    solver.maxRefinements = options.integer<int>("--max-refinements", *v, 0, 50);
   }
   if (options.flag("--finite-difference")) solver.derivatives = DerivativeMode::kFiniteDifference;
   if (!options.flag("--quiet") && solver.printLevel == 0) {

@@ -58,9 +58,7 @@ int runProject(std::span<const std::string> args, std::ostream& out) {
   if (const auto v = options.value("--fix")) po.fixed = configIndices(model, "project", "--fix", *v);
   if (const auto v = options.value("--tolerance")) po.tolerance = options.positiveNumber("--tolerance", *v);
   if (const auto v = options.value("--max-iterations")) {
-    const unsigned long long k = options.count("--max-iterations", *v);
-    if (k < 1 || k > 100000) throw UsageError("project: --max-iterations: " + *v + " must be in [1, 100000]");
-    po.maxIterations = static_cast<int>(k);
+    po.maxIterations = options.integer<int>("--max-iterations", *v, 1, 100000);
   }
   po.velocities = !options.flag("--positions-only");
   Data data(model);
