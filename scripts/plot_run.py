@@ -27,6 +27,7 @@ import json
 import math
 import os
 import subprocess
+import re
 import sys
 
 import matplotlib
@@ -42,11 +43,15 @@ def read_csv(path):
             rows = list(csv.reader(f))
     except OSError as e:
         sys.exit(f"plot_run.py: cannot read {path}: {e.strerror}")
-    if len(rows) < 2:
+    # Comment lines before the header ('# trellis gain schedule: ...') carry metadata, not data.
+    first = 0
+    while first < len(rows) and rows[first] and rows[first][0].lstrip().startswith("#"):
+        first += 1
+    if len(rows) - first < 2:
         sys.exit(f"plot_run.py: {path}: needs a header and at least one data row")
-    header = [h.strip() for h in rows[0]]
+    header = [h.strip() for h in rows[first]]
     columns = [[] for _ in header]
-    for line, row in enumerate(rows[1:], start=2):
+    for line, row in enumerate(rows[first + 1:], start=first + 2):
         if not row:
             continue
         if len(row) != len(header):
@@ -183,12 +188,22 @@ def plot_inputs(ref, closed, out, title):
 def plot_gains(path, out, title):
     header, columns = read_csv(path)
     t = columns[0]
+    # Columns are K row-major. Named files ('K_<input>_<state>') say m and nx in their metadata
+    # line; old files name the indices ('K_i_j').
+    with open(path) as f:
+        meta = re.search(r"m=(\d+) nx=(\d+)", f.readline())
     rows = {}
-    for name, col in zip(header[1:], columns[1:]):
-        parts = name.split("_")
-        if len(parts) != 3 or parts[0] != "K":
-            sys.exit(f"plot_run.py: {path}: gain column '{name}' is not K_i_j")
-        rows.setdefault(int(parts[1]), []).append(col)
+    for index, (name, col) in enumerate(zip(header[1:], columns[1:])):
+        if not name.startswith("K_"):
+            sys.exit(f"plot_run.py: {path}: gain column '{name}' is not K_<input>_<state>")
+        if meta:
+            row = index // int(meta.group(2))
+        else:
+            parts = name.split("_")
+            if len(parts) != 3 or not parts[1].isdigit():
+                sys.exit(f"plot_run.py: {path}: gain column '{name}' is not K_i_j")
+            row = int(parts[1])
+        rows.setdefault(row, []).append(col)
     fig, ax = plt.subplots(figsize=(9, 4))
     for i in sorted(rows):
         norm = [math.sqrt(sum(c[k] ** 2 for c in rows[i])) for k in range(len(t))]

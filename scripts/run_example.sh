@@ -50,11 +50,17 @@ done
 # Open loop for comparison: the same perturbation (seed 1) under zero gains.
 "$python" - "$out/gains.csv" "$out/zero_gains.csv" <<'EOF'
 import csv, sys
-rows = list(csv.reader(open(sys.argv[1])))
+lines = open(sys.argv[1]).read().splitlines()
+# The metadata comment lines and the named header are kept: the zero gains stay checked against
+# the scene and the rate like the real ones.
+head = 0
+while lines[head].startswith("#"):
+    head += 1
+rows = list(csv.reader(lines[head + 1:]))
 with open(sys.argv[2], "w", newline="") as f:
-    w = csv.writer(f)
-    w.writerow(rows[0])
-    for r in rows[1:]:
+    f.write("\n".join(lines[:head + 1]) + "\n")
+    w = csv.writer(f, lineterminator="\n")
+    for r in rows:
         w.writerow([r[0]] + ["0"] * (len(r) - 1))
 EOF
 if "$trellis" simulate "$scene" --trajectory "$out/reference.csv" --gains "$out/zero_gains.csv" \

@@ -220,30 +220,20 @@ GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) 
   double rate = 0.0;
   bool haveMetadata = false;
   std::vector<std::string> names;
-  // The comments precede the header, so peek at them first: readNumericCsv calls the header check
-  // after collecting them, but hands them over only at the end. Read the stream once into memory.
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  {
-    std::string line;
-    std::istringstream pre(buffer.str());
-    while (std::getline(pre, line)) {
-      const std::string t = detail::trimCsvField(line);
-      if (t.empty()) continue;
-      if (t[0] != '#') break;
-      int mm = 0, nn = 0;
-      double r = 0.0;
-      bool cont = false;
-      if (parseMetadata(t.substr(1), mm, nn, r, cont)) {
-        haveMetadata = true;
-        m = mm;
-        nx = nn;
-        rate = cont ? 0.0 : r;
-      }
-    }
-  }
   const detail::NumericCsv csv = detail::readNumericCsv(
-      buffer, source, [&](const std::vector<std::string>& header, int lineNo) {
+      in, source, [&](const std::vector<std::string>& comments, const std::vector<std::string>& header, int lineNo) {
+        // The metadata line ('# trellis gain schedule: m=.. nx=.. ...') is among the comments.
+        for (const std::string& comment : comments) {
+          int mm = 0, nn = 0;
+          double r = 0.0;
+          bool cont = false;
+          if (parseMetadata(comment, mm, nn, r, cont)) {
+            haveMetadata = true;
+            m = mm;
+            nx = nn;
+            rate = cont ? 0.0 : r;
+          }
+        }
         const std::string hat = source + ": header (line " + std::to_string(lineNo) + ")";
         if (header[0] != "t") {
           throw TrajectoryError(hat + ", column 1: must be 't', got '" + header[0] + "'");
@@ -251,10 +241,10 @@ GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) 
         const int ncols = static_cast<int>(header.size()) - 1;
         if (ncols < 1) throw TrajectoryError(hat + ": no gain columns after 't' (expected K_0_0, ...)");
         if (haveMetadata) {
-          if (ncols != m * nx) {
+          if (ncols != static_cast<long long>(m) * nx) {
             throw TrajectoryError(hat + ": " + std::to_string(ncols) + " gain columns, but the metadata line says m=" +
                                   std::to_string(m) + " nx=" + std::to_string(nx) + " (" +
-                                  std::to_string(m * nx) + " columns)");
+                                  std::to_string(static_cast<long long>(m) * nx) + " columns)");
           }
           for (int c = 0; c < ncols; ++c) {
             if (header[1 + c].rfind("K_", 0) != 0) {

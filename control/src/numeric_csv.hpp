@@ -93,13 +93,15 @@ struct NumericCsv {
 };
 
 /// Reads the header (the first non-empty line not starting with '#'; such comment lines before it
-/// are kept in `comments`) and passes it to checkHeader(header, headerLine),
+/// are kept in `comments`) and passes it to checkHeader(comments, header, headerLine),
 /// which throws TrajectoryError if the names are wrong; then the data rows (blank lines skipped).
 /// Throws for an empty file, no data rows, a wrong column count, a field that is not a number or
-/// not finite, and a time not greater than the previous one.
+/// not finite, and a time not greater than the previous one. The stream is read line by line
+/// within the limits above (never slurped whole: it may be endless).
 inline NumericCsv readNumericCsv(
     std::istream& in, const std::string& source,
-    const std::function<void(const std::vector<std::string>&, int)>& checkHeader) {
+    const std::function<void(const std::vector<std::string>&, const std::vector<std::string>&, int)>&
+        checkHeader) {
   NumericCsv csv;
   std::string line;
   long long lineNo = 0;
@@ -116,7 +118,7 @@ inline NumericCsv readNumericCsv(
     }
   }
   if (csv.header.empty()) throw TrajectoryError(source + ": empty file (expected a header row)");
-  checkHeader(csv.header, csv.headerLine);
+  checkHeader(csv.comments, csv.header, csv.headerLine);
   const int width = static_cast<int>(csv.header.size());
   int row = 0;
   while (readCsvLine(in, line, lineNo, source)) {
@@ -154,6 +156,15 @@ inline NumericCsv readNumericCsv(
   }
   if (csv.rows.empty()) throw TrajectoryError(source + ": no data rows after the header");
   return csv;
+}
+
+/// The same without comments for the header check (trajectory files).
+inline NumericCsv readNumericCsv(
+    std::istream& in, const std::string& source,
+    const std::function<void(const std::vector<std::string>&, int)>& checkHeader) {
+  return readNumericCsv(in, source,
+                        [&checkHeader](const std::vector<std::string>&, const std::vector<std::string>& header,
+                                       int line) { checkHeader(header, line); });
 }
 
 }  // namespace trellis::detail

@@ -121,7 +121,9 @@ def test_gain_schedule_numpy_and_csv(tm, tmp_path):
     np.testing.assert_allclose(g.evaluate(0.25), 0.75 * gains[0] + 0.25 * gains[1], rtol=1e-15)
     path = tmp_path / "g.csv"
     g.write_csv(str(path))
-    assert path.read_text().splitlines()[0].startswith("t,K_0_0,K_0_1,K_0_2,K_0_3,K_1_0")
+    lines = path.read_text().splitlines()
+    assert lines[0].startswith("# trellis gain schedule: m=2 nx=4")
+    assert lines[1].startswith("t,K_0_0,K_0_1,K_0_2,K_0_3,K_1_0")
     np.testing.assert_array_equal(tm.GainSchedule.read_csv(str(path)).gains, gains)
     sampled = tm.GainSchedule.sample(lambda t: np.full((1, 2), t), [0.0, 0.5])
     np.testing.assert_array_equal(sampled.gains[:, 0, 0], [0.0, 0.5])
