@@ -46,13 +46,8 @@ constexpr std::size_t kMaxSceneFrames = 20000;
 constexpr double kRotationTolerance = 1e-9;   // max |RᵀR − I| entry of a const_se3 rotation
 constexpr double kInertiaTolerance = 1e-12;   // relative, smallest eigenvalue of an inertia tensor
 
-/// The value as it appears in the file, shortened for messages.
-std::string show(const Json& value) {
-  std::string text = value.dump(-1, ' ', false, Json::error_handler_t::replace);
-  constexpr std::size_t kMax = 80;
-  if (text.size() > kMax) text = text.substr(0, kMax - 3) + "...";
-  return text;
-}
+/// The value as it appears in the file, shortened for messages (one helper with state files).
+std::string show(const Json& value) { return detail::showJson(value); }
 
 std::string quote(std::string_view name) { return show(Json(std::string(name))); }
 
@@ -68,15 +63,7 @@ std::string kind(const Json& value) {
   }
 }
 
-/// "a, b, c" (at most a few names) for "expected one of" hints.
-std::string listNames(const std::vector<std::string>& names) {
-  if (names.empty()) return "none";
-  std::string out;
-  constexpr std::size_t kMax = 12;
-  for (std::size_t i = 0; i < names.size() && i < kMax; ++i) out += (i ? ", " : "") + names[i];
-  if (names.size() > kMax) out += ", ...";
-  return out;
-}
+using detail::listNames;  // "a, b, c" for "expected one of" hints (state_json.hpp)
 
 /// One element of the scene (a frame, "potentials[2] (linear_spring)", "state") and the JSON
 /// object that describes it. All field accessors throw ModelError naming element, field and value.

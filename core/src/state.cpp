@@ -15,7 +15,9 @@ namespace {
 
 using Json = nlohmann::json;
 
-std::string show(const Json& value) {
+}  // namespace
+
+std::string showJson(const Json& value) {
   std::string text = value.dump(-1, ' ', false, Json::error_handler_t::replace);
   constexpr std::size_t kMax = 80;
   if (text.size() > kMax) text = text.substr(0, kMax - 3) + "...";
@@ -31,14 +33,12 @@ std::string listNames(const std::vector<std::string>& names) {
   return out;
 }
 
-}  // namespace
-
 void readStateObject(const Model& model, const Json& object, const std::string& label, bool strict,
                      bool allowAcceleration, ModelState& state) {
   const auto fail = [&label](const std::string& field, const std::string& problem) {
     throw ModelError(label + ": field '" + field + "': " + problem);
   };
-  if (!object.is_object()) throw ModelError(label + ": must be a JSON object, not " + show(object));
+  if (!object.is_object()) throw ModelError(label + ": must be a JSON object, not " + showJson(object));
   if (strict) {
     for (const auto& [key, value] : object.items()) {
       if (key == "q" || key == "dq" || key == "u" || (key == "ddq" && allowAcceleration)) continue;
@@ -49,16 +49,16 @@ void readStateObject(const Model& model, const Json& object, const std::string& 
                               Eigen::VectorXd& out) {
     const auto found = object.find(key);
     if (found == object.end()) return false;
-    if (!found->is_object()) fail(key, show(*found) + " must be an object");
+    if (!found->is_object()) fail(key, showJson(*found) + " must be an object");
     for (const auto& [name, value] : found->items()) {
       const std::string field = std::string(key) + "." + name;
       const auto it = std::find(names.begin(), names.end(), name);
       if (it == names.end()) {
-        fail(field, "unknown " + std::string(what) + " " + show(Json(name)) + " (known: " + listNames(names) + ")");
+        fail(field, "unknown " + std::string(what) + " " + showJson(Json(name)) + " (known: " + listNames(names) + ")");
       }
-      if (!value.is_number()) fail(field, show(value) + " must be a number");
+      if (!value.is_number()) fail(field, showJson(value) + " must be a number");
       const double x = value.get<double>();
-      if (!std::isfinite(x)) fail(field, show(value) + " must be finite");
+      if (!std::isfinite(x)) fail(field, showJson(value) + " must be finite");
       out[it - names.begin()] = x;
     }
     return true;

@@ -7,8 +7,15 @@
 #include <nlohmann/json.hpp>
 
 #include <string>
+#include <vector>
 
 namespace trellis::detail {
+
+/// The value as it appears in the file, shortened for messages (at most 80 characters).
+std::string showJson(const nlohmann::json& value);
+
+/// "a, b, c" (at most 12 names, then "...") for "known: ..." hints; "none" when empty.
+std::string listNames(const std::vector<std::string>& names);
 
 /// Overwrites the entries of `state` named in `object` (a JSON object). `label` names the object
 /// in messages ("state"). strict: keys other than q, dq, u (and ddq when allowAcceleration) are
