@@ -3,7 +3,7 @@
 
     plot_run.py --reference TRAJ.csv [--scene SCENE.json] [--closed CLOSED.csv ...]
                 [--gains GAINS.csv] [--controllability CONTROLLABILITY.csv] --out DIR
-                [--title NAME] [--configs a,b,...] [--trellis PROGRAM]
+                [--title NAME] [--configs a,b,...] [--trellis PROGRAM] [--closed-after-go]
 
 TRAJ.csv and CLOSED.csv use the trajectory layout (t, configurations, d + configurations,
 inputs); GAINS.csv the gains layout (t, K_i_j row-major). Writes DIR/states.png, DIR/inputs.png,
@@ -19,6 +19,12 @@ the knots with the knot derivatives x'_k = [dq_k; q''(q_k, dq_k, u_k)], which is
 --scene the velocity part of the spline has no derivatives and the error plot falls back to linear
 interpolation between knots, says so in its title and on standard error (it overstates the error
 between knots by O(h²)).
+
+With --closed-after-go the plots that need no closed loop (gains, controllability) are made
+first; then the script reads one line from standard input and goes on only if it is "go" (the
+caller has written the --closed files). A caller can so start this one process early and let
+matplotlib's start-up and the first plots overlap its own work; end of input without "go" (the
+caller failed) ends the script with an error.
 """
 import argparse
 import bisect
@@ -278,9 +284,22 @@ def main():
     p.add_argument("--out", required=True)
     p.add_argument("--title", default="trellis")
     p.add_argument("--configs", default="", help="comma-separated configurations to plot (default: all)")
+    p.add_argument("--closed-after-go", action="store_true",
+                   help="read the --closed files only after a line 'go' on standard input")
     args = p.parse_args()
     os.makedirs(args.out, exist_ok=True)
     ref = Trajectory(args.reference)
+    if args.closed_after_go:
+        if args.gains:
+            plot_gains(args.gains, args.out, args.title)
+            args.gains = None
+        if args.controllability:
+            plot_controllability(args.controllability, args.out, args.title)
+            args.controllability = None
+        line = sys.stdin.readline()
+        if line.strip() != "go":
+            sys.exit("plot_run.py: standard input ended without 'go': the closed-loop files were "
+                     "not announced (did the caller fail?)")
     closed = [Trajectory(c) for c in args.closed]
     for run in closed:
         if run.configs != ref.configs:

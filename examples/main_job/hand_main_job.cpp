@@ -10,9 +10,14 @@
 //      (the reduced reachability Gramian);
 //   5. TV-LQR on the constraint manifold (CVODES), gains K(t) (23 × 40, full state) at the knots;
 //   6. closed-loop simulations from seeded perturbed starts (tangent to the manifold), tensions
-//      saturated at zero, constraints projected; tracking error, drift and saturation;
+//      saturated at zero, constraints projected; tracking error, drift and saturation — one batch
+//      (simulateBatch) over the machine's cores;
 //   7. files in the output folder (default output/hand/): reference.csv, gains.csv,
 //      controllability.csv, closed_loop_<k>.csv, summary.txt and the PNG plots (scripts/plot_run.py).
+// The plots are ONE Python process, started as soon as the gains are written: matplotlib's start-up
+// and the gain and controllability plots overlap the closed loops; it is told "go" on its standard
+// input once the closed-loop files exist. The summary (with each stage's time) is printed first;
+// then the job waits for the plots, and a plot failure still fails the job.
 //
 // usage: hand_main_job [--out DIR] [--runs N] [--seed S] [--perturbation SIZE] [--no-plots]
 #include "reference_motion.hpp"
@@ -28,6 +33,7 @@
 #include <chrono>
 #include <cmath>
 #include <csignal>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
@@ -38,6 +44,8 @@
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include <sys/wait.h>
 
 namespace {
 
@@ -137,7 +145,8 @@ void finiteDifferenceLinearization(const trellis::Model& model, trellis::Data& d
 }  // namespace
 
 int main(int argc, char** argv) try {
-  std::signal(SIGXFSZ, SIG_IGN);  // beyond a file-size limit a write fails (EFBIG) and is reported
+  std::signal(SIGXFSZ, SIG_IGN);
+  std::signal(SIGPIPE, SIG_IGN);  // a plot process that died early is reported by pclose, not fatal  // beyond a file-size limit a write fails (EFBIG) and is reported
   const Options options = parseOptions(argc, argv);
   const auto jobStart = Clock::now();
   Progress progress(7);
@@ -250,6 +259,24 @@ int main(int argc, char** argv) try {
   progress.end(format("%.0f Riccati steps on %.0f reduced states, max ‖K‖_F %.3g", lqr.reduced.steps,
                       lqr.basis.dimension(), maxGain));
 
+  // The plots' one Python process starts now (see the file comment). popen's pipe is its stdin.
+  FILE* plots = nullptr;
+  const auto plotStart = Clock::now();
+  if (options.plots) {
+    std::ostringstream cmd;
+    // Debian's interpreter has python3-matplotlib; a python3 earlier on PATH may not.
+    const char* python = std::filesystem::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
+    cmd << python << " \"" << TRELLIS_SOURCE_DIR << "/scripts/plot_run.py\" --closed-after-go --title 'human hand'"
+        << " --reference \"" << options.out << "/reference.csv\" --gains \"" << options.out
+        << "/gains.csv\" --controllability \"" << options.out << "/controllability.csv\" --out \""
+        << options.out << "\"";
+    for (int r = 0; r < std::min(options.runs, 5); ++r)
+      cmd << " --closed \"" << options.out << "/closed_loop_" << r << ".csv\"";
+    std::fflush(stdout);  // the child inherits the stream: no duplicated buffered output
+    plots = popen(cmd.str().c_str(), "w");
+    if (!plots) throw std::runtime_error("could not start the plot process: " + cmd.str());
+  }
+
   // 6. Closed loop ------------------------------------------------------------------------------
   progress.begin("closed-loop simulations from seeded perturbed starts (tensions saturated at 0)");
   trellis::SimulationOptions sim;
@@ -266,13 +293,20 @@ int main(int argc, char** argv) try {
     double initial, final, maxDrift, saturated;
     bool ok;
   };
-  std::vector<Run> runs;
+  std::vector<Eigen::VectorXd> starts;
   for (int r = 0; r < options.runs; ++r) {
     Eigen::VectorXd z(T0.cols());
     for (int i = 0; i < z.size(); ++i) z(i) = normal(rng);
     z *= options.perturbation / z.norm();
-    const Eigen::VectorXd start = x0 + T0 * z;  // tangent to the manifold; projection removes O(‖z‖²)
-    const trellis::SimulationResult result = trellis::simulateClosedLoop(model, trajectory, gains, start, sim);
+    starts.push_back(x0 + T0 * z);  // tangent to the manifold; projection removes O(‖z‖²)
+  }
+  // One Data and one integrator per thread; model, reference and gains shared read-only.
+  const std::vector<trellis::SimulationResult> results =
+      trellis::simulateBatch(model, trajectory, gains, starts, sim, 0);
+  std::vector<Run> runs;
+  long steps = 0, restarts = 0, projections = 0, jacobians = 0, quotientRhs = 0;
+  for (int r = 0; r < options.runs; ++r) {
+    const trellis::SimulationResult& result = results[r];
     Run run{0, 0, result.maxConstraintDrift, result.saturatedFraction, result.ok()};
     if (result.trackingError.size() > 0) {
       run.initial = result.trackingError(0);
@@ -280,7 +314,16 @@ int main(int argc, char** argv) try {
     }
     if (!result.ok()) std::printf("      run %d: %s\n", r, result.message.c_str());
     if (r < 5) result.trajectory.writeCsvFile(options.out + "/closed_loop_" + std::to_string(r) + ".csv");
+    steps += result.steps;
+    restarts += result.restarts;
+    projections += result.projections;
+    jacobians += result.jacobianEvaluations;
+    quotientRhs += result.linearRhsEvaluations;
     runs.push_back(run);
+  }
+  if (plots) {  // the closed-loop files are complete: the plot process may read them
+    std::fputs("go\n", plots);
+    std::fflush(plots);
   }
   int converged = 0, failed = 0;
   double worstRatio = 0.0, worstDrift = 0.0, meanSaturated = 0.0;
@@ -296,24 +339,15 @@ int main(int argc, char** argv) try {
     if (ratio < 0.5) ++converged;
   }
   progress.end(format("%.0f of %.0f runs end with less than half their initial error", converged, runs.size()) +
-               format("; worst final/initial %.2e, worst constraint drift %.1e", worstRatio, worstDrift));
+               format("; worst final/initial %.2e, worst constraint drift %.1e", worstRatio, worstDrift) +
+               format("; per run %.0f steps, %.1f restarts (= projections %.1f)", double(steps) / runs.size(),
+                      double(restarts) / runs.size(), double(projections) / runs.size()) +
+               format(", %.0f exact Jacobians, %.0f difference-quotient right-hand sides", double(jacobians) / runs.size(),
+                      double(quotientRhs) / runs.size()));
 
-  // 7. Plots and summary ------------------------------------------------------------------------
-  progress.begin("plots and summary");
-  bool plotsOk = false;
-  if (options.plots) {
-    std::ostringstream cmd;
-    // Debian's interpreter has python3-matplotlib; a python3 earlier on PATH may not.
-    const char* python = std::filesystem::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
-    cmd << python << " \"" << TRELLIS_SOURCE_DIR << "/scripts/plot_run.py\" --title 'human hand' --reference \""
-        << options.out << "/reference.csv\" --gains \"" << options.out << "/gains.csv\" --controllability \""
-        << options.out << "/controllability.csv\" --out \"" << options.out << "\"";
-    for (int r = 0; r < std::min(options.runs, 5); ++r)
-      cmd << " --closed \"" << options.out << "/closed_loop_" << r << ".csv\"";
-    plotsOk = std::system(cmd.str().c_str()) == 0;
-  }
-  progress.end(plotsOk ? "PNG plots written" : "plots skipped or failed (python3-matplotlib missing?)");
-
+  // 7. Summary; then the plots ----------------------------------------------------------------
+  progress.begin("summary (the plots finish in parallel)");
+  progress.end();
   std::ostringstream summary;
   summary << "\nhand main job — summary\n";
   summary << "  stage                                                         time [s]\n";
@@ -334,10 +368,29 @@ int main(int argc, char** argv) try {
           << format("%.0f with final error < half the initial; worst final/initial %.2e\n", converged, worstRatio)
           << format("  constraint drift ≤ %.1e, tensions saturated at 0 in %.1f%% of the control evaluations\n",
                     worstDrift, 100 * meanSaturated);
+  summary << format("  closed-loop integration per run: %.0f steps, %.1f restarts, %.1f projections, ",
+                    double(steps) / runs.size(), double(restarts) / runs.size(), double(projections) / runs.size())
+          << format("%.0f exact Jacobians, %.0f difference-quotient right-hand sides\n", double(jacobians) / runs.size(),
+                    double(quotientRhs) / runs.size());
   summary << "  files: " << std::filesystem::absolute(options.out).string() << "/\n";
   std::printf("%s", summary.str().c_str());
+  std::fflush(stdout);
   trellis::writeFileAtomically(options.out + "/summary.txt", summary.str());
-  return (failed == 0 && pointwise && gramian.controllable() && converged == options.runs) ? 0 : 1;
+
+  bool plotsOk = true;
+  if (plots) {
+    const int status = pclose(plots);
+    plotsOk = status != -1 && WIFEXITED(status) && WEXITSTATUS(status) == 0;
+    const std::string line =
+        plotsOk ? format("  plots: PNG files written by one Python process in %.3f s (started after the gains), "
+                         "whole job with plots %.3f s\n", secondsSince(plotStart), secondsSince(jobStart))
+                : format("  plots: FAILED (the plot process, scripts/plot_run.py, exited with status %.0f; "
+                         "python3-matplotlib missing?)\n", WIFEXITED(status) ? WEXITSTATUS(status) : -1);
+    std::printf("%s", line.c_str());
+    trellis::writeFileAtomically(options.out + "/summary.txt", summary.str() + line);
+    if (!plotsOk) std::fprintf(stderr, "hand_main_job: error: the plots failed (see above)\n");
+  }
+  return (plotsOk && failed == 0 && pointwise && gramian.controllable() && converged == options.runs) ? 0 : 1;
 } catch (const std::exception& e) {
   std::fprintf(stderr, "hand_main_job: error: %s\n", e.what());
   return 1;

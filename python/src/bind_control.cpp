@@ -522,13 +522,15 @@ void bindControl(py::module_& m) {
       .value("INTEGRATOR_FAILURE", SimulationStatus::kIntegratorFailure)
       .value("DYNAMICS_FAILURE", SimulationStatus::kDynamicsFailure)
       .value("NON_FINITE", SimulationStatus::kNonFinite)
-      .value("POLICY_FAILURE", SimulationStatus::kPolicyFailure);
+      .value("POLICY_FAILURE", SimulationStatus::kPolicyFailure)
+      .value("CONSTRAINT_DRIFT", SimulationStatus::kConstraintDrift);
 
   py::class_<SimulationOptions>(m, "SimulationOptions",
       "Options of the CVODES simulation (keywords): rtol, atol, max_steps, sample_rate (0: "
       "continuous feedback; f > 0: sampled at f Hz with zero-order hold), input_lower / "
       "input_upper (nu,) box, output_step, constraints (ConstraintHandling), method, max_step, "
-      "breakpoints, projection_iterations.")
+      "breakpoints, projection_iterations, drift_tolerance (0: 10 (atol + rtol); projection above "
+      "it), exact_jacobian (BDF: exact A - B S K, else difference quotients).")
       .def(py::init(&makeFromKwargs<SimulationOptions>))
       .def_readwrite("rtol", &SimulationOptions::rtol)
       .def_readwrite("atol", &SimulationOptions::atol)
@@ -542,6 +544,8 @@ void bindControl(py::module_& m) {
       .def_readwrite("max_step", &SimulationOptions::maxStep)
       .def_readwrite("breakpoints", &SimulationOptions::breakpoints)
       .def_readwrite("projection_iterations", &SimulationOptions::projectionIterations)
+      .def_readwrite("drift_tolerance", &SimulationOptions::driftTolerance)
+      .def_readwrite("exact_jacobian", &SimulationOptions::exactJacobian)
       .def("validate", &SimulationOptions::validate);
 
   py::class_<SimulationResult>(m, "SimulationResult",
@@ -563,6 +567,9 @@ void bindControl(py::module_& m) {
       .def_readonly("saturated_fraction", &SimulationResult::saturatedFraction)
       .def_readonly("steps", &SimulationResult::steps)
       .def_readonly("rhs_evaluations", &SimulationResult::rhsEvaluations)
+      .def_readonly("linear_rhs_evaluations", &SimulationResult::linearRhsEvaluations,
+                    "right-hand sides spent on difference-quotient Jacobians (0 with exact ones)")
+      .def_readonly("jacobian_evaluations", &SimulationResult::jacobianEvaluations)
       .def_readonly("restarts", &SimulationResult::restarts)
       .def_readonly("projections", &SimulationResult::projections)
       .def_property_readonly("ok", &SimulationResult::ok)
@@ -601,34 +608,13 @@ void bindControl(py::module_& m) {
         [](const Model& model, const Trajectory& reference, const GainSchedule& gains,
            const Eigen::MatrixXd& x0s, const std::optional<SimulationOptions>& options, int threads) {
           checkSize(x0s.cols(), 2 * model.nq(), "x0s columns", "model.nx");
-          if (threads < 0) throw std::invalid_argument("threads: must be >= 0, got " + std::to_string(threads));
+          std::vector<Eigen::VectorXd> starts;
+          for (Eigen::Index k = 0; k < x0s.rows(); ++k) starts.push_back(x0s.row(k).transpose());
           const SimulationOptions opts = options.value_or(SimulationOptions{});
-          opts.validate();
-          std::vector<SimulationResult> results(x0s.rows());
+          std::vector<SimulationResult> results;
           {
             py::gil_scoped_release release;
-            const int count = threads > 0 ? threads
-                                          : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-            const int workers = std::min<int>(count, static_cast<int>(x0s.rows()));
-            std::atomic<Eigen::Index> next{0};
-            std::vector<std::exception_ptr> errors(std::max(workers, 1));
-            auto work = [&](int w) {
-              try {
-                for (Eigen::Index k = next++; k < x0s.rows(); k = next++) {
-                  const Eigen::VectorXd x = x0s.row(k).transpose();
-                  results[k] = simulateClosedLoop(model, reference, gains, x, opts);
-                }
-              } catch (...) {
-                errors[w] = std::current_exception();
-              }
-            };
-            std::vector<std::thread> pool;
-            for (int w = 1; w < workers; ++w) pool.emplace_back(work, w);
-            if (workers > 0) work(0);
-            for (std::thread& t : pool) t.join();
-            for (const auto& e : errors) {
-              if (e) std::rethrow_exception(e);
-            }
+            results = simulateBatch(model, reference, gains, starts, opts, threads);
           }
           return results;
         },

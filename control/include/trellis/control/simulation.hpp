@@ -1,38 +1,47 @@
 // trellis/control/simulation.hpp — open- and closed-loop simulation of the NONLINEAR plant.
 //
-// The state x = [q; q̇] (2n) evolves by ẋ = [q̇; q̈(q, q̇, u)], q̈ from computeDynamics (the KKT
-// solve that enforces A q̈ + Ȧ q̇ = 0), integrated with SUNDIALS CVODES. The input comes from a
-// policy u = π(t, x) (m), clipped to the box [inputLower, inputUpper]:
+// The state x = [q; q̇] (2n) evolves by ẋ = f(t, x) = [q̇; q̈(q, q̇, u)], q̈ from computeDynamics
+// (the KKT solve that enforces A q̈ + Ȧ q̇ = 0), integrated with SUNDIALS CVODES (the control
+// module's one driver). The input comes from a policy u = π(t, x) (m), clipped to the box
+// [inputLower, inputUpper]:
 //  - continuous feedback (sampleRate = 0): u(t) = sat(π(t, x(t))) inside every right-hand side;
 //  - sampled feedback (sampleRate = f > 0): u_k = sat(π(s_k, x(s_k))) at s_k = t0 + k/f, held
 //    constant (zero-order hold) on [s_k, s_{k+1}).
 // The closed loop about a reference (x_ref, u_ref) with a gain schedule K(t) is the policy
 //   π(t, x) = u_ref(t) − K(t) (x − x_ref(t)),
 // the open loop π(t, x) = u_ref(t). x_ref is the reference's cubic Hermite spline, u_ref and K are
-// piecewise linear (Trajectory::evaluate, GainSchedule::evaluate).
+// interpolated by Trajectory::evaluate and GainSchedule::evaluate (continuous in t).
 //
-// Integration is split into segments at every time where the right-hand side is not smooth — the
-// reference knots, the gain-schedule times (or options.breakpoints), the sample times — and, when
-// projecting, at every output time. Each segment ends exactly on its end point (CVodeSetStopTime)
-// and the next starts with CVodeReInit, so no step straddles a kink or a jump of the held input.
-// Output times that are neither kinks nor projection points are interpolated by CVODES (its
-// dense output, of the accepted local error). The kinks created by saturation occur at unknown
-// times; there CVODES' error control shortens the step (the right-hand side stays continuous).
+// Jacobian (BDF). The Newton matrix needs ∂f/∂x. For the closed loop it is exact:
+//   ∂f/∂x = A(x, u) − B(x, u) S K(t),   S = diag(s_i), s_i = 0 where u_i is clipped, else 1,
+// with A, B from computeLinearization at the current state and input (a clipped input does not
+// move with x). Sampled and open loops have ∂u/∂x = 0, so ∂f/∂x = A. A generic Policy has no
+// known ∂π/∂x: there, and with SimulationOptions::exactJacobian = false, CVODES forms the
+// difference quotient (2n extra right-hand sides per Jacobian, counted in
+// SimulationResult::linearRhsEvaluations).
+//
+// Restarts. The integration restarts (order 1, a fresh step) only where the right-hand side
+// jumps: at the sample times of sampled feedback, at options.breakpoints, and after a projection
+// changed the state. u_ref(t) and K(t) are continuous, so the reference knots and the gain times
+// are NOT restart points: there f is continuous with a kink in t, which the error control steps
+// over like the kinks of saturation (switching of sat(·) is left to the error control too; root
+// finding on u_i − bound cost more steps than it saved, see the report of issue 11). Outputs are
+// the integrator's dense output (the interpolating polynomial of the last step, of the accepted
+// local error), except at restart points, where the integration stops exactly.
 //
 // Constraints (model.nc() > 0). The exact dynamics keep h(q) and A q̇ constant along the exact
-// solution, so they drift only by integration error. ConstraintHandling::kProject projects the
-// state back at the start and at the end of every segment:
-//  1. positions: Gauss–Newton on the holonomic rows, q ← q − W⁻¹A_hᵀ (A_h W⁻¹ A_hᵀ)⁺ h(q), i.e. the
-//     minimum-norm step in the metric W = M(q) (the mass matrix at the state before projecting),
-//     repeated until |h| stops decreasing (at most 10 iterations);
-//  2. velocities: q̇ ← q̇ − M⁻¹Aᵀ (A M⁻¹ Aᵀ)⁺ A q̇ over all rows (holonomic and nonholonomic), the
-//     M-orthogonal projection onto A q̇ = 0. It is the velocity change of a constraint impulse
-//     (M δq̇ = Aᵀ p), the correction of least kinetic energy; it never raises the kinetic energy and
-//     does not depend on the units of the coordinates (a Euclidean projection would weigh metres
-//     against radians arbitrarily).
-// Pseudo-inverses go through a complete orthogonal decomposition of A L⁻ᵀ (M = L Lᵀ), so redundant
-// rows are handled. The drift max(|h(q)|∞, |A q̇|∞) is measured before projecting. kNone never
-// changes the state (the drift is still reported).
+// solution, so they drift only by integration error. The drift max(|h(q)|∞, |A q̇|∞) is measured
+// at every output time and restart point. With ConstraintHandling::kProject the state is projected
+// (core's projectState: feasibility in the mass-matrix metric, positions then velocities) where the
+// drift exceeds the tolerance δ = driftTolerance (default 10·(atol + rtol)) — at t0 and at the
+// output and restart times, not at every knot — and the integration restarts from the projected
+// state. A drift still above δ after projection ends the run with kConstraintDrift (time, drift).
+// kNone never changes the state (the drift is still reported).
+//
+// Threads. simulate* read the Model, the reference and the gain schedule only (const methods);
+// each call owns its Data, its CVODES memory and its buffers. Calls on distinct threads may share
+// one Model, Trajectory and GainSchedule as long as nobody modifies them meanwhile; a Policy
+// shared across threads must itself be safe to call concurrently. simulateBatch relies on this.
 #pragma once
 
 #include "trellis/control/gain_schedule.hpp"
@@ -57,8 +66,8 @@ enum class ConstraintHandling {
 /// Linear multistep family used by CVODES.
 enum class IntegrationMethod {
   kAdams,  ///< Adams–Moulton with fixed-point iterations: no Jacobian, for non-stiff systems
-  kBDF,    ///< BDF with Newton iterations and a dense difference-quotient Jacobian: stiff systems
-           ///< (stiff springs, very high gains)
+  kBDF,    ///< BDF with Newton iterations and a dense Jacobian (exact where known, see the file
+           ///< comment): stiff systems (stiff springs, very high gains, the hand)
 };
 
 /// "adams", "bdf".
@@ -81,10 +90,17 @@ struct SimulationOptions {
   ConstraintHandling constraints = ConstraintHandling::kProject;
   IntegrationMethod method = IntegrationMethod::kAdams;
   double maxStep = 0.0;  ///< largest internal step; 0 = unlimited (≥ 0)
-  /// Extra times where the policy has a kink or a jump (integration restarts there). Times outside
-  /// (t0, t1) are ignored. simulateClosedLoop adds the gain schedule's times.
+  /// Extra times where the policy jumps (integration restarts there). Times outside (t0, t1) are
+  /// ignored. (Kinks need none: the reference knots and gain times are not restart points.)
   std::vector<double> breakpoints;
-  int projectionIterations = 10;  ///< Gauss–Newton iterations per position projection (≥ 1)
+  int projectionIterations = 10;  ///< Newton iterations per position projection (≥ 1)
+  /// Constraint drift tolerated before projecting (units of h and A q̇); 0: 10·(atol + rtol). A
+  /// projection that cannot bring the drift below it is kConstraintDrift. (≥ 0)
+  double driftTolerance = 0.0;
+  /// BDF only: the exact closed-loop Jacobian A − B S K (true) or CVODES's difference quotient
+  /// (false; the fallback, 2n extra right-hand sides per Jacobian). A generic Policy always uses
+  /// the difference quotient unless sampled (then ∂f/∂x = A).
+  bool exactJacobian = true;
 
   /// Throws std::invalid_argument naming the field and its value (sizes against the model are
   /// checked by simulate).
@@ -101,6 +117,7 @@ enum class SimulationStatus {
                        ///< constraints)
   kNonFinite,          ///< the state, the input or q̈ became NaN/Inf
   kPolicyFailure,      ///< the policy threw (e.g. a time outside the reference)
+  kConstraintDrift,    ///< the drift stayed above driftTolerance after a projection
 };
 
 const char* toString(SimulationStatus status);
@@ -135,8 +152,10 @@ struct SimulationResult {
   int controlSamples = 0;          ///< the evaluations counted for saturatedSamples
   double saturatedFraction = 0.0;  ///< saturatedSamples / controlSamples (0 if none)
   long steps = 0;                  ///< CVODES internal steps, all segments
-  long rhsEvaluations = 0;         ///< right-hand sides (difference-quotient Jacobians included)
-  long restarts = 0;               ///< CVodeReInit calls (segment boundaries)
+  long rhsEvaluations = 0;         ///< right-hand sides by the integrator itself
+  long linearRhsEvaluations = 0;   ///< right-hand sides for difference-quotient Jacobians (0 exact)
+  long jacobianEvaluations = 0;    ///< Newton-matrix Jacobians formed (exact or difference quotient)
+  long restarts = 0;               ///< restarts after t0: samples, breakpoints, projections
   long projections = 0;            ///< projections that were applied
   bool ok() const { return status == SimulationStatus::kOk; }
 };
@@ -164,15 +183,27 @@ SimulationResult simulateClosedLoop(const Model& model, const Trajectory& refere
 SimulationResult simulateOpenLoop(const Model& model, const Trajectory& reference,
                                   const Eigen::VectorXd& x0, const SimulationOptions& options = {});
 
+/// simulateClosedLoop from each of initialStates (2n each) on `threads` threads (0: one per
+/// hardware thread), results in the order of initialStates. The model, the reference and the
+/// gains are shared read-only (see "Threads" in the file comment); every run has its own Data and
+/// integrator, so each result is bit-identical to the same run alone, for any thread count.
+/// Bad arguments throw std::invalid_argument before any thread starts.
+std::vector<SimulationResult> simulateBatch(const Model& model, const Trajectory& reference,
+                                            const GainSchedule& gains,
+                                            const std::vector<Eigen::VectorXd>& initialStates,
+                                            const SimulationOptions& options = {},
+                                            int threads = 0);
+
 /// Outcome of projectOntoConstraints.
 struct ConstraintProjection {
   double driftBefore = 0.0;  ///< max(|h(q)|∞, |A q̇|∞) before
   double driftAfter = 0.0;   ///< the same after
-  int iterations = 0;        ///< Gauss–Newton iterations on the positions
+  int iterations = 0;        ///< Newton iterations on the positions
+  bool converged = true;     ///< core's projectState reached its tolerance (|h| ≤ 1e-12)
 };
 
-/// Projects x = [q; q̇] (2n) in place onto h(q) = 0, A(q) q̇ = 0 exactly as kProject does (see the
-/// file comment). A model without constraints leaves x unchanged. Throws std::invalid_argument for
+/// Projects x = [q; q̇] (2n) in place onto h(q) = 0, A(q) q̇ = 0 exactly as kProject does (core's
+/// projectState, feasibility only: the restoration's Newton steps in the mass-matrix metric). A model without constraints leaves x unchanged. Throws std::invalid_argument for
 /// a wrong size; maxIterations ≥ 1.
 ConstraintProjection projectOntoConstraints(const Model& model, Eigen::VectorXd& x,
                                             int maxIterations = 10);

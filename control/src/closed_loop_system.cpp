@@ -1,0 +1,194 @@
+// closed_loop_system.cpp — the closed loop's right-hand side, input law with saturation, and the
+// exact Jacobian A − B S K (see closed_loop_system.hpp).
+#include "closed_loop_system.hpp"
+
+#include "trellis/core/dynamics.hpp"
+#include "trellis/core/linearization.hpp"
+#include "trellis/core/model.hpp"
+
+#include <limits>
+#include <sstream>
+
+namespace trellis::detail {
+
+std::string formatVector(const Eigen::VectorXd& v) {
+  std::ostringstream m;
+  m.precision(10);
+  m << "[";
+  for (Eigen::Index i = 0; i < v.size(); ++i) m << (i ? ", " : "") << v(i);
+  m << "]";
+  return m.str();
+}
+
+std::string formatTime(double t) {
+  std::ostringstream m;
+  m.precision(12);
+  m << t;
+  return m.str();
+}
+
+ClosedLoopSystem::ClosedLoopSystem(const Model& model, const InputLaw& law,
+                                   const SimulationOptions& options)
+    : model_(model),
+      law_(law),
+      n_(model.nq()),
+      m_(model.nu()),
+      sampled_(options.sampleRate > 0.0),
+      bounded_(options.inputLower.size() > 0 || options.inputUpper.size() > 0),
+      // ∂u/∂x is known unless a continuous user policy decides u.
+      jacobianKnown_(options.exactJacobian && (sampled_ || law.kind != InputLaw::Kind::kPolicy)),
+      data_(model),
+      x_(2 * n_),
+      q_(n_),
+      dq_(n_),
+      u_(Eigen::VectorXd::Zero(m_)),
+      held_(Eigen::VectorXd::Zero(m_)),
+      lower_(Eigen::VectorXd::Constant(m_, -std::numeric_limits<double>::infinity())),
+      upper_(Eigen::VectorXd::Constant(m_, std::numeric_limits<double>::infinity())),
+      xr_(2 * n_),
+      ur_(m_),
+      active_(Eigen::VectorXd::Ones(m_)),
+      K_(m_, 2 * n_),
+      SK_(m_, 2 * n_) {
+  if (options.inputLower.size() == m_) lower_ = options.inputLower;
+  if (options.inputUpper.size() == m_) upper_ = options.inputUpper;
+  failState.resize(2 * n_);
+}
+
+void ClosedLoopSystem::fail(SimulationStatus s, double t, const Eigen::VectorXd& state,
+                            std::string message) {
+  // Keeps the LAST failure: after a recoverable failure CVODES retries with ever smaller steps,
+  // so the last failing point is the closest to where the integration stuck.
+  failed = true;
+  failStatus = s;
+  failTime = t;
+  failState = state;
+  failMessage = std::move(message);
+  failure = failMessage;
+}
+
+void ClosedLoopSystem::resetCallState() {
+  failed = false;
+  aborted_ = false;
+  failuresThisCall_ = 0;
+}
+
+int ClosedLoopSystem::failureReturn() {
+  if (failStatus == SimulationStatus::kPolicyFailure ||
+      ++failuresThisCall_ >= kMaxRecoverableFailures) {
+    aborted_ = true;
+  }
+  return aborted_ ? -1 : 1;
+}
+
+bool ClosedLoopSystem::input(double t, const Eigen::VectorXd& x, Eigen::VectorXd& out) {
+  try {
+    switch (law_.kind) {
+      case InputLaw::Kind::kPolicy:
+        (*law_.policy)(t, x, out);
+        break;
+      case InputLaw::Kind::kOpenLoop:
+        law_.reference->evaluate(t, xr_, out);
+        break;
+      case InputLaw::Kind::kFeedback:
+        law_.reference->evaluate(t, xr_, out);
+        law_.gains->evaluate(t, K_);
+        xr_ = x - xr_;  // x − x_ref
+        out.noalias() -= K_ * xr_;
+        break;
+    }
+  } catch (const std::exception& e) {
+    fail(SimulationStatus::kPolicyFailure, t, x, std::string("the policy threw: ") + e.what());
+    return false;
+  } catch (...) {
+    fail(SimulationStatus::kPolicyFailure, t, x, "the policy threw an unknown exception");
+    return false;
+  }
+  if (out.size() != m_) {
+    fail(SimulationStatus::kPolicyFailure, t, x,
+         "the policy returned u of size " + std::to_string(out.size()) + ", expected " +
+             std::to_string(m_));
+    return false;
+  }
+  if (!out.allFinite()) {
+    fail(SimulationStatus::kNonFinite, t, x,
+         "the policy returned a non-finite input u = " + formatVector(out));
+    return false;
+  }
+  active_.setOnes();
+  if (bounded_) {
+    for (int i = 0; i < m_; ++i) {
+      if (out(i) < lower_(i)) {
+        out(i) = lower_(i);
+        active_(i) = 0.0;
+      } else if (out(i) > upper_(i)) {
+        out(i) = upper_(i);
+        active_(i) = 0.0;
+      }
+    }
+  }
+  return true;
+}
+
+bool ClosedLoopSystem::control(double t, const Eigen::VectorXd& x, Eigen::VectorXd& out,
+                               bool& clipped) {
+  if (!input(t, x, out)) return false;
+  clipped = (active_.array() == 0.0).any();
+  return true;
+}
+
+int ClosedLoopSystem::rhs(double t, ConstVectorMap y, VectorMap ydot) {
+  if (aborted_) return -1;
+  x_ = y;
+  if (!x_.allFinite()) {
+    fail(SimulationStatus::kNonFinite, t, x_, "the state became non-finite");
+    return failureReturn();
+  }
+  if (sampled_) {
+    u_ = held_;
+  } else if (!input(t, x_, u_)) {
+    return failureReturn();
+  }
+  q_ = x_.head(n_);
+  dq_ = x_.tail(n_);
+  computeDynamics(model_, data_, q_, dq_, u_);
+  const DynamicsStatus& st = data_.status;
+  if (!st.ok()) {
+    fail(st.code == DynamicsStatus::Code::kNonFinite ? SimulationStatus::kNonFinite
+                                                     : SimulationStatus::kDynamicsFailure,
+         t, x_, "computeDynamics failed: " + st.message);
+    return failureReturn();
+  }
+  ydot.head(n_) = dq_;
+  ydot.tail(n_) = data_.qdd;
+  return 0;
+}
+
+int ClosedLoopSystem::jacobian(double t, ConstVectorMap y, ConstVectorMap /*fy*/, MatrixMap J) {
+  if (aborted_) return -1;
+  x_ = y;
+  const bool feedback = !sampled_ && law_.kind == InputLaw::Kind::kFeedback;
+  if (sampled_) {
+    u_ = held_;
+  } else if (!input(t, x_, u_)) {  // also K_ and active_ at t
+    return failureReturn();
+  }
+  q_ = x_.head(n_);
+  dq_ = x_.tail(n_);
+  const DynamicsStatus st = computeLinearization(model_, data_, q_, dq_, u_);
+  if (!st.ok()) {
+    fail(st.code == DynamicsStatus::Code::kNonFinite ? SimulationStatus::kNonFinite
+                                                     : SimulationStatus::kDynamicsFailure,
+         t, x_, "computeLinearization failed: " + st.message);
+    return failureReturn();
+  }
+  J = data_.A;
+  if (feedback) {
+    // ∂u/∂x = −S K: a clipped input's row drops out.
+    SK_ = active_.asDiagonal() * K_;
+    J.noalias() -= data_.B * SK_;
+  }
+  return 0;
+}
+
+}  // namespace trellis::detail

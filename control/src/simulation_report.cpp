@@ -1,0 +1,113 @@
+// simulation_report.cpp — the simulator's names, option checks and JSON summary (no numerics).
+#include "trellis/control/simulation.hpp"
+
+#include "trellis/control/tvlqr.hpp"
+
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+namespace trellis {
+
+const char* toString(SimulationStatus status) {
+  switch (status) {
+    case SimulationStatus::kOk:
+      return "ok";
+    case SimulationStatus::kIntegratorFailure:
+      return "integrator failure";
+    case SimulationStatus::kDynamicsFailure:
+      return "dynamics failure";
+    case SimulationStatus::kNonFinite:
+      return "non-finite";
+    case SimulationStatus::kPolicyFailure:
+      return "policy failure";
+    case SimulationStatus::kConstraintDrift:
+      return "constraint drift";
+  }
+  return "unknown";
+}
+
+const char* toString(IntegrationMethod method) {
+  return method == IntegrationMethod::kAdams ? "adams" : "bdf";
+}
+
+IntegrationMethod parseIntegrationMethod(const std::string& text) {
+  if (text == "adams") return IntegrationMethod::kAdams;
+  if (text == "bdf") return IntegrationMethod::kBDF;
+  throw std::invalid_argument("'" + text + "' is not one of adams, bdf");
+}
+
+std::string simulationJson(const SimulationResult& r) {
+  std::ostringstream o;
+  const Trajectory& tr = r.trajectory;
+  const bool have = tr.size() > 0;
+  const Eigen::VectorXd& e = r.trackingError;
+  Eigen::Index worst = 0;
+  if (e.size() > 0) e.maxCoeff(&worst);
+  o << "{\"ok\": " << (r.ok() ? "true" : "false") << ", \"status\": " << jsonString(toString(r.status))
+    << ", \"message\": " << jsonString(r.message) << ", \"rows\": " << tr.size()
+    << ", \"t0\": " << (have ? jsonNumber(tr.startTime()) : "null")
+    << ", \"t1\": " << (have ? jsonNumber(tr.endTime()) : "null")
+    << ", \"tracking_error_initial\": " << (e.size() > 0 ? jsonNumber(e(0)) : "null")
+    << ", \"tracking_error_final\": " << (e.size() > 0 ? jsonNumber(e(e.size() - 1)) : "null")
+    << ", \"tracking_error_max\": " << (e.size() > 0 ? jsonNumber(e(worst)) : "null")
+    << ", \"tracking_error_max_time\": " << (e.size() > 0 && have ? jsonNumber(tr.times()(worst)) : "null")
+    << ", \"max_constraint_drift\": " << jsonNumber(r.maxConstraintDrift)
+    << ", \"saturated_samples\": " << r.saturatedSamples << ", \"control_samples\": " << r.controlSamples
+    << ", \"saturated_fraction\": " << jsonNumber(r.saturatedFraction) << ", \"steps\": " << r.steps
+    << ", \"rhs_evaluations\": " << r.rhsEvaluations
+    << ", \"difference_quotient_rhs_evaluations\": " << r.linearRhsEvaluations
+    << ", \"jacobian_evaluations\": " << r.jacobianEvaluations << ", \"restarts\": " << r.restarts
+    << ", \"projections\": " << r.projections << "}";
+  return o.str();
+}
+
+void SimulationOptions::validate() const {
+  auto bad = [](const std::string& field, double v, const char* rule) {
+    std::ostringstream m;
+    m << "SimulationOptions." << field << " = " << v << " must be " << rule;
+    throw std::invalid_argument(m.str());
+  };
+  if (!(rtol > 0.0) || !std::isfinite(rtol)) bad("rtol", rtol, "> 0 and finite");
+  if (!(atol > 0.0) || !std::isfinite(atol)) bad("atol", atol, "> 0 and finite");
+  if (maxSteps <= 0) bad("maxSteps", static_cast<double>(maxSteps), "> 0");
+  if (!(sampleRate >= 0.0) || !std::isfinite(sampleRate))
+    bad("sampleRate", sampleRate, ">= 0 and finite");
+  if (!(outputStep >= 0.0) || !std::isfinite(outputStep))
+    bad("outputStep", outputStep, ">= 0 and finite");
+  if (!(maxStep >= 0.0) || !std::isfinite(maxStep)) bad("maxStep", maxStep, ">= 0 and finite");
+  if (!(driftTolerance >= 0.0) || !std::isfinite(driftTolerance))
+    bad("driftTolerance", driftTolerance, ">= 0 and finite");
+  if (projectionIterations < 1) {
+    bad("projectionIterations", projectionIterations, ">= 1");
+  }
+  for (std::size_t k = 0; k < breakpoints.size(); ++k) {
+    if (!std::isfinite(breakpoints[k]))
+      bad("breakpoints[" + std::to_string(k) + "]", breakpoints[k], "finite");
+  }
+  if (inputLower.size() != 0 && inputUpper.size() != 0 && inputLower.size() != inputUpper.size()) {
+    std::ostringstream m;
+    m << "SimulationOptions.inputLower has size " << inputLower.size()
+      << " but SimulationOptions.inputUpper has size " << inputUpper.size();
+    throw std::invalid_argument(m.str());
+  }
+  for (Eigen::Index i = 0; i < inputLower.size(); ++i) {
+    if (std::isnan(inputLower(i)) || inputLower(i) == std::numeric_limits<double>::infinity()) {
+      bad("inputLower[" + std::to_string(i) + "]", inputLower(i), "a number < +inf");
+    }
+  }
+  for (Eigen::Index i = 0; i < inputUpper.size(); ++i) {
+    if (std::isnan(inputUpper(i)) || inputUpper(i) == -std::numeric_limits<double>::infinity()) {
+      bad("inputUpper[" + std::to_string(i) + "]", inputUpper(i), "a number > -inf");
+    }
+    if (i < inputLower.size() && !(inputLower(i) <= inputUpper(i))) {
+      std::ostringstream m;
+      m << "SimulationOptions.inputLower[" << i << "] = " << inputLower(i)
+        << " is greater than SimulationOptions.inputUpper[" << i << "] = " << inputUpper(i);
+      throw std::invalid_argument(m.str());
+    }
+  }
+}
+
+}  // namespace trellis
