@@ -85,6 +85,9 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
     // 1. the state at te: step until the integrator passes te, then its dense output
     if (e > 0) {
       bool failed = false;
+      // Failures count per event interval: a run creeping towards a point beyond which the
+      // right-hand side fails takes ever smaller successful steps, each with a few failures.
+      system.resetCallState();
       while (driver.time() < te) {
         if (steps >= options.maxSteps) {
           setFailure(SimulationStatus::kIntegratorFailure, driver.time(),
@@ -93,7 +96,6 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
           failed = true;
           break;
         }
-        system.resetCallState();
         const OdeStatus st = driver.step(stopTime);
         if (!st.ok()) {
           if (system.failed && callbackFlag(st.flag)) {
