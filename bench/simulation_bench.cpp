@@ -2,7 +2,8 @@
 // designed reference (301 knots over 3 s), manifold TV-LQR gains (Q = diag(100 I, I), R = I,
 // kProjected transport), BDF at rtol 1e-7 / atol 1e-9, tensions clipped at 0, constraints
 // projected, starts perturbed by 0.05 along seeded tangent directions.
-//   BM_HandClosedLoop/exact:1  one 3 s run, exact Jacobian A − B S K; /exact:0 difference quotients
+//   BM_HandClosedLoop/exact:1/saturation:1  one 3 s run as in the main job, exact Jacobian A − B S K;
+//     exact:0 difference quotients; saturation:0 without the tension limits (what switching costs)
 //   BM_HandClosedLoopBatch/threads:T  the main job's 20 runs through simulateBatch on T threads
 // Counters: steps, restarts, projections, Jacobians and difference-quotient right-hand sides per
 // run, and the final tracking error (the speed is worth nothing if the run is wrong).
@@ -100,6 +101,7 @@ void BM_HandClosedLoop(benchmark::State& state) {
   HandLoop& h = hand();
   trellis::SimulationOptions options = h.options;
   options.exactJacobian = state.range(0) != 0;
+  if (state.range(1) == 0) options.inputLower.resize(0), options.inputUpper.resize(0);
   trellis::SimulationResult result;
   for (auto _ : state) {
     result = trellis::simulateClosedLoop(h.scene.model, h.reference, h.gains, h.starts[0], options);
@@ -107,8 +109,8 @@ void BM_HandClosedLoop(benchmark::State& state) {
   }
   setCounters(state, {result});
 }
-BENCHMARK(BM_HandClosedLoop)->ArgName("exact")->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond)
-    ->UseRealTime();
+BENCHMARK(BM_HandClosedLoop)->ArgNames({"exact", "saturation"})->Args({1, 1})->Args({0, 1})
+    ->Args({1, 0})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_HandClosedLoopBatch(benchmark::State& state) {
   HandLoop& h = hand();
