@@ -3,7 +3,7 @@
 
 #include "internal.hpp"
 #include "mass_factor.hpp"
-#include "point_kinematics.hpp"
+#include "constraint_kinds.hpp"
 
 #include <cmath>
 #include <limits>

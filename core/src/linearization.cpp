@@ -4,7 +4,7 @@
 #include "trellis/core/dynamics.hpp"
 #include "internal.hpp"
 #include "mass_factor.hpp"
-#include "point_kinematics.hpp"
+#include "constraint_kinds.hpp"
 
 #include <algorithm>
 #include <cmath>
