@@ -42,6 +42,17 @@ void Data::describeTree(const Model& model) {
     tendonFirst.push_back(tendonFirst.back() + static_cast<int>(t.path.size()));
   }
   tendonPoint.assign(static_cast<size_t>(tendonFirst.back()), Eigen::Vector3d::Zero());
+  tendonPointJoint.clear();
+  tendonSegmentStart.assign(1, 0);
+  tendonSegmentPoint.clear();
+  for (const Tendon& t : model.tendons()) {
+    for (size_t k = 0; k < t.path.size(); ++k) {
+      if (k + 1 < t.path.size() && t.path[k].joint != t.path[k + 1].joint)
+        tendonSegmentPoint.push_back(static_cast<int>(tendonPointJoint.size()));
+      tendonPointJoint.push_back(t.path[k].joint);
+    }
+    tendonSegmentStart.push_back(static_cast<int>(tendonSegmentPoint.size()));
+  }
   blockStart.push_back(n);
   // Row r of A (and column r of M⁻¹Aᵀ) lives on the blocks of the constraint's two bodies.
   rowLo.assign(nc, 0);

@@ -3,9 +3,11 @@
 
 #include "internal.hpp"
 #include "mass_factor.hpp"
-#include "point_kinematics.hpp"
+#include "constraint_kinds.hpp"
+#include "force_elements.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <string>
 
@@ -26,12 +28,10 @@ void updateAccelerations(const Model& model, Data& data, const Eigen::VectorXd& 
 
 namespace {
 
-/// Equal and opposite forces along the segment a → b: τ d on a, −τ d on b, d = p_b − p_a.
-inline void addSegmentForce(Data& data, const BodyPoint& a, const BodyPoint& b, const Vector3d& pa,
-                            const Vector3d& pb, double tau) {
-  const Vector3d f = tau * (pb - pa);
-  addBodyWrench(data, a.joint, forceAt(pa, f));
-  addBodyWrench(data, b.joint, forceAt(pb, -f));
+std::string formatNumber(double x) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", x);
+  return buf;
 }
 
 }  // namespace
@@ -39,27 +39,10 @@ inline void addSegmentForce(Data& data, const BodyPoint& a, const BodyPoint& b, 
 void accumulateExternalWrenches(const Model& model, Data& data, const Eigen::VectorXd& u,
                                 bool conservative, bool nonConservative, const Eigen::VectorXd* lambda) {
   for (auto& w : data.fext) w.setZero();
-  if (conservative) {
-    for (const LinearSpring& s : model.linearSprings()) {
-      const Vector3d pa = pointPosition(data, s.a), pb = pointPosition(data, s.b);
-      addSegmentForce(data, s.a, s.b, pa, pb, springTensionPerLength(s, (pb - pa).norm()));
-    }
-  }
-  if (nonConservative) {
-    for (const BodyWrench& bw : model.bodyWrenches()) {
-      if (bw.joint == kWorld) continue;
-      Eigen::Matrix<double, 6, 1> w;
-      for (int k = 0; k < 6; ++k) w[k] = bw.input[k] >= 0 ? u[bw.input[k]] : bw.constant[k];
-      addBodyWrench(data, bw.joint, bodyWrenchWorld(data, bw, w));
-    }
-    for (const Tendon& t : model.tendons()) {
-      const double tension = u[t.input];
-      for (size_t k = 0; k + 1 < t.path.size(); ++k) {
-        const Vector3d pa = pointPosition(data, t.path[k]), pb = pointPosition(data, t.path[k + 1]);
-        addSegmentForce(data, t.path[k], t.path[k + 1], pa, pb, tension / (pb - pa).norm());
-      }
-    }
-  }
+  const auto add = [&](int joint, const Vector6d& w) { addBodyWrench(data, joint, w); };
+  forEachForceElement(model, [&](auto kind, const auto& e, size_t i) {
+    if (decltype(kind)::conservative ? conservative : nonConservative) decltype(kind)::wrenches(data, e, i, u, add);
+  });
   if (lambda) {
     const auto& cs = model.constraints();
     for (int r = 0; r < model.nc(); ++r) addConstraintWrenches(data, cs[r], (*lambda)[r]);
@@ -83,9 +66,7 @@ void inverseDynamicsPass(const Model& model, Data& data, Eigen::VectorXd& tau) {
 
 void addConfigurationForces(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
                             const Eigen::VectorXd& u, Eigen::VectorXd& Q) {
-  for (const ConfigForce& cf : model.configForces()) Q[cf.config] += u[cf.input];
-  for (const ConfigSpring& s : model.configSprings()) Q[s.config] -= s.k * (q[s.config] - s.q0);
-  Q.array() -= model.damping().array() * dq.array();
+  forEachForceElement(model, [&](auto kind, const auto& e, size_t) { decltype(kind)::generalizedForce(q, dq, u, e, Q); });
 }
 
 void evaluateConstraints(const Model& model, Data& data, Eigen::VectorXd* h, Eigen::VectorXd* hdot,
@@ -135,11 +116,13 @@ void factorizeKkt(const Model& model, Data& data) {
     return;
   }
   if (nc == 0) return;
-  // Two separate questions. (1) Is a row close to a singular configuration? Its kinematic
-  // conditioning κ_r = ‖A_r‖ / s_r compares it with the norm it would have if every joint moved
-  // the constraint's points along the gradient (s_r from addConstraintJacobianRow). (2) Are the
-  // rows dependent? The Schur complement scaled to unit diagonal, Ŝ = D A M⁻¹ Aᵀ D, answers
-  // that independently of how each h is scaled.
+  // Two separate questions. (1) Is a row degenerate, or close to it? Its kinematic conditioning
+  // κ_r = ‖A_r‖ / s_r compares it with the norm it has when its gradients have their natural size
+  // (s_r from addConstraintJacobianRow: e.g. 2ℓ for a distance ℓ, 1 for a point axis), so it is
+  // independent of the units and scale of h and → 0 both at a singular configuration and when the
+  // gradient itself vanishes (a distance constraint whose points coincide). s_r = 0: no joint
+  // moves the row's points at all. (2) Are the rows dependent? The Schur complement scaled to
+  // unit diagonal, Ŝ = D A M⁻¹ Aᵀ D, answers that independently of how each h is scaled.
   double kinematic = 1.0;
   int worstRow = 0;
   for (int r = 0; r < nc; ++r) {
@@ -150,6 +133,18 @@ void factorizeKkt(const Model& model, Data& data) {
       worstRow = r;
     }
   }
+  // Relative errors of the constraint forces and their derivatives grow like eps / κ²; below
+  // κ = 1e-5 they may exceed 1e-6 and the row is reported as degenerate (finite results, no ok).
+  const auto reportDegenerate = [&] {
+    st.code = DynamicsStatus::Code::kSingularConstraints;
+    st.message = "degenerate constraint row " + std::to_string(worstRow) + " (" + model.constraints()[worstRow].name +
+                 "): |A_row| = " + formatNumber(data.constraintJacobian.row(worstRow).norm()) +
+                 (data.constraintScale[worstRow] > 0
+                      ? " is " + formatNumber(kinematic) + " of its natural scale " +
+                            formatNumber(data.constraintScale[worstRow])
+                      : std::string(" and no configuration variable moves its points")) +
+                 " (its gradient vanishes or the configuration is singular; the constraint force is undetermined)";
+  };
   // M⁻¹ Aᵀ by one tree solve per row, inside the blocks the row touches; then A M⁻¹ Aᵀ, whose
   // entries between groups of rows on disjoint blocks are exactly zero.
   for (int r = 0; r < nc; ++r) {
@@ -183,13 +178,7 @@ void factorizeKkt(const Model& model, Data& data) {
     const double rcond = ratio * ratio;
     st.constraintConditioning = std::min(kinematic, rcond);
     if (rcond > 1e-13 && kinematic > 0) {
-      // Relative errors of the constraint forces and their derivatives grow like eps / κ²;
-      // below κ = 1e-5 they may exceed 1e-6 and the configuration is reported as singular.
-      if (kinematic < 1e-5) {
-        st.code = DynamicsStatus::Code::kSingularConstraints;
-        st.message = "near-singular constraint configuration (kinematic conditioning " + std::to_string(kinematic) +
-                     ") at " + model.constraints()[worstRow].name;
-      }
+      if (kinematic < 1e-5) reportDegenerate();
       return;
     }
   }
@@ -238,8 +227,13 @@ void factorizeKkt(const Model& model, Data& data) {
     if (worst == i) worst = swaps[i];
     else if (worst == swaps[i]) worst = i;
   }
+  if (kinematic < 1e-5) {
+    reportDegenerate();
+    return;
+  }
   st.message = "constraint Jacobian has rank " + std::to_string(rank) + " < " + std::to_string(nc) +
-               " rows (redundant or singular constraints, e.g. " + model.constraints()[worst].name + ")";
+               " rows: row " + std::to_string(worst) + " (" + model.constraints()[worst].name +
+               ") depends on the others (redundant constraints: q̈ is determined, the constraint forces are not)";
 }
 
 void solveMass(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X) {
@@ -299,27 +293,7 @@ void solveKkt(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X, Eig
 void inputMatrixPass(const Model& model, Data& data) {
   Eigen::MatrixXd& Bq = data.inputMatrix;
   Bq.setZero();
-  for (const ConfigForce& cf : model.configForces()) Bq(cf.config, cf.input) += 1.0;
-  for (const BodyWrench& bw : model.bodyWrenches()) {
-    if (bw.joint == kWorld) continue;
-    const Eigen::Matrix3d R = data.jointR[bw.joint] * bw.R;
-    const Vector3d p = data.jointP[bw.joint] + data.jointR[bw.joint] * bw.p;
-    for (int k = 0; k < 6; ++k) {
-      if (bw.input[k] < 0) continue;
-      const Vector3d e = R.col(k % 3);
-      const Vector6d w = k < 3 ? forceAt(p, e) : make(Vector3d::Zero(), e);
-      for (int j = bw.joint; j != kWorld; j = model.joints()[j].parent) Bq(j, bw.input[k]) += data.S[j].dot(w);
-    }
-  }
-  for (const Tendon& t : model.tendons()) {
-    for (size_t k = 0; k + 1 < t.path.size(); ++k) {
-      const BodyPoint &a = t.path[k], &b = t.path[k + 1];
-      const Vector3d pa = pointPosition(data, a), pb = pointPosition(data, b);
-      const Vector3d e = (pb - pa).normalized();  // unit tension pulls a toward b and b toward a
-      addPointGradient(model, data, a.joint, pa, e, Bq.col(t.input));
-      addPointGradient(model, data, b.joint, pb, -e, Bq.col(t.input));
-    }
-  }
+  forEachForceElement(model, [&](auto kind, const auto& e, size_t i) { decltype(kind)::addInputColumns(model, data, e, i, Bq); });
 }
 
 void massMatrixPass(const Model& model, Data& data) {
@@ -352,6 +326,20 @@ bool nonFinite(const Eigen::VectorXd& x, const char* name, const std::vector<std
       return true;
     }
   return false;
+}
+
+void appendState(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& dq, std::string& message) {
+  // The first coordinates by name (a message, not a state file: long states are cut).
+  constexpr int kShown = 12;
+  const int n = model.nq();
+  for (int pass = 0; pass < 2; ++pass) {
+    const Eigen::VectorXd& x = pass == 0 ? q : dq;
+    message += pass == 0 ? " at q = (" : ", dq = (";
+    for (int i = 0; i < std::min(n, kShown); ++i)
+      message += (i ? ", " : "") + model.configNames()[i] + "=" + formatNumber(x[i]);
+    if (n > kShown) message += ", … " + std::to_string(n - kShown) + " more";
+    message += ")";
+  }
 }
 
 bool inputsAreFinite(const Model& model, Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
@@ -406,7 +394,10 @@ DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::Vect
   detail::evaluateConstraints(model, data, &data.constraintValue, nullptr, &data.constraintDrift,
                               &data.constraintJacobian);
   detail::factorizeKkt(model, data);
-  if (!detail::solvable(data.status)) return data.status;
+  if (!detail::solvable(data.status)) {
+    detail::appendState(model, q, dq, data.status.message);
+    return data.status;
+  }
   data.qdd = -data.bias;
   data.lambda = -data.constraintDrift;
   detail::solveKkt(model, data, data.qdd, data.lambda);
@@ -428,6 +419,7 @@ DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::Vect
     data.status.code = DynamicsStatus::Code::kNonFinite;
     data.status.message = "forward dynamics produced non-finite values";
   }
+  if (!data.status.ok()) detail::appendState(model, q, dq, data.status.message);
   return data.status;
 }
 
@@ -440,12 +432,9 @@ Energy computeEnergy(const Model& model, Data& data, const Eigen::VectorXd& q, c
     e.kinetic += 0.5 * data.v[i].dot(spatial::applyInertia(data.wm[i], data.wh[i], data.wI[i], data.v[i]));
     e.potential -= model.gravity().dot(data.wh[i]);  // V = −m g·c
   }
-  for (const LinearSpring& s : model.linearSprings()) {
-    const double L = (detail::pointPosition(data, s.a) - detail::pointPosition(data, s.b)).norm();
-    e.potential += 0.5 * s.k * (L - s.x0) * (L - s.x0);
-  }
-  for (const ConfigSpring& s : model.configSprings())
-    e.potential += 0.5 * s.k * (q[s.config] - s.q0) * (q[s.config] - s.q0);
+  detail::forEachForceElement(model, [&](auto kind, const auto& el, size_t) {
+    if constexpr (decltype(kind)::conservative) e.potential += decltype(kind)::potential(data, q, el);
+  });
   return e;
 }
 
@@ -458,9 +447,12 @@ double computeNonConservativePower(const Model& model, Data& data, const Eigen::
   detail::accumulateExternalWrenches(model, data, u, false, true, nullptr);
   double power = 0.0;
   for (int i = 0; i < model.nq(); ++i) power += data.fext[i].dot(data.v[i]);
-  for (const ConfigForce& cf : model.configForces()) power += u[cf.input] * dq[cf.config];
-  power -= (model.damping().array() * dq.array().square()).sum();
-  return power;
+  // Non-conservative generalized forces on coordinates (inputs, damping): Q_nc · q̇.
+  data.tmpN.setZero();
+  detail::forEachForceElement(model, [&](auto kind, const auto& e, size_t) {
+    if constexpr (!decltype(kind)::conservative) decltype(kind)::generalizedForce(q, dq, u, e, data.tmpN);
+  });
+  return power + data.tmpN.dot(dq);
 }
 
 }  // namespace trellis

@@ -43,11 +43,14 @@ void inputMatrixPass(const Model& model, Data& data);
 bool inputsAreFinite(const Model& model, Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
                      const Eigen::VectorXd& u);
 
+/// Appends " at q = (name=value, …), dq = (…)" to a status message (the first coordinates).
+void appendState(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& dq, std::string& message);
+
 /// Factorizes [M Aᵀ; A 0] from data.M and data.constraintJacobian; fills data.status.
 void factorizeKkt(const Model& model, Data& data);
 
-/// Whether the KKT factorization can be used at all (it can, with a warning status, for
-/// redundant and near-singular constraints; not for a singular M or non-finite input).
+/// Whether the KKT factorization can be used at all (it can, with a status that is not ok, for
+/// redundant and degenerate or near-singular constraints; not for a singular M or non-finite input).
 inline bool solvable(const DynamicsStatus& s) {
   return s.code != DynamicsStatus::Code::kSingularMassMatrix && s.code != DynamicsStatus::Code::kNonFinite;
 }

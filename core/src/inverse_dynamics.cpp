@@ -6,6 +6,8 @@
 #include <Eigen/QR>
 
 #include <algorithm>
+#include <cmath>
+#include <vector>
 #include <sstream>
 #include <stdexcept>
 
@@ -16,6 +18,7 @@ const char* toString(InverseDynamicsStatus status) {
     case InverseDynamicsStatus::kOk: return "ok";
     case InverseDynamicsStatus::kUnreachable: return "unreachable";
     case InverseDynamicsStatus::kInadmissibleAcceleration: return "inadmissible_acceleration";
+    case InverseDynamicsStatus::kInputBounds: return "input_bounds";
     case InverseDynamicsStatus::kNonFinite: return "non_finite";
   }
   return "unknown";
@@ -35,6 +38,20 @@ InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, con
   }
   if (!(options.tolerance > 0.0)) {
     throw std::invalid_argument("InverseDynamicsOptions: tolerance must be > 0");
+  }
+  const bool bounded = options.lowerBound.size() > 0 || options.upperBound.size() > 0;
+  if (bounded) {
+    if (options.lowerBound.size() != m || options.upperBound.size() != m)
+      throw std::invalid_argument("InverseDynamicsOptions: lowerBound and upperBound have " +
+                                  std::to_string(options.lowerBound.size()) + " and " +
+                                  std::to_string(options.upperBound.size()) + " entries, the model has m = " +
+                                  std::to_string(m) + " inputs");
+    for (int i = 0; i < m; ++i)
+      if (std::isnan(options.lowerBound[i]) || std::isnan(options.upperBound[i]) ||
+          options.lowerBound[i] > options.upperBound[i])
+        throw std::invalid_argument("InverseDynamicsOptions: bounds of input '" + model.inputNames()[i] + "' are [" +
+                                    std::to_string(options.lowerBound[i]) + ", " +
+                                    std::to_string(options.upperBound[i]) + "] (need lower ≤ upper, not NaN)");
   }
   InverseDynamicsResult r;
   r.u = Eigen::VectorXd::Zero(m);
@@ -58,10 +75,62 @@ InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, con
     return r;
   }
   const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(G);
-  const Eigen::VectorXd z = cod.solve(rhs);
+  Eigen::VectorXd z = cod.solve(rhs);
+  const Eigen::VectorXd zUnbounded = z;
+  r.rank = static_cast<int>(cod.rank());
+  int boundInput = -1;  // the input whose bound the unbounded answer exceeds most
+  if (bounded && z.allFinite()) {
+    r.boundExcess = Eigen::VectorXd::Zero(m);
+    for (int i = 0; i < m; ++i)
+      r.boundExcess[i] = std::max({0.0, z[i] - options.upperBound[i], options.lowerBound[i] - z[i]});
+    if (m > 0 && r.boundExcess.maxCoeff(&boundInput) > 0.0) {
+      // Active set on the bounds of min ½‖G z − r‖²: held inputs sit at a bound, the free unknowns
+      // (the other inputs and λ) are the least squares of the rest. Hold the input that leaves its
+      // interval most; release a held input whose gradient g_i = (Gᵀ(G z − r))_i points into the
+      // interval (g_i > 0 at the upper bound, < 0 at the lower). Each step decreases the residual,
+      // so the iteration ends; 4 (m + 1) steps bound it.
+      std::vector<int> held(static_cast<size_t>(m), 0);  // 0 free, +1 upper, −1 lower
+      for (int it = 0; it < 4 * (m + 1); ++it) {
+        r.boundIterations = it + 1;
+        int worstFree = -1;
+        double worstExcess = 0.0;
+        for (int i = 0; i < m; ++i) {
+          if (held[i]) continue;
+          const double e = std::max(z[i] - options.upperBound[i], options.lowerBound[i] - z[i]);
+          if (e > worstExcess) worstExcess = e, worstFree = i;
+        }
+        if (worstFree >= 0) {
+          held[worstFree] = z[worstFree] > options.upperBound[worstFree] ? 1 : -1;
+        } else {
+          const Eigen::VectorXd g = G.transpose() * (G * z - rhs);
+          int release = -1;
+          double gmax = options.tolerance * std::max(1.0, rhs.cwiseAbs().maxCoeff());
+          for (int i = 0; i < m; ++i)
+            if ((held[i] > 0 && g[i] > gmax) || (held[i] < 0 && -g[i] > gmax)) gmax = std::abs(g[i]), release = i;
+          if (release < 0) break;  // optimal: every held input is pushed against its bound
+          held[release] = 0;
+        }
+        // Re-solve with the held inputs fixed.
+        Eigen::VectorXd fixedPart = rhs;
+        std::vector<int> freeCols;
+        for (int i = 0; i < m + nc; ++i) {
+          if (i < m && held[i]) {
+            z[i] = held[i] > 0 ? options.upperBound[i] : options.lowerBound[i];
+            fixedPart -= G.col(i) * z[i];
+          } else {
+            freeCols.push_back(i);
+          }
+        }
+        Eigen::MatrixXd Gf(n, static_cast<Eigen::Index>(freeCols.size()));
+        for (size_t c = 0; c < freeCols.size(); ++c) Gf.col(static_cast<Eigen::Index>(c)) = G.col(freeCols[c]);
+        const Eigen::VectorXd zf = Gf.cols() ? Eigen::VectorXd(Gf.completeOrthogonalDecomposition().solve(fixedPart))
+                                              : Eigen::VectorXd();
+        for (size_t c = 0; c < freeCols.size(); ++c) z[freeCols[c]] = zf[static_cast<Eigen::Index>(c)];
+      }
+    }
+  }
   r.u = z.head(m);
   r.lambda = z.tail(nc);
-  r.rank = static_cast<int>(cod.rank());
   r.unique = r.rank == m + nc;
   r.residual = G * z - rhs;
   int worst = 0;
@@ -85,6 +154,14 @@ InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, con
     r.status = InverseDynamicsStatus::kInadmissibleAcceleration;
     msg << "q̈ violates the constraint " << model.constraints()[worstConstraint].name
         << ": A q̈ + Ȧ q̇ = " << r.constraintResidual;
+  } else if (boundInput >= 0 && r.residualNorm > options.tolerance * scale) {
+    r.status = InverseDynamicsStatus::kInputBounds;
+    const bool upper = zUnbounded[boundInput] > options.upperBound[boundInput];
+    msg << "the inputs that produce this q̈ violate the " << (upper ? "upper" : "lower") << " bound "
+        << (upper ? options.upperBound[boundInput] : options.lowerBound[boundInput]) << " of input '"
+        << model.inputNames()[boundInput] << "' by " << r.boundExcess[boundInput]
+        << "; within the bounds the least-squares residual is " << r.residualNorm << ", largest on "
+        << model.configNames()[worst];
   } else if (r.residualNorm > options.tolerance * scale) {
     r.status = InverseDynamicsStatus::kUnreachable;
     msg << "no inputs produce this q̈ (rank of [B_u A^T] = " << r.rank << " < n = " << n

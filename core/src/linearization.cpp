@@ -4,7 +4,8 @@
 #include "trellis/core/dynamics.hpp"
 #include "internal.hpp"
 #include "mass_factor.hpp"
-#include "point_kinematics.hpp"
+#include "constraint_kinds.hpp"
+#include "force_elements.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -13,44 +14,14 @@ namespace trellis {
 namespace detail {
 namespace {
 
-/// Tangents of the force elements that move with q (springs, tendons, body wrenches, constraint
-/// forces at fixed λ); each body wrench tangent δW goes to emit(joint, δW).
+/// Tangents of the force elements that move with q (force_elements.hpp) and of the constraint
+/// forces at fixed λ; each body wrench tangent δW goes to emit(joint, δW).
 template <class Emit>
 void forceTangents(const Model& model, const Data& data, const Direction& dir, const Eigen::VectorXd& u,
                    Emit&& emit) {
-  auto segment = [&](const BodyPoint& a, const BodyPoint& b, const Vector3d& pa, const Vector3d& pb, auto tauOfL,
-                     auto dtauOfL) {
-    if (!dir.moves(a.joint) && !dir.moves(b.joint)) return;
-    const Vector3d dpa = pointDisplacement(dir, a.joint, pa), dpb = pointDisplacement(dir, b.joint, pb);
-    const Vector3d d = pb - pa, dd = dpb - dpa;
-    const double L = d.norm();
-    const double tau = tauOfL(L), dL = d.dot(dd) / L;
-    const Vector3d f = tau * d, df = dtauOfL(L) * dL * d + tau * dd;
-    emit(a.joint, forceAtTangent(pa, dpa, f, df));
-    emit(b.joint, forceAtTangent(pb, dpb, -f, -df));
-  };
-  for (const LinearSpring& s : model.linearSprings())
-    segment(s.a, s.b, pointPosition(data, s.a), pointPosition(data, s.b),
-            [&](double L) { return springTensionPerLength(s, L); },
-            [&](double L) { return springTensionPerLengthDerivative(s, L); });
-  const auto& tendons = model.tendons();
-  for (size_t i = 0; i < tendons.size(); ++i) {
-    // Ancestor rule: only the segments with an end on a body in the subtree [k, end) move.
-    if (data.tendonJointHi[i] < dir.k || data.tendonJointLo[i] >= dir.end) continue;
-    const Tendon& t = tendons[i];
-    const Vector3d* p = &data.tendonPoint[static_cast<size_t>(data.tendonFirst[i])];
-    const double T = u[t.input];
-    for (size_t k = 0; k + 1 < t.path.size(); ++k)
-      segment(t.path[k], t.path[k + 1], p[k], p[k + 1], [&](double L) { return T / L; },
-              [&](double L) { return -T / (L * L); });
-  }
-  for (const BodyWrench& bw : model.bodyWrenches()) {
-    if (!dir.moves(bw.joint)) continue;
-    Vector6d w;
-    for (int k = 0; k < 6; ++k) w[k] = bw.input[k] >= 0 ? u[bw.input[k]] : bw.constant[k];
-    // A wrench fixed in a body is carried along rigidly: δW = S_k ×* W.
-    emit(bw.joint, crossForce(dir.Sk, bodyWrenchWorld(data, bw, w)));
-  }
+  forEachForceElement(model, [&](auto kind, const auto& e, size_t i) {
+    decltype(kind)::wrenchTangents(data, dir, e, i, u, emit);
+  });
   const auto& cs = model.constraints();
   for (int r = 0; r < model.nc(); ++r)
     if (dir.moves(cs[r].a.joint) || dir.moves(cs[r].b.joint))
@@ -145,11 +116,11 @@ void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const
       if (joints[j].parent != kWorld) data.tangentWrench[joints[j].parent] += w;
       w.setZero();
     }
-    for (const ConfigSpring& s : model.configSprings())
-      if (s.config == k) dr(k) += s.k;  // r contains −Q_config
-  } else {
-    dr(k) += model.damping()[k];
   }
+  // Forces on coordinates (springs, damping): r contains −Q.
+  forEachForceElement(model, [&](auto kind, const auto& e, size_t) {
+    decltype(kind)::generalizedForceTangent(dir, e, [&](int i, double dQ) { dr(i) -= dQ; });
+  });
 
   const auto& cs = model.constraints();
   for (int r = 0; r < model.nc(); ++r) {
@@ -177,12 +148,7 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
   detail::inverseDynamicsPass(model, data, data.tmpN);
   detail::inputMatrixPass(model, data);
 
-  detail::compositePass(model, data);
-  {
-    Eigen::Vector3d* p = data.tendonPoint.data();
-    for (const Tendon& t : model.tendons())
-      for (const BodyPoint& bp : t.path) *p++ = detail::pointPosition(data, bp);
-  }
+  detail::compositePass(model, data);  // (the tendons' path points were stored by the passes above)
   // Columns of −∂r/∂[q, q̇, u] and −∂c/∂[q, q̇, u]; c does not depend on u at fixed q̈.
   for (int k = 0; k < n; ++k) {
     detail::tangentPass(model, data, u, detail::makeDirection(model, data, k, false), data.rhsX.col(k),

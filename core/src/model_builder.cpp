@@ -355,6 +355,19 @@ Model ModelBuilder::finalize() && {
   Model model;
   model.name_ = name_;
   const int nf = static_cast<int>(frames_.size());
+  // The limits of scene files (scene.cpp), here for models built in C++: checked before any
+  // n×n matrix exists, so that a Data for the model cannot ask for gigabytes.
+  if (frames_.size() > static_cast<std::size_t>(kMaxFrames))
+    throw ModelError("model" + (name_.empty() ? std::string() : " '" + name_ + "'") + " has " +
+                     std::to_string(frames_.size()) + " frames, more than the limit of " + std::to_string(kMaxFrames));
+  std::size_t driven = 0;
+  for (const FrameSpec& f : frames_) driven += f.transform.isDriven() ? 1 : 0;
+  if (driven > static_cast<std::size_t>(kMaxConfigs))
+    throw ModelError("model" + (name_.empty() ? std::string() : " '" + name_ + "'") + " has " + std::to_string(driven) +
+                     " configuration variables, more than the limit of " + std::to_string(kMaxConfigs) +
+                     " (the dense matrices of the linearization take about 200 n^2 bytes: " +
+                     fmt(200.0 * static_cast<double>(driven) * static_cast<double>(driven) / 1e9) +
+                     " GB at n = " + std::to_string(driven) + ")");
 
   // Pre-order of the frame tree, children in the order they were added.
   std::vector<std::vector<int>> children(nf);

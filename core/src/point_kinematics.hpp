@@ -134,228 +134,26 @@ inline Vector6d bodyWrenchWorld(const Data& data, const BodyWrench& bw, const Ve
   return make(f, p.cross(f) + R * w.tail<3>());
 }
 
-struct ConstraintEval {
-  double h = 0.0;     ///< h(q) (0 for nonholonomic)
-  double hdot = 0.0;  ///< A q̇
-  double c = 0.0;     ///< A q̈ + Ȧ q̇ at the current accelerations
-};
-
-inline Vector3d constraintAxis(const Constraint& c) { return Vector3d::Unit(c.axis); }
-
-/// h, A q̇ and d/dt(A q̇) from the kinematics of the constraint's points (and direction).
-inline ConstraintEval evaluateConstraint(const Data& data, const Constraint& c) {
-  ConstraintEval e;
-  const PointKin a = pointKin(data, c.a);
-  switch (c.type) {
-    case ConstraintType::kDistance: {
-      const PointKin b = pointKin(data, c.b);
-      const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
-      e.h = d.squaredNorm() - c.distance * c.distance;
-      e.hdot = 2.0 * d.dot(dd);
-      e.c = 2.0 * dd.squaredNorm() + 2.0 * d.dot(ddd);
-      break;
-    }
-    case ConstraintType::kPoint: {
-      const PointKin b = pointKin(data, c.b);
-      const Vector3d ax = constraintAxis(c);
-      e.h = ax.dot(a.p - b.p);
-      e.hdot = ax.dot(a.v - b.v);
-      e.c = ax.dot(a.a - b.a);
-      break;
-    }
-    case ConstraintType::kPointOnPlane: {
-      const PointKin b = pointKin(data, c.b);
-      const PointKin n = directionKin(data, c.a.joint, c.direction);
-      const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
-      e.h = n.p.dot(d);
-      e.hdot = n.v.dot(d) + n.p.dot(dd);
-      e.c = n.a.dot(d) + 2.0 * n.v.dot(dd) + n.p.dot(ddd);
-      break;
-    }
-    case ConstraintType::kKnifeEdge: {
-      const PointKin n = directionKin(data, c.a.joint, c.direction);
-      e.hdot = n.p.dot(a.v);
-      e.c = n.v.dot(a.v) + n.p.dot(a.a);
-      break;
-    }
-  }
-  return e;
-}
-
-/// Directional derivative of evaluateConstraint (uses the body tangents in data).
-inline ConstraintEval constraintTangent(const Data& data, const Direction& dir, const Constraint& c) {
-  ConstraintEval e;
-  const PointKin a = pointKin(data, c.a);
-  const PointKin ta = pointTangent(data, dir, c.a.joint, a);
-  switch (c.type) {
-    case ConstraintType::kDistance: {
-      const PointKin b = pointKin(data, c.b);
-      const PointKin tb = pointTangent(data, dir, c.b.joint, b);
-      const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
-      const Vector3d td = ta.p - tb.p, tdd = ta.v - tb.v, tddd = ta.a - tb.a;
-      e.h = 2.0 * d.dot(td);
-      e.hdot = 2.0 * (td.dot(dd) + d.dot(tdd));
-      e.c = 4.0 * dd.dot(tdd) + 2.0 * (td.dot(ddd) + d.dot(tddd));
-      break;
-    }
-    case ConstraintType::kPoint: {
-      const PointKin b = pointKin(data, c.b);
-      const PointKin tb = pointTangent(data, dir, c.b.joint, b);
-      const Vector3d ax = constraintAxis(c);
-      e.h = ax.dot(ta.p - tb.p);
-      e.hdot = ax.dot(ta.v - tb.v);
-      e.c = ax.dot(ta.a - tb.a);
-      break;
-    }
-    case ConstraintType::kPointOnPlane: {
-      const PointKin b = pointKin(data, c.b);
-      const PointKin tb = pointTangent(data, dir, c.b.joint, b);
-      const PointKin n = directionKin(data, c.a.joint, c.direction);
-      const PointKin tn = directionTangent(data, dir, c.a.joint, n);
-      const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
-      const Vector3d td = ta.p - tb.p, tdd = ta.v - tb.v, tddd = ta.a - tb.a;
-      e.h = tn.p.dot(d) + n.p.dot(td);
-      e.hdot = tn.v.dot(d) + n.v.dot(td) + tn.p.dot(dd) + n.p.dot(tdd);
-      e.c = tn.a.dot(d) + n.a.dot(td) + 2.0 * (tn.v.dot(dd) + n.v.dot(tdd)) + tn.p.dot(ddd) + n.p.dot(tddd);
-      break;
-    }
-    case ConstraintType::kKnifeEdge: {
-      const PointKin n = directionKin(data, c.a.joint, c.direction);
-      const PointKin tn = directionTangent(data, dir, c.a.joint, n);
-      e.hdot = tn.p.dot(a.v) + n.p.dot(ta.v);
-      e.c = tn.v.dot(a.v) + n.v.dot(ta.v) + tn.p.dot(a.a) + n.p.dot(ta.a);
-      break;
-    }
-  }
-  return e;
-}
-
 /// row(j) += g · ∂p/∂q_j for the joints j that move the body point at world position p; with a
-/// `bound` row, also bound(j) += |g| ‖∂p/∂q_j‖, the largest |row(j)| the point could give.
+/// `bound` row, also bound(j) += gScale ‖∂p/∂q_j‖, the largest |row(j)| a gradient of the
+/// natural size gScale could give (see constraint_kinds.hpp).
 template <class Row>
 inline void addPointGradient(const Model& model, const Data& data, int joint, const Vector3d& p,
-                             const Vector3d& g, Row&& row, Eigen::VectorXd* bound = nullptr) {
-  const double gn = bound ? g.norm() : 0.0;
+                             const Vector3d& g, Row&& row, Eigen::VectorXd* bound = nullptr, double gScale = 0.0) {
   for (int j = joint; j != kWorld; j = model.joints()[j].parent) {
     const Vector3d dp = lin(data.S[j]) + ang(data.S[j]).cross(p);
     row(j) += g.dot(dp);
-    if (bound) (*bound)[j] += gn * dp.norm();
-  }
-}
-
-/// The constraint's row of A = ∂(A q̇)/∂q̇ (for holonomic rows, ∂h/∂q), and optionally the
-/// entry-wise bound of addPointGradient (used to measure how close the row is to singular).
-template <class Row>
-inline void addConstraintJacobianRow(const Model& model, const Data& data, const Constraint& c, Row&& row,
-                                     Eigen::VectorXd* bound = nullptr) {
-  const Vector3d pa = pointPosition(data, c.a);
-  switch (c.type) {
-    case ConstraintType::kDistance: {
-      const Vector3d d = pa - pointPosition(data, c.b);
-      addPointGradient(model, data, c.a.joint, pa, 2.0 * d, row, bound);
-      addPointGradient(model, data, c.b.joint, pointPosition(data, c.b), -2.0 * d, row, bound);
-      break;
-    }
-    case ConstraintType::kPoint: {
-      const Vector3d ax = constraintAxis(c);
-      addPointGradient(model, data, c.a.joint, pa, ax, row, bound);
-      addPointGradient(model, data, c.b.joint, pointPosition(data, c.b), -ax, row, bound);
-      break;
-    }
-    case ConstraintType::kPointOnPlane: {
-      // The normal turns with the plane body: the plane body sees the force n at the point p_b.
-      const Vector3d pb = pointPosition(data, c.b);
-      const Vector3d n = directionKin(data, c.a.joint, c.direction).p;
-      addPointGradient(model, data, c.a.joint, pb, n, row, bound);
-      addPointGradient(model, data, c.b.joint, pb, -n, row, bound);
-      break;
-    }
-    case ConstraintType::kKnifeEdge: {
-      const Vector3d n = directionKin(data, c.a.joint, c.direction).p;
-      addPointGradient(model, data, c.a.joint, pa, n, row, bound);
-      break;
-    }
+    if (bound) (*bound)[j] += gScale * dp.norm();
   }
 }
 
 inline void addBodyWrench(Data& data, int joint, const Vector6d& w) {
   if (joint != kWorld) data.fext[joint] += w;
 }
-/// Constraint forces Aᵀλ of one row as wrenches on the bodies (data.fext).
-inline void addConstraintWrenches(Data& data, const Constraint& c, double lambda) {
-  const Vector3d pa = pointPosition(data, c.a);
-  switch (c.type) {
-    case ConstraintType::kDistance: {
-      const Vector3d pb = pointPosition(data, c.b);
-      const Vector3d f = 2.0 * lambda * (pa - pb);
-      addBodyWrench(data, c.a.joint, forceAt(pa, f));
-      addBodyWrench(data, c.b.joint, forceAt(pb, -f));
-      break;
-    }
-    case ConstraintType::kPoint: {
-      const Vector3d f = lambda * constraintAxis(c);
-      addBodyWrench(data, c.a.joint, forceAt(pa, f));
-      addBodyWrench(data, c.b.joint, forceAt(pointPosition(data, c.b), -f));
-      break;
-    }
-    case ConstraintType::kPointOnPlane: {
-      const Vector3d pb = pointPosition(data, c.b);
-      const Vector3d f = lambda * directionKin(data, c.a.joint, c.direction).p;
-      addBodyWrench(data, c.a.joint, forceAt(pb, f));
-      addBodyWrench(data, c.b.joint, forceAt(pb, -f));
-      break;
-    }
-    case ConstraintType::kKnifeEdge: {
-      const Vector3d f = lambda * directionKin(data, c.a.joint, c.direction).p;
-      addBodyWrench(data, c.a.joint, forceAt(pa, f));
-      break;
-    }
-  }
-}
 
 /// Tangent of a force f applied at a moving point p: [δf; δp × f + p × δf].
 inline Vector6d forceAtTangent(const Vector3d& p, const Vector3d& dp, const Vector3d& f, const Vector3d& df) {
   return make(df, dp.cross(f) + p.cross(df));
-}
-
-/// Tangent of addConstraintWrenches at fixed λ along a configuration direction; each body wrench
-/// tangent is handed to emit(joint, δW).
-template <class Emit>
-inline void constraintWrenchTangents(const Data& data, const Direction& dir, const Constraint& c, double lambda,
-                                     Emit&& emit) {
-  const BodyPoint& A = c.a;
-  const Vector3d pa = pointPosition(data, A), dpa = pointDisplacement(dir, A.joint, pa);
-  switch (c.type) {
-    case ConstraintType::kDistance: {
-      const Vector3d pb = pointPosition(data, c.b), dpb = pointDisplacement(dir, c.b.joint, pb);
-      const Vector3d f = 2.0 * lambda * (pa - pb), df = 2.0 * lambda * (dpa - dpb);
-      emit(A.joint, forceAtTangent(pa, dpa, f, df));
-      emit(c.b.joint, forceAtTangent(pb, dpb, -f, -df));
-      break;
-    }
-    case ConstraintType::kPoint: {
-      const Vector3d pb = pointPosition(data, c.b), dpb = pointDisplacement(dir, c.b.joint, pb);
-      const Vector3d f = lambda * constraintAxis(c);
-      emit(A.joint, forceAtTangent(pa, dpa, f, Vector3d::Zero()));
-      emit(c.b.joint, forceAtTangent(pb, dpb, -f, Vector3d::Zero()));
-      break;
-    }
-    case ConstraintType::kPointOnPlane: {
-      const Vector3d pb = pointPosition(data, c.b), dpb = pointDisplacement(dir, c.b.joint, pb);
-      const Vector3d n = directionKin(data, A.joint, c.direction).p;
-      const Vector3d dn = dir.moves(A.joint) ? Vector3d(ang(dir.Sk).cross(n)) : Vector3d::Zero().eval();
-      const Vector3d f = lambda * n, df = lambda * dn;
-      emit(A.joint, forceAtTangent(pb, dpb, f, df));
-      emit(c.b.joint, forceAtTangent(pb, dpb, -f, -df));
-      break;
-    }
-    case ConstraintType::kKnifeEdge: {
-      const Vector3d n = directionKin(data, A.joint, c.direction).p;
-      const Vector3d dn = dir.moves(A.joint) ? Vector3d(ang(dir.Sk).cross(n)) : Vector3d::Zero().eval();
-      emit(A.joint, forceAtTangent(pa, dpa, lambda * n, lambda * dn));
-      break;
-    }
-  }
 }
 
 }  // namespace trellis::detail

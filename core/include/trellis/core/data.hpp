@@ -19,11 +19,15 @@ namespace trellis {
 struct DynamicsStatus {
   enum class Code {
     kOk,
-    kRedundantConstraints,   ///< A is rank deficient; q̈ is exact, λ the minimum-norm choice
-                             ///< (in the row-normalized coordinates of A M⁻¹ Aᵀ)
+    kRedundantConstraints,   ///< A is rank deficient beyond round-off (rows that depend on the others):
+                             ///< q̈ is computed exactly, λ is one choice (minimum norm in the
+                             ///< row-normalized coordinates of A M⁻¹ Aᵀ); not ok, the message names the row
     kSingularMassMatrix,     ///< M is not positive definite (a joint moves no mass); no result
-    kSingularConstraints,    ///< a singular or near-singular constraint configuration: the results are
-                             ///< finite but inaccurate (or A q̈ + Ȧ q̇ = 0 has no solution)
+    kSingularConstraints,    ///< a degenerate row (its gradient vanishes: e.g. a distance constraint whose
+                             ///< points coincide) or a singular or near-singular configuration, judged
+                             ///< relative to the row's natural scale: the results are finite but
+                             ///< inaccurate (or A q̈ + Ȧ q̇ = 0 has no solution); the message names
+                             ///< the constraint, its row and the state
     kNonFinite,              ///< an input or result is NaN/Inf
   };
   Code code = Code::kOk;
@@ -32,9 +36,9 @@ struct DynamicsStatus {
   /// value; 0 at a singular configuration) and the reciprocal condition estimate of the
   /// row-normalized A M⁻¹ Aᵀ (0 for redundant rows). 1 without constraints.
   double constraintConditioning = 1.0;
-  std::string message;             ///< empty when ok; names the configuration / constraint otherwise
-  /// True when q̈ (and the linearization) are valid: kOk or kRedundantConstraints.
-  bool ok() const { return code == Code::kOk || code == Code::kRedundantConstraints; }
+  std::string message;             ///< empty when ok; names the configuration / constraint and the state otherwise
+  /// True when q̈, λ (and the linearization) are valid and determined: kOk only.
+  bool ok() const { return code == Code::kOk; }
 };
 
 /// Kinetic and potential energy, T = ½ q̇ᵀ M q̇, V = gravity + springs.
@@ -98,6 +102,11 @@ class Data {
   std::vector<int> tendonFirst;          ///< per tendon: offset of its path in tendonPoint, then the total
   std::vector<int> tendonJointLo, tendonJointHi;  ///< per tendon: lowest and highest joint on its path
   std::vector<Eigen::Vector3d> tendonPoint;       ///< world positions of every tendon path point
+  std::vector<int> tendonPointJoint;              ///< joint body of every tendon path point
+  /// Per tendon: offset into tendonSegmentPoint, then the total. tendonSegmentPoint lists, by the
+  /// index in tendonPoint of its first end, each segment whose ends lie on different bodies (a
+  /// segment within one body exerts equal and opposite forces along one line: no net wrench).
+  std::vector<int> tendonSegmentStart, tendonSegmentPoint;
   Eigen::VectorXd u;                     ///< inputs of the current evaluation
   Eigen::VectorXd qddZero;
   Eigen::MatrixXd rhsX;                  ///< n×(2n+m): −∂r/∂[x; u]

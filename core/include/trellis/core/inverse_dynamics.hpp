@@ -22,12 +22,20 @@ struct InverseDynamicsOptions {
   /// Exact when ‖G z − r‖∞ ≤ tolerance · max(1, ‖r‖∞, ‖G‖∞ ‖z‖∞), and likewise for the
   /// constraint acceleration ‖A q̈ + Ȧ q̇‖∞ ≤ tolerance · max(1, ‖A‖∞ ‖q̈‖∞, ‖Ȧ q̇‖∞).
   double tolerance = 1e-9;
+  /// Optional input bounds: empty (unbounded) or m entries each (±infinity allowed, lower ≤ upper).
+  /// With bounds, u is the bounded least-squares solution (an active set on the bounds: inputs
+  /// that would leave their interval are held at the bound and the others re-solved, until the
+  /// held ones satisfy the optimality sign conditions); λ stays free.
+  Eigen::VectorXd lowerBound, upperBound;
 };
 
 enum class InverseDynamicsStatus {
   kOk,                      ///< u, λ reproduce q̈ exactly (to tolerance)
   kUnreachable,             ///< no u, λ give this q̈ (under-actuated): least squares, see residual
   kInadmissibleAcceleration,///< q̈ violates A q̈ + Ȧ q̇ = 0; u, λ are still the least squares
+  kInputBounds,             ///< q̈ needs inputs outside their bounds: u is the bounded least squares,
+                            ///< the message names the input, its bound and by how much the unbounded
+                            ///< answer exceeds it (see boundExcess)
   kNonFinite,               ///< an input or a result is NaN/Inf
 };
 
@@ -43,6 +51,9 @@ struct InverseDynamicsResult {
   double constraintResidual = 0.0;  ///< ‖A q̈ + Ȧ q̇‖∞
   int rank = 0;                     ///< numerical rank of G = [B_u  Aᵀ]
   bool unique = true;               ///< rank = m + nc: u and λ are determined (else minimum norm)
+  /// With bounds: by how much the unbounded answer exceeds each input's interval (m; 0 inside).
+  Eigen::VectorXd boundExcess;
+  int boundIterations = 0;          ///< active-set iterations (0: the unbounded answer was feasible)
   bool ok() const { return status == InverseDynamicsStatus::kOk; }
 };
 

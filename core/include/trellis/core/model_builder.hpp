@@ -62,7 +62,13 @@ class ModelBuilder {
   /// frame's axes) is zero, e_wᵀ ṗ = 0 — an A(q) q̇ = 0 row that is not the derivative of any h(q).
   void addKnifeEdgeConstraint(const std::string& frame, const Eigen::Vector3d& axis);
 
-  /// Validates cross references and returns the immutable model. Throws ModelError.
+  /// Size limits of a model, the same as a scene file's: the workspace of the linearization (Data)
+  /// holds about 25 dense n×n matrices, ≈ 200·n² bytes — 200 MB at 1000 configuration variables.
+  static constexpr int kMaxConfigs = 1000;
+  static constexpr int kMaxFrames = 20000;
+
+  /// Validates cross references and the size limits above (before any Data can allocate) and
+  /// returns the immutable model. Throws ModelError naming the count and the limit.
   Model finalize() &&;
   Model finalize() const&;
 

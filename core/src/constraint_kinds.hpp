@@ -1,0 +1,214 @@
+// Internal: each constraint kind as one unit — its value, its row of A, its drift term, the
+// forces its multiplier applies, and the derivatives of all of these — and the one dispatch on
+// the kind. Adding a kind is one struct here and one line in withConstraintKind.
+//
+// A kind provides (Data holds the kinematics of the current state; see point_kinematics.hpp):
+//   value(data, c)                 → {h, A q̇, A q̈ + Ȧ q̇} at the accelerations in data
+//   tangent(data, dir, c)          → the derivative of value along one state direction
+//   forces(data, c, emit)          → the row as point forces: A_r = Σ gᵀ ∂p/∂q over the calls
+//                                    emit(joint, p, g, gScale), so that Aᵀλ is the force λ g at p
+//                                    on `joint`'s body; gScale is the size ‖g‖ has in a regular
+//                                    configuration (the row's natural scale, for conditioning)
+//   forceTangents(data, dir, c, emit) → emit(joint, p, δp, g, δg): the derivative of forces
+//                                    along a configuration direction
+// Everything is fixed-size and inlined: no allocation, no virtual call.
+#pragma once
+
+#include "point_kinematics.hpp"
+
+namespace trellis::detail {
+
+struct ConstraintEval {
+  double h = 0.0;     ///< h(q) (0 for nonholonomic)
+  double hdot = 0.0;  ///< A q̇
+  double c = 0.0;     ///< A q̈ + Ȧ q̇ at the current accelerations
+};
+
+/// h = ‖d‖² − ℓ², d = p_a − p_b: A q̇ = 2 d·ḋ, c = 2 ‖ḋ‖² + 2 d·d̈; the row is the force 2d on a,
+/// −2d on b, of natural size 2ℓ (it vanishes when the points coincide: a degenerate row).
+struct DistanceKind {
+  static ConstraintEval value(const Data& data, const Constraint& c) {
+    const PointKin a = pointKin(data, c.a), b = pointKin(data, c.b);
+    const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
+    return {d.squaredNorm() - c.distance * c.distance, 2.0 * d.dot(dd), 2.0 * dd.squaredNorm() + 2.0 * d.dot(ddd)};
+  }
+  static ConstraintEval tangent(const Data& data, const Direction& dir, const Constraint& c) {
+    const PointKin a = pointKin(data, c.a), b = pointKin(data, c.b);
+    const PointKin ta = pointTangent(data, dir, c.a.joint, a), tb = pointTangent(data, dir, c.b.joint, b);
+    const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
+    const Vector3d td = ta.p - tb.p, tdd = ta.v - tb.v, tddd = ta.a - tb.a;
+    return {2.0 * d.dot(td), 2.0 * (td.dot(dd) + d.dot(tdd)), 4.0 * dd.dot(tdd) + 2.0 * (td.dot(ddd) + d.dot(tddd))};
+  }
+  template <class Emit>
+  static void forces(const Data& data, const Constraint& c, Emit&& emit) {
+    const Vector3d pa = pointPosition(data, c.a), pb = pointPosition(data, c.b);
+    const Vector3d g = 2.0 * (pa - pb);
+    emit(c.a.joint, pa, g, 2.0 * c.distance);
+    emit(c.b.joint, pb, Vector3d(-g), 2.0 * c.distance);
+  }
+  template <class Emit>
+  static void forceTangents(const Data& data, const Direction& dir, const Constraint& c, Emit&& emit) {
+    const Vector3d pa = pointPosition(data, c.a), pb = pointPosition(data, c.b);
+    const Vector3d dpa = pointDisplacement(dir, c.a.joint, pa), dpb = pointDisplacement(dir, c.b.joint, pb);
+    const Vector3d g = 2.0 * (pa - pb), dg = 2.0 * (dpa - dpb);
+    emit(c.a.joint, pa, dpa, g, dg);
+    emit(c.b.joint, pb, dpb, Vector3d(-g), Vector3d(-dg));
+  }
+};
+
+/// h = e·(p_a − p_b), e a fixed world axis: linear in the points; the row is the force e on a,
+/// −e on b (natural size 1).
+struct PointKind {
+  static ConstraintEval value(const Data& data, const Constraint& c) {
+    const PointKin a = pointKin(data, c.a), b = pointKin(data, c.b);
+    const Vector3d e = Vector3d::Unit(c.axis);
+    return {e.dot(a.p - b.p), e.dot(a.v - b.v), e.dot(a.a - b.a)};
+  }
+  static ConstraintEval tangent(const Data& data, const Direction& dir, const Constraint& c) {
+    const PointKin a = pointKin(data, c.a), b = pointKin(data, c.b);
+    const PointKin ta = pointTangent(data, dir, c.a.joint, a), tb = pointTangent(data, dir, c.b.joint, b);
+    const Vector3d e = Vector3d::Unit(c.axis);
+    return {e.dot(ta.p - tb.p), e.dot(ta.v - tb.v), e.dot(ta.a - tb.a)};
+  }
+  template <class Emit>
+  static void forces(const Data& data, const Constraint& c, Emit&& emit) {
+    const Vector3d e = Vector3d::Unit(c.axis);
+    emit(c.a.joint, pointPosition(data, c.a), e, 1.0);
+    emit(c.b.joint, pointPosition(data, c.b), Vector3d(-e), 1.0);
+  }
+  template <class Emit>
+  static void forceTangents(const Data& data, const Direction& dir, const Constraint& c, Emit&& emit) {
+    const Vector3d pa = pointPosition(data, c.a), pb = pointPosition(data, c.b);
+    const Vector3d e = Vector3d::Unit(c.axis), zero = Vector3d::Zero();
+    emit(c.a.joint, pa, pointDisplacement(dir, c.a.joint, pa), e, zero);
+    emit(c.b.joint, pb, pointDisplacement(dir, c.b.joint, pb), Vector3d(-e), zero);
+  }
+};
+
+/// Normal n = R_a n_a of the plane body a, and its derivative along a configuration direction.
+inline Vector3d bodyDirection(const Data& data, const Constraint& c) { return directionKin(data, c.a.joint, c.direction).p; }
+inline Vector3d bodyDirectionDisplacement(const Direction& dir, const Constraint& c, const Vector3d& n) {
+  return dir.moves(c.a.joint) ? Vector3d(ang(dir.Sk).cross(n)) : Vector3d::Zero().eval();
+}
+
+/// h = n·(p_a − p_b) with the normal n = R_a n_a turning with the plane body a. The row is the
+/// force n on the plane body and −n on the point body, both at the point p_b (natural size ‖n_a‖).
+struct PointOnPlaneKind {
+  static ConstraintEval value(const Data& data, const Constraint& c) {
+    const PointKin a = pointKin(data, c.a), b = pointKin(data, c.b);
+    const PointKin n = directionKin(data, c.a.joint, c.direction);
+    const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
+    return {n.p.dot(d), n.v.dot(d) + n.p.dot(dd), n.a.dot(d) + 2.0 * n.v.dot(dd) + n.p.dot(ddd)};
+  }
+  static ConstraintEval tangent(const Data& data, const Direction& dir, const Constraint& c) {
+    const PointKin a = pointKin(data, c.a), b = pointKin(data, c.b);
+    const PointKin ta = pointTangent(data, dir, c.a.joint, a), tb = pointTangent(data, dir, c.b.joint, b);
+    const PointKin n = directionKin(data, c.a.joint, c.direction);
+    const PointKin tn = directionTangent(data, dir, c.a.joint, n);
+    const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
+    const Vector3d td = ta.p - tb.p, tdd = ta.v - tb.v, tddd = ta.a - tb.a;
+    return {tn.p.dot(d) + n.p.dot(td), tn.v.dot(d) + n.v.dot(td) + tn.p.dot(dd) + n.p.dot(tdd),
+            tn.a.dot(d) + n.a.dot(td) + 2.0 * (tn.v.dot(dd) + n.v.dot(tdd)) + tn.p.dot(ddd) + n.p.dot(tddd)};
+  }
+  template <class Emit>
+  static void forces(const Data& data, const Constraint& c, Emit&& emit) {
+    const Vector3d pb = pointPosition(data, c.b), n = bodyDirection(data, c);
+    const double s = c.direction.norm();
+    emit(c.a.joint, pb, n, s);
+    emit(c.b.joint, pb, Vector3d(-n), s);
+  }
+  template <class Emit>
+  static void forceTangents(const Data& data, const Direction& dir, const Constraint& c, Emit&& emit) {
+    const Vector3d pb = pointPosition(data, c.b), dpb = pointDisplacement(dir, c.b.joint, pb);
+    const Vector3d n = bodyDirection(data, c), dn = bodyDirectionDisplacement(dir, c, n);
+    emit(c.a.joint, pb, dpb, n, dn);
+    emit(c.b.joint, pb, dpb, Vector3d(-n), Vector3d(-dn));
+  }
+};
+
+/// Nonholonomic e·ṗ_a = 0 with e = R_a e_a fixed on the body (no h): A q̇ = e·ṗ_a,
+/// c = ė·ṗ_a + e·p̈_a; the row is the force e at p_a (natural size ‖e_a‖).
+struct KnifeEdgeKind {
+  static ConstraintEval value(const Data& data, const Constraint& c) {
+    const PointKin a = pointKin(data, c.a);
+    const PointKin n = directionKin(data, c.a.joint, c.direction);
+    return {0.0, n.p.dot(a.v), n.v.dot(a.v) + n.p.dot(a.a)};
+  }
+  static ConstraintEval tangent(const Data& data, const Direction& dir, const Constraint& c) {
+    const PointKin a = pointKin(data, c.a), ta = pointTangent(data, dir, c.a.joint, a);
+    const PointKin n = directionKin(data, c.a.joint, c.direction);
+    const PointKin tn = directionTangent(data, dir, c.a.joint, n);
+    return {0.0, tn.p.dot(a.v) + n.p.dot(ta.v), tn.v.dot(a.v) + n.v.dot(ta.v) + tn.p.dot(a.a) + n.p.dot(ta.a)};
+  }
+  template <class Emit>
+  static void forces(const Data& data, const Constraint& c, Emit&& emit) {
+    emit(c.a.joint, pointPosition(data, c.a), bodyDirection(data, c), c.direction.norm());
+  }
+  template <class Emit>
+  static void forceTangents(const Data& data, const Direction& dir, const Constraint& c, Emit&& emit) {
+    const Vector3d pa = pointPosition(data, c.a), n = bodyDirection(data, c);
+    emit(c.a.joint, pa, pointDisplacement(dir, c.a.joint, pa), n, bodyDirectionDisplacement(dir, c, n));
+  }
+};
+
+/// The one dispatch on the kind: f(Kind{}) for c's kind.
+template <class F>
+inline decltype(auto) withConstraintKind(const Constraint& c, F&& f) {
+  switch (c.type) {
+    case ConstraintType::kDistance: return f(DistanceKind{});
+    case ConstraintType::kPoint: return f(PointKind{});
+    case ConstraintType::kPointOnPlane: return f(PointOnPlaneKind{});
+    case ConstraintType::kKnifeEdge: return f(KnifeEdgeKind{});
+  }
+  return f(KnifeEdgeKind{});  // not reached: every enumerator is handled above
+}
+
+// ---- The quantities the algorithms use, each defined once for every kind ----------------------
+
+/// h, A q̇ and d/dt(A q̇) from the kinematics of the constraint's points (and direction).
+inline ConstraintEval evaluateConstraint(const Data& data, const Constraint& c) {
+  return withConstraintKind(c, [&](auto kind) { return decltype(kind)::value(data, c); });
+}
+
+/// Directional derivative of evaluateConstraint (uses the body tangents in data).
+inline ConstraintEval constraintTangent(const Data& data, const Direction& dir, const Constraint& c) {
+  return withConstraintKind(c, [&](auto kind) { return decltype(kind)::tangent(data, dir, c); });
+}
+
+/// The constraint's row of A = ∂(A q̇)/∂q̇ (for holonomic rows, ∂h/∂q), and optionally, in
+/// `bound`, the entry-wise size the row has when its gradients have their natural size
+/// (Σ gScale ‖∂p/∂q_j‖): ‖A_r‖ / ‖bound‖ → 0 measures how close the row is to degenerate,
+/// independently of the units and scale of h.
+template <class Row>
+inline void addConstraintJacobianRow(const Model& model, const Data& data, const Constraint& c, Row&& row,
+                                     Eigen::VectorXd* bound = nullptr) {
+  withConstraintKind(c, [&](auto kind) {
+    decltype(kind)::forces(data, c, [&](int joint, const Vector3d& p, const Vector3d& g, double gScale) {
+      addPointGradient(model, data, joint, p, g, row, bound, gScale);
+    });
+  });
+}
+
+/// Constraint forces Aᵀλ of one row as wrenches on the bodies (data.fext).
+inline void addConstraintWrenches(Data& data, const Constraint& c, double lambda) {
+  withConstraintKind(c, [&](auto kind) {
+    decltype(kind)::forces(data, c, [&](int joint, const Vector3d& p, const Vector3d& g, double) {
+      addBodyWrench(data, joint, forceAt(p, lambda * g));
+    });
+  });
+}
+
+/// Tangent of addConstraintWrenches at fixed λ along a configuration direction; each body wrench
+/// tangent is handed to emit(joint, δW).
+template <class Emit>
+inline void constraintWrenchTangents(const Data& data, const Direction& dir, const Constraint& c, double lambda,
+                                     Emit&& emit) {
+  withConstraintKind(c, [&](auto kind) {
+    decltype(kind)::forceTangents(
+        data, dir, c, [&](int joint, const Vector3d& p, const Vector3d& dp, const Vector3d& g, const Vector3d& dg) {
+          emit(joint, forceAtTangent(p, dp, lambda * g, lambda * dg));
+        });
+  });
+}
+
+}  // namespace trellis::detail

@@ -1,0 +1,188 @@
+// tests/core/test_degenerate_constraints.cpp — a constraint row whose gradient vanishes (or that
+// depends on the other rows) is reported by name, row and state, never an ok status; the test is
+// relative to the row's natural scale, so it does not depend on the units of the model.
+#include <catch2/catch.hpp>
+
+#include "support/test_models.hpp"
+
+#include <trellis/core.hpp>
+
+#include <cmath>
+#include <filesystem>
+#include <string>
+
+using namespace trellis;
+using namespace trellis::test;
+using Catch::Matchers::Contains;
+
+namespace {
+
+/// Two pendulums of length s on one pivot, their tips joined by a distance constraint of length
+/// s/2 (lengths scaled by s). With θ1 = θ2 the tips coincide: h = −ℓ² ≠ 0 and ∂h/∂q = 0.
+Model twoTips(double s) {
+  ModelBuilder b;
+  b.addFrame("L1", "world", Transform::rz("theta1"));
+  b.addFrame("T1", "L1", Transform::ty(-s), Mass{1.0, Eigen::Matrix3d::Zero()});
+  b.addFrame("L2", "world", Transform::rz("theta2"));
+  b.addFrame("T2", "L2", Transform::ty(-s), Mass{1.0, Eigen::Matrix3d::Zero()});
+  b.addGravity(Eigen::Vector3d(0.0, -9.81, 0.0));
+  b.addConfigForce("theta1", "u");
+  b.addDistanceConstraint("T1", "T2", 0.5 * s);
+  return std::move(b).finalize();
+}
+
+void expectDegenerate(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
+                      const std::string& constraintName) {
+  Data data(model);
+  const Eigen::VectorXd u = Eigen::VectorXd::Zero(model.nu());
+  for (int pass = 0; pass < 2; ++pass) {
+    const DynamicsStatus st = pass == 0 ? computeDynamics(model, data, q, dq, u)
+                                        : computeLinearization(model, data, q, dq, u);
+    INFO("pass " << pass << ": code " << static_cast<int>(st.code) << ": " << st.message);
+    CHECK_FALSE(st.ok());
+    CHECK(st.code == DynamicsStatus::Code::kSingularConstraints);
+    CHECK_THAT(st.message, Contains("degenerate constraint row 0"));
+    CHECK_THAT(st.message, Contains(constraintName));
+    CHECK_THAT(st.message, Contains("q = (" + model.configNames()[0] + "="));
+    CHECK(st.constraintConditioning < 1e-5);
+    // Not ok, but finite: the row is dropped, not turned into λ = ±1e16.
+    CHECK(data.qdd.allFinite());
+    CHECK(data.lambda.allFinite());
+  }
+}
+
+}  // namespace
+
+TEST_CASE("Degenerate rows: a distance constraint whose points coincide", "[degenerate]") {
+  for (double s : {1e-3, 1.0, 1e3}) {
+    INFO("length scale " << s);
+    const Model model = twoTips(s);
+    const std::string name = model.constraints()[0].name;
+    SECTION("coincident, s = " + std::to_string(s)) {
+      expectDegenerate(model, Eigen::Vector2d(0.3, 0.3), Eigen::Vector2d(0.5, -0.2), name);
+    }
+    SECTION("1e-9 apart (relative to the length), s = " + std::to_string(s)) {
+      // ‖∇h‖ is 1e-9 of its natural size 2ℓ: the old test, relative to ‖∇h‖ itself, called this ok
+      // with λ ~ 1e9 times too large.
+      expectDegenerate(model, Eigen::Vector2d(0.3, 0.3 + 1e-9), Eigen::Vector2d(0.5, -0.2), name);
+    }
+    SECTION("regular configuration: ok, and the conditioning does not depend on the units, s = " +
+            std::to_string(s)) {
+      // θ2 − θ1 = 2 asin(1/4): the tips are ℓ = s/2 apart, the constraint holds.
+      const double gap = 2.0 * std::asin(0.25);
+      const Eigen::Vector2d q(0.3, 0.3 + gap), dq(0.5, 0.5);
+      Data data(model);
+      const DynamicsStatus st = computeLinearization(model, data, q, dq, Eigen::VectorXd::Zero(1));
+      INFO(st.message);
+      CHECK(st.ok());
+      const Model unitModel = twoTips(1.0);
+      Data d1(unitModel);
+      REQUIRE(computeDynamics(unitModel, d1, q, dq, Eigen::VectorXd::Zero(1)).ok());
+      CHECK(std::abs(st.constraintConditioning - d1.status.constraintConditioning) <= 1e-12);
+      CHECK(st.constraintConditioning > 0.1);
+    }
+  }
+}
+
+TEST_CASE("Degenerate rows: a row no motion can change", "[degenerate]") {
+  SECTION("point constraint along z on a planar pendulum") {
+    ModelBuilder b;
+    b.addFrame("L", "world", Transform::rz("theta"));
+    b.addFrame("T", "L", Transform::ty(-1.0), Mass{1.0, Eigen::Matrix3d::Zero()});
+    b.addFrame("P", "world", Transform::ty(-1.0));
+    b.addPointConstraint("T", "P", 2);  // z: holds everywhere, its row is identically zero
+    const Model model = std::move(b).finalize();
+    expectDegenerate(model, Eigen::VectorXd::Constant(1, 0.4), Eigen::VectorXd::Constant(1, 0.1),
+                     model.constraints()[0].name);
+  }
+  SECTION("knife edge at the rotation axis (its point cannot move)") {
+    ModelBuilder b;
+    b.addFrame("sx", "world", Transform::tx("x"));
+    b.addFrame("body", "sx", Transform::rz("phi"), Mass{1.0, Eigen::Matrix3d::Identity() * 0.1});
+    b.addFrame("blade", "body", Transform::tx(0.0));
+    b.addKnifeEdgeConstraint("blade", Eigen::Vector3d::UnitY());
+    b.addConfigForce("x", "u");
+    const Model model = std::move(b).finalize();
+    // ṗ = (ẋ, 0, 0) and e = R_z(φ) e_y: at φ = 0 the row (e·∂ṗ/∂q̇) = (0, 0) vanishes.
+    expectDegenerate(model, Eigen::Vector2d(0.2, 0.0), Eigen::Vector2d(0.3, 0.1), model.constraints()[0].name);
+    // At φ = 0.7 it is regular.
+    Data data(model);
+    const DynamicsStatus st = computeDynamics(model, data, Eigen::Vector2d(0.2, 0.7), Eigen::Vector2d(0.3, 0.0),
+                                              Eigen::VectorXd::Zero(1));
+    INFO(st.message);
+    CHECK(st.ok());
+  }
+}
+
+TEST_CASE("Degenerate rows: two identical constraints are redundant, not ok", "[degenerate][redundant]") {
+  const Model once = paperPendulum(1).model, twice = paperPendulum(2).model;
+  const Eigen::Vector2d q(0.5, 1.0), dq(0.5, -1.0);
+  const Eigen::VectorXd u = Eigen::VectorXd::Constant(1, 2.0);
+  Data d1(once), d2(twice);
+  REQUIRE(computeDynamics(once, d1, q, dq, u).ok());
+  const DynamicsStatus st = computeDynamics(twice, d2, q, dq, u);
+  INFO(st.message);
+  CHECK_FALSE(st.ok());
+  CHECK(st.code == DynamicsStatus::Code::kRedundantConstraints);
+  CHECK(st.constraintRank == 1);
+  // Which of the two copies is named depends on the pivoting; one of them is.
+  CHECK_THAT(st.message, Contains("depends on the others"));
+  CHECK_THAT(st.message, Contains(twice.constraints()[0].name) || Contains(twice.constraints()[1].name));
+  CHECK_THAT(st.message, Contains("theta1="));
+  // q̈ is still computed (and the same as with one copy).
+  CHECK((d1.qdd - d2.qdd).cwiseAbs().maxCoeff() <= 1e-10 * std::max(1.0, d1.qdd.cwiseAbs().maxCoeff()));
+}
+
+TEST_CASE("Degenerate rows: every example scene stays ok at its stored state", "[degenerate][scenes]") {
+  int checked = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(std::string(TRELLIS_SOURCE_DIR) + "/examples/scenes")) {
+    if (entry.path().extension() != ".json") continue;
+    const Scene scene = loadScene(entry.path().string());
+    Data data(scene.model);
+    const DynamicsStatus st = computeLinearization(scene.model, data, scene.q, scene.dq, scene.u);
+    INFO(entry.path().filename().string() << ": " << st.message);
+    CHECK(st.ok());
+    ++checked;
+  }
+  CHECK(checked >= 6);
+}
+
+TEST_CASE("ModelBuilder: the size limits of scene files, checked in finalize", "[model_builder][limits]") {
+  using Catch::Matchers::Contains;
+  SECTION("configuration variables") {
+    ModelBuilder b("long chain");
+    std::string parent = "world";
+    for (int i = 0; i <= ModelBuilder::kMaxConfigs; ++i) {  // one more than the limit
+      const std::string name = "l" + std::to_string(i);
+      b.addFrame(name, parent, Transform::rz("q" + std::to_string(i)), Mass{1.0, Eigen::Matrix3d::Identity()});
+      parent = name;
+    }
+    try {
+      (void)std::move(b).finalize();
+      FAIL("finalize accepted " << ModelBuilder::kMaxConfigs + 1 << " configuration variables");
+    } catch (const ModelError& e) {
+      CHECK_THAT(e.what(), Contains("1001 configuration variables") && Contains("limit of 1000") &&
+                               Contains("long chain"));
+    }
+  }
+  SECTION("at the limit it builds") {
+    ModelBuilder b;
+    std::string parent = "world";
+    for (int i = 0; i < ModelBuilder::kMaxConfigs; ++i) {
+      const std::string name = "l" + std::to_string(i);
+      b.addFrame(name, parent, Transform::rz("q" + std::to_string(i)), Mass{1.0, Eigen::Matrix3d::Identity()});
+      parent = name;
+    }
+    CHECK(std::move(b).finalize().nq() == ModelBuilder::kMaxConfigs);
+  }
+  SECTION("frames") {
+    ModelBuilder b;
+    for (int i = 0; i <= ModelBuilder::kMaxFrames; ++i) b.addFrame("f" + std::to_string(i), "world", Transform::tx(0.1 * i));
+    try {
+      (void)std::move(b).finalize();
+      FAIL("finalize accepted " << ModelBuilder::kMaxFrames + 1 << " frames");
+    } catch (const ModelError& e) {
+      CHECK_THAT(e.what(), Contains("20001 frames") && Contains("limit of 20000"));
+    }
+  }
+}
