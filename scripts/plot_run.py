@@ -12,7 +12,7 @@ CSV t,dimension,rank,smallest_singular_value). Uses matplotlib's Agg backend (no
 display needed); Debian's python3-matplotlib is enough.
 
 The tracking error is measured against the reference as every trellis tool reads it
-(control/include/trellis/control/trajectory.hpp): the state is the cubic Hermite spline through
+(control/include/trellis/core/trajectory.hpp): the state is the cubic Hermite spline through
 the knots with the knot derivatives x'_k = [dq_k; q''(q_k, dq_k, u_k)], which is what
 `trellis simulate` reports. q'' comes from the scene's exact dynamics: with --scene, one
 `trellis linearize -` per knot (the scene with the knot as its state, on standard input). Without

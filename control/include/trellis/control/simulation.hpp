@@ -35,8 +35,8 @@
 // changes the state (the drift is still reported).
 #pragma once
 
-#include "trellis/control/gain_schedule.hpp"
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/gain_schedule.hpp"
+#include "trellis/core/trajectory.hpp"
 
 #include <Eigen/Core>
 
