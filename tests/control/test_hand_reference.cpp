@@ -43,8 +43,8 @@ namespace {
 // Max deviation (rad, rad/s) of the open-loop hand from its reference at the knots. Measured
 // (2026-12-01, this test): linear tensions 7.5e-5, cubic tensions 1.8e-7. The cubic figure is not
 // the input rule's error (~h⁴|u⁗|/384 ~ 1e-10 N) but the distribution's own: the forward dynamics
-// under u_k miss the designed q̈_k by up to ~1e-6 rad/s² (the O(ε²) tangential residual times
-// M⁻¹; forwardDynamicsError), and that integrates to ~1e-7 over 3 s. 1e-6 leaves 5× above it and
+// under u_k miss the designed q̈_k by ~1e-7 rad/s² (the O(ε²) tangential residual times M⁻¹;
+// forwardDynamicsError, examples/hand/README.md), and that integrates to ~1e-7 over 3 s. 1e-6 leaves 5× above it and
 // sits 75× below the linear rule.
 constexpr double kHandCubicBound = 1e-6;
 }  // namespace
