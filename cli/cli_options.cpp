@@ -3,7 +3,8 @@
 
 #include "command.hpp"
 
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/reference.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/core/data.hpp"
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/model.hpp"
@@ -188,23 +189,23 @@ std::string formatNumber(double value, int digits) {
 
 Trajectory loadReference(const Model& model, const std::string& scenePath,
                          const std::string& trajectoryPath) {
-  Trajectory trajectory = Trajectory::readCsvFile(trajectoryPath);
+  const Trajectory file = Trajectory::readCsvFile(trajectoryPath);
   try {
-    trajectory.checkCompatible(model);
+    file.checkCompatible(model);
   } catch (const TrajectoryError& e) {
     throw std::runtime_error(trajectoryPath + " does not match the scene " + scenePath + ": " + e.what());
   }
-  if (trajectory.size() < 2) {
+  if (file.size() < 2) {
     throw std::runtime_error(trajectoryPath + ": a reference needs at least 2 knots, got " +
-                             std::to_string(trajectory.size()));
+                             std::to_string(file.size()));
   }
   Data data(model);
   if (model.nc() > 0) {
     // h(q) and A(q) q' at each knot, each relative to the size of its terms (‖A_r‖·‖q'‖ for the
     // velocity rows; 1 + the constraint's own scale for h, which for a distance row is d²).
-    for (int k = 0; k < trajectory.size(); ++k) {
-      const Eigen::VectorXd q = trajectory.states().col(k).head(model.nq());
-      const Eigen::VectorXd dq = trajectory.states().col(k).tail(model.nq());
+    for (int k = 0; k < file.size(); ++k) {
+      const Eigen::VectorXd q = file.states().col(k).head(model.nq());
+      const Eigen::VectorXd dq = file.states().col(k).tail(model.nq());
       computeConstraints(model, data, q, dq);
       const Eigen::VectorXd hdot = data.constraintJacobian * dq;
       for (int r = 0; r < model.nc(); ++r) {
@@ -215,7 +216,7 @@ Trajectory loadReference(const Model& model, const std::string& scenePath,
         const bool vBad = !(std::abs(hdot(r)) <= kReferenceConstraintTolerance * vScale);
         if (hBad || vBad) {
           throw std::runtime_error(
-              trajectoryPath + ": row " + std::to_string(k + 1) + " (t = " + formatNumber(trajectory.times()(k)) +
+              trajectoryPath + ": row " + std::to_string(k + 1) + " (t = " + formatNumber(file.times()(k)) +
               ") violates the constraint '" + c.name + "' of " + scenePath + ": " +
               (hBad ? "h(q) = " + formatNumber(data.constraintValue(r), 3)
                     : "A(q) q' = " + formatNumber(hdot(r), 3)) +
@@ -225,8 +226,16 @@ Trajectory loadReference(const Model& model, const std::string& scenePath,
       }
     }
   }
-  trajectory.computeStateDerivatives(model, data);
-  return trajectory;
+  // The file's meaning: knot derivatives from the scene's dynamics (the failing knot named),
+  // the file's input rule (linear, or cubic Hermite with rate_<input> columns).
+  ReferenceOptions checks;
+  checks.stateDerivatives = ReferenceOptions::StateDerivatives::kFromDynamics;
+  checks.minimumKnots = 2;
+  try {
+    return ReferenceEvaluator(model, file, checks).trajectory();
+  } catch (const TrajectoryError& e) {
+    throw std::runtime_error(trajectoryPath + ": " + e.what());
+  }
 }
 
 void checkSemidefinite(const std::string& command, const std::string& what, double minEigenvalue,

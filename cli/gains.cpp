@@ -6,10 +6,10 @@
 #include "weights.hpp"
 
 #include "trellis/control/controllability.hpp"
-#include "trellis/control/gain_schedule.hpp"
+#include "trellis/core/gain_schedule.hpp"
 #include "trellis/control/manifold_lqr.hpp"
 #include "trellis/control/riccati.hpp"
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/control/tvlqr.hpp"
 #include "trellis/core/data.hpp"
 #include "trellis/core/scene.hpp"
@@ -38,7 +38,9 @@ an orthonormal basis T(t) (2n x d) transported along the reference, Ar = T^T A T
 Qr = T^T Q T, and K = Kr T^T (the gain ignores off-manifold deviations).
 
 The trajectory file has one row per knot: t, <configs>, d<configs>, <inputs> (the layout
-`trellis simulate --out` writes); its names must equal the scene's, in order.
+`trellis simulate --out` writes); its names must equal the scene's, in order. Optional columns
+rate_<input> after the inputs (one per input) give du/dt at the knots: u_ref(t) is then the cubic
+Hermite spline through them instead of linear between knots.
 
 Weights W (for --Q, --Qf: 2n x 2n, positive semidefinite; for --R: m x m, positive definite):
   a number            that multiple of the identity            --Q 10

@@ -6,7 +6,7 @@
 
 #include "json_output.hpp"
 
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/core/data.hpp"
 #include "trellis/core/scene.hpp"
 #include "trellis/core/state.hpp"

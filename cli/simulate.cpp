@@ -3,9 +3,9 @@
 #include "cli_options.hpp"
 #include "command.hpp"
 
-#include "trellis/control/gain_schedule.hpp"
+#include "trellis/core/gain_schedule.hpp"
 #include "trellis/control/simulation.hpp"
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/control/tvlqr.hpp"
 #include "trellis/core/scene.hpp"
 
@@ -28,8 +28,9 @@ Simulates the NONLINEAR scene (SCENE_FORMAT.md) under the time-varying feedback
 
   u = sat( u_ref(t) - K(t) (x - x_ref(t)) ),   x = [q; q'],
 
-along the reference trajectory (x_ref: cubic Hermite through its knots, u_ref and K linear
-between knots and gain times), from x(t0) = x_ref(t0) + dx0, over the reference's time span,
+along the reference trajectory (x_ref: cubic Hermite through its knots; u_ref linear between
+knots, or cubic Hermite when the file has rate_<input> columns; K linear between gain times, or
+cubic with interpolation=cubic in its metadata line), from x(t0) = x_ref(t0) + dx0, over the reference's time span,
 with SUNDIALS CVODES. GAINS.csv is a gain schedule as `trellis gains` writes it (header
 t,K_<input>_<state>, checked against the scene's names; K is m x 2n and must cover the reference's
 time span). sat clips u to [--umin, --umax].

@@ -12,7 +12,7 @@ CSV t,dimension,rank,smallest_singular_value). Uses matplotlib's Agg backend (no
 display needed); Debian's python3-matplotlib is enough.
 
 The tracking error is measured against the reference as every trellis tool reads it
-(control/include/trellis/control/trajectory.hpp): the state is the cubic Hermite spline through
+(control/include/trellis/core/trajectory.hpp): the state is the cubic Hermite spline through
 the knots with the knot derivatives x'_k = [dq_k; q''(q_k, dq_k, u_k)], which is what
 `trellis simulate` reports. q'' comes from the scene's exact dynamics: with --scene, one
 `trellis linearize -` per knot (the scene with the knot as its state, on standard input). Without
@@ -71,7 +71,8 @@ def read_csv(path):
 
 
 class Trajectory:
-    """The trajectory CSV layout: t, n configurations, their d-prefixed velocities, then inputs."""
+    """The trajectory CSV layout: t, n configurations, their d-prefixed velocities, then inputs
+    (and optionally their rates, rate_<input>)."""
 
     def __init__(self, path):
         header, columns = read_csv(path)
@@ -88,10 +89,15 @@ class Trajectory:
         self.path = path
         self.t = columns[0]
         self.configs = names[:n]
-        self.inputs = names[2 * n:]
+        # Inputs up to the optional rate_<input> columns (the knot derivatives of the inputs for
+        # the cubic input rule, trajectory.hpp); the rates are kept apart, not plotted as inputs.
+        rest = names[2 * n:]
+        m = next((j for j, name in enumerate(rest) if name.startswith("rate_")), len(rest))
+        self.inputs = rest[:m]
         self.q = columns[1:1 + n]
         self.dq = columns[1 + n:1 + 2 * n]
-        self.u = columns[1 + 2 * n:]
+        self.u = columns[1 + 2 * n:1 + 2 * n + m]
+        self.rates = columns[1 + 2 * n + m:]
 
         self.qdd = None  # q'' at the knots (n lists), from compute_accelerations
 

@@ -6,12 +6,14 @@
 #include "trellis/core/data.hpp"
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/model.hpp"
+#include "trellis/core/reference.hpp"
 
 #include <sunnonlinsol/sunnonlinsol_fixedpoint.h>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -35,16 +37,15 @@ void ConsistencyOptions::validate() const {
 
 namespace {
 
-/// The right-hand side's state: the model, the trajectory (for its input rule) and scratch.
+/// The right-hand side's state: the model, the reference (for its input rule) and scratch.
 struct Integrand {
   const Model& model;
-  const Trajectory& trajectory;
+  ReferenceEvaluator& reference;
   Data data;
-  Eigen::VectorXd q, dq, xRef, u;
+  Eigen::VectorXd q, dq;
   std::string failure;  // the first failure inside the current CVode call
 
-  Integrand(const Model& m, const Trajectory& t)
-      : model(m), trajectory(t), data(m), q(m.nq()), dq(m.nq()), xRef(2 * m.nq()), u(m.nu()) {}
+  Integrand(const Model& m, ReferenceEvaluator& r) : model(m), reference(r), data(m), q(m.nq()), dq(m.nq()) {}
 
   static int rhs(double t, N_Vector yv, N_Vector ydotv, void* user) {
     auto& s = *static_cast<Integrand*>(user);
@@ -56,10 +57,9 @@ struct Integrand {
       if (s.failure.empty()) s.failure = "the state became non-finite at t = " + std::to_string(t);
       return 1;
     }
-    // The toolkit's rule for the input between knots (Trajectory::evaluate: linear).
-    const double tc = std::clamp(t, s.trajectory.startTime(), s.trajectory.endTime());
-    s.trajectory.evaluate(tc, s.xRef, s.u);
-    const DynamicsStatus status = computeDynamics(s.model, s.data, s.q, s.dq, s.u);
+    // The trajectory's rule for the input between knots (linear, or cubic Hermite with rates).
+    s.reference.evaluate(std::clamp(t, s.reference.startTime(), s.reference.endTime()));
+    const DynamicsStatus status = computeDynamics(s.model, s.data, s.q, s.dq, s.reference.u());
     if (!status.ok() || !s.data.qdd.allFinite()) {
       if (s.failure.empty()) {
         s.failure = "the dynamics failed at t = " + std::to_string(t) + ": " +
@@ -97,17 +97,18 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
   const int n = model.nq(), nx = 2 * n, N = input.size();
   if (N < 2) throw TrajectoryError("checkConsistency: the trajectory needs at least 2 knots");
 
-  // The readers' reference: knot derivatives from the core (Hermite spline), linear input.
-  Trajectory trajectory = input;
-  {
-    Data data(model);
-    try {
-      trajectory.computeStateDerivatives(model, data);
-    } catch (const TrajectoryError& e) {
-      result.message = std::string("not checked: ") + e.what();
-      return result;
-    }
+  // The readers' reference: knot derivatives from the core (Hermite spline), the file's input
+  // rule. (Names and knot count are checked above, so a refusal here is the dynamics at a knot.)
+  std::optional<ReferenceEvaluator> reference;
+  try {
+    ReferenceOptions checks;
+    checks.stateDerivatives = ReferenceOptions::StateDerivatives::kFromDynamics;
+    reference.emplace(model, input, checks);
+  } catch (const TrajectoryError& e) {
+    result.message = std::string("not checked: ") + e.what();
+    return result;
   }
+  const Trajectory& trajectory = reference->trajectory();
 
   // Scales s_i (file comment).
   const Eigen::MatrixXd& X = trajectory.states();
@@ -118,7 +119,7 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
     result.stateScale(i) = std::max({range(i), options.rangeFloor * (i < n ? rq : rv), 1e-12});
   }
 
-  Integrand integrand(model, trajectory);
+  Integrand integrand(model, *reference);
   detail::CvodeSession cv;
   cv.context.reset(detail::createContext());
   SUNContext ctx = cv.context.get();
@@ -147,7 +148,7 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
   check(CVodeSetNonlinearSolver(mem, cv.nonlinearSolver.get()), "CVodeSetNonlinearSolver");
 
   result.intervalDefects = Eigen::VectorXd::Zero(N - 1);
-  Eigen::VectorXd xRef(nx), u(model.nu()), e(nx);
+  Eigen::VectorXd e(nx);
   result.integrated = true;
   for (int k = 0; k + 1 < N; ++k) {
     const double ta = trajectory.times()(k), tb = trajectory.times()(k + 1), tm = 0.5 * (ta + tb);
@@ -171,8 +172,8 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
         break;
       }
       if (stage == 0) {
-        trajectory.evaluate(tm, xRef, u);
-        e = y - xRef;
+        reference->evaluate(tm);
+        e = y - reference->x();
       } else {
         e = y - X.col(k + 1);
       }

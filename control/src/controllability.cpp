@@ -1,7 +1,7 @@
 // controllability.cpp — rank and singular values of the (reduced) controllability matrix.
 #include "trellis/control/controllability.hpp"
 
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/core/data.hpp"
 #include "trellis/core/linearization.hpp"
 #include "trellis/core/model.hpp"

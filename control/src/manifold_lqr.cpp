@@ -5,7 +5,7 @@
 
 #include "sundials_raii.hpp"
 #include "trellis/control/controllability.hpp"
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/core/data.hpp"
 #include "trellis/core/linearization.hpp"
 #include "trellis/core/model.hpp"

@@ -2,7 +2,7 @@
 #include "trellis/control/riccati.hpp"
 
 #include "sundials_raii.hpp"
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/core/data.hpp"
 #include "trellis/core/linearization.hpp"
 #include "trellis/core/model.hpp"

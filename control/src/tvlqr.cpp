@@ -2,7 +2,8 @@
 // Riccati solve and the sampled-data recursion; summary and JSON of the result.
 #include "trellis/control/tvlqr.hpp"
 
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/reference.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/core/model.hpp"
 
 #include <Eigen/Eigenvalues>
@@ -131,13 +132,13 @@ std::string TvlqrSolution::json() const {
   return o.str();
 }
 
-TvlqrSolution solveTvlqr(const Model& model, const Trajectory& reference, const LqrWeights& weights,
+TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrWeights& weights,
                          const TvlqrOptions& options) {
   options.validate();
-  reference.checkCompatible(model);
-  if (!reference.hasStateDerivatives()) {
-    throw std::logic_error("solveTvlqr: the reference has no state derivatives (call computeStateDerivatives)");
-  }
+  // Names checked, knot derivatives the reference's own or from the core's dynamics: one check,
+  // and every solve below reads this copy.
+  const ReferenceEvaluator checked(model, input);
+  const Trajectory& reference = checked.trajectory();
   const int nx = reference.nx(), nu = reference.nu();
   if (nu == 0) throw std::invalid_argument("solveTvlqr: the model has no inputs: there is nothing to control");
   checkWeightMatrix(weights.Qf, "Qf", nx, false);

@@ -2,9 +2,11 @@
 #include "reference_motion.hpp"
 
 #include <trellis/core/dynamics.hpp>
+#include <trellis/core/linearization.hpp>
 #include <trellis/core/projection.hpp>
 
 #include <Eigen/QR>
+#include <Eigen/LU>
 #include <Eigen/SVD>
 
 #include <algorithm>
@@ -192,6 +194,10 @@ ReferenceMotion makeReferenceMotion(const Model& model, const Eigen::VectorXd& q
                                 " drivers but " + std::to_string(options.amplitudes.size()) +
                                 " amplitudes");
   }
+  if (!(options.rateStep > 0.0) || !std::isfinite(options.rateStep)) {
+    throw std::invalid_argument("makeReferenceMotion: rateStep must be > 0 and finite, got " +
+                                std::to_string(options.rateStep));
+  }
   std::vector<int> drivers;
   for (const std::string& name : options.drivers) {
     try {
@@ -203,6 +209,7 @@ ReferenceMotion makeReferenceMotion(const Model& model, const Eigen::VectorXd& q
   std::vector<int> others;
   for (int i = 0; i < n; ++i)
     if (std::find(drivers.begin(), drivers.end(), i) == drivers.end()) others.push_back(i);
+  const int p = static_cast<int>(drivers.size());
 
   Data data(model);
   ReferenceMotion out;
@@ -215,6 +222,10 @@ ReferenceMotion makeReferenceMotion(const Model& model, const Eigen::VectorXd& q
   out.accelerationResidual.resize(N);
   out.dynamicsResidual.resize(N);
   out.forwardDynamicsError.resize(N);
+  out.inputRates.resize(m, N);
+  out.rateCorrection.resize(N);
+  out.rateDifferenceEstimate.resize(N);
+  out.rateResidual.resize(N);
   out.ok = true;
   auto fail = [&](const std::string& what) {
     if (out.ok) out.message = what;
@@ -223,64 +234,137 @@ ReferenceMotion makeReferenceMotion(const Model& model, const Eigen::VectorXd& q
 
   Eigen::VectorXd qStart = q0;
   projectWithDriversFixed(model, data, qStart, drivers);
-  Eigen::VectorXd q = qStart, dq(n), qdd(n);
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
-  Eigen::MatrixXd Ao(nc, static_cast<Eigen::Index>(others.size()));
   const double T = options.duration, w = 2.0 * std::numbers::pi / T;
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
+
+  // The design at time t: drivers a_i (1 − cos ωt)/2 about their start values, the others by
+  // Newton from q (the caller's guess, updated in place), q̇ and q̈ on the manifold, the tensions.
+  struct Design {
+    Eigen::VectorXd dq, qdd;
+    TensionDistribution tensions;
+    double constraintResidual = 0.0, velocityResidual = 0.0, accelerationResidual = 0.0;
+    std::string failure;  // empty when the design is valid
+  };
+  auto design = [&](double t, Eigen::VectorXd& q) {
+    Design d;
+    d.dq.resize(n);
+    d.qdd.resize(n);
+    Eigen::VectorXd dqd(p), ddqd(p);
+    for (int i = 0; i < p; ++i) {
+      const double a = options.amplitudes[static_cast<std::size_t>(i)];
+      q(drivers[i]) = qStart(drivers[i]) + 0.5 * a * (1.0 - std::cos(w * t));
+      dqd(i) = 0.5 * a * w * std::sin(w * t);
+      ddqd(i) = 0.5 * a * w * w * std::cos(w * t);
+    }
+    d.constraintResidual = projectWithDriversFixed(model, data, q, drivers);
+    computeConstraints(model, data, q, zero);
+    Eigen::MatrixXd Ao(nc, static_cast<Eigen::Index>(others.size())), Ad(nc, p);
+    for (std::size_t c = 0; c < others.size(); ++c)
+      Ao.col(static_cast<Eigen::Index>(c)) = data.constraintJacobian.col(others[c]);
+    for (int i = 0; i < p; ++i) Ad.col(i) = data.constraintJacobian.col(drivers[i]);
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qrAo(Ao);
+    if (qrAo.rank() < static_cast<Eigen::Index>(others.size())) {
+      d.failure = "∂h/∂q_others is singular (the drivers do not parameterize the manifold here)";
+    }
+    const Eigen::VectorXd dqo = qrAo.solve(-Ad * dqd);
+    for (int i = 0; i < p; ++i) d.dq(drivers[i]) = dqd(i);
+    for (std::size_t c = 0; c < others.size(); ++c) d.dq(others[c]) = dqo(static_cast<Eigen::Index>(c));
+    computeConstraints(model, data, q, d.dq);  // Ȧ q̇ at the final q̇
+    const Eigen::VectorXd ddqo = qrAo.solve(-Ad * ddqd - data.constraintDrift);
+    for (int i = 0; i < p; ++i) d.qdd(drivers[i]) = ddqd(i);
+    for (std::size_t c = 0; c < others.size(); ++c) d.qdd(others[c]) = ddqo(static_cast<Eigen::Index>(c));
+    d.velocityResidual = nc ? (data.constraintJacobian * d.dq).cwiseAbs().maxCoeff() : 0.0;
+    d.accelerationResidual =
+        nc ? (data.constraintJacobian * d.qdd + data.constraintDrift).cwiseAbs().maxCoeff() : 0.0;
+    if (d.failure.empty() && !(d.constraintResidual < 1e-10)) {
+      d.failure = "Newton on h(q) = 0 stopped at ‖h‖∞ = " + std::to_string(d.constraintResidual);
+    }
+    d.tensions = distributeTensions(model, data, q, d.dq, d.qdd, options.tensions);
+    if (d.failure.empty() && !d.tensions.converged) d.failure = "tension distribution: " + d.tensions.message;
+    return d;
+  };
+
+  // u̇_fd by the central quotient with step h from the designs at t ± h (Newton starts at q);
+  // bound tendons 0, a tendon reaching the bound within h one-sided from its free side.
+  auto rateQuotient = [&](double t, const Eigen::VectorXd& q, const Eigen::VectorXd& u, double h,
+                          std::string& failure) {
+    Eigen::VectorXd qm = q, qp = q;
+    const Design minus = design(t - h, qm), plus = design(t + h, qp);
+    if (!minus.failure.empty()) failure = "the design at t - " + std::to_string(h) + ": " + minus.failure;
+    if (!plus.failure.empty()) failure = "the design at t + " + std::to_string(h) + ": " + plus.failure;
+    const Eigen::VectorXd& um = minus.tensions.tension;
+    const Eigen::VectorXd& up = plus.tensions.tension;
+    Eigen::VectorXd rate(m);
+    for (int i = 0; i < m; ++i) {
+      if (u(i) == 0.0) rate(i) = 0.0;
+      else if (um(i) == 0.0) rate(i) = (up(i) - u(i)) / h;
+      else if (up(i) == 0.0) rate(i) = (u(i) - um(i)) / h;
+      else rate(i) = (up(i) - um(i)) / (2.0 * h);
+    }
+    return rate;
+  };
+
+  Eigen::VectorXd q = qStart;
   for (int k = 0; k < N; ++k) {
     const double t = T * k / (N - 1);
     times(k) = t;
-    // Drivers: a_i (1 − cos ωt)/2 about their start values.
-    Eigen::VectorXd dqd(drivers.size()), ddqd(drivers.size());
-    for (std::size_t i = 0; i < drivers.size(); ++i) {
-      const double a = options.amplitudes[i];
-      q(drivers[i]) = qStart(drivers[i]) + 0.5 * a * (1.0 - std::cos(w * t));
-      dqd(static_cast<Eigen::Index>(i)) = 0.5 * a * w * std::sin(w * t);
-      ddqd(static_cast<Eigen::Index>(i)) = 0.5 * a * w * w * std::cos(w * t);
-    }
     // q from the previous knot is the Newton start: the path is continuous.
-    out.constraintResidual(k) = projectWithDriversFixed(model, data, q, drivers);
-    computeConstraints(model, data, q, zero);
-    for (std::size_t c = 0; c < others.size(); ++c)
-      Ao.col(static_cast<Eigen::Index>(c)) = data.constraintJacobian.col(others[c]);
-    Eigen::MatrixXd Ad(nc, static_cast<Eigen::Index>(drivers.size()));
-    for (std::size_t i = 0; i < drivers.size(); ++i)
-      Ad.col(static_cast<Eigen::Index>(i)) = data.constraintJacobian.col(drivers[i]);
-    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qrAo(Ao);
-    if (qrAo.rank() < static_cast<Eigen::Index>(others.size())) {
-      fail(knotLabel(k, t) + ": ∂h/∂q_others is singular (the drivers do not parameterize the "
-           "manifold here)");
-    }
-    const Eigen::VectorXd dqo = qrAo.solve(-Ad * dqd);
-    for (std::size_t i = 0; i < drivers.size(); ++i) dq(drivers[i]) = dqd(static_cast<Eigen::Index>(i));
-    for (std::size_t c = 0; c < others.size(); ++c) dq(others[c]) = dqo(static_cast<Eigen::Index>(c));
-    computeConstraints(model, data, q, dq);  // Ȧ q̇ at the final q̇
-    const Eigen::VectorXd ddqo = qrAo.solve(-Ad * ddqd - data.constraintDrift);
-    for (std::size_t i = 0; i < drivers.size(); ++i) qdd(drivers[i]) = ddqd(static_cast<Eigen::Index>(i));
-    for (std::size_t c = 0; c < others.size(); ++c) qdd(others[c]) = ddqo(static_cast<Eigen::Index>(c));
-    out.velocityResidual(k) = nc ? (data.constraintJacobian * dq).cwiseAbs().maxCoeff() : 0.0;
-    out.accelerationResidual(k) =
-        nc ? (data.constraintJacobian * qdd + data.constraintDrift).cwiseAbs().maxCoeff() : 0.0;
-    if (!(out.constraintResidual(k) < 1e-10)) {
-      fail(knotLabel(k, t) + ": Newton on h(q) = 0 stopped at ‖h‖∞ = " +
-           std::to_string(out.constraintResidual(k)));
-    }
-
-    const TensionDistribution td = distributeTensions(model, data, q, dq, qdd, options.tensions);
-    if (!td.converged) fail(knotLabel(k, t) + ": tension distribution: " + td.message);
+    const Design d = design(t, q);
+    if (!d.failure.empty()) fail(knotLabel(k, t) + ": " + d.failure);
+    out.constraintResidual(k) = d.constraintResidual;
+    out.velocityResidual(k) = d.velocityResidual;
+    out.accelerationResidual(k) = d.accelerationResidual;
+    const TensionDistribution& td = d.tensions;
     out.dynamicsResidual(k) = td.relativeResidual;
-    const DynamicsStatus st = computeDynamics(model, data, q, dq, td.tension);
+    const DynamicsStatus st = computeDynamics(model, data, q, d.dq, td.tension);
     if (!st.ok()) fail(knotLabel(k, t) + ": forward dynamics: " + st.message);
-    out.forwardDynamicsError(k) = (data.qdd - qdd).cwiseAbs().maxCoeff();
+    out.forwardDynamicsError(k) = (data.qdd - d.qdd).cwiseAbs().maxCoeff();
 
-    states.col(k) << q, dq;
+    // The tensions' rate (header comment): the quotient, then the exact correction.
+    std::string rateFailure;
+    const Eigen::VectorXd rateFd = rateQuotient(t, q, td.tension, options.rateStep, rateFailure);
+    const Eigen::VectorXd rateFd2 = rateQuotient(t, q, td.tension, 2.0 * options.rateStep, rateFailure);
+    if (!rateFailure.empty()) fail(knotLabel(k, t) + ": input rate: " + rateFailure);
+    out.rateDifferenceEstimate(k) = (rateFd - rateFd2).cwiseAbs().maxCoeff();
+    const DynamicsStatus lin = computeLinearization(model, data, q, d.dq, td.tension);
+    if (!lin.ok()) fail(knotLabel(k, t) + ": linearization: " + lin.message);
+    Eigen::VectorXd xdot(2 * n);
+    xdot << d.dq, d.qdd;
+    std::vector<int> freeTendons;
+    for (int i = 0; i < m; ++i)
+      if (td.tension(i) > 0.0) freeTendons.push_back(i);
+    const auto nf = static_cast<Eigen::Index>(freeTendons.size());
+    Eigen::MatrixXd S(p, nf);
+    Eigen::VectorXd g(p);
+    for (int r = 0; r < p; ++r) {
+      const int row = n + drivers[r];
+      const double a = options.amplitudes[static_cast<std::size_t>(r)];
+      const double jerk = -0.5 * a * w * w * w * std::sin(w * t);  // q⃛ of driver r
+      g(r) = jerk - data.A.row(row).dot(xdot);
+      for (Eigen::Index c = 0; c < nf; ++c) S(r, c) = data.B(row, freeTendons[static_cast<std::size_t>(c)]);
+    }
+    Eigen::VectorXd rate = rateFd;
+    if (nf > 0) {
+      Eigen::VectorXd rateFree(nf);
+      for (Eigen::Index c = 0; c < nf; ++c) rateFree(c) = rateFd(freeTendons[static_cast<std::size_t>(c)]);
+      const Eigen::VectorXd change = S.completeOrthogonalDecomposition().solve(g - S * rateFree);
+      for (Eigen::Index c = 0; c < nf; ++c) rate(freeTendons[static_cast<std::size_t>(c)]) += change(c);
+    }
+    out.rateCorrection(k) = (rate - rateFd).cwiseAbs().maxCoeff();
+    Eigen::VectorXd residual = -g;
+    for (int r = 0; r < p; ++r) residual(r) += data.B.row(n + drivers[r]).dot(rate);
+    out.rateResidual(k) = residual.cwiseAbs().maxCoeff() / std::max(g.cwiseAbs().maxCoeff(), 1e-300);
+
+    states.col(k) << q, d.dq;
     inputs.col(k) = td.tension;
-    derivatives.col(k) << dq, qdd;
-    out.accelerations.col(k) = qdd;
+    derivatives.col(k) << d.dq, d.qdd;
+    out.inputRates.col(k) = rate;
+    out.accelerations.col(k) = d.qdd;
     out.lambda.col(k) = td.lambda;
   }
   out.trajectory = Trajectory(model.configNames(), model.inputNames(), times, states, inputs);
   out.trajectory.setStateDerivatives(derivatives);
+  if (options.inputRates) out.trajectory.setInputDerivatives(out.inputRates);
   return out;
 }
 

@@ -18,9 +18,28 @@
 // tone, which keeps most tensions off the bound u = 0 so that feedback can move them both ways;
 // on the default motion 23 % of the entries still sit on the bound).
 // The tangential residual is O(ε²) relative; it is reported per knot.
+//
+// Input derivatives (the tensions' rates u̇_k, so that the trajectory's cubic Hermite input rule
+// reproduces the motion between knots; trajectory.hpp). The distribution u*(t) is a smooth
+// function of t while its active set (the tendons on the bound u = 0) does not change; it is an
+// NNLS solve, whose exact derivative would need the derivatives of N(q), B(q), M(q) and b along
+// the motion. It is differentiated in two parts:
+//  1. a central difference quotient of the whole design in t (drivers, Newton projection,
+//     distribution at t_k ± δ): u̇_fd = (u*(t_k + δ) − u*(t_k − δ)) / 2δ, error δ² |d³u*/dt³| / 6
+//     plus the design's rounding over δ; bound tendons (u_k = 0) get u̇ = 0, and a tendon that
+//     reaches the bound within δ gets the one-sided quotient from its free side;
+//  2. an exact correction of the part the dynamics see. Along the design, d/dt q̈(x(t), u(t))
+//     must equal the designed q⃛; with the core's exact linearization at the knot,
+//       ∂q̈/∂x · ẋ_k + ∂q̈/∂u · u̇ = q⃛_k,
+//     and since every forward-dynamics q̈ satisfies A q̈ + Ȧ q̇ = 0, the driver rows suffice (the
+//     others follow, as the drivers parameterize the manifold; q⃛ of a driver is analytic). u̇ is
+//     u̇_fd plus the least-norm change over the free tendons that meets these p equations, so the
+//     dynamically relevant part of u̇ is exact and the rest (which tendon pulls how much more) is
+//     the difference quotient's. Both the correction (the quotient's error where it matters) and
+//     |u̇_δ − u̇_2δ| (its error estimate) are reported per knot.
 #pragma once
 
-#include <trellis/control/trajectory.hpp>
+#include <trellis/core/trajectory.hpp>
 #include <trellis/core/data.hpp>
 #include <trellis/core/model.hpp>
 
@@ -82,6 +101,12 @@ struct ReferenceMotionOptions {
   /// singularity near −0.06, so the motion flexes by about half the available range.
   std::vector<double> amplitudes = {0.12, 0.10, 0.12, 0.10, 0.12};
   TensionDistributionOptions tensions;
+  /// Give the trajectory input derivatives (the cubic Hermite input rule; file comment). False:
+  /// no rates, the linear rule (the rates are still computed and reported).
+  bool inputRates = true;
+  /// δ (s) of the central difference quotient of the design: truncation δ² |d³u/dt³| / 6 against
+  /// the design's rounding (~1e-12 N) over δ.
+  double rateStep = 1e-4;
 };
 
 struct ReferenceMotion {
@@ -95,6 +120,16 @@ struct ReferenceMotion {
   Eigen::VectorXd dynamicsResidual;      ///< N: relative inverse-dynamics residual (see above)
   /// N: ‖q̈_fd − q̈_k‖∞ with q̈_fd = forward dynamics (computeDynamics) under the tensions u_k.
   Eigen::VectorXd forwardDynamicsError;
+  /// m×N: the tensions' rates u̇_k (given to the trajectory when options.inputRates).
+  Eigen::MatrixXd inputRates;
+  /// N: ‖u̇ − u̇_fd‖∞, the exact correction of the difference quotient (its error in the directions
+  /// the dynamics see; N/s).
+  Eigen::VectorXd rateCorrection;
+  /// N: ‖u̇_fd(δ) − u̇_fd(2δ)‖∞ ≈ 3 × the quotient's truncation error (N/s).
+  Eigen::VectorXd rateDifferenceEstimate;
+  /// N: ‖∂q̈_d/∂x ẋ + ∂q̈_d/∂u u̇ − q⃛_d‖∞ / max(‖q⃛_d − ∂q̈_d/∂x ẋ‖∞, 1e-300) of the final u̇ on
+  /// the driver rows (rounding level when the correction succeeded).
+  Eigen::VectorXd rateResidual;
   bool ok = false;
   std::string message;                   ///< first failure (knot, time, what), empty when ok
 };

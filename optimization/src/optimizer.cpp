@@ -2,6 +2,7 @@
 #include "trellis/optimization/optimizer.hpp"
 
 #include "trellis/core/data.hpp"
+#include "trellis/core/reference.hpp"
 
 #include <IpIpoptApplication.hpp>
 #include <IpIpoptCalculatedQuantities.hpp>
@@ -330,21 +331,20 @@ bool refine(OptimalControlProblem& problem, const OptimizationResult& r, const E
   }
   const int N = static_cast<int>(mesh.size());
   if (N > options.maxKnots || N == tau.size()) return false;
-  Trajectory previous = r.trajectory;
-  Data data(*problem.model);
-  previous.computeStateDerivatives(*problem.model, data);
+  // The solution as every reader sees it (knot derivatives from the dynamics), sampled on the new mesh.
+  ReferenceOptions readers;
+  readers.stateDerivatives = ReferenceOptions::StateDerivatives::kFromDynamics;
+  ReferenceEvaluator previous(*problem.model, r.trajectory, readers);
   Eigen::VectorXd times(N);
   Eigen::MatrixXd states(problem.nx(), N), inputs(problem.nu(), N);
-  Eigen::VectorXd x, u;
   for (int k = 0; k < N; ++k) {
     times(k) = r.horizon * mesh[k];
-    previous.evaluate(std::min(times(k), previous.endTime()), x, u);
-    states.col(k) = x;
-    inputs.col(k) = u;
+    previous.evaluate(std::min(times(k), previous.endTime()));
+    states.col(k) = previous.x();
+    inputs.col(k) = previous.u();
   }
-  Trajectory guess(problem.model->configNames(), problem.model->inputNames(), times, states, inputs);
-  guess.computeStateDerivatives(*problem.model, data);
-  problem.initialGuess = std::move(guess);
+  const Trajectory guess(problem.model->configNames(), problem.model->inputNames(), times, states, inputs);
+  problem.initialGuess = ReferenceEvaluator(*problem.model, guess, readers).trajectory();
   problem.knots = N;
   problem.mesh = Eigen::Map<const Eigen::VectorXd>(mesh.data(), N);
   if (problem.freeHorizon()) problem.horizon = std::clamp(r.horizon, problem.minHorizon, problem.maxHorizon);

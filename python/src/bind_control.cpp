@@ -12,12 +12,12 @@
 #include "options.hpp"
 
 #include "trellis/control/controllability.hpp"
-#include "trellis/control/gain_schedule.hpp"
+#include "trellis/core/gain_schedule.hpp"
 #include "trellis/control/lqr.hpp"
 #include "trellis/control/manifold_lqr.hpp"
 #include "trellis/control/riccati.hpp"
 #include "trellis/control/simulation.hpp"
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/core/data.hpp"
 
 #include <algorithm>
@@ -112,7 +112,8 @@ void bindControl(py::module_& m) {
       "A nominal trajectory: knot times (N,), states x = [q; dq] (nx, N) — column k is the state "
       "at t_k, the layout of scipy's solve_ivp — and inputs u (nu, N). Between knots the state is "
       "a cubic Hermite spline (knot derivatives [dq; qdd] from the dynamics) and the input is "
-      "piecewise linear. CSV layout: t, <configs>, d<configs>, <inputs>.")
+      "piecewise linear, or the cubic Hermite spline through (u_k, du_k) when input derivatives are set. "
+      "CSV layout: t, <configs>, d<configs>, <inputs>[, rate_<inputs>].")
       .def(py::init<std::vector<std::string>, std::vector<std::string>, Eigen::VectorXd,
                     Eigen::MatrixXd, Eigen::MatrixXd>(),
            py::arg("config_names"), py::arg("input_names"), py::arg("times"), py::arg("states"),
@@ -157,6 +158,14 @@ void bindControl(py::module_& m) {
            py::arg("model"), "[dq; qdd] at every knot from the forward dynamics.")
       .def("set_state_derivatives", &Trajectory::setStateDerivatives, py::arg("state_derivatives"),
            "(nx, N)")
+      .def("set_input_derivatives", &Trajectory::setInputDerivatives, py::arg("input_derivatives"),
+           "(nu, N): the input becomes the cubic Hermite spline through (u_k, du_k).")
+      .def("clear_input_derivatives", &Trajectory::clearInputDerivatives, "Back to the linear input rule.")
+      .def_property_readonly("has_input_derivatives", &Trajectory::hasInputDerivatives)
+      .def_property_readonly("input_derivatives", [](const Trajectory& t) -> py::object {
+            if (!t.hasInputDerivatives()) return py::none();
+            return toArray(t.inputDerivatives());
+          }, "(nu, N) or None")
       .def("evaluate",
            [](const Trajectory& tr, double t) {
              Eigen::VectorXd x, u;

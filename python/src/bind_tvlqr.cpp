@@ -9,7 +9,7 @@
 #include "control_common.hpp"
 #include "options.hpp"
 
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/control/tvlqr.hpp"
 #include "trellis/core/model.hpp"
 

@@ -8,7 +8,7 @@
 // trellis_mech.NumericalError (a RuntimeError). Failures the C++ reports as a status stay a status.
 #include "common.hpp"
 
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/core/model_builder.hpp"
 #include "trellis/optimization/problem.hpp"
 

@@ -3,11 +3,11 @@
 // (cart-pole, TV-LQR tracking of a swinging pendulum), sampled feedback, saturation, failures.
 #include "control_test_support.hpp"
 
-#include <trellis/control/gain_schedule.hpp>
+#include <trellis/core/gain_schedule.hpp>
 #include <trellis/control/lqr.hpp>
 #include <trellis/control/riccati.hpp>
 #include <trellis/control/simulation.hpp>
-#include <trellis/control/trajectory.hpp>
+#include <trellis/core/trajectory.hpp>
 #include <trellis/core.hpp>
 
 #include <catch2/catch.hpp>

@@ -2,7 +2,7 @@
 // TrajectoryError; a schedule that reads is written and read again to the same numbers.
 #include "fuzz_support.hpp"
 
-#include "trellis/control/gain_schedule.hpp"
+#include "trellis/core/gain_schedule.hpp"
 
 #include <cstdint>
 #include <sstream>

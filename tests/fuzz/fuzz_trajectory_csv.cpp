@@ -3,7 +3,7 @@
 // (17 significant digits round-trip a double).
 #include "fuzz_support.hpp"
 
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 
 #include <cstdint>
 #include <sstream>

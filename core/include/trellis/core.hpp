@@ -12,3 +12,6 @@
 #include "trellis/core/inverse_dynamics.hpp"
 #include "trellis/core/equilibrium.hpp"
 #include "trellis/core/io.hpp"
+#include "trellis/core/trajectory.hpp"
+#include "trellis/core/gain_schedule.hpp"
+#include "trellis/core/reference.hpp"

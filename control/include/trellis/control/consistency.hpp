@@ -3,7 +3,8 @@
 // A-posteriori check of any trajectory (an optimizer's output, a hand-made CSV): for every
 // interval [t_k, t_{k+1}] the exact dynamics ẋ = f(x, u(t)) (the core's computeDynamics) are
 // integrated with CVODES at a tight tolerance from the knot state x_k, under the input as every
-// trellis tool reads a trajectory (trajectory.hpp: linear between knots), and compared with
+// trellis tool reads a trajectory (trajectory.hpp: linear between knots, or the cubic Hermite
+// spline through (u_k, u̇_k) when the trajectory carries input derivatives), and compared with
 //  - the next knot:           e_end = x(t_{k+1}) − x_{k+1},
 //  - the reference in between: e_mid = x(t_mid) − x_ref(t_mid) at the interval's midpoint, where
 //    x_ref is the cubic Hermite spline that `gains` and `simulate` use as the reference.
@@ -14,7 +15,7 @@
 // The interval's defect is max_i over both points; the trajectory's is the worst interval.
 #pragma once
 
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 
 #include <Eigen/Core>
 

@@ -44,8 +44,8 @@
 // shared across threads must itself be safe to call concurrently. simulateBatch relies on this.
 #pragma once
 
-#include "trellis/control/gain_schedule.hpp"
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/gain_schedule.hpp"
+#include "trellis/core/trajectory.hpp"
 
 #include <Eigen/Core>
 

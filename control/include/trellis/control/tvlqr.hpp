@@ -17,7 +17,7 @@
 // The result is plain data (it owns the gains and S; no reference to the model).
 #pragma once
 
-#include "trellis/control/gain_schedule.hpp"
+#include "trellis/core/gain_schedule.hpp"
 #include "trellis/control/manifold_lqr.hpp"
 #include "trellis/control/riccati.hpp"
 #include "trellis/control/sampled_lqr.hpp"
@@ -73,7 +73,8 @@ struct TvlqrSolution {
 };
 
 /// Throws std::invalid_argument / TrajectoryError for bad input (sizes, weights, options, a
-/// reference not matching the model or without state derivatives); numerical failure is in
+/// reference not matching the model, or whose knot dynamics fail: a reference without state
+/// derivatives gets them from computeDynamics, ReferenceEvaluator); numerical failure is in
 /// the result (ok = false, message), never thrown.
 TvlqrSolution solveTvlqr(const Model& model, const Trajectory& reference, const LqrWeights& weights,
                          const TvlqrOptions& options = {});

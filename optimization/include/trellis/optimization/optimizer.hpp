@@ -23,7 +23,7 @@
 #pragma once
 
 #include "trellis/control/consistency.hpp"
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/optimization/problem.hpp"
 #include "trellis/optimization/transcription.hpp"
 

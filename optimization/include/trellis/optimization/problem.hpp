@@ -14,7 +14,7 @@
 // A problem can also be read from a JSON problem file (optimization/README.md describes it).
 #pragma once
 
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/core/model.hpp"
 
 #include <Eigen/Core>

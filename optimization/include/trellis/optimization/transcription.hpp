@@ -48,7 +48,7 @@
 // new_x flag and also callers that do not pass one (the tests' checker).
 #pragma once
 
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 #include "trellis/optimization/problem.hpp"
 
 #include <Eigen/Core>

@@ -1,19 +1,29 @@
-// trellis/control/trajectory.hpp — a nominal trajectory: knot times, states x = [q; q̇], inputs u.
+// trellis/core/trajectory.hpp — a nominal trajectory: knot times, states x = [q; q̇], inputs u.
 //
 // Layout: N knots t_0 < t_1 < … < t_{N-1}; states() is 2n×N (column k = [q(t_k); q̇(t_k)]),
 // inputs() is m×N. CSV form, one row per knot:
-//   t, <config names…>, d<config names…>, <input names…>
-// e.g. `t,x,theta,dx,dtheta,push`.
+//   t, <config names…>, d<config names…>, <input names…>[, rate_<input names…>]
+// e.g. `t,x,theta,dx,dtheta,push` or, with input derivatives, `t,x,theta,dx,dtheta,push,rate_push`.
+// The optional rate columns u̇_k come last, one per input in the inputs' order, named "rate_" +
+// the input name; they cannot be mistaken for a state column (those are the n configuration names
+// and "d" + each, before the inputs). An input name must therefore not begin with "rate_": the
+// first column after the state columns that does begins the rate block, which must then be
+// exactly rate_<input> for every input (else TrajectoryError naming the column).
 //
-// Interpolation rule (evaluate):
+// Interpolation rule (evaluate), h = t_{k+1} − t_k:
 //  - the state is a cubic Hermite spline through the knots using the knot derivatives
 //    ẋ_k = [q̇_k; q̈(q_k, q̇_k, u_k)] (computeStateDerivatives evaluates them with the core's forward
 //    dynamics, or setStateDerivatives supplies them). On a trajectory that satisfies the dynamics
 //    the error is O(h⁴) in the knot spacing h, and the spline is C¹;
-//  - the input is piecewise linear between knots (C⁰), exact at the knots.
-// This rule is the meaning of a trajectory file for the whole toolkit: `trellis optimize` writes
-// what it optimized under it (its Hermite–Simpson midpoint input is the knot average), `gains`
-// and `simulate` read by it, and checkConsistency (consistency.hpp) checks any file against it.
+//  - the input, by default (no input derivatives), is piecewise linear between knots (C⁰), exact
+//    at the knots; its error against a smooth u*(t) is ≤ h² max|ü*| / 8 (second order);
+//  - with input derivatives u̇_k (setInputDerivatives, or the rate columns of a file) the input is
+//    the cubic Hermite spline through (u_k, u̇_k): C¹, exact for cubics, and when u̇_k = u̇*(t_k)
+//    its error is ≤ h⁴ max|u*⁗| / 384 (fourth order). A closed loop need not restart at a knot.
+// The linear rule is the meaning of a trajectory file without rate columns for the whole toolkit:
+// `trellis optimize` writes what it optimized under it (its Hermite–Simpson midpoint input is the
+// knot average), `gains` and `simulate` read by it, and checkConsistency (consistency.hpp) checks
+// any file against the rule the file carries.
 // Queries outside [t_0, t_{N-1}] throw std::out_of_range.
 #pragma once
 
@@ -69,27 +79,42 @@ class Trajectory {
   bool hasStateDerivatives() const { return stateDerivatives_.cols() == times_.size() && size() > 0; }
   const Eigen::MatrixXd& stateDerivatives() const { return stateDerivatives_; }  ///< 2n×N
 
-  /// x(t) (2n) by cubic Hermite and u(t) (m) linearly; see the file comment. x and u are resized
-  /// if needed (no allocation when already sized). Throws std::logic_error without state
+  /// Supplies u̇ at the knots (m×N, finite): the input becomes the cubic Hermite spline through
+  /// (u_k, u̇_k) (file comment). Throws TrajectoryError naming the size or the entry (knot, input).
+  void setInputDerivatives(Eigen::MatrixXd inputDerivatives);
+  /// Back to the linear input rule.
+  void clearInputDerivatives() { inputDerivatives_.resize(0, 0); }
+  bool hasInputDerivatives() const { return inputDerivatives_.cols() == times_.size() && size() > 0 && nu() > 0; }
+  const Eigen::MatrixXd& inputDerivatives() const { return inputDerivatives_; }  ///< m×N
+
+  /// x(t) (2n) by cubic Hermite and u(t) (m) by the input rule; see the file comment. x and u are
+  /// resized if needed (no allocation when already sized). Throws std::logic_error without state
   /// derivatives, std::out_of_range outside [t_0, t_{N-1}] (a relative slack of 1e-12 is clamped).
   void evaluate(double t, Eigen::VectorXd& x, Eigen::VectorXd& u) const;
+  /// The same and the spline's derivative ẋ(t) (2n; at a knot ẋ_k exactly) — what the reference
+  /// moves at, to compare with f(x(t), u(t)).
+  void evaluate(double t, Eigen::VectorXd& x, Eigen::VectorXd& u, Eigen::VectorXd& xdot) const;
   Eigen::VectorXd state(double t) const;
   Eigen::VectorXd input(double t) const;
 
   /// Reads the CSV layout above; the number of configurations n is inferred from the header as the
-  /// first n with columns 2n+1.. equal to "d" + columns 1..n. `source` names the stream in messages.
+  /// first n with columns n+1..2n equal to "d" + columns 1..n; rate_<input> columns, when present,
+  /// become the input derivatives. `source` names the stream in messages.
   static Trajectory readCsv(std::istream& in, const std::string& source = "<stream>");
   static Trajectory readCsvFile(const std::string& path);
-  /// Writes the CSV layout with 17 significant digits (round trip exact).
+  /// Writes the CSV layout with 17 significant digits (round trip exact); the rate columns when the
+  /// trajectory has input derivatives.
   void writeCsv(std::ostream& out) const;
   void writeCsvFile(const std::string& path) const;
 
  private:
   int intervalIndex(double& t) const;
+  template <bool kWithDerivative>
+  void interpolate(double t, Eigen::VectorXd& x, Eigen::VectorXd& u, Eigen::VectorXd* xdot) const;
 
   std::vector<std::string> configNames_, inputNames_;
   Eigen::VectorXd times_;
-  Eigen::MatrixXd states_, inputs_, stateDerivatives_;
+  Eigen::MatrixXd states_, inputs_, stateDerivatives_, inputDerivatives_;
 };
 
 }  // namespace trellis

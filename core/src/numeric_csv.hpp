@@ -8,7 +8,7 @@
 // kMaxCsvLines lines and kMaxCsvValues numbers (8 bytes each: 512 MiB).
 #pragma once
 
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 
 #include <cerrno>
 #include <cmath>

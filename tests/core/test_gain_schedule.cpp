@@ -1,6 +1,6 @@
-// Tests for trellis/control/gain_schedule.hpp: validation, interpolation, sampling, CSV I/O.
-#include <trellis/control/gain_schedule.hpp>
-#include <trellis/control/trajectory.hpp>
+// Tests for trellis/core/gain_schedule.hpp: validation, interpolation, sampling, CSV I/O.
+#include <trellis/core/gain_schedule.hpp>
+#include <trellis/core/trajectory.hpp>
 
 #include <catch2/catch.hpp>
 
@@ -205,4 +205,87 @@ TEST_CASE("gain schedule: CSV errors name the row and the column", "[gain_schedu
   // The file line is named too (blank lines are skipped but counted).
   CHECK_THAT(errorOf(header + "\n0,1,2,3,4\n\n1,5,6,7,bad\n"),
              Catch::Contains("row 2 (line 5)") && Catch::Contains("column 5"));
+}
+
+TEST_CASE("gain schedule: the cubic rule (parabola slopes from the table)", "[gain]") {
+  // Non-uniform times; K(t) = quadratic entry by entry, reproduced exactly by the cubic rule.
+  VectorXd t(5);
+  t << 0.0, 0.3, 0.5, 1.2, 2.0;
+  auto quad = [](double s) {
+    MatrixXd K(2, 3);
+    K << 1 + s, 2 * s * s - s, -3.0, s * s, 0.5 - s * s, 4 * s;
+    return K;
+  };
+  std::vector<MatrixXd> gains;
+  for (int k = 0; k < t.size(); ++k) gains.push_back(quad(t(k)));
+  GainSchedule g(t, gains);
+  REQUIRE(g.interpolation() == trellis::GainInterpolation::kLinear);
+  const double tm = 0.8;
+  CHECK((g.evaluate(tm) - quad(tm)).cwiseAbs().maxCoeff() > 1e-2);  // linear misses the parabola
+  g.setInterpolation(trellis::GainInterpolation::kCubic);
+  SECTION("exact on quadratics, equal to the rows at the rows") {
+    for (double s : {0.0, 0.1, 0.3, 0.41, 0.8, 1.2, 1.9, 2.0}) {
+      INFO("t = " << s);
+      CHECK((g.evaluate(s) - quad(s)).cwiseAbs().maxCoeff() < 1e-13);
+    }
+    for (int k = 0; k < t.size(); ++k) CHECK(g.evaluate(t(k)) == gains[static_cast<std::size_t>(k)]);
+  }
+  SECTION("C1 at the rows on data that is not a polynomial") {
+    std::vector<MatrixXd> wiggly;
+    for (int k = 0; k < t.size(); ++k) wiggly.push_back(MatrixXd::Constant(1, 1, std::sin(5 * t(k)) + k % 2));
+    GainSchedule w(t, wiggly);
+    w.setInterpolation(trellis::GainInterpolation::kCubic);
+    for (int k = 1; k + 1 < t.size(); ++k) {
+      const double e = 1e-7, tk = t(k);
+      const double left = (w.evaluate(tk)(0, 0) - w.evaluate(tk - e)(0, 0)) / e;
+      const double right = (w.evaluate(tk + e)(0, 0) - w.evaluate(tk)(0, 0)) / e;
+      INFO("row " << k << ": slope " << w.slopes()[static_cast<std::size_t>(k)](0, 0) << ", left " << left
+                  << ", right " << right);
+      // One-sided quotients with e = 1e-7: error ~ e·|K̈| (|K̈| ≲ 1e2 here) ~ 1e-5.
+      CHECK(std::abs(left - right) < 1e-4);
+      CHECK(std::abs(left - w.slopes()[static_cast<std::size_t>(k)](0, 0)) < 1e-4);
+    }
+    // The linear rule has a kink there.
+    GainSchedule lin(t, wiggly);
+    const double e = 1e-7, tk = t(2);
+    const double left = (lin.evaluate(tk)(0, 0) - lin.evaluate(tk - e)(0, 0)) / e;
+    const double right = (lin.evaluate(tk + e)(0, 0) - lin.evaluate(tk)(0, 0)) / e;
+    CHECK(std::abs(left - right) > 1.0);
+  }
+  SECTION("third order on a smooth gain") {
+    // Max error of K(t) = sin(3t) on uniform grids of N and 2N rows: ratio ≈ 8 (third order).
+    auto maxError = [](int rows) {
+      VectorXd tt = VectorXd::LinSpaced(rows, 0.0, 2.0);
+      std::vector<MatrixXd> k;
+      for (int i = 0; i < rows; ++i) k.push_back(MatrixXd::Constant(1, 1, std::sin(3 * tt(i))));
+      GainSchedule s(tt, k);
+      s.setInterpolation(trellis::GainInterpolation::kCubic);
+      double worst = 0.0;
+      for (int j = 0; j <= 2000; ++j) {
+        const double x = 2.0 * j / 2000;
+        worst = std::max(worst, std::abs(s.evaluate(x)(0, 0) - std::sin(3 * x)));
+      }
+      return worst;
+    };
+    const double e1 = maxError(21), e2 = maxError(41);
+    INFO("errors " << e1 << ", " << e2);
+    CHECK(e1 / e2 > 6.0);
+    CHECK(e1 / e2 < 20.0);
+  }
+  SECTION("CSV round trip keeps the rule; a file without it is linear; a bad rule is refused") {
+    std::stringstream ss;
+    g.writeCsv(ss);
+    CHECK(ss.str().find("interpolation=cubic") != std::string::npos);
+    const GainSchedule back = GainSchedule::readCsv(ss, "mem");
+    CHECK(back.interpolation() == trellis::GainInterpolation::kCubic);
+    CHECK((back.evaluate(0.8) - g.evaluate(0.8)).cwiseAbs().maxCoeff() == 0.0);
+    GainSchedule plain(t, gains);
+    std::stringstream ps;
+    plain.writeCsv(ps);
+    CHECK(ps.str().find("interpolation") == std::string::npos);
+    CHECK(GainSchedule::readCsv(ps, "mem").interpolation() == trellis::GainInterpolation::kLinear);
+    std::istringstream bad("# trellis gain schedule: m=1 nx=1 continuous interpolation=spline\nt,K_0_0\n0,1\n");
+    CHECK_THROWS_WITH(GainSchedule::readCsv(bad, "g.csv"),
+                      Catch::Matchers::Contains("g.csv") && Catch::Matchers::Contains("interpolation=spline"));
+  }
 }

@@ -1,7 +1,7 @@
 // gain_schedule.cpp — validation, interpolation and CSV I/O of a tabulated gain K(t).
-#include "trellis/control/gain_schedule.hpp"
+#include "trellis/core/gain_schedule.hpp"
 
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 
 #include "numeric_csv.hpp"
 
@@ -110,8 +110,45 @@ void GainSchedule::evaluate(double t, Eigen::MatrixXd& K) const {
   const double* begin = times_.data();
   const int k = std::min(static_cast<int>(std::upper_bound(begin, begin + size(), t) - begin) - 1,
                          size() - 2);
-  const double s = (t - times_(k)) / (times_(k + 1) - times_(k));
-  K = (1.0 - s) * gains_[k] + s * gains_[k + 1];
+  const double h = times_(k + 1) - times_(k);
+  const double s = (t - times_(k)) / h;
+  if (interpolation_ == GainInterpolation::kCubic) {
+    const double s2 = s * s, s3 = s2 * s;
+    K = (2 * s3 - 3 * s2 + 1) * gains_[k] + ((s3 - 2 * s2 + s) * h) * slopes_[k] +
+        (-2 * s3 + 3 * s2) * gains_[k + 1] + ((s3 - s2) * h) * slopes_[k + 1];
+  } else {
+    K = (1.0 - s) * gains_[k] + s * gains_[k + 1];
+  }
+}
+
+void GainSchedule::setInterpolation(GainInterpolation rule) {
+  interpolation_ = rule;
+  slopes_.clear();
+  if (rule != GainInterpolation::kCubic) return;
+  const int N = size();
+  slopes_.assign(static_cast<std::size_t>(N), Eigen::MatrixXd::Zero(nu_, nx_));
+  if (N < 2) return;
+  // Secants Δ_j and spacings h_j; slopes from the parabola through three neighbouring rows.
+  auto secant = [&](int j) -> Eigen::MatrixXd { return (gains_[j + 1] - gains_[j]) / (times_(j + 1) - times_(j)); };
+  auto spacing = [&](int j) { return times_(j + 1) - times_(j); };
+  if (N == 2) {
+    slopes_[0] = slopes_[1] = secant(0);
+    return;
+  }
+  for (int k = 1; k + 1 < N; ++k) {
+    const double hl = spacing(k - 1), hr = spacing(k);
+    slopes_[k] = (hr * secant(k - 1) + hl * secant(k)) / (hl + hr);
+  }
+  {
+    const double h0 = spacing(0), h1 = spacing(1);
+    const Eigen::MatrixXd c = (secant(1) - secant(0)) / (h0 + h1);
+    slopes_[0] = secant(0) - h0 * c;
+  }
+  {
+    const double ha = spacing(N - 3), hb = spacing(N - 2);
+    const Eigen::MatrixXd c = (secant(N - 2) - secant(N - 3)) / (ha + hb);
+    slopes_[N - 1] = secant(N - 2) + hb * c;
+  }
 }
 
 Eigen::MatrixXd GainSchedule::evaluate(double t) const {
@@ -183,7 +220,8 @@ void GainSchedule::checkNames(const std::vector<std::string>& inputNames,
 
 namespace {
 // "# trellis gain schedule: m=1 nx=4 sample_rate_hz=100" → m, nx, rate; false if not that line.
-bool parseMetadata(const std::string& comment, int& m, int& nx, double& rate, bool& continuous) {
+bool parseMetadata(const std::string& comment, int& m, int& nx, double& rate, bool& continuous,
+                   std::string& interpolation) {
   const std::string key = "trellis gain schedule:";
   const auto at = comment.find(key);
   if (at == std::string::npos) return false;
@@ -207,6 +245,8 @@ bool parseMetadata(const std::string& comment, int& m, int& nx, double& rate, bo
       haveRate = true;
     } else if (name == "continuous") {
       continuous = true;
+    } else if (name == "interpolation") {
+      interpolation = value;
     } else if (item == "(" || item.front() == '(') {
       break;  // free text follows
     }
@@ -219,6 +259,7 @@ GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) 
   int m = 0, nx = 0;
   double rate = 0.0;
   bool haveMetadata = false;
+  std::string interpolation;
   std::vector<std::string> names;
   const detail::NumericCsv csv = detail::readNumericCsv(
       in, source, [&](const std::vector<std::string>& comments, const std::vector<std::string>& header, int lineNo) {
@@ -227,14 +268,20 @@ GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) 
           int mm = 0, nn = 0;
           double r = 0.0;
           bool cont = false;
-          if (parseMetadata(comment, mm, nn, r, cont)) {
+          std::string rule;
+          if (parseMetadata(comment, mm, nn, r, cont, rule)) {
             haveMetadata = true;
             m = mm;
             nx = nn;
             rate = cont ? 0.0 : r;
+            interpolation = rule;
           }
         }
         const std::string hat = source + ": header (line " + std::to_string(lineNo) + ")";
+        if (!interpolation.empty() && interpolation != "linear" && interpolation != "cubic") {
+          throw TrajectoryError(source + ": the metadata line before " + "line " + std::to_string(lineNo) +
+                                ": interpolation=" + interpolation + " (expected linear or cubic)");
+        }
         if (header[0] != "t") {
           throw TrajectoryError(hat + ", column 1: must be 't', got '" + header[0] + "'");
         }
@@ -298,6 +345,7 @@ GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) 
       std::move(gains));
   schedule.sampleRate_ = rate;
   schedule.columnNames_ = std::move(names);
+  if (interpolation == "cubic") schedule.setInterpolation(GainInterpolation::kCubic);
   return schedule;
 }
 
@@ -314,6 +362,9 @@ void GainSchedule::writeCsv(std::ostream& out) const {
   if (sampleRate_ > 0.0) {
     out << " sample_rate_hz=" << sampleRate_ << " (zero-order-hold gains: apply K at t0 + k/"
         << sampleRate_ << " and hold u until the next sample)\n";
+  } else if (interpolation_ == GainInterpolation::kCubic) {
+    out << " continuous interpolation=cubic (K(t) cubic Hermite between rows, slopes of the parabola "
+           "through neighbouring rows)\n";
   } else {
     out << " continuous (K(t) linear between rows)\n";
   }

@@ -1,5 +1,5 @@
 // trajectory.cpp — validation, CSV I/O and Hermite interpolation of a nominal trajectory.
-#include "trellis/control/trajectory.hpp"
+#include "trellis/core/trajectory.hpp"
 
 #include "numeric_csv.hpp"
 
@@ -22,12 +22,20 @@
 namespace trellis {
 namespace {
 
+// The name of an input-derivative column: "rate_" + the input's name (file comment).
+const std::string kRatePrefix = "rate_";
+
+bool isRateColumn(const std::string& name) { return name.rfind(kRatePrefix, 0) == 0; }
+
 std::vector<std::string> columnNames(const std::vector<std::string>& configs,
-                                     const std::vector<std::string>& inputs) {
+                                     const std::vector<std::string>& inputs, bool rates = false) {
   std::vector<std::string> names{"t"};
   for (const auto& c : configs) names.push_back(c);
   for (const auto& c : configs) names.push_back("d" + c);
   for (const auto& u : inputs) names.push_back(u);
+  if (rates) {
+    for (const auto& u : inputs) names.push_back(kRatePrefix + u);
+  }
   return names;
 }
 
@@ -117,10 +125,10 @@ void Trajectory::computeStateDerivatives(const Model& model, Data& data) {
     dq = states_.col(k).tail(n);
     u = inputs_.col(k);
     const DynamicsStatus st = computeDynamics(model, data, q, dq, u);
-    if (!st.ok()) {
+    if (!st.ok() || !data.qdd.allFinite()) {
       std::ostringstream m;
       m << "trajectory: dynamics failed at knot " << k + 1 << " (t = " << times_(k)
-        << "): " << st.message;
+        << "): " << (st.ok() ? std::string("q'' is not finite") : st.message);
       throw TrajectoryError(m.str());
     }
     xd.col(k).head(n) = dq;
@@ -140,6 +148,26 @@ void Trajectory::setStateDerivatives(Eigen::MatrixXd stateDerivatives) {
   stateDerivatives_ = std::move(stateDerivatives);
 }
 
+void Trajectory::setInputDerivatives(Eigen::MatrixXd inputDerivatives) {
+  if (inputDerivatives.rows() != nu() || inputDerivatives.cols() != size()) {
+    std::ostringstream m;
+    m << "trajectory: input derivatives must be " << nu() << "x" << size() << " (m x knots), got "
+      << inputDerivatives.rows() << "x" << inputDerivatives.cols();
+    throw TrajectoryError(m.str());
+  }
+  for (Eigen::Index k = 0; k < inputDerivatives.cols(); ++k) {
+    for (Eigen::Index i = 0; i < inputDerivatives.rows(); ++i) {
+      if (!std::isfinite(inputDerivatives(i, k))) {
+        std::ostringstream m;
+        m << "trajectory: input derivative of '" << inputNames_[static_cast<std::size_t>(i)] << "' at knot "
+          << k + 1 << " (t = " << times_(k) << ") is " << inputDerivatives(i, k) << " (must be finite)";
+        throw TrajectoryError(m.str());
+      }
+    }
+  }
+  inputDerivatives_ = std::move(inputDerivatives);
+}
+
 int Trajectory::intervalIndex(double& t) const {
   const double t0 = startTime(), t1 = endTime();
   const double slack = 1e-12 * std::max(1.0, std::max(std::abs(t0), std::abs(t1)));
@@ -156,7 +184,8 @@ int Trajectory::intervalIndex(double& t) const {
   return std::min(k, size() - 2);
 }
 
-void Trajectory::evaluate(double t, Eigen::VectorXd& x, Eigen::VectorXd& u) const {
+template <bool kWithDerivative>
+void Trajectory::interpolate(double t, Eigen::VectorXd& x, Eigen::VectorXd& u, Eigen::VectorXd* xdot) const {
   if (!hasStateDerivatives()) {
     throw std::logic_error(
         "trajectory: evaluate needs state derivatives (computeStateDerivatives or "
@@ -165,11 +194,17 @@ void Trajectory::evaluate(double t, Eigen::VectorXd& x, Eigen::VectorXd& u) cons
   const int k = intervalIndex(t);
   if (x.size() != nx()) x.resize(nx());
   if (u.size() != nu()) u.resize(nu());
+  if constexpr (kWithDerivative) {
+    if (xdot->size() != nx()) xdot->resize(nx());
+  }
   if (size() == 1) {
     x = states_.col(0);
     u = inputs_.col(0);
+    if constexpr (kWithDerivative) *xdot = stateDerivatives_.col(0);
     return;
   }
+  // Cubic Hermite basis on s = (t − t_k)/h ∈ [0, 1]: p(s) = h00 p_k + h10 h ṗ_k + h01 p_{k+1} +
+  // h11 h ṗ_{k+1}; dp/dt = (h00' p_k + h01' p_{k+1}) / h + h10' ṗ_k + h11' ṗ_{k+1}.
   const double h = times_(k + 1) - times_(k);
   const double s = (t - times_(k)) / h;
   const double s2 = s * s, s3 = s2 * s;
@@ -177,7 +212,26 @@ void Trajectory::evaluate(double t, Eigen::VectorXd& x, Eigen::VectorXd& u) cons
   const double h01 = -2 * s3 + 3 * s2, h11 = s3 - s2;
   x = h00 * states_.col(k) + (h10 * h) * stateDerivatives_.col(k) + h01 * states_.col(k + 1) +
       (h11 * h) * stateDerivatives_.col(k + 1);
-  u = (1.0 - s) * inputs_.col(k) + s * inputs_.col(k + 1);
+  if constexpr (kWithDerivative) {
+    const double d00 = (6 * s2 - 6 * s) / h, d10 = 3 * s2 - 4 * s + 1;
+    const double d01 = -d00, d11 = 3 * s2 - 2 * s;
+    *xdot = d00 * states_.col(k) + d10 * stateDerivatives_.col(k) + d01 * states_.col(k + 1) +
+            d11 * stateDerivatives_.col(k + 1);
+  }
+  if (hasInputDerivatives()) {
+    u = h00 * inputs_.col(k) + (h10 * h) * inputDerivatives_.col(k) + h01 * inputs_.col(k + 1) +
+        (h11 * h) * inputDerivatives_.col(k + 1);
+  } else {
+    u = (1.0 - s) * inputs_.col(k) + s * inputs_.col(k + 1);
+  }
+}
+
+void Trajectory::evaluate(double t, Eigen::VectorXd& x, Eigen::VectorXd& u) const {
+  interpolate<false>(t, x, u, nullptr);
+}
+
+void Trajectory::evaluate(double t, Eigen::VectorXd& x, Eigen::VectorXd& u, Eigen::VectorXd& xdot) const {
+  interpolate<true>(t, x, u, &xdot);
 }
 
 Eigen::VectorXd Trajectory::state(double t) const {
@@ -194,6 +248,7 @@ Eigen::VectorXd Trajectory::input(double t) const {
 
 Trajectory Trajectory::readCsv(std::istream& in, const std::string& source) {
   int n = -1;
+  int rateBlock = 0;  // the number of input columns (the rate columns, if any, follow them)
   const detail::NumericCsv csv = detail::readNumericCsv(
       in, source, [&](const std::vector<std::string>& header, int lineNo) {
         if (header[0] != "t") {
@@ -235,20 +290,55 @@ Trajectory Trajectory::readCsv(std::istream& in, const std::string& source) {
                                 ": expected 't', the configuration names, then 'd' + each "
                                 "configuration name, then the input names");
         }
+        // Inputs up to the first rate_ column; from there exactly rate_<input> for every input.
+        const int first = 1 + 2 * n, width = static_cast<int>(header.size());
+        int c = first;
+        while (c < width && !isRateColumn(header[c])) ++c;
+        rateBlock = c - first;
+        if (c < width) {
+          const int m = rateBlock;
+          for (int i = 0; i < std::max(m, width - c); ++i) {
+            const int col = c + i;
+            const std::string want = i < m ? kRatePrefix + header[first + i] : std::string();
+            const std::string got = col < width ? header[col] : std::string();
+            if (got != want) {
+              std::string what;
+              if (col >= width) {
+                what = "missing the rate column '" + want + "'";
+              } else if (i >= m) {
+                what = "column " + std::to_string(col + 1) + " ('" + got + "'): a rate column beyond the " +
+                       std::to_string(m) + " inputs";
+              } else {
+                what = "column " + std::to_string(col + 1) + " ('" + got + "'): expected '" + want + "'";
+              }
+              throw TrajectoryError(source + ": line " + std::to_string(lineNo) + ": " + what +
+                                    " (input derivative columns are rate_<input>, one per input in the "
+                                    "inputs' order, after the inputs; an input name must not begin with "
+                                    "'rate_')");
+            }
+          }
+        }
       });
   const std::vector<std::string>& header = csv.header;
   std::vector<std::string> configs(header.begin() + 1, header.begin() + 1 + n);
-  std::vector<std::string> inputs(header.begin() + 1 + 2 * n, header.end());
+  std::vector<std::string> inputs(header.begin() + 1 + 2 * n, header.begin() + 1 + 2 * n + rateBlock);
+  const bool rates = rateBlock < static_cast<int>(header.size()) - 1 - 2 * n;
+  const int m = static_cast<int>(inputs.size());
   const auto& rows = csv.rows;
   const int N = static_cast<int>(rows.size());
   Eigen::VectorXd t(N);
-  Eigen::MatrixXd x(2 * n, N), u(static_cast<Eigen::Index>(inputs.size()), N);
+  Eigen::MatrixXd x(2 * n, N), u(m, N), du(rates ? m : 0, N);
   for (int k = 0; k < N; ++k) {
     t(k) = rows[k][0];
     for (int i = 0; i < 2 * n; ++i) x(i, k) = rows[k][1 + i];
-    for (std::size_t i = 0; i < inputs.size(); ++i) u(i, k) = rows[k][1 + 2 * n + i];
+    for (int i = 0; i < m; ++i) u(i, k) = rows[k][1 + 2 * n + i];
+    if (rates) {
+      for (int i = 0; i < m; ++i) du(i, k) = rows[k][1 + 2 * n + m + i];
+    }
   }
-  return Trajectory(std::move(configs), std::move(inputs), std::move(t), std::move(x), std::move(u));
+  Trajectory out(std::move(configs), std::move(inputs), std::move(t), std::move(x), std::move(u));
+  if (rates) out.setInputDerivatives(std::move(du));
+  return out;
 }
 
 Trajectory Trajectory::readCsvFile(const std::string& path) {
@@ -258,7 +348,8 @@ Trajectory Trajectory::readCsvFile(const std::string& path) {
 }
 
 void Trajectory::writeCsv(std::ostream& out) const {
-  const auto names = columnNames(configNames_, inputNames_);
+  const bool rates = hasInputDerivatives();
+  const auto names = columnNames(configNames_, inputNames_, rates);
   for (std::size_t c = 0; c < names.size(); ++c) out << (c ? "," : "") << names[c];
   out << "\n";
   out << std::setprecision(17);
@@ -266,6 +357,9 @@ void Trajectory::writeCsv(std::ostream& out) const {
     out << times_(k);
     for (int i = 0; i < nx(); ++i) out << "," << states_(i, k);
     for (int i = 0; i < nu(); ++i) out << "," << inputs_(i, k);
+    if (rates) {
+      for (int i = 0; i < nu(); ++i) out << "," << inputDerivatives_(i, k);
+    }
     out << "\n";
   }
 }

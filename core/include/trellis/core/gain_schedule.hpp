@@ -1,9 +1,22 @@
-// trellis/control/gain_schedule.hpp — feedback gains K(t) tabulated at times, for u = u_ref − K δx.
+// trellis/core/gain_schedule.hpp — feedback gains K(t) tabulated at times, for u = u_ref − K δx.
 //
 // Layout: N ≥ 1 times t_0 < t_1 < … < t_{N-1}, each with a gain K_k (m×nx). Between two times the
 // gain is interpolated linearly entry by entry,
 //   K(t) = (1 − s) K_k + s K_{k+1},   s = (t − t_k) / (t_{k+1} − t_k),
-// so a gain that is linear in t is reproduced exactly and K(t_k) = K_k.
+// so a gain that is linear in t is reproduced exactly and K(t_k) = K_k (second order: the error
+// against a smooth K*(t) is ≤ h² max|K̈*| / 8). This is the default and the meaning of a file
+// without an interpolation= item.
+//
+// C¹ rule (setInterpolation(GainInterpolation::kCubic), or `interpolation=cubic` in the metadata
+// line): between two times K(t) is the cubic Hermite spline through (K_k, K̇_k) with the slopes
+// taken from the table — at an interior time the derivative of the parabola through the rows
+// k − 1, k, k + 1,
+//   K̇_k = (h_k Δ_{k−1} + h_{k−1} Δ_k) / (h_{k−1} + h_k),  Δ_j = (K_{j+1} − K_j) / h_j,
+// and at the ends the derivative of the parabola through the first (last) three rows (two rows:
+// the secant). K(t) is then continuous with a continuous derivative at every row (a closed loop
+// need not restart there), quadratics in t are reproduced exactly, and the error against a
+// smooth K*(t) is O(h³) (the slopes are second-order accurate; with exact slopes it would be
+// O(h⁴)). The slopes are computed once, when the rule is chosen; evaluation does not allocate.
 //
 // Discrete (zero-order-hold) gains: sampleRate() = f > 0 says the gains were computed for a
 // controller that samples at t_k = t0 + k/f and holds u until the next sample; K_k is the row at
@@ -13,6 +26,7 @@
 //
 // CSV form, one row per time, 17 significant digits (round trip exact):
 //   # trellis gain schedule: m=<m> nx=<nx> sample_rate_hz=<f>   (or: continuous)
+//     [interpolation=cubic]   (absent or interpolation=linear: the linear rule)
 //   t,K_<input>_<state>,…        (row-major: input by input, the states [q; dq] in order)
 // e.g. `t,K_push_x,K_push_theta,K_push_dx,K_push_dtheta`. Without names (setColumnNames not
 // called) the columns are K_<i>_<j> (i: input row, j: state column); such files without the
@@ -28,7 +42,13 @@
 
 namespace trellis {
 
-/// Feedback gains K(t) (m × nx each) at ascending times; piecewise-linear in between.
+/// The rule for K(t) between the tabulated times (file comment).
+enum class GainInterpolation {
+  kLinear,  ///< piecewise linear (C⁰), second order; the default
+  kCubic,   ///< cubic Hermite with parabola slopes from the table (C¹), third order
+};
+
+/// Feedback gains K(t) (m × nx each) at ascending times; piecewise-linear (or cubic) in between.
 class GainSchedule {
  public:
   GainSchedule() = default;
@@ -66,7 +86,13 @@ class GainSchedule {
   void checkNames(const std::vector<std::string>& inputNames,
                   const std::vector<std::string>& stateNames, const std::string& source) const;
 
-  /// K(t) by linear interpolation (m×nx). t outside [start, end] beyond a relative slack of 1e-12
+  GainInterpolation interpolation() const { return interpolation_; }
+  /// Chooses the rule between rows (file comment); kCubic computes the slopes here.
+  void setInterpolation(GainInterpolation rule);
+  /// The slopes K̇_k of the cubic rule (N matrices m×nx; empty for the linear rule).
+  const std::vector<Eigen::MatrixXd>& slopes() const { return slopes_; }
+
+  /// K(t) by the interpolation rule (m×nx). t outside [start, end] beyond a relative slack of 1e-12
   /// throws std::out_of_range (inside the slack t is clamped). No allocation when K is already
   /// m×nx. Throws std::logic_error on an empty schedule.
   void evaluate(double t, Eigen::MatrixXd& K) const;
@@ -90,9 +116,10 @@ class GainSchedule {
  private:
   int nu_ = 0, nx_ = 0;
   double sampleRate_ = 0.0;
+  GainInterpolation interpolation_ = GainInterpolation::kLinear;
   std::vector<std::string> columnNames_;
   Eigen::VectorXd times_;
-  std::vector<Eigen::MatrixXd> gains_;
+  std::vector<Eigen::MatrixXd> gains_, slopes_;
 };
 
 }  // namespace trellis
