@@ -325,6 +325,31 @@ StabilizabilityCheck stabilizabilityImpl(const MatrixXd& A, const MatrixXd& B, b
   return out;
 }
 
+/// First-order rounding uncertainty of an eigenvalue λ of the pencil (M, L):
+///   u = 4 eps (‖M‖ + |λ|‖L‖) ‖x‖‖y‖ / |yᴴLx|,
+/// x, y its right and left eigenvectors (inverse iteration on M − λL, one complex LU, O(n³)). A
+/// backward-stable eigensolver may move λ by about u; u ≥ |λ − λ_true| is the sign of an
+/// eigenvalue that the data, at working precision, do not determine.
+double eigenvalueUncertainty(const MatrixXd& M, const MatrixXd& L, Complex lambda) {
+  const Index k = M.rows();
+  const double scale = M.norm() + std::abs(lambda) * L.norm();
+  MatrixXcd P = M.cast<Complex>() - lambda * L.cast<Complex>();
+  P.diagonal().array() += Complex(kEps * scale, 0.0);  // keep an exact eigenvalue from a zero pivot
+  const Eigen::PartialPivLU<MatrixXcd> lu(P);
+  VectorXcd x(k), y(k);
+  for (Index i = 0; i < k; ++i) x(i) = y(i) = Complex(1.0 + 0.37 * std::sin(1.0 + i), 0.1 * std::cos(2.0 * i));
+  for (int it = 0; it < 3; ++it) {
+    x = lu.solve(x);
+    y = lu.adjoint().solve(y);
+    if (!x.allFinite() || !y.allFinite() || x.norm() == 0.0 || y.norm() == 0.0)
+      return std::numeric_limits<double>::infinity();
+    x.normalize();
+    y.normalize();
+  }
+  const double den = std::abs(y.dot(L.cast<Complex>() * x));  // |yᴴ L x|
+  return den > 0.0 ? 4.0 * kEps * scale / den : std::numeric_limits<double>::infinity();
+}
+
 /// After a failed solve: the first true reason among (1) an uncontrollable unstable mode, (2) a
 /// Hamiltonian / symplectic-pencil eigenvalue on the boundary; otherwise no convergence.
 void diagnoseFailure(LqrResult& res, const Prepared& p, bool discrete, const CareOptions& options,
@@ -338,8 +363,8 @@ void diagnoseFailure(LqrResult& res, const Prepared& p, bool discrete, const Car
   const Index n = p.A.rows();
   Complex nearest(0.0, 0.0);
   double gap = std::numeric_limits<double>::infinity();
+  MatrixXd H(2 * n, 2 * n), M, L;
   if (!discrete) {
-    MatrixXd H(2 * n, 2 * n);
     H << p.A, -p.G, -p.Q, -p.A.transpose();
     const VectorXcd ev = Eigen::EigenSolver<MatrixXd>(H, false).eigenvalues();
     for (Index i = 0; i < ev.size(); ++i) {
@@ -350,7 +375,8 @@ void diagnoseFailure(LqrResult& res, const Prepared& p, bool discrete, const Car
       }
     }
   } else {
-    MatrixXd M = MatrixXd::Zero(2 * n, 2 * n), L = MatrixXd::Zero(2 * n, 2 * n);
+    M = MatrixXd::Zero(2 * n, 2 * n);
+    L = MatrixXd::Zero(2 * n, 2 * n);
     M << p.A, MatrixXd::Zero(n, n), -p.Q, MatrixXd::Identity(n, n);
     L << MatrixXd::Identity(n, n), p.G, MatrixXd::Zero(n, n), p.A.transpose();
     Eigen::GeneralizedEigenSolver<MatrixXd> ges(M, L, false);
@@ -366,6 +392,15 @@ void diagnoseFailure(LqrResult& res, const Prepared& p, bool discrete, const Car
       }
     }
   }
+  // The eigenvalue's rounding uncertainty u (same relative measure as gap, on the balanced problem,
+  // so diagonal scalings change neither). On the boundary: gap ≤ 1e-6 (u is not used there yet: an
+  // exactly defective boundary eigenvalue has u = ∞). Otherwise gap ≤ u: undetermined, said so.
+  double relUnc = std::numeric_limits<double>::infinity();
+  if (std::isfinite(gap)) {
+    const double u = discrete ? eigenvalueUncertainty(M, L, nearest)
+                              : eigenvalueUncertainty(H, MatrixXd::Identity(2 * n, 2 * n), nearest);
+    relUnc = u / (discrete ? std::max(std::abs(nearest), 1.0) : std::abs(nearest));
+  }
   std::ostringstream msg;
   msg << fn << ": ";
   if (gap <= kBoundaryTolerance) {
@@ -374,14 +409,24 @@ void diagnoseFailure(LqrResult& res, const Prepared& p, bool discrete, const Car
         << " has the eigenvalue " << formatComplex(nearest)
         << (discrete ? " on the unit circle (||lambda| - 1|/max(|lambda|, 1) = "
                      : " on the imaginary axis (|Re lambda|/|lambda| = ")
-        << gap << " <= " << kBoundaryTolerance
+        << gap << " <= " << kBoundaryTolerance << ", rounding uncertainty " << relUnc
         << "): a mode of A there is unobservable in Q (not detectable), or the cost is not "
            "definite enough [" << why << "]";
+  } else if (gap <= relUnc) {
+    res.status = LqrStatus::kNoConvergence;
+    msg << "ill conditioned at working precision: the "
+        << (discrete ? "symplectic pencil" : "Hamiltonian") << " eigenvalue nearest "
+        << (discrete ? "the unit circle " : "the imaginary axis ") << formatComplex(nearest)
+        << " has relative distance " << gap << " within its rounding uncertainty " << relUnc
+        << " (first-order, from its condition number after balancing), so the data do not "
+           "determine whether a stabilizing solution exists; a state basis in which the data are "
+           "not mixed across scales may help (diagonal scalings are already undone) [" << why
+        << "]";
   } else {
     res.status = LqrStatus::kNoConvergence;
     msg << why << " ((A, B) is stabilizable: least margin " << st.margin << "; eigenvalue nearest "
         << (discrete ? "the unit circle " : "the imaginary axis ") << formatComplex(nearest)
-        << ", relative distance " << gap << ")";
+        << ", relative distance " << gap << ", rounding uncertainty " << relUnc << ")";
   }
   res.message = msg.str();
 }
@@ -520,6 +565,7 @@ LqrResult solveCare(const MatrixXd& A, const MatrixXd& B, const MatrixXd& Q, con
   MatrixXd Z(2 * n, 2 * n);
   Z << p.A, -p.G, -p.Q, -p.A.transpose();
   bool scaling = true, converged = false;
+  int stalled = 0;
   double prev = std::numeric_limits<double>::infinity();
   for (int it = 0; it < options.maxIterations; ++it) {
     res.iterations = it + 1;
@@ -548,6 +594,14 @@ LqrResult solveCare(const MatrixXd& A, const MatrixXd& B, const MatrixXd& Q, con
     Z = std::move(Zn);
     if (rel < 1e-2) scaling = false;  // quadratic convergence without scaling near the end
     if (rel <= options.tolerance || (!scaling && rel < 1e-8 && rel >= 0.5 * prev)) {
+      converged = true;
+      break;
+    }
+    // Stagnation above 1e-8: rounding in a badly conditioned H (entries that no diagonal scaling
+    // equalizes) limits how far the iteration can go. The subspace it has reached is a starting
+    // point for Newton; the residual test in finish() decides whether the result is right.
+    stalled = !scaling && rel >= 0.5 * prev ? stalled + 1 : 0;
+    if (stalled >= 3) {
       converged = true;
       break;
     }
