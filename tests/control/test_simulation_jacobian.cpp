@@ -5,10 +5,10 @@
 #include "closed_loop_system.hpp"
 #include "control_test_support.hpp"
 
-#include <trellis/control/gain_schedule.hpp>
+#include <trellis/core/gain_schedule.hpp>
 #include <trellis/control/lqr.hpp>
 #include <trellis/control/simulation.hpp>
-#include <trellis/control/trajectory.hpp>
+#include <trellis/core/trajectory.hpp>
 #include <trellis/core.hpp>
 
 #include <catch2/catch.hpp>
