@@ -324,6 +324,25 @@ void OdeDriver::setMaxStep(double h) {
   check(CVodeSetMaxStep(impl_->cv.cvode.get(), h), "CVodeSetMaxStep", options_.what);
 }
 
+void OdeDriver::setQuadratureTolerances(double rtol, double atol) {
+  if (options_.quadratureSize == 0 || !options_.quadratureErrorControl) {
+    throw std::logic_error(options_.what + ": quadrature tolerances without quadrature error control");
+  }
+  if (!(rtol > 0.0) || !(atol >= 0.0) || !std::isfinite(rtol) || !std::isfinite(atol)) {
+    throw std::invalid_argument(options_.what + ": quadrature tolerances must be finite with rtol > 0, atol >= 0");
+  }
+  check(CVodeQuadSStolerances(impl_->cv.cvode.get(), rtol, atol), "CVodeQuadSStolerances",
+        options_.what);
+  options_.quadratureRtol = rtol;
+  options_.quadratureAtol = atol;
+}
+
+int OdeDriver::lastOrder() const {
+  int q = 0;
+  if (CVodeGetLastOrder(impl_->cv.cvode.get(), &q) < 0) return 0;
+  return q;
+}
+
 void OdeDriver::collectCounters(OdeStats& into) const {
   void* mem = impl_->cv.cvode.get();
   long v = 0;

@@ -167,6 +167,11 @@ class OdeDriver {
   void rootDirections(int* directions);
 
   void setMaxStep(double h);
+  /// Changes the quadratures' error-control tolerances (OdeOptions::quadratureErrorControl must
+  /// be on), e.g. per interval when the quadrature's scale depends on the interval's length.
+  void setQuadratureTolerances(double rtol, double atol);
+  /// Order of the last internal step (the interpolating polynomial's degree; 0 before a step).
+  int lastOrder() const;
 
   OdeStats stats() const;
   const OdeOptions& options() const { return options_; }

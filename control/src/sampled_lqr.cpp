@@ -1,15 +1,12 @@
 // sampled_lqr.cpp — exact discretization of a time-varying linearization over sample intervals
-// (variational equation + cost quadrature with CVODES) and the discrete Riccati recursion with the
+// (variational equation + cost quadrature, integrated by OdeDriver) and the discrete Riccati recursion with the
 // cross term. See sampled_lqr.hpp for the math.
 #include "trellis/control/sampled_lqr.hpp"
 
-#include "sundials_raii.hpp"
+#include "ode_driver.hpp"
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
-
-#include <cvodes/cvodes_ls.h>
-#include <sunlinsol/sunlinsol_spgmr.h>
 
 #include <algorithm>
 #include <cmath>
@@ -51,13 +48,14 @@ Eigen::VectorXd sampleTimes(double t0, double T, double rate) {
 
 namespace {
 
-/// CVODES user data: Y = [Φ Γ] (nx × (nx+m), column-major in the N_Vector), quadrature
-/// W = [Φ Γ]ᵀ Q [Φ Γ] + blkdiag(0, R) ((nx+m)² entries).
-struct Discretizer {
+/// The variational equation Y = [Φ Γ] (nx × (nx+m), column-major) and the cost quadrature
+/// W = ∫ [Φ Γ]ᵀ Q [Φ Γ] + blkdiag(0, R) ((nx+m)² entries), for OdeDriver.
+class Discretizer final : public detail::OdeSystem {
+ public:
   int nx, nu, cols;
   const LinearizationCallback& lin;
   const LqrWeights& w;
-  Eigen::MatrixXd A, B, Q, R, QY, W, LUmat;
+  Eigen::MatrixXd A, B, Q, R, QY, LUmat;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu;
   double cachedT = std::numeric_limits<double>::quiet_NaN();
   bool cacheValid = false;
@@ -67,12 +65,11 @@ struct Discretizer {
   long linearizations = 0;
   bool failed = false;
   double failTime = 0.0;
-  std::string failMessage, cvodeMessage;
+  std::string failMessage;
 
   Discretizer(int nx_, int nu_, const LinearizationCallback& l, const LqrWeights& w_)
       : nx(nx_), nu(nu_), cols(nx_ + nu_), lin(l), w(w_), A(nx_, nx_), B(nx_, nu_), Q(nx_, nx_),
-        R(nu_, nu_), QY(nx_, nx_ + nu_), W(nx_ + nu_, nx_ + nu_), LUmat(nx_, nx_), lu(nx_),
-        Aprec(nx_, nx_) {
+        R(nu_, nu_), QY(nx_, nx_ + nu_), LUmat(nx_, nx_), lu(nx_), Aprec(nx_, nx_) {
     if (!w.Qfun) Q = w.Q;
     if (!w.Rfun) R = w.R;
   }
@@ -120,55 +117,54 @@ struct Discretizer {
   }
 
   // Ẏ = A Y + [0 B].
-  static int rhs(double t, N_Vector yv, N_Vector ydotv, void* user) {
-    auto& s = *static_cast<Discretizer*>(user);
-    if (!s.evaluate(t)) return -1;
-    Eigen::Map<const Eigen::MatrixXd> Y(N_VGetArrayPointer(yv), s.nx, s.cols);
-    Eigen::Map<Eigen::MatrixXd> Yd(N_VGetArrayPointer(ydotv), s.nx, s.cols);
-    Yd.noalias() = s.A * Y;
-    Yd.rightCols(s.nu) += s.B;
+  int rhs(double t, detail::ConstVectorMap y, detail::VectorMap ydot) override {
+    if (!evaluate(t)) return -1;
+    Eigen::Map<const Eigen::MatrixXd> Y(y.data(), nx, cols);
+    Eigen::Map<Eigen::MatrixXd> Yd(ydot.data(), nx, cols);
+    Yd.noalias() = A * Y;
+    Yd.rightCols(nu) += B;
     return 0;
   }
 
   // Ẇ = Yᵀ Q Y + blkdiag(0, R).
-  static int quad(double t, N_Vector yv, N_Vector qdot, void* user) {
-    auto& s = *static_cast<Discretizer*>(user);
-    if (!s.evaluate(t)) return -1;
-    Eigen::Map<const Eigen::MatrixXd> Y(N_VGetArrayPointer(yv), s.nx, s.cols);
-    Eigen::Map<Eigen::MatrixXd> Wd(N_VGetArrayPointer(qdot), s.cols, s.cols);
-    s.QY.noalias() = s.Q * Y;
-    Wd.noalias() = Y.transpose() * s.QY;
-    Wd.bottomRightCorner(s.nu, s.nu) += s.R;
+  int quadrature(double t, detail::ConstVectorMap y, detail::VectorMap qdot) override {
+    if (!evaluate(t)) return -1;
+    Eigen::Map<const Eigen::MatrixXd> Y(y.data(), nx, cols);
+    Eigen::Map<Eigen::MatrixXd> Wd(qdot.data(), cols, cols);
+    QY.noalias() = Q * Y;
+    Wd.noalias() = Y.transpose() * QY;
+    Wd.bottomRightCorner(nu, nu) += R;
     return 0;
   }
 
   // Jacobian-vector product: J V = A V (block diagonal, one A per column).
-  static int jtSetup(double t, N_Vector, N_Vector, void* user) {
-    auto& s = *static_cast<Discretizer*>(user);
-    return s.evaluate(t) ? 0 : -1;
+  bool hasJacTimes() const override { return true; }
+  int jacTimesSetup(double t, detail::ConstVectorMap, detail::ConstVectorMap) override {
+    return evaluate(t) ? 0 : -1;
   }
-  static int jtimes(N_Vector v, N_Vector Jv, double t, N_Vector, N_Vector, void* user, N_Vector) {
-    auto& s = *static_cast<Discretizer*>(user);
-    if (!s.evaluate(t)) return -1;
-    Eigen::Map<const Eigen::MatrixXd> V(N_VGetArrayPointer(v), s.nx, s.cols);
-    Eigen::Map<Eigen::MatrixXd> out(N_VGetArrayPointer(Jv), s.nx, s.cols);
-    out.noalias() = s.A * V;
+  int jacTimes(double t, detail::ConstVectorMap, detail::ConstVectorMap, detail::ConstVectorMap v,
+               detail::VectorMap Jv) override {
+    if (!evaluate(t)) return -1;
+    Eigen::Map<const Eigen::MatrixXd> V(v.data(), nx, cols);
+    Eigen::Map<Eigen::MatrixXd> out(Jv.data(), nx, cols);
+    out.noalias() = A * V;
     return 0;
   }
 
   // Exact preconditioner: the Newton matrix is blkdiag(I − γA), solved column by column with one
   // LU of I − γA (refactored when γ or the set-up time changes).
-  static int precSetup(double t, N_Vector, N_Vector, int jok, int* jcur, double gamma, void* user) {
-    auto& s = *static_cast<Discretizer*>(user);
-    if (!jok || !(t == s.precT)) {
-      if (!s.evaluate(t)) return -1;
-      s.Aprec = s.A;
-      s.precT = t;
-      *jcur = 1;
+  bool hasPreconditioner() const override { return true; }
+  int preconditionerSetup(double t, detail::ConstVectorMap, detail::ConstVectorMap, bool jacOk,
+                          bool* jacUpdated, double gamma) override {
+    if (!jacOk || !(t == precT)) {
+      if (!evaluate(t)) return -1;
+      Aprec = A;
+      precT = t;
+      *jacUpdated = true;
     } else {
-      *jcur = 0;
+      *jacUpdated = false;
     }
-    s.factor(gamma);
+    factor(gamma);
     return 0;
   }
   void factor(double gamma) {
@@ -177,19 +173,13 @@ struct Discretizer {
     lu.compute(LUmat);
     luGamma = gamma;
   }
-  static int precSolve(double, N_Vector, N_Vector, N_Vector rv, N_Vector zv, double gamma, double,
-                       int, void* user) {
-    auto& s = *static_cast<Discretizer*>(user);
-    if (gamma != s.luGamma) s.factor(gamma);
-    Eigen::Map<const Eigen::MatrixXd> Rm(N_VGetArrayPointer(rv), s.nx, s.cols);
-    Eigen::Map<Eigen::MatrixXd> Z(N_VGetArrayPointer(zv), s.nx, s.cols);
-    Z = s.lu.solve(Rm);
+  int preconditionerSolve(double, detail::ConstVectorMap, detail::ConstVectorMap,
+                          detail::ConstVectorMap r, detail::VectorMap z, double gamma) override {
+    if (gamma != luGamma) factor(gamma);
+    Eigen::Map<const Eigen::MatrixXd> Rm(r.data(), nx, cols);
+    Eigen::Map<Eigen::MatrixXd> Z(z.data(), nx, cols);
+    Z = lu.solve(Rm);
     return Z.allFinite() ? 0 : 1;
-  }
-
-  static void errorHandler(int code, const char* module, const char* function, char* msg, void* user) {
-    auto& s = *static_cast<Discretizer*>(user);
-    if (code < 0) s.cvodeMessage = std::string(module) + "::" + function + ": " + msg;
   }
 };
 
@@ -218,46 +208,25 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
   SampledDiscretization out;
   Discretizer s(nx, nu, linearization, weights);
   const int cols = nx + nu;
-  const sunindextype N = static_cast<sunindextype>(nx) * cols;
-  const sunindextype NQ = static_cast<sunindextype>(cols) * cols;
 
-  detail::CvodeSession cv;
-  cv.context.reset(detail::createContext());
-  SUNContext ctx = cv.context.get();
-  cv.y.reset(N_VNew_Serial(N, ctx));
-  detail::Vector yQ(N_VNew_Serial(NQ, ctx));
-  if (!cv.y || !yQ) throw std::runtime_error("discretizeSampledData: N_VNew_Serial failed");
-  Eigen::Map<Eigen::MatrixXd> Y(N_VGetArrayPointer(cv.y.get()), nx, cols);
-  Eigen::Map<Eigen::MatrixXd> W(N_VGetArrayPointer(yQ.get()), cols, cols);
-  auto resetState = [&] {
-    Y.setZero();
-    Y.leftCols(nx).setIdentity();
-    W.setZero();
-  };
-  resetState();
+  const Eigen::Index N = static_cast<Eigen::Index>(nx) * cols;
+  const Eigen::Index NQ = static_cast<Eigen::Index>(cols) * cols;
+  Eigen::VectorXd y0 = Eigen::VectorXd::Zero(N);  // Y(a) = [I 0]
+  Eigen::Map<Eigen::MatrixXd>(y0.data(), nx, cols).leftCols(nx).setIdentity();
+  Eigen::VectorXd wq(NQ);
 
-  cv.cvode.reset(CVodeCreate(CV_BDF, ctx));
-  void* mem = cv.cvode.get();
-  if (!mem) throw std::runtime_error("discretizeSampledData: CVodeCreate failed");
-  auto check = [&](int flag, const char* call) {
-    if (flag < 0) {
-      throw std::runtime_error(std::string("discretizeSampledData: ") + call + " failed with flag " +
-                               std::to_string(flag) + ": " + s.cvodeMessage);
-    }
-  };
-  check(CVodeSetErrHandlerFn(mem, &Discretizer::errorHandler, &s), "CVodeSetErrHandlerFn");
-  check(CVodeInit(mem, &Discretizer::rhs, times(0), cv.y.get()), "CVodeInit");
-  check(CVodeSStolerances(mem, options.rtol, options.atol), "CVodeSStolerances");
-  check(CVodeSetUserData(mem, &s), "CVodeSetUserData");
-  check(CVodeSetMaxNumSteps(mem, options.maxSteps), "CVodeSetMaxNumSteps");
-  cv.linearSolver.reset(SUNLinSol_SPGMR(cv.y.get(), SUN_PREC_LEFT, 0, ctx));
-  if (!cv.linearSolver) throw std::runtime_error("discretizeSampledData: SPGMR solver");
-  check(CVodeSetLinearSolver(mem, cv.linearSolver.get(), nullptr), "CVodeSetLinearSolver");
-  check(CVodeSetJacTimes(mem, &Discretizer::jtSetup, &Discretizer::jtimes), "CVodeSetJacTimes");
-  check(CVodeSetPreconditioner(mem, &Discretizer::precSetup, &Discretizer::precSolve),
-        "CVodeSetPreconditioner");
-  check(CVodeQuadInit(mem, &Discretizer::quad, yQ.get()), "CVodeQuadInit");
-  check(CVodeSetQuadErrCon(mem, SUNTRUE), "CVodeSetQuadErrCon");
+  detail::OdeOptions o;
+  o.what = "sampled-data discretization";
+  o.method = detail::OdeMethod::Bdf;
+  o.linearSolver = detail::OdeLinearSolver::Gmres;
+  o.rtol = options.rtol;
+  o.atol = options.atol;
+  o.maxSteps = options.maxSteps;
+  o.quadratureSize = static_cast<int>(NQ);
+  o.quadratureErrorControl = true;
+  o.quadratureRtol = options.rtol;
+  o.quadratureAtol = options.atol;
+  detail::OdeDriver driver(s, N, o);
 
   // Scale of the cost entries per unit time, for the quadrature's absolute tolerance.
   double costScale = 1.0;
@@ -267,37 +236,24 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
   out.intervals.reserve(static_cast<std::size_t>(times.size() - 1));
   for (Eigen::Index k = 0; k + 1 < times.size(); ++k) {
     const double a = times(k), b = times(k + 1);
-    resetState();
-    if (k > 0) {
-      check(CVodeReInit(mem, a, cv.y.get()), "CVodeReInit");
-      check(CVodeQuadReInit(mem, yQ.get()), "CVodeQuadReInit");
-    }
-    check(CVodeQuadSStolerances(mem, options.rtol, options.atol * (b - a) * costScale),
-          "CVodeQuadSStolerances");
-    check(CVodeSetStopTime(mem, b), "CVodeSetStopTime");
-    double t = a;
-    const int flag = CVode(mem, b, cv.y.get(), &t, CV_NORMAL);
-    long v = 0;
-    if (CVodeGetNumSteps(mem, &v) >= 0) out.steps += v;
-    if (CVodeGetNumRhsEvals(mem, &v) >= 0) out.rhsEvaluations += v;
-    if (flag < 0) {
+    // Every interval starts from Y = [I 0], W = 0 (a restart: Φ, Γ are per interval).
+    driver.start(a, y0);
+    driver.setQuadratureTolerances(options.rtol, options.atol * (b - a) * costScale);
+    const detail::OdeStatus st = driver.advanceTo(b);
+    if (!st.ok()) {
       out.ok = false;
-      double tcur = t;
-      CVodeGetCurrentTime(mem, &tcur);
-      out.failureTime = s.failed ? s.failTime : tcur;
-      char* name = CVodeGetReturnFlagName(flag);
+      out.failureTime = s.failed ? s.failTime : st.t;
       std::ostringstream m;
       m << "sampled-data discretization stopped in interval " << k << " [" << a << ", " << b
         << "] at t = " << out.failureTime << ": ";
       if (s.failed) m << s.failMessage << "; ";
-      m << "CVODES " << (name ? name : "error") << " (" << flag << ")";
-      if (!s.cvodeMessage.empty()) m << ": " << s.cvodeMessage;
-      std::free(name);
+      m << st.message;
       out.message = m.str();
       break;
     }
-    double tq = t;
-    check(CVodeGetQuad(mem, &tq, yQ.get()), "CVodeGetQuad");
+    driver.quadrature(wq);
+    Eigen::Map<const Eigen::MatrixXd> Y(driver.state().data(), nx, cols);
+    Eigen::Map<const Eigen::MatrixXd> W(wq.data(), cols, cols);
     SampledInterval iv;
     iv.t0 = a;
     iv.t1 = b;
@@ -316,6 +272,9 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
     }
     out.intervals.push_back(std::move(iv));
   }
+  const detail::OdeStats stats = driver.stats();
+  out.steps = stats.steps;
+  out.rhsEvaluations = stats.rhsEvaluations;
   out.linearizations = s.linearizations;
   return out;
 }

@@ -360,7 +360,8 @@ void bindControl(py::module_& m) {
       .value("INTEGRATOR_FAILURE", RiccatiStatus::kIntegratorFailure)
       .value("NON_FINITE", RiccatiStatus::kNonFinite)
       .value("BLOW_UP", RiccatiStatus::kBlowUp)
-      .value("CALLBACK_FAILURE", RiccatiStatus::kCallbackFailure);
+      .value("CALLBACK_FAILURE", RiccatiStatus::kCallbackFailure)
+      .value("INDEFINITE", RiccatiStatus::kIndefinite);
   py::enum_<TangentTransport>(m, "TangentTransport")
       .value("INTEGRATED", TangentTransport::kIntegrated)
       .value("PROJECTED", TangentTransport::kProjected);

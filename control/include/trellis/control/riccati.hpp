@@ -6,7 +6,8 @@
 //   −Ṡ = AᵀS + SA − S B R⁻¹ Bᵀ S + Q,   S(T) = Qf,
 // and the optimal feedback is δu = −K(t) δx, K = R⁻¹ Bᵀ S (m×nx).
 //
-// solveRiccati integrates it backward with SUNDIALS CVODES in reversed time τ = T − t, on the
+// solveRiccati integrates it backward with SUNDIALS CVODES (through the control module's one
+// driver, control/src/ode_driver.hpp) in reversed time τ = T − t, on the
 // nx(nx+1)/2 entries of the upper triangle of S (column by column), so S is symmetric by
 // construction. BDF uses Newton iterations with a dense linear solver and the exact Jacobian of
 // the right-hand side (the Lyapunov operator E ↦ A_clᵀE + E A_cl, A_cl = A − BK); Adams uses
@@ -122,6 +123,14 @@ struct RiccatiOptions {
   /// diagonal — while S stays smooth: a rank-deficient Q over a long horizon otherwise costs
   /// ~100 times the steps of the plain form, or fails with too much work. 0 never switches (> 0 or 0).
   double factoredSwitchCondition = 1e8;
+  /// Check that S stays positive semidefinite (plain forms; the factored form is PSD by
+  /// construction): at every stored step, S is accepted when λmin(S) ≥ −ε·λmax(S) with
+  /// ε = psdSlack·nx·rtol — the eigenvalue shift a per-entry error of rtol·max|S_ij| could cause
+  /// (‖E‖₂ ≤ nx·max|E_ij|), times a safety factor. The test is a Cholesky factorization of
+  /// S + ε·max_i S_ii·I (O(nx³/3) per step); only a step that fails it gets the eigenvalues.
+  /// A violation makes the status kIndefinite (the solve still covers the whole horizon).
+  bool checkPositiveSemidefinite = true;
+  double psdSlack = 10.0;       ///< ε = psdSlack·nx·rtol (≥ 0)
   /// Throws std::invalid_argument naming the field and its value.
   void validate() const;
 };
@@ -133,6 +142,9 @@ enum class RiccatiStatus {
   kBlowUp,             ///< max |S_ij| exceeded options.maxNorm
   kCallbackFailure,    ///< A/B/Q/R callback threw, returned a wrong size or non-finite values,
                        ///< or R(t) was not positive definite
+  kIndefinite,         ///< S lost positive semidefiniteness beyond the tolerance-scaled slack
+                       ///< (RiccatiOptions::checkPositiveSemidefinite): failureTime is the
+                       ///< worst step, indefiniteRatio = λmin/λmax there; S covers the horizon
 };
 
 const char* toString(RiccatiStatus status);
@@ -151,6 +163,8 @@ class RiccatiSolution {
   long preconditionerSolves = 0;    ///< Lyapunov preconditioner applications (Krylov only)
   double switchedToPlainAt = std::numeric_limits<double>::quiet_NaN();  ///< kFactored: the time t
                                     ///< where the solve switched to the plain form (NaN: never)
+  double indefiniteRatio = 0.0;     ///< kIndefinite: λmin(S)/λmax(S) at failureTime (< −ε)
+  long linearizations = 0;          ///< calls of the linearization callback (solve and gains)
   double minEigenvalue = 0.0;       ///< of S over the stored steps (if tracked)
   double maxEigenvalue = 0.0;
 
