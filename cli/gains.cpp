@@ -178,7 +178,8 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
       model, data, trajectory.states().col(0).head(n), trajectory.states().col(0).tail(n),
       trajectory.inputs().col(0));
   const GramianReport gramian =
-      computeControllabilityGramian(model, trajectory, trajectory.startTime(), trajectory.endTime());
+      computeControllabilityGramian(model, trajectory, trajectory.startTime(), trajectory.endTime(),
+                                    GramianOptions{});  // summary accuracy (controllability.hpp)
   if (json) {
     std::string body = solution.json();
     body.pop_back();  // the closing brace: append the file and the controllability checks

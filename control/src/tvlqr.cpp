@@ -222,15 +222,15 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
   const int d = basis.dimension();
   sol.dimension = d;
   struct Shared {
-    TangentBasisTrajectory basis;
-    Eigen::MatrixXd T, Ar, Br, Q;
+    Shared(const Model& m, const TangentBasisTrajectory& b) : lin(m, b) {}
+    ReducedLinearization lin;  // lives only for the solve (the callbacks are not kept)
+    Eigen::MatrixXd Q;
   };
-  auto sh = std::make_shared<Shared>();
-  sh->basis = basis;
+  auto sh = std::make_shared<Shared>(model, basis);
   const LinearizationCallback lin = [sh](double t, Eigen::MatrixXd& A, Eigen::MatrixXd& B) {
-    sh->basis.reducedLinearization(t, sh->T, sh->Ar, sh->Br);
-    A = sh->Ar;
-    B = sh->Br;
+    sh->lin.evaluate(t);
+    A = sh->lin.Ar();
+    B = sh->lin.Br();
   };
   LqrWeights reduced;
   reduced.R = weights.R;
@@ -238,13 +238,14 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
   const Eigen::MatrixXd Qconst = weights.Q;
   const WeightCallback Qfull = weights.Qfun;
   reduced.Qfun = [sh, Qconst, Qfull, nx](double t, Eigen::MatrixXd& Qr) {
-    sh->basis.reducedLinearization(t, sh->T, sh->Ar, sh->Br);  // cached on t: no extra dynamics
+    sh->lin.evaluate(t);  // cached on t: no extra dynamics
+    const Eigen::MatrixXd& T = sh->lin.T();
     if (Qfull) {
       sh->Q.setZero(nx, nx);
       Qfull(t, sh->Q);
-      Qr = sh->T.transpose() * sh->Q * sh->T;
+      Qr = T.transpose() * sh->Q * T;
     } else {
-      Qr = sh->T.transpose() * Qconst * sh->T;
+      Qr = T.transpose() * Qconst * T;
     }
     Qr = 0.5 * (Qr + Qr.transpose()).eval();
   };

@@ -2,10 +2,9 @@
 // discrete recursion, controllability, TV-LQR (full state and on the constraint manifold) and
 // closed-loop simulation.
 //
-// Lifetimes: RiccatiSolution, TangentBasisTrajectory and ManifoldRiccatiSolution keep a pointer
-// to the Model (C++ API of this version); every function returning one keeps the Python Model
-// alive for as long as the result lives (py::keep_alive), so a solution may outlive every other
-// reference to its model. The unified, plain-data TV-LQR (solveTvlqr) is bound in
+// Lifetimes: RiccatiSolution, TangentBasisTrajectory and ManifoldRiccatiSolution are plain data
+// (they keep no reference to the Model); the py::keep_alive on the functions returning them is
+// harmless and kept for older results. The unified, plain-data TV-LQR (solveTvlqr) is bound in
 // bind_tvlqr.cpp when its header exists.
 #include "common.hpp"
 #include "control_common.hpp"
@@ -453,12 +452,14 @@ void bindControl(py::module_& m) {
       .def("basis", [](const TangentBasisTrajectory& b, double t) { return toArray(b.basis(t)); },
            py::arg("t"), "T(t) (nx, d)")
       .def("reduced_linearization",
-           [](const TangentBasisTrajectory& b, double t) {
+           [](const TangentBasisTrajectory& b, const Model& model, double t) {
              Eigen::MatrixXd T, Ar, Br;
-             b.reducedLinearization(t, T, Ar, Br);
+             b.reducedLinearization(model, t, T, Ar, Br);
              return py::make_tuple(toArray(T), toArray(Ar), toArray(Br));
            },
-           py::arg("t"), "(T (nx, d), Ar = T^T A T (d, d), Br = T^T B (d, nu)) at t");
+           py::arg("model"), py::arg("t"),
+           "(T (nx, d), Ar = T^T A T (d, d), Br = T^T B (d, nu)) at t, with T corrected onto the "
+           "exact tangent space of the model at x_ref(t)");
   m.def("transport_tangent_basis",
         [](const Model& model, const Trajectory& reference,
            const std::optional<TangentTransportOptions>& options) {

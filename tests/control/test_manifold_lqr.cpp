@@ -151,14 +151,21 @@ TEST_CASE("transported tangent basis on the paper pendulum", "[manifold]") {
   for (int i = 0; i <= 40; ++i) {
     const double t = 0.003 + 1.99 * i / 40.0;  // off the knots as well
     INFO("t = " << t);
-    const MatrixXd T = basis.basis(t), Tt = basis.transportedBasis(t);
+    MatrixXd T, Ar0, Br0;
+    basis.reducedLinearization(model, t, T, Ar0, Br0);
+    const MatrixXd Th = basis.basis(t), Tt = basis.transportedBasis(t);
     const MatrixXd I2 = MatrixXd::Identity(2, 2), I4 = MatrixXd::Identity(4, 4);
     const MatrixXd P = coreProjector(model, ref.state(t), ref.input(t));
-    // Corrected basis: orthonormal and tangent to rounding (it is a polar factor in the core's
-    // basis), and close to the transported one.
+    // Corrected basis (model-bound): orthonormal and tangent to rounding (it is a polar factor in
+    // the core's basis), and close to the transported one.
     CHECK((T.transpose() * T - I2).norm() < 1e-13);
     CHECK(((I4 - P) * T).norm() < 1e-13);
     CHECK((T - Tt).norm() < 1e-5);
+    // The held basis (plain data: Hermite on the knots, h = 0.01, then the polar factor):
+    // orthonormal to rounding, and the model-bound correction moves it by the interpolation
+    // error O(h⁴‖T⁗‖/384) only (‖T⁗‖ ~ 10⁴ here: ~3e-7; bound 1e-6).
+    CHECK((Th.transpose() * Th - I2).norm() < 1e-13);
+    CHECK((Th - T).norm() < 1e-6);
     // Transported basis: orthonormal up to the reference's inconsistency. Ṫ = (I − P)AT is
     // normal, so d/dt TᵀT = 2 sym(((I − P)T)ᵀ A T) vanishes while T is tangent; T leaves the
     // tangent space only by the inconsistency above (≤ 1e-5), which feeds TᵀT − I at second
@@ -176,7 +183,7 @@ TEST_CASE("transported tangent basis on the paper pendulum", "[manifold]") {
       // Tᵀ(I − P)AT = ((I − P)T)ᵀAT is that times ‖A‖ ~ 10 (measured ≤ 4.4e-6). Bound 1e-4.
       CHECK((Tt.transpose() * dT).norm() < 1e-4);
       MatrixXd Tc, Ar, Br;
-      basis.reducedLinearization(t, Tc, Ar, Br);
+      basis.reducedLinearization(model, t, Tc, Ar, Br);
       trellis::Data data(model);
       const VectorXd x = ref.state(t);
       REQUIRE(trellis::computeLinearization(model, data, x.head(2), x.tail(2), ref.input(t)).ok());
@@ -228,7 +235,7 @@ TEST_CASE("reduced linear system predicts on-manifold perturbations to O(eps^2)"
   const double h = tf / ((knots - 1) * substeps);
   auto Ar = [&](double t) {
     MatrixXd T, A, B;
-    basis.reducedLinearization(t, T, A, B);
+    basis.reducedLinearization(model, t, T, A, B);
     return A;
   };
   MatrixXd Z(2, knots);
@@ -308,7 +315,7 @@ TEST_CASE("two tied carts: the reduced problem is a double integrator of mass 2"
   CHECK((sol.basis.basis(13.0) - sol.basis.basis(0.0)).norm() < 1e-9);
   // The reduced closed loop at t0 is Hurwitz and its eigenvalues are those of the CARE.
   MatrixXd T, Ar, Br;
-  sol.basis.reducedLinearization(0.0, T, Ar, Br);
+  sol.basis.reducedLinearization(model, 0.0, T, Ar, Br);
   const Eigen::VectorXcd ev = (Ar - Br * sol.reduced.K(0.0)).eigenvalues();
   const Eigen::VectorXcd evCare = (A2 - B2 * care.K).eigenvalues();
   CHECK(ev.real().maxCoeff() < 0.0);
@@ -386,7 +393,7 @@ TEST_CASE("manifold LQR on the paper pendulum: gains and closed loop", "[manifol
   z << 1.0, -0.5;
   auto closedLoop = [&](double t, const VectorXd& zz) {
     MatrixXd T, Ar, Br;
-    sol.basis.reducedLinearization(t, T, Ar, Br);
+    sol.basis.reducedLinearization(model, t, T, Ar, Br);
     return VectorXd((Ar - Br * sol.reduced.K(t)) * zz);
   };
   const double h = 1e-3;
@@ -450,7 +457,7 @@ TEST_CASE("reachability Gramian", "[manifold][controllability]") {
     const auto basis = trellis::transportTangentBasis(model, ref);
     auto f = [&](double t, const MatrixXd& W) {
       MatrixXd T, Ar, Br;
-      basis.reducedLinearization(t, T, Ar, Br);
+      basis.reducedLinearization(model, t, T, Ar, Br);
       return MatrixXd(Ar * W + W * Ar.transpose() + Br * Br.transpose());
     };
     MatrixXd W = MatrixXd::Zero(2, 2);
@@ -513,7 +520,9 @@ TEST_CASE("the correction onto the tangent space converges with the knot spacing
     double worst = 0.0;
     for (int k = 0; k + 1 < knots; ++k) {  // midpoints, where the spline is least accurate
       const double t = (k + 0.5) * hk;
-      worst = std::max(worst, (basis.basis(t) - basis.transportedBasis(t)).norm());
+      MatrixXd T, Ar, Br;  // the correction onto the exact tangent space at x_ref(t)
+      basis.reducedLinearization(model, t, T, Ar, Br);
+      worst = std::max(worst, (T - basis.transportedBasis(t)).norm());
     }
     return worst;
   };
@@ -525,4 +534,137 @@ TEST_CASE("the correction onto the tangent space converges with the knot spacing
   CHECK(z1 < 1e-6);
   CHECK(s1 / s2 > 3.0);
   CHECK(s1 / s2 < 6.0);
+}
+
+TEST_CASE("the transport and the Gramian use exact Jacobian products only", "[manifold]") {
+  // Both integrate with Newton–GMRES on the exact products ((I − P)A E for the transport, the
+  // Lyapunov operator for the Gramian): CVODES never falls back to difference quotients, whose
+  // right-hand sides it counts separately.
+  const PendulumCase pc = paperPendulum();
+  const trellis::Model& model = pc.scene.model;
+  const trellis::Trajectory ref = makeReference(model, pc.x0, pc.u, 0.0, 1.0, 101, 10);
+  const auto basis = trellis::transportTangentBasis(model, ref);
+  REQUIRE(basis.ok());
+  CHECK(basis.steps() > 10);
+  CHECK(basis.differenceQuotientEvaluations() == 0);
+  const auto gr = trellis::computeControllabilityGramian(model, ref, 0.0, 1.0);
+  REQUIRE(gr.ok);
+  CHECK(gr.steps > 10);
+  CHECK(gr.linearizations > 0);
+  CHECK(gr.differenceQuotientEvaluations == 0);
+}
+
+TEST_CASE("Gramian at the summary's tolerance against the closed form", "[manifold][controllability]") {
+  // Double integrator (a free cart of mass 1): W(0, T) = [[T³/3, T²/2], [T²/2, T]]. The default
+  // GramianOptions (rtol 1e-8) must meet it to ~1e-7 relative.
+  const trellis::Model model = makeCart(false);
+  VectorXd x0(2);
+  x0 << 0.1, 0.0;
+  const auto ref = makeReference(model, x0, [](double) { return VectorXd::Zero(1); }, 0.0, 3.0, 31, 2);
+  const double T = 3.0;
+  const auto gr = trellis::computeControllabilityGramian(model, ref, 0.0, T, trellis::GramianOptions{});
+  REQUIRE(gr.ok);
+  MatrixXd expected(2, 2);
+  expected << T * T * T / 3, T * T / 2, T * T / 2, T;
+  CONTROL_CHECK_CLOSE(expected, gr.W, 1e-7, expected.norm());
+  trellis::GramianOptions bad;
+  bad.rtol = 0.0;
+  CHECK_THROWS_WITH(trellis::computeControllabilityGramian(model, ref, 0.0, T, bad), Catch::Contains("rtol"));
+}
+
+namespace {
+
+struct HeldValues {
+  trellis::ManifoldRiccatiSolution solution;
+  std::vector<double> times;
+  std::vector<MatrixXd> K, S, T;  // evaluated while the model was alive
+};
+
+/// Loads its own model, solves, evaluates, and returns the solution: the model dies on return.
+HeldValues solveWithLocalModel() {
+  const PendulumCase pc = paperPendulum();  // owns the scene (and the model)
+  const trellis::Trajectory ref = makeReference(pc.scene.model, pc.x0, pc.u, 0.0, 1.0, 101, 10);
+  const MatrixXd Q = MatrixXd::Identity(4, 4), R = MatrixXd::Identity(1, 1);
+  HeldValues h;
+  h.solution = trellis::solveManifoldRiccati(pc.scene.model, ref, {Q, R, Q, {}, {}});
+  h.times = {0.0, 0.123, 0.5, 0.77, 1.0};
+  for (double t : h.times) {
+    h.K.push_back(h.solution.K(t));
+    h.S.push_back(h.solution.S(t));
+    MatrixXd T, Ar, Br;
+    h.solution.basis.reducedLinearization(pc.scene.model, t, T, Ar, Br);
+    h.T.push_back(T);
+  }
+  return h;
+}
+
+}  // namespace
+
+TEST_CASE("a manifold solution outlives its model (plain data)", "[manifold]") {
+  const HeldValues held = solveWithLocalModel();
+  REQUIRE(held.solution.ok());
+  const trellis::ManifoldRiccatiSolution copy = held.solution;  // a copy, the model long gone
+  for (std::size_t i = 0; i < held.times.size(); ++i) {
+    const double t = held.times[i];
+    INFO("t = " << t);
+    const MatrixXd K = copy.K(t), S = copy.S(t);
+    CHECK(K == held.K[i]);  // bit for bit: the same stored data, the same arithmetic
+    CHECK(S == held.S[i]);
+    // The held basis against the model-bound correction computed while the model lived.
+    CHECK((copy.basis.basis(t) - held.T[i]).norm() < 1e-6);
+  }
+  CHECK_THROWS_AS(copy.K(1.5), std::out_of_range);
+}
+
+TEST_CASE("node linearizations: interpolated Ar, Br and the gains against the exact ones", "[manifold]") {
+  // kNodes interpolates Ar_i, Br_i from the knots (h = 0.01) by the C¹ cubic Hermite with
+  // three-point slopes: error O(h³‖Ar'''‖) for a smooth reference, plus the kink of the exact A(t)
+  // between knots (u_ref is linear there: |u − u_smooth| ≤ h²|ü|/8 = 2.5e-5 at |ü| ≤ 2), so both
+  // differ by ~1e-5 relative; bound 1e-4 (measured values in the INFO).
+  const PendulumCase pc = paperPendulum();
+  const trellis::Model& model = pc.scene.model;
+  const trellis::Trajectory ref = makeReference(model, pc.x0, pc.u, 0.0, 2.0, 201, 10);
+  trellis::TangentTransportOptions exact, nodes;
+  exact.linearization = trellis::ReducedLinearizationMode::kExact;
+  nodes.linearization = trellis::ReducedLinearizationMode::kNodes;
+  const auto be = trellis::transportTangentBasis(model, ref, exact);
+  const auto bn = trellis::transportTangentBasis(model, ref, nodes);
+  REQUIRE(be.ok());
+  REQUIRE(bn.ok());
+  CHECK(!be.usesNodeLinearization());
+  CHECK(bn.usesNodeLinearization());
+  trellis::ReducedLinearization le(model, be), ln(model, bn);
+  double worstA = 0.0, worstB = 0.0;
+  for (int k = 0; k < 200; k += 7) {
+    for (double f : {0.0, 0.5, 0.25}) {
+      const double t = 0.01 * (k + f);
+      le.evaluate(t);
+      ln.evaluate(t);
+      worstA = std::max(worstA, (le.Ar() - ln.Ar()).norm() / le.Ar().norm());
+      worstB = std::max(worstB, (le.Br() - ln.Br()).norm() / le.Br().norm());
+      if (f == 0.0) {  // at a node: the same numbers up to the basis (exact there)
+        CHECK((le.Ar() - ln.Ar()).norm() < 1e-12 * le.Ar().norm());
+      }
+    }
+  }
+  INFO("max relative difference Ar " << worstA << ", Br " << worstB);
+  CHECK(worstA < 1e-4);
+  CHECK(worstB < 1e-4);
+  CHECK(le.evaluations() > 0);
+  CHECK(ln.evaluations() == 0);  // the node path never linearizes, nor does its solve below
+  const MatrixXd Q = MatrixXd::Identity(4, 4), R = MatrixXd::Identity(1, 1);
+  trellis::RiccatiOptions ro;
+  ro.rtol = 1e-8;
+  const auto se = trellis::solveManifoldRiccati(model, ref, {Q, R, Q, {}, {}}, ro, exact);
+  const auto sn = trellis::solveManifoldRiccati(model, ref, {Q, R, Q, {}, {}}, ro, nodes);
+  REQUIRE(se.ok());
+  REQUIRE(sn.ok());
+  CHECK(se.linearizations > 0);
+  CHECK(sn.linearizations == 0);
+  double worstK = 0.0;
+  for (double t : {0.0, 0.333, 1.0, 1.777, 2.0}) {
+    worstK = std::max(worstK, (se.K(t) - sn.K(t)).norm() / se.K(t).norm());
+  }
+  INFO("max relative difference of K " << worstK);
+  CHECK(worstK < 1e-4);
 }

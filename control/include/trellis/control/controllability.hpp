@@ -63,18 +63,35 @@ struct GramianReport {
   bool ok = false;                    ///< false on numerical failure (see message)
   std::string message;                ///< empty when ok; otherwise the time and the cause
   int dimension = 0;                  ///< d
+  long steps = 0;                     ///< CVODES steps of the Lyapunov equation
+  long linearizations = 0;            ///< dynamics evaluations for it (one per distinct t)
+  long differenceQuotientEvaluations = 0;  ///< 0: only the exact Lyapunov products were used
   /// ok and λ_min(W) > relTol · λ_max(W).
   bool controllable(double relTol = 1e-10) const {
     return ok && dimension > 0 && minEigenvalue > relTol * maxEigenvalue;
   }
 };
 
+/// How the Gramian is integrated. The defaults serve a summary that prints λ_min and λ_max to
+/// three digits: rtol 1e-8 on the entries of W resolves λ_min down to ~1e-8·λ_max (atol 1e-14
+/// absolute below that); tighten both for more.
+struct GramianOptions {
+  TangentTransportOptions transport;  ///< for the basis (constrained scenes)
+  double rtol = 1e-8;                 ///< CVODES relative tolerance on each entry of W (> 0)
+  double atol = 1e-14;                ///< absolute tolerance on each entry of W (> 0)
+  void validate() const;              ///< throws std::invalid_argument naming the field
+};
+
 /// The Gramian above along the trajectory (which needs state derivatives), for
-/// reference.startTime() ≤ t0 < t1 ≤ reference.endTime(); integrated with CVODES (BDF, exact
-/// Jacobian, options.rtol/atol on each entry) on the packed d(d+1)/2 entries. The basis is
-/// transported over the whole trajectory first (transportTangentBasis). Throws
-/// std::invalid_argument / TrajectoryError for bad input; numerical failure is in the report.
-/// (Defined in manifold_lqr.cpp, beside the transport it uses.)
+/// reference.startTime() ≤ t0 < t1 ≤ reference.endTime(): CVODES BDF on the packed d(d+1)/2
+/// entries, Newton by GMRES on the exact Lyapunov product E ↦ Ar E + E Arᵀ, preconditioned by the
+/// exact Newton-matrix solve (complex Schur form of Ar, Bartels–Stewart: O(d³), no dense
+/// N×N matrix). The basis is transported over the whole trajectory first (transportTangentBasis).
+/// Throws std::invalid_argument / TrajectoryError for bad input; numerical failure is in the report.
+GramianReport computeControllabilityGramian(const Model& model, const Trajectory& reference,
+                                            double t0, double t1, const GramianOptions& options);
+
+/// The same with the transport's options, and its rtol/atol for W as well (the earlier signature).
 GramianReport computeControllabilityGramian(const Model& model, const Trajectory& reference,
                                             double t0, double t1,
                                             const TangentTransportOptions& options = {});

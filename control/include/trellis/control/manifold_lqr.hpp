@@ -23,12 +23,22 @@
 // the orthonormal matrices (a perturbation T S, S symmetric, grows like −S·TᵀAT, the negated
 // tangent dynamics — +1e4 s⁻¹ on the stiff hand), while with P(t) a perturbation stays bounded.
 //
-// T is integrated forward with CVODES (BDF, dense Newton with the exact, block-diagonal Jacobian
-// E ↦ (I − P)A E, tight tolerances) on vec(T) (2n·d unknowns), keeping each step's Nordsieck data
-// (CVodeGetDky) for dense output T̃(t). The reference x(t) comes from cubic Hermite interpolation
-// and is only approximately on M, so a query corrects the stored T̃ onto the actual tangent space
-// at x(t): T = polar(P(x(t)) T̃), the nearest orthonormal matrix (U Vᵀ of the SVD U Σ Vᵀ), where
-// P(x) is the projector of the core's basis at x. maxCorrection() reports max ‖T − T̃‖_F seen.
+// T is integrated forward with CVODES (BDF; Newton with matrix-free GMRES on the exact product
+// E ↦ (I − P)A E, preconditioned by the exact solve with the block-diagonal Newton matrix
+// I − γ(I − P)A, so no difference quotient is ever taken; tight tolerances) on vec(T) (2n·d
+// unknowns), keeping each step's Nordsieck data for the dense output T̃(t). The reference x(t)
+// comes from cubic Hermite interpolation and is only approximately on M, so at every node of the
+// grid below the stored T̃ is corrected onto the actual tangent space at x(t):
+// T = polar(P(x(t)) T̃), the nearest orthonormal matrix (U Vᵀ of the SVD U Σ Vᵀ), where P(x) is
+// the projector of the core's basis at x. maxCorrection() reports max ‖T − T̃‖_F over the nodes.
+//
+// A plain-data result. The basis owns what it needs and keeps no reference to the model: the
+// corrected T_i and Ṫ_i = (I − P_i) A_i T_i (the transport's derivative) at the nodes t_i — the
+// reference's knots, each interval split into `substeps` — and basis(t) is the cubic Hermite
+// interpolant of these, made orthonormal again by its polar factor. Its error is
+// O(h⁴ max‖T⁗‖/384) for node spacing h (exact at the nodes); it is tangent to M to that accuracy.
+// The model-bound evaluator ReducedLinearization (used by the solvers) corrects the interpolant
+// onto the exact tangent space at x(t) and returns Ar = TᵀAT, Br = TᵀB there.
 //
 // Without constraints the core's basis is I, so T(t) = I (d = 2n): the same code works for every
 // scene, and solveManifoldRiccati then solves the full-state problem.
@@ -64,9 +74,24 @@ class Trajectory;
 ///    distribution on a stiff model, where the mismatch is amplified by M⁻¹).
 enum class TangentTransport { kIntegrated, kProjected };
 
+/// How solvers (manifold Riccati, Gramian, sampled-data discretization) get Ar(t), Br(t).
+///  kExact: the core's linearization at x_ref(t), u_ref(t) at every t the integrator asks for
+///    (one dynamics evaluation per distinct t), T corrected onto the exact tangent space there.
+///  kNodes: Ar_i = T_iᵀA_iT_i, Br_i = T_iᵀB_i stored at the nodes during the transport (which
+///    linearizes there anyway) and interpolated by the C¹ cubic Hermite with three-point slopes
+///    (error O(h³) for node spacing h on a smooth reference; exact at the nodes); T(t) is the held
+///    basis. No dynamics evaluation during the solve, and Ar, Br are C¹ in t (no kinks for the
+///    integrator). Suited where the reference is only trustworthy at its knots — the case of
+///    kProjected (a reference that does not satisfy the dynamics between knots).
+///  kAuto: kNodes with kProjected, kExact with kIntegrated.
+enum class ReducedLinearizationMode { kAuto, kExact, kNodes };
+
 struct TangentTransportOptions {
   TangentTransport method = TangentTransport::kIntegrated;
-  int substeps = 1;           ///< kProjected: steps per reference interval (≥ 1)
+  ReducedLinearizationMode linearization = ReducedLinearizationMode::kAuto;
+  /// Steps per reference interval (≥ 1): kProjected's transport steps, and for both methods the
+  /// nodes where the held basis is stored (the knots split `substeps` times).
+  int substeps = 1;
   double rtol = 1e-10;        ///< CVODES relative tolerance (> 0)
   double atol = 1e-12;        ///< CVODES absolute tolerance on each entry of T (> 0)
   long maxSteps = 100000;     ///< total internal steps over the trajectory (> 0)
@@ -74,18 +99,11 @@ struct TangentTransportOptions {
   void validate() const;
 };
 
-/// T(t) along a reference trajectory. Holds a copy of the trajectory and a pointer to the model
-/// (which must outlive it), plus its own workspace: queries are not thread safe (a copy gets a
-/// fresh workspace and can be used on another thread).
+/// T(t) along a reference trajectory: plain data (see "A plain-data result" above), safe to copy,
+/// to share between threads (every query is const and uses no shared workspace) and to keep after
+/// the model is gone.
 class TangentBasisTrajectory {
  public:
-  TangentBasisTrajectory();
-  ~TangentBasisTrajectory();
-  TangentBasisTrajectory(const TangentBasisTrajectory& other);
-  TangentBasisTrajectory& operator=(const TangentBasisTrajectory& other);
-  TangentBasisTrajectory(TangentBasisTrajectory&&) noexcept;
-  TangentBasisTrajectory& operator=(TangentBasisTrajectory&&) noexcept;
-
   int dimension() const { return d_; }   ///< d
   int nx() const { return nx_; }         ///< 2n
   double startTime() const { return t0_; }
@@ -94,45 +112,63 @@ class TangentBasisTrajectory {
   /// True when the transport covered the whole trajectory (false for a default-constructed object).
   /// Otherwise message() names the time and the cause (dynamics failure at x(t), CVODES error), and
   /// T is available on [t0, validUntil()].
-  bool ok() const { return trajectory_ != nullptr && message_.empty(); }
+  bool ok() const { return nx_ > 0 && message_.empty(); }
   const std::string& message() const { return message_; }
-  double validUntil() const;
-  long steps() const { return steps_; }  ///< CVODES internal steps
+  double validUntil() const { return validUntil_; }
+  long steps() const { return steps_; }  ///< CVODES internal steps (kProjected: transport steps)
+  /// Right-hand sides spent on difference-quotient Jacobian products (0: the exact ones were used).
+  long differenceQuotientEvaluations() const { return linearRhsEvaluations_; }
 
-  /// T(t), 2n×d, orthonormal, spanning the tangent space at x_ref(t) (corrected as described in
-  /// the file comment). Throws std::out_of_range outside [t0, validUntil()], std::runtime_error if
-  /// the dynamics fail at x_ref(t).
+  /// T(t), 2n×d, orthonormal: the Hermite interpolant of the stored nodes, polar-corrected (see the
+  /// file comment; tangent to M to the interpolation accuracy, exactly at the nodes). Throws
+  /// std::out_of_range outside [t0, validUntil()].
   Eigen::MatrixXd basis(double t) const;
-  /// The stored (uncorrected) transported basis T̃(t) from the dense output.
+  /// The same into out, which is resized; allocation-free once out and the internal scratch sizes
+  /// match (the polar factor's d×d eigen-decomposition aside).
+  void basis(double t, Eigen::MatrixXd& out) const;
+  /// The transported basis T̃(t) before any correction (kIntegrated: the CVODES dense output;
+  /// kProjected: T_k on (t_k, t_{k+1}]).
   Eigen::MatrixXd transportedBasis(double t) const;
-  /// T(t), and Ar = TᵀAT (d×d), Br = TᵀB (d×m) with A, B the exact linearization at x_ref(t),
-  /// u_ref(t) — one evaluation of the dynamics. Outputs are resized as needed.
-  void reducedLinearization(double t, Eigen::MatrixXd& T, Eigen::MatrixXd& Ar,
+  /// T(t) corrected onto the exact tangent space at x_ref(t), and Ar = TᵀAT (d×d), Br = TᵀB (d×m)
+  /// from the exact linearization at x_ref(t), u_ref(t) of `model` (which must be the model the
+  /// basis was transported with). Convenience for one-off queries (allocates a Data); solvers use
+  /// ReducedLinearization. Throws std::out_of_range outside the valid range, std::runtime_error
+  /// if the dynamics fail at x_ref(t).
+  void reducedLinearization(const Model& model, double t, Eigen::MatrixXd& T, Eigen::MatrixXd& Ar,
                             Eigen::MatrixXd& Br) const;
-  /// max ‖T − T̃‖_F seen at the knots (checked on construction) and at every query since.
+  /// max ‖T − T̃‖_F over the nodes (the correction onto the tangent space).
   double maxCorrection() const { return maxCorrection_; }
 
+  /// The reference the basis was transported along (an owned, immutable copy).
+  const Trajectory& reference() const;
+  /// Node times (ascending, t0 first) with the corrected T and Ṫ there.
+  const std::vector<double>& nodeTimes() const { return nodeTimes_; }
+  /// True when solvers interpolate Ar, Br between the nodes (ReducedLinearizationMode::kNodes).
+  bool usesNodeLinearization() const { return nodeLinearization_; }
+
  private:
+  friend class ReducedLinearization;
   friend TangentBasisTrajectory transportTangentBasis(const Model&, const Trajectory&,
                                                       const TangentTransportOptions&);
-  struct Workspace;
   struct Step {
     double t;            // step end
     Eigen::MatrixXd D;   // (2n·d) × (q+1): d^k vec(T)/dt^k at t
   };
-  void evaluateStored(double t, Eigen::MatrixXd& Ttilde) const;
-  void correct(double t, const Eigen::MatrixXd& Ttilde, Eigen::MatrixXd& T) const;
+  void checkRange(double t, const char* what) const;
+  void interpolate(double t, Eigen::MatrixXd& T) const;  // Hermite, not yet orthonormal
 
-  const Model* model_ = nullptr;
   std::shared_ptr<const Trajectory> trajectory_;  // immutable, shared between copies
   int nx_ = 0, d_ = 0;
-  double t0_ = 0.0, tf_ = 0.0;
+  double t0_ = 0.0, tf_ = 0.0, validUntil_ = 0.0;
   bool identity_ = false;      // no constraints: T = I, nothing stored
-  std::vector<Step> stored_;   // ascending t; stored_[0] is t0
+  std::vector<Step> stored_;   // transported T̃, ascending t; stored_[0] is t0
+  std::vector<double> nodeTimes_;
+  std::vector<Eigen::MatrixXd> nodeT_, nodeDT_;  // corrected T and Ṫ at the nodes
+  std::vector<Eigen::MatrixXd> nodeAr_, nodeBr_;  // TᵀAT, TᵀB at the nodes
+  bool nodeLinearization_ = false;                // solvers interpolate nodeAr_/nodeBr_ (kNodes)
   std::string message_;
-  long steps_ = 0;
-  mutable double maxCorrection_ = 0.0;
-  mutable std::unique_ptr<Workspace> work_;
+  long steps_ = 0, linearRhsEvaluations_ = 0;
+  double maxCorrection_ = 0.0;
 };
 
 /// Transports the tangent basis along the reference (see the file comment). The trajectory must
@@ -143,11 +179,48 @@ class TangentBasisTrajectory {
 TangentBasisTrajectory transportTangentBasis(const Model& model, const Trajectory& reference,
                                              const TangentTransportOptions& options = {});
 
-/// The reduced solution's callbacks share one TangentBasisTrajectory workspace (with copies of
-/// this struct too): K(t) and S(t) are not thread safe.
+/// The reduced linearization along a transported basis, bound to a model (like a Data: the model
+/// must outlive it; one per thread). evaluate(t) computes, for t in the basis's valid range,
+///   T = polar(P(x_ref(t)) T_h(t))   (T_h: the basis's Hermite interpolant),
+///   Ar = TᵀA T,  Br = TᵀB           (A, B: the core's exact linearization at x_ref(t), u_ref(t)),
+/// with one dynamics evaluation per distinct t (the last t is cached) — or, when the basis uses
+/// node linearizations (kNodes), T = basis(t) and Ar, Br interpolated from the nodes, with no
+/// dynamics evaluation. Allocation-free after the first call, except the d×d SVD/eigensolver.
+class ReducedLinearization {
+ public:
+  ReducedLinearization(const Model& model, TangentBasisTrajectory basis);
+  ~ReducedLinearization();
+  ReducedLinearization(const ReducedLinearization&) = delete;
+  ReducedLinearization& operator=(const ReducedLinearization&) = delete;
+
+  /// Throws std::out_of_range outside the valid range, std::runtime_error (naming t) when the
+  /// dynamics fail or the tangent space changes dimension.
+  void evaluate(double t);
+  const Eigen::MatrixXd& T() const { return T_; }
+  const Eigen::MatrixXd& Ar() const { return Ar_; }
+  const Eigen::MatrixXd& Br() const { return Br_; }
+  const Eigen::MatrixXd& A() const;  ///< the full-state A at the last t
+  const TangentBasisTrajectory& basis() const { return basis_; }
+  long evaluations() const { return evaluations_; }  ///< dynamics evaluations so far
+
+ private:
+  struct Work;
+  const Model& model_;
+  TangentBasisTrajectory basis_;
+  std::unique_ptr<Work> work_;
+  Eigen::MatrixXd T_, Ar_, Br_;
+  bool cached_ = false;
+  double cachedTime_ = 0.0;
+  long evaluations_ = 0;
+};
+
+/// The manifold TV-LQR: plain data (the reduced solution and the basis own everything they need;
+/// nothing refers to the model, the weights' callbacks or the trajectory passed in). Copyable,
+/// thread safe for queries.
 struct ManifoldRiccatiSolution {
   RiccatiSolution reduced;          ///< on z (d states): Sr(t), Kr(t)
   TangentBasisTrajectory basis;     ///< T(t)
+  long linearizations = 0;          ///< dynamics evaluations during the Riccati solve
   /// False when the transport failed (then `reduced` is empty: the Riccati solve needs T on the
   /// whole horizon) or the reduced Riccati solve failed.
   bool ok() const { return basis.ok() && reduced.ok(); }
@@ -155,7 +228,8 @@ struct ManifoldRiccatiSolution {
   const std::string& message() const;
   int nx() const { return basis.nx(); }
   int dimension() const { return basis.dimension(); }
-  /// K(t) = Kr(t) T(t)ᵀ (m×2n).
+  /// K(t) = Kr(t) T(t)ᵀ (m×2n), T(t) the held basis (Hermite + polar, see above): exact at the
+  /// nodes, and within O(h⁴) of the basis the solve used elsewhere; Kr(t) as RiccatiSolution::K.
   Eigen::MatrixXd K(double t) const;
   /// S(t) = T(t) Sr(t) T(t)ᵀ (2n×2n, symmetric PSD, rank ≤ d).
   Eigen::MatrixXd S(double t) const;
