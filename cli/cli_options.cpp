@@ -189,7 +189,11 @@ std::string formatNumber(double value, int digits) {
 
 Trajectory loadReference(const Model& model, const std::string& scenePath,
                          const std::string& trajectoryPath) {
-  const Trajectory file = Trajectory::readCsvFile(trajectoryPath);
+  return checkReference(model, scenePath, trajectoryPath, Trajectory::readCsvFile(trajectoryPath));
+}
+
+Trajectory checkReference(const Model& model, const std::string& scenePath, const std::string& trajectoryPath,
+                          const Trajectory& file) {
   try {
     file.checkCompatible(model);
   } catch (const TrajectoryError& e) {

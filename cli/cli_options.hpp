@@ -136,6 +136,9 @@ std::string formatNumber(double value, int digits = 6);
 /// meaningful linearization and would be tracked with a drift as large as its violation.
 Trajectory loadReference(const Model& model, const std::string& scenePath,
                          const std::string& trajectoryPath);
+/// loadReference's checks on a trajectory made in memory; `trajectoryPath` names it in messages.
+Trajectory checkReference(const Model& model, const std::string& scenePath, const std::string& trajectoryPath,
+                          const Trajectory& trajectory);
 
 /// The bound of loadReference's constraint check: 1e-6 relative (written trajectories carry 17
 /// digits; an optimized or integrated one satisfies its constraints to its solver's tolerance).

@@ -3,6 +3,7 @@
 // trellis::solveTvlqr: continuous, or sampled with --rate).
 #include "cli_options.hpp"
 #include "command.hpp"
+#include "model_questions.hpp"
 #include "weights.hpp"
 
 #include "trellis/control/controllability.hpp"
@@ -12,17 +13,20 @@
 #include "trellis/core/trajectory.hpp"
 #include "trellis/control/tvlqr.hpp"
 #include "trellis/core/data.hpp"
+#include "trellis/core/equilibrium.hpp"
 #include "trellis/core/scene.hpp"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 
 namespace trellis::cli {
 namespace {
 
 constexpr std::string_view kHelp = R"(usage: trellis gains SCENE.json --trajectory TRAJ.csv --out GAINS.csv [options]
+       trellis gains SCENE.json --hold T [--state STATE.json] --out GAINS.csv [options]
 
 Time-varying LQR along a reference trajectory x_ref(t), u_ref(t) of the scene (SCENE_FORMAT.md):
 with the exact linearization dx' = A(t) dx + B(t) du at the reference, x = [q; q'] (2n states,
@@ -41,6 +45,12 @@ The trajectory file has one row per knot: t, <configs>, d<configs>, <inputs> (th
 `trellis simulate --out` writes); its names must equal the scene's, in order. Optional columns
 rate_<input> after the inputs (one per input) give du/dt at the knots: u_ref(t) is then the cubic
 Hermite spline through them instead of linear between knots.
+
+Holding a pose (--hold T, no trajectory file; a URDF works as it is): the reference is the pose q
+of the scene's stored state (or of --state; its velocities are ignored) at rest over [0, T], with
+the inputs that hold it still (as `trellis equilibrium --hold`: B_u u + A^T lambda = b(q), least
+squares of minimum norm; the command fails if no inputs hold the pose exactly), 101 knots. On a
+scene with constraints the pose must satisfy them (`trellis project` moves a state onto them).
 
 Weights W (for --Q, --Qf: 2n x 2n, positive semidefinite; for --R: m x m, positive definite):
   a number            that multiple of the identity            --Q 10
@@ -70,7 +80,9 @@ reachability Gramian over the whole trajectory (smallest and largest eigenvalue)
 summary is one JSON object instead.
 
 options:
-  --trajectory FILE   the reference trajectory (CSV; required)
+  --trajectory FILE   the reference trajectory (CSV; required unless --hold)
+  --hold T            instead of --trajectory: hold the stored (or --state) pose still for T s
+  --state FILE        with --hold: the pose (a state object, see `trellis linearize --help`)
   --out FILE          where to write the gains (CSV; required)
   --Q W               state weight (default 1)
   --R W               input weight (default 1)
@@ -92,27 +104,57 @@ usage error (unknown option, missing file argument, malformed number or weight l
 one line on standard error, nothing on standard output, and no output file.
 )";
 
-/// W ≻ 0 is controllability; a ratio λmin/λmax below 1e-10 (GramianReport::controllable) is
-/// reported as ill-conditioned when λmin is still positive (typical of an unstable reference,
-/// whose transition matrix grows the Gramian along the unstable directions).
-std::string gramianVerdict(const GramianReport& gramian) {
-  if (gramian.controllable()) return " (controllable)";
-  if (gramian.minEigenvalue > 0.0) {
-    return " (positive definite but ill-conditioned: min/max = " +
-           formatNumber(gramian.minEigenvalue / gramian.maxEigenvalue, 3) + ")";
+/// W ≻ 0 is controllability, but the integration resolves λ_min only down to rtol·λ_max
+/// (GramianOptions: the entries of W carry a relative error rtol). Below that the sign and size of
+/// λ_min are rounding, not information: an unstable reference makes λ_max grow like e^{2σT} and
+/// pushes λ_min under the resolution although the pair is controllable, so the verdict says the
+/// Gramian cannot decide instead of "not controllable" (the rank at t0 above still can).
+std::string gramianVerdict(const GramianReport& gramian, double resolution) {
+  if (gramian.minEigenvalue > resolution * gramian.maxEigenvalue) return " (controllable)";
+  return " (undecided: min eigenvalue below the integration's resolution " + formatNumber(resolution, 1) +
+         " x max" + (gramian.maxEigenvalue > 1e8 ? ", max grows as an unstable reference does" : "") +
+         "; see the rank at t0)";
+}
+
+/// The reference of --hold: the pose q at rest over [0, span] with the inputs that hold it
+/// (computeHoldingInputs), 101 knots; checked as a reference file is (constraints, dynamics).
+Trajectory heldPose(const LoadedScene& loaded, const std::optional<std::string>& statePath, double span) {
+  const Model& model = loaded.scene.model;
+  const ModelState state = stateFromFile(loaded, statePath);
+  Data data(model);
+  const InverseDynamicsResult hold = computeHoldingInputs(model, data, state.q);
+  if (!hold.ok()) {
+    throw std::runtime_error(loaded.path + ": gains --hold: the pose cannot be held (" + toString(hold.status) +
+                             "): " + hold.message);
   }
-  return " (NOT controllable)";
+  constexpr int kKnots = 101;
+  const Eigen::VectorXd times = Eigen::VectorXd::LinSpaced(kKnots, 0.0, span);
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(2 * model.nq());
+  x.head(model.nq()) = state.q;
+  const Trajectory pose(model.configNames(), model.inputNames(), times, x.replicate(1, kKnots),
+                        hold.u.replicate(1, kKnots));
+  return checkReference(model, loaded.path, "the held pose", pose);
 }
 
 int runGains(std::span<const std::string> args, std::ostream& out) {
   const ParsedOptions options(
       "gains", args,
-      {.valued = {"--trajectory", "--out", "--Q", "--R", "--Qf", "--dt", "--rate", "--rtol", "--atol", "--method",
+      {.valued = {"--trajectory", "--hold", "--state", "--out", "--Q", "--R", "--Qf", "--dt", "--rate", "--rtol", "--atol", "--method",
                   "--max-steps"},
        .flags = {"--json"},
        .repeatable = {}});
   const std::string scenePath = options.singlePositional("scene file");
-  const std::string trajectoryPath = options.required("--trajectory", "(the reference trajectory CSV)");
+  if (options.has("--hold") && options.has("--trajectory")) {
+    throw UsageError("gains: --hold and --trajectory exclude each other (--hold makes the reference)");
+  }
+  if (options.has("--state") && !options.has("--hold")) {
+    throw UsageError("gains: --state applies to --hold only (the reference comes from --trajectory)");
+  }
+  const std::optional<double> holdSpan =
+      options.has("--hold") ? std::optional<double>(options.positiveNumber("--hold", *options.value("--hold")))
+                            : std::nullopt;
+  const std::string trajectoryPath =
+      holdSpan ? std::string("the held pose") : options.required("--trajectory", "(the reference trajectory CSV, or --hold T)");
   const std::string outPath = options.required("--out", "(the gains CSV to write)");
 
   TvlqrOptions tvlqr;
@@ -143,12 +185,13 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
     if (auto v = options.value("--atol")) tvlqr.sampled.atol = options.absoluteTolerance("--atol", *v);
   }
 
-  const Scene scene = loadScene(scenePath);
-  const Model& model = scene.model;
+  const LoadedScene loaded = loadSceneArgument(scenePath);
+  const Model& model = loaded.scene.model;
   const int n = model.nq(), m = model.nu(), nx = 2 * n;
   if (m == 0) throw std::runtime_error(scenePath + ": the scene has no inputs: there is nothing to control");
 
-  const Trajectory trajectory = loadReference(model, scenePath, trajectoryPath);
+  const Trajectory trajectory = holdSpan ? heldPose(loaded, options.value("--state"), *holdSpan)
+                                         : loadReference(model, scenePath, trajectoryPath);
   if (tvlqr.outputStep > 0.0) options.gridPoints("--dt", tvlqr.outputStep, trajectory.endTime() - trajectory.startTime(), kMaxOutputRows, "output rows");
   if (tvlqr.sampleRate > 0.0) options.gridPoints("--rate", 1.0 / tvlqr.sampleRate, trajectory.endTime() - trajectory.startTime(), kMaxOutputRows, "output rows");
   Data data(model);
@@ -177,15 +220,16 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   const ControllabilityReport pointwise = computeControllabilityAt(
       model, data, trajectory.states().col(0).head(n), trajectory.states().col(0).tail(n),
       trajectory.inputs().col(0));
-  const GramianReport gramian =
-      computeControllabilityGramian(model, trajectory, trajectory.startTime(), trajectory.endTime(),
-                                    GramianOptions{});  // summary accuracy (controllability.hpp)
+  const GramianOptions gramianOptions;  // summary accuracy (controllability.hpp)
+  const GramianReport gramian = computeControllabilityGramian(model, trajectory, trajectory.startTime(),
+                                                              trajectory.endTime(), gramianOptions);
   if (json) {
     std::string body = solution.json();
     body.pop_back();  // the closing brace: append the file and the controllability checks
     out << body << ", \"out\": " << jsonString(outPath) << ", \"controllable_at_t0\": "
         << (pointwise.controllable() ? "true" : "false") << ", \"rank_at_t0\": " << pointwise.rank
         << ", \"gramian_ok\": " << (gramian.ok ? "true" : "false")
+        << ", \"gramian_resolved\": " << (gramian.ok && gramian.minEigenvalue > gramianOptions.rtol * gramian.maxEigenvalue ? "true" : "false")
         << ", \"gramian_min_eigenvalue\": " << jsonNumber(gramian.ok ? gramian.minEigenvalue : NAN)
         << ", \"gramian_max_eigenvalue\": " << jsonNumber(gramian.ok ? gramian.maxEigenvalue : NAN) << "}\n";
     return 0;
@@ -197,7 +241,7 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
     out << "gramian on [" << formatNumber(trajectory.startTime()) << ", "
         << formatNumber(trajectory.endTime()) << "]: min eigenvalue " << formatNumber(gramian.minEigenvalue, 3)
         << ", max eigenvalue " << formatNumber(gramian.maxEigenvalue, 3)
-        << gramianVerdict(gramian) << "\n";
+        << gramianVerdict(gramian, gramianOptions.rtol) << "\n";
   } else {
     out << "gramian: not available (" << gramian.message << ")\n";
   }
