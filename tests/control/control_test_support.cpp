@@ -1,5 +1,7 @@
 #include "control_test_support.hpp"
 
+#include "support/cart_pole_model.hpp"
+
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -40,15 +42,7 @@ Comparison compareRelative(const Eigen::MatrixXd& expected, const Eigen::MatrixX
   return c;
 }
 
-Model makeCartPole(double mc, double mp, double l) {
-  ModelBuilder b("cartpole");
-  b.addFrame("cart", "world", Transform::tx("x"), Mass{mc, Eigen::Matrix3d::Zero()});
-  b.addFrame("pole", "cart", Transform::rz("theta"));
-  b.addFrame("bob", "pole", Transform::ty(l), Mass{mp, Eigen::Matrix3d::Zero()});
-  b.addGravity({0.0, -9.81, 0.0});
-  b.addConfigForce("x", "push");
-  return std::move(b).finalize();
-}
+Model makeCartPole(double mc, double mp, double l) { return trellis::test::cartPole(mc, mp, l); }
 
 Model makeConstrainedCarts() {
   ModelBuilder b("carts");

@@ -1,5 +1,5 @@
 // Tests for trellis/core/reference.hpp: the checks once, x/u/ẋ and the exact linearization at any t.
-#include "cart_pole_model.hpp"
+#include "support/cart_pole_model.hpp"
 
 #include <trellis/core.hpp>
 

@@ -1,5 +1,5 @@
 // Tests for trellis/core/trajectory.hpp: validation, CSV round trip, interpolation.
-#include "cart_pole_model.hpp"
+#include "support/cart_pole_model.hpp"
 
 #include <trellis/core.hpp>
 

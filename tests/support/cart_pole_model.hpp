@@ -1,4 +1,4 @@
-// cart_pole_model.hpp — the cart-pole of the trajectory and reference tests (core only).
+// support/cart_pole_model.hpp — the cart-pole of the core and control tests (header only).
 #pragma once
 
 #include <trellis/core/model_builder.hpp>
