@@ -37,6 +37,7 @@ ClosedLoopSystem::ClosedLoopSystem(const Model& model, const InputLaw& law,
       bounded_(options.inputLower.size() > 0 || options.inputUpper.size() > 0),
       // ∂u/∂x is known unless a continuous user policy decides u.
       jacobianKnown_(options.exactJacobian && (sampled_ || law.kind != InputLaw::Kind::kPolicy)),
+      deviation_(law.kind != InputLaw::Kind::kPolicy && law.reference != nullptr),
       data_(model),
       x_(2 * n_),
       q_(n_),
@@ -47,6 +48,10 @@ ClosedLoopSystem::ClosedLoopSystem(const Model& model, const InputLaw& law,
       upper_(Eigen::VectorXd::Constant(m_, std::numeric_limits<double>::infinity())),
       xr_(2 * n_),
       ur_(m_),
+      xrdot_(2 * n_),
+      dx_(2 * n_),
+      xc_(2 * n_),
+      uc_(m_),
       active_(Eigen::VectorXd::Ones(m_)),
       K_(m_, 2 * n_),
       SK_(m_, 2 * n_) {
@@ -81,20 +86,59 @@ int ClosedLoopSystem::failureReturn() {
   return aborted_ ? -1 : 1;
 }
 
-bool ClosedLoopSystem::input(double t, const Eigen::VectorXd& x, Eigen::VectorXd& out) {
+void ClosedLoopSystem::toState(double t, const Eigen::Ref<const Eigen::VectorXd>& y,
+                               Eigen::VectorXd& x) {
+  if (!deviation_) {
+    x = y;
+    return;
+  }
+  law_.reference->evaluate(t, xc_, uc_);
+  x = xc_ + y;
+}
+
+void ClosedLoopSystem::toIntegrator(double t, const Eigen::VectorXd& x, Eigen::VectorXd& y) {
+  if (!deviation_) {
+    y = x;
+    return;
+  }
+  law_.reference->evaluate(t, xc_, uc_);
+  y = x - xc_;
+}
+
+bool ClosedLoopSystem::stateFrom(double t, ConstVectorMap y) {
+  if (!deviation_) {
+    x_ = y;
+    return true;
+  }
   try {
+    law_.reference->evaluate(t, xr_, ur_, xrdot_);
+  } catch (const std::exception& e) {
+    x_ = y;
+    fail(SimulationStatus::kPolicyFailure, t, x_, std::string("the reference threw: ") + e.what());
+    return false;
+  }
+  x_ = xr_ + y;
+  return true;
+}
+
+bool ClosedLoopSystem::input(double t, const Eigen::VectorXd& x, Eigen::VectorXd& out,
+                             bool referenceFresh) {
+  try {
+    if (law_.kind != InputLaw::Kind::kPolicy && !referenceFresh) {
+      law_.reference->evaluate(t, xr_, ur_);
+    }
     switch (law_.kind) {
       case InputLaw::Kind::kPolicy:
         (*law_.policy)(t, x, out);
         break;
       case InputLaw::Kind::kOpenLoop:
-        law_.reference->evaluate(t, xr_, out);
+        out = ur_;
         break;
       case InputLaw::Kind::kFeedback:
-        law_.reference->evaluate(t, xr_, out);
         law_.gains->evaluate(t, K_);
-        xr_ = x - xr_;  // x − x_ref
-        out.noalias() -= K_ * xr_;
+        dx_ = x - xr_;
+        out = ur_;
+        out.noalias() -= K_ * dx_;
         break;
     }
   } catch (const std::exception& e) {
@@ -139,14 +183,14 @@ bool ClosedLoopSystem::control(double t, const Eigen::VectorXd& x, Eigen::Vector
 
 int ClosedLoopSystem::rhs(double t, ConstVectorMap y, VectorMap ydot) {
   if (aborted_) return -1;
-  x_ = y;
+  if (!stateFrom(t, y)) return failureReturn();
   if (!x_.allFinite()) {
     fail(SimulationStatus::kNonFinite, t, x_, "the state became non-finite");
     return failureReturn();
   }
   if (sampled_) {
     u_ = held_;
-  } else if (!input(t, x_, u_)) {
+  } else if (!input(t, x_, u_, deviation_)) {
     return failureReturn();
   }
   q_ = x_.head(n_);
@@ -161,16 +205,17 @@ int ClosedLoopSystem::rhs(double t, ConstVectorMap y, VectorMap ydot) {
   }
   ydot.head(n_) = dq_;
   ydot.tail(n_) = data_.qdd;
+  if (deviation_) ydot -= xrdot_;
   return 0;
 }
 
 int ClosedLoopSystem::jacobian(double t, ConstVectorMap y, ConstVectorMap /*fy*/, MatrixMap J) {
   if (aborted_) return -1;
-  x_ = y;
+  if (!stateFrom(t, y)) return failureReturn();
   const bool feedback = !sampled_ && law_.kind == InputLaw::Kind::kFeedback;
   if (sampled_) {
     u_ = held_;
-  } else if (!input(t, x_, u_)) {  // also K_ and active_ at t
+  } else if (!input(t, x_, u_, deviation_)) {  // also K_ and active_ at t
     return failureReturn();
   }
   q_ = x_.head(n_);

@@ -76,7 +76,14 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
         "simulation stopped at t = " + formatTime(t) + ", x = " + formatVector(state) + ": " + what;
   };
 
-  Eigen::VectorXd x = x0, xr(nx), ur(m), u(m);
+  Eigen::VectorXd x = x0, xr(nx), ur(m), u(m), y(nx);
+  // The state x at the integrator's current time (the integrator holds x or x − x_ref, see
+  // closed_loop_system.hpp).
+  auto integratorState = [&]() {
+    Eigen::VectorXd state(nx);
+    system.toState(driver.time(), driver.state(), state);
+    return state;
+  };
   long steps = 0;
   double stopTime = t0;  // the next stop event: the integrator never steps past it
   for (std::size_t e = 0; e < events.size(); ++e) {
@@ -91,7 +98,7 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
       while (driver.time() < te) {
         if (steps >= options.maxSteps) {
           setFailure(SimulationStatus::kIntegratorFailure, driver.time(),
-                     Eigen::VectorXd(driver.state()),
+                     integratorState(),
                      "more than maxSteps = " + std::to_string(options.maxSteps) + " internal steps");
           failed = true;
           break;
@@ -106,7 +113,7 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
               what = "more than maxSteps = " + std::to_string(options.maxSteps) +
                      " internal steps; " + what;
             if (system.failed) what += " (last right-hand-side failure: " + system.failMessage + ")";
-            setFailure(SimulationStatus::kIntegratorFailure, st.t, Eigen::VectorXd(driver.state()),
+            setFailure(SimulationStatus::kIntegratorFailure, st.t, integratorState(),
                        what);
           }
           failed = true;
@@ -116,9 +123,11 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
       }
       if (failed) break;
       if (driver.time() == te) {
-        x = driver.state();
-      } else if (!driver.interpolate(te, 0, x)) {
-        setFailure(SimulationStatus::kIntegratorFailure, te, Eigen::VectorXd(driver.state()),
+        system.toState(te, driver.state(), x);
+      } else if (driver.interpolate(te, 0, y)) {
+        system.toState(te, y, x);
+      } else {
+        setFailure(SimulationStatus::kIntegratorFailure, te, integratorState(),
                    "the dense output is not available at t = " + formatTime(te));
         break;
       }
@@ -188,7 +197,8 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
     if (e + 1 == events.size()) break;
     // 5. (re)start where the right-hand side jumps (a sample, a breakpoint) or the state did
     if (e == 0 || ev.stop || projected) {
-      driver.start(te, x);
+      system.toIntegrator(te, x, y);
+      driver.start(te, y);
       std::size_t next = e + 1;
       while (!events[next].stop) ++next;  // the last event (t1) is a stop
       stopTime = events[next].t;
