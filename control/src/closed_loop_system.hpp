@@ -11,7 +11,9 @@
 // function; ∂ẏ/∂y = ∂f/∂x). The error control then weighs the local error against |y| and atol
 // instead of |x|: once the tracking error is small the steps are limited by how well y is
 // resolved, not by the reference motion itself, and the absolute accuracy of x near the reference
-// is ~atol, not rtol·|x| (measured on the hand, see the report of issue 11).
+// is ~atol, not rtol·|x| (measured on the hand, see the report of issue 11). Not used with BDF's
+// difference-quotient Jacobian (its increments, scaled to |y| and atol, drown in the rounding of
+// x_ref + y), so the fallback integrates x itself.
 #pragma once
 
 #include "ode_driver.hpp"

@@ -13,6 +13,7 @@
 //      saturated at zero, constraints projected; tracking error, drift and saturation — one batch
 //      (simulateBatch) over the machine's cores;
 //   7. files in the output folder (default output/hand/): reference.csv, gains.csv,
+//      reference_accelerations.csv (q'' at the knots, for the plots' Hermite reference),
 //      controllability.csv, closed_loop_<k>.csv, summary.txt and the PNG plots (scripts/plot_run.py).
 // The plots are ONE Python process, started as soon as the gains are written: matplotlib's start-up
 // and the gain and controllability plots overlap the closed loops; it is told "go" on its standard
@@ -172,6 +173,19 @@ int main(int argc, char** argv) try {
                       reference.dynamicsResidual.maxCoeff(), reference.forwardDynamicsError.maxCoeff()) +
                format(", tensions %.3g … %.3g N", trajectory.inputs().minCoeff(), trajectory.inputs().maxCoeff()));
   trajectory.writeCsvFile(options.out + "/reference.csv");
+  {  // q'' at the knots (the reference's state derivatives) for the plots' Hermite reference
+    std::ostringstream csv;
+    csv.precision(17);
+    csv << 't';
+    for (const std::string& name : trajectory.configNames()) csv << ',' << name;
+    csv << '\n';
+    for (int k = 0; k < N; ++k) {
+      csv << trajectory.times()(k);
+      for (int i = 0; i < n; ++i) csv << ',' << trajectory.stateDerivatives()(n + i, k);
+      csv << '\n';
+    }
+    trellis::writeFileAtomically(options.out + "/reference_accelerations.csv", csv.str());
+  }
 
   // 3. Linearization along the reference ---------------------------------------------------------
   progress.begin("exact linearization at every knot (and central differences at the first knot)");
@@ -260,14 +274,10 @@ int main(int argc, char** argv) try {
     // Debian's interpreter has python3-matplotlib; a python3 earlier on PATH may not.
     const char* python = std::filesystem::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
     cmd << python << " \"" << TRELLIS_SOURCE_DIR << "/scripts/plot_run.py\" --closed-after-go --title 'human hand'"
-        // The scene: the tracking error against the Hermite reference, as simulate measures it.
-        << " --scene \"" << scenePath << "\"";
-    // plot_run.py evaluates q'' at the knots with the trellis CLI: this build's, when it is here.
-    std::error_code ec;
-    const std::filesystem::path cli =
-        std::filesystem::canonical("/proc/self/exe", ec).parent_path() / "../../cli/trellis";
-    if (!ec && std::filesystem::exists(cli)) cmd << " --trellis \"" << cli.lexically_normal().string() << "\"";
-    cmd
+        // The reference's knot accelerations (what simulate's Hermite reference uses): the tracking
+        // error plotted as simulate measures it. (--scene would give the same from one `trellis
+        // linearize` process per knot: 22 s for the 301 knots, measured.)
+        << " --accelerations \"" << options.out << "/reference_accelerations.csv\""
         << " --reference \"" << options.out << "/reference.csv\" --gains \"" << options.out
         << "/gains.csv\" --controllability \"" << options.out << "/controllability.csv\" --out \""
         << options.out << "\"";
