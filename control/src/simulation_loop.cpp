@@ -8,21 +8,12 @@
 
 #include "trellis/core/model.hpp"
 
-#include <cvodes/cvodes.h>
-
 #include <memory>
 #include <string>
 
 namespace trellis::detail {
 
 namespace {
-
-/// The integrator stopped because a callback failed (then the callback's record says why).
-bool callbackFlag(int flag) {
-  return flag == CV_RHSFUNC_FAIL || flag == CV_FIRST_RHSFUNC_ERR || flag == CV_REPTD_RHSFUNC_ERR ||
-         flag == CV_UNREC_RHSFUNC_ERR || flag == CV_CONV_FAILURE || flag == CV_LSETUP_FAIL ||
-         flag == CV_LSOLVE_FAIL || flag == CV_NLS_FAIL;
-}
 
 OdeOptions integratorOptions(const SimulationOptions& options) {
   OdeOptions ode;
@@ -105,11 +96,11 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
         }
         const OdeStatus st = driver.step(stopTime);
         if (!st.ok()) {
-          if (system.failed && callbackFlag(st.flag)) {
+          if (system.failed && st.callbackFailed()) {
             setFailure(system.failStatus, system.failTime, system.failState, st.message);
           } else {
             std::string what = st.message;
-            if (st.flag == CV_TOO_MUCH_WORK)
+            if (st.tooMuchWork())
               what = "more than maxSteps = " + std::to_string(options.maxSteps) +
                      " internal steps; " + what;
             if (system.failed) what += " (last right-hand-side failure: " + system.failMessage + ")";
