@@ -8,12 +8,13 @@
 // Weights as the main job: Q = diag(100·I_n, I_n), R = I, Qf = Q; the tangent basis by discrete
 // transport on the knots (kProjected, 2 substeps); continuous Riccati and interval discretization
 // rtol 1e-6, atol 1e-8.
-// Closed loop: BDF, rtol 1e-7, atol 1e-9, tensions clipped at 0, perturbation of norm --perturbation
+// Closed loop: examples/hand/hand_feedback.hpp's options (BDF, rtol 1e-7, atol 5e-10, tensions clipped at 0), perturbation of norm --perturbation
 // along a seeded random tangent direction at t0.
 //
 //   trellis_bench_sampled [--duration 3] [--knots 301] [--rates 100,1000] [--perturbation 0.01]
 //                         [--seed 1] [--repeat 1] [--no-simulate]
 // One line per solve and per closed loop; a JSON line (prefix "json: ") per row for scripts.
+#include "hand_feedback.hpp"
 #include "reference_motion.hpp"
 
 #include <trellis/control.hpp>
@@ -23,7 +24,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -73,7 +73,7 @@ int main(int argc, char** argv) try {
   const Args args = parse(argc, argv);
   const trellis::Scene scene = trellis::loadScene(std::string(TRELLIS_EXAMPLE_SCENES_DIR) + "/hand.json");
   const trellis::Model& model = scene.model;
-  const int n = model.nq(), m = model.nu(), nx = 2 * n;
+  const int n = model.nq(), m = model.nu();
   trellis::hand::ReferenceMotionOptions ro;
   ro.duration = args.duration;
   ro.knots = args.knots;
@@ -83,18 +83,12 @@ int main(int argc, char** argv) try {
   std::printf("hand: n = %d, m = %d, nc = %d; reference %d knots over %.3g s\n", n, m, model.nc(),
               trajectory.size(), trajectory.endTime() - trajectory.startTime());
 
-  trellis::LqrWeights weights;
-  weights.Q = Eigen::MatrixXd::Identity(nx, nx);
-  weights.Q.topLeftCorner(n, n) *= 100.0;
-  weights.R = Eigen::MatrixXd::Identity(m, m);
-  weights.Qf = weights.Q;
+  const trellis::LqrWeights weights = trellis::hand::feedbackWeights(model);
   trellis::TvlqrOptions base;
-  base.transport.method = trellis::TangentTransport::kProjected;
-  base.transport.substeps = 2;
-  base.riccati.rtol = 1e-6;
-  base.riccati.atol = 1e-8;
-  base.sampled.rtol = 1e-6;  // the same tolerances for the interval discretization
-  base.sampled.atol = 1e-8;
+  base.transport = trellis::hand::feedbackTransport();
+  base.riccati = trellis::hand::feedbackRiccatiOptions();
+  base.sampled.rtol = base.riccati.rtol;  // the same tolerances for the interval discretization
+  base.sampled.atol = base.riccati.atol;
 
   auto timed = [&](const trellis::TvlqrOptions& o, double& best) {
     trellis::TvlqrSolution sol;
@@ -117,21 +111,11 @@ int main(int argc, char** argv) try {
   const trellis::GainSchedule& contGains = cont.gains;
 
   // Seeded tangent perturbation at t0.
-  std::mt19937 rng(args.seed);
-  std::normal_distribution<double> normal(0.0, 1.0);
   const trellis::TangentBasisTrajectory basis = trellis::transportTangentBasis(model, trajectory, base.transport);
-  const Eigen::MatrixXd T0 = basis.basis(trajectory.startTime());
-  Eigen::VectorXd z(T0.cols());
-  for (int i = 0; i < z.size(); ++i) z(i) = normal(rng);
-  z *= args.perturbation / z.norm();
-  const Eigen::VectorXd x0 = trajectory.states().col(0) + T0 * z;
-
-  trellis::SimulationOptions sim;
-  sim.method = trellis::IntegrationMethod::kBDF;
-  sim.rtol = 1e-7;
-  sim.atol = 1e-9;
-  sim.inputLower = Eigen::VectorXd::Zero(m);
-  sim.inputUpper = Eigen::VectorXd::Constant(m, INFINITY);
+  const Eigen::VectorXd x0 = trellis::hand::perturbedStarts(basis.basis(trajectory.startTime()),
+                                                            trajectory.states().col(0), 1, args.seed,
+                                                            args.perturbation)[0];
+  trellis::SimulationOptions sim = trellis::hand::closedLoopOptions(m);
 
   for (double rate : args.rates) {
     trellis::TvlqrOptions o = base;

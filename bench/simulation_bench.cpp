@@ -1,12 +1,14 @@
 // simulation_bench — the hand's closed loop as the main job runs it (examples/main_job): the
-// designed reference (301 knots over 3 s), manifold TV-LQR gains (Q = diag(100 I, I), R = I,
-// kProjected transport), BDF at rtol 1e-7 / atol 1e-9, tensions clipped at 0, constraints
-// projected, starts perturbed by 0.05 along seeded tangent directions.
+// designed reference (301 knots over 3 s, tensions with rates: cubic input rule), manifold TV-LQR
+// gains as examples/hand/hand_feedback.hpp designs them (knots + Riccati steps, cubic gain rule),
+// BDF at rtol 1e-7 / atol 5e-10 on the deviation from the reference, tensions clipped at 0,
+// constraints projected, starts perturbed by 0.05 along seeded tangent directions.
 //   BM_HandClosedLoop/exact:1/saturation:1  one 3 s run as in the main job, exact Jacobian A − B S K;
 //     exact:0 difference quotients; saturation:0 without the tension limits (what switching costs)
 //   BM_HandClosedLoopBatch/threads:T  the main job's 20 runs through simulateBatch on T threads
 // Counters: steps, restarts, projections, Jacobians and difference-quotient right-hand sides per
 // run, and the final tracking error (the speed is worth nothing if the run is wrong).
+#include "hand_feedback.hpp"
 #include "reference_motion.hpp"
 
 #include <trellis/control.hpp>
@@ -16,9 +18,7 @@
 
 #include <Eigen/Core>
 
-#include <cmath>
 #include <memory>
-#include <random>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -33,41 +33,19 @@ struct HandLoop {
   trellis::SimulationOptions options;
 
   HandLoop() : scene(trellis::loadScene(std::string(TRELLIS_EXAMPLE_SCENES_DIR) + "/hand.json")) {
+    namespace hand = trellis::hand;
     const trellis::Model& model = scene.model;
-    const int n = model.nq(), m = model.nu(), nx = 2 * n;
-    const trellis::hand::ReferenceMotion motion = trellis::hand::makeReferenceMotion(model, scene.q);
+    const hand::ReferenceMotion motion = hand::makeReferenceMotion(model, scene.q);
     if (!motion.ok) throw std::runtime_error("reference motion: " + motion.message);
     reference = motion.trajectory;
-    trellis::LqrWeights w;
-    w.Q = Eigen::MatrixXd::Identity(nx, nx);
-    w.Q.topLeftCorner(n, n) *= 100.0;
-    w.R = Eigen::MatrixXd::Identity(m, m);
-    w.Qf = w.Q;
-    trellis::RiccatiOptions ro;
-    ro.rtol = 1e-6;
-    ro.atol = 1e-8;
-    trellis::TangentTransportOptions transport;
-    transport.method = trellis::TangentTransport::kProjected;
-    transport.substeps = 2;
-    const trellis::ManifoldRiccatiSolution lqr =
-        trellis::solveManifoldRiccati(model, reference, w, ro, transport);
+    const trellis::ManifoldRiccatiSolution lqr = trellis::solveManifoldRiccati(
+        model, reference, hand::feedbackWeights(model), hand::feedbackRiccatiOptions(),
+        hand::feedbackTransport());
     if (!lqr.ok()) throw std::runtime_error("manifold Riccati: " + lqr.message());
-    gains = trellis::GainSchedule::sample([&](double t) { return lqr.K(t); }, reference.times());
-    options.method = trellis::IntegrationMethod::kBDF;
-    options.rtol = 1e-7;
-    options.atol = 1e-9;
-    options.inputLower = Eigen::VectorXd::Zero(m);
-    options.inputUpper = Eigen::VectorXd::Constant(m, INFINITY);
-    std::mt19937 rng(1);
-    std::normal_distribution<double> normal(0.0, 1.0);
-    const Eigen::MatrixXd T0 = lqr.basis.basis(reference.startTime());
-    const Eigen::VectorXd x0 = reference.states().col(0);
-    for (int r = 0; r < 20; ++r) {
-      Eigen::VectorXd z(T0.cols());
-      for (int i = 0; i < z.size(); ++i) z(i) = normal(rng);
-      z *= 0.05 / z.norm();
-      starts.push_back(x0 + T0 * z);
-    }
+    gains = hand::feedbackGains(lqr, reference);
+    options = hand::closedLoopOptions(model.nu());
+    starts = hand::perturbedStarts(lqr.basis.basis(reference.startTime()),
+                                   reference.states().col(0), 20, 1, 0.05);
   }
 };
 

@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Plots of a trellis run from its CSV files: states, inputs, gains and tracking error against time.
 
-    plot_run.py --reference TRAJ.csv [--scene SCENE.json] [--closed CLOSED.csv ...]
+    plot_run.py --reference TRAJ.csv [--scene SCENE.json | --accelerations QDD.csv]
+                [--closed CLOSED.csv ...]
                 [--gains GAINS.csv] [--controllability CONTROLLABILITY.csv] --out DIR
                 [--title NAME] [--configs a,b,...] [--trellis PROGRAM] [--closed-after-go]
 
@@ -18,7 +19,9 @@ the knots with the knot derivatives x'_k = [dq_k; q''(q_k, dq_k, u_k)], which is
 `trellis linearize -` per knot (the scene with the knot as its state, on standard input). Without
 --scene the velocity part of the spline has no derivatives and the error plot falls back to linear
 interpolation between knots, says so in its title and on standard error (it overstates the error
-between knots by O(h²)).
+between knots by O(h²)). --accelerations QDD.csv gives q''_k directly instead (header t and the
+configuration names, one row per reference knot — e.g. the reference's stored state derivatives,
+which is what simulate uses; no trellis process per knot).
 
 With --closed-after-go the plots that need no closed loop (gains, controllability) are made
 first; then the script reads one line from standard input and goes on only if it is "go" (the
@@ -124,6 +127,16 @@ class Trajectory:
             for i in range(len(self.configs)):
                 qdd[i].append(float(values[i]))
         self.qdd = qdd
+
+    def read_accelerations(self, path):
+        """q''_k at every knot from a CSV: t, then one column per configuration (same knots)."""
+        header, columns = read_csv(path)
+        if header != ["t"] + self.configs:
+            sys.exit(f"plot_run.py: {path}: expected the columns t,{','.join(self.configs)}")
+        if len(columns[0]) != len(self.t) or any(
+                abs(a - b) > 1e-9 * max(1.0, abs(b)) for a, b in zip(columns[0], self.t)):
+            sys.exit(f"plot_run.py: {path}: its times are not the reference's {len(self.t)} knots")
+        self.qdd = columns[1:]
 
     def state_at(self, t):
         """x(t): the cubic Hermite spline of trajectory.hpp when the knot accelerations are known
@@ -283,6 +296,8 @@ def main():
     p.add_argument("--closed", action="append", default=[])
     p.add_argument("--gains")
     p.add_argument("--scene", help="scene of the reference: Hermite reference for the tracking error")
+    p.add_argument("--accelerations",
+                   help="CSV t,<configs>: q'' at the reference knots (Hermite reference without --scene)")
     p.add_argument("--trellis", default=os.environ.get("TRELLIS", os.path.join(
         os.path.dirname(os.path.abspath(__file__)), "..", "build", "cli", "trellis")),
         help="the trellis program (default $TRELLIS or build/cli/trellis)")
@@ -316,10 +331,12 @@ def main():
     if args.gains:
         plot_gains(args.gains, args.out, args.title)
     if closed:
-        if args.scene:
+        if args.accelerations:
+            ref.read_accelerations(args.accelerations)
+        elif args.scene:
             ref.compute_accelerations(args.scene, args.trellis)
         else:
-            print("plot_run.py: no --scene: the tracking error is measured against the reference "
+            print("plot_run.py: no --scene or --accelerations: the tracking error is measured against the reference "
                   "interpolated LINEARLY, not as simulate does (Hermite)", file=sys.stderr)
         plot_error(ref, closed, args.out, args.title)
     if args.controllability:

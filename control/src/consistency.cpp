@@ -1,14 +1,14 @@
-// consistency.cpp — the a-posteriori check of consistency.hpp (CVODES stays in this file).
+// consistency.cpp — the a-posteriori check of consistency.hpp, integrated with the control
+// module's one CVODES driver (ode_driver.hpp): Adams with fixed-point iterations, per-component
+// absolute tolerances scaled to the state's range, a fresh start at every knot.
 #include "trellis/control/consistency.hpp"
 
-#include "sundials_raii.hpp"
+#include "ode_driver.hpp"
 
 #include "trellis/core/data.hpp"
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/model.hpp"
 #include "trellis/core/reference.hpp"
-
-#include <sunnonlinsol/sunnonlinsol_fixedpoint.h>
 
 #include <algorithm>
 #include <cmath>
@@ -37,46 +37,40 @@ void ConsistencyOptions::validate() const {
 
 namespace {
 
-/// The right-hand side's state: the model, the reference (for its input rule) and scratch.
-struct Integrand {
-  const Model& model;
-  ReferenceEvaluator& reference;
-  Data data;
-  Eigen::VectorXd q, dq;
-  std::string failure;  // the first failure inside the current CVode call
+/// ẋ = [q̇; q̈(q, q̇, u(t))] with u(t) by the trajectory's input rule (linear, or cubic Hermite
+/// with rates). A failure is recoverable (CVODES retries with a smaller step); the first one of
+/// an interval is kept in `failure` (the driver clears it at every start).
+class Integrand final : public detail::OdeSystem {
+ public:
+  Integrand(const Model& m, ReferenceEvaluator& r) : model_(m), reference_(r), data_(m), q_(m.nq()), dq_(m.nq()) {}
 
-  Integrand(const Model& m, ReferenceEvaluator& r) : model(m), reference(r), data(m), q(m.nq()), dq(m.nq()) {}
-
-  static int rhs(double t, N_Vector yv, N_Vector ydotv, void* user) {
-    auto& s = *static_cast<Integrand*>(user);
-    const int n = s.model.nq();
-    const double* y = N_VGetArrayPointer(yv);
-    s.q = Eigen::Map<const Eigen::VectorXd>(y, n);
-    s.dq = Eigen::Map<const Eigen::VectorXd>(y + n, n);
-    if (!s.q.allFinite() || !s.dq.allFinite()) {
-      if (s.failure.empty()) s.failure = "the state became non-finite at t = " + std::to_string(t);
+  int rhs(double t, detail::ConstVectorMap y, detail::VectorMap ydot) override {
+    const int n = model_.nq();
+    q_ = y.head(n);
+    dq_ = y.tail(n);
+    if (!q_.allFinite() || !dq_.allFinite()) {
+      if (failure.empty()) failure = "the state became non-finite at t = " + std::to_string(t);
       return 1;
     }
-    // The trajectory's rule for the input between knots (linear, or cubic Hermite with rates).
-    s.reference.evaluate(std::clamp(t, s.reference.startTime(), s.reference.endTime()));
-    const DynamicsStatus status = computeDynamics(s.model, s.data, s.q, s.dq, s.reference.u());
-    if (!status.ok() || !s.data.qdd.allFinite()) {
-      if (s.failure.empty()) {
-        s.failure = "the dynamics failed at t = " + std::to_string(t) + ": " +
-                    (status.message.empty() ? std::string("non-finite q''") : status.message);
+    reference_.evaluate(std::clamp(t, reference_.startTime(), reference_.endTime()));
+    const DynamicsStatus status = computeDynamics(model_, data_, q_, dq_, reference_.u());
+    if (!status.ok() || !data_.qdd.allFinite()) {
+      if (failure.empty()) {
+        failure = "the dynamics failed at t = " + std::to_string(t) + ": " +
+                  (status.message.empty() ? std::string("non-finite q''") : status.message);
       }
-      return 1;  // recoverable: CVODES retries with a smaller step
+      return 1;
     }
-    double* out = N_VGetArrayPointer(ydotv);
-    Eigen::Map<Eigen::VectorXd>(out, n) = s.dq;
-    Eigen::Map<Eigen::VectorXd>(out + n, n) = s.data.qdd;
+    ydot.head(n) = dq_;
+    ydot.tail(n) = data_.qdd;
     return 0;
   }
 
-  static void errorHandler(int code, const char* module, const char* function, char* msg, void* user) {
-    auto& s = *static_cast<Integrand*>(user);
-    if (code < 0 && s.failure.empty()) s.failure = std::string(module) + "::" + function + ": " + msg;
-  }
+ private:
+  const Model& model_;
+  ReferenceEvaluator& reference_;
+  Data data_;
+  Eigen::VectorXd q_, dq_;
 };
 
 std::string formatNumber(double v) {
@@ -120,62 +114,45 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
   }
 
   Integrand integrand(model, *reference);
-  detail::CvodeSession cv;
-  cv.context.reset(detail::createContext());
-  SUNContext ctx = cv.context.get();
-  cv.y.reset(N_VNew_Serial(nx, ctx));
-  detail::Vector atol(N_VNew_Serial(nx, ctx));
-  if (!cv.y || !atol) throw std::runtime_error("checkConsistency: N_VNew_Serial failed");
-  Eigen::Map<Eigen::VectorXd> y(N_VGetArrayPointer(cv.y.get()), nx);
-  Eigen::Map<Eigen::VectorXd>(N_VGetArrayPointer(atol.get()), nx) = options.atolFraction * result.stateScale;
-  cv.cvode.reset(CVodeCreate(CV_ADAMS, ctx));
-  void* mem = cv.cvode.get();
-  if (!mem) throw std::runtime_error("checkConsistency: CVodeCreate failed");
-  auto check = [&](int flag, const char* call) {
-    if (flag < 0) {
-      throw std::runtime_error(std::string("checkConsistency: ") + call + " failed with flag " +
-                               std::to_string(flag) + ": " + integrand.failure);
-    }
-  };
-  y = X.col(0);
-  check(CVodeSetErrHandlerFn(mem, &Integrand::errorHandler, &integrand), "CVodeSetErrHandlerFn");
-  check(CVodeInit(mem, &Integrand::rhs, trajectory.startTime(), cv.y.get()), "CVodeInit");
-  check(CVodeSVtolerances(mem, options.rtol, atol.get()), "CVodeSVtolerances");
-  check(CVodeSetUserData(mem, &integrand), "CVodeSetUserData");
-  check(CVodeSetMaxNumSteps(mem, options.maxStepsPerInterval), "CVodeSetMaxNumSteps");
-  cv.nonlinearSolver.reset(SUNNonlinSol_FixedPoint(cv.y.get(), 0, ctx));
-  if (!cv.nonlinearSolver) throw std::runtime_error("checkConsistency: fixed-point solver");
-  check(CVodeSetNonlinearSolver(mem, cv.nonlinearSolver.get()), "CVodeSetNonlinearSolver");
+  detail::OdeOptions ode;
+  ode.method = detail::OdeMethod::Adams;
+  ode.linearSolver = detail::OdeLinearSolver::FixedPoint;
+  ode.rtol = options.rtol;
+  ode.atolVector = options.atolFraction * result.stateScale;
+  ode.maxSteps = options.maxStepsPerInterval;  // the driver's budget restarts at every start()
+  ode.what = "checkConsistency";
+  detail::OdeDriver driver(integrand, nx, ode);
 
   result.intervalDefects = Eigen::VectorXd::Zero(N - 1);
-  Eigen::VectorXd e(nx);
+  Eigen::VectorXd e(nx), y(nx);
   result.integrated = true;
-  for (int k = 0; k + 1 < N; ++k) {
+  for (int k = 0; k + 1 < N && result.integrated; ++k) {
     const double ta = trajectory.times()(k), tb = trajectory.times()(k + 1), tm = 0.5 * (ta + tb);
-    y = X.col(k);
-    integrand.failure.clear();
-    if (k > 0) check(CVodeReInit(mem, ta, cv.y.get()), "CVodeReInit");
-    check(CVodeSetStopTime(mem, tb), "CVodeSetStopTime");
+    driver.start(ta, X.col(k));
     double interval = 0.0;
     for (int stage = 0; stage < 2; ++stage) {
       const double target = stage == 0 ? tm : tb;
-      double tret = ta;
-      const int flag = CVode(mem, target, cv.y.get(), &tret, CV_NORMAL);
-      if (flag < 0) {
+      // Steps towards the knot tb (never beyond it); the midpoint from the dense output.
+      detail::OdeStatus st;
+      while (driver.time() < target && st.ok()) st = driver.step(tb);
+      if (!st.ok()) {
         result.integrated = false;
         result.worstInterval = k;
-        result.worstTime = tret;
+        result.worstTime = st.t;
         result.message = "not checked: the integration of interval " + std::to_string(k) + " [" +
                          formatNumber(ta) + ", " + formatNumber(tb) + "] failed at t = " +
-                         formatNumber(tret) + " (" + CVodeGetReturnFlagName(flag) + "): " +
-                         integrand.failure;
+                         formatNumber(st.t) + ": " + st.message;
         break;
       }
       if (stage == 0) {
+        if (!driver.interpolate(tm, 0, y)) {
+          throw std::logic_error("checkConsistency: no dense output at the midpoint of interval " +
+                                 std::to_string(k));
+        }
         reference->evaluate(tm);
         e = y - reference->x();
       } else {
-        e = y - X.col(k + 1);
+        e = driver.state() - X.col(k + 1);
       }
       const Eigen::VectorXd relative = e.cwiseAbs().cwiseQuotient(result.stateScale);
       int i = 0;
@@ -189,12 +166,12 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
         result.worstState = i;
       }
     }
-    long v = 0;
-    if (CVodeGetNumSteps(mem, &v) >= 0) result.steps += v;
-    if (CVodeGetNumRhsEvals(mem, &v) >= 0) result.rhsEvaluations += v;
-    if (!result.integrated) return result;
-    result.intervalDefects(k) = interval;
+    if (result.integrated) result.intervalDefects(k) = interval;
   }
+  const detail::OdeStats stats = driver.stats();
+  result.steps = stats.steps;
+  result.rhsEvaluations = stats.rhsEvaluations;
+  if (!result.integrated) return result;
   const int i = result.worstState;
   result.worstStateName = i < n ? trajectory.configNames()[i] : "d" + trajectory.configNames()[i - n];
   result.consistent = result.maxDefect <= options.tolerance;

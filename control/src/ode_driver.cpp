@@ -91,6 +91,17 @@ void check(int flag, const char* call, const std::string& what) {
 
 }  // namespace
 
+bool OdeStatus::callbackFailed() const {
+  return outcome == OdeOutcome::Failed &&
+         (flag == CV_RHSFUNC_FAIL || flag == CV_FIRST_RHSFUNC_ERR || flag == CV_REPTD_RHSFUNC_ERR ||
+          flag == CV_UNREC_RHSFUNC_ERR || flag == CV_CONV_FAILURE || flag == CV_LSETUP_FAIL ||
+          flag == CV_LSOLVE_FAIL || flag == CV_NLS_FAIL);
+}
+
+bool OdeStatus::tooMuchWork() const {
+  return outcome == OdeOutcome::Failed && flag == CV_TOO_MUCH_WORK;
+}
+
 OdeDriver::OdeDriver(OdeSystem& system, Eigen::Index n, OdeOptions options)
     : system_(system), n_(n), options_(std::move(options)), impl_(std::make_unique<Impl>()) {
   const std::string& what = options_.what;

@@ -130,6 +130,11 @@ struct OdeStatus {
   int flag = 0;         ///< CVODES return flag (0 on success)
   std::string message;  ///< on failure: what, the CVODES flag, t, |y|∞ and the callback's failure
   bool ok() const { return outcome != OdeOutcome::Failed; }
+  /// The failure came from a callback (right-hand side, Jacobian, linear or nonlinear solve):
+  /// the system's own record says why.
+  bool callbackFailed() const;
+  /// The step budget (OdeOptions::maxSteps) ran out.
+  bool tooMuchWork() const;
 };
 
 class OdeDriver {

@@ -49,6 +49,34 @@ void checkGainsCover(const Trajectory& reference, const GainSchedule& gains) {
   }
 }
 
+/// The open loop (gains == nullptr) or the closed loop about `reference`; `storage` holds the
+/// reference with state derivatives when it has none.
+detail::InputLaw referenceLaw(const Model& model, const Trajectory& reference,
+                              const GainSchedule* gains, Trajectory& storage) {
+  detail::InputLaw law;
+  law.kind = gains ? detail::InputLaw::Kind::kFeedback : detail::InputLaw::Kind::kOpenLoop;
+  law.reference = &withStateDerivatives(model, reference, storage);
+  law.gains = gains;
+  return law;
+}
+
+/// Checks the reference (and the gains) against the model.
+void checkReference(const Model& model, const Trajectory& reference, const GainSchedule* gains) {
+  reference.checkCompatible(model);
+  if (gains) checkGainsCover(reference, *gains);
+}
+
+SimulationResult simulateAboutReference(const Model& model, const Trajectory& reference,
+                                        const GainSchedule* gains, const Eigen::VectorXd& x0,
+                                        const SimulationOptions& options) {
+  checkReference(model, reference, gains);
+  const double t0 = reference.startTime(), t1 = reference.endTime();
+  detail::checkSimulationArguments(model, x0, t0, t1, options, &reference);
+  Trajectory storage;
+  const detail::InputLaw law = referenceLaw(model, reference, gains, storage);
+  return detail::runSimulation(model, x0, t0, t1, law, options, law.reference);
+}
+
 }  // namespace
 
 SimulationResult simulate(const Model& model, const Eigen::VectorXd& x0, double t0, double t1,
@@ -66,29 +94,13 @@ SimulationResult simulate(const Model& model, const Eigen::VectorXd& x0, double 
 
 SimulationResult simulateOpenLoop(const Model& model, const Trajectory& reference,
                                   const Eigen::VectorXd& x0, const SimulationOptions& options) {
-  reference.checkCompatible(model);
-  const double t0 = reference.startTime(), t1 = reference.endTime();
-  detail::checkSimulationArguments(model, x0, t0, t1, options, &reference);
-  Trajectory storage;
-  detail::InputLaw law;
-  law.kind = detail::InputLaw::Kind::kOpenLoop;
-  law.reference = &withStateDerivatives(model, reference, storage);
-  return detail::runSimulation(model, x0, t0, t1, law, options, law.reference);
+  return simulateAboutReference(model, reference, nullptr, x0, options);
 }
 
 SimulationResult simulateClosedLoop(const Model& model, const Trajectory& reference,
                                     const GainSchedule& gains, const Eigen::VectorXd& x0,
                                     const SimulationOptions& options) {
-  reference.checkCompatible(model);
-  checkGainsCover(reference, gains);
-  const double t0 = reference.startTime(), t1 = reference.endTime();
-  detail::checkSimulationArguments(model, x0, t0, t1, options, &reference);
-  Trajectory storage;
-  detail::InputLaw law;
-  law.kind = detail::InputLaw::Kind::kFeedback;
-  law.reference = &withStateDerivatives(model, reference, storage);
-  law.gains = &gains;
-  return detail::runSimulation(model, x0, t0, t1, law, options, law.reference);
+  return simulateAboutReference(model, reference, &gains, x0, options);
 }
 
 std::vector<SimulationResult> simulateBatch(const Model& model, const Trajectory& reference,
@@ -100,8 +112,7 @@ std::vector<SimulationResult> simulateBatch(const Model& model, const Trajectory
                                 " must be >= 0");
   }
   // Every check on the calling thread, before any worker starts.
-  reference.checkCompatible(model);
-  checkGainsCover(reference, gains);
+  checkReference(model, reference, &gains);
   const double t0 = reference.startTime(), t1 = reference.endTime();
   for (std::size_t k = 0; k < initialStates.size(); ++k) {
     try {
@@ -113,10 +124,7 @@ std::vector<SimulationResult> simulateBatch(const Model& model, const Trajectory
   }
   // Shared read-only by the workers: model, ref, gains (see "Threads" in simulation.hpp).
   Trajectory storage;
-  detail::InputLaw law;
-  law.kind = detail::InputLaw::Kind::kFeedback;
-  law.reference = &withStateDerivatives(model, reference, storage);
-  law.gains = &gains;
+  const detail::InputLaw law = referenceLaw(model, reference, &gains, storage);
 
   const auto count = static_cast<int>(initialStates.size());
   std::vector<SimulationResult> results(initialStates.size());

@@ -8,21 +8,12 @@
 
 #include "trellis/core/model.hpp"
 
-#include <cvodes/cvodes.h>
-
 #include <memory>
 #include <string>
 
 namespace trellis::detail {
 
 namespace {
-
-/// The integrator stopped because a callback failed (then the callback's record says why).
-bool callbackFlag(int flag) {
-  return flag == CV_RHSFUNC_FAIL || flag == CV_FIRST_RHSFUNC_ERR || flag == CV_REPTD_RHSFUNC_ERR ||
-         flag == CV_UNREC_RHSFUNC_ERR || flag == CV_CONV_FAILURE || flag == CV_LSETUP_FAIL ||
-         flag == CV_LSOLVE_FAIL || flag == CV_NLS_FAIL;
-}
 
 OdeOptions integratorOptions(const SimulationOptions& options) {
   OdeOptions ode;
@@ -76,7 +67,14 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
         "simulation stopped at t = " + formatTime(t) + ", x = " + formatVector(state) + ": " + what;
   };
 
-  Eigen::VectorXd x = x0, xr(nx), ur(m), u(m);
+  Eigen::VectorXd x = x0, xr(nx), ur(m), u(m), y(nx);
+  // The state x at the integrator's current time (the integrator holds x or x − x_ref, see
+  // closed_loop_system.hpp).
+  auto integratorState = [&]() {
+    Eigen::VectorXd state(nx);
+    system.toState(driver.time(), driver.state(), state);
+    return state;
+  };
   long steps = 0;
   double stopTime = t0;  // the next stop event: the integrator never steps past it
   for (std::size_t e = 0; e < events.size(); ++e) {
@@ -91,22 +89,22 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
       while (driver.time() < te) {
         if (steps >= options.maxSteps) {
           setFailure(SimulationStatus::kIntegratorFailure, driver.time(),
-                     Eigen::VectorXd(driver.state()),
+                     integratorState(),
                      "more than maxSteps = " + std::to_string(options.maxSteps) + " internal steps");
           failed = true;
           break;
         }
         const OdeStatus st = driver.step(stopTime);
         if (!st.ok()) {
-          if (system.failed && callbackFlag(st.flag)) {
+          if (system.failed && st.callbackFailed()) {
             setFailure(system.failStatus, system.failTime, system.failState, st.message);
           } else {
             std::string what = st.message;
-            if (st.flag == CV_TOO_MUCH_WORK)
+            if (st.tooMuchWork())
               what = "more than maxSteps = " + std::to_string(options.maxSteps) +
                      " internal steps; " + what;
             if (system.failed) what += " (last right-hand-side failure: " + system.failMessage + ")";
-            setFailure(SimulationStatus::kIntegratorFailure, st.t, Eigen::VectorXd(driver.state()),
+            setFailure(SimulationStatus::kIntegratorFailure, st.t, integratorState(),
                        what);
           }
           failed = true;
@@ -116,9 +114,11 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
       }
       if (failed) break;
       if (driver.time() == te) {
-        x = driver.state();
-      } else if (!driver.interpolate(te, 0, x)) {
-        setFailure(SimulationStatus::kIntegratorFailure, te, Eigen::VectorXd(driver.state()),
+        system.toState(te, driver.state(), x);
+      } else if (driver.interpolate(te, 0, y)) {
+        system.toState(te, y, x);
+      } else {
+        setFailure(SimulationStatus::kIntegratorFailure, te, integratorState(),
                    "the dense output is not available at t = " + formatTime(te));
         break;
       }
@@ -188,7 +188,8 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
     if (e + 1 == events.size()) break;
     // 5. (re)start where the right-hand side jumps (a sample, a breakpoint) or the state did
     if (e == 0 || ev.stop || projected) {
-      driver.start(te, x);
+      system.toIntegrator(te, x, y);
+      driver.start(te, y);
       std::size_t next = e + 1;
       while (!events[next].stop) ++next;  // the last event (t1) is a stop
       stopTime = events[next].t;

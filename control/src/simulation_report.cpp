@@ -1,6 +1,7 @@
 // simulation_report.cpp — the simulator's names, option checks and JSON summary (no numerics).
 #include "trellis/control/simulation.hpp"
 
+#include "enum_names.hpp"
 #include "trellis/control/tvlqr.hpp"
 
 #include <cmath>
@@ -10,32 +11,29 @@
 
 namespace trellis {
 
-const char* toString(SimulationStatus status) {
-  switch (status) {
-    case SimulationStatus::kOk:
-      return "ok";
-    case SimulationStatus::kIntegratorFailure:
-      return "integrator failure";
-    case SimulationStatus::kDynamicsFailure:
-      return "dynamics failure";
-    case SimulationStatus::kNonFinite:
-      return "non-finite";
-    case SimulationStatus::kPolicyFailure:
-      return "policy failure";
-    case SimulationStatus::kConstraintDrift:
-      return "constraint drift";
-  }
-  return "unknown";
-}
+namespace {
 
-const char* toString(IntegrationMethod method) {
-  return method == IntegrationMethod::kAdams ? "adams" : "bdf";
-}
+constexpr detail::EnumName<SimulationStatus> kStatusNames[] = {
+    {SimulationStatus::kOk, "ok"},
+    {SimulationStatus::kIntegratorFailure, "integrator failure"},
+    {SimulationStatus::kDynamicsFailure, "dynamics failure"},
+    {SimulationStatus::kNonFinite, "non-finite"},
+    {SimulationStatus::kPolicyFailure, "policy failure"},
+    {SimulationStatus::kConstraintDrift, "constraint drift"},
+};
+constexpr detail::EnumName<IntegrationMethod> kMethodNames[] = {
+    {IntegrationMethod::kAdams, "adams"},
+    {IntegrationMethod::kBDF, "bdf"},
+};
+
+}  // namespace
+
+const char* toString(SimulationStatus status) { return detail::nameOf(kStatusNames, status); }
+
+const char* toString(IntegrationMethod method) { return detail::nameOf(kMethodNames, method); }
 
 IntegrationMethod parseIntegrationMethod(const std::string& text) {
-  if (text == "adams") return IntegrationMethod::kAdams;
-  if (text == "bdf") return IntegrationMethod::kBDF;
-  throw std::invalid_argument("'" + text + "' is not one of adams, bdf");
+  return detail::parseName(kMethodNames, text);
 }
 
 std::string simulationJson(const SimulationResult& r) {
@@ -65,9 +63,7 @@ std::string simulationJson(const SimulationResult& r) {
 
 void SimulationOptions::validate() const {
   auto bad = [](const std::string& field, double v, const char* rule) {
-    std::ostringstream m;
-    m << "SimulationOptions." << field << " = " << v << " must be " << rule;
-    throw std::invalid_argument(m.str());
+    detail::badOption("SimulationOptions", field, v, rule);
   };
   if (!(rtol > 0.0) || !std::isfinite(rtol)) bad("rtol", rtol, "> 0 and finite");
   if (!(atol > 0.0) || !std::isfinite(atol)) bad("atol", atol, "> 0 and finite");

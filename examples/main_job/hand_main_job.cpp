@@ -13,6 +13,7 @@
 //      saturated at zero, constraints projected; tracking error, drift and saturation — one batch
 //      (simulateBatch) over the machine's cores;
 //   7. files in the output folder (default output/hand/): reference.csv, gains.csv,
+//      reference_accelerations.csv (q'' at the knots, for the plots' Hermite reference),
 //      controllability.csv, closed_loop_<k>.csv, summary.txt and the PNG plots (scripts/plot_run.py).
 // The plots are ONE Python process, started as soon as the gains are written: matplotlib's start-up
 // and the gain and controllability plots overlap the closed loops; it is told "go" on its standard
@@ -20,6 +21,7 @@
 // then the job waits for the plots, and a plot failure still fails the job.
 //
 // usage: hand_main_job [--out DIR] [--runs N] [--seed S] [--perturbation SIZE] [--no-plots]
+#include "hand_feedback.hpp"
 #include "reference_motion.hpp"
 
 #include "trellis/control.hpp"
@@ -39,7 +41,6 @@
 #include <exception>
 #include <filesystem>
 #include <fstream>
-#include <random>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -172,6 +173,19 @@ int main(int argc, char** argv) try {
                       reference.dynamicsResidual.maxCoeff(), reference.forwardDynamicsError.maxCoeff()) +
                format(", tensions %.3g … %.3g N", trajectory.inputs().minCoeff(), trajectory.inputs().maxCoeff()));
   trajectory.writeCsvFile(options.out + "/reference.csv");
+  {  // q'' at the knots (the reference's state derivatives) for the plots' Hermite reference
+    std::ostringstream csv;
+    csv.precision(17);
+    csv << 't';
+    for (const std::string& name : trajectory.configNames()) csv << ',' << name;
+    csv << '\n';
+    for (int k = 0; k < N; ++k) {
+      csv << trajectory.times()(k);
+      for (int i = 0; i < n; ++i) csv << ',' << trajectory.stateDerivatives()(n + i, k);
+      csv << '\n';
+    }
+    trellis::writeFileAtomically(options.out + "/reference_accelerations.csv", csv.str());
+  }
 
   // 3. Linearization along the reference ---------------------------------------------------------
   progress.begin("exact linearization at every knot (and central differences at the first knot)");
@@ -225,9 +239,7 @@ int main(int argc, char** argv) try {
   // so between knots the reference satisfies the dynamics only approximately — amplified by the
   // fingertips' tiny inertias. The tangent basis is therefore carried by discrete transport on the
   // knots (manifold_lqr.hpp, kProjected), which does not rely on the dynamics between knots.
-  trellis::TangentTransportOptions transport;
-  transport.method = trellis::TangentTransport::kProjected;
-  transport.substeps = 2;
+  const trellis::TangentTransportOptions transport = trellis::hand::feedbackTransport();
   const trellis::GramianReport gramian = trellis::computeControllabilityGramian(
       model, trajectory, trajectory.startTime(), trajectory.endTime(), transport);
   if (!gramian.ok) throw std::runtime_error("controllability Gramian: " + gramian.message);
@@ -237,21 +249,16 @@ int main(int argc, char** argv) try {
 
   // 5. TV-LQR on the manifold -------------------------------------------------------------------
   progress.begin("TV-LQR on the constraint manifold (CVODES, BDF)");
-  trellis::LqrWeights weights;
-  weights.Q = Eigen::MatrixXd::Identity(nx, nx);
-  weights.Q.topLeftCorner(n, n) *= 100.0;  // angles matter more than rates
-  // Tensions in N: R = I. The hand is passively stable but very stiff (tangent eigenvalues down to
-  // −9e3 s⁻¹); a much cheaper input (R = 1e-2 I) drives the closed loop to −1.3e5 s⁻¹ and the
-  // backward Riccati integration with it (measured: S exceeded 1e15).
-  weights.R = Eigen::MatrixXd::Identity(m, m);
-  weights.Qf = weights.Q;
-  trellis::RiccatiOptions riccatiOptions;
-  riccatiOptions.rtol = 1e-6;
-  riccatiOptions.atol = 1e-8;
-  const trellis::ManifoldRiccatiSolution lqr = trellis::solveManifoldRiccati(model, trajectory, weights, riccatiOptions, transport);
+  // Q = diag(100 I, I) (angles matter more than rates), R = I, Qf = Q (hand_feedback.hpp). Tensions
+  // in N: R = I. The hand is passively stable but very stiff (tangent eigenvalues down to −9e3 s⁻¹);
+  // a much cheaper input (R = 1e-2 I) drives the closed loop to −1.3e5 s⁻¹ and the backward
+  // Riccati integration with it (measured: S exceeded 1e15).
+  const trellis::LqrWeights weights = trellis::hand::feedbackWeights(model);
+  const trellis::ManifoldRiccatiSolution lqr = trellis::solveManifoldRiccati(
+      model, trajectory, weights, trellis::hand::feedbackRiccatiOptions(), transport);
   if (!lqr.ok()) throw std::runtime_error("manifold Riccati solve failed: " + lqr.message());
-  trellis::GainSchedule gains =
-      trellis::GainSchedule::sample([&](double t) { return lqr.K(t); }, trajectory.times());
+  // K at the knots and the Riccati steps (its end-time boundary layer), cubic rule (hand_feedback.hpp).
+  trellis::GainSchedule gains = trellis::hand::feedbackGains(lqr, trajectory);
   gains.setColumnNames(model.inputNames(), trellis::GainSchedule::stateNames(model.configNames()));
   gains.writeCsvFile(options.out + "/gains.csv");
   double maxGain = 0.0;
@@ -267,6 +274,10 @@ int main(int argc, char** argv) try {
     // Debian's interpreter has python3-matplotlib; a python3 earlier on PATH may not.
     const char* python = std::filesystem::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
     cmd << python << " \"" << TRELLIS_SOURCE_DIR << "/scripts/plot_run.py\" --closed-after-go --title 'human hand'"
+        // The reference's knot accelerations (what simulate's Hermite reference uses): the tracking
+        // error plotted as simulate measures it. (--scene would give the same from one `trellis
+        // linearize` process per knot: 22 s for the 301 knots, measured.)
+        << " --accelerations \"" << options.out << "/reference_accelerations.csv\""
         << " --reference \"" << options.out << "/reference.csv\" --gains \"" << options.out
         << "/gains.csv\" --controllability \"" << options.out << "/controllability.csv\" --out \""
         << options.out << "\"";
@@ -279,27 +290,16 @@ int main(int argc, char** argv) try {
 
   // 6. Closed loop ------------------------------------------------------------------------------
   progress.begin("closed-loop simulations from seeded perturbed starts (tensions saturated at 0)");
-  trellis::SimulationOptions sim;
-  // The hand is stiff (eigenvalues to −9e3 s⁻¹ open loop, further with feedback): BDF, not Adams.
-  sim.method = trellis::IntegrationMethod::kBDF;
-  sim.rtol = 1e-7;
-  sim.atol = 1e-9;
-  sim.inputLower = Eigen::VectorXd::Zero(m);
-  sim.inputUpper = Eigen::VectorXd::Constant(m, INFINITY);
-  std::mt19937 rng(options.seed);
-  std::normal_distribution<double> normal(0.0, 1.0);
-  const Eigen::MatrixXd T0 = lqr.basis.basis(trajectory.startTime());
+  // The hand is stiff (eigenvalues to −9e3 s⁻¹ open loop, further with feedback): BDF, not Adams;
+  // rtol 1e-7, atol 5e-10 on the deviation from the reference (hand_feedback.hpp).
+  const trellis::SimulationOptions sim = trellis::hand::closedLoopOptions(m);
   struct Run {
     double initial, final, maxDrift, saturated;
     bool ok;
   };
-  std::vector<Eigen::VectorXd> starts;
-  for (int r = 0; r < options.runs; ++r) {
-    Eigen::VectorXd z(T0.cols());
-    for (int i = 0; i < z.size(); ++i) z(i) = normal(rng);
-    z *= options.perturbation / z.norm();
-    starts.push_back(x0 + T0 * z);  // tangent to the manifold; projection removes O(‖z‖²)
-  }
+  // Tangent to the manifold; the projection at t0 removes the O(‖z‖²) drift.
+  const std::vector<Eigen::VectorXd> starts = trellis::hand::perturbedStarts(
+      lqr.basis.basis(trajectory.startTime()), x0, options.runs, options.seed, options.perturbation);
   // One Data and one integrator per thread; model, reference and gains shared read-only.
   const std::vector<trellis::SimulationResult> results =
       trellis::simulateBatch(model, trajectory, gains, starts, sim, 0);
@@ -326,7 +326,7 @@ int main(int argc, char** argv) try {
     std::fflush(plots);
   }
   int converged = 0, failed = 0;
-  double worstRatio = 0.0, worstDrift = 0.0, meanSaturated = 0.0;
+  double worstRatio = 0.0, worstDrift = 0.0, meanSaturated = 0.0, worstFinal = 0.0;
   for (const Run& run : runs) {
     if (!run.ok) {
       ++failed;
@@ -334,12 +334,14 @@ int main(int argc, char** argv) try {
     }
     const double ratio = run.final / run.initial;
     worstRatio = std::max(worstRatio, ratio);
+    worstFinal = std::max(worstFinal, run.final);
     worstDrift = std::max(worstDrift, run.maxDrift);
     meanSaturated += run.saturated / runs.size();
     if (ratio < 0.5) ++converged;
   }
   progress.end(format("%.0f of %.0f runs end with less than half their initial error", converged, runs.size()) +
-               format("; worst final/initial %.2e, worst constraint drift %.1e", worstRatio, worstDrift) +
+               format("; worst final/initial %.2e, worst final error %.2e", worstRatio, worstFinal) +
+               format(", worst constraint drift %.1e", worstDrift) +
                format("; per run %.0f steps, %.1f restarts (= projections %.1f)", double(steps) / runs.size(),
                       double(restarts) / runs.size(), double(projections) / runs.size()) +
                format(", %.0f exact Jacobians, %.0f difference-quotient right-hand sides", double(jacobians) / runs.size(),
@@ -365,7 +367,8 @@ int main(int argc, char** argv) try {
                     gramian.maxEigenvalue)
           << (gramian.controllable() ? "controllable" : "NOT controllable") << '\n';
   summary << format("  closed loop: %.0f runs, %.0f failed, ", runs.size(), failed)
-          << format("%.0f with final error < half the initial; worst final/initial %.2e\n", converged, worstRatio)
+          << format("%.0f with final error < half the initial; worst final/initial %.2e, ", converged, worstRatio)
+          << format("worst final error ‖x − x_ref‖ %.2e\n", worstFinal)
           << format("  constraint drift ≤ %.1e, tensions saturated at 0 in %.1f%% of the control evaluations\n",
                     worstDrift, 100 * meanSaturated);
   summary << format("  closed-loop integration per run: %.0f steps, %.1f restarts, %.1f projections, ",

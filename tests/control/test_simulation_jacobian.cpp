@@ -115,13 +115,28 @@ TEST_CASE("simulation: the exact closed-loop Jacobian A − B S K against centra
   VectorXd u(1);
   bool clipped = false;
 
+  // The integrator's state is the deviation y = x − x_ref(t) (closed_loop_system.hpp); ∂ẏ/∂y = ∂f/∂x.
+  VectorXd y(4);
   SECTION("unsaturated: A − B K") {
     trellis::detail::ClosedLoopSystem sys(loop.model, law, SimulationOptions{});
+    REQUIRE(sys.deviation());
+    sys.toIntegrator(t, x, y);
+    CHECK((y - (x - loop.reference.state(t))).norm() < 1e-15);
     REQUIRE(sys.control(t, x, u, clipped));
     CHECK_FALSE(clipped);
-    const MatrixXd J = exactJacobian(sys, t, x);
+    const MatrixXd J = exactJacobian(sys, t, y);
     // ε^(2/3) ≈ 4e-11 relative truncation and rounding; 1e-7 leaves the margin of the house rule.
-    CONTROL_CHECK_CLOSE(centralDifferenceJacobian(sys, t, x), J, 1e-7, 1.0);
+    CONTROL_CHECK_CLOSE(centralDifferenceJacobian(sys, t, y), J, 1e-7, 1.0);
+    // ẏ = f(x) − ẋ_ref(t): against the core's dynamics and the reference's spline derivative.
+    VectorXd fy(4), xr, ur, xrdot;
+    REQUIRE(sys.rhs(t, trellis::detail::ConstVectorMap(y.data(), 4),
+                    trellis::detail::VectorMap(fy.data(), 4)) == 0);
+    loop.reference.evaluate(t, xr, ur, xrdot);
+    trellis::Data dyn(loop.model);
+    REQUIRE(trellis::computeDynamics(loop.model, dyn, x.head(2), x.tail(2), u).ok());
+    VectorXd f(4);
+    f << x.tail(2), dyn.qdd;
+    CONTROL_CHECK_CLOSE(f, VectorXd(fy + xrdot), 1e-12, 1.0);
     // Independent path: the plant's A and B at the same (x, u), and the gain at t.
     trellis::Data data(loop.model);
     REQUIRE(trellis::computeLinearization(loop.model, data, x.head(2), x.tail(2), u).ok());
@@ -134,10 +149,11 @@ TEST_CASE("simulation: the exact closed-loop Jacobian A − B S K against centra
     opt.inputLower = VectorXd::Constant(1, -0.1);  // u ≈ −0.8 is clipped to −0.1
     opt.inputUpper = VectorXd::Constant(1, 0.1);
     trellis::detail::ClosedLoopSystem sys(loop.model, law, opt);
+    sys.toIntegrator(t, x, y);
     REQUIRE(sys.control(t, x, u, clipped));
     REQUIRE(clipped);
-    const MatrixXd J = exactJacobian(sys, t, x);
-    CONTROL_CHECK_CLOSE(centralDifferenceJacobian(sys, t, x), J, 1e-7, 1.0);
+    const MatrixXd J = exactJacobian(sys, t, y);
+    CONTROL_CHECK_CLOSE(centralDifferenceJacobian(sys, t, y), J, 1e-7, 1.0);
     trellis::Data data(loop.model);
     REQUIRE(trellis::computeLinearization(loop.model, data, x.head(2), x.tail(2), u).ok());
     CONTROL_CHECK_CLOSE(MatrixXd(data.A), J, 1e-13, 1.0);
