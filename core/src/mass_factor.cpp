@@ -3,24 +3,75 @@
 
 #include <Eigen/Cholesky>
 
+#include <algorithm>
 #include <cmath>
 
 namespace trellis::detail {
 namespace {
-// Plain loops for the short runs of the tree: Eigen's segment expressions spend more on setting
-// up a dynamic-size operation than on the few multiply-adds of a run (measured with callgrind).
-inline void subtractScaled(double* y, const double* x, double a, int len) {
-  for (int t = 0; t < len; ++t) y[t] -= a * x[t];
+// Plain loops on two-lane packets (Eigen::Array2d: one SSE2/NEON register, or two scalars) for
+// the runs of the tree: Eigen's dynamic-size segment expressions spend more on setting up than on
+// the few multiply-adds of a digit's run, and GCC leaves the scalar reductions unvectorized
+// without -ffast-math (the lane order below is fixed, so results do not depend on the build).
+using Pack = Eigen::Array2d;
+inline Pack loadPack(const double* x) { return Eigen::Map<const Pack>(x); }
+inline void storePack(double* y, const Pack& v) {
+  Eigen::Map<Pack> m(y);
+  m = v;
 }
+
+/// y −= a x over len entries.
+inline void subtractScaled(double* y, const double* x, double a, int len) {
+  const Pack av = Pack::Constant(a);
+  int t = 0;
+  for (; t + 3 < len; t += 4) {
+    storePack(y + t, loadPack(y + t) - av * loadPack(x + t));
+    storePack(y + t + 2, loadPack(y + t + 2) - av * loadPack(x + t + 2));
+  }
+  for (; t < len; ++t) y[t] -= a * x[t];
+}
+/// x·y over len entries.
 inline double dotRun(const double* x, const double* y, int len) {
-  double s0 = 0.0, s1 = 0.0;
+  Pack s0 = Pack::Zero(), s1 = Pack::Zero();
+  int t = 0;
+  for (; t + 3 < len; t += 4) {
+    s0 += loadPack(x + t) * loadPack(y + t);
+    s1 += loadPack(x + t + 2) * loadPack(y + t + 2);
+  }
+  s0 += s1;
+  double s = s0[0] + s0[1];
+  for (; t < len; ++t) s += x[t] * y[t];
+  return s;
+}
+
+/// y −= a0 x0 + a1 x1 over len entries (two columns per pass over y).
+inline void subtractScaled2(double* y, const double* x0, double a0, const double* x1, double a1, int len) {
+  const Pack a0v = Pack::Constant(a0), a1v = Pack::Constant(a1);
+  int t = 0;
+  for (; t + 1 < len; t += 2) storePack(y + t, loadPack(y + t) - a0v * loadPack(x0 + t) - a1v * loadPack(x1 + t));
+  for (; t < len; ++t) y[t] -= a0 * x0[t] + a1 * x1[t];
+}
+/// The four dot products of columns (a0, a1) with (b0, b1) over len entries, in one pass:
+/// out = {a0·b0, a1·b0, a0·b1, a1·b1}.
+inline void dot2x2(const double* a0, const double* a1, const double* b0, const double* b1, int len, double* out) {
+  Pack s00 = Pack::Zero(), s10 = Pack::Zero(), s01 = Pack::Zero(), s11 = Pack::Zero();
   int t = 0;
   for (; t + 1 < len; t += 2) {
-    s0 += x[t] * y[t];
-    s1 += x[t + 1] * y[t + 1];
+    const Pack x0 = loadPack(a0 + t), x1 = loadPack(a1 + t), y0 = loadPack(b0 + t), y1 = loadPack(b1 + t);
+    s00 += x0 * y0;
+    s10 += x1 * y0;
+    s01 += x0 * y1;
+    s11 += x1 * y1;
   }
-  if (t < len) s0 += x[t] * y[t];
-  return s0 + s1;
+  out[0] = s00[0] + s00[1];
+  out[1] = s10[0] + s10[1];
+  out[2] = s01[0] + s01[1];
+  out[3] = s11[0] + s11[1];
+  for (; t < len; ++t) {
+    out[0] += a0[t] * b0[t];
+    out[1] += a1[t] * b0[t];
+    out[2] += a0[t] * b1[t];
+    out[3] += a1[t] * b1[t];
+  }
 }
 
 /// LTDL of one branched block [bs, be): eliminate the leaves first. With D_k = H(k, k) and
@@ -48,13 +99,25 @@ int factorTreeBlock(Data& data, int bs, int be, double tol) {
   return -1;
 }
 
-/// Dense Cholesky M_b = L Lᵀ of an unbranched block, in place in the lower triangle.
+/// Dense Cholesky M_b = L Lᵀ of an unbranched block, in place in the lower triangle, column by
+/// column (left-looking): L(k:, k) = (M(k:, k) − Σ_{t<k} L(k, t) L(k:, t)) / L(k, k), the sum taken
+/// two columns t per pass. Eigen's blocked LLT spends 3× the instructions at n = 40 on setting up
+/// its small panels (callgrind).
 int factorChainBlock(Data& data, int bs, int nb, double tol) {
-  Eigen::Ref<Eigen::MatrixXd> blk = data.massFactor.block(bs, bs, nb, nb);
-  Eigen::LLT<Eigen::Ref<Eigen::MatrixXd>, Eigen::Lower> llt(blk);
-  if (llt.info() != Eigen::Success) return bs;
-  for (int i = 0; i < nb; ++i)
-    if (!(blk(i, i) * blk(i, i) > tol)) return bs + i;
+  Eigen::MatrixXd& H = data.massFactor;
+  const int be = bs + nb;
+  for (int k = bs; k < be; ++k) {
+    double* hk = &H(0, k) + k;
+    const int len = be - k;
+    int t = bs;
+    for (; t + 1 < k; t += 2) subtractScaled2(hk, &H(0, t) + k, H(k, t), &H(0, t + 1) + k, H(k, t + 1), len);
+    if (t < k) subtractScaled(hk, &H(0, t) + k, H(k, t), len);
+    const double d = hk[0];
+    if (!(d > tol)) return k;
+    const double l = std::sqrt(d), r = 1.0 / l;
+    hk[0] = l;
+    for (int i = 1; i < len; ++i) hk[i] *= r;
+  }
   return -1;
 }
 
@@ -119,26 +182,49 @@ void invertTreeBlock(Data& data, int bs, int be) {
 
 /// M_b⁻¹ = L⁻ᵀ L⁻¹ from the dense factor, in plain loops on contiguous columns (Eigen's
 /// triangular-solve and rank-update kernels took twice the instructions at n = 40): column j of
-/// L⁻¹ by forward substitution in axpy form, then M⁻¹(i, j) = Σ_{k ≥ i} L⁻¹(k, i) L⁻¹(k, j), i ≥ j.
+/// W = L⁻¹ by forward substitution in axpy form, two pivots per pass; then M⁻¹(i, j) =
+/// Σ_{k ≥ i} W(k, i) W(k, j) for i ≥ j in 2×2 tiles (W is stored with its zeros above the diagonal,
+/// so a tile's four sums all run from k = i).
 void invertChainBlock(Data& data, int bs, int nb) {
   const Eigen::MatrixXd& F = data.massFactor;
   Eigen::MatrixXd& W = data.massInverseFactor;
   Eigen::MatrixXd& Minv = data.massInverse;
-  for (int j = bs; j < bs + nb; ++j) {
+  const int be = bs + nb;
+  double* r = data.massPivotInvSqrt.data();  // workspace here: 1 / L(k, k)
+  for (int k = bs; k < be; ++k) r[k] = 1.0 / F(k, k);
+  for (int j = bs; j < be; ++j) {
     double* x = &W(0, j);
-    for (int t = j; t < bs + nb; ++t) x[t] = 0.0;
+    for (int t = bs; t < be; ++t) x[t] = 0.0;
     x[j] = 1.0;
-    for (int k = j; k < bs + nb; ++k) {
-      x[k] /= F(k, k);
-      subtractScaled(x + k + 1, &F(0, k) + k + 1, x[k], bs + nb - k - 1);
+    int k = j;
+    for (; k + 1 < be; k += 2) {
+      const double* f0 = &F(0, k);
+      const double* f1 = &F(0, k + 1);
+      const double x0 = x[k] * r[k];
+      const double x1 = (x[k + 1] - x0 * f0[k + 1]) * r[k + 1];
+      x[k] = x0;
+      x[k + 1] = x1;
+      subtractScaled2(x + k + 2, f0 + k + 2, x0, f1 + k + 2, x1, be - k - 2);
     }
+    if (k < be) x[k] *= r[k];
   }
-  for (int j = bs; j < bs + nb; ++j) {
-    const double* wj = &W(0, j);
-    for (int i = j; i < bs + nb; ++i) {
-      const double v = dotRun(&W(i, i), wj + i, bs + nb - i);
-      Minv(i, j) = v;
-      Minv(j, i) = v;
+  for (int j = bs; j < be; j += 2) {
+    for (int i = j; i < be; i += 2) {
+      if (i + 1 < be && j + 1 < be) {
+        double v[4];
+        dot2x2(&W(i, i), &W(i, i + 1), &W(i, j), &W(i, j + 1), be - i, v);
+        Minv(i, j) = Minv(j, i) = v[0];
+        Minv(i + 1, j) = Minv(j, i + 1) = v[1];
+        Minv(i, j + 1) = Minv(j + 1, i) = v[2];
+        Minv(i + 1, j + 1) = Minv(j + 1, i + 1) = v[3];
+        continue;
+      }
+      for (int jj = j; jj < std::min(j + 2, be); ++jj)
+        for (int ii = std::max(i, jj); ii < std::min(i + 2, be); ++ii) {
+          const double v = dotRun(&W(ii, ii), &W(ii, jj), be - ii);
+          Minv(ii, jj) = v;
+          Minv(jj, ii) = v;
+        }
     }
   }
 }
@@ -146,7 +232,7 @@ void invertChainBlock(Data& data, int bs, int nb) {
 /// Unbranched blocks of at least this many joints use the dense Cholesky kernels: with no
 /// branching there is nothing for the tree to skip, and Eigen's blocked kernels run the O(n³)
 /// work with fewer instructions than the run loops (measured with callgrind on chains of 10–40).
-constexpr int kDenseChain = 12;
+constexpr int kDenseChain = 6;
 bool denseBlock(const Data& data, int bs, int be) {
   return be - bs >= kDenseChain && data.runStart[static_cast<size_t>(be - 1)] == bs;
 }
@@ -169,10 +255,14 @@ void solveMassVector(Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi) 
     const int bs = data.blockStart[b], be = data.blockStart[b + 1];
     if (be <= lo || bs >= hi) continue;
     if (denseBlock(data, bs, be)) {
-      const auto L = data.massFactor.block(bs, bs, be - bs, be - bs).triangularView<Eigen::Lower>();
-      auto xb = x.segment(bs, be - bs);
-      L.solveInPlace(xb);
-      L.transpose().solveInPlace(xb);
+      // L y = x in axpy form, then Lᵀ z = y in dot form, both on contiguous columns of L.
+      const Eigen::MatrixXd& F = data.massFactor;
+      double* xp = x.data();
+      for (int k = bs; k < be; ++k) {
+        xp[k] /= F(k, k);
+        subtractScaled(xp + k + 1, &F(0, k) + k + 1, xp[k], be - k - 1);
+      }
+      for (int k = be - 1; k >= bs; --k) xp[k] = (xp[k] - dotRun(&F(0, k) + k + 1, xp + k + 1, be - k - 1)) / F(k, k);
     } else {
       solveTreeBlock(data, x.data(), bs, be);
     }
