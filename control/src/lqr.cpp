@@ -319,7 +319,11 @@ StabilizabilityCheck stabilizabilityImpl(const MatrixXd& A, const MatrixXd& B, b
           << (out.eigenvalue.real() >= 0.0 ? " >= 0)" : ", within 1e-8|lambda| of the imaginary axis)");
     }
     msg << " is uncontrollable: controllability margin |w^H B|/(|w||B|) = " << out.margin
-        << " <= " << tolerance << " (w its left eigenvector)";
+        << " <= " << tolerance << " (w its left eigenvector"
+        << (out.margin > 1e3 * kEps ? "; a margin above rounding means nearly, not exactly, "
+                                      "uncontrollable: below the tolerance it is treated as "
+                                      "uncontrollable, see CareOptions::stabilizabilityTolerance)"
+                                    : ")");
     out.message = msg.str();
   }
   return out;

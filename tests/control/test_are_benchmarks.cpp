@@ -613,6 +613,11 @@ TEST_CASE("DARE: 30 coupled modes at ±2 and ±3 decades are never ok with a wro
       CHECK_THAT(res.message, Catch::Matchers::Contains("does not stabilize: spectral radius of Ad - Bd K = "));
       CHECK_THAT(res.message, Catch::Matchers::Contains("(A, B) is stabilizable") ||
                                   Catch::Matchers::Contains("is uncontrollable"));
+      // Every b_i ≠ 0: the pair is stabilizable, so an "uncontrollable" verdict must say that it
+      // is a tolerance call on a nearly uncontrollable mode (margin above rounding).
+      if (res.status == LqrStatus::kNotStabilizable) {
+        CHECK_THAT(res.message, Catch::Matchers::Contains("nearly, not exactly, uncontrollable"));
+      }
     }
   }
 }
