@@ -1,9 +1,11 @@
 // cli/optimize.cpp — `trellis optimize PROBLEM.json --out TRAJ.csv`: trajectory optimization.
 #include "cli_options.hpp"
 #include "command.hpp"
+#include "json_output.hpp"
 
 #include "trellis/optimization.hpp"
 
+#include <cmath>
 #include <cstdio>
 #include <iostream>
 
@@ -50,6 +52,8 @@ options:
   --finite-difference   build the constraint Jacobian from central differences of the dynamics
                         instead of the exact linearization (for comparison)
   --quiet               no progress lines
+  --json                print the summary as one JSON object (one line, the same keys, plus
+                        "ok" and "message"; "rounds" a list, "consistency_where" an object)
   -h, --help            show this help
 
 Exit status: 0 when Ipopt converges (Solve_Succeeded or Solved_To_Acceptable_Level) AND the
@@ -65,7 +69,7 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
   OptionSpec spec;
   spec.valued = {"--out", "--knots", "--method", "--max-iter", "--tol", "--print-level",
                  "--consistency-tol", "--max-refinements"};
-  spec.flags = {"--finite-difference", "--quiet"};
+  spec.flags = {"--finite-difference", "--quiet", "--json"};
   const ParsedOptions options("optimize", args, spec);
   const std::string path = options.singlePositional("the problem file");
 
@@ -111,6 +115,50 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
   const auto outPath = options.value("--out");
   if (outPath) result.trajectory.writeCsvFile(*outPath);
 
+  const char* methodName =
+      problem.method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : "trapezoidal";
+  const char* derivativesName =
+      solver.derivatives == DerivativeMode::kExact ? "exact" : "finite_difference";
+  if (options.flag("--json")) {
+    // The summary below as one object (non-finite numbers become null).
+    auto num = [](double v) { return std::isfinite(v) ? OutputJson(v) : OutputJson(nullptr); };
+    OutputJson j = OutputJson::object();
+    j["ok"] = result.success();
+    j["message"] = result.success() ? std::string() : result.message;
+    j["status"] = toString(result.status);
+    j["ipopt_status"] = result.ipoptStatus;
+    j["iterations"] = result.iterations;
+    j["cost"] = num(result.cost);
+    j["constraint_violation"] = num(result.constraintViolation);
+    j["bound_violation"] = num(result.boundViolation);
+    j["max_slack"] = num(result.maxSlack);
+    j["horizon"] = num(result.horizon);
+    j["knots"] = result.trajectory.size();
+    j["method"] = methodName;
+    j["derivatives"] = derivativesName;
+    j["consistency_defect"] = num(result.consistency.maxDefect);
+    if (result.consistency.worstInterval >= 0 && result.consistency.integrated) {
+      j["consistency_where"] = {{"state", result.consistency.worstStateName},
+                                {"interval", result.consistency.worstInterval},
+                                {"time", num(result.consistency.worstTime)}};
+    }
+    if (problem.model->nc() > 0) j["slack_defect"] = num(result.maxSlackDefect);
+    j["refinement_rounds"] = result.rounds.empty() ? 0 : result.rounds.size() - 1;
+    OutputJson rounds = OutputJson::array();
+    for (const RefinementRound& r : result.rounds) {
+      rounds.push_back({{"knots", r.knots}, {"iterations", r.iterations}, {"defect", num(r.maxDefect)}});
+    }
+    j["rounds"] = std::move(rounds);
+    j["solve_time_ms"] = num(1e3 * result.solveTime);
+    j["solve_cpu_time_ms"] = num(1e3 * result.solveCpuTime);
+    j["trajectory"] = outPath ? OutputJson(*outPath) : OutputJson(nullptr);
+    writeJson(out, j, true);
+    if (!result.success()) {
+      std::cerr << "trellis: optimize: " << result.message << '\n';
+      return result.status == OptimizationStatus::kInconsistent ? 4 : 3;
+    }
+    return 0;
+  }
   out << "status: " << toString(result.status) << '\n'
       << "ipopt_status: " << result.ipoptStatus << '\n'
       << "iterations: " << result.iterations << '\n'
@@ -120,10 +168,8 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
       << "max_slack: " << formatNumber(result.maxSlack, 3) << '\n'
       << "horizon: " << formatNumber(result.horizon, 10) << '\n'
       << "knots: " << result.trajectory.size() << '\n'
-      << "method: "
-      << (problem.method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : "trapezoidal") << '\n'
-      << "derivatives: "
-      << (solver.derivatives == DerivativeMode::kExact ? "exact" : "finite_difference") << '\n'
+      << "method: " << methodName << '\n'
+      << "derivatives: " << derivativesName << '\n'
       << "consistency_defect: " << formatNumber(result.consistency.maxDefect, 3) << '\n';
   if (result.consistency.worstInterval >= 0 && result.consistency.integrated) {
     out << "consistency_where: " << result.consistency.worstStateName << " on interval "

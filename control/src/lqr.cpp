@@ -319,7 +319,11 @@ StabilizabilityCheck stabilizabilityImpl(const MatrixXd& A, const MatrixXd& B, b
           << (out.eigenvalue.real() >= 0.0 ? " >= 0)" : ", within 1e-8|lambda| of the imaginary axis)");
     }
     msg << " is uncontrollable: controllability margin |w^H B|/(|w||B|) = " << out.margin
-        << " <= " << tolerance << " (w its left eigenvector)";
+        << " <= " << tolerance << " (w its left eigenvector"
+        << (out.margin > 1e3 * kEps ? "; a margin above rounding means nearly, not exactly, "
+                                      "uncontrollable: below the tolerance it is treated as "
+                                      "uncontrollable, see CareOptions::stabilizabilityTolerance)"
+                                    : ")");
     out.message = msg.str();
   }
   return out;
@@ -659,6 +663,40 @@ double entrywiseChange(const MatrixXd& Hn, const MatrixXd& H) {
   return worst;
 }
 
+/// Structure-preserving doubling for X = Aᵀ X (I + G X)⁻¹ A + H (G, H symmetric): H_k → X. A_k
+/// behaves like (A − B K)^{2^k}, and what H_k still lacks is about A_kᵀ X A_k. Two tests must both
+/// pass: the change per entry, relative to √|X_ii X_jj| (a large block cannot hide a small one in
+/// the same coordinates), and ‖A_k‖_F ≤ √tol ‖A_0‖_F (in a basis that mixes modes of very
+/// different sizes a slow mode adds only a masked amount to every entry, and the first test alone
+/// stops with that mode unconverged).
+MatrixXd doubling(const MatrixXd& A, const MatrixXd& G, const MatrixXd& H, const CareOptions& options,
+                  int& iterations, bool& converged) {
+  const Index n = A.rows();
+  MatrixXd Ak = A, Gk = G, Hk = H;
+  const MatrixXd I = MatrixXd::Identity(n, n);
+  const double a0 = std::max(A.norm(), std::numeric_limits<double>::min());
+  converged = false;
+  iterations = 0;
+  for (int it = 0; it < options.maxIterations; ++it) {
+    iterations = it + 1;
+    Eigen::PartialPivLU<MatrixXd> lu(I + Gk * Hk);
+    const MatrixXd WA = lu.solve(Ak), WG = lu.solve(Gk);
+    MatrixXd Hn = Hk + Ak.transpose() * Hk * WA;
+    Hn = (0.5 * (Hn + Hn.transpose())).eval();
+    MatrixXd Gn = Gk + Ak * WG * Ak.transpose();
+    Gk = 0.5 * (Gn + Gn.transpose());
+    Ak = Ak * WA;
+    const double change = entrywiseChange(Hn, Hk);
+    Hk = std::move(Hn);
+    if (!Hk.allFinite() || !Gk.allFinite() || !Ak.allFinite()) break;
+    if (change <= options.tolerance && Ak.norm() <= std::sqrt(options.tolerance) * a0) {
+      converged = true;
+      break;
+    }
+  }
+  return Hk;
+}
+
 }  // namespace
 
 LqrResult solveDare(const MatrixXd& Ad, const MatrixXd& Bd, const MatrixXd& Q, const MatrixXd& R,
@@ -676,39 +714,19 @@ LqrResult solveDare(const MatrixXd& Ad, const MatrixXd& Bd, const MatrixXd& Q, c
   LqrResult res;
   res.stateScaling = p.d;
 
-  // Structure-preserving doubling on the balanced problem: H_k → S. A_k behaves like
-  // (Ad − Bd K)^{2^k}, so the change vanishes (to the last bit) once A_k is negligible; the
-  // stopping test is per entry, relative to √|S_ii S_jj|, so a large block cannot hide a small one.
-  MatrixXd Ak = p.A, Gk = p.G, Hk = p.Q;
-  const MatrixXd I = MatrixXd::Identity(n, n);
+  // Structure-preserving doubling on the balanced problem (see doubling()).
   bool converged = false;
-  for (int it = 0; it < options.maxIterations; ++it) {
-    res.iterations = it + 1;
-    Eigen::PartialPivLU<MatrixXd> lu(I + Gk * Hk);
-    const MatrixXd WA = lu.solve(Ak), WG = lu.solve(Gk);
-    MatrixXd Hn = Hk + Ak.transpose() * Hk * WA;
-    Hn = (0.5 * (Hn + Hn.transpose())).eval();
-    MatrixXd Gn = Gk + Ak * WG * Ak.transpose();
-    Gk = 0.5 * (Gn + Gn.transpose());
-    Ak = Ak * WA;
-    const double change = entrywiseChange(Hn, Hk);
-    Hk = std::move(Hn);
-    if (!Hk.allFinite() || !Gk.allFinite() || !Ak.allFinite()) break;
-    if (change <= options.tolerance) {
-      converged = true;
-      break;
-    }
-  }
+  MatrixXd X = doubling(p.A, p.G, p.Q, options, res.iterations, converged);
   if (!converged) {
     diagnoseFailure(res, p, true, options, "solveDare",
-                    Hk.allFinite() ? "the doubling iteration did not converge in " +
-                                         std::to_string(res.iterations) + " iterations"
-                                   : "the doubling iteration overflowed at iteration " +
-                                         std::to_string(res.iterations));
+                    X.allFinite() ? "the doubling iteration did not converge in " +
+                                        std::to_string(res.iterations) + " iterations"
+                                  : "the doubling iteration overflowed at iteration " +
+                                        std::to_string(res.iterations));
     return res;
   }
   // Newton (Hewer): Aclᵀ Δ Acl − Δ + Res(X) = 0, Acl = A − B̂ Kv; kept only if it lowers the residual.
-  MatrixXd X = Hk, Res, ResNew, Kv, KvNew;
+  MatrixXd Res, ResNew, Kv, KvNew;
   double rho = dareResidual(p.A, p.B, MatrixXd(), p.Q, X, &Res, &Kv);
   for (int k = 0; k < options.refinementSteps && std::isfinite(rho) && rho > kEps; ++k) {
     MatrixXd Xn;

