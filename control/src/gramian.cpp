@@ -4,6 +4,7 @@
 // product or solve, where a dense Newton matrix on the N = d(d+1)/2 unknowns costs O(d⁶) per
 // factorization.
 #include "ode_driver.hpp"
+#include "riccati_lyapunov.hpp"
 #include "trellis/control/controllability.hpp"
 #include "trellis/core/trajectory.hpp"
 
@@ -31,15 +32,12 @@ namespace {
 
 /// Ẇ = Ar W + W Arᵀ + Br Brᵀ on the packed upper triangle of W (column by column).
 /// Jacobian: the Lyapunov operator L(E) = Ar E + E Arᵀ (products only). Preconditioner: the exact
-/// solve of the Newton matrix, (I − γL) X = R. With the complex Schur form Ar = U Tu Uᴴ (once per
-/// Newton-matrix update) and X = U Y Uᴴ this is M Y + Y Mᴴ = Uᴴ R U, M = ½I − γTu upper
-/// triangular, solved column by column from the last: (M + conj(M_jj) I) y_j = c_j −
-/// Σ_{k>j} conj(M_jk) y_k (back substitution; Bartels–Stewart).
+/// solve of the Newton matrix, (I − γL) X = R, by detail::SchurLyapunov (real Schur form of Arᵀ,
+/// Bartels–Stewart; shared with the Riccati solver).
 class GramianSystem final : public detail::OdeSystem {
  public:
   GramianSystem(const Model& model, const TangentBasisTrajectory& basis)
-      : lin(model, basis), d(basis.dimension()), W(d, d), F(d, d), G(d, d), Y(d, d), C(d, d),
-        Mj(d, d), c(d) {}
+      : lin(model, basis), d(basis.dimension()), W(d, d), F(d, d), G(d, d), ArT(d, d), lyap(d) {}
 
   int rhs(double t, detail::ConstVectorMap y, detail::VectorMap ydot) override {
     if (!ready(t)) return -1;
@@ -68,46 +66,31 @@ class GramianSystem final : public detail::OdeSystem {
     return 0;
   }
   bool hasPreconditioner() const override { return true; }
+  // The Newton matrix I − γL acts on symmetric X as X − γ(ArX + XArᵀ): the Riccati solver's
+  // Newton matrix with A_cl = Arᵀ, solved by the same real-Schur Bartels–Stewart (O(d³) per
+  // factorization and per solve; riccati_lyapunov.hpp). The Schur form is refreshed only when
+  // CVODES asks for a new Newton matrix (jacOk false); γ enters each solve.
   int preconditionerSetup(double t, detail::ConstVectorMap, detail::ConstVectorMap, bool jacOk,
-                          bool* jacUpdated, double g) override {
+                          bool* jacUpdated, double) override {
     if (!ready(t)) return -1;
-    if (!(jacOk && schurTime == t && haveSchur)) {
-      schur.compute(lin.Ar().cast<std::complex<double>>());
-      if (schur.info() != Eigen::Success) {
-        failure = "the Schur form of Ar did not converge";
-        return 1;
-      }
-      haveSchur = true;
-      schurTime = t;
-      *jacUpdated = true;
-    } else {
+    if (jacOk && haveSchur) {
       *jacUpdated = false;
+      return 0;
     }
-    gamma = g;
+    ArT = lin.Ar().transpose();
+    if (!lyap.factor(ArT)) {
+      failure = "the Schur form of Ar did not converge";
+      haveSchur = false;
+      return 1;
+    }
+    haveSchur = true;
+    *jacUpdated = true;
     return 0;
   }
   int preconditionerSolve(double, detail::ConstVectorMap, detail::ConstVectorMap,
-                          detail::ConstVectorMap r, detail::VectorMap z, double) override {
-    const auto& U = schur.matrixU();
-    const auto& Tu = schur.matrixT();
-    unpack(r.data(), W);
-    C.noalias() = U.adjoint() * W.cast<std::complex<double>>() * U;
-    for (Eigen::Index j = d; j-- > 0;) {
-      // rhs c_j − Σ_{k>j} conj(M_jk) y_k with M = ½I − γTu (off-diagonal: −γTu).
-      c = C.col(j);
-      for (Eigen::Index k = j + 1; k < d; ++k) c += gamma * std::conj(Tu(j, k)) * Y.col(k);
-      // (M + conj(M_jj) I), upper triangular.
-      const std::complex<double> shift = 0.5 - gamma * std::conj(Tu(j, j));
-      Mj.noalias() = (-gamma) * Tu;
-      Mj.triangularView<Eigen::StrictlyLower>().setZero();
-      Mj.diagonal().array() += 0.5 + shift;
-      for (Eigen::Index i = 0; i < d; ++i) {
-        if (std::abs(Mj(i, i)) < 1e-14) return 1;  // (near) singular Newton matrix: smaller step
-      }
-      Mj.triangularView<Eigen::Upper>().solveInPlace(c);
-      Y.col(j) = c;
-    }
-    G = (U * Y * U.adjoint()).real();
+                          detail::ConstVectorMap r, detail::VectorMap z, double gamma) override {
+    unpack(r.data(), G);
+    if (!lyap.solve(gamma, G)) return 1;  // (near) singular Newton matrix: smaller step
     for (Eigen::Index j = 0; j < d; ++j) {
       double* col = z.data() + j * (j + 1) / 2;
       for (Eigen::Index i = 0; i <= j; ++i) col[i] = 0.5 * (G(i, j) + G(j, i));
@@ -135,12 +118,9 @@ class GramianSystem final : public detail::OdeSystem {
     }
   }
   Eigen::Index d;
-  Eigen::MatrixXd W, F, G;
-  Eigen::MatrixXcd Y, C, Mj;
-  Eigen::VectorXcd c;
-  Eigen::ComplexSchur<Eigen::MatrixXcd> schur;
+  Eigen::MatrixXd W, F, G, ArT;
+  detail::SchurLyapunov lyap;
   bool haveSchur = false;
-  double schurTime = 0.0, gamma = 0.0;
 };
 
 }  // namespace

@@ -18,6 +18,9 @@ RiccatiSystem::RiccatiSystem(int nx, int nu, double T, const LinearizationCallba
   if (!w_.Rfun) {
     R_ = w_.R;
     Rllt_.compute(R_);
+    // Constant R: R⁻¹ once, so that G = R⁻¹Bᵀ is one m×m×nx product per linearization instead
+    // of two triangular solves.
+    if (Rllt_.info() == Eigen::Success) Rinv_ = Rllt_.solve(Eigen::MatrixXd::Identity(nu, nu));
   }
 }
 
@@ -78,8 +81,12 @@ bool RiccatiSystem::coefficientsAt(double t) {
     fail(RiccatiStatus::kCallbackFailure, t, m.str());
     return false;
   }
-  G_ = B_.transpose();
-  Rllt_.solveInPlace(G_);
+  if (w_.Rfun) {
+    G_ = B_.transpose();
+    Rllt_.solveInPlace(G_);
+  } else {
+    G_.noalias() = Rinv_ * B_.transpose();
+  }
   cachedT_ = t;
   cacheValid_ = true;
   return true;
@@ -100,7 +107,6 @@ bool RiccatiSystem::evaluate(double tau, const double* y) {
     fail(RiccatiStatus::kNonFinite, t, m.str());
     return false;
   }
-  P_.noalias() = S_ * B_;
   K_.noalias() = G_ * S_;
   return true;
 }
@@ -110,19 +116,23 @@ void RiccatiSystem::closedLoop() {
   Acl_.noalias() -= B_ * K_;
 }
 
-// dS/dτ = AᵀS + SA − S B R⁻¹ Bᵀ S + Q = F + Fᵀ − P K + Q with F = AᵀS.
+// dS/dτ = AᵀS + SA − S B R⁻¹ Bᵀ S + Q = F + Fᵀ − P K + Q with F = AᵀS, K = G S and
+// P = S B = Kᵀ R (R K = BᵀS): nx·m² flops for P instead of nx²·m, and only the upper triangle
+// of the symmetric P K (half its nx²·m) in the plain form.
 int RiccatiSystem::rhs(double tau, ConstVectorMap y, VectorMap ydot) {
   if (!evaluate(tau, y.data())) return -1;
   F_.noalias() = A_.transpose() * S_;
-  PK_.noalias() = P_ * K_;
+  P_.noalias() = K_.transpose() * R_;
   double* out = ydot.data();
   if (!factored) {
+    PK_.triangularView<Eigen::Upper>() = P_ * K_;
     for (Eigen::Index j = 0; j < nx_; ++j) {
       double* col = out + j * (j + 1) / 2;
       for (Eigen::Index i = 0; i <= j; ++i) col[i] = F_(i, j) + F_(j, i) - PK_(i, j) + Q_(i, j);
     }
     return 0;
   }
+  PK_.noalias() = P_ * K_;
   // Factored: dU/dτ = Υ(U⁻ᵀ Ṡ U⁻¹) U. A zero on U's diagonal (a trial point where the factor
   // lost rank) or a non-finite result is recoverable: CVODES retries with a smaller step.
   Sdot_.noalias() = F_ + F_.transpose();

@@ -10,7 +10,8 @@
 //
 // Cost per right-hand side: the coefficients A, B, Q, R and G = R⁻¹Bᵀ depend on t only and are
 // cached on t (BDF's Newton iterations and the Jacobian set-up evaluate the same t several
-// times: one linearization per distinct t); then one nx³ product (AᵀS) and two nx²m products.
+// times: one linearization per distinct t); then one nx³ product (AᵀS), one nx²m product (K = GS)
+// and the upper half of another (P K, with P = KᵀR).
 // Nothing allocates after construction.
 #pragma once
 
@@ -69,7 +70,7 @@ class RiccatiSystem final : public OdeSystem {
   double T_;
   const LinearizationCallback& lin_;
   const LqrWeights& w_;
-  Eigen::MatrixXd A_, B_, Q_, R_, G_, S_, P_, K_, F_, Acl_, PK_;
+  Eigen::MatrixXd A_, B_, Q_, R_, Rinv_, G_, S_, P_, K_, F_, Acl_, PK_;
   Eigen::LLT<Eigen::MatrixXd> Rllt_;
   double cachedT_ = std::numeric_limits<double>::quiet_NaN();
   bool cacheValid_ = false;
