@@ -34,23 +34,44 @@ RiccatiOptions feedbackRiccatiOptions() {
 }
 
 GainSchedule feedbackGains(const ManifoldRiccatiSolution& lqr, const Trajectory& reference) {
+  // Rows: the knots, each interval bisected while K at its midpoint differs from the chord through
+  // its ends by more than kTolerance of the local gain size (max |K_ij| at the two ends). The chord
+  // test is conservative for the cubic rule used between rows (its error is O(h⁴) where the
+  // chord's is O(h²)); it puts rows into the end-time boundary layer and nowhere else.
+  constexpr double kTolerance = 1e-3;
+  const double span = reference.endTime() - reference.startTime();
+  const double shortest = 1e-7 * std::max(1.0, span);
   const Eigen::VectorXd& knots = reference.times();
-  std::vector<double> times(knots.data(), knots.data() + knots.size());
-  const std::vector<double> steps = lqr.reduced.stepTimes();
-  times.insert(times.end(), steps.begin(), steps.end());
-  std::sort(times.begin(), times.end());
-  // Rows closer than 1e-9 of the horizon are one row (a step ending on a knot).
-  const double merge = 1e-9 * std::max(1.0, reference.endTime() - reference.startTime());
   std::vector<double> rows;
-  for (double t : times) {
-    if (t < reference.startTime() || t > reference.endTime()) continue;
-    if (rows.empty() || t - rows.back() > merge) rows.push_back(t);
+  std::vector<Eigen::MatrixXd> values;
+  rows.push_back(knots(0));
+  values.push_back(lqr.K(knots(0)));
+  struct Interval {
+    double a, b;
+    Eigen::MatrixXd Kb;
+  };
+  std::vector<Interval> pending;  // right halves still to test (a stack: rows stay in order)
+  for (Eigen::Index k = 1; k < knots.size(); ++k) {
+    pending.push_back({rows.back(), knots(k), lqr.K(knots(k))});
+    while (!pending.empty()) {
+      Interval iv = std::move(pending.back());
+      pending.pop_back();
+      const Eigen::MatrixXd& Ka = values.back();
+      const double mid = 0.5 * (iv.a + iv.b);
+      Eigen::MatrixXd Km = lqr.K(mid);
+      const double scale = std::max(Ka.cwiseAbs().maxCoeff(), iv.Kb.cwiseAbs().maxCoeff());
+      const double chordError = (Km - 0.5 * (Ka + iv.Kb)).cwiseAbs().maxCoeff();
+      if (chordError > kTolerance * scale && iv.b - iv.a > 2.0 * shortest) {
+        pending.push_back({mid, iv.b, std::move(iv.Kb)});  // tested after the left half
+        pending.push_back({iv.a, mid, std::move(Km)});
+        continue;
+      }
+      rows.push_back(iv.b);
+      values.push_back(std::move(iv.Kb));
+    }
   }
-  rows.front() = reference.startTime();
-  rows.back() = reference.endTime();
-  GainSchedule gains = GainSchedule::sample(
-      [&](double t) { return lqr.K(t); },
-      Eigen::Map<const Eigen::VectorXd>(rows.data(), static_cast<Eigen::Index>(rows.size())));
+  GainSchedule gains(Eigen::Map<const Eigen::VectorXd>(rows.data(), static_cast<Eigen::Index>(rows.size())),
+                     std::move(values));
   gains.setInterpolation(GainInterpolation::kCubic);
   return gains;
 }

@@ -7,10 +7,11 @@
 //
 // Gains. The manifold TV-LQR's K(t) has a boundary layer at the end time (K(T) from Qf is ~1e4,
 // and it relaxes within a few ms), far narrower than the knot spacing. The schedule therefore
-// samples K at the reference's knots AND at the Riccati solve's own step times (which the
-// solver's error control concentrates where K changes fast), with the C¹ cubic rule between rows
-// (no closed-loop restart at a row). Cubic on the knots alone overshoots in the boundary layer
-// (measured: the closed loop blew up at t = 2.98 s); linear on the knots misses the layer.
+// samples K at the reference's knots and bisects each interval where K's midpoint is off the
+// chord by more than 1e-3 of the gain's size (rows go into the layer and nowhere else), with the
+// C¹ cubic rule between rows (no closed-loop restart at a row). Cubic on the knots alone
+// overshoots in the boundary layer (measured: the closed loop blew up at t = 2.98 s); linear on
+// the knots misses the layer; every Riccati step time as a row (1440 rows) writes a 28 MB file.
 //
 // Closed loop: BDF (the hand is stiff), rtol 1e-7, atol 5e-10 — the simulator integrates the
 // deviation from the reference, so atol bounds the absolute local error once the perturbation has
@@ -30,8 +31,8 @@ LqrWeights feedbackWeights(const Model& model);
 TangentTransportOptions feedbackTransport();
 RiccatiOptions feedbackRiccatiOptions();
 
-/// K(t) of `lqr` sampled at the union of the reference's knots and lqr.reduced.stepTimes(), cubic
-/// rule (file comment). Throws what GainSchedule::sample throws.
+/// K(t) of `lqr` at the reference's knots and the bisection points of the file comment, cubic
+/// rule. Throws what the GainSchedule constructor throws.
 GainSchedule feedbackGains(const ManifoldRiccatiSolution& lqr, const Trajectory& reference);
 
 /// BDF, rtol 1e-7, atol 5e-10, inputs clipped to [0, ∞) (m inputs).
