@@ -2,6 +2,8 @@
 // Riccati solve and the sampled-data recursion; summary and JSON of the result.
 #include "trellis/control/tvlqr.hpp"
 
+#include "reduced_problem.hpp"
+
 #include "trellis/core/reference.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/core/model.hpp"
@@ -221,36 +223,9 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
   }
   const int d = basis.dimension();
   sol.dimension = d;
-  struct Shared {
-    Shared(const Model& m, const TangentBasisTrajectory& b) : lin(m, b) {}
-    ReducedLinearization lin;  // lives only for the solve (the callbacks are not kept)
-    Eigen::MatrixXd Q;
-  };
-  auto sh = std::make_shared<Shared>(model, basis);
-  const LinearizationCallback lin = [sh](double t, Eigen::MatrixXd& A, Eigen::MatrixXd& B) {
-    sh->lin.evaluate(t);
-    A = sh->lin.Ar();
-    B = sh->lin.Br();
-  };
-  LqrWeights reduced;
-  reduced.R = weights.R;
-  reduced.Rfun = weights.Rfun;
-  const Eigen::MatrixXd Qconst = weights.Q;
-  const WeightCallback Qfull = weights.Qfun;
-  reduced.Qfun = [sh, Qconst, Qfull, nx](double t, Eigen::MatrixXd& Qr) {
-    sh->lin.evaluate(t);  // cached on t: no extra dynamics
-    const Eigen::MatrixXd& T = sh->lin.T();
-    if (Qfull) {
-      sh->Q.setZero(nx, nx);
-      Qfull(t, sh->Q);
-      Qr = T.transpose() * sh->Q * T;
-    } else {
-      Qr = T.transpose() * Qconst * T;
-    }
-    Qr = 0.5 * (Qr + Qr.transpose()).eval();
-  };
+  const detail::ReducedProblem problem = detail::makeReducedProblem(model, basis, weights);
   const Eigen::VectorXd times = sampleTimes(reference.startTime(), reference.endTime(), options.sampleRate);
-  const SampledDiscretization disc = discretizeSampledData(times, d, nu, lin, reduced, options.sampled);
+  const SampledDiscretization disc = discretizeSampledData(times, d, nu, problem.linearization, problem.weights, options.sampled);
   sol.steps = disc.steps;
   sol.rhsEvaluations = disc.rhsEvaluations;
   sol.linearizations = disc.linearizations;

@@ -1,0 +1,56 @@
+// reduced_problem.cpp — see reduced_problem.hpp.
+#include "reduced_problem.hpp"
+
+#include <stdexcept>
+#include <string>
+
+namespace trellis::detail {
+
+Eigen::MatrixXd ReducedProblem::reducedTerminal(const Eigen::MatrixXd& Qf, double t) const {
+  evaluator->evaluate(t);
+  const Eigen::MatrixXd& T = evaluator->T();
+  const Eigen::MatrixXd Qr = T.transpose() * Qf * T;
+  return 0.5 * (Qr + Qr.transpose());
+}
+
+ReducedProblem makeReducedProblem(const Model& model, const TangentBasisTrajectory& basis,
+                                  const LqrWeights& weights) {
+  ReducedProblem p;
+  p.evaluator = std::make_shared<ReducedLinearization>(model, basis);
+  const std::shared_ptr<ReducedLinearization> lin = p.evaluator;
+  p.linearization = [lin](double t, Eigen::MatrixXd& A, Eigen::MatrixXd& B) {
+    lin->evaluate(t);
+    A = lin->Ar();
+    B = lin->Br();
+  };
+  p.weights.R = weights.R;
+  p.weights.Rfun = weights.Rfun;
+  const Eigen::Index nx = basis.nx();
+  struct Scratch {
+    Eigen::MatrixXd Q, QT;
+  };
+  auto scratch = std::make_shared<Scratch>();
+  p.weights.Qfun = [lin, scratch, Qconst = weights.Q, Qfull = weights.Qfun, nx](double t, Eigen::MatrixXd& Qr) {
+    lin->evaluate(t);  // cached on t: no extra dynamics
+    const Eigen::MatrixXd& T = lin->T();
+    if (Qfull) {
+      scratch->Q.setZero(nx, nx);
+      Qfull(t, scratch->Q);
+      if (scratch->Q.rows() != nx || scratch->Q.cols() != nx) {
+        throw std::runtime_error("Q(t) callback returned " + std::to_string(scratch->Q.rows()) + "x" +
+                                 std::to_string(scratch->Q.cols()) + ", expected " + std::to_string(nx) +
+                                 "x" + std::to_string(nx));
+      }
+      scratch->QT.noalias() = scratch->Q * T;
+    } else {
+      scratch->QT.noalias() = Qconst * T;
+    }
+    Qr.noalias() = T.transpose() * scratch->QT;
+    for (Eigen::Index j = 0; j < Qr.cols(); ++j) {  // exactly symmetric: upper triangle mirrored
+      for (Eigen::Index i = j + 1; i < Qr.rows(); ++i) Qr(i, j) = Qr(j, i);
+    }
+  };
+  return p;
+}
+
+}  // namespace trellis::detail
