@@ -93,14 +93,17 @@ void Data::describeTree(const Model& model) {
 }
 
 Data::Data(const Model& model)
-    // The factorizations are built at their size here (not assigned later) so that every member,
-    // including their status flags, is initialized.
+    // The factorizations are built at their size here (not assigned later); the body factors an
+    // identity once because Eigen 3.4's size constructors leave the ComputationInfo flag
+    // uninitialized, and moving a Data copies it (UBSan: invalid enum load).
     : schurLLT(model.nc()),
       schurLDLT(model.nc()),
       basisQR(2 * model.nq(), model.nholonomic() + model.nc()) {
   const int n = model.nq(), m = model.nu(), nc = model.nc(), nf = model.nframes();
   const int nh = model.nholonomic();
   const int cols = 2 * n + m;
+  schurLLT.compute(Eigen::MatrixXd::Identity(nc, nc));
+  schurLDLT.compute(Eigen::MatrixXd::Identity(nc, nc));
   framePose.assign(nf, Eigen::Isometry3d::Identity());
   frameVelocity.assign(nf, Vector6d::Zero());
   M = Eigen::MatrixXd::Zero(n, n);
