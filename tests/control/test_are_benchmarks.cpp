@@ -105,6 +105,33 @@ Transformed transform(const MatrixXd& A, const MatrixXd& B, const MatrixXd& Q, c
   return t;
 }
 
+/// 30 decoupled scalar DAREs (10 stable modes down to |a| = 1 − 1e-9, 10 unstable up to 1e3, 10
+/// near 1), b, q, r over ±`decades` decades, exact s_i, coupled by x = T z with T =
+/// diag(10^k)·orthogonal, k in ±`decades` (seed 10).
+struct ThirtyModes {
+  VectorXd a, b, q, r, s;
+  Transformed t;
+};
+
+ThirtyModes thirtyModes(double decades) {
+  std::mt19937 rng(10);
+  std::uniform_real_distribution<double> ud(-decades, decades);
+  const int n = 30;
+  ThirtyModes m{VectorXd(n), VectorXd(n), VectorXd(n), VectorXd(n), VectorXd(n), {}};
+  for (int i = 0; i < n; ++i) {
+    m.a(i) = i < 10 ? (1.0 - std::pow(10.0, -1.0 - 0.8 * i)) * (i % 2 ? -1 : 1)
+             : i < 20 ? std::pow(10.0, 0.3 * (i - 10)) : 1.0 + 1e-6 * (i - 20);
+    m.b(i) = std::pow(10.0, ud(rng));
+    m.q(i) = std::pow(10.0, ud(rng));
+    m.r(i) = std::pow(10.0, ud(rng));
+    m.s(i) = scalarDare(m.a(i), m.b(i), m.q(i), m.r(i));
+  }
+  const VectorXd tscale = VectorXd::NullaryExpr(n, [&](Eigen::Index) { return std::pow(10.0, ud(rng)); });
+  m.t = transform(m.a.asDiagonal(), m.b.asDiagonal(), m.q.asDiagonal(), m.r.asDiagonal(), MatrixXd::Zero(n, n),
+                  m.s.asDiagonal(), tscale, randomOrthogonal(rng, n), MatrixXd::Identity(n, n));
+  return m;
+}
+
 }  // namespace
 
 TEST_CASE("DARE: the badly scaled case of issue 10 and its scalings", "[lqr][are][dare]") {
@@ -159,22 +186,9 @@ TEST_CASE("DARE: DAREX closed forms and scalable decoupled families", "[lqr][are
     // k in [−1, 1]. (With six decades in b and T, a mode a = 126 with a small b becomes nearly
     // uncontrollable after the coupling (margin 3e-11) and the solver refuses it: see issue 10's
     // closing note.)
-    std::mt19937 rng(10);
-    std::uniform_real_distribution<double> ud(-1.0, 1.0);
-    const int n = 30;
-    VectorXd a(n), b(n), q(n), r(n), s(n);
-    for (int i = 0; i < n; ++i) {
-      a(i) = i < 10 ? (1.0 - std::pow(10.0, -1.0 - 0.8 * i)) * (i % 2 ? -1 : 1)
-             : i < 20 ? std::pow(10.0, 0.3 * (i - 10)) : 1.0 + 1e-6 * (i - 20);
-      b(i) = std::pow(10.0, ud(rng));
-      q(i) = std::pow(10.0, ud(rng));
-      r(i) = std::pow(10.0, ud(rng));
-      s(i) = scalarDare(a(i), b(i), q(i), r(i));
-    }
-    const VectorXd tscale = VectorXd::NullaryExpr(n, [&](Eigen::Index) { return std::pow(10.0, ud(rng)); });
-    const auto t = transform(a.asDiagonal(), b.asDiagonal(), q.asDiagonal(), r.asDiagonal(),
-                             MatrixXd::Zero(n, n), s.asDiagonal(), tscale, randomOrthogonal(rng, n),
-                             MatrixXd::Identity(n, n));
+    const ThirtyModes modes = thirtyModes(1.0);
+    const VectorXd &a = modes.a, &b = modes.b, &q = modes.q, &r = modes.r, &s = modes.s;
+    const Transformed& t = modes.t;
     const auto res = trellis::solveDare(t.A, t.B, t.Q, t.R);
     INFO(res.message);
     REQUIRE(res.ok());
@@ -586,22 +600,8 @@ TEST_CASE("DARE: 30 coupled modes at ±2 and ±3 decades are never ok with a wro
   // attainable at ±2: Hewer's iteration started from the exact gain stays within 2e-10 of it; the
   // solver has no stabilizing start of its own yet — see the issue 10 closing note.)
   for (double dec : {2.0, 3.0}) {
-    std::mt19937 rng(10);
-    std::uniform_real_distribution<double> ud(-dec, dec);
-    const int n = 30;
-    VectorXd a(n), b(n), q(n), r(n), s(n);
-    for (int i = 0; i < n; ++i) {
-      a(i) = i < 10 ? (1.0 - std::pow(10.0, -1.0 - 0.8 * i)) * (i % 2 ? -1 : 1)
-             : i < 20 ? std::pow(10.0, 0.3 * (i - 10)) : 1.0 + 1e-6 * (i - 20);
-      b(i) = std::pow(10.0, ud(rng));
-      q(i) = std::pow(10.0, ud(rng));
-      r(i) = std::pow(10.0, ud(rng));
-      s(i) = scalarDare(a(i), b(i), q(i), r(i));
-    }
-    const VectorXd tscale = VectorXd::NullaryExpr(n, [&](Eigen::Index) { return std::pow(10.0, ud(rng)); });
-    const auto t = transform(a.asDiagonal(), b.asDiagonal(), q.asDiagonal(), r.asDiagonal(),
-                             MatrixXd::Zero(n, n), s.asDiagonal(), tscale, randomOrthogonal(rng, n),
-                             MatrixXd::Identity(n, n));
+    const ThirtyModes modes = thirtyModes(dec);
+    const Transformed& t = modes.t;
     const auto res = trellis::solveDare(t.A, t.B, t.Q, t.R);
     INFO("±" << dec << " decades: " << res.message);
     if (res.ok()) {
