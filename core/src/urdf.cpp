@@ -144,9 +144,6 @@ class UrdfReader {
     for (const XMLElement* l = robot->FirstChildElement("link"); l; l = l->NextSiblingElement("link")) {
       LinkSpec link{l, attribute(l, "name", "link", true)};
       if (link.name.empty()) fail(l, "link", "attribute 'name': empty");
-      if (link.name == "world") {
-        fail(l, "link 'world'", "the name 'world' is reserved for the fixed world frame (the root link is the world)");
-      }
       if (linkIndex_.count(link.name)) fail(l, "link '" + link.name + "'", "duplicate link name");
       linkIndex_[link.name] = static_cast<int>(links_.size());
       links_.push_back(link);
@@ -222,6 +219,14 @@ class UrdfReader {
                                       : "several root links (" + list + "); a URDF is one tree");
     }
     out_.rootLink = roots[0];
+    // The ROS convention <link name="world"/> as the root (fixed to the ground by a fixed joint)
+    // names the world itself; anywhere else in the tree 'world' would be a second world.
+    const bool rootIsWorld = out_.rootLink == "world";
+    if (!rootIsWorld && linkIndex_.count("world")) {
+      fail(links_[linkIndex_.at("world")].xml, "link 'world'",
+           "the name 'world' is reserved for the fixed world frame; only the root link may have it "
+           "(the root link is '" + out_.rootLink + "')");
+    }
     for (const auto& l : links_)
       if (l.name != out_.rootLink) addInertial(l);
     for (const auto& [link, f] : inertialFrames_)
@@ -232,8 +237,10 @@ class UrdfReader {
     for (int i = 0; i < static_cast<int>(joints_.size()); ++i) children[joints_[i].parent].push_back(i);
 
     ModelBuilder& b = out_.builder;
-    b.addFrame(out_.rootLink, "world", Transform::constSE3(Eigen::Matrix4d::Identity()));
-    out_.frames.push_back(out_.rootLink);
+    if (!rootIsWorld) {
+      b.addFrame(out_.rootLink, "world", Transform::constSE3(Eigen::Matrix4d::Identity()));
+      out_.frames.push_back(out_.rootLink);
+    }
     std::map<std::string, double> damping;
     // Depth first from the root, children in file order: the builder sees the tree in pre-order.
     std::vector<int> stack;

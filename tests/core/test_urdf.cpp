@@ -369,6 +369,32 @@ TEST_CASE("URDF compound joints: planar and floating as primitive sequences", "[
   }
 }
 
+TEST_CASE("URDF root link named world is the world frame (ROS convention)", "[urdf]") {
+  const std::string arm = R"(
+  <link name="b"><inertial><origin xyz="0 0 -0.3"/><mass value="0.7"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.005"/></inertial></link>
+  <joint name="h" type="revolute"><parent link="base"/><child link="b"/><origin xyz="0 0.1 0.2"/><axis xyz="0 1 0"/></joint>
+)";
+  const std::string mount = R"(<origin xyz="0.5 -0.2 1" rpy="0.1 0.2 0.3"/>)";
+  // The same arm: on a base fixed to a root named 'world', and on a root 'base' placed by hand.
+  const Scene onWorld = parseScene(robot(R"(<link name="world"/><link name="base"/>
+  <joint name="mount" type="fixed"><parent link="world"/><child link="base"/>)" + mount + "</joint>" + arm), "w.urdf");
+  const Scene onBase = parseScene(robot(R"(<link name="base"/>)" + arm), "b.urdf");
+  const Model& m = onWorld.model;
+  REQUIRE(m.nq() == 1);
+  CHECK_NOTHROW(m.frameIndex("base"));
+  std::mt19937 rng(63);
+  const State st = randomState(m, rng);
+  checkLinearizationAgainstFd(m, st);
+  // Frame b relative to base is the same in both; base sits at the mount pose in the first.
+  Data dw(m), db(onBase.model);
+  computeKinematics(m, dw, st.q, st.dq);
+  computeKinematics(onBase.model, db, st.q, st.dq);
+  const Eigen::Matrix4d mountPose = poseFromXyzRpy({0.5, -0.2, 1}, {0.1, 0.2, 0.3});
+  CHECK((dw.framePose[m.frameIndex("base")].matrix() - mountPose).cwiseAbs().maxCoeff() < 1e-15);
+  const Eigen::Matrix4d rel = mountPose.inverse() * dw.framePose[m.frameIndex("b")].matrix();
+  CHECK((rel - db.framePose[onBase.model.frameIndex("b")].matrix()).cwiseAbs().maxCoeff() < 1e-14);
+}
+
 TEST_CASE("URDF errors name link, joint, attribute, value and line", "[urdf][errors]") {
   const auto fails = [](const std::string& body, const std::string& expected) {
     INFO("expected message containing: " << expected);
@@ -386,6 +412,8 @@ TEST_CASE("URDF errors name link, joint, attribute, value and line", "[urdf][err
 <joint name="k" type="revolute"><parent link="a"/><child link="b"/></joint>)",
           "joint 'k': link 'b' already has a parent joint 'j' (line 5)");
     fails(R"(<link name="a"/><link name="a"/>)", "bad.urdf:3: link 'a': duplicate link name");
+    fails(R"(<link name="a"/><link name="world"/><joint name="j" type="fixed"><parent link="a"/><child link="world"/></joint>)",
+          "bad.urdf:3: link 'world': the name 'world' is reserved for the fixed world frame; only the root link may have it (the root link is 'a')");
     fails(std::string(kTwoLinks) + R"(<joint name="j" type="screw"><parent link="a"/><child link="b"/></joint>)",
           "joint 'j': attribute 'type': value 'screw' is not one of");
   }

@@ -16,6 +16,15 @@ TRAJECTORIES = SOURCE_DIR / "examples" / "trajectories"
 PROBLEMS = SOURCE_DIR / "examples" / "problems"
 
 
+def cli_env():
+    """The environment for the C++ command-line tool. Under a sanitizer build CTest preloads the
+    sanitizer runtime into the interpreter (LD_PRELOAD, python/CMakeLists.txt); the tool links its
+    own runtime (clang: statically), so it must not inherit the preload."""
+    env = dict(os.environ)
+    env.pop("LD_PRELOAD", None)
+    return env
+
+
 def _cli():
     path = os.environ.get("TRELLIS_CLI") or str(SOURCE_DIR / "build" / "cli" / "trellis")
     return path if os.path.exists(path) else None
@@ -29,7 +38,7 @@ def cli():
         pytest.skip("the trellis command-line tool is not built")
 
     def run(*args):
-        done = subprocess.run([path, *map(str, args)], capture_output=True, text=True)
+        done = subprocess.run([path, *map(str, args)], capture_output=True, text=True, env=cli_env())
         assert done.returncode == 0, done.stderr
         return done.stdout
     return run

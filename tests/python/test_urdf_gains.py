@@ -77,12 +77,13 @@ def test_hold_gains_urdf_with_closing_constraint(tm, cli, tmp_path, urdf):
 
 def test_hold_refuses_trajectory_and_names_options(cli, tmp_path, urdf):
     import subprocess
-    from conftest import _cli
+    from conftest import _cli, cli_env
     done = subprocess.run([_cli(), "gains", str(urdf), "--hold", "1", "--trajectory", "x.csv",
-                           "--out", str(tmp_path / "g.csv")], capture_output=True, text=True)
+                           "--out", str(tmp_path / "g.csv")], capture_output=True, text=True,
+                          env=cli_env())
     assert done.returncode == 2
     assert "--hold and --trajectory exclude each other" in done.stderr
     done = subprocess.run([_cli(), "gains", str(urdf), "--hold", "-1", "--out", str(tmp_path / "g.csv")],
-                          capture_output=True, text=True)
+                          capture_output=True, text=True, env=cli_env())
     assert done.returncode == 2 and "--hold" in done.stderr
     assert not (tmp_path / "g.csv").exists()
