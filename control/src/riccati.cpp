@@ -59,7 +59,7 @@ void checkProblem(double t0, double T, int nx, int nu, const LinearizationCallba
 // held hanging (`trellis gains`, Q = 10, R = 1) the equation is stiff: fixed point runs out of
 // 100000 steps and Adams needs 5225 steps where BDF–GMRES needs 814.
 detail::OdeOptions integratorOptions(const RiccatiOptions& options, int nx, bool factored,
-                                     bool& krylov) {
+                                     bool& usesLyapunov) {
   detail::OdeOptions o;
   o.what = "Riccati equation (in reversed time tau = T - t)";
   o.rtol = options.rtol;
@@ -69,13 +69,23 @@ detail::OdeOptions integratorOptions(const RiccatiOptions& options, int nx, bool
   o.initialStep = options.initialStep;
   o.exactJacobian = options.exactJacobian;
   const bool bdf = options.method != RiccatiMethod::kAdams;
-  krylov = options.linearSolver == RiccatiLinearSolver::kKrylov ||
-           (options.linearSolver == RiccatiLinearSolver::kAuto && nx > 10);
+  RiccatiLinearSolver ls = options.linearSolver;
+  if (ls == RiccatiLinearSolver::kAuto) {
+    ls = nx <= 10 ? RiccatiLinearSolver::kDense
+                  : (factored ? RiccatiLinearSolver::kKrylov : RiccatiLinearSolver::kLyapunov);
+  }
   o.method = bdf ? detail::OdeMethod::Bdf : detail::OdeMethod::Adams;
-  o.linearSolver = !bdf     ? detail::OdeLinearSolver::FixedPoint
-                   : krylov ? detail::OdeLinearSolver::Gmres
-                            : detail::OdeLinearSolver::Dense;
-  (void)factored;
+  if (!bdf) {
+    o.linearSolver = detail::OdeLinearSolver::FixedPoint;
+  } else if (ls == RiccatiLinearSolver::kLyapunov) {
+    o.linearSolver = detail::OdeLinearSolver::SystemSolve;
+  } else if (ls == RiccatiLinearSolver::kKrylov) {
+    o.linearSolver = detail::OdeLinearSolver::Gmres;
+  } else {
+    o.linearSolver = detail::OdeLinearSolver::Dense;
+  }
+  usesLyapunov = (o.linearSolver == detail::OdeLinearSolver::Gmres && options.krylovPreconditioner) ||
+                 o.linearSolver == detail::OdeLinearSolver::SystemSolve;
   return o;
 }
 
@@ -98,9 +108,12 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
   bool factored = options.method == RiccatiMethod::kFactored;
   detail::RiccatiSystem system(nx, nu, T, linearization, weights);
   system.factored = factored;
-  bool krylov = false;
-  const detail::OdeOptions odeOptions = integratorOptions(options, nx, factored, krylov);
-  system.preconditioned = krylov && options.krylovPreconditioner;
+  bool usesLyapunov = false;
+  const detail::OdeOptions odeOptions = integratorOptions(options, nx, factored, usesLyapunov);
+  system.preconditioned = usesLyapunov;
+  // As the linear solver the Lyapunov solve must be exact (no identity shortcut on mildly stiff
+  // steps: an inexact Newton matrix costs Newton iterations and convergence failures).
+  system.exactSolve = odeOptions.linearSolver == detail::OdeLinearSolver::SystemSolve;
 
   Eigen::VectorXd y0(N);
   if (factored) {

@@ -223,7 +223,7 @@ int RiccatiSystem::preconditionerSetup(double tau, ConstVectorMap y, ConstVector
 int RiccatiSystem::preconditionerSolve(double, ConstVectorMap, ConstVectorMap, ConstVectorMap r,
                                        VectorMap z, double gamma) {
   const Eigen::Index n = nx_;
-  if (2.0 * gamma * aclNorm_ < 0.5) {  // non-stiff step: identity preconditioner
+  if (!exactSolve && 2.0 * gamma * aclNorm_ < 0.5) {  // non-stiff step: identity preconditioner
     z = r;
     return 0;
   }

@@ -33,7 +33,8 @@ class RiccatiSystem final : public OdeSystem {
                 const LqrWeights& weights);
 
   bool factored = false;         ///< integrate U (S = UᵀU) instead of S
-  bool preconditioned = false;   ///< offer the Lyapunov preconditioner (Krylov only)
+  bool preconditioned = false;   ///< offer the Lyapunov solve (Krylov preconditioner or solver)
+  bool exactSolve = false;       ///< the Lyapunov solve is the linear solver (no identity shortcut)
 
   int rhs(double tau, ConstVectorMap y, VectorMap ydot) override;
   bool hasJacobian() const override { return !factored; }
