@@ -52,12 +52,15 @@ void checkProblem(double t0, double T, int nx, int nu, const LinearizationCallba
 
 // Linear solver and method. Measured on bench/riccati_bench (planar chain, 2 s, rtol 1e-6):
 // see RiccatiLinearSolver::kAuto in the header for the rule and bench/README.md for the numbers.
-// Why BDF + Newton–GMRES + the Lyapunov preconditioner stays the default above nx = 10 (measured
-// 2026-12, 40 states, rtol 1e-6): on the benchmark's blended chain, which is barely stiff, BDF
-// with fixed-point iterations would be cheaper (390 steps, 622 right-hand sides, 0.74e9
-// instructions against 293 steps, 330 right-hand sides, 1.14e9), but on the damped 20-link chain
-// held hanging (`trellis gains`, Q = 10, R = 1) the equation is stiff: fixed point runs out of
-// 100000 steps and Adams needs 5225 steps where BDF–GMRES needs 814.
+// Above nx = 10 the plain form uses the direct Lyapunov solve (kLyapunov, 2026-12-01, 40 states,
+// callgrind): 0.54e9 instructions per solve against 0.69e9 for GMRES with the same Lyapunov
+// preconditioner (and 1.13e9 for that GMRES before the compiled N_Vector kernels), at the same
+// error: one O(nx³) solve per Newton iteration and no Gram–Schmidt on N = nx(nx+1)/2 unknowns.
+// Why Newton at all (measured 2026-12, 40 states): on the benchmark's blended chain, which is
+// barely stiff, BDF with fixed-point iterations was cheaper than the GMRES solve of the time, but
+// on the damped 20-link chain held hanging (`trellis gains`, Q = 10, R = 1) the equation is stiff:
+// fixed point runs out of 100000 steps and Adams needs 5225 steps where BDF–Newton needs 814.
+// The factored form keeps GMRES: its Newton matrix is not a Lyapunov operator.
 detail::OdeOptions integratorOptions(const RiccatiOptions& options, int nx, bool factored,
                                      bool& usesLyapunov) {
   detail::OdeOptions o;

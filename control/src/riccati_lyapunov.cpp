@@ -69,8 +69,10 @@ bool SchurLyapunov::solve(double gamma, Eigen::MatrixXd& X) {
   TF_ = gamma * T_;
   TF_.diagonal().array() -= 0.5;
   TFt_ = TF_.transpose();
+  // Y ← ZᵀXZ (upper triangle; the triangular product kernel computes only that half). The
+  // substitution below solves with C = +ZᵀXZ and the sign of −C enters the back transform.
   C_.noalias() = X * Z_;
-  Y_.triangularView<Eigen::Upper>() = -(Z_.transpose() * C_);  // C = −ZᵀXZ, upper triangle
+  Y_.triangularView<Eigen::Upper>() = Z_.transpose() * C_;
   const std::size_t nb = blockStart_.size() - 1;
   for (std::size_t bj = 0; bj < nb; ++bj) {
     const Eigen::Index j0 = blockStart_[bj], sj = blockStart_[bj + 1] - j0, jEnd = j0 + sj;
@@ -123,7 +125,7 @@ bool SchurLyapunov::solve(double gamma, Eigen::MatrixXd& X) {
     if (j0 > 0) Y_.block(j0, 0, sj, j0) = Y_.block(0, j0, j0, sj).transpose();
     if (sj == 2) Y_(j0 + 1, j0) = Y_(j0, j0 + 1) = 0.5 * (Y_(j0 + 1, j0) + Y_(j0, j0 + 1));
   }
-  C_.noalias() = Z_ * Y_;
+  C_.noalias() = -Z_ * Y_;
   X.triangularView<Eigen::Upper>() = C_ * Z_.transpose();
   X.triangularView<Eigen::StrictlyLower>() = X.transpose();
   return X.allFinite();
