@@ -204,3 +204,44 @@ TEST_CASE("kLyapunov: names, the factored form, and failures name the time", "[r
   CHECK(cb.failureTime > 0.4);
   CHECK_THAT(cb.message, Catch::Contains("non-finite"));
 }
+
+TEST_CASE("mechanical structure A = [0 I; Aq Av] gives the solution of the unstructured form",
+          "[riccati]") {
+  // The same time-varying system in x = [q; v] (structure detected: half-size products) and in
+  // x' = [v; q] (not detected: dense products): S' = P S Pᵀ.
+  std::srand(5);
+  const int h = 6, nx = 12, nu = 4;
+  const MatrixXd Aq0 = MatrixXd::Random(h, h), Av0 = MatrixXd::Random(h, h),
+                 Aq1 = 0.3 * MatrixXd::Random(h, h), Bv0 = MatrixXd::Random(h, nu);
+  auto structured = [&](double t, MatrixXd& A, MatrixXd& B) {
+    A.setZero();
+    A.topRightCorner(h, h).setIdentity();
+    A.bottomLeftCorner(h, h) = Aq0 + std::cos(t) * Aq1;
+    A.bottomRightCorner(h, h) = Av0;
+    B.setZero();
+    B.bottomRows(h) = Bv0;
+  };
+  MatrixXd P = MatrixXd::Zero(nx, nx);
+  P.topRightCorner(h, h).setIdentity();
+  P.bottomLeftCorner(h, h).setIdentity();  // x' = P x = [v; q]
+  auto permuted = [&](double t, MatrixXd& A, MatrixXd& B) {
+    MatrixXd a(nx, nx), b(nx, nu);
+    structured(t, a, b);
+    A = P * a * P.transpose();
+    B = P * b;
+  };
+  LqrWeights w = unitWeights(nx, nu);
+  w.Q.diagonal().head(h).setConstant(3.0);  // not permutation-invariant
+  LqrWeights wp = w;
+  wp.Q = P * w.Q * P.transpose();
+  const auto o = withSolver(RiccatiLinearSolver::kAuto, 1e-11);
+  const auto s1 = trellis::solveRiccati(0.0, 2.0, nx, nu, structured, w, o);
+  const auto s2 = trellis::solveRiccati(0.0, 2.0, nx, nu, permuted, wp, o);
+  REQUIRE(s1.ok());
+  REQUIRE(s2.ok());
+  for (double t : {0.0, 0.7, 1.9}) {
+    const MatrixXd back = P.transpose() * s2.S(t) * P;
+    CONTROL_CHECK_CLOSE(back, s1.S(t), 1e-8, 1.0);
+    CONTROL_CHECK_CLOSE((s2.K(t) * P).eval(), s1.K(t), 1e-8, 1.0);
+  }
+}
