@@ -53,9 +53,10 @@ void checkProblem(double t0, double T, int nx, int nu, const LinearizationCallba
 // Linear solver and method. Measured on bench/riccati_bench (planar chain, 2 s, rtol 1e-6):
 // see RiccatiLinearSolver::kAuto in the header for the rule and bench/README.md for the numbers.
 // Above nx = 10 the plain form uses the direct Lyapunov solve (kLyapunov, 2026-12-01, 40 states,
-// callgrind): 0.54e9 instructions per solve against 0.69e9 for GMRES with the same Lyapunov
-// preconditioner (and 1.13e9 for that GMRES before the compiled N_Vector kernels), at the same
-// error: one O(nx³) solve per Newton iteration and no Gram–Schmidt on N = nx(nx+1)/2 unknowns.
+// callgrind): 0.52e9 instructions per solve against 0.64e9 for GMRES with the same Lyapunov
+// preconditioner (and 1.13e9 for that GMRES before the compiled N_Vector kernels), error of S
+// 1.6e-6 against 1.2e-6 at rtol 1e-6: one O(nx³) solve per Newton iteration and no Jacobian
+// products or Gram–Schmidt on N = nx(nx+1)/2 unknowns.
 // Why Newton at all (measured 2026-12, 40 states): on the benchmark's blended chain, which is
 // barely stiff, BDF with fixed-point iterations was cheaper than the GMRES solve of the time, but
 // on the damped 20-link chain held hanging (`trellis gains`, Q = 10, R = 1) the equation is stiff:
