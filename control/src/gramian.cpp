@@ -31,7 +31,7 @@ void GramianOptions::validate() const {
 namespace {
 
 /// Ẇ = Ar W + W Arᵀ + Br Brᵀ on the packed upper triangle of W (column by column).
-/// Jacobian: the Lyapunov operator L(E) = Ar E + E Arᵀ (products only). Preconditioner: the exact
+/// Jacobian: the Lyapunov operator L(E) = Ar E + E Arᵀ (products only). Linear solver: the exact
 /// solve of the Newton matrix, (I − γL) X = R, by detail::SchurLyapunov (real Schur form of Arᵀ,
 /// Bartels–Stewart; shared with the Riccati solver).
 class GramianSystem final : public detail::OdeSystem {
@@ -155,7 +155,9 @@ GramianReport computeControllabilityGramian(const Model& model, const Trajectory
   const Eigen::Index N = d * (d + 1) / 2;
   detail::OdeOptions o;
   o.method = detail::OdeMethod::Bdf;
-  o.linearSolver = detail::OdeLinearSolver::Gmres;
+  // The Schur solve is exact for the Newton matrix (L depends on t only): the direct solver, no
+  // Krylov iterations (a stale Schur form, from an earlier t, is CVODES's modified Newton).
+  o.linearSolver = detail::OdeLinearSolver::SystemSolve;
   o.rtol = options.rtol;
   o.atol = options.atol;
   o.maxSteps = options.transport.maxSteps;

@@ -1,6 +1,7 @@
 // ode_driver.cpp — OdeDriver: the CVODES calls of trellis::control, written once.
 #include "ode_driver.hpp"
 
+#include "nvector_kernels.hpp"
 #include "sundials_raii.hpp"
 
 #include <cvodes/cvodes.h>
@@ -26,6 +27,80 @@ ConstVectorMap view(N_Vector v) {
   return ConstVectorMap(N_VGetArrayPointer(v), N_VGetLength(v));
 }
 VectorMap viewMutable(N_Vector v) { return VectorMap(N_VGetArrayPointer(v), N_VGetLength(v)); }
+
+// OdeLinearSolver::SystemSolve: a SUNLinearSolver whose solve is one application of the system's
+// preconditioner, P⁻¹ = (I − γJ)⁻¹ exactly. It declares itself ITERATIVE, matrix-free, so that
+// CVODES's linear-solver interface keeps its Jacobian-age heuristics (the set-up is called after
+// a convergence failure, every 20 steps or on a γ change > 30 %, with jok telling the system
+// whether it may keep J) and passes the current γ to every solve. (A MATRIX_EMBEDDED solver would
+// not do: CVODES 6 never calls the set-up of one, and every refresh decision would have to be
+// rebuilt here.) It reports zero iterations: linearIterations stays 0.
+struct SystemSolveContent {
+  void* pData = nullptr;
+  SUNPSetupFn pset = nullptr;
+  SUNPSolveFn psolve = nullptr;
+  sunindextype lastFlag = 0;
+};
+
+SystemSolveContent& content(SUNLinearSolver S) { return *static_cast<SystemSolveContent*>(S->content); }
+
+SUNLinearSolver_Type systemSolveType(SUNLinearSolver) { return SUNLINEARSOLVER_ITERATIVE; }
+SUNLinearSolver_ID systemSolveId(SUNLinearSolver) { return SUNLINEARSOLVER_CUSTOM; }
+int systemSolveSetATimes(SUNLinearSolver, void*, SUNATimesFn) { return SUNLS_SUCCESS; }
+int systemSolveSetPreconditioner(SUNLinearSolver S, void* pData, SUNPSetupFn pset,
+                                 SUNPSolveFn psolve) {
+  content(S).pData = pData;
+  content(S).pset = pset;
+  content(S).psolve = psolve;
+  return SUNLS_SUCCESS;
+}
+// Scaling is irrelevant to an exact solve; offering the operation spares CVODES the weight-mean
+// computation it does for iterative solvers without it.
+int systemSolveSetScaling(SUNLinearSolver, N_Vector, N_Vector) { return SUNLS_SUCCESS; }
+int systemSolveInitialize(SUNLinearSolver S) {
+  return content(S).psolve ? SUNLS_SUCCESS : SUNLS_ILL_INPUT;
+}
+int systemSolveSetup(SUNLinearSolver S, SUNMatrix) {
+  SystemSolveContent& c = content(S);
+  const int r = c.pset ? c.pset(c.pData) : 0;
+  c.lastFlag = r;
+  return r == 0 ? SUNLS_SUCCESS : (r > 0 ? SUNLS_PSET_FAIL_REC : SUNLS_PSET_FAIL_UNREC);
+}
+int systemSolveSolve(SUNLinearSolver S, SUNMatrix, N_Vector x, N_Vector b, realtype tol) {
+  SystemSolveContent& c = content(S);
+  const int r = c.psolve(c.pData, b, x, tol, SUN_PREC_LEFT);
+  c.lastFlag = r;
+  return r == 0 ? SUNLS_SUCCESS : (r > 0 ? SUNLS_PSOLVE_FAIL_REC : SUNLS_PSOLVE_FAIL_UNREC);
+}
+int systemSolveIters(SUNLinearSolver) { return 0; }
+realtype systemSolveResNorm(SUNLinearSolver) { return 0.0; }
+sunindextype systemSolveLastFlag(SUNLinearSolver S) { return content(S).lastFlag; }
+int systemSolveFree(SUNLinearSolver S) {
+  if (!S) return SUNLS_SUCCESS;
+  delete static_cast<SystemSolveContent*>(S->content);
+  S->content = nullptr;
+  SUNLinSolFreeEmpty(S);
+  return SUNLS_SUCCESS;
+}
+
+SUNLinearSolver newSystemSolve(SUNContext ctx) {
+  SUNLinearSolver S = SUNLinSolNewEmpty(ctx);
+  if (!S) return nullptr;
+  S->content = new SystemSolveContent();
+  S->ops->gettype = systemSolveType;
+  S->ops->getid = systemSolveId;
+  S->ops->setatimes = systemSolveSetATimes;
+  S->ops->setpreconditioner = systemSolveSetPreconditioner;
+  S->ops->setscalingvectors = systemSolveSetScaling;
+  S->ops->initialize = systemSolveInitialize;
+  S->ops->setup = systemSolveSetup;
+  S->ops->solve = systemSolveSolve;
+  S->ops->numiters = systemSolveIters;
+  S->ops->resnorm = systemSolveResNorm;
+  S->ops->lastflag = systemSolveLastFlag;
+  S->ops->free = systemSolveFree;
+  return S;
+}
 
 }  // namespace
 
@@ -127,15 +202,19 @@ OdeDriver::OdeDriver(OdeSystem& system, Eigen::Index n, OdeOptions options)
   cv.y.reset(N_VNew_Serial(N, ctx));
   cv.dky.reset(N_VNew_Serial(N, ctx));
   if (!cv.y || !cv.dky) throw std::runtime_error(what + ": N_VNew_Serial failed");
+  useKernels(cv.y.get());  // before CVodeInit: its work vectors are clones of y
+  useKernels(cv.dky.get());
   N_VConst(0.0, cv.y.get());
   if (options_.quadratureSize > 0) {
     impl_->quad.reset(N_VNew_Serial(options_.quadratureSize, ctx));
     if (!impl_->quad) throw std::runtime_error(what + ": N_VNew_Serial failed");
+    useKernels(impl_->quad.get());
     N_VConst(0.0, impl_->quad.get());
   }
   if (options_.atolVector.size() == n) {
     impl_->atol.reset(N_VNew_Serial(N, ctx));
     if (!impl_->atol) throw std::runtime_error(what + ": N_VNew_Serial failed");
+    useKernels(impl_->atol.get());
     viewMutable(impl_->atol.get()) = options_.atolVector;
   }
 
@@ -184,6 +263,18 @@ OdeDriver::OdeDriver(OdeSystem& system, Eigen::Index n, OdeOptions options)
         check(CVodeSetPreconditioner(mem, &Impl::precSetup, &Impl::precSolve),
               "CVodeSetPreconditioner", what);
       }
+      break;
+    }
+    case OdeLinearSolver::SystemSolve: {
+      if (!system_.hasPreconditioner()) {
+        throw std::invalid_argument(what + ": OdeLinearSolver::SystemSolve needs the system's exact "
+                                           "solve (preconditionerSetup/preconditionerSolve)");
+      }
+      cv.linearSolver.reset(newSystemSolve(ctx));
+      if (!cv.linearSolver) throw std::runtime_error(what + ": SUNLinSolNewEmpty failed");
+      check(CVodeSetLinearSolver(mem, cv.linearSolver.get(), nullptr), "CVodeSetLinearSolver", what);
+      check(CVodeSetPreconditioner(mem, &Impl::precSetup, &Impl::precSolve),
+            "CVodeSetPreconditioner", what);
       break;
     }
     case OdeLinearSolver::FixedPoint: {
@@ -364,7 +455,8 @@ void OdeDriver::collectCounters(OdeStats& into) const {
   if (options_.linearSolver != OdeLinearSolver::FixedPoint) {
     if (CVodeGetNumLinRhsEvals(mem, &v) >= 0) into.linearRhsEvaluations += v;
     if (CVodeGetNumJacEvals(mem, &v) >= 0) into.jacobianEvaluations += v;
-    if (options_.linearSolver == OdeLinearSolver::Gmres) {
+    if (options_.linearSolver == OdeLinearSolver::Gmres ||
+        options_.linearSolver == OdeLinearSolver::SystemSolve) {
       if (CVodeGetNumLinIters(mem, &v) >= 0) into.linearIterations += v;
       if (CVodeGetNumPrecEvals(mem, &v) >= 0) into.preconditionerSetups += v;
       if (CVodeGetNumPrecSolves(mem, &v) >= 0) into.preconditionerSolves += v;

@@ -55,7 +55,8 @@ class OdeSystem {
                        ConstVectorMap /*v*/, VectorMap /*Jv*/) {
     return -1;
   }
-  /// Left preconditioner P ≈ I − γJ for Gmres: setup (jacOk: the system may reuse its Jacobian
+  /// Left preconditioner P ≈ I − γJ for Gmres (and the linear solver of SystemSolve, where P
+  /// must be I − γJ at the set-up's J with the solve's γ): setup (jacOk: the system may reuse its Jacobian
   /// data; set *jacUpdated when it recomputed it) and solve P z = r.
   virtual bool hasPreconditioner() const { return false; }
   virtual int preconditionerSetup(double /*t*/, ConstVectorMap /*y*/, ConstVectorMap /*fy*/,
@@ -85,6 +86,12 @@ enum class OdeLinearSolver {
   Gmres,       ///< Newton with matrix-free SPGMR: jacTimes when provided, else difference quotients;
                ///< the system's left preconditioner when it has one
   FixedPoint,  ///< no linear solver: fixed-point iteration (non-stiff problems, usually Adams)
+  SystemSolve, ///< Newton with the system's own exact solve of (I − γJ) x = b: its
+               ///< preconditionerSetup/preconditionerSolve used as the linear solver, no Krylov
+               ///< iterations (stats().linearIterations stays 0; preconditionerSolves counts the
+               ///< solves). CVODES keeps deciding when J is refreshed (jacOk false: after a
+               ///< convergence failure, every 20 steps, or a γ change > 30 %); the solve gets the
+               ///< current γ, so a stale J is the only approximation (modified Newton).
 };
 
 struct OdeOptions {

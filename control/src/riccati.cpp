@@ -52,14 +52,18 @@ void checkProblem(double t0, double T, int nx, int nu, const LinearizationCallba
 
 // Linear solver and method. Measured on bench/riccati_bench (planar chain, 2 s, rtol 1e-6):
 // see RiccatiLinearSolver::kAuto in the header for the rule and bench/README.md for the numbers.
-// Why BDF + Newton–GMRES + the Lyapunov preconditioner stays the default above nx = 10 (measured
-// 2026-12, 40 states, rtol 1e-6): on the benchmark's blended chain, which is barely stiff, BDF
-// with fixed-point iterations would be cheaper (390 steps, 622 right-hand sides, 0.74e9
-// instructions against 293 steps, 330 right-hand sides, 1.14e9), but on the damped 20-link chain
-// held hanging (`trellis gains`, Q = 10, R = 1) the equation is stiff: fixed point runs out of
-// 100000 steps and Adams needs 5225 steps where BDF–GMRES needs 814.
+// Above nx = 10 the plain form uses the direct Lyapunov solve (kLyapunov, 2026-12-01, 40 states,
+// callgrind): 0.52e9 instructions per solve against 0.64e9 for GMRES with the same Lyapunov
+// preconditioner (and 1.13e9 for that GMRES before the compiled N_Vector kernels), error of S
+// 1.6e-6 against 1.2e-6 at rtol 1e-6: one O(nx³) solve per Newton iteration and no Jacobian
+// products or Gram–Schmidt on N = nx(nx+1)/2 unknowns.
+// Why Newton at all (measured 2026-12, 40 states): on the benchmark's blended chain, which is
+// barely stiff, BDF with fixed-point iterations was cheaper than the GMRES solve of the time, but
+// on the damped 20-link chain held hanging (`trellis gains`, Q = 10, R = 1) the equation is stiff:
+// fixed point runs out of 100000 steps and Adams needs 5225 steps where BDF–Newton needs 814.
+// The factored form keeps GMRES: its Newton matrix is not a Lyapunov operator.
 detail::OdeOptions integratorOptions(const RiccatiOptions& options, int nx, bool factored,
-                                     bool& krylov) {
+                                     bool& usesLyapunov) {
   detail::OdeOptions o;
   o.what = "Riccati equation (in reversed time tau = T - t)";
   o.rtol = options.rtol;
@@ -69,13 +73,23 @@ detail::OdeOptions integratorOptions(const RiccatiOptions& options, int nx, bool
   o.initialStep = options.initialStep;
   o.exactJacobian = options.exactJacobian;
   const bool bdf = options.method != RiccatiMethod::kAdams;
-  krylov = options.linearSolver == RiccatiLinearSolver::kKrylov ||
-           (options.linearSolver == RiccatiLinearSolver::kAuto && nx > 10);
+  RiccatiLinearSolver ls = options.linearSolver;
+  if (ls == RiccatiLinearSolver::kAuto) {
+    ls = nx <= 10 ? RiccatiLinearSolver::kDense
+                  : (factored ? RiccatiLinearSolver::kKrylov : RiccatiLinearSolver::kLyapunov);
+  }
   o.method = bdf ? detail::OdeMethod::Bdf : detail::OdeMethod::Adams;
-  o.linearSolver = !bdf     ? detail::OdeLinearSolver::FixedPoint
-                   : krylov ? detail::OdeLinearSolver::Gmres
-                            : detail::OdeLinearSolver::Dense;
-  (void)factored;
+  if (!bdf) {
+    o.linearSolver = detail::OdeLinearSolver::FixedPoint;
+  } else if (ls == RiccatiLinearSolver::kLyapunov) {
+    o.linearSolver = detail::OdeLinearSolver::SystemSolve;
+  } else if (ls == RiccatiLinearSolver::kKrylov) {
+    o.linearSolver = detail::OdeLinearSolver::Gmres;
+  } else {
+    o.linearSolver = detail::OdeLinearSolver::Dense;
+  }
+  usesLyapunov = (o.linearSolver == detail::OdeLinearSolver::Gmres && options.krylovPreconditioner) ||
+                 o.linearSolver == detail::OdeLinearSolver::SystemSolve;
   return o;
 }
 
@@ -98,9 +112,12 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
   bool factored = options.method == RiccatiMethod::kFactored;
   detail::RiccatiSystem system(nx, nu, T, linearization, weights);
   system.factored = factored;
-  bool krylov = false;
-  const detail::OdeOptions odeOptions = integratorOptions(options, nx, factored, krylov);
-  system.preconditioned = krylov && options.krylovPreconditioner;
+  bool usesLyapunov = false;
+  const detail::OdeOptions odeOptions = integratorOptions(options, nx, factored, usesLyapunov);
+  system.preconditioned = usesLyapunov;
+  // As the linear solver the Lyapunov solve must be exact (no identity shortcut on mildly stiff
+  // steps: an inexact Newton matrix costs Newton iterations and convergence failures).
+  system.exactSolve = odeOptions.linearSolver == detail::OdeLinearSolver::SystemSolve;
 
   Eigen::VectorXd y0(N);
   if (factored) {

@@ -4,7 +4,8 @@
 // Solving (I − γJ) X = R is the Lyapunov equation FᵀX + XF = −R with F = γA_cl − ½I. With the
 // real Schur form A_cl = Z T Zᵀ (factor(), O(nx³) once per Jacobian update; γ only rescales T)
 // it is a Bartels–Stewart back substitution on quasi-triangular T (solve(), O(nx³) per call,
-// no allocation): the exact preconditioner of the Krylov solver.
+// no allocation): the exact preconditioner of the Krylov solver, or the linear solver itself
+// (OdeLinearSolver::SystemSolve).
 #pragma once
 
 #include <Eigen/Core>
@@ -19,7 +20,7 @@ class SchurLyapunov {
   explicit SchurLyapunov(Eigen::Index n);
   /// Real Schur form of Acl; false if the QR iteration did not converge.
   bool factor(const Eigen::MatrixXd& Acl);
-  /// X ← the symmetric solution of X − γ(A_clᵀX + X A_cl) = X (R in X on entry).
+  /// X ← the symmetric solution of X − γ(A_clᵀX + X A_cl) = X (R in X on entry, symmetric).
   /// False if the equation is singular (an eigenvalue sum of F is zero) or the result not finite.
   bool solve(double gamma, Eigen::MatrixXd& X);
 

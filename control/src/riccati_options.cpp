@@ -2,6 +2,8 @@
 // solver.
 #include "trellis/control/riccati.hpp"
 
+#include "enum_names.hpp"
+
 #include <Eigen/Eigenvalues>
 
 #include <algorithm>
@@ -39,6 +41,21 @@ RiccatiMethod parseRiccatiMethod(const std::string& text) {
   throw std::invalid_argument("'" + text + "' is not one of bdf, adams, factored");
 }
 
+namespace {
+constexpr detail::EnumName<RiccatiLinearSolver> kLinearSolvers[] = {
+    {RiccatiLinearSolver::kAuto, "auto"},
+    {RiccatiLinearSolver::kDense, "dense"},
+    {RiccatiLinearSolver::kKrylov, "krylov"},
+    {RiccatiLinearSolver::kLyapunov, "lyapunov"},
+};
+}  // namespace
+
+const char* toString(RiccatiLinearSolver solver) { return detail::nameOf(kLinearSolvers, solver); }
+
+RiccatiLinearSolver parseRiccatiLinearSolver(const std::string& text) {
+  return detail::parseName(kLinearSolvers, text);
+}
+
 void RiccatiOptions::validate() const {
   auto bad = [](const char* field, double v, const char* rule) {
     std::ostringstream m;
@@ -58,6 +75,11 @@ void RiccatiOptions::validate() const {
     bad("factoredQfShift", factoredQfShift, ">= 0 and finite");
   }
   if (!(psdSlack >= 0.0) || std::isnan(psdSlack)) bad("psdSlack", psdSlack, ">= 0");
+  if (method == RiccatiMethod::kFactored && linearSolver == RiccatiLinearSolver::kLyapunov) {
+    throw std::invalid_argument(
+        "RiccatiOptions.linearSolver = lyapunov needs the plain form (method bdf): the factored "
+        "form's Newton matrix is not a Lyapunov operator (use krylov, dense or auto)");
+  }
 }
 
 void checkWeightMatrix(const Eigen::MatrixXd& W, const char* name, Eigen::Index size,

@@ -87,6 +87,12 @@ bool RiccatiSystem::coefficientsAt(double t) {
   } else {
     G_.noalias() = Rinv_ * B_.transpose();
   }
+  // Mechanical structure (x = [q; v], q̇ = v, inputs act on v̇): A = [0 I; Aq Av], B = [0; Bv]
+  // exactly, as an exact linearization in generalized coordinates gives it. Then G = [0 Gv] and
+  // the products below need only the v rows of S (half of AᵀS and of G S).
+  const Eigen::Index h = nx_ / 2;
+  mechanical_ = nx_ % 2 == 0 && h > 0 && A_.topLeftCorner(h, h).isZero(0.0) &&
+                A_.topRightCorner(h, h).isIdentity(0.0) && B_.topRows(h).isZero(0.0);
   cachedT_ = t;
   cacheValid_ = true;
   return true;
@@ -107,7 +113,12 @@ bool RiccatiSystem::evaluate(double tau, const double* y) {
     fail(RiccatiStatus::kNonFinite, t, m.str());
     return false;
   }
-  K_.noalias() = G_ * S_;
+  if (mechanical_) {
+    const Eigen::Index h = nx_ / 2;
+    K_.noalias() = G_.rightCols(h) * S_.bottomRows(h);
+  } else {
+    K_.noalias() = G_ * S_;
+  }
   return true;
 }
 
@@ -121,7 +132,14 @@ void RiccatiSystem::closedLoop() {
 // of the symmetric P K (half its nx²·m) in the plain form.
 int RiccatiSystem::rhs(double tau, ConstVectorMap y, VectorMap ydot) {
   if (!evaluate(tau, y.data())) return -1;
-  F_.noalias() = A_.transpose() * S_;
+  if (mechanical_) {  // AᵀS = [Aqᵀ S_v; S_q + Avᵀ S_v] with S_q, S_v the q and v rows of S
+    const Eigen::Index h = nx_ / 2;
+    F_.topRows(h).noalias() = A_.bottomLeftCorner(h, h).transpose() * S_.bottomRows(h);
+    F_.bottomRows(h) = S_.topRows(h);
+    F_.bottomRows(h).noalias() += A_.bottomRightCorner(h, h).transpose() * S_.bottomRows(h);
+  } else {
+    F_.noalias() = A_.transpose() * S_;
+  }
   P_.noalias() = K_.transpose() * R_;
   double* out = ydot.data();
   if (!factored) {
@@ -223,7 +241,7 @@ int RiccatiSystem::preconditionerSetup(double tau, ConstVectorMap y, ConstVector
 int RiccatiSystem::preconditionerSolve(double, ConstVectorMap, ConstVectorMap, ConstVectorMap r,
                                        VectorMap z, double gamma) {
   const Eigen::Index n = nx_;
-  if (2.0 * gamma * aclNorm_ < 0.5) {  // non-stiff step: identity preconditioner
+  if (!exactSolve && 2.0 * gamma * aclNorm_ < 0.5) {  // non-stiff step: identity preconditioner
     z = r;
     return 0;
   }

@@ -11,7 +11,8 @@
 // Cost per right-hand side: the coefficients A, B, Q, R and G = R⁻¹Bᵀ depend on t only and are
 // cached on t (BDF's Newton iterations and the Jacobian set-up evaluate the same t several
 // times: one linearization per distinct t); then one nx³ product (AᵀS), one nx²m product (K = GS)
-// and the upper half of another (P K, with P = KᵀR).
+// and the upper half of another (P K, with P = KᵀR). A mechanical A = [0 I; Aq Av], B = [0; Bv]
+// (detected exactly per t) halves the first two: only the velocity rows of S enter.
 // Nothing allocates after construction.
 #pragma once
 
@@ -33,7 +34,8 @@ class RiccatiSystem final : public OdeSystem {
                 const LqrWeights& weights);
 
   bool factored = false;         ///< integrate U (S = UᵀU) instead of S
-  bool preconditioned = false;   ///< offer the Lyapunov preconditioner (Krylov only)
+  bool preconditioned = false;   ///< offer the Lyapunov solve (Krylov preconditioner or solver)
+  bool exactSolve = false;       ///< the Lyapunov solve is the linear solver (no identity shortcut)
 
   int rhs(double tau, ConstVectorMap y, VectorMap ydot) override;
   bool hasJacobian() const override { return !factored; }
@@ -74,6 +76,7 @@ class RiccatiSystem final : public OdeSystem {
   Eigen::LLT<Eigen::MatrixXd> Rllt_;
   double cachedT_ = std::numeric_limits<double>::quiet_NaN();
   bool cacheValid_ = false;
+  bool mechanical_ = false;  // A = [0 I; Aq Av], B = [0; Bv] at the cached t (see coefficientsAt)
   long linearizations_ = 0;
   // Factored form: U (upper triangular, zero below), Ṡ, M = U⁻ᵀṠU⁻¹, dU/dτ, U at the last
   // preconditioner set-up.

@@ -353,7 +353,8 @@ void bindControl(py::module_& m) {
   py::enum_<RiccatiLinearSolver>(m, "RiccatiLinearSolver")
       .value("AUTO", RiccatiLinearSolver::kAuto)
       .value("DENSE", RiccatiLinearSolver::kDense)
-      .value("KRYLOV", RiccatiLinearSolver::kKrylov);
+      .value("KRYLOV", RiccatiLinearSolver::kKrylov)
+      .value("LYAPUNOV", RiccatiLinearSolver::kLyapunov);
   py::enum_<RiccatiStatus>(m, "RiccatiStatus")
       .value("OK", RiccatiStatus::kOk)
       .value("INTEGRATOR_FAILURE", RiccatiStatus::kIntegratorFailure)

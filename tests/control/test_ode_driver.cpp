@@ -206,3 +206,90 @@ TEST_CASE("ode driver: failures carry the time, the state size and the callback'
   nan(1) = std::nan("");
   CHECK_THROWS_AS(d2.start(0.0, nan), std::invalid_argument);
 }
+
+namespace {
+
+// The linear system with the exact solve of its Newton matrix (I − γA) z = r (LU of the 5×5
+// matrix at each call: γ changes) for OdeLinearSolver::SystemSolve.
+class LinearWithSolve : public Linear {
+ public:
+  bool hasPreconditioner() const override { return true; }
+  int preconditionerSetup(double, ConstVectorMap, ConstVectorMap, bool jacOk, bool* jacUpdated,
+                          double) override {
+    ++setups;
+    if (!jacOk) ++refreshes;
+    *jacUpdated = !jacOk;
+    return failSetup ? -1 : 0;
+  }
+  int preconditionerSolve(double, ConstVectorMap, ConstVectorMap, ConstVectorMap r, VectorMap z,
+                          double gamma) override {
+    ++solves;
+    if (failSolve) {
+      failure = "the test's solve refuses";
+      return 1;
+    }
+    const Eigen::MatrixXd M = Eigen::MatrixXd::Identity(5, 5) - gamma * A;
+    z = M.partialPivLu().solve(r);
+    return 0;
+  }
+  long setups = 0, refreshes = 0, solves = 0;
+  bool failSetup = false, failSolve = false;
+};
+
+}  // namespace
+
+TEST_CASE("ode driver: SystemSolve uses the system's exact solve, no Krylov iteration") {
+  LinearWithSolve sys;
+  OdeOptions o;
+  o.linearSolver = OdeLinearSolver::SystemSolve;
+  o.rtol = 1e-10;
+  o.atol = 1e-12;
+  OdeDriver d(sys, 5, o);
+  d.start(0.0, y0());
+  for (double t : {0.1, 1.0, 2.0}) {
+    REQUIRE(d.advanceTo(t).ok());
+    const Eigen::VectorXd exact = (sys.A * t).exp() * y0();
+    CHECK((d.state() - exact).cwiseAbs().maxCoeff() < 1e-8);
+  }
+  const auto s = d.stats();
+  CHECK(s.linearIterations == 0);
+  CHECK(s.preconditionerSolves == sys.solves);
+  CHECK(sys.solves > 0);
+  CHECK(s.preconditionerSetups == sys.refreshes);  // CVODES counts the set-ups that refreshed J
+  CHECK(sys.refreshes > 0);
+  CHECK(sys.setups >= sys.refreshes);
+  CHECK(sys.jacobianCalls == 0);
+  CHECK(s.linearRhsEvaluations == 0);
+  // The stiff eigenvalue −1000: as few steps as Newton with the dense exact Jacobian (an explicit
+  // method would need h < 2e-3 from the start).
+  Linear denseSys;
+  OdeOptions od = o;
+  od.linearSolver = OdeLinearSolver::Dense;
+  OdeDriver dd(denseSys, 5, od);
+  dd.start(0.0, y0());
+  REQUIRE(dd.advanceTo(2.0).ok());
+  CHECK(s.steps <= dd.stats().steps * 11 / 10);
+
+  // A system without a solve is rejected; failing solves and set-ups are failures naming t.
+  Linear plain;
+  CHECK_THROWS_WITH(OdeDriver(plain, 5, o), Catch::Contains("SystemSolve"));
+  LinearWithSolve badSolve;
+  badSolve.failSolve = true;
+  o.what = "test integration";
+  OdeDriver ds(badSolve, 5, o);
+  ds.start(0.0, y0());
+  const auto st = ds.advanceTo(1.0);
+  REQUIRE(st.outcome == OdeOutcome::Failed);
+  // (A recoverable solve failure makes CVODES shrink the step; it ends in too much work or a
+  // convergence failure, either way with the system's reason in the message.)
+  CHECK_THAT(st.message, Catch::Contains("test integration") && Catch::Contains("t = ") &&
+                             Catch::Contains("the test's solve refuses"));
+  LinearWithSolve badSetup;
+  badSetup.failSetup = true;
+  OdeDriver du(badSetup, 5, o);
+  du.start(0.0, y0());
+  const auto su = du.advanceTo(1.0);
+  REQUIRE(su.outcome == OdeOutcome::Failed);
+  CHECK(su.callbackFailed());
+  CHECK_THAT(su.message, Catch::Contains("t = "));
+}

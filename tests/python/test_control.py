@@ -184,6 +184,21 @@ def test_tvlqr_long_horizon_converges_to_care(tm):
     np.testing.assert_allclose(sol.K(0.0), care.K, rtol=1e-6)
 
 
+def test_riccati_linear_solvers_agree(tm):
+    """The direct Lyapunov solve (LYAPUNOV) against the dense Jacobian on the cart-pole: the same S,
+    and no Krylov iteration."""
+    model = tm.load_scene(str(SCENES / "cart_pole.json")).model
+    ref = reference(tm, model, "cart_pole_upright.csv")
+    sols = {}
+    for name in ("DENSE", "LYAPUNOV"):
+        opts = tm.RiccatiOptions(rtol=1e-10, atol=1e-12,
+                                 linear_solver=getattr(tm.RiccatiLinearSolver, name))
+        sols[name] = tm.solve_riccati(model, ref, Q=1.0, R=1.0, options=opts)
+    lyap = sols["LYAPUNOV"]
+    assert lyap.linear_iterations == 0 and lyap.preconditioner_solves > 0
+    np.testing.assert_allclose(lyap.S(0.0), sols["DENSE"].S(0.0), rtol=1e-7, atol=1e-9)
+
+
 def test_solution_outlives_its_model(tm):
     def solve():
         model = tm.load_scene(str(SCENES / "cart_pole.json")).model

@@ -96,9 +96,19 @@ RiccatiMethod parseRiccatiMethod(const std::string& text);
 /// (N = nx(nx+1)/2; O(N³) per factorization, only sensible for small nx); kKrylov is matrix-free
 /// GMRES with the exact Jacobian-vector product A_clᵀV + V A_cl (O(nx³) each), preconditioned by
 /// the exact Lyapunov solve of the Newton matrix unless krylovPreconditioner is false.
-/// kAuto: kDense for nx ≤ 10, kKrylov above. kFactored uses the same choice (with
-/// difference-quotient Jacobians).
-enum class RiccatiLinearSolver { kAuto, kDense, kKrylov };
+/// kLyapunov (plain forms only) is a direct Newton solve without Krylov iterations: the same
+/// exact Lyapunov (Bartels–Stewart) solve of I − γJ, applied once per Newton iteration with the
+/// current γ on the real Schur form of A_cl taken at the last Jacobian update (CVODES decides when
+/// to refresh it, as for a dense Jacobian): O(nx³) per iteration, no Gram–Schmidt on N unknowns.
+/// kAuto: kDense for nx ≤ 10, kLyapunov above (plain forms); kFactored uses kDense / kKrylov
+/// (difference-quotient Jacobians; its Newton matrix is not a Lyapunov operator, the solve is
+/// only its preconditioner there).
+enum class RiccatiLinearSolver { kAuto, kDense, kKrylov, kLyapunov };
+
+/// "auto", "dense", "krylov", "lyapunov".
+const char* toString(RiccatiLinearSolver solver);
+/// The inverse of toString; throws std::invalid_argument "'TEXT' is not one of auto, …".
+RiccatiLinearSolver parseRiccatiLinearSolver(const std::string& text);
 
 struct RiccatiOptions {
   double rtol = 1e-8;           ///< CVODES relative tolerance (> 0)
@@ -159,8 +169,8 @@ class RiccatiSolution {
   long steps = 0;                   ///< CVODES internal steps
   long rhsEvaluations = 0;
   long jacobianEvaluations = 0;
-  long linearIterations = 0;        ///< GMRES iterations (Krylov solver only)
-  long preconditionerSolves = 0;    ///< Lyapunov preconditioner applications (Krylov only)
+  long linearIterations = 0;        ///< GMRES iterations (Krylov solver only; 0 for kLyapunov)
+  long preconditionerSolves = 0;    ///< Lyapunov solves (Krylov preconditioner or kLyapunov)
   double switchedToPlainAt = std::numeric_limits<double>::quiet_NaN();  ///< kFactored: the time t
                                     ///< where the solve switched to the plain form (NaN: never)
   double indefiniteRatio = 0.0;     ///< kIndefinite: λmin(S)/λmax(S) at failureTime (< −ε)
