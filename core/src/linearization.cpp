@@ -122,14 +122,10 @@ void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const
     decltype(kind)::generalizedForceTangent(dir, e, [&](int i, double dQ) { dr(i) -= dQ; });
   });
 
-  const auto& cs = model.constraints();
-  for (int r = 0; r < model.nc(); ++r) {
-    const Constraint& c = cs[r];
-    ConstraintEval e;
-    if (dir.moves(c.a.joint) || dir.moves(c.b.joint)) e = constraintTangent(data, dir, c);
+  constraintTangents(model, data, dir, [&](int r, const ConstraintEval& e) {
     dc(r) = e.c;
     if (!dir.velocity) dhdot(r) = e.hdot;
-  }
+  });
 }
 
 }  // namespace
