@@ -59,9 +59,11 @@ void compositePass(const Model& model, Data& data) {
   }
   for (int j = 0; j < n; ++j) {
     const Vector6d& S = data.S[j];
-    data.tangentAlpha[j] = crossForce(S, data.fext[j]);
-    data.tangentBeta[j] = applyInertia(data.cm[j], data.ch[j], data.cI[j], S);
-    data.tangentGamma[j] = data.compositeD[j] * S + crossForce(S, data.compositeMomentum[j]);
+    auto t = data.tangentABG.col(j);
+    t.segment<6>(0) = crossForce(S, data.fext[j]);
+    t.segment<6>(6) = applyInertia(data.cm[j], data.ch[j], data.cI[j], S);
+    t.segment<6>(12).noalias() = data.compositeD[j] * S;
+    t.segment<6>(12) += crossForce(S, data.compositeMomentum[j]);
   }
 }
 
@@ -84,17 +86,20 @@ void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const
   // With (a × b)·f = −b·(a ×* f) and D symmetric, δτ_j = δS_jᵀ F_j + S_jᵀ δF_j becomes
   //   ∂/∂q_k:  δτ_j = −S_k·α_j − c·β_j + w·γ_j,     ∂/∂q̇_k:  δτ_j = −S_k·γ_j − 2 w·β_j
   // for j in the subtree (external wrench tangents are added below), and S_j·δF_k above it.
+  // dr holds −δτ; in the subtree it is one dot product with column j of tangentABG = [α; β; γ].
   dr.setZero();
   Vector6d dFk;
   if (!dir.velocity) {
     const Vector6d c = crossMotion(dir.Sk, dir.aP - g) - crossMotion(dir.w, dir.vP);
-    for (int j = k; j < dir.end; ++j)
-      dr(j) = dir.Sk.dot(data.tangentAlpha[j]) + c.dot(data.tangentBeta[j]) - dir.w.dot(data.tangentGamma[j]);
+    Eigen::Matrix<double, 18, 1> coef;
+    coef << dir.Sk, c, -dir.w;
+    for (int j = k; j < dir.end; ++j) dr(j) = coef.dot(data.tangentABG.col(j));
     dFk = crossForce(dir.Sk, data.inertialForce[k]) - applyInertia(data.cm[k], data.ch[k], data.cI[k], c) +
           data.compositeD[k] * dir.w - crossForce(dir.w, data.compositeMomentum[k]);
   } else {
-    for (int j = k; j < dir.end; ++j)
-      dr(j) = dir.Sk.dot(data.tangentGamma[j]) + 2.0 * dir.w.dot(data.tangentBeta[j]);
+    Eigen::Matrix<double, 12, 1> coef;  // against [β; γ]
+    coef << 2.0 * dir.w, dir.Sk;
+    for (int j = k; j < dir.end; ++j) dr(j) = coef.dot(data.tangentABG.col(j).segment<12>(6));
     dFk = -(data.compositeD[k] * dir.Sk) - 2.0 * applyInertia(data.cm[k], data.ch[k], data.cI[k], dir.w) +
           crossForce(dir.Sk, data.compositeMomentum[k]);
   }
