@@ -151,7 +151,6 @@ Data::Data(const Model& model)
   describeTree(model);
   massInverseAt = Eigen::MatrixXd::Zero(n, nc);
   schur = Eigen::MatrixXd::Zero(nc, nc);
-  schurInverse = Eigen::MatrixXd::Zero(nc, nc);
   correctionWork = Eigen::VectorXd::Zero(2 * nc * n + nc * nc + nc);
   constraintScale = Eigen::VectorXd::Ones(nc);
   schurScale = Eigen::VectorXd::Ones(nc);

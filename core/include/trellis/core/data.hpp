@@ -131,7 +131,6 @@ class Data {
   Eigen::VectorXd schurScale;            ///< nc: D = 1 / constraintScale
   Eigen::LLT<Eigen::MatrixXd> schurLLT;
   Eigen::VectorXd correctionWork;        ///< 2 nc n + nc² + nc: one row group's operands (correctForConstraints)
-  Eigen::MatrixXd schurInverse;          ///< nc×nc: (A M⁻¹ Aᵀ)⁻¹ group by group (zero between groups) when schurLLT is used
   Eigen::LDLT<Eigen::MatrixXd> schurLDLT;  ///< pivoted, for rank-deficient Ŝ
   Eigen::VectorXd schurPivotInverse;     ///< 1/D_i of schurLDLT, 0 for the dropped pivots
   Eigen::MatrixXd schurNullBasis;        ///< nc×nc, first schurNullity columns: null space of Ŝ
