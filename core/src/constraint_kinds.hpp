@@ -65,10 +65,27 @@ struct PointKind {
     return {e.dot(a.p - b.p), e.dot(a.v - b.v), e.dot(a.a - b.a)};
   }
   static ConstraintEval tangent(const Data& data, const Direction& dir, const Constraint& c) {
-    const PointKin a = pointKin(data, c.a), b = pointKin(data, c.b);
-    const PointKin ta = pointTangent(data, dir, c.a.joint, a), tb = pointTangent(data, dir, c.b.joint, b);
-    const Vector3d e = Vector3d::Unit(c.axis);
-    return {e.dot(ta.p - tb.p), e.dot(ta.v - tb.v), e.dot(ta.a - tb.a)};
+    return fromDifferenceTangent(c, differenceTangent(data, dir, c));
+  }
+  /// The tangent of p_a − p_b (with its velocity and acceleration), shared by the rows of one
+  /// point pair (constraintTangents computes it once for the x, y, z rows).
+  static PointKin differenceTangent(const Data& data, const Direction& dir, const Constraint& c) {
+    PointKin d;
+    if (dir.moves(c.a.joint)) d = pointTangent(data, dir, c.a.joint, pointKin(data, c.a));
+    if (dir.moves(c.b.joint)) {
+      const PointKin tb = pointTangent(data, dir, c.b.joint, pointKin(data, c.b));
+      d.p -= tb.p;
+      d.v -= tb.v;
+      d.a -= tb.a;
+    }
+    return d;
+  }
+  static ConstraintEval fromDifferenceTangent(const Constraint& c, const PointKin& d) {
+    return {d.p[c.axis], d.v[c.axis], d.a[c.axis]};
+  }
+  static bool samePair(const Constraint& x, const Constraint& y) {
+    return x.type == ConstraintType::kPoint && y.type == ConstraintType::kPoint && x.a.joint == y.a.joint &&
+           x.b.joint == y.b.joint && x.a.local == y.a.local && x.b.local == y.b.local;
   }
   template <class Emit>
   static void forces(const Data& data, const Constraint& c, Emit&& emit) {
@@ -173,6 +190,29 @@ inline ConstraintEval evaluateConstraint(const Data& data, const Constraint& c) 
 /// Directional derivative of evaluateConstraint (uses the body tangents in data).
 inline ConstraintEval constraintTangent(const Data& data, const Direction& dir, const Constraint& c) {
   return withConstraintKind(c, [&](auto kind) { return decltype(kind)::tangent(data, dir, c); });
+}
+
+/// constraintTangent of every row the direction moves, as out(r, eval) (rows it does not move
+/// get zeros); consecutive point rows on one pair of body points share the pair's tangent.
+template <class Out>
+inline void constraintTangents(const Model& model, const Data& data, const Direction& dir, Out&& out) {
+  const auto& cs = model.constraints();
+  PointKin pair;
+  int pairRow = -1;  // the row whose point pair `pair` belongs to
+  for (int r = 0; r < model.nc(); ++r) {
+    const Constraint& c = cs[r];
+    if (!dir.moves(c.a.joint) && !dir.moves(c.b.joint)) {
+      out(r, ConstraintEval{});
+    } else if (c.type == ConstraintType::kPoint) {
+      if (pairRow < 0 || !PointKind::samePair(cs[pairRow], c)) {
+        pair = PointKind::differenceTangent(data, dir, c);
+        pairRow = r;
+      }
+      out(r, PointKind::fromDifferenceTangent(c, pair));
+    } else {
+      out(r, constraintTangent(data, dir, c));
+    }
+  }
 }
 
 /// The constraint's row of A = ∂(A q̇)/∂q̇ (for holonomic rows, ∂h/∂q), and optionally, in

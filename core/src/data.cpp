@@ -130,8 +130,9 @@ Data::Data(const Model& model)
   jointR.assign(n, Eigen::Matrix3d::Identity());
   jointP.assign(n, Eigen::Vector3d::Zero());
   for (auto* vec : {&S, &v, &a, &f, &fext, &Iv, &Ia, &inertialForce, &compositeMomentum,
-                    &tangentAlpha, &tangentBeta, &tangentGamma, &tangentWrench})
+                    &tangentWrench})
     vec->assign(n, Vector6d::Zero());
+  tangentABG = Eigen::Matrix<double, 18, Eigen::Dynamic>::Zero(18, n);
   compositeD.assign(n, Eigen::Matrix<double, 6, 6>::Zero());
   wm.assign(n, 0.0);
   wh.assign(n, Eigen::Vector3d::Zero());
@@ -150,6 +151,7 @@ Data::Data(const Model& model)
   describeTree(model);
   massInverseAt = Eigen::MatrixXd::Zero(n, nc);
   schur = Eigen::MatrixXd::Zero(nc, nc);
+  correctionWork = Eigen::VectorXd::Zero(2 * nc * n + nc * nc + nc);
   constraintScale = Eigen::VectorXd::Ones(nc);
   schurScale = Eigen::VectorXd::Ones(nc);
   schurPivotInverse = Eigen::VectorXd::Zero(nc);

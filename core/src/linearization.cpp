@@ -59,14 +59,17 @@ void compositePass(const Model& model, Data& data) {
   }
   for (int j = 0; j < n; ++j) {
     const Vector6d& S = data.S[j];
-    data.tangentAlpha[j] = crossForce(S, data.fext[j]);
-    data.tangentBeta[j] = applyInertia(data.cm[j], data.ch[j], data.cI[j], S);
-    data.tangentGamma[j] = data.compositeD[j] * S + crossForce(S, data.compositeMomentum[j]);
+    auto t = data.tangentABG.col(j);
+    t.segment<6>(0) = crossForce(S, data.fext[j]);
+    t.segment<6>(6) = applyInertia(data.cm[j], data.ch[j], data.cI[j], S);
+    t.segment<6>(12).noalias() = data.compositeD[j] * S;
+    t.segment<6>(12) += crossForce(S, data.compositeMomentum[j]);
   }
 }
 
-/// One state direction, ∂/∂q_k or ∂/∂q̇_k, with q̈ and λ fixed: the column ∂r (n) of the
-/// equations of motion, ∂c (nc) of the constraint accelerations and, for q_k, ∂(A q̇)/∂q_k.
+/// One state direction, ∂/∂q_k or ∂/∂q̇_k, with q̈ and λ fixed: the columns −∂r (n) of the
+/// equations of motion and −∂c (nc) of the constraint accelerations (negated: the right-hand
+/// sides of the KKT solve) and, for q_k, ∂(A q̇)/∂q_k.
 ///
 /// The subtree of k moves; with the closed-form body tangents (point_kinematics.hpp) the
 /// tangent of its subtree wrench F_j (j in the subtree) is, with Ic, H, D the subtree sums of
@@ -83,21 +86,24 @@ void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const
   // With (a × b)·f = −b·(a ×* f) and D symmetric, δτ_j = δS_jᵀ F_j + S_jᵀ δF_j becomes
   //   ∂/∂q_k:  δτ_j = −S_k·α_j − c·β_j + w·γ_j,     ∂/∂q̇_k:  δτ_j = −S_k·γ_j − 2 w·β_j
   // for j in the subtree (external wrench tangents are added below), and S_j·δF_k above it.
+  // dr holds −δτ; in the subtree it is one dot product with column j of tangentABG = [α; β; γ].
   dr.setZero();
   Vector6d dFk;
   if (!dir.velocity) {
     const Vector6d c = crossMotion(dir.Sk, dir.aP - g) - crossMotion(dir.w, dir.vP);
-    for (int j = k; j < dir.end; ++j)
-      dr(j) = -dir.Sk.dot(data.tangentAlpha[j]) - c.dot(data.tangentBeta[j]) + dir.w.dot(data.tangentGamma[j]);
+    Eigen::Matrix<double, 18, 1> coef;
+    coef << dir.Sk, c, -dir.w;
+    for (int j = k; j < dir.end; ++j) dr(j) = coef.dot(data.tangentABG.col(j));
     dFk = crossForce(dir.Sk, data.inertialForce[k]) - applyInertia(data.cm[k], data.ch[k], data.cI[k], c) +
           data.compositeD[k] * dir.w - crossForce(dir.w, data.compositeMomentum[k]);
   } else {
-    for (int j = k; j < dir.end; ++j)
-      dr(j) = -dir.Sk.dot(data.tangentGamma[j]) - 2.0 * dir.w.dot(data.tangentBeta[j]);
+    Eigen::Matrix<double, 12, 1> coef;  // against [β; γ]
+    coef << 2.0 * dir.w, dir.Sk;
+    for (int j = k; j < dir.end; ++j) dr(j) = coef.dot(data.tangentABG.col(j).segment<12>(6));
     dFk = -(data.compositeD[k] * dir.Sk) - 2.0 * applyInertia(data.cm[k], data.ch[k], data.cI[k], dir.w) +
           crossForce(dir.Sk, data.compositeMomentum[k]);
   }
-  for (int j = joints[k].parent; j != kWorld; j = joints[j].parent) dr(j) = data.S[j].dot(dFk);
+  for (int j = joints[k].parent; j != kWorld; j = joints[j].parent) dr(j) = -data.S[j].dot(dFk);
 
   if (!dir.velocity) {
     // External wrenches enter r with a minus sign; positions do not depend on q̇.
@@ -112,24 +118,20 @@ void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const
     });
     for (int j = hi; j >= lo; --j) {
       Vector6d& w = data.tangentWrench[j];
-      dr(j) -= data.S[j].dot(w);
+      dr(j) += data.S[j].dot(w);
       if (joints[j].parent != kWorld) data.tangentWrench[joints[j].parent] += w;
       w.setZero();
     }
   }
   // Forces on coordinates (springs, damping): r contains −Q.
   forEachForceElement(model, [&](auto kind, const auto& e, size_t) {
-    decltype(kind)::generalizedForceTangent(dir, e, [&](int i, double dQ) { dr(i) -= dQ; });
+    decltype(kind)::generalizedForceTangent(dir, e, [&](int i, double dQ) { dr(i) += dQ; });
   });
 
-  const auto& cs = model.constraints();
-  for (int r = 0; r < model.nc(); ++r) {
-    const Constraint& c = cs[r];
-    ConstraintEval e;
-    if (dir.moves(c.a.joint) || dir.moves(c.b.joint)) e = constraintTangent(data, dir, c);
-    dc(r) = e.c;
+  constraintTangents(model, data, dir, [&](int r, const ConstraintEval& e) {
+    dc(r) = -e.c;
     if (!dir.velocity) dhdot(r) = e.hdot;
-  }
+  });
 }
 
 }  // namespace
@@ -156,36 +158,37 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
     detail::tangentPass(model, data, u, detail::makeDirection(model, data, k, true), data.rhsX.col(n + k),
                         data.crhsX.col(n + k), data.constraintVelocityJacobian.col(k));
   }
-  data.rhsX.leftCols(2 * n) *= -1.0;
-  data.crhsX.leftCols(2 * n) *= -1.0;
   data.crhsX.rightCols(m).setZero();
-  // X = M⁻¹ R block by block with the explicit block-diagonal M⁻¹ (its columns are themselves
-  // wanted: an input that is a force on one coordinate has M⁻¹ e_c as its column of ∂q̈/∂u).
+  // ∂q̈/∂[q, q̇, u] = M⁻¹ R block by block with the explicit block-diagonal M⁻¹ (its columns are
+  // themselves wanted: an input that is a force on one coordinate has M⁻¹ e_c as its column of
+  // ∂q̈/∂u), written straight into the results, then corrected for the constraints.
   detail::invertMass(data);
-  detail::applyMassInverse(data, data.rhsX.leftCols(2 * n));
+  detail::applyMassInverse(data, data.rhsX.leftCols(n), data.dqdd_dq);
+  detail::applyMassInverse(data, data.rhsX.middleCols(n, n), data.dqdd_ddq);
   for (int k = 0; k < m;) {
     const int c = data.unitInputConfig[k];
     if (c >= 0) {
-      data.rhsX.col(2 * n + k) = data.unitInputGain[k] * data.massInverse.col(c);
+      data.dqdd_du.col(k) = data.unitInputGain[k] * data.massInverse.col(c);
       ++k;
       continue;
     }
     int e = k + 1;  // a run of inputs with general columns ∂Q/∂u_k
     while (e < m && data.unitInputConfig[e] < 0) ++e;
-    data.rhsX.middleCols(2 * n + k, e - k) = data.inputMatrix.middleCols(k, e - k);
-    detail::applyMassInverse(data, data.rhsX.middleCols(2 * n + k, e - k));
+    detail::applyMassInverse(data, data.inputMatrix.middleCols(k, e - k), data.dqdd_du.middleCols(k, e - k));
     k = e;
   }
-  detail::correctForConstraints(model, data, data.rhsX, data.crhsX);
+  if (nc > 0) {
+    detail::correctForConstraints(model, data, data.dqdd_dq, data.crhsX.leftCols(n));
+    detail::correctForConstraints(model, data, data.dqdd_ddq, data.crhsX.middleCols(n, n));
+    if (m > 0) detail::correctForConstraints(model, data, data.dqdd_du, data.crhsX.rightCols(m));
+  }
 
   // A sum is NaN or ±Inf if any term is (or if finite terms overflow, which is no result either).
-  if (detail::solvable(data.status) && !(std::isfinite(data.rhsX.sum()) && std::isfinite(data.crhsX.sum()))) {
+  if (detail::solvable(data.status) &&
+      !(std::isfinite(data.dqdd_dq.sum() + data.dqdd_ddq.sum() + data.dqdd_du.sum()) && std::isfinite(data.crhsX.sum()))) {
     data.status.code = DynamicsStatus::Code::kNonFinite;
     data.status.message = "linearization produced non-finite values";
   }
-  data.dqdd_dq = data.rhsX.leftCols(n);
-  data.dqdd_ddq = data.rhsX.middleCols(n, n);
-  data.dqdd_du = data.rhsX.rightCols(m);
   if (nc > 0) data.dlambda_dx = data.crhsX;
   // The top rows of A = [[0, I], ·] and B = [[0], ·] were set when Data was built.
   data.A.bottomLeftCorner(n, n) = data.dqdd_dq;

@@ -302,4 +302,19 @@ void applyMassInverse(Data& data, Eigen::Ref<Eigen::MatrixXd> X) {
   }
 }
 
+void applyMassInverse(Data& data, const Eigen::Ref<const Eigen::MatrixXd>& R, Eigen::Ref<Eigen::MatrixXd> X) {
+  for (size_t b = 0; b + 1 < data.blockStart.size(); ++b) {
+    const int bs = data.blockStart[b], nb = data.blockStart[b + 1] - bs;
+    if (nb <= 8) {
+      for (Eigen::Index c = 0; c < X.cols(); ++c) {
+        const double* r = R.data() + c * R.outerStride() + bs;
+        double* x = &X(bs, c);
+        for (int i = 0; i < nb; ++i) x[i] = dotRun(&data.massInverse(bs, bs + i), r, nb);
+      }
+      continue;
+    }
+    X.middleRows(bs, nb).noalias() = data.massInverse.block(bs, bs, nb, nb) * R.middleRows(bs, nb);
+  }
+}
+
 }  // namespace trellis::detail

@@ -49,4 +49,7 @@ void invertMass(Data& data);
 /// X ← M⁻¹ X for many columns, block by block with data.massInverse (invertMass first).
 void applyMassInverse(Data& data, Eigen::Ref<Eigen::MatrixXd> X);
 
+/// X = M⁻¹ R (X and R distinct, same shape), block by block with data.massInverse.
+void applyMassInverse(Data& data, const Eigen::Ref<const Eigen::MatrixXd>& R, Eigen::Ref<Eigen::MatrixXd> X);
+
 }  // namespace trellis::detail

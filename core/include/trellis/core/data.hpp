@@ -94,9 +94,10 @@ class Data {
   // and D = Σ (I crm(v) − crf(v) I) (6×6), which make each tangent O(1) per joint pair.
   std::vector<Vector6d> inertialForce, compositeMomentum;
   std::vector<Eigen::Matrix<double, 6, 6>> compositeD;
-  // Per-joint vectors that reduce each (direction k, joint j) pair of the linearization to three
-  // dot products (linearization.cpp): α = S ×* F_ext, β = Ic S, γ = D S + S ×* H.
-  std::vector<Vector6d> tangentAlpha, tangentBeta, tangentGamma;
+  // Per-joint vectors that reduce each (direction k, joint j) pair of the linearization to one
+  // dot product (linearization.cpp): column j = [α; β; γ] with α = S ×* F_ext, β = Ic S,
+  // γ = D S + S ×* H.
+  Eigen::Matrix<double, 18, Eigen::Dynamic> tangentABG;
   std::vector<Vector6d> tangentWrench;   ///< per body: external wrench tangents of one direction
   std::vector<int> treeRoot;             ///< n: the top-level joint of i's tree
   std::vector<int> tendonFirst;          ///< per tendon: offset of its path in tendonPoint, then the total
@@ -129,6 +130,7 @@ class Data {
   Eigen::VectorXd constraintScale;       ///< nc: largest possible ‖A_r‖ (see factorizeKkt)
   Eigen::VectorXd schurScale;            ///< nc: D = 1 / constraintScale
   Eigen::LLT<Eigen::MatrixXd> schurLLT;
+  Eigen::VectorXd correctionWork;        ///< 2 nc n + nc² + nc: one row group's operands (correctForConstraints)
   Eigen::LDLT<Eigen::MatrixXd> schurLDLT;  ///< pivoted, for rank-deficient Ŝ
   Eigen::VectorXd schurPivotInverse;     ///< 1/D_i of schurLDLT, 0 for the dropped pivots
   Eigen::MatrixXd schurNullBasis;        ///< nc×nc, first schurNullity columns: null space of Ŝ
