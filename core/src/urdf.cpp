@@ -383,10 +383,14 @@ class UrdfReader {
         vg.size = vector3(shape, "size", element, Eigen::Vector3d::Zero());
       } else if (kind == "cylinder") {
         vg.shape = VisualGeometry::Shape::kCylinder;
-        vg.size << number(shape, "radius", element), number(shape, "length", element), 0.0;
+        // Both read before the comma initializer: a throw from the second inside it would
+        // destroy a half-filled initializer (an Eigen assertion in builds with assertions on).
+        const double radius = number(shape, "radius", element);
+        const double length = number(shape, "length", element);
+        vg.size = Eigen::Vector3d(radius, length, 0.0);
       } else if (kind == "sphere") {
         vg.shape = VisualGeometry::Shape::kSphere;
-        vg.size << number(shape, "radius", element), 0.0, 0.0;
+        vg.size = Eigen::Vector3d(number(shape, "radius", element), 0.0, 0.0);
       } else if (kind == "mesh") {
         vg.shape = VisualGeometry::Shape::kMesh;
         vg.mesh = attribute(shape, "filename", element, true);

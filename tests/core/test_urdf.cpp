@@ -430,6 +430,12 @@ TEST_CASE("URDF errors name link, joint, attribute, value and line", "[urdf][err
     fails(R"(<link name="a"/><link name="b"><inertial><mass value="1"/><inertia ixx="1" ixy="5" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>
 <joint name="j" type="fixed"><parent link="a"/><child link="b"/></joint>)",
           "joint 'j': frame 'b': field 'mass.inertia': tensor is not positive semidefinite");
+    // A bad second number of a cylinder (found by fuzz_urdf: with assertions on, the throw inside
+    // an Eigen comma initializer aborted instead of reporting).
+    fails(R"(<link name="a"><visual><geometry><cylinder radius="0.02" length="x"/></geometry></visual></link>)",
+          "link 'a' <visual>");
+    fails(R"(<link name="a"><visual><geometry><cylinder radius="0.02"/></geometry></visual></link>)",
+          "'length'");
     fails(R"(<link name="a"/><link name="b"><inertial><mass value="1"/><inertia ixx="nan" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>
 <joint name="j" type="fixed"><parent link="a"/><child link="b"/></joint>)",
           "<inertia> attribute 'ixx': value 'nan' must be 1 finite number");
