@@ -13,35 +13,20 @@
 
 namespace trellis {
 
-const char* toString(RiccatiStatus status) {
-  switch (status) {
-    case RiccatiStatus::kOk: return "ok";
-    case RiccatiStatus::kIntegratorFailure: return "integrator failure";
-    case RiccatiStatus::kNonFinite: return "non-finite";
-    case RiccatiStatus::kBlowUp: return "blow-up";
-    case RiccatiStatus::kCallbackFailure: return "callback failure";
-    case RiccatiStatus::kIndefinite: return "S indefinite";
-  }
-  return "unknown";
-}
-
-const char* toString(RiccatiMethod method) {
-  switch (method) {
-    case RiccatiMethod::kBDF: return "bdf";
-    case RiccatiMethod::kAdams: return "adams";
-    case RiccatiMethod::kFactored: return "factored";
-  }
-  return "unknown";
-}
-
-RiccatiMethod parseRiccatiMethod(const std::string& text) {
-  for (RiccatiMethod m : {RiccatiMethod::kBDF, RiccatiMethod::kAdams, RiccatiMethod::kFactored}) {
-    if (text == toString(m)) return m;
-  }
-  throw std::invalid_argument("'" + text + "' is not one of bdf, adams, factored");
-}
-
 namespace {
+constexpr detail::EnumName<RiccatiStatus> kStatuses[] = {
+    {RiccatiStatus::kOk, "ok"},
+    {RiccatiStatus::kIntegratorFailure, "integrator failure"},
+    {RiccatiStatus::kNonFinite, "non-finite"},
+    {RiccatiStatus::kBlowUp, "blow-up"},
+    {RiccatiStatus::kCallbackFailure, "callback failure"},
+    {RiccatiStatus::kIndefinite, "S indefinite"},
+};
+constexpr detail::EnumName<RiccatiMethod> kMethods[] = {
+    {RiccatiMethod::kBDF, "bdf"},
+    {RiccatiMethod::kAdams, "adams"},
+    {RiccatiMethod::kFactored, "factored"},
+};
 constexpr detail::EnumName<RiccatiLinearSolver> kLinearSolvers[] = {
     {RiccatiLinearSolver::kAuto, "auto"},
     {RiccatiLinearSolver::kDense, "dense"},
@@ -49,6 +34,12 @@ constexpr detail::EnumName<RiccatiLinearSolver> kLinearSolvers[] = {
     {RiccatiLinearSolver::kLyapunov, "lyapunov"},
 };
 }  // namespace
+
+const char* toString(RiccatiStatus status) { return detail::nameOf(kStatuses, status); }
+
+const char* toString(RiccatiMethod method) { return detail::nameOf(kMethods, method); }
+
+RiccatiMethod parseRiccatiMethod(const std::string& text) { return detail::parseName(kMethods, text); }
 
 const char* toString(RiccatiLinearSolver solver) { return detail::nameOf(kLinearSolvers, solver); }
 
@@ -58,9 +49,7 @@ RiccatiLinearSolver parseRiccatiLinearSolver(const std::string& text) {
 
 void RiccatiOptions::validate() const {
   auto bad = [](const char* field, double v, const char* rule) {
-    std::ostringstream m;
-    m << "RiccatiOptions." << field << " = " << v << " must be " << rule;
-    throw std::invalid_argument(m.str());
+    detail::badOption("RiccatiOptions", field, v, rule);
   };
   if (!(rtol > 0.0) || !std::isfinite(rtol)) bad("rtol", rtol, "> 0 and finite");
   if (!(atol > 0.0) || !std::isfinite(atol)) bad("atol", atol, "> 0 and finite");
