@@ -29,7 +29,7 @@ TangentTransportOptions feedbackTransport() {
 RiccatiOptions feedbackRiccatiOptions() {
   RiccatiOptions o;
   o.rtol = 1e-6;
-  o.atol = 1e-8;
+  o.atol = 5e-10;
   return o;
 }
 
@@ -81,6 +81,7 @@ SimulationOptions closedLoopOptions(int m) {
   o.method = IntegrationMethod::kBDF;
   o.rtol = 1e-7;
   o.atol = 5e-10;
+  o.driftTolerance = 3e-11;  // see the header
   o.inputLower = Eigen::VectorXd::Zero(m);
   o.inputUpper = Eigen::VectorXd::Constant(m, INFINITY);
   return o;

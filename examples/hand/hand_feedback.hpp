@@ -35,7 +35,11 @@ RiccatiOptions feedbackRiccatiOptions();
 /// rule. Throws what the GainSchedule constructor throws.
 GainSchedule feedbackGains(const ManifoldRiccatiSolution& lqr, const Trajectory& reference);
 
-/// BDF, rtol 1e-7, atol 5e-10, inputs clipped to [0, ∞) (m inputs).
+/// BDF, rtol 1e-7, atol 5e-10, inputs clipped to [0, ∞) (m inputs), projection onto the
+/// constraints where the drift exceeds 3e-11: the drift the transient leaves would otherwise stay
+/// (the exact dynamics keep h and A q̇; the tangent-space feedback cannot see them) and, through the
+/// light phalanges, show as ~1e-7 rad in the joints; each projection moves q by ~100× the drift it
+/// removes, so a small tolerance also keeps those steps small (test_hand_closed_loop.cpp).
 SimulationOptions closedLoopOptions(int m);
 
 /// `runs` starts x0 + T0 z with z ~ N(0, I) (mt19937 seeded with `seed`, drawn run after run)

@@ -7,7 +7,7 @@
 
 #include <Eigen/QR>
 #include <Eigen/LU>
-#include <Eigen/SVD>
+#include <Eigen/Cholesky>
 
 #include <algorithm>
 #include <cmath>
@@ -120,23 +120,121 @@ TensionDistribution distributeTensions(const Model& model, Data& data, const Eig
   } else {
     N = Eigen::MatrixXd::Identity(n, n);
   }
-  const Eigen::MatrixXd NB = N.transpose() * B;
-  const Eigen::VectorXd Nr = N.transpose() * rhs;
-  // ε relative to the largest singular value of Nᵀ B, so the regularization is scale-free. The
-  // problem is solved in the equivalent scaling [W Nᵀ B; I] u ≈ [W Nᵀ r; u_rest], W = 1/ε, where
-  // the regularization rows are O(1): their multipliers (u_rest − u ~ 0.1 N) then stand far above
-  // the rounding of the W rows (~eps ‖W NᵀB‖ ‖W Nᵀr‖ ≲ 1e-8 here), and the tolerance 1e-10·(1 +
-  // u_rest) separates the two. (In the unscaled form ε² (u_rest − u) fell below the default
-  // tolerance and the tensions stayed on the bound.)
-  const double sigmaMax = NB.size() ? Eigen::JacobiSVD<Eigen::MatrixXd>(NB).singularValues()(0) : 0.0;
-  const double weight = sigmaMax > 0.0 ? 1.0 / (options.regularization * sigmaMax) : 1.0;
-  Eigen::MatrixXd C(NB.rows() + m, m);
-  C << weight * NB, Eigen::MatrixXd::Identity(m, m);
-  Eigen::VectorXd d(NB.rows() + m);
-  d << weight * Nr, Eigen::VectorXd::Constant(m, options.restingTension);
-  const NnlsResult nnls =
-      solveNonNegativeLeastSquares(C, d, 0, 1e-10 * (1.0 + std::abs(options.restingTension)));
-  out.tension = nnls.x;
+  const Eigen::MatrixXd C = N.transpose() * B;  // p×m, the tangential equations C u = d
+  const Eigen::VectorXd d = N.transpose() * rhs;
+  const double mu = options.barrier, rest = options.restingTension;
+  const Eigen::Index p = C.rows();
+  const double eps = std::numeric_limits<double>::epsilon();
+  // min f(u) = ½‖u − u_rest‖² − μ Σ ln u  s.t.  C u = d  (∇f = u − u_rest − μ/u, ∇²f = H =
+  // diag(1 + μ/u²)). Newton's step from u with C u = c toward C u = e solves
+  //   [H Cᵀ; C 0] [Δu; ν] = −[∇f; c − e]   by the Schur complement S = C H⁻¹ Cᵀ (p×p, SPD when C
+  // has full row rank): S ν = (c − e) − C H⁻¹ ∇f,  Δu = −H⁻¹ (∇f + Cᵀ ν).
+  // Globalization by homotopy in the right-hand side: along e(s) = (1 − s) C u₀ + s d (u₀ = u_rest,
+  // feasible for s = 0) every e(s) has the strictly positive solution (1 − s) u₀ + s u* whenever
+  // some u* ≥ 0 meets C u* = d, so the path stays inside u > 0; each increase of s is taken by one
+  // full Newton step that must keep u > 0 (else s advances by less), then feasible Newton
+  // iterations with backtracking on f — convergent for this strictly convex barrier function.
+  Eigen::VectorXd u = Eigen::VectorXd::Constant(m, rest > 0.0 ? rest : 1.0);
+  Eigen::VectorXd grad(m), Hinv(m), du(m), nu(p), trial(m);
+  Eigen::MatrixXd CHinv(p, m);
+  Eigen::LDLT<Eigen::MatrixXd> schur(p);
+  auto objective = [&](const Eigen::VectorXd& v) {
+    return 0.5 * (v.array() - rest).matrix().squaredNorm() - mu * v.array().log().sum();
+  };
+  // Newton step at u for the residual r = C u − e; false when S is singular or the step not finite.
+  auto newtonStep = [&](const Eigen::VectorXd& r) {
+    grad = (u.array() - rest - mu / u.array()).matrix();
+    Hinv = (1.0 + mu / u.array().square()).inverse().matrix();
+    CHinv = C * Hinv.asDiagonal();
+    schur.compute(CHinv * C.transpose());
+    if (schur.info() != Eigen::Success) return false;
+    nu = schur.solve(r - CHinv * grad);
+    du = -Hinv.cwiseProduct(grad + C.transpose() * nu);
+    return du.allFinite() && nu.allFinite();
+  };
+  const Eigen::VectorXd cStart = C * u;
+  double s = 0.0, ds = 1.0;
+  bool converged = false, failed = false;
+  out.iterations = 0;
+  while (!failed && out.iterations < options.maxIterations) {
+    // Advance the homotopy: the Newton step toward e(s + ds), damped to stay inside u > 0. By
+    // linearity a fraction α of it lands exactly on e(s + α ds), so every step makes progress.
+    if (s < 1.0) {
+      const double sNext = std::min(1.0, s + ds);
+      ++out.iterations;
+      if (!newtonStep(C * u - ((1.0 - sNext) * cStart + sNext * d))) {
+        failed = true;
+        break;
+      }
+      double alpha = 1.0;
+      for (int i = 0; i < m; ++i)
+        if (du(i) < 0.0) alpha = std::min(alpha, -0.9 * u(i) / du(i));
+      u += alpha * du;
+      s = alpha == 1.0 ? sNext : s + alpha * (sNext - s);
+      ds = alpha == 1.0 ? 2.0 * ds : std::max(alpha * ds, 1e-3);
+    }
+    // Centering: feasible Newton for e(s) with backtracking on f, to δ² ≤ 0.01 on the way (close
+    // enough to the path for the next full step) and to rounding level at s = 1.
+    const Eigen::VectorXd target = (1.0 - s) * cStart + s * d;
+    int smallSteps = 0;
+    while (out.iterations < options.maxIterations) {
+      ++out.iterations;
+      if (!newtonStep(C * u - target)) {
+        failed = true;
+        break;
+      }
+      const double decrement = du.dot(du.cwiseQuotient(Hinv));
+      const double scale = (u.array().abs() + std::abs(rest) + mu / u.array()).maxCoeff();
+      if (s < 1.0 && decrement <= 1e-2) break;
+      if (decrement <= 16.0 * eps * eps * scale * scale) break;  // dual residual at rounding level
+      double alpha = 1.0;
+      for (int i = 0; i < m; ++i)
+        if (du(i) < 0.0) alpha = std::min(alpha, -0.99 * u(i) / du(i));
+      if (alpha == 1.0 && decrement < 1e-8) {
+        // Quadratic-convergence region (δ ≪ 1 for a self-concordant f): the full step, without a
+        // line search whose decrease δ²/4 would be below the rounding of f itself.
+        trial = u + du;
+        if (++smallSteps > 8) break;  // rounding floor reached
+      } else {
+        const double f0 = objective(u);
+        while (alpha > 1e-12) {
+          trial = u + alpha * du;
+          if (objective(trial) <= f0 - 0.25 * alpha * decrement) break;
+          alpha *= 0.5;
+        }
+        if (!(alpha > 1e-12)) break;  // no decrease left
+      }
+      u = trial;
+    }
+    if (s >= 1.0) {
+      converged = true;
+      break;
+    }
+  }
+  // Verify, independently of how the loop ended: at the final u the Newton system's best ν leaves
+  // the dual residual ∇f + Cᵀν = −H Δu, and the primal residual C u − d; both at the rounding
+  // level of their own terms.
+  const Eigen::VectorXd rp = C * u - d;
+  double primal = rp.cwiseAbs().maxCoeff(), dual = std::numeric_limits<double>::infinity();
+  if (newtonStep(rp)) dual = du.cwiseQuotient(Hinv).cwiseAbs().maxCoeff();
+  const double primalScale = (C.size() ? C.cwiseAbs().rowwise().sum().maxCoeff() : 0.0) * u.cwiseAbs().maxCoeff() +
+                             d.cwiseAbs().maxCoeff();
+  const double dualScale = (u.array().abs() + std::abs(rest) + mu / u.array()).maxCoeff();
+  converged = converged && !failed && primal <= 1e3 * eps * primalScale && dual <= 1e3 * eps * dualScale &&
+              u.minCoeff() > 0.0;
+  out.tension = u;
+  if (!converged) {
+    std::ostringstream msg;
+    msg << "interior-point tension distribution did not converge in " << out.iterations
+        << " Newton iterations (homotopy at s = " << s << " of 1, tangential residual " << primal
+        << " against " << primalScale << ", dual residual " << dual << " against " << dualScale
+        << ", smallest tension " << u.minCoeff() << " N)";
+    // Is there any u ≥ 0 with C u = d at all? Non-negative least squares says how close one gets.
+    const NnlsResult nnls = solveNonNegativeLeastSquares(C, d);
+    msg << "; the best non-negative tensions leave a tangential residual " << nnls.residualNorm
+        << " against ‖d‖ = " << d.norm();
+    out.message = msg.str();
+  }
   const Eigen::VectorXd normal = rhs - B * out.tension;
   if (nc > 0) out.lambda = qrAt.solve(normal);
   const Eigen::VectorXd residual = B * out.tension + At * out.lambda - rhs;
@@ -144,8 +242,7 @@ TensionDistribution distributeTensions(const Model& model, Data& data, const Eig
   const double scale = std::max({rhs.cwiseAbs().maxCoeff(),
                                  B.cwiseAbs().maxCoeff() * out.tension.cwiseAbs().maxCoeff(), 1e-300});
   out.relativeResidual = out.residual / scale;
-  out.converged = nnls.converged;
-  if (!nnls.converged) out.message = "non-negative least squares did not converge";
+  out.converged = out.message.empty();
   return out;
 }
 
@@ -284,23 +381,13 @@ ReferenceMotion makeReferenceMotion(const Model& model, const Eigen::VectorXd& q
     return d;
   };
 
-  // u̇_fd by the central quotient with step h from the designs at t ± h (Newton starts at q);
-  // bound tendons 0, a tendon reaching the bound within h one-sided from its free side.
-  auto rateQuotient = [&](double t, const Eigen::VectorXd& q, const Eigen::VectorXd& u, double h,
-                          std::string& failure) {
+  // u̇_fd by the central quotient with step h from the designs at t ± h (Newton starts at q).
+  auto rateQuotient = [&](double t, const Eigen::VectorXd& q, double h, std::string& failure) {
     Eigen::VectorXd qm = q, qp = q;
     const Design minus = design(t - h, qm), plus = design(t + h, qp);
     if (!minus.failure.empty()) failure = "the design at t - " + std::to_string(h) + ": " + minus.failure;
     if (!plus.failure.empty()) failure = "the design at t + " + std::to_string(h) + ": " + plus.failure;
-    const Eigen::VectorXd& um = minus.tensions.tension;
-    const Eigen::VectorXd& up = plus.tensions.tension;
-    Eigen::VectorXd rate(m);
-    for (int i = 0; i < m; ++i) {
-      if (u(i) == 0.0) rate(i) = 0.0;
-      else if (um(i) == 0.0) rate(i) = (up(i) - u(i)) / h;
-      else if (up(i) == 0.0) rate(i) = (u(i) - um(i)) / h;
-      else rate(i) = (up(i) - um(i)) / (2.0 * h);
-    }
+    const Eigen::VectorXd rate = (plus.tensions.tension - minus.tensions.tension) / (2.0 * h);
     return rate;
   };
 
@@ -322,34 +409,25 @@ ReferenceMotion makeReferenceMotion(const Model& model, const Eigen::VectorXd& q
 
     // The tensions' rate (header comment): the quotient, then the exact correction.
     std::string rateFailure;
-    const Eigen::VectorXd rateFd = rateQuotient(t, q, td.tension, options.rateStep, rateFailure);
-    const Eigen::VectorXd rateFd2 = rateQuotient(t, q, td.tension, 2.0 * options.rateStep, rateFailure);
+    const Eigen::VectorXd rateFd = rateQuotient(t, q, options.rateStep, rateFailure);
+    const Eigen::VectorXd rateFd2 = rateQuotient(t, q, 2.0 * options.rateStep, rateFailure);
     if (!rateFailure.empty()) fail(knotLabel(k, t) + ": input rate: " + rateFailure);
     out.rateDifferenceEstimate(k) = (rateFd - rateFd2).cwiseAbs().maxCoeff();
     const DynamicsStatus lin = computeLinearization(model, data, q, d.dq, td.tension);
     if (!lin.ok()) fail(knotLabel(k, t) + ": linearization: " + lin.message);
     Eigen::VectorXd xdot(2 * n);
     xdot << d.dq, d.qdd;
-    std::vector<int> freeTendons;
-    for (int i = 0; i < m; ++i)
-      if (td.tension(i) > 0.0) freeTendons.push_back(i);
-    const auto nf = static_cast<Eigen::Index>(freeTendons.size());
-    Eigen::MatrixXd S(p, nf);
+    // Every tension is > 0 (interior point), so every tendon may take part in the correction.
+    Eigen::MatrixXd S(p, m);
     Eigen::VectorXd g(p);
     for (int r = 0; r < p; ++r) {
       const int row = n + drivers[r];
       const double a = options.amplitudes[static_cast<std::size_t>(r)];
       const double jerk = -0.5 * a * w * w * w * std::sin(w * t);  // q⃛ of driver r
       g(r) = jerk - data.A.row(row).dot(xdot);
-      for (Eigen::Index c = 0; c < nf; ++c) S(r, c) = data.B(row, freeTendons[static_cast<std::size_t>(c)]);
+      S.row(r) = data.B.row(row);
     }
-    Eigen::VectorXd rate = rateFd;
-    if (nf > 0) {
-      Eigen::VectorXd rateFree(nf);
-      for (Eigen::Index c = 0; c < nf; ++c) rateFree(c) = rateFd(freeTendons[static_cast<std::size_t>(c)]);
-      const Eigen::VectorXd change = S.completeOrthogonalDecomposition().solve(g - S * rateFree);
-      for (Eigen::Index c = 0; c < nf; ++c) rate(freeTendons[static_cast<std::size_t>(c)]) += change(c);
-    }
+    const Eigen::VectorXd rate = rateFd + S.completeOrthogonalDecomposition().solve(g - S * rateFd);
     out.rateCorrection(k) = (rate - rateFd).cwiseAbs().maxCoeff();
     Eigen::VectorXd residual = -g;
     for (int r = 0; r < p; ++r) residual(r) += data.B.row(n + drivers[r]).dot(rate);

@@ -6,34 +6,41 @@
 //   q̇_o = −A_o⁻¹ A_d q̇_d,     q̈_o = −A_o⁻¹ (A_d q̈_d + Ȧ q̇)
 // so that h = 0, A q̇ = 0 and A q̈ + Ȧ q̇ = 0 hold at every knot (to Newton/rounding accuracy).
 //
-// Tension distribution. At each knot find u ≥ 0 and λ with
+// Tension distribution. At each knot find u > 0 and λ with
 //   B(q) u + Aᵀ λ = M q̈ + b(q, q̇)           (b: bias with u = 0 — gravity, springs, damping,
 //                                             Coriolis; B = ∂Q/∂u, the tendons' input matrix).
 // With N an orthonormal basis of null(A) (n × (n − rank A)) this splits into the tangential part
 // Nᵀ B u = Nᵀ r (r = M q̈ + b), which u alone must meet, and λ = least squares of Aᵀ λ = r − B u,
-// which meets the normal part exactly when A has full row rank. u is the non-negative least
-// squares solution (Lawson–Hanson active set) of
-//   min ‖Nᵀ B u − Nᵀ r‖² + ε² ‖u − u_rest‖²,   u ≥ 0,      ε = regularization · ‖Nᵀ B‖₂,
-// i.e. among the (near-)exact solutions the one closest to a small resting tension u_rest (muscle
-// tone, which keeps most tensions off the bound u = 0 so that feedback can move them both ways;
-// on the default motion 23 % of the entries still sit on the bound).
-// The tangential residual is O(ε²) relative; it is reported per knot.
-//
+// which meets the normal part exactly when A has full row rank. u is the interior-point (log
+// barrier) solution of
+//   min ½‖u − u_rest‖² − μ Σᵢ ln uᵢ   subject to   Nᵀ B u = Nᵀ r   (exactly),
+// i.e. near the resting tension u_rest (muscle tone) with every tendon strictly positive: a
+// tendon that the closest point to u_rest would push below zero keeps ≈ μ / (its shortfall).
+// Why a barrier and not u ≥ 0 with an active set: the solution of the barrier problem is an
+// analytic function of (q, q̇, q̈) — the KKT system is smooth and nonsingular — so along the
+// motion u(t) is smooth and the cubic Hermite input rule below reproduces it to O(h⁴). With an
+// active set (non-negative least squares, the rule before) a tendon reaching u = 0 between two
+// knots puts a kink into u(t) that no cubic can follow: the reference was inconsistent with the
+// dynamics there and the closed-loop error floor rose from ~5e-8 to ~2e-6 at those instants. And
+// the equality is met to rounding, where the regularized least squares left an O(ε²) residual
+// (~1e-7 rad/s² in q̈ after the hand's M⁻¹ ~ 1e6).
+// Solved by Newton's method on the KKT system, globalized by a homotopy in the right-hand side
+// from u_rest (reference_motion.cpp); when it fails, non-negative least squares on the tangential
+// equations tells whether any u ≥ 0 meets them, for the message.
 // Input derivatives (the tensions' rates u̇_k, so that the trajectory's cubic Hermite input rule
 // reproduces the motion between knots; trajectory.hpp). The distribution u*(t) is a smooth
-// function of t while its active set (the tendons on the bound u = 0) does not change; it is an
-// NNLS solve, whose exact derivative would need the derivatives of N(q), B(q), M(q) and b along
+// function of t (above); it is an
+// interior-point solve, whose exact derivative would need the derivatives of N(q), B(q), M(q) and b along
 // the motion. It is differentiated in two parts:
 //  1. a central difference quotient of the whole design in t (drivers, Newton projection,
 //     distribution at t_k ± δ): u̇_fd = (u*(t_k + δ) − u*(t_k − δ)) / 2δ, error δ² |d³u*/dt³| / 6
-//     plus the design's rounding over δ; bound tendons (u_k = 0) get u̇ = 0, and a tendon that
-//     reaches the bound within δ gets the one-sided quotient from its free side;
+//     plus the design's rounding over δ;
 //  2. an exact correction of the part the dynamics see. Along the design, d/dt q̈(x(t), u(t))
 //     must equal the designed q⃛; with the core's exact linearization at the knot,
 //       ∂q̈/∂x · ẋ_k + ∂q̈/∂u · u̇ = q⃛_k,
 //     and since every forward-dynamics q̈ satisfies A q̈ + Ȧ q̇ = 0, the driver rows suffice (the
 //     others follow, as the drivers parameterize the manifold; q⃛ of a driver is analytic). u̇ is
-//     u̇_fd plus the least-norm change over the free tendons that meets these p equations, so the
+//     u̇_fd plus the least-norm change over the tendons that meets these p equations, so the
 //     dynamically relevant part of u̇ is exact and the rest (which tendon pulls how much more) is
 //     the difference quotient's. Both the correction (the quotient's error where it matters) and
 //     |u̇_δ − u̇_2δ| (its error estimate) are reported per knot.
@@ -66,21 +73,26 @@ NnlsResult solveNonNegativeLeastSquares(const Eigen::MatrixXd& C, const Eigen::V
                                         int maxIterations = 0, double tolerance = 0.0);
 
 struct TensionDistributionOptions {
-  /// ε relative to ‖Nᵀ B‖₂ (see the file comment). The tangential residual is ~ε² relative, and
-  /// the hand's small inertias (M ~ 1e-6 kg m²) turn it into q̈ errors ~ ε² ‖M⁻¹‖ ‖r‖: 1e-6
-  /// keeps the forward dynamics within ~1e-8 rad/s² of the design.
-  double regularization = 1e-6;
-  double restingTension = 0.5;   ///< u_rest (N), every tendon
+  /// μ (N²), the barrier weight (file comment). A tendon whose resting-point shortfall is s keeps
+  /// ≈ μ/s: 1e-2 N² leaves the hand's "unneeded" tendons at 1.6–12 mN, far below u_rest, yet above
+  /// what the feedback takes away once the perturbation has decayed (1e-3: tensions down to 0.2 mN
+  /// and the closed loop clipped at 0 in 10 % of its evaluations instead of 0.2 %).
+  double barrier = 1e-2;
+  double restingTension = 0.5;  ///< u_rest (N), every tendon
+  int maxIterations = 200;      ///< Newton iterations of the interior-point solve (all phases)
 };
 
 struct TensionDistribution {
-  Eigen::VectorXd tension;        ///< m, ≥ 0
+  Eigen::VectorXd tension;        ///< m, every entry > 0 when converged
   Eigen::VectorXd lambda;         ///< nc
   /// ‖B u + Aᵀ λ − r‖∞ / max(‖r‖∞, ‖B‖∞·‖u‖∞): the relative inverse-dynamics residual.
   double relativeResidual = 0.0;
   double residual = 0.0;          ///< ‖B u + Aᵀ λ − r‖∞ (N m / N)
-  bool converged = false;         ///< NNLS converged and the dynamics evaluation was ok
-  std::string message;            ///< empty when converged
+  int iterations = 0;             ///< Newton iterations of the interior-point solve
+  /// Converged: the KKT residual at rounding level, every tension > 0, and the dynamics
+  /// evaluation was ok.
+  bool converged = false;
+  std::string message;            ///< empty when converged; else what failed and the residuals
 };
 
 /// The tension distribution at (q, q̇) for the acceleration q̈ (n-vectors). Uses data as workspace.

@@ -3,7 +3,7 @@
 // Steps (each prints a progress line and its time):
 //   1. load examples/scenes/hand.json;
 //   2. the reference motion (examples/hand: a designed motion on the constraint manifold with
-//      non-negative tensions from an inverse-dynamics tension distribution);
+//      strictly positive tensions from an interior-point inverse-dynamics tension distribution);
 //   3. the exact linearization at every knot (and, for comparison, central finite differences of
 //      the dynamics at the first knot: time and error);
 //   4. controllability on the constraint manifold at every knot and over the whole trajectory
@@ -163,7 +163,7 @@ int main(int argc, char** argv) try {
                std::to_string(model.nc()) + " constraint rows (" + scenePath + ")");
 
   // 2. Reference --------------------------------------------------------------------------------
-  progress.begin("reference motion: designed on the constraint manifold, tensions ≥ 0 by inverse dynamics");
+  progress.begin("reference motion: designed on the constraint manifold, tensions > 0 by inverse dynamics");
   const trellis::hand::ReferenceMotion reference = trellis::hand::makeReferenceMotion(model, scene.q);
   if (!reference.ok) throw std::runtime_error("reference motion: " + reference.message);
   const trellis::Trajectory& trajectory = reference.trajectory;
@@ -235,9 +235,9 @@ int main(int argc, char** argv) try {
     }
     trellis::writeFileAtomically(options.out + "/controllability.csv", csv.str());  // complete or absent
   }
-  // The tensions come from a per-knot inverse-dynamics distribution and are interpolated linearly,
-  // so between knots the reference satisfies the dynamics only approximately — amplified by the
-  // fingertips' tiny inertias. The tangent basis is therefore carried by discrete transport on the
+  // The tensions come from a per-knot inverse-dynamics distribution and between knots they are
+  // cubic in time: the reference satisfies the dynamics there only to the input rule's O(h⁴),
+  // amplified by the fingertips' tiny inertias. The tangent basis is therefore carried by discrete transport on the
   // knots (manifold_lqr.hpp, kProjected), which does not rely on the dynamics between knots.
   const trellis::TangentTransportOptions transport = trellis::hand::feedbackTransport();
   const trellis::GramianReport gramian = trellis::computeControllabilityGramian(

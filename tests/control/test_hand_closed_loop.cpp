@@ -17,12 +17,18 @@
 TEST_CASE("The hand's closed-loop error falls below 1e-7 once the perturbation has decayed",
           "[hand][simulation]") {
   // Run 0 of the main job: perturbation 0.05 along a seeded tangent direction, manifold TV-LQR
-  // gains (knots + Riccati steps, cubic rule), tensions clipped at 0, BDF rtol 1e-7, atol 5e-10.
-  // The error decays like e^{-7t}; the reference itself is not exactly consistent where a
-  // tension's active set changes between two knots (t ≈ 1.81, 2.50, 2.56, 2.69 s; the cubic input
-  // rule cannot follow the kink of the NNLS tensions inside the interval), which kicks the error
-  // back to ~2e-6 at 1.82 s. Between 2.3 s and the kink at 2.50 s the error sits at 3–6e-8
-  // (measured); integrating x itself at rtol 1e-7 (before issue 11) it stalled at ~1e-5.
+  // gains (knots + Riccati steps, cubic rule), tensions clipped at 0, BDF rtol 1e-7, atol 5e-10,
+  // projection onto the constraints where the drift exceeds 3e-11. The error decays like e^{-7t}
+  // (0.05 e^{-14} ≈ 4e-8 at 2 s). Two things used to hold it above 1e-7 after that: the
+  // reference's tensions had kinks between knots (an active set on u = 0) and missed the designed
+  // q̈ by ~1e-7 rad/s² (a regularized distribution) — both gone with the interior-point
+  // distribution (reference_motion.hpp); and the drift off the manifold accumulated during the
+  // large transient (~3e-9 m of h, ~1e-7 rad in a DIP joint: the exact dynamics keep it, the
+  // tangent-space feedback cannot see it) was tolerated up to the default 1e-6. A projection moves
+  // q by ~100× the drift it removes (light phalanges, M-metric) and the loop answers that step, so
+  // the tolerance is small enough for those kicks to stay small too. Measured (2026-12-01): max
+  // 1.9e-8 on [2, 3] s, final 3.1e-9, 1658 steps, 25 projections (1e-10: a kick to 1.3e-7 at
+  // 2.16 s; the default: 2.6e-7).
   const trellis::Scene s = trellis::loadScene(std::string(TRELLIS_SOURCE_DIR) + "/examples/scenes/hand.json");
   const trellis::Model& model = s.model;
   const trellis::hand::ReferenceMotion motion = trellis::hand::makeReferenceMotion(model, s.q);
@@ -44,18 +50,17 @@ TEST_CASE("The hand's closed-loop error falls below 1e-7 once the perturbation h
   REQUIRE(r.ok());
   CHECK(r.restarts <= r.projections);  // no restart at the knots or the gain rows
 
-  double settled = 0.0, end = 0.0;  // max error on [2.3, 2.5) s and on [2.9, 3] s
+  double decayed = 0.0;  // max error once the perturbation has decayed: t ≥ 2 s
   const Eigen::VectorXd& t = r.trajectory.times();
   for (Eigen::Index k = 0; k < t.size(); ++k) {
-    if (t(k) >= 2.3 && t(k) < 2.495) settled = std::max(settled, r.trackingError(k));
-    if (t(k) >= 2.9) end = std::max(end, r.trackingError(k));
+    if (t(k) >= 2.0) decayed = std::max(decayed, r.trackingError(k));
   }
-  WARN("hand closed loop: initial error " << r.trackingError(0) << ", max on [2.3, 2.5) s " << settled
-                                          << ", max on [2.9, 3] s " << end << ", final "
-                                          << r.trackingError(t.size() - 1) << "; " << r.steps
-                                          << " steps");
+  const double final = r.trackingError(t.size() - 1);
+  WARN("hand closed loop: initial error " << r.trackingError(0) << ", max on [2, 3] s " << decayed << ", final "
+                                          << final << "; " << r.steps << " steps, " << r.projections
+                                          << " projections");
   CHECK(r.trackingError(0) > 0.04);
-  CHECK(settled < 1e-7);
-  CHECK(end < 1e-6);  // after the reference's own kinks at 2.50–2.69 s, still decaying
+  CHECK(decayed < 1e-7);
+  CHECK(final < 1e-8);
 }
 #endif

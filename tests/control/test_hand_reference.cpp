@@ -1,7 +1,7 @@
 // tests/control/test_hand_reference.cpp — the hand of issue 5 (examples/scenes/hand.json): its
 // linearization reduced to the constraint tangent space is controllable, and its reference motion
-// (examples/hand/reference_motion.hpp) stays on the constraint manifold with non-negative tensions
-// that reproduce the motion through the forward dynamics.
+// (examples/hand/reference_motion.hpp) stays on the constraint manifold with strictly positive
+// tensions (an interior-point distribution) that reproduce the motion through the forward dynamics.
 //
 // The reference-motion cases need the library trellis_hand_reference (examples/hand/); they are
 // compiled only when trellis_control_tests links it (its include directory is then visible).
@@ -9,6 +9,8 @@
 #include <trellis/core.hpp>
 
 #include <catch2/catch.hpp>
+
+#include <Eigen/LU>
 
 #include <string>
 
@@ -41,12 +43,11 @@ TEST_CASE("The hand is controllable on its constraint manifold at the stored gra
 
 namespace {
 // Max deviation (rad, rad/s) of the open-loop hand from its reference at the knots. Measured
-// (2026-12-01, this test): linear tensions 7.5e-5, cubic tensions 1.8e-7. The cubic figure is not
-// the input rule's error (~h⁴|u⁗|/384 ~ 1e-10 N) but the distribution's own: the forward dynamics
-// under u_k miss the designed q̈_k by ~1e-7 rad/s² (the O(ε²) tangential residual times M⁻¹;
-// forwardDynamicsError, examples/hand/README.md), and that integrates to ~1e-7 over 3 s. 1e-6 leaves 5× above it and
-// sits 75× below the linear rule.
-constexpr double kHandCubicBound = 1e-6;
+// (2026-12-01, this test): linear tensions 7.5e-5, cubic tensions 4.5e-9 (1.8e-7 with the former
+// regularized, active-set distribution, whose q̈ missed the design by ~1e-7 rad/s²). The cubic
+// figure is the input rule's O(h⁴) and the integrator's tolerance; 5e-8 leaves 10× above it and
+// sits 1500× below the linear rule.
+constexpr double kHandCubicBound = 5e-8;
 }  // namespace
 
 TEST_CASE("Lawson-Hanson NNLS meets the KKT conditions of min ||Cx - d||, x >= 0",
@@ -82,7 +83,81 @@ TEST_CASE("Lawson-Hanson NNLS meets the KKT conditions of min ||Cx - d||, x >= 0
                   std::invalid_argument);
 }
 
-TEST_CASE("The hand's reference motion stays on the manifold with non-negative tensions",
+TEST_CASE("The interior-point tension distribution is exact, positive and optimal", "[hand][reference]") {
+  // At the stored grasp with a q̇ tangent to the manifold and a demanded q̈ that satisfies the
+  // acceleration constraint (both from a 3-knot reference, whose first knots are consistent):
+  // the distribution must (1) meet B u + Aᵀλ = M q̈ + b so that the forward dynamics return the
+  // demanded q̈, (2) keep every tension > 0, (3) be the barrier problem's minimizer: no feasible
+  // direction (Δu in null(NᵀB)) decreases ½‖u − u_rest‖² − μ Σ ln u — checked on random directions
+  // against the objective itself, not the solver's KKT residual; (4) report failure, with the
+  // residuals, when stopped early.
+  const trellis::Scene s = loadHand();
+  const trellis::Model& model = s.model;
+  trellis::hand::ReferenceMotionOptions options;
+  options.knots = 3;
+  options.inputRates = false;
+  const auto ref = trellis::hand::makeReferenceMotion(model, s.q, options);
+  INFO(ref.message);
+  REQUIRE(ref.ok);
+  const int n = model.nq(), m = model.nu();
+  trellis::Data data(model);
+  const trellis::hand::TensionDistributionOptions tension;
+  for (int k = 0; k < 3; ++k) {
+    INFO("knot " << k);
+    const Eigen::VectorXd q = ref.trajectory.states().col(k).head(n);
+    const Eigen::VectorXd dq = ref.trajectory.states().col(k).tail(n);
+    const Eigen::VectorXd qdd = ref.accelerations.col(k);
+    const auto td = trellis::hand::distributeTensions(model, data, q, dq, qdd, tension);
+    INFO(td.message);
+    REQUIRE(td.converged);
+    CHECK(td.tension.minCoeff() > 0.0);
+    CHECK(td.relativeResidual < 1e-13);
+    REQUIRE(trellis::computeDynamics(model, data, q, dq, td.tension).ok());
+    const double qddError = (data.qdd - qdd).cwiseAbs().maxCoeff();
+    WARN("knot " << k << ": forward dynamics under the distributed tensions miss q'' by " << qddError
+                 << " rad/s^2 (|q''| " << qdd.cwiseAbs().maxCoeff() << "), " << td.iterations
+                 << " Newton iterations, tensions " << td.tension.minCoeff() << " ... "
+                 << td.tension.maxCoeff() << " N");
+    CHECK(qddError < 1e-9 * (1.0 + qdd.cwiseAbs().maxCoeff()));
+    // Optimality on feasible directions: null space of the tangential equations NᵀB, with N a
+    // basis of null(A) (A = constraint Jacobian at q).
+    trellis::computeConstraints(model, data, q, dq);
+    const Eigen::MatrixXd At = data.constraintJacobian.transpose();
+    trellis::computeInputMatrix(model, data, q);
+    const Eigen::FullPivLU<Eigen::MatrixXd> luA(At.transpose());
+    const Eigen::MatrixXd N = luA.kernel();
+    const Eigen::MatrixXd tangential = N.transpose() * data.inputMatrix;
+    const Eigen::MatrixXd feasible = Eigen::FullPivLU<Eigen::MatrixXd>(tangential).kernel();
+    REQUIRE(feasible.cols() == m - tangential.rows());
+    auto objective = [&](const Eigen::VectorXd& u) {
+      return 0.5 * (u.array() - tension.restingTension).matrix().squaredNorm() -
+             tension.barrier * u.array().log().sum();
+    };
+    const double f0 = objective(td.tension);
+    std::mt19937 rng(static_cast<unsigned>(100 + k));
+    std::normal_distribution<double> gauss;
+    for (int trial = 0; trial < 50; ++trial) {
+      Eigen::VectorXd c(feasible.cols());
+      for (Eigen::Index i = 0; i < c.size(); ++i) c(i) = gauss(rng);
+      Eigen::VectorXd dir = feasible * c;
+      dir *= 1e-3 * td.tension.minCoeff() / dir.cwiseAbs().maxCoeff();  // stays inside u > 0
+      // Second-order increase here ~½|Δu|²(1 + μ/u²) ≳ 1e-12; rounding of the objective ~1e-14.
+      for (double sign : {1.0, -1.0}) CHECK(objective(td.tension + sign * dir) >= f0 - 1e-13 * (1.0 + std::abs(f0)));
+    }
+  }
+  // Stopped after one Newton iteration from the infeasible start: not converged, and the message
+  // says so with the residuals.
+  trellis::hand::TensionDistributionOptions early = tension;
+  early.maxIterations = 1;
+  const Eigen::VectorXd q = ref.trajectory.states().col(1).head(n);
+  const Eigen::VectorXd dq = ref.trajectory.states().col(1).tail(n);
+  const auto stopped = trellis::hand::distributeTensions(model, data, q, dq, ref.accelerations.col(1), early);
+  CHECK_FALSE(stopped.converged);
+  CHECK(stopped.message.find("did not converge in 1 Newton iterations") != std::string::npos);
+  CHECK(stopped.message.find("tangential residual") != std::string::npos);
+}
+
+TEST_CASE("The hand's reference motion stays on the manifold with strictly positive tensions",
           "[hand][reference]") {
   const trellis::Scene s = loadHand();
   const trellis::Model& model = s.model;
@@ -111,15 +186,16 @@ TEST_CASE("The hand's reference motion stays on the manifold with non-negative t
   const int mcp = model.configIndex("index_mcp_flex");
   CHECK(traj.states().row(mcp).maxCoeff() - traj.states().row(mcp).minCoeff() ==
         Approx(options.amplitudes[0]).epsilon(1e-9));
-  // Tensions: non-negative by construction of the NNLS, and bounded (a few newtons for a ~160 g
-  // hand moving slowly).
-  CHECK(traj.inputs().minCoeff() >= 0.0);
+  // Tensions: strictly positive (interior point), and bounded (a few newtons for a ~160 g hand
+  // moving slowly).
+  CHECK(traj.inputs().minCoeff() > 0.0);
   CHECK(traj.inputs().maxCoeff() < 50.0);
-  // Inverse dynamics: B u + Aᵀλ = M q̈ + b to ~ε² = 1e-12 relative (regularization 1e-6).
-  CHECK(ref.dynamicsResidual.maxCoeff() < 1e-10);
-  // Forward dynamics under the tensions reproduce the designed q̈: the residual above is amplified
-  // by M⁻¹ (~1e6) — ~1e-6 rad/s² at worst against q̈ of ~1 rad/s².
-  CHECK(ref.forwardDynamicsError.maxCoeff() < 1e-5 * (1.0 + ref.accelerations.cwiseAbs().maxCoeff()));
+  // Inverse dynamics: B u + Aᵀλ = M q̈ + b to rounding (the distribution is exact, not
+  // regularized).
+  CHECK(ref.dynamicsResidual.maxCoeff() < 1e-13);
+  // Forward dynamics under the tensions reproduce the designed q̈: rounding amplified by the
+  // fingertips' M⁻¹ (~1e6) against q̈ of ~1 rad/s².
+  CHECK(ref.forwardDynamicsError.maxCoeff() < 1e-9 * (1.0 + ref.accelerations.cwiseAbs().maxCoeff()));
 }
 
 TEST_CASE("Integrating the hand under the reference tensions follows the reference",
