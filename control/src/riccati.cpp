@@ -310,6 +310,10 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
         finishedStats.jacobianEvaluations += s.jacobianEvaluations;
         finishedStats.linearIterations += s.linearIterations;
         finishedStats.preconditionerSolves += s.preconditionerSolves;
+        finishedStats.nonlinearIterations += s.nonlinearIterations;
+        finishedStats.linearSolverSetups += s.linearSolverSetups;
+        finishedStats.errorTestFailures += s.errorTestFailures;
+        finishedStats.nonlinearFailures += s.nonlinearFailures;
         driver = std::make_unique<detail::OdeDriver>(system, N, odeOptions);
         driver->start(tau, y0);
         lastNorm = normOf(y0.data());
@@ -322,6 +326,11 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
   sol.jacobianEvaluations = finishedStats.jacobianEvaluations + s.jacobianEvaluations;
   sol.linearIterations = finishedStats.linearIterations + s.linearIterations;
   sol.preconditionerSolves = finishedStats.preconditionerSolves + s.preconditionerSolves;
+  sol.newtonIterations = finishedStats.nonlinearIterations + s.nonlinearIterations;
+  sol.linearSolverSetups = finishedStats.linearSolverSetups + s.linearSolverSetups;
+  sol.errorTestFailures = finishedStats.errorTestFailures + s.errorTestFailures;
+  sol.convergenceFailures = finishedStats.nonlinearFailures + s.nonlinearFailures;
+  sol.schurFactorizations = system.schurFactorizations();
   sol.linearizations = system.linearizations();
   if (!options.trackEigenvalues) sol.minEigenvalue = sol.maxEigenvalue = 0.0;
   if (sol.ok() && indefinite) {

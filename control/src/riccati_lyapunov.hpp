@@ -27,7 +27,9 @@ class SchurLyapunov {
  private:
   Eigen::Index n_;
   Eigen::RealSchur<Eigen::MatrixXd> schur_;
-  Eigen::MatrixXd Z_, T_, TF_, TFt_, C_, Y_;
+  Eigen::MatrixXd Z_, Zt_, T_, TF_, C_, Y_;
+  double gammaTF_ = 0.0;  // the γ of TF_ (re-formed only when γ changes)
+  bool tfValid_ = false;
   std::vector<Eigen::Index> blockStart_;  // 1×1 and 2×2 diagonal blocks of T, and n at the end
 };
 

@@ -55,6 +55,7 @@ class RiccatiSystem final : public OdeSystem {
   bool coefficientsAt(double t);
   const Eigen::MatrixXd& gain() const { return G_; }  ///< G = R⁻¹Bᵀ of the last coefficientsAt
   long linearizations() const { return linearizations_; }
+  long schurFactorizations() const { return schurFactorizations_; }
 
   bool failed = false;
   double failTime = 0.0;
@@ -72,12 +73,13 @@ class RiccatiSystem final : public OdeSystem {
   double T_;
   const LinearizationCallback& lin_;
   const LqrWeights& w_;
-  Eigen::MatrixXd A_, B_, Q_, R_, Rinv_, G_, S_, P_, K_, F_, Acl_, PK_;
+  Eigen::MatrixXd A_, B_, Q_, R_, Rinv_, G_, S_, P_, Pt_, K_, F_, Acl_, PK_;
   Eigen::LLT<Eigen::MatrixXd> Rllt_;
   double cachedT_ = std::numeric_limits<double>::quiet_NaN();
   bool cacheValid_ = false;
   bool mechanical_ = false;  // A = [0 I; Aq Av], B = [0; Bv] at the cached t (see coefficientsAt)
   long linearizations_ = 0;
+  long schurFactorizations_ = 0;
   // Factored form: U (upper triangular, zero below), Ṡ, M = U⁻ᵀṠU⁻¹, dU/dτ, U at the last
   // preconditioner set-up.
   Eigen::MatrixXd U_, Sdot_, M_, Udot_, Upre_;

@@ -1,0 +1,33 @@
+// dense_kernels.hpp (private) — the dense products of the Riccati solve, with an AVX2+FMA path.
+//
+// Why: the Lyapunov (Bartels–Stewart) solve of every Newton iteration is dominated by four
+// nx×nx×nx products (the congruences ZᵀXZ and ZYZᵀ), and the right-hand side by a few more. The
+// library is built for the baseline x86-64 (SSE2), where Eigen's product kernel retires about
+// 1.5 flops per instruction; with AVX2 and FMA four products-and-sums fit in one instruction.
+// The product below runs a 8×4 register-blocked FMA kernel when the CPU has AVX2 and FMA
+// (checked once at run time; the kernel is compiled for those instructions alone, with no Eigen
+// or other shared inline code in it) and Eigen's product otherwise: same results up to rounding.
+// Matrices are column-major; the nx of the Riccati solve fit in L2, so no packing is done.
+#pragma once
+
+#include <Eigen/Core>
+
+namespace trellis::detail {
+
+/// C (m×n, leading dimension ldc) = alpha · A · op(B), or C += alpha · A · op(B) (accumulate);
+/// A m×k column-major (lda), op(B) = B (k×n, ldb) or Bᵀ (B n×k, ldb). upperOnly (not with
+/// accumulate): only C(i, j) with i ≤ j is required (entries below the diagonal may be written
+/// or not). C must not alias A or B.
+void matmul(Eigen::Index m, Eigen::Index n, Eigen::Index k, double alpha, const double* A,
+            Eigen::Index lda, const double* B, Eigen::Index ldb, bool transB, double* C,
+            Eigen::Index ldc, bool upperOnly, bool accumulate = false);
+
+/// Σ x_i y_i over n entries (AVX2+FMA when available, like matmul).
+double dotProduct(const double* x, const double* y, Eigen::Index n);
+
+/// Which kernel matmul (and dotProduct) uses: the AVX2+FMA one (true) when the CPU has it, else Eigen's.
+bool matmulUsesAvx2();
+/// Tests only: force Eigen's product (true) or restore the automatic choice (false).
+void matmulForceGeneric(bool force);
+
+}  // namespace trellis::detail
