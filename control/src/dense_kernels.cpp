@@ -4,6 +4,7 @@
 #include <immintrin.h>
 
 #include <algorithm>
+#include <cmath>
 
 namespace trellis::detail {
 
@@ -170,6 +171,46 @@ void matmulForceGeneric(bool force) { forceGeneric = force; }
 double dotProduct(const double* x, const double* y, Index n) {
   if (n <= 0) return 0.0;
   return matmulUsesAvx2() ? dotAvx2(x, y, n) : dotGeneric(x, y, n);
+}
+
+// x − x is 0 for a finite x and NaN otherwise, and NaN survives the sums (four partial sums).
+bool finiteEntries(const double* x, Index n) {
+  double s[4] = {0.0, 0.0, 0.0, 0.0};
+  Index i = 0;
+  for (; i + 4 <= n; i += 4) {
+    for (int k = 0; k < 4; ++k) s[k] += x[i + k] - x[i + k];
+  }
+  for (; i < n; ++i) s[0] += x[i] - x[i];
+  return s[0] + s[1] + s[2] + s[3] == 0.0;
+}
+
+// Right-looking: row k of U is A(k, k:n)/√A(k, k) (copied to work, contiguous), then the
+// trailing upper triangle loses its outer product, column by column (contiguous axpy).
+inline __attribute__((always_inline)) bool choleskyLoop(double* A, Index n, Index lda,
+                                                         double* work) {
+  for (Index k = 0; k < n; ++k) {
+    const double d = A[k + k * lda];
+    if (!(d > 0.0) || !std::isfinite(d)) return false;
+    const double r = std::sqrt(d);
+    A[k + k * lda] = r;
+    for (Index j = k + 1; j < n; ++j) work[j] = A[k + j * lda] /= r;
+    for (Index j = k + 1; j < n; ++j) {
+      const double ukj = work[j];
+      double* cj = A + j * lda;
+#pragma GCC ivdep
+      for (Index i = k + 1; i <= j; ++i) cj[i] -= work[i] * ukj;
+    }
+  }
+  return true;
+}
+
+__attribute__((target("avx2,fma"))) bool choleskyAvx2(double* A, Index n, Index lda,
+                                                      double* work) {
+  return choleskyLoop(A, n, lda, work);
+}
+
+bool choleskyUpper(double* A, Index n, Index lda, double* work) {
+  return matmulUsesAvx2() ? choleskyAvx2(A, n, lda, work) : choleskyLoop(A, n, lda, work);
 }
 
 void matmul(Index m, Index n, Index k, double alpha, const double* A, Index lda, const double* B,

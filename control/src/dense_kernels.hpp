@@ -25,6 +25,15 @@ void matmul(Eigen::Index m, Eigen::Index n, Eigen::Index k, double alpha, const 
 /// Σ x_i y_i over n entries (AVX2+FMA when available, like matmul).
 double dotProduct(const double* x, const double* y, Eigen::Index n);
 
+/// Every one of the n entries finite (one pass, no branch per entry).
+bool finiteEntries(const double* x, Eigen::Index n);
+
+/// In place: the upper-triangular U with UᵀU = A for symmetric A (n×n, lda; the upper triangle
+/// is read and overwritten, the strict lower one left alone; work: n doubles). False, as soon as
+/// it happens, if a pivot is not positive (or not finite): A is not positive definite (to
+/// working precision).
+bool choleskyUpper(double* A, Eigen::Index n, Eigen::Index lda, double* work);
+
 /// Which kernel matmul (and dotProduct) uses: the AVX2+FMA one (true) when the CPU has it, else Eigen's.
 bool matmulUsesAvx2();
 /// Tests only: force Eigen's product (true) or restore the automatic choice (false).

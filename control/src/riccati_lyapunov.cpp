@@ -87,8 +87,11 @@ bool blockSolve(const Eigen::MatrixXd& TF, Eigen::MatrixXd& Y, Eigen::Index i0, 
 //   T_F(I,I)ᵀ Y_IJ + Y_IJ T_F(J,J) = C_IJ − Σ_{L<I} T_F(L,I)ᵀ Y_LJ − Σ_{K<J} Y_IK T_F(K,J),
 // a Kronecker system of at most 4 unknowns. Y is symmetric: only the blocks I ≤ J are solved,
 // column block by column block, and each finished column is mirrored into its row, so that every
-// Y_IK the sums need is known (K < I: the mirror of Y_KI; I ≤ K < J: an earlier column). For the
-// diagonal block the Σ_{K<J} term is (Y_{<J,J})ᵀ T_F(<J,J), once the rows above it are solved.
+// Y_IK the sums need is known (K < I: the mirror of Y_KI; I ≤ K < J: an earlier column). Per
+// column block J, the Σ_{K<J} terms of all rows above J are one product Y(0:j0, 0:j0)·T_F(0:j0, J);
+// then, row block by row block, the Σ_{L<I} terms are dot products of a column of T_F with one of
+// Y (both contiguous). For the diagonal block the Σ_{K<J} term is (Y_{<J,J})ᵀ T_F(<J,J), once the
+// rows above it are solved.
 // Cost: ~6 nx³ flops for the two congruences (half of each second product, the result being
 // symmetric) and ~nx³ for the substitution, against ~10 nx³ without symmetry.
 bool SchurLyapunov::solve(double gamma, Eigen::MatrixXd& X) {
@@ -154,7 +157,7 @@ bool SchurLyapunov::solve(double gamma, Eigen::MatrixXd& X) {
     const double* col = &X(0, j);
     for (Eigen::Index i = 0; i < j; ++i) X(j, i) = col[i];
   }
-  return X.allFinite();
+  return finiteEntries(X.data(), n * n);
 }
 
 }  // namespace trellis::detail

@@ -5,7 +5,9 @@
 // real Schur form A_cl = Z T Zᵀ (factor(), O(nx³) once per Jacobian update; γ only rescales T)
 // it is a Bartels–Stewart back substitution on quasi-triangular T (solve(), O(nx³) per call,
 // no allocation): the exact preconditioner of the Krylov solver, or the linear solver itself
-// (OdeLinearSolver::SystemSolve).
+// (OdeLinearSolver::SystemSolve). The dense products (the two congruences, ~6 nx³ flops, and the
+// rows above each column block of the substitution) and the substitution's dot products run
+// through dense_kernels.hpp (AVX2+FMA when the CPU has it).
 #pragma once
 
 #include <Eigen/Core>

@@ -34,22 +34,6 @@ void RiccatiSystem::fail(RiccatiStatus status, double t, const std::string& mess
   }
 }
 
-namespace {
-
-// Every entry finite: x − x is 0 for a finite x and NaN otherwise, and NaN survives the sums
-// (four independent partial sums: one pass, no branch per entry).
-bool finiteEntries(const double* x, Eigen::Index n) {
-  double s[4] = {0.0, 0.0, 0.0, 0.0};
-  Eigen::Index i = 0;
-  for (; i + 4 <= n; i += 4) {
-    for (int k = 0; k < 4; ++k) s[k] += x[i + k] - x[i + k];
-  }
-  for (; i < n; ++i) s[0] += x[i] - x[i];
-  return s[0] + s[1] + s[2] + s[3] == 0.0;
-}
-
-}  // namespace
-
 template <class M>
 bool RiccatiSystem::checkSize(const M& X, Eigen::Index r, Eigen::Index c, const char* name,
                               double t) {

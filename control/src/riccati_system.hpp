@@ -10,10 +10,11 @@
 //
 // Cost per right-hand side: the coefficients A, B, Q, R and G = R⁻¹Bᵀ depend on t only and are
 // cached on t (BDF's Newton iterations and the Jacobian set-up evaluate the same t several
-// times: one linearization per distinct t); then one nx³ product (AᵀS), one nx²m product (K = GS)
-// and the upper half of another (P K, with P = KᵀR). A mechanical A = [0 I; Aq Av], B = [0; Bv]
-// (detected exactly per t) halves the first two: only the velocity rows of S enter.
-// Nothing allocates after construction.
+// times: one linearization per distinct t); then one nx³ product (S A, whose symmetric part is
+// that of AᵀS), one nx²m product (K = GS) and the upper half of another (P K, with P = KᵀR). A
+// mechanical A = [0 I; Aq Av], B = [0; Bv] (detected exactly per t) halves the first two: only
+// the velocity rows and columns of S enter. The products run through matmul (dense_kernels.hpp:
+// AVX2+FMA when the CPU has it). Nothing allocates after construction.
 #pragma once
 
 #include "ode_driver.hpp"

@@ -11,6 +11,7 @@
 #include <Eigen/Dense>
 
 #include <cstdlib>
+#include <limits>
 
 using Eigen::MatrixXd;
 using trellis::detail::matmul;
@@ -104,6 +105,56 @@ TEST_CASE("dotProduct equals Eigen's dot on both paths, every tail length", "[ri
       const Eigen::VectorXd x = Eigen::VectorXd::Random(n + 1), y = Eigen::VectorXd::Random(n + 1);
       INFO("n = " << n << ", generic = " << generic);
       CHECK(std::abs(trellis::detail::dotProduct(x.data(), y.data(), n) - x.head(n).dot(y.head(n))) <= 1e-14 * (1 + n));
+    }
+  }
+}
+
+TEST_CASE("choleskyUpper: UᵀU = A for positive definite A, false otherwise, on both paths",
+          "[riccati]") {
+  std::srand(17);
+  for (bool generic : {false, true}) {
+    const ForceGeneric force(generic);
+    for (int n : {1, 2, 5, 9, 40}) {
+      INFO("n = " << n << ", generic = " << generic);
+      const MatrixXd M = MatrixXd::Random(n, n);
+      const MatrixXd A = M * M.transpose() + 0.1 * MatrixXd::Identity(n, n);
+      MatrixXd U = A;
+      Eigen::VectorXd work(n);
+      REQUIRE(trellis::detail::choleskyUpper(U.data(), n, n, work.data()));
+      const MatrixXd Ut = U.triangularView<Eigen::Upper>();
+      CHECK((Ut.transpose() * Ut - A).cwiseAbs().maxCoeff() <= 1e-12 * A.cwiseAbs().maxCoeff());
+      CHECK((U.triangularView<Eigen::StrictlyLower>().toDenseMatrix() -
+             A.triangularView<Eigen::StrictlyLower>().toDenseMatrix())
+                .cwiseAbs()
+                .maxCoeff() == 0.0);  // the lower triangle is left alone
+      // Indefinite (one negative eigenvalue), semidefinite (a zero pivot) and non-finite.
+      Eigen::SelfAdjointEigenSolver<MatrixXd> es(A);
+      Eigen::VectorXd lambda = es.eigenvalues();
+      lambda(0) = -0.05;
+      MatrixXd B = es.eigenvectors() * lambda.asDiagonal() * es.eigenvectors().transpose();
+      CHECK_FALSE(trellis::detail::choleskyUpper(B.data(), n, n, work.data()));
+      MatrixXd Z = MatrixXd::Zero(n, n);
+      CHECK_FALSE(trellis::detail::choleskyUpper(Z.data(), n, n, work.data()));
+      MatrixXd N = A;
+      N(n - 1, n - 1) = std::numeric_limits<double>::quiet_NaN();
+      CHECK_FALSE(trellis::detail::choleskyUpper(N.data(), n, n, work.data()));
+    }
+  }
+}
+
+TEST_CASE("finiteEntries finds a NaN or an infinity anywhere", "[riccati]") {
+  for (int n : {0, 1, 3, 4, 9}) {
+    Eigen::VectorXd x = Eigen::VectorXd::LinSpaced(n, -1e300, 1e300);
+    CHECK(trellis::detail::finiteEntries(x.data(), n));
+    for (int k = 0; k < n; ++k) {
+      for (double bad : {std::numeric_limits<double>::quiet_NaN(),
+                         std::numeric_limits<double>::infinity(),
+                         -std::numeric_limits<double>::infinity()}) {
+        Eigen::VectorXd y = x;
+        y(k) = bad;
+        INFO("n = " << n << ", k = " << k << ", value " << bad);
+        CHECK_FALSE(trellis::detail::finiteEntries(y.data(), n));
+      }
     }
   }
 }
