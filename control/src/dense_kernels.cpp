@@ -197,7 +197,7 @@ inline __attribute__((always_inline)) bool choleskyLoop(double* A, Index n, Inde
     for (Index j = k + 1; j < n; ++j) {
       const double ukj = work[j];
       double* cj = A + j * lda;
-#pragma GCC ivdep
+TRELLIS_IVDEP
       for (Index i = k + 1; i <= j; ++i) cj[i] -= work[i] * ukj;
     }
   }

@@ -19,9 +19,8 @@ Vec arr(N_Vector v) { return Vec(NV_DATA_S(v), NV_LENGTH_S(v)); }
 // The streaming operations CVODES calls most (linear sums, scalings, linear combinations) as
 // plain loops, compiled twice: for the baseline and, chosen at run time like matmul (see
 // dense_kernels.hpp), for AVX2. The loops are the same source (always inlined into both); the
-// AVX2 build may contract a·x + y to one FMA (a rounding-level difference). `ivdep`: the
-// specification allows z to be one of the inputs (the same index, never a shifted overlap), so
-// the loops vectorize without run-time overlap checks.
+// AVX2 build may contract a·x + y to one FMA (a rounding-level difference). TRELLIS_IVDEP: the
+// specification allows z to be one of the inputs (the same index, never a shifted overlap).
 #define TRELLIS_INLINE inline __attribute__((always_inline))
 #define TRELLIS_AVX2 __attribute__((target("avx2,fma")))
 using Index = sunindextype;
@@ -29,12 +28,12 @@ using Index = sunindextype;
 // z = a x + b y (z may be x or y).
 TRELLIS_INLINE void linearSumLoop(double a, const double* x, double b, const double* y, double* z,
                                   Index n) {
-#pragma GCC ivdep
+TRELLIS_IVDEP
   for (Index i = 0; i < n; ++i) z[i] = a * x[i] + b * y[i];
 }
 // z = c x (z may be x).
 TRELLIS_INLINE void scaleLoop(double c, const double* x, double* z, Index n) {
-#pragma GCC ivdep
+TRELLIS_IVDEP
   for (Index i = 0; i < n; ++i) z[i] = c * x[i];
 }
 // z = Σ c_i X_i (z may be X_0, no other), three vectors per pass over z; the sum is formed in the
@@ -45,13 +44,13 @@ TRELLIS_INLINE void linearCombinationLoop(int nv, const double* c, N_Vector* X, 
   if (nv >= 3) {
     const double *x0 = NV_DATA_S(X[0]), *x1 = NV_DATA_S(X[1]), *x2 = NV_DATA_S(X[2]);
     const double c0 = c[0], c1 = c[1], c2 = c[2];
-#pragma GCC ivdep
+TRELLIS_IVDEP
     for (Index i = 0; i < n; ++i) z[i] = c0 * x0[i] + c1 * x1[i] + c2 * x2[i];
     k = 3;
   } else if (nv == 2) {
     const double *x0 = NV_DATA_S(X[0]), *x1 = NV_DATA_S(X[1]);
     const double c0 = c[0], c1 = c[1];
-#pragma GCC ivdep
+TRELLIS_IVDEP
     for (Index i = 0; i < n; ++i) z[i] = c0 * x0[i] + c1 * x1[i];
     return;
   } else {
@@ -61,19 +60,19 @@ TRELLIS_INLINE void linearCombinationLoop(int nv, const double* c, N_Vector* X, 
   for (; k + 3 <= nv; k += 3) {
     const double *x0 = NV_DATA_S(X[k]), *x1 = NV_DATA_S(X[k + 1]), *x2 = NV_DATA_S(X[k + 2]);
     const double c0 = c[k], c1 = c[k + 1], c2 = c[k + 2];
-#pragma GCC ivdep
+TRELLIS_IVDEP
     for (Index i = 0; i < n; ++i) z[i] = ((z[i] + c0 * x0[i]) + c1 * x1[i]) + c2 * x2[i];
   }
   for (; k < nv; ++k) {
     const double* x0 = NV_DATA_S(X[k]);
     const double c0 = c[k];
-#pragma GCC ivdep
+TRELLIS_IVDEP
     for (Index i = 0; i < n; ++i) z[i] = z[i] + c0 * x0[i];
   }
 }
 // Z_i = c_i x + Y_i.
 TRELLIS_INLINE void scaleAddLoop(double c, const double* x, const double* y, double* z, Index n) {
-#pragma GCC ivdep
+TRELLIS_IVDEP
   for (Index i = 0; i < n; ++i) z[i] = c * x[i] + y[i];
 }
 

@@ -132,7 +132,7 @@ bool SchurLyapunov::solve(double gamma, Eigen::MatrixXd& X) {
       bool ok = true;
       if (si == 1 && sj == 1) {
         const double d = TF_(i0, i0) + TF_(j0, j0);
-        ok = d != 0.0;
+        if (d == 0.0) return false;
         Y_(i0, j0) /= d;
       } else if (si == 1) {
         ok = blockSolve<1, 2>(TF_, Y_, i0, j0);

@@ -82,18 +82,24 @@ bool RiccatiSystem::coefficientsAt(double t) {
     fail(RiccatiStatus::kCallbackFailure, t, m.str());
     return false;
   }
-  if (w_.Rfun) {
-    G_ = B_.transpose();
-    Rllt_.solveInPlace(G_);
-  } else {  // G = R⁻¹ Bᵀ
-    matmul(nu_, nx_, nu_, 1.0, Rinv_.data(), nu_, B_.data(), nx_, true, G_.data(), nu_, false);
-  }
   // Mechanical structure (x = [q; v], q̇ = v, inputs act on v̇): A = [0 I; Aq Av], B = [0; Bv]
   // exactly, as an exact linearization in generalized coordinates gives it. Then G = [0 Gv] and
   // the products below need only the v rows of S (half of AᵀS and of G S).
   const Eigen::Index h = nx_ / 2;
   mechanical_ = nx_ % 2 == 0 && h > 0 && A_.topLeftCorner(h, h).isZero(0.0) &&
                 A_.topRightCorner(h, h).isIdentity(0.0) && B_.topRows(h).isZero(0.0);
+  if (w_.Rfun) {
+    G_ = B_.transpose();
+    Rllt_.solveInPlace(G_);
+  } else if (mechanical_) {  // G = R⁻¹ Bᵀ = [0, R⁻¹ Bvᵀ]
+    G_.leftCols(h).setZero();
+    if (nu_ > 0) {
+      matmul(nu_, h, nu_, 1.0, Rinv_.data(), nu_, B_.data() + h, nx_, true, G_.data() + h * nu_,
+             nu_, false);
+    }
+  } else {
+    matmul(nu_, nx_, nu_, 1.0, Rinv_.data(), nu_, B_.data(), nx_, true, G_.data(), nu_, false);
+  }
   cachedT_ = t;
   cacheValid_ = true;
   return true;

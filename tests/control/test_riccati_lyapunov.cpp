@@ -249,6 +249,7 @@ TEST_CASE("mechanical structure A = [0 I; Aq Av] gives the solution of the unstr
   };
   LqrWeights w = unitWeights(nx, nu);
   w.Q.diagonal().head(h).setConstant(3.0);  // not permutation-invariant
+  w.R = 2.0 * MatrixXd::Identity(nu, nu) + 0.3 * MatrixXd::Ones(nu, nu);  // G = R⁻¹Bᵀ ≠ Bᵀ
   LqrWeights wp = w;
   wp.Q = P * w.Q * P.transpose();
   const auto o = withSolver(RiccatiLinearSolver::kAuto, 1e-11);
