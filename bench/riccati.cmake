@@ -4,6 +4,8 @@ if(TARGET trellis_control)
   add_executable(trellis_bench_riccati ${CMAKE_CURRENT_LIST_DIR}/riccati_bench.cpp)
   target_link_libraries(trellis_bench_riccati PRIVATE trellis::control trellis_bench_support
                                                       benchmark::benchmark)
+  add_executable(trellis_bench_riccati_profile ${CMAKE_CURRENT_LIST_DIR}/riccati_profile.cpp)
+  target_link_libraries(trellis_bench_riccati_profile PRIVATE trellis::control trellis_bench_support)
 endif()
 
 # Sampled-data (ZOH) TV-LQR along the hand's reference (needs the examples' hand reference).

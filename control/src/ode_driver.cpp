@@ -452,9 +452,11 @@ void OdeDriver::collectCounters(OdeStats& into) const {
   if (CVodeGetNumRhsEvals(mem, &v) >= 0) into.rhsEvaluations += v;
   if (CVodeGetNumErrTestFails(mem, &v) >= 0) into.errorTestFailures += v;
   if (CVodeGetNumNonlinSolvConvFails(mem, &v) >= 0) into.nonlinearFailures += v;
+  if (CVodeGetNumNonlinSolvIters(mem, &v) >= 0) into.nonlinearIterations += v;
   if (options_.linearSolver != OdeLinearSolver::FixedPoint) {
     if (CVodeGetNumLinRhsEvals(mem, &v) >= 0) into.linearRhsEvaluations += v;
     if (CVodeGetNumJacEvals(mem, &v) >= 0) into.jacobianEvaluations += v;
+    if (CVodeGetNumLinSolvSetups(mem, &v) >= 0) into.linearSolverSetups += v;
     if (options_.linearSolver == OdeLinearSolver::Gmres ||
         options_.linearSolver == OdeLinearSolver::SystemSolve) {
       if (CVodeGetNumLinIters(mem, &v) >= 0) into.linearIterations += v;

@@ -120,6 +120,8 @@ struct OdeStats {
   long linearRhsEvaluations = 0;    ///< by difference-quotient Jacobians / products
   long jacobianEvaluations = 0;     ///< dense Jacobians formed (exact or difference quotient)
   long linearIterations = 0;        ///< Krylov iterations
+  long nonlinearIterations = 0;     ///< Newton (or fixed-point) iterations
+  long linearSolverSetups = 0;      ///< calls of the linear solver's set-up (Newton matrix updates)
   long preconditionerSetups = 0;
   long preconditionerSolves = 0;
   long errorTestFailures = 0;

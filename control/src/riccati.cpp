@@ -3,6 +3,7 @@
 // sides and their derivatives are in riccati_system.*, the integrator in ode_driver.*.
 #include "trellis/control/riccati.hpp"
 
+#include "dense_kernels.hpp"
 #include "ode_driver.hpp"
 #include "riccati_packing.hpp"
 #include "riccati_system.hpp"
@@ -151,8 +152,8 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
 
   // S at a stored step (scratch reused), for the eigenvalue tracking and the S ⪰ 0 check.
   Eigen::MatrixXd Sk(nx, nx), Uk = Eigen::MatrixXd::Zero(nx, nx), Sshift(nx, nx);
+  Eigen::VectorXd cholWork(nx);
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(nx);
-  Eigen::LLT<Eigen::MatrixXd> psdLlt(nx);
   sol.minEigenvalue = std::numeric_limits<double>::infinity();
   sol.maxEigenvalue = -std::numeric_limits<double>::infinity();
   const double psdEps = options.psdSlack * nx * options.rtol;
@@ -180,8 +181,7 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
     const double scale = Sk.diagonal().maxCoeff();
     Sshift = Sk;
     Sshift.diagonal().array() += psdEps * std::max(scale, 0.0);
-    psdLlt.compute(Sshift);
-    if (psdLlt.info() == Eigen::Success) return;
+    if (detail::choleskyUpper(Sshift.data(), nx, nx, cholWork.data())) return;
     if (!haveEig) eig.compute(Sk, Eigen::EigenvaluesOnly);
     const double lmin = eig.eigenvalues()(0), lmax = eig.eigenvalues()(nx - 1);
     const double ratio = lmax > 0.0 ? lmin / lmax : -std::numeric_limits<double>::infinity();
@@ -310,6 +310,10 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
         finishedStats.jacobianEvaluations += s.jacobianEvaluations;
         finishedStats.linearIterations += s.linearIterations;
         finishedStats.preconditionerSolves += s.preconditionerSolves;
+        finishedStats.nonlinearIterations += s.nonlinearIterations;
+        finishedStats.linearSolverSetups += s.linearSolverSetups;
+        finishedStats.errorTestFailures += s.errorTestFailures;
+        finishedStats.nonlinearFailures += s.nonlinearFailures;
         driver = std::make_unique<detail::OdeDriver>(system, N, odeOptions);
         driver->start(tau, y0);
         lastNorm = normOf(y0.data());
@@ -322,6 +326,11 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
   sol.jacobianEvaluations = finishedStats.jacobianEvaluations + s.jacobianEvaluations;
   sol.linearIterations = finishedStats.linearIterations + s.linearIterations;
   sol.preconditionerSolves = finishedStats.preconditionerSolves + s.preconditionerSolves;
+  sol.newtonIterations = finishedStats.nonlinearIterations + s.nonlinearIterations;
+  sol.linearSolverSetups = finishedStats.linearSolverSetups + s.linearSolverSetups;
+  sol.errorTestFailures = finishedStats.errorTestFailures + s.errorTestFailures;
+  sol.convergenceFailures = finishedStats.nonlinearFailures + s.nonlinearFailures;
+  sol.schurFactorizations = system.schurFactorizations();
   sol.linearizations = system.linearizations();
   if (!options.trackEigenvalues) sol.minEigenvalue = sol.maxEigenvalue = 0.0;
   if (sol.ok() && indefinite) {

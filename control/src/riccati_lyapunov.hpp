@@ -5,7 +5,9 @@
 // real Schur form A_cl = Z T Zᵀ (factor(), O(nx³) once per Jacobian update; γ only rescales T)
 // it is a Bartels–Stewart back substitution on quasi-triangular T (solve(), O(nx³) per call,
 // no allocation): the exact preconditioner of the Krylov solver, or the linear solver itself
-// (OdeLinearSolver::SystemSolve).
+// (OdeLinearSolver::SystemSolve). The dense products (the two congruences, ~6 nx³ flops, and the
+// rows above each column block of the substitution) and the substitution's dot products run
+// through dense_kernels.hpp (AVX2+FMA when the CPU has it).
 #pragma once
 
 #include <Eigen/Core>
@@ -27,7 +29,9 @@ class SchurLyapunov {
  private:
   Eigen::Index n_;
   Eigen::RealSchur<Eigen::MatrixXd> schur_;
-  Eigen::MatrixXd Z_, T_, TF_, TFt_, C_, Y_;
+  Eigen::MatrixXd Z_, Zt_, T_, TF_, C_, Y_;
+  double gammaTF_ = 0.0;  // the γ of TF_ (re-formed only when γ changes)
+  bool tfValid_ = false;
   std::vector<Eigen::Index> blockStart_;  // 1×1 and 2×2 diagonal blocks of T, and n at the end
 };
 

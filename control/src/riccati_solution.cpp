@@ -20,6 +20,15 @@ std::vector<double> RiccatiSolution::stepTimes() const {
   return t;
 }
 
+std::vector<int> RiccatiSolution::stepOrders() const {
+  std::vector<int> q;
+  q.reserve(steps_.size());
+  for (auto it = steps_.rbegin(); it != steps_.rend(); ++it) {
+    q.push_back(static_cast<int>(it->D.cols()) - 1);
+  }
+  return q;
+}
+
 // The step's interpolating polynomial Σ D_k (τ − τ_k)ᵏ / k! (CVODES's own dense output), in S or
 // in its factor U (then S = UᵀU, symmetric PSD by construction).
 void RiccatiSolution::S(double t, Eigen::MatrixXd& out) const {

@@ -1,6 +1,7 @@
 // riccati_system.cpp — right-hand sides, Jacobian and preconditioner of the Riccati equation.
 #include "riccati_system.hpp"
 
+#include "dense_kernels.hpp"
 #include "riccati_packing.hpp"
 
 #include <sstream>
@@ -10,7 +11,7 @@ namespace trellis::detail {
 RiccatiSystem::RiccatiSystem(int nx, int nu, double T, const LinearizationCallback& linearization,
                              const LqrWeights& weights)
     : nx_(nx), nu_(nu), T_(T), lin_(linearization), w_(weights),
-      A_(nx, nx), B_(nx, nu), Q_(nx, nx), R_(nu, nu), G_(nu, nx), S_(nx, nx), P_(nx, nu),
+      A_(nx, nx), B_(nx, nu), Q_(nx, nx), R_(nu, nu), G_(nu, nx), S_(nx, nx), P_(nx, nu), Pt_(nu, nx),
       K_(nu, nx), F_(nx, nx), Acl_(nx, nx), PK_(nx, nx), Rllt_(nu),
       U_(Eigen::MatrixXd::Zero(nx, nx)), Sdot_(nx, nx), M_(nx, nx), Udot_(nx, nx),
       Upre_(Eigen::MatrixXd::Zero(nx, nx)), lyap_(nx), Xr_(nx, nx) {
@@ -36,7 +37,7 @@ void RiccatiSystem::fail(RiccatiStatus status, double t, const std::string& mess
 template <class M>
 bool RiccatiSystem::checkSize(const M& X, Eigen::Index r, Eigen::Index c, const char* name,
                               double t) {
-  if (X.rows() == r && X.cols() == c && X.allFinite()) return true;
+  if (X.rows() == r && X.cols() == c && finiteEntries(X.data(), X.size())) return true;
   std::ostringstream m;
   if (X.rows() != r || X.cols() != c) {
     m << name << "(t) callback returned " << X.rows() << "x" << X.cols() << ", expected " << r
@@ -81,18 +82,24 @@ bool RiccatiSystem::coefficientsAt(double t) {
     fail(RiccatiStatus::kCallbackFailure, t, m.str());
     return false;
   }
-  if (w_.Rfun) {
-    G_ = B_.transpose();
-    Rllt_.solveInPlace(G_);
-  } else {
-    G_.noalias() = Rinv_ * B_.transpose();
-  }
   // Mechanical structure (x = [q; v], q̇ = v, inputs act on v̇): A = [0 I; Aq Av], B = [0; Bv]
   // exactly, as an exact linearization in generalized coordinates gives it. Then G = [0 Gv] and
   // the products below need only the v rows of S (half of AᵀS and of G S).
   const Eigen::Index h = nx_ / 2;
   mechanical_ = nx_ % 2 == 0 && h > 0 && A_.topLeftCorner(h, h).isZero(0.0) &&
                 A_.topRightCorner(h, h).isIdentity(0.0) && B_.topRows(h).isZero(0.0);
+  if (w_.Rfun) {
+    G_ = B_.transpose();
+    Rllt_.solveInPlace(G_);
+  } else if (mechanical_) {  // G = R⁻¹ Bᵀ = [0, R⁻¹ Bvᵀ]
+    G_.leftCols(h).setZero();
+    if (nu_ > 0) {
+      matmul(nu_, h, nu_, 1.0, Rinv_.data(), nu_, B_.data() + h, nx_, true, G_.data() + h * nu_,
+             nu_, false);
+    }
+  } else {
+    matmul(nu_, nx_, nu_, 1.0, Rinv_.data(), nu_, B_.data(), nx_, true, G_.data(), nu_, false);
+  }
   cachedT_ = t;
   cacheValid_ = true;
   return true;
@@ -113,11 +120,11 @@ bool RiccatiSystem::evaluate(double tau, const double* y) {
     fail(RiccatiStatus::kNonFinite, t, m.str());
     return false;
   }
-  if (mechanical_) {
+  if (mechanical_) {  // K = G_v S_v (the v columns of G, the v rows of S)
     const Eigen::Index h = nx_ / 2;
-    K_.noalias() = G_.rightCols(h) * S_.bottomRows(h);
+    matmul(nu_, nx_, h, 1.0, G_.data() + h * nu_, nu_, &S_(h, 0), nx_, false, K_.data(), nu_, false);
   } else {
-    K_.noalias() = G_ * S_;
+    matmul(nu_, nx_, nx_, 1.0, G_.data(), nu_, S_.data(), nx_, false, K_.data(), nu_, false);
   }
   return true;
 }
@@ -132,25 +139,30 @@ void RiccatiSystem::closedLoop() {
 // of the symmetric P K (half its nx²·m) in the plain form.
 int RiccatiSystem::rhs(double tau, ConstVectorMap y, VectorMap ydot) {
   if (!evaluate(tau, y.data())) return -1;
-  if (mechanical_) {  // AᵀS = [Aqᵀ S_v; S_q + Avᵀ S_v] with S_q, S_v the q and v rows of S
-    const Eigen::Index h = nx_ / 2;
-    F_.topRows(h).noalias() = A_.bottomLeftCorner(h, h).transpose() * S_.bottomRows(h);
-    F_.bottomRows(h) = S_.topRows(h);
-    F_.bottomRows(h).noalias() += A_.bottomRightCorner(h, h).transpose() * S_.bottomRows(h);
+  // F = S A = (AᵀS)ᵀ: only F + Fᵀ enters. Mechanical A: S A = [S_v Aq, S_q + S_v Av] with S_q,
+  // S_v the q and v columns of S.
+  const Eigen::Index n = nx_;
+  if (mechanical_) {
+    const Eigen::Index h = n / 2;
+    matmul(n, h, h, 1.0, &S_(0, h), n, &A_(h, 0), n, false, F_.data(), n, false);
+    F_.rightCols(h) = S_.leftCols(h);
+    matmul(n, h, h, 1.0, &S_(0, h), n, &A_(h, h), n, false, &F_(0, h), n, false, true);
   } else {
-    F_.noalias() = A_.transpose() * S_;
+    matmul(n, n, n, 1.0, S_.data(), n, A_.data(), n, false, F_.data(), n, false);
   }
-  P_.noalias() = K_.transpose() * R_;
+  // P = Kᵀ R = (R K)ᵀ (R symmetric): the product on contiguous operands, then a transposed copy.
+  matmul(nu_, n, nu_, 1.0, R_.data(), nu_, K_.data(), nu_, false, Pt_.data(), nu_, false);
+  P_ = Pt_.transpose();
   double* out = ydot.data();
   if (!factored) {
-    PK_.triangularView<Eigen::Upper>() = P_ * K_;
+    matmul(n, n, nu_, 1.0, P_.data(), n, K_.data(), nu_, false, PK_.data(), n, true);
     for (Eigen::Index j = 0; j < nx_; ++j) {
       double* col = out + j * (j + 1) / 2;
       for (Eigen::Index i = 0; i <= j; ++i) col[i] = F_(i, j) + F_(j, i) - PK_(i, j) + Q_(i, j);
     }
     return 0;
   }
-  PK_.noalias() = P_ * K_;
+  matmul(n, n, nu_, 1.0, P_.data(), n, K_.data(), nu_, false, PK_.data(), n, false);
   // Factored: dU/dτ = Υ(U⁻ᵀ Ṡ U⁻¹) U. A zero on U's diagonal (a trial point where the factor
   // lost rank) or a non-finite result is recoverable: CVODES retries with a smaller step.
   Sdot_.noalias() = F_ + F_.transpose();
@@ -248,6 +260,7 @@ int RiccatiSystem::preconditionerSolve(double, ConstVectorMap, ConstVectorMap, C
   if (!schurOk_) {
     // Acl_ is the set-up's A_cl unless a Jacobian-product set-up replaced it since; the Schur
     // form is taken of the set-up's matrix either way (re-evaluated here would cost the same).
+    ++schurFactorizations_;
     if (!lyap_.factor(Acl_)) return 1;
     schurOk_ = true;
   }

@@ -10,10 +10,11 @@
 //
 // Cost per right-hand side: the coefficients A, B, Q, R and G = R⁻¹Bᵀ depend on t only and are
 // cached on t (BDF's Newton iterations and the Jacobian set-up evaluate the same t several
-// times: one linearization per distinct t); then one nx³ product (AᵀS), one nx²m product (K = GS)
-// and the upper half of another (P K, with P = KᵀR). A mechanical A = [0 I; Aq Av], B = [0; Bv]
-// (detected exactly per t) halves the first two: only the velocity rows of S enter.
-// Nothing allocates after construction.
+// times: one linearization per distinct t); then one nx³ product (S A, whose symmetric part is
+// that of AᵀS), one nx²m product (K = GS) and the upper half of another (P K, with P = KᵀR). A
+// mechanical A = [0 I; Aq Av], B = [0; Bv] (detected exactly per t) halves the first two: only
+// the velocity rows and columns of S enter. The products run through matmul (dense_kernels.hpp:
+// AVX2+FMA when the CPU has it). Nothing allocates after construction.
 #pragma once
 
 #include "ode_driver.hpp"
@@ -55,6 +56,7 @@ class RiccatiSystem final : public OdeSystem {
   bool coefficientsAt(double t);
   const Eigen::MatrixXd& gain() const { return G_; }  ///< G = R⁻¹Bᵀ of the last coefficientsAt
   long linearizations() const { return linearizations_; }
+  long schurFactorizations() const { return schurFactorizations_; }
 
   bool failed = false;
   double failTime = 0.0;
@@ -72,12 +74,13 @@ class RiccatiSystem final : public OdeSystem {
   double T_;
   const LinearizationCallback& lin_;
   const LqrWeights& w_;
-  Eigen::MatrixXd A_, B_, Q_, R_, Rinv_, G_, S_, P_, K_, F_, Acl_, PK_;
+  Eigen::MatrixXd A_, B_, Q_, R_, Rinv_, G_, S_, P_, Pt_, K_, F_, Acl_, PK_;
   Eigen::LLT<Eigen::MatrixXd> Rllt_;
   double cachedT_ = std::numeric_limits<double>::quiet_NaN();
   bool cacheValid_ = false;
   bool mechanical_ = false;  // A = [0 I; Aq Av], B = [0; Bv] at the cached t (see coefficientsAt)
   long linearizations_ = 0;
+  long schurFactorizations_ = 0;
   // Factored form: U (upper triangular, zero below), Ṡ, M = U⁻ᵀṠU⁻¹, dU/dτ, U at the last
   // preconditioner set-up.
   Eigen::MatrixXd U_, Sdot_, M_, Udot_, Upre_;

@@ -133,6 +133,23 @@ TEST_CASE("kLyapunov agrees with the dense-Jacobian BDF and a tight reference, w
   CHECK(lyap.jacobianEvaluations == 0);
   CHECK(gmres.linearIterations > 0);
   CHECK(dense.jacobianEvaluations > 0);
+  // The integrator's statistics: at least one Newton iteration per step, at most one Lyapunov
+  // solve per Newton iteration (CVODES skips the solve when the residual is already below the
+  // linear tolerance); each fresh A_cl gets one Schur form, and a fresh A_cl needs a set-up call.
+  CHECK(lyap.newtonIterations >= lyap.steps);
+  CHECK(lyap.preconditionerSolves <= lyap.newtonIterations);
+  CHECK(lyap.schurFactorizations >= 1);
+  CHECK(lyap.schurFactorizations <= lyap.linearSolverSetups);
+  CHECK(lyap.errorTestFailures >= 0);
+  CHECK(lyap.convergenceFailures >= 0);
+  CHECK(dense.schurFactorizations == 0);
+  const std::vector<int> orders = lyap.stepOrders();
+  REQUIRE(orders.size() == lyap.stepTimes().size());
+  CHECK(orders.back() == 0);  // the terminal point S(T) = Qf
+  for (std::size_t k = 0; k + 1 < orders.size(); ++k) {
+    CHECK(orders[k] >= 1);
+    CHECK(orders[k] <= 5);  // BDF
+  }
   // kAuto above nx = 10 is kLyapunov: the identical computation.
   const auto autoSol = trellis::solveRiccati(0.0, 1.5, 12, 3, sys.callback(), w,
                                              withSolver(RiccatiLinearSolver::kAuto, 1e-8));
@@ -232,6 +249,7 @@ TEST_CASE("mechanical structure A = [0 I; Aq Av] gives the solution of the unstr
   };
   LqrWeights w = unitWeights(nx, nu);
   w.Q.diagonal().head(h).setConstant(3.0);  // not permutation-invariant
+  w.R = 2.0 * MatrixXd::Identity(nu, nu) + 0.3 * MatrixXd::Ones(nu, nu);  // G = R⁻¹Bᵀ ≠ Bᵀ
   LqrWeights wp = w;
   wp.Q = P * w.Q * P.transpose();
   const auto o = withSolver(RiccatiLinearSolver::kAuto, 1e-11);

@@ -171,6 +171,11 @@ class RiccatiSolution {
   long jacobianEvaluations = 0;
   long linearIterations = 0;        ///< GMRES iterations (Krylov solver only; 0 for kLyapunov)
   long preconditionerSolves = 0;    ///< Lyapunov solves (Krylov preconditioner or kLyapunov)
+  long newtonIterations = 0;        ///< nonlinear iterations of BDF (Newton) or Adams (fixed point)
+  long linearSolverSetups = 0;      ///< Newton-matrix set-ups CVODES asked for (BDF)
+  long schurFactorizations = 0;     ///< real Schur forms of A_cl (Lyapunov solve; one per fresh A_cl)
+  long errorTestFailures = 0;       ///< steps rejected by the local error test
+  long convergenceFailures = 0;     ///< steps retried because the nonlinear iteration failed
   double switchedToPlainAt = std::numeric_limits<double>::quiet_NaN();  ///< kFactored: the time t
                                     ///< where the solve switched to the plain form (NaN: never)
   double indefiniteRatio = 0.0;     ///< kIndefinite: λmin(S)/λmax(S) at failureTime (< −ε)
@@ -187,6 +192,9 @@ class RiccatiSolution {
   double validFrom() const;
   /// Times (ascending) of the stored step points, T included.
   std::vector<double> stepTimes() const;
+  /// Order (degree of the interpolating polynomial) of each stored step, aligned with
+  /// stepTimes() (0 for the terminal point).
+  std::vector<int> stepOrders() const;
 
   /// S(t) (nx×nx, symmetric). Throws std::out_of_range outside [validFrom(), T].
   Eigen::MatrixXd S(double t) const;
