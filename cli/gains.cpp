@@ -149,11 +149,12 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   if (options.has("--state") && !options.has("--hold")) {
     throw UsageError("gains: --state applies to --hold only (the reference comes from --trajectory)");
   }
-  const std::optional<double> holdSpan =
-      options.has("--hold") ? std::optional<double>(options.positiveNumber("--hold", *options.value("--hold")))
-                            : std::nullopt;
+  // A plain flag and value rather than std::optional<double>: GCC 12 warns, wrongly, that the
+  // optional's payload may be read uninitialized in the branch below (-Wmaybe-uninitialized).
+  const bool hold = options.has("--hold");
+  const double holdSpan = hold ? options.positiveNumber("--hold", *options.value("--hold")) : 0.0;
   const std::string trajectoryPath =
-      holdSpan ? std::string("the held pose") : options.required("--trajectory", "(the reference trajectory CSV, or --hold T)");
+      hold ? std::string("the held pose") : options.required("--trajectory", "(the reference trajectory CSV, or --hold T)");
   const std::string outPath = options.required("--out", "(the gains CSV to write)");
 
   TvlqrOptions tvlqr;
@@ -189,7 +190,7 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   const int n = model.nq(), m = model.nu(), nx = 2 * n;
   if (m == 0) throw std::runtime_error(scenePath + ": the scene has no inputs: there is nothing to control");
 
-  const Trajectory trajectory = holdSpan ? heldPose(loaded, options.value("--state"), *holdSpan)
+  const Trajectory trajectory = hold ? heldPose(loaded, options.value("--state"), holdSpan)
                                          : loadReference(model, scenePath, trajectoryPath);
   if (tvlqr.outputStep > 0.0) options.gridPoints("--dt", tvlqr.outputStep, trajectory.endTime() - trajectory.startTime(), kMaxOutputRows, "output rows");
   if (tvlqr.sampleRate > 0.0) options.gridPoints("--rate", 1.0 / tvlqr.sampleRate, trajectory.endTime() - trajectory.startTime(), kMaxOutputRows, "output rows");
