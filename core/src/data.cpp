@@ -148,6 +148,11 @@ Data::Data(const Model& model)
   massFactor = Eigen::MatrixXd::Zero(n, n);
   massInverseFactor = Eigen::MatrixXd::Zero(n, n);
   massPivotInvSqrt = Eigen::VectorXd::Zero(n);
+  articulatedInertia.assign(n, Eigen::Matrix<double, 6, 6>::Zero());
+  articulatedU.assign(n, Vector6d::Zero());
+  articulatedWork.assign(n, Vector6d::Zero());
+  articulatedPivot = Eigen::VectorXd::Zero(n);
+  articulatedColumns = Eigen::Matrix<double, 6, Eigen::Dynamic>::Zero(6, n);
   describeTree(model);
   massInverseAt = Eigen::MatrixXd::Zero(n, nc);
   schur = Eigen::MatrixXd::Zero(nc, nc);

@@ -140,7 +140,7 @@ void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const
 DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen::VectorXd& q,
                                     const Eigen::VectorXd& dq, const Eigen::VectorXd& u) {
   const int n = model.nq(), m = model.nu(), nc = model.nc();
-  computeDynamics(model, data, q, dq, u);
+  computeDynamics(model, data, q, dq, u);  // and the factor of M that invertMass uses below
   // Near-singular or inconsistent constraints still give finite numbers, flagged by the status.
   if (!detail::solvable(data.status)) return data.status;
 

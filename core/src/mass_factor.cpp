@@ -229,6 +229,45 @@ void invertChainBlock(Data& data, int bs, int nb) {
   }
 }
 
+/// M_b⁻¹ of an unbranched block from the articulated factor. Column j of M⁻¹ is the forward
+/// dynamics at rest for τ = e_j; all columns at once, each joint's 6-vectors side by side in
+/// data.articulatedColumns (column j for τ = e_j), and only j ≥ i for joint i (M⁻¹ symmetric):
+///   from the tip, u_i(j) = δ_ij − S_i·p_j,  p_j += U_i u_i(j) / D_i   (p: the bias of the parent),
+///   from the root, M⁻¹(i, j) = (u_i(j) − U_i·a_j) / D_i,  a_j += S_i M⁻¹(i, j)   (a: the parent's).
+/// One joint has one child here, so p and a are updated in place. O(n_b²) 6-vector operations
+/// against the dense factor's n_b³/2 multiply-adds.
+void invertChainArticulated(Data& data, int bs, int be) {
+  Eigen::MatrixXd& Minv = data.massInverse;
+  Eigen::Matrix<double, 6, Eigen::Dynamic>& W = data.articulatedColumns;
+  W.middleCols(bs, be - bs).setZero();
+  for (int i = be - 1; i >= bs; --i) {
+    const Vector6d& S = data.S[i];
+    const Vector6d Ud = data.articulatedU[i] / data.articulatedPivot[i];
+    double* col = &Minv(0, i);  // u_i(j) in M⁻¹(j, i) until the second sweep
+    for (int j = i; j < be; ++j) {
+      auto p = W.col(j);
+      const double uij = (j == i ? 1.0 : 0.0) - S.dot(p);
+      col[j] = uij;
+      p.noalias() += Ud * uij;
+    }
+  }
+  W.middleCols(bs, be - bs).setZero();
+  for (int i = bs; i < be; ++i) {
+    const Vector6d& S = data.S[i];
+    const Vector6d& U = data.articulatedU[i];
+    const double dInv = 1.0 / data.articulatedPivot[i];
+    double* col = &Minv(0, i);
+    for (int j = i; j < be; ++j) {
+      auto a = W.col(j);
+      const double x = (col[j] - U.dot(a)) * dInv;
+      col[j] = x;
+      a.noalias() += S * x;
+    }
+  }
+  for (int i = bs; i < be; ++i)
+    for (int j = i + 1; j < be; ++j) Minv(i, j) = Minv(j, i);
+}
+
 /// Unbranched blocks of at least this many joints use the dense Cholesky kernels: with no
 /// branching there is nothing for the tree to skip, and Eigen's blocked kernels run the O(n³)
 /// work with fewer instructions than the run loops (measured with callgrind on chains of 10–40).
@@ -241,6 +280,7 @@ bool denseBlock(const Data& data, int bs, int be) {
 int factorMass(const Model& model, Data& data, double tol) {
   (void)model;
   data.massInverseCurrent = false;
+  data.articulatedCurrent = false;
   data.massFactor = data.M;  // zero off the ancestor pattern, as M is
   for (size_t b = 0; b + 1 < data.blockStart.size(); ++b) {
     const int bs = data.blockStart[b], be = data.blockStart[b + 1];
@@ -269,16 +309,75 @@ void solveMassVector(Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi) 
   }
 }
 
+bool blocksAreChains(const Data& data) {
+  for (size_t b = 0; b + 1 < data.blockStart.size(); ++b)
+    if (data.runStart[static_cast<size_t>(data.blockStart[b + 1] - 1)] != data.blockStart[b]) return false;
+  return true;
+}
+
 void invertMass(Data& data) {
   for (size_t b = 0; b + 1 < data.blockStart.size(); ++b) {
     const int bs = data.blockStart[b], be = data.blockStart[b + 1];
-    if (denseBlock(data, bs, be)) {
+    if (data.articulatedCurrent) {
+      invertChainArticulated(data, bs, be);
+    } else if (denseBlock(data, bs, be)) {
       invertChainBlock(data, bs, be - bs);
     } else {
       invertTreeBlock(data, bs, be);
     }
   }
   data.massInverseCurrent = true;
+}
+
+int factorArticulated(const Model& model, Data& data, double tol) {
+  const auto& joints = model.joints();
+  const int n = model.nq();
+  // I_i = [[m E, −ĥ], [ĥ, I_O]] (applyInertia as a matrix), symmetric.
+  for (int i = 0; i < n; ++i) {
+    Eigen::Matrix<double, 6, 6>& IA = data.articulatedInertia[i];
+    const Eigen::Matrix3d hh = spatial::skew(data.wh[i]);
+    IA.topLeftCorner<3, 3>() = data.wm[i] * Eigen::Matrix3d::Identity();
+    IA.topRightCorner<3, 3>() = -hh;
+    IA.bottomLeftCorner<3, 3>() = hh;
+    IA.bottomRightCorner<3, 3>() = data.wI[i];
+  }
+  for (int i = n - 1; i >= 0; --i) {
+    const Eigen::Matrix<double, 6, 6>& IA = data.articulatedInertia[i];
+    Vector6d& U = data.articulatedU[i];
+    U.noalias() = IA * data.S[i];
+    const double d = data.S[i].dot(U);
+    if (!(d > tol)) return i;
+    data.articulatedPivot[i] = d;
+    const int p = joints[i].parent;
+    if (p == kWorld) continue;
+    Eigen::Matrix<double, 6, 6>& IAp = data.articulatedInertia[p];
+    IAp += IA;
+    IAp.noalias() -= (U / d) * U.transpose();
+  }
+  return -1;
+}
+
+void solveArticulated(const Model& model, Data& data, Eigen::VectorXd& x) {
+  const auto& joints = model.joints();
+  const int n = model.nq();
+  std::vector<Vector6d>& w = data.articulatedWork;  // p_i from the leaves, then a_i from the roots
+  for (int i = 0; i < n; ++i) w[i].setZero();
+  for (int i = n - 1; i >= 0; --i) {
+    const double ui = x[i] - data.S[i].dot(w[i]);
+    x[i] = ui;
+    const int p = joints[i].parent;
+    if (p != kWorld) w[p] += w[i] + data.articulatedU[i] * (ui / data.articulatedPivot[i]);
+  }
+  for (int i = 0; i < n; ++i) {
+    const int p = joints[i].parent;
+    if (p == kWorld) {
+      x[i] /= data.articulatedPivot[i];
+      w[i] = data.S[i] * x[i];
+    } else {
+      x[i] = (x[i] - data.articulatedU[i].dot(w[p])) / data.articulatedPivot[i];
+      w[i] = w[p] + data.S[i] * x[i];
+    }
+  }
 }
 
 void applyMassInverse(Data& data, Eigen::Ref<Eigen::MatrixXd> X) {

@@ -125,6 +125,12 @@ class Data {
   Eigen::MatrixXd massInverseFactor;     ///< n×n: rows of L⁻¹ D^(−1/2), stored as columns
   Eigen::MatrixXd massInverse;           ///< n×n, block diagonal M⁻¹ when many right-hand sides are solved
   bool massInverseCurrent = false;       ///< massInverse belongs to the current factor
+  // The factor in spatial form (forward dynamics without constraints; mass_factor.hpp):
+  std::vector<Eigen::Matrix<double, 6, 6>> articulatedInertia;  ///< n: IA_i
+  std::vector<Vector6d> articulatedU, articulatedWork;          ///< n: U_i = IA_i S_i; solve workspace
+  Eigen::VectorXd articulatedPivot;                             ///< n: D_i = S_iᵀ IA_i S_i
+  Eigen::Matrix<double, 6, Eigen::Dynamic> articulatedColumns;  ///< 6×n workspace of invertMass
+  bool articulatedCurrent = false;                              ///< the articulated factor is the current one
   Eigen::MatrixXd massInverseAt;         ///< n×nc: M⁻¹ Aᵀ
   Eigen::MatrixXd schur;                 ///< nc×nc: D A M⁻¹ Aᵀ D, rows normalized by D
   Eigen::VectorXd constraintScale;       ///< nc: largest possible ‖A_r‖ (see factorizeKkt)
