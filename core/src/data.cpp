@@ -133,7 +133,7 @@ Data::Data(const Model& model)
                     &tangentWrench})
     vec->assign(n, Vector6d::Zero());
   tangentABG = Eigen::Matrix<double, 18, Eigen::Dynamic>::Zero(18, n);
-  compositeD.assign(n, Eigen::Matrix<double, 6, 6>::Zero());
+  compositeB.assign(n, Eigen::Matrix3d::Zero());
   wm.assign(n, 0.0);
   wh.assign(n, Eigen::Vector3d::Zero());
   wI.assign(n, Eigen::Matrix3d::Zero());

@@ -235,37 +235,51 @@ void invertChainBlock(Data& data, int bs, int nb) {
 ///   from the tip, u_i(j) = δ_ij − S_i·p_j,  p_j += U_i u_i(j) / D_i   (p: the bias of the parent),
 ///   from the root, M⁻¹(i, j) = (u_i(j) − U_i·a_j) / D_i,  a_j += S_i M⁻¹(i, j)   (a: the parent's).
 /// One joint has one child here, so p and a are updated in place. O(n_b²) 6-vector operations
-/// against the dense factor's n_b³/2 multiply-adds.
+/// (three two-lane packets each) against the dense factor's n_b³/2 multiply-adds.
 void invertChainArticulated(Data& data, int bs, int be) {
   Eigen::MatrixXd& Minv = data.massInverse;
-  Eigen::Matrix<double, 6, Eigen::Dynamic>& W = data.articulatedColumns;
-  W.middleCols(bs, be - bs).setZero();
+  double* W = data.articulatedColumns.data();  // column j at W + 6 j
+  const auto dot6 = [](const Pack* x, const double* y) {
+    const Pack t = x[0] * loadPack(y) + x[1] * loadPack(y + 2) + x[2] * loadPack(y + 4);
+    return t[0] + t[1];
+  };
+  const auto axpy6 = [](double* y, const Pack* x, double a) {
+    const Pack av = Pack::Constant(a);
+    storePack(y, loadPack(y) + x[0] * av);
+    storePack(y + 2, loadPack(y + 2) + x[1] * av);
+    storePack(y + 4, loadPack(y + 4) + x[2] * av);
+  };
+  const auto load6 = [](const Vector6d& v, double scale, Pack* out) {
+    for (int t = 0; t < 3; ++t) out[t] = loadPack(v.data() + 2 * t) * scale;
+  };
+  std::fill(W + 6 * bs, W + 6 * be, 0.0);
   for (int i = be - 1; i >= bs; --i) {
-    const Vector6d& S = data.S[i];
-    const Vector6d Ud = data.articulatedU[i] / data.articulatedPivot[i];
+    Pack S[3], Ud[3];
+    load6(data.S[i], 1.0, S);
+    load6(data.articulatedU[i], 1.0 / data.articulatedPivot[i], Ud);
     double* col = &Minv(0, i);  // u_i(j) in M⁻¹(j, i) until the second sweep
     for (int j = i; j < be; ++j) {
-      auto p = W.col(j);
-      const double uij = (j == i ? 1.0 : 0.0) - S.dot(p);
+      double* p = W + 6 * j;
+      const double uij = (j == i ? 1.0 : 0.0) - dot6(S, p);
       col[j] = uij;
-      p.noalias() += Ud * uij;
+      axpy6(p, Ud, uij);
     }
   }
-  W.middleCols(bs, be - bs).setZero();
+  std::fill(W + 6 * bs, W + 6 * be, 0.0);
   for (int i = bs; i < be; ++i) {
-    const Vector6d& S = data.S[i];
-    const Vector6d& U = data.articulatedU[i];
+    Pack S[3], U[3];
+    load6(data.S[i], 1.0, S);
+    load6(data.articulatedU[i], 1.0, U);
     const double dInv = 1.0 / data.articulatedPivot[i];
     double* col = &Minv(0, i);
     for (int j = i; j < be; ++j) {
-      auto a = W.col(j);
-      const double x = (col[j] - U.dot(a)) * dInv;
+      double* a = W + 6 * j;
+      const double x = (col[j] - dot6(U, a)) * dInv;
       col[j] = x;
-      a.noalias() += S * x;
+      Minv(i, j) = x;
+      axpy6(a, S, x);
     }
   }
-  for (int i = bs; i < be; ++i)
-    for (int j = i + 1; j < be; ++j) Minv(i, j) = Minv(j, i);
 }
 
 /// Unbranched blocks of at least this many joints use the dense Cholesky kernels: with no

@@ -14,6 +14,8 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+#include <Eigen/SVD>
 
 #include <limits>
 
@@ -80,41 +82,59 @@ TestSystem branchedTree() {
 }
 }  // namespace
 
-// computeDynamics without constraints solves M q̈ = −b with the articulated factor; the
-// linearization's own forward dynamics use the tree factor of M (the KKT path). Both must agree to
-// κ(M)·eps, on chains (tree and dense kernels), a branched tree, every transform type and every
-// force element; with constraints both take the KKT path. Independently of either factor, the
-// energy balance dE/dt = P_nc along (q̇, q̈) checks q̈ against central differences of E.
-TEST_CASE("Articulated factor: forward dynamics equal the tree factor's and balance energy", "[mass_factor]") {
-  std::vector<std::pair<std::string, TestSystem>> systems;
-  for (const int n : {1, 3, 7, 13, 40}) systems.emplace_back("planar chain " + std::to_string(n), planarChain(n));
-  systems.emplace_back("branched tree", branchedTree());
-  systems.emplace_back("kitchen sink, unconstrained", kitchenSink(3, false));
-  systems.emplace_back("kitchen sink, constrained", kitchenSink(3, true));
-  systems.emplace_back("paper pendulum", paperPendulum(1));
+// computeDynamics takes the articulated factor for chains without constraints and the tree factor
+// of M otherwise (the KKT path); the linearization forms M⁻¹ from the same factor. Both against
+// Eigen's dense solves of the same M and b (an independent factorization) to κ·eps: q̈ (with
+// constraints, of the dense KKT system [M Aᵀ; A 0]) and M⁻¹, on chains (tree and dense kernels'
+// lengths), a branched tree, every transform type and every force element. Independently of any
+// factor, the energy balance dE/dt = P_nc along (q̇, q̈) checks q̈ against central differences of E.
+TEST_CASE("Articulated factor: q̈ and M⁻¹ equal dense solves and balance energy", "[mass_factor]") {
+  struct Case {
+    std::string name;
+    TestSystem sys;
+    bool articulated;  // the path computeDynamics is expected to take
+  };
+  std::vector<Case> cases;
+  for (const int n : {1, 3, 7, 13, 40}) cases.push_back({std::string("planar chain ").append(std::to_string(n)), planarChain(n), true});
+  cases.push_back({"double pendulum", paperPendulum(0), true});
+  cases.push_back({"kitchen sink, unconstrained", kitchenSink(3, false), true});
   for (const TransformType t : {TransformType::kTx, TransformType::kRy, TransformType::kRotAxis,
                                 TransformType::kTransAxis, TransformType::kConstSE3})
-    systems.emplace_back("transform chain " + std::to_string(static_cast<int>(t)), transformChain(t));
-  for (const auto& [name, sys] : systems) {
-    const Model& model = sys.model;
-    const int n = model.nq();
-    INFO(name);
+    cases.push_back({std::string("transform chain ").append(std::to_string(static_cast<int>(t))), transformChain(t), true});
+  cases.push_back({"branched tree", branchedTree(), false});
+  cases.push_back({"kitchen sink, constrained", kitchenSink(3, true), false});
+  cases.push_back({"paper pendulum", paperPendulum(1), false});
+  for (const Case& c : cases) {
+    const Model& model = c.sys.model;
+    const int n = model.nq(), nc = model.nc();
+    INFO(c.name);
     std::mt19937 rng(900 + static_cast<unsigned>(n));
-    const State s = model.nc() > 0 ? randomConsistentState(model, rng) : randomState(model, rng, 0.8, 1.0, 0.5);
-    Data data(model), ref(model);
-    const DynamicsStatus st = computeDynamics(model, data, s.q, s.dq, s.u);
-    REQUIRE(st.ok());
-    REQUIRE(computeLinearization(model, ref, s.q, s.dq, s.u).ok());  // q̈ by the tree factor
-    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(ref.M);
-    const double kappa = eig.eigenvalues().maxCoeff() / eig.eigenvalues().minCoeff();
-    const double tol = 100.0 * kappa * std::numeric_limits<double>::epsilon();
-    INFO("cond(M) = " << kappa);
-    TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(ref.qdd), Eigen::MatrixXd(data.qdd), tol, Scale::kMatrix);
-    // data.M and data.bias are results of computeDynamics as well.
-    TRELLIS_CHECK_MATRIX(ref.M, data.M, 1e-15, Scale::kMatrix);
-    TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(ref.bias), Eigen::MatrixXd(data.bias), 1e-15, Scale::kMatrix);
-    if (model.nc() > 0) continue;  // the constraint forces do work on a path off the manifold
+    const State s = nc > 0 ? randomConsistentState(model, rng) : randomState(model, rng, 0.8, 1.0, 0.5);
+    Data data(model);
+    REQUIRE(computeDynamics(model, data, s.q, s.dq, s.u).ok());
+    CHECK(data.articulatedCurrent == c.articulated);
+    const Eigen::MatrixXd M = data.M;
     const Eigen::VectorXd qdd = data.qdd;
+    Eigen::MatrixXd K = Eigen::MatrixXd::Zero(n + nc, n + nc);
+    K.topLeftCorner(n, n) = M;
+    K.topRightCorner(n, nc) = data.constraintJacobian.transpose();
+    K.bottomLeftCorner(nc, n) = data.constraintJacobian;
+    Eigen::VectorXd rhs(n + nc);
+    rhs << -data.bias, -data.constraintDrift;
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(K);
+    const double kappa = svd.singularValues()(0) / svd.singularValues()(n + nc - 1);
+    const double tol = 100.0 * kappa * std::numeric_limits<double>::epsilon();
+    INFO("cond = " << kappa);
+    const Eigen::VectorXd ref = Eigen::FullPivLU<Eigen::MatrixXd>(K).solve(rhs);
+    TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(ref.head(n)), Eigen::MatrixXd(qdd), tol, Scale::kMatrix);
+
+    REQUIRE(computeLinearization(model, data, s.q, s.dq, s.u).ok());
+    CHECK(data.articulatedCurrent == c.articulated);
+    const Eigen::MatrixXd Minv = M.ldlt().solve(Eigen::MatrixXd::Identity(n, n));
+    TRELLIS_CHECK_MATRIX(Minv, data.massInverse, tol, Scale::kMatrix);
+    TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(qdd), Eigen::MatrixXd(data.qdd), 0.0, Scale::kAbsolute);
+
+    if (nc > 0) continue;  // the constraint forces do work on a path off the manifold
     const double P = computeNonConservativePower(model, data, s.q, s.dq, s.u);
     const double h = 1e-5;
     const double Ep = computeEnergy(model, data, s.q + h * s.dq, s.dq + h * qdd).total();

@@ -91,9 +91,10 @@ class Data {
   std::vector<Eigen::Matrix3d> cI;
   std::vector<Vector6d> Iv, Ia;          ///< I v and I (a − g) per body
   // Subtree sums for the linearization: inertial wrench Σ I(a − g) + v ×* I v, momentum Σ I v,
-  // and D = Σ (I crm(v) − crf(v) I) (6×6), which make each tangent O(1) per joint pair.
+  // and the 3×3 block B of D = Σ (I crm(v) − crf(v) I) (linearization.cpp: applyD), which make
+  // each tangent O(1) per joint pair.
   std::vector<Vector6d> inertialForce, compositeMomentum;
-  std::vector<Eigen::Matrix<double, 6, 6>> compositeD;
+  std::vector<Eigen::Matrix3d> compositeB;
   // Per-joint vectors that reduce each (direction k, joint j) pair of the linearization to one
   // dot product (linearization.cpp): column j = [α; β; γ] with α = S ×* F_ext, β = Ic S,
   // γ = D S + S ×* H.
