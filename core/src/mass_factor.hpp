@@ -60,8 +60,9 @@ void applyMassInverse(Data& data, const Eigen::Ref<const Eigen::MatrixXd>& R, Ei
 // The same factor in spatial form, for one right-hand side without forming M (forward dynamics
 // without constraints). Articulated-body inertias from the leaves (Featherstone, RBDA §7.3, at
 // zero velocity): IA_i = I_i + Σ_children (IA_c − U_c U_cᵀ / D_c), U_i = IA_i S_i, D_i = S_iᵀ U_i.
-// The D_i are the pivots of M = Lᵀ D L above; the work is O(n) 6×6 products instead of M's
-// O(Σ dᵢ) entries and the factor's O(Σ dᵢ²).
+// The D_i are the pivots of M = Lᵀ D L above; the work is O(n) 6×6 products instead of the
+// factor's O(Σ dᵢ²) (M itself is still formed: data.M is a result of computeDynamics). Used for
+// models whose trees are all chains and have no constraints (computeDynamics).
 
 /// Fills data.articulatedInertia, articulatedU, articulatedPivot from the world inertias (needs
 /// updateJoints). Returns −1 on success, else the joint whose pivot D_i is not above tol.
