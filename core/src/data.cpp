@@ -148,7 +148,6 @@ Data::Data(const Model& model)
   massFactor = Eigen::MatrixXd::Zero(n, n);
   massInverseFactor = Eigen::MatrixXd::Zero(n, n);
   massPivotInvSqrt = Eigen::VectorXd::Zero(n);
-  articulatedInertia.assign(n, Eigen::Matrix<double, 6, 6>::Zero());
   articulatedU.assign(n, Vector6d::Zero());
   articulatedWork.assign(n, Vector6d::Zero());
   articulatedPivot = Eigen::VectorXd::Zero(n);

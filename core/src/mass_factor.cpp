@@ -344,29 +344,40 @@ void invertMass(Data& data) {
 }
 
 int factorArticulated(const Model& model, Data& data, double tol) {
-  const auto& joints = model.joints();
-  const int n = model.nq();
-  // I_i = [[m E, −ĥ], [ĥ, I_O]] (applyInertia as a matrix), symmetric.
-  for (int i = 0; i < n; ++i) {
-    Eigen::Matrix<double, 6, 6>& IA = data.articulatedInertia[i];
-    const Eigen::Matrix3d hh = spatial::skew(data.wh[i]);
-    IA.topLeftCorner<3, 3>() = data.wm[i] * Eigen::Matrix3d::Identity();
-    IA.topRightCorner<3, 3>() = -hh;
-    IA.bottomLeftCorner<3, 3>() = hh;
-    IA.bottomRightCorner<3, 3>() = data.wI[i];
-  }
-  for (int i = n - 1; i >= 0; --i) {
-    const Eigen::Matrix<double, 6, 6>& IA = data.articulatedInertia[i];
-    Vector6d& U = data.articulatedU[i];
-    U.noalias() = IA * data.S[i];
-    const double d = data.S[i].dot(U);
-    if (!(d > tol)) return i;
-    data.articulatedPivot[i] = d;
-    const int p = joints[i].parent;
-    if (p == kWorld) continue;
-    Eigen::Matrix<double, 6, 6>& IAp = data.articulatedInertia[p];
-    IAp += IA;
-    IAp.noalias() -= (U / d) * U.transpose();
+  (void)model;
+  // On a chain joint i has one child c: IA_i = I_i + IA_c − U_c U_cᵀ / D_c, carried from the tip
+  // of each block to its root in one running 6×6 matrix.
+  Eigen::Matrix<double, 6, 6> IA;
+  for (size_t b = 0; b + 1 < data.blockStart.size(); ++b) {
+    const int bs = data.blockStart[b], be = data.blockStart[b + 1];
+    IA.setZero();
+    for (int i = be - 1; i >= bs; --i) {
+      // + I_i = [[m E, −ĥ], [ĥ, I_O]] (applyInertia as a matrix), entry by entry.
+      const Eigen::Vector3d& h = data.wh[i];
+      const double m = data.wm[i];
+      IA(0, 0) += m;
+      IA(1, 1) += m;
+      IA(2, 2) += m;
+      IA(0, 4) += h[2];
+      IA(0, 5) -= h[1];
+      IA(1, 3) -= h[2];
+      IA(1, 5) += h[0];
+      IA(2, 3) += h[1];
+      IA(2, 4) -= h[0];
+      IA(3, 1) -= h[2];
+      IA(3, 2) += h[1];
+      IA(4, 0) += h[2];
+      IA(4, 2) -= h[0];
+      IA(5, 0) -= h[1];
+      IA(5, 1) += h[0];
+      IA.bottomRightCorner<3, 3>() += data.wI[i];
+      Vector6d& U = data.articulatedU[i];
+      U.noalias() = IA * data.S[i];
+      const double d = data.S[i].dot(U);
+      if (!(d > tol)) return i;
+      data.articulatedPivot[i] = d;
+      IA.noalias() -= (U / d) * U.transpose();
+    }
   }
   return -1;
 }

@@ -57,15 +57,16 @@ void applyMassInverse(Data& data, Eigen::Ref<Eigen::MatrixXd> X);
 /// X = M⁻¹ R (X and R distinct, same shape), block by block with data.massInverse.
 void applyMassInverse(Data& data, const Eigen::Ref<const Eigen::MatrixXd>& R, Eigen::Ref<Eigen::MatrixXd> X);
 
-// The same factor in spatial form, for one right-hand side without forming M (forward dynamics
-// without constraints). Articulated-body inertias from the leaves (Featherstone, RBDA §7.3, at
+// The same factor in spatial form (forward dynamics without constraints, and M⁻¹ of chains for
+// the linearization: invertMass). Articulated-body inertias from the leaves (Featherstone, RBDA §7.3, at
 // zero velocity): IA_i = I_i + Σ_children (IA_c − U_c U_cᵀ / D_c), U_i = IA_i S_i, D_i = S_iᵀ U_i.
 // The D_i are the pivots of M = Lᵀ D L above; the work is O(n) 6×6 products instead of the
 // factor's O(Σ dᵢ²) (M itself is still formed: data.M is a result of computeDynamics). Used for
 // models whose trees are all chains and have no constraints (computeDynamics).
 
-/// Fills data.articulatedInertia, articulatedU, articulatedPivot from the world inertias (needs
-/// updateJoints). Returns −1 on success, else the joint whose pivot D_i is not above tol.
+/// Fills data.articulatedU, articulatedPivot from the world inertias (needs updateJoints), for a
+/// model whose blocks are chains (blocksAreChains). Returns −1 on success, else the joint whose
+/// pivot D_i is not above tol.
 int factorArticulated(const Model& model, Data& data, double tol);
 
 /// x ← M⁻¹ x with the articulated factor: from the leaves u_i = x_i − S_i·p_i with

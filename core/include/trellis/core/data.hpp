@@ -127,7 +127,6 @@ class Data {
   Eigen::MatrixXd massInverse;           ///< n×n, block diagonal M⁻¹ when many right-hand sides are solved
   bool massInverseCurrent = false;       ///< massInverse belongs to the current factor
   // The factor in spatial form (forward dynamics without constraints; mass_factor.hpp):
-  std::vector<Eigen::Matrix<double, 6, 6>> articulatedInertia;  ///< n: IA_i
   std::vector<Vector6d> articulatedU, articulatedWork;          ///< n: U_i = IA_i S_i; solve workspace
   Eigen::VectorXd articulatedPivot;                             ///< n: D_i = S_iᵀ IA_i S_i
   Eigen::Matrix<double, 6, Eigen::Dynamic> articulatedColumns;  ///< 6×n workspace of invertMass
