@@ -133,7 +133,7 @@ Data::Data(const Model& model)
                     &tangentWrench})
     vec->assign(n, Vector6d::Zero());
   tangentABG = Eigen::Matrix<double, 18, Eigen::Dynamic>::Zero(18, n);
-  compositeD.assign(n, Eigen::Matrix<double, 6, 6>::Zero());
+  compositeB.assign(n, Eigen::Matrix3d::Zero());
   wm.assign(n, 0.0);
   wh.assign(n, Eigen::Vector3d::Zero());
   wI.assign(n, Eigen::Matrix3d::Zero());
@@ -148,6 +148,10 @@ Data::Data(const Model& model)
   massFactor = Eigen::MatrixXd::Zero(n, n);
   massInverseFactor = Eigen::MatrixXd::Zero(n, n);
   massPivotInvSqrt = Eigen::VectorXd::Zero(n);
+  articulatedU.assign(n, Vector6d::Zero());
+  articulatedWork.assign(n, Vector6d::Zero());
+  articulatedPivot = Eigen::VectorXd::Zero(n);
+  articulatedColumns = Eigen::Matrix<double, 6, Eigen::Dynamic>::Zero(6, n);
   describeTree(model);
   massInverseAt = Eigen::MatrixXd::Zero(n, nc);
   schur = Eigen::MatrixXd::Zero(nc, nc);

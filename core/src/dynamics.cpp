@@ -96,7 +96,7 @@ void factorizeKkt(const Model& model, Data& data) {
   st.constraintRank = nc;
   st.constraintConditioning = 1.0;
   data.schurUsesPinv = false;
-  if (!data.M.allFinite()) {
+  if (!std::isfinite(data.M.sum())) {  // NaN or ±Inf if any entry is
     st.code = DynamicsStatus::Code::kNonFinite;
     st.message = "mass matrix has non-finite entries";
     return;
@@ -390,10 +390,13 @@ void massMatrixPass(const Model& model, Data& data) {
     data.ch[p] += data.ch[i];
     data.cI[p] += data.cI[i];
   }
+  // M(j, i) = S_jᵀ Ic_i S_i for j = i and its ancestors, walked as runs of consecutive indices.
   for (int i = 0; i < n; ++i) {
     const Vector6d F = applyInertia(data.cm[i], data.ch[i], data.cI[i], data.S[i]);
-    data.M(i, i) = data.S[i].dot(F);
-    for (int j = joints[i].parent; j != kWorld; j = joints[j].parent) data.M(i, j) = data.M(j, i) = data.S[j].dot(F);
+    double* col = &data.M(0, i);
+    forAncestorRuns(data, i, true, [&](int s, int e) {
+      for (int j = s; j <= e; ++j) data.M(i, j) = col[j] = data.S[j].dot(F);
+    });
   }
 }
 
@@ -456,30 +459,55 @@ void computeInputMatrix(const Model& model, Data& data, const Eigen::VectorXd& q
 
 DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::VectorXd& q,
                                const Eigen::VectorXd& dq, const Eigen::VectorXd& u) {
+  using namespace detail;
   const int n = model.nq();
-  detail::checkSize(q, n, "computeDynamics: q");
-  detail::checkSize(dq, n, "computeDynamics: dq");
-  detail::checkSize(u, model.nu(), "computeDynamics: u");
-  if (!detail::inputsAreFinite(model, data, q, dq, u)) return data.status;
-  detail::updateJoints(model, data, q, dq);
-  detail::massMatrixPass(model, data);
+  checkSize(q, n, "computeDynamics: q");
+  checkSize(dq, n, "computeDynamics: dq");
+  checkSize(u, model.nu(), "computeDynamics: u");
+  if (!inputsAreFinite(model, data, q, dq, u)) return data.status;
+  updateJoints(model, data, q, dq);
+  massMatrixPass(model, data);
   data.qddZero.setZero();
-  detail::updateAccelerations(model, data, dq, data.qddZero);
-  detail::accumulateExternalWrenches(model, data, u, true, true, nullptr);
-  detail::inverseDynamicsPass(model, data, data.bias);  // ID(q, q̇, 0) − Q_wrenches
+  updateAccelerations(model, data, dq, data.qddZero);
+  accumulateExternalWrenches(model, data, u, true, true, nullptr);
+  inverseDynamicsPass(model, data, data.bias);  // ID(q, q̇, 0) − Q_wrenches
   data.tmpN.setZero();
-  detail::addConfigurationForces(model, q, dq, u, data.tmpN);
+  addConfigurationForces(model, q, dq, u, data.tmpN);
   data.bias -= data.tmpN;
-  detail::evaluateConstraints(model, data, &data.constraintValue, nullptr, &data.constraintDrift,
-                              &data.constraintJacobian);
-  detail::factorizeKkt(model, data);
-  if (!detail::solvable(data.status)) {
-    detail::appendState(model, q, dq, data.status.message);
+  evaluateConstraints(model, data, &data.constraintValue, nullptr, &data.constraintDrift, &data.constraintJacobian);
+  if (model.nc() == 0 && n > 0 && blocksAreChains(data) && std::isfinite(data.M.sum())) {
+    // No constraints, chains: M q̈ = −b by the articulated factor (mass_factor.hpp), O(n) instead
+    // of the dense factor's O(n³), and the linearization's M⁻¹ from it in O(n²). (Branched trees
+    // keep the tree factor, cheap there, so that q̈ is the same computation in both.) The pivot
+    // test is factorizeKkt's; a failing one takes the KKT path below, which reports it.
+    const double scale = std::max(data.M.diagonal().maxCoeff(), std::numeric_limits<double>::min());
+    if (factorArticulated(model, data, 1e-14 * scale) < 0) {
+      DynamicsStatus& st = data.status;
+      st.code = DynamicsStatus::Code::kOk;
+      st.message.clear();
+      st.constraintRank = 0;
+      st.constraintConditioning = 1.0;
+      data.schurUsesPinv = false;
+      data.massInverseCurrent = false;  // the tree factor was not updated
+      data.articulatedCurrent = true;
+      data.qdd = -data.bias;
+      solveArticulated(model, data, data.qdd);
+      if (!data.qdd.allFinite()) {
+        st.code = DynamicsStatus::Code::kNonFinite;
+        st.message = "forward dynamics produced non-finite values";
+        appendState(model, q, dq, st.message);
+      }
+      return st;
+    }
+  }
+  factorizeKkt(model, data);
+  if (!solvable(data.status)) {
+    appendState(model, q, dq, data.status.message);
     return data.status;
   }
   data.qdd = -data.bias;
   data.lambda = -data.constraintDrift;
-  detail::solveKkt(model, data, data.qdd, data.lambda);
+  solveKkt(model, data, data.qdd, data.lambda);
   if (data.status.code == DynamicsStatus::Code::kRedundantConstraints) {
     // The pseudo-inverse solves consistent redundant rows exactly; inconsistent ones are not.
     data.tmpC.noalias() = data.constraintJacobian * data.qdd;
@@ -498,7 +526,7 @@ DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::Vect
     data.status.code = DynamicsStatus::Code::kNonFinite;
     data.status.message = "forward dynamics produced non-finite values";
   }
-  if (!data.status.ok()) detail::appendState(model, q, dq, data.status.message);
+  if (!data.status.ok()) appendState(model, q, dq, data.status.message);
   return data.status;
 }
 

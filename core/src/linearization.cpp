@@ -28,6 +28,20 @@ void forceTangents(const Model& model, const Data& data, const Direction& dir, c
       constraintWrenchTangents(data, dir, cs[r], data.lambda[r], emit);
 }
 
+/// The subtree sum D = Σ (I crm(v) − crf(v) I) enters only as D x ± x ×* H (H = [p; L] = Σ I v, the
+/// subtree momentum). With I = [[m E, −ĥ], [ĥ, Ī]] and crm(v) = [[ω̂, v̂], [0, ω̂]] each term is
+/// P + Pᵀ, P = I crm(v) = [[m ω̂, m v̂ − ĥ ω̂], [ĥ ω̂, ĥ v̂ + Ī ω̂]]; with â b̂ = b aᵀ − (a·b) E and
+/// [â, b̂] = (a × b)^, D = [[0, p̂], [−p̂, B]], B = Σ (v hᵀ + h vᵀ − 2 (h·v) E + Ī ω̂ + (Ī ω̂)ᵀ), so
+///   D x − x ×* H = [2 p × x_ω; B x_ω + L × x_ω],   D x + x ×* H = [0; 2 x_v × p + B x_ω + x_ω × L].
+inline Vector6d dMinusCross(const Vector6d& H, const Eigen::Matrix3d& B, const Vector6d& x) {
+  const Vector3d p = lin(H), L = ang(H), xw = ang(x);
+  return make(2.0 * p.cross(xw), B * xw + L.cross(xw));
+}
+inline Vector3d dPlusCrossAngular(const Vector6d& H, const Eigen::Matrix3d& B, const Vector6d& x) {
+  const Vector3d p = lin(H), L = ang(H), xw = ang(x);
+  return 2.0 * lin(x).cross(p) + B * xw + xw.cross(L);
+}
+
 /// Subtree sums used by tangentPass (after the nominal Newton-Euler pass at the solved q̈, λ).
 void compositePass(const Model& model, Data& data) {
   const auto& joints = model.joints();
@@ -36,17 +50,14 @@ void compositePass(const Model& model, Data& data) {
     const Vector6d& v = data.v[i];
     data.inertialForce[i] = data.Ia[i] + crossForce(v, data.Iv[i]);
     data.compositeMomentum[i] = data.Iv[i];
-    // D_i = I crm(v) − crf(v) I = P + Pᵀ with P = I crm(v) (crf(v) = −crm(v)ᵀ, I symmetric), and
-    // with I = [[m E, −ĥ], [ĥ, Ī]], crm(v) = [[ω̂, v̂], [0, ω̂]]:
-    //   P = [[m ω̂, m v̂ − ĥ ω̂], [ĥ ω̂, ĥ v̂ + Ī ω̂]].
-    const Eigen::Matrix3d wh = skew(ang(v)), vh = skew(lin(v)), hh = skew(data.wh[i]);
-    const double m = data.wm[i];
-    Eigen::Matrix<double, 6, 6> P;
-    P.topLeftCorner<3, 3>() = m * wh;
-    P.topRightCorner<3, 3>().noalias() = m * vh - hh * wh;
-    P.bottomLeftCorner<3, 3>().noalias() = hh * wh;
-    P.bottomRightCorner<3, 3>().noalias() = hh * vh + data.wI[i] * wh;
-    data.compositeD[i] = P + P.transpose();
+    const Vector3d& h = data.wh[i];
+    const Vector3d vl = lin(v);
+    Eigen::Matrix3d X;  // Ī ω̂ + v hᵀ; B_i = X + Xᵀ − 2 (h·v) E
+    X.noalias() = data.wI[i] * skew(ang(v));
+    X.noalias() += vl * h.transpose();
+    Eigen::Matrix3d& B = data.compositeB[i];
+    B = X + X.transpose();
+    B.diagonal().array() -= 2.0 * h.dot(vl);
   }
   // Subtree sums; data.fext is reused for the subtree sum of the external wrenches.
   for (int i = n - 1; i >= 0; --i) {
@@ -54,7 +65,7 @@ void compositePass(const Model& model, Data& data) {
     if (p == kWorld) continue;
     data.inertialForce[p] += data.inertialForce[i];
     data.compositeMomentum[p] += data.compositeMomentum[i];
-    data.compositeD[p] += data.compositeD[i];
+    data.compositeB[p] += data.compositeB[i];
     data.fext[p] += data.fext[i];
   }
   for (int j = 0; j < n; ++j) {
@@ -62,8 +73,8 @@ void compositePass(const Model& model, Data& data) {
     auto t = data.tangentABG.col(j);
     t.segment<6>(0) = crossForce(S, data.fext[j]);
     t.segment<6>(6) = applyInertia(data.cm[j], data.ch[j], data.cI[j], S);
-    t.segment<6>(12).noalias() = data.compositeD[j] * S;
-    t.segment<6>(12) += crossForce(S, data.compositeMomentum[j]);
+    t.segment<3>(12).setZero();
+    t.segment<3>(15) = dPlusCrossAngular(data.compositeMomentum[j], data.compositeB[j], S);
   }
 }
 
@@ -95,13 +106,13 @@ void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const
     coef << dir.Sk, c, -dir.w;
     for (int j = k; j < dir.end; ++j) dr(j) = coef.dot(data.tangentABG.col(j));
     dFk = crossForce(dir.Sk, data.inertialForce[k]) - applyInertia(data.cm[k], data.ch[k], data.cI[k], c) +
-          data.compositeD[k] * dir.w - crossForce(dir.w, data.compositeMomentum[k]);
+          dMinusCross(data.compositeMomentum[k], data.compositeB[k], dir.w);
   } else {
     Eigen::Matrix<double, 12, 1> coef;  // against [β; γ]
     coef << 2.0 * dir.w, dir.Sk;
     for (int j = k; j < dir.end; ++j) dr(j) = coef.dot(data.tangentABG.col(j).segment<12>(6));
-    dFk = -(data.compositeD[k] * dir.Sk) - 2.0 * applyInertia(data.cm[k], data.ch[k], data.cI[k], dir.w) +
-          crossForce(dir.Sk, data.compositeMomentum[k]);
+    dFk = -dMinusCross(data.compositeMomentum[k], data.compositeB[k], dir.Sk) -
+          2.0 * applyInertia(data.cm[k], data.ch[k], data.cI[k], dir.w);
   }
   for (int j = joints[k].parent; j != kWorld; j = joints[j].parent) dr(j) = -data.S[j].dot(dFk);
 
@@ -140,7 +151,7 @@ void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const
 DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen::VectorXd& q,
                                     const Eigen::VectorXd& dq, const Eigen::VectorXd& u) {
   const int n = model.nq(), m = model.nu(), nc = model.nc();
-  computeDynamics(model, data, q, dq, u);
+  computeDynamics(model, data, q, dq, u);  // and the factor of M that invertMass uses below
   // Near-singular or inconsistent constraints still give finite numbers, flagged by the status.
   if (!detail::solvable(data.status)) return data.status;
 

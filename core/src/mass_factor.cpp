@@ -229,6 +229,59 @@ void invertChainBlock(Data& data, int bs, int nb) {
   }
 }
 
+/// M_b⁻¹ of an unbranched block from the articulated factor. Column j of M⁻¹ is the forward
+/// dynamics at rest for τ = e_j; all columns at once, each joint's 6-vectors side by side in
+/// data.articulatedColumns (column j for τ = e_j), and only j ≥ i for joint i (M⁻¹ symmetric):
+///   from the tip, u_i(j) = δ_ij − S_i·p_j,  p_j += U_i u_i(j) / D_i   (p: the bias of the parent),
+///   from the root, M⁻¹(i, j) = (u_i(j) − U_i·a_j) / D_i,  a_j += S_i M⁻¹(i, j)   (a: the parent's).
+/// One joint has one child here, so p and a are updated in place. O(n_b²) 6-vector operations
+/// (three two-lane packets each) against the dense factor's n_b³/2 multiply-adds.
+void invertChainArticulated(Data& data, int bs, int be) {
+  Eigen::MatrixXd& Minv = data.massInverse;
+  double* W = data.articulatedColumns.data();  // column j at W + 6 j
+  const auto dot6 = [](const Pack* x, const double* y) {
+    const Pack t = x[0] * loadPack(y) + x[1] * loadPack(y + 2) + x[2] * loadPack(y + 4);
+    return t[0] + t[1];
+  };
+  const auto axpy6 = [](double* y, const Pack* x, double a) {
+    const Pack av = Pack::Constant(a);
+    storePack(y, loadPack(y) + x[0] * av);
+    storePack(y + 2, loadPack(y + 2) + x[1] * av);
+    storePack(y + 4, loadPack(y + 4) + x[2] * av);
+  };
+  const auto load6 = [](const Vector6d& v, double scale, Pack* out) {
+    for (int t = 0; t < 3; ++t) out[t] = loadPack(v.data() + 2 * t) * scale;
+  };
+  std::fill(W + 6 * bs, W + 6 * be, 0.0);
+  for (int i = be - 1; i >= bs; --i) {
+    Pack S[3], Ud[3];
+    load6(data.S[i], 1.0, S);
+    load6(data.articulatedU[i], 1.0 / data.articulatedPivot[i], Ud);
+    double* col = &Minv(0, i);  // u_i(j) in M⁻¹(j, i) until the second sweep
+    for (int j = i; j < be; ++j) {
+      double* p = W + 6 * j;
+      const double uij = (j == i ? 1.0 : 0.0) - dot6(S, p);
+      col[j] = uij;
+      axpy6(p, Ud, uij);
+    }
+  }
+  std::fill(W + 6 * bs, W + 6 * be, 0.0);
+  for (int i = bs; i < be; ++i) {
+    Pack S[3], U[3];
+    load6(data.S[i], 1.0, S);
+    load6(data.articulatedU[i], 1.0, U);
+    const double dInv = 1.0 / data.articulatedPivot[i];
+    double* col = &Minv(0, i);
+    for (int j = i; j < be; ++j) {
+      double* a = W + 6 * j;
+      const double x = (col[j] - dot6(U, a)) * dInv;
+      col[j] = x;
+      Minv(i, j) = x;
+      axpy6(a, S, x);
+    }
+  }
+}
+
 /// Unbranched blocks of at least this many joints use the dense Cholesky kernels: with no
 /// branching there is nothing for the tree to skip, and Eigen's blocked kernels run the O(n³)
 /// work with fewer instructions than the run loops (measured with callgrind on chains of 10–40).
@@ -241,6 +294,7 @@ bool denseBlock(const Data& data, int bs, int be) {
 int factorMass(const Model& model, Data& data, double tol) {
   (void)model;
   data.massInverseCurrent = false;
+  data.articulatedCurrent = false;
   data.massFactor = data.M;  // zero off the ancestor pattern, as M is
   for (size_t b = 0; b + 1 < data.blockStart.size(); ++b) {
     const int bs = data.blockStart[b], be = data.blockStart[b + 1];
@@ -269,16 +323,86 @@ void solveMassVector(Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi) 
   }
 }
 
+bool blocksAreChains(const Data& data) {
+  for (size_t b = 0; b + 1 < data.blockStart.size(); ++b)
+    if (data.runStart[static_cast<size_t>(data.blockStart[b + 1] - 1)] != data.blockStart[b]) return false;
+  return true;
+}
+
 void invertMass(Data& data) {
   for (size_t b = 0; b + 1 < data.blockStart.size(); ++b) {
     const int bs = data.blockStart[b], be = data.blockStart[b + 1];
-    if (denseBlock(data, bs, be)) {
+    if (data.articulatedCurrent) {
+      invertChainArticulated(data, bs, be);
+    } else if (denseBlock(data, bs, be)) {
       invertChainBlock(data, bs, be - bs);
     } else {
       invertTreeBlock(data, bs, be);
     }
   }
   data.massInverseCurrent = true;
+}
+
+int factorArticulated(const Model& model, Data& data, double tol) {
+  (void)model;
+  // On a chain joint i has one child c: IA_i = I_i + IA_c − U_c U_cᵀ / D_c, carried from the tip
+  // of each block to its root in one running 6×6 matrix.
+  Eigen::Matrix<double, 6, 6> IA;
+  for (size_t b = 0; b + 1 < data.blockStart.size(); ++b) {
+    const int bs = data.blockStart[b], be = data.blockStart[b + 1];
+    IA.setZero();
+    for (int i = be - 1; i >= bs; --i) {
+      // + I_i = [[m E, −ĥ], [ĥ, I_O]] (applyInertia as a matrix), entry by entry.
+      const Eigen::Vector3d& h = data.wh[i];
+      const double m = data.wm[i];
+      IA(0, 0) += m;
+      IA(1, 1) += m;
+      IA(2, 2) += m;
+      IA(0, 4) += h[2];
+      IA(0, 5) -= h[1];
+      IA(1, 3) -= h[2];
+      IA(1, 5) += h[0];
+      IA(2, 3) += h[1];
+      IA(2, 4) -= h[0];
+      IA(3, 1) -= h[2];
+      IA(3, 2) += h[1];
+      IA(4, 0) += h[2];
+      IA(4, 2) -= h[0];
+      IA(5, 0) -= h[1];
+      IA(5, 1) += h[0];
+      IA.bottomRightCorner<3, 3>() += data.wI[i];
+      Vector6d& U = data.articulatedU[i];
+      U.noalias() = IA * data.S[i];
+      const double d = data.S[i].dot(U);
+      if (!(d > tol)) return i;
+      data.articulatedPivot[i] = d;
+      IA.noalias() -= (U / d) * U.transpose();
+    }
+  }
+  return -1;
+}
+
+void solveArticulated(const Model& model, Data& data, Eigen::VectorXd& x) {
+  const auto& joints = model.joints();
+  const int n = model.nq();
+  std::vector<Vector6d>& w = data.articulatedWork;  // p_i from the leaves, then a_i from the roots
+  for (int i = 0; i < n; ++i) w[i].setZero();
+  for (int i = n - 1; i >= 0; --i) {
+    const double ui = x[i] - data.S[i].dot(w[i]);
+    x[i] = ui;
+    const int p = joints[i].parent;
+    if (p != kWorld) w[p] += w[i] + data.articulatedU[i] * (ui / data.articulatedPivot[i]);
+  }
+  for (int i = 0; i < n; ++i) {
+    const int p = joints[i].parent;
+    if (p == kWorld) {
+      x[i] /= data.articulatedPivot[i];
+      w[i] = data.S[i] * x[i];
+    } else {
+      x[i] = (x[i] - data.articulatedU[i].dot(w[p])) / data.articulatedPivot[i];
+      w[i] = w[p] + data.S[i] * x[i];
+    }
+  }
 }
 
 void applyMassInverse(Data& data, Eigen::Ref<Eigen::MatrixXd> X) {

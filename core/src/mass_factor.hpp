@@ -42,14 +42,36 @@ int factorMass(const Model& model, Data& data, double tol);
 /// x ← M⁻¹ x on the coordinates [lo, hi), a union of whole blocks (x is 0 elsewhere or ignored).
 void solveMassVector(Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi);
 
-/// data.massInverse = M⁻¹ (block diagonal, zero between blocks) from the factor:
-/// M⁻¹ = W D⁻¹ Wᵀ with W = L⁻¹, which keeps the ancestor pattern of L. O(Σ per block n_b³/3).
+/// data.massInverse = M⁻¹ (block diagonal, zero between blocks) from the current factor: the tree
+/// factor, M⁻¹ = W D⁻¹ Wᵀ with W = L⁻¹, which keeps the ancestor pattern of L, O(Σ per block
+/// n_b³/3); or, when data.articulatedCurrent (only used when blocksAreChains), the articulated
+/// factor, O(Σ n_b²) (invertChainArticulated in mass_factor.cpp).
 void invertMass(Data& data);
+
+/// Whether every top-level tree is unbranched (a chain).
+bool blocksAreChains(const Data& data);
 
 /// X ← M⁻¹ X for many columns, block by block with data.massInverse (invertMass first).
 void applyMassInverse(Data& data, Eigen::Ref<Eigen::MatrixXd> X);
 
 /// X = M⁻¹ R (X and R distinct, same shape), block by block with data.massInverse.
 void applyMassInverse(Data& data, const Eigen::Ref<const Eigen::MatrixXd>& R, Eigen::Ref<Eigen::MatrixXd> X);
+
+// The same factor in spatial form (forward dynamics without constraints, and M⁻¹ of chains for
+// the linearization: invertMass). Articulated-body inertias from the leaves (Featherstone, RBDA §7.3, at
+// zero velocity): IA_i = I_i + Σ_children (IA_c − U_c U_cᵀ / D_c), U_i = IA_i S_i, D_i = S_iᵀ U_i.
+// The D_i are the pivots of M = Lᵀ D L above; the work is O(n) 6×6 products instead of the
+// factor's O(Σ dᵢ²) (M itself is still formed: data.M is a result of computeDynamics). Used for
+// models whose trees are all chains and have no constraints (computeDynamics).
+
+/// Fills data.articulatedU, articulatedPivot from the world inertias (needs updateJoints), for a
+/// model whose blocks are chains (blocksAreChains). Returns −1 on success, else the joint whose
+/// pivot D_i is not above tol.
+int factorArticulated(const Model& model, Data& data, double tol);
+
+/// x ← M⁻¹ x with the articulated factor: from the leaves u_i = x_i − S_i·p_i with
+/// p_parent += p_i + U_i u_i / D_i, then from the roots x_i = (u_i − U_i·a_parent) / D_i,
+/// a_i = a_parent + S_i x_i.
+void solveArticulated(const Model& model, Data& data, Eigen::VectorXd& x);
 
 }  // namespace trellis::detail

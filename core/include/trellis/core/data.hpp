@@ -91,9 +91,10 @@ class Data {
   std::vector<Eigen::Matrix3d> cI;
   std::vector<Vector6d> Iv, Ia;          ///< I v and I (a − g) per body
   // Subtree sums for the linearization: inertial wrench Σ I(a − g) + v ×* I v, momentum Σ I v,
-  // and D = Σ (I crm(v) − crf(v) I) (6×6), which make each tangent O(1) per joint pair.
+  // and the 3×3 block B of D = Σ (I crm(v) − crf(v) I) (linearization.cpp: applyD), which make
+  // each tangent O(1) per joint pair.
   std::vector<Vector6d> inertialForce, compositeMomentum;
-  std::vector<Eigen::Matrix<double, 6, 6>> compositeD;
+  std::vector<Eigen::Matrix3d> compositeB;
   // Per-joint vectors that reduce each (direction k, joint j) pair of the linearization to one
   // dot product (linearization.cpp): column j = [α; β; γ] with α = S ×* F_ext, β = Ic S,
   // γ = D S + S ×* H.
@@ -125,6 +126,11 @@ class Data {
   Eigen::MatrixXd massInverseFactor;     ///< n×n: rows of L⁻¹ D^(−1/2), stored as columns
   Eigen::MatrixXd massInverse;           ///< n×n, block diagonal M⁻¹ when many right-hand sides are solved
   bool massInverseCurrent = false;       ///< massInverse belongs to the current factor
+  // The factor in spatial form (forward dynamics without constraints; mass_factor.hpp):
+  std::vector<Vector6d> articulatedU, articulatedWork;          ///< n: U_i = IA_i S_i; solve workspace
+  Eigen::VectorXd articulatedPivot;                             ///< n: D_i = S_iᵀ IA_i S_i
+  Eigen::Matrix<double, 6, Eigen::Dynamic> articulatedColumns;  ///< 6×n workspace of invertMass
+  bool articulatedCurrent = false;                              ///< the articulated factor is the current one
   Eigen::MatrixXd massInverseAt;         ///< n×nc: M⁻¹ Aᵀ
   Eigen::MatrixXd schur;                 ///< nc×nc: D A M⁻¹ Aᵀ D, rows normalized by D
   Eigen::VectorXd constraintScale;       ///< nc: largest possible ‖A_r‖ (see factorizeKkt)

@@ -4,7 +4,9 @@
 //   M(q) q̈ = Q(q, q̇, u) + ∂L/∂q − (∂²L/∂q∂q̇) q̇ + Aᵀ λ,     A q̈ + Ȧ q̇ = 0,
 // are evaluated with a recursive Newton-Euler pass over the joint tree (the same quantities as the
 // Lagrangian terms, O(n)) and a composite-rigid-body pass for M, then solved as the KKT system
-// [M Aᵀ; A 0] [q̈; −λ] = [Q − b; −Ȧ q̇] by a Cholesky factor of M and of A M⁻¹ Aᵀ.
+// [M Aᵀ; A 0] [q̈; −λ] = [Q − b; −Ȧ q̇] by a Cholesky factor of M and of A M⁻¹ Aᵀ — or, without
+// constraints on a model whose trees are chains, M q̈ = Q − b by the articulated-body recursion
+// in O(n).
 #pragma once
 
 #include "trellis/core/data.hpp"
