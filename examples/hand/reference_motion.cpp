@@ -152,6 +152,15 @@ TensionDistribution distributeTensions(const Model& model, Data& data, const Eig
     du = -Hinv.cwiseProduct(grad + C.transpose() * nu);
     return du.allFinite() && nu.allFinite();
   };
+  // The largest step α ≤ 1 along du that keeps u ≥ (1 − fraction) u (fraction to the boundary).
+  auto stepToBoundary = [&](double fraction) {
+    double alpha = 1.0;
+    for (int i = 0; i < m; ++i)
+      if (du(i) < 0.0) alpha = std::min(alpha, -fraction * u(i) / du(i));
+    return alpha;
+  };
+  // Size of the terms of the dual residual ∇f + Cᵀν (its rounding level is eps times this).
+  auto dualTermScale = [&] { return (u.array().abs() + std::abs(rest) + mu / u.array()).maxCoeff(); };
   const Eigen::VectorXd cStart = C * u;
   double s = 0.0, ds = 1.0;
   bool converged = false, failed = false;
@@ -166,9 +175,7 @@ TensionDistribution distributeTensions(const Model& model, Data& data, const Eig
         failed = true;
         break;
       }
-      double alpha = 1.0;
-      for (int i = 0; i < m; ++i)
-        if (du(i) < 0.0) alpha = std::min(alpha, -0.9 * u(i) / du(i));
+      const double alpha = stepToBoundary(0.9);
       u += alpha * du;
       s = alpha == 1.0 ? sNext : s + alpha * (sNext - s);
       ds = alpha == 1.0 ? 2.0 * ds : std::max(alpha * ds, 1e-3);
@@ -184,12 +191,10 @@ TensionDistribution distributeTensions(const Model& model, Data& data, const Eig
         break;
       }
       const double decrement = du.dot(du.cwiseQuotient(Hinv));
-      const double scale = (u.array().abs() + std::abs(rest) + mu / u.array()).maxCoeff();
+      const double scale = dualTermScale();
       if (s < 1.0 && decrement <= 1e-2) break;
       if (decrement <= 16.0 * eps * eps * scale * scale) break;  // dual residual at rounding level
-      double alpha = 1.0;
-      for (int i = 0; i < m; ++i)
-        if (du(i) < 0.0) alpha = std::min(alpha, -0.99 * u(i) / du(i));
+      double alpha = stepToBoundary(0.99);
       if (alpha == 1.0 && decrement < 1e-8) {
         // Quadratic-convergence region (δ ≪ 1 for a self-concordant f): the full step, without a
         // line search whose decrease δ²/4 would be below the rounding of f itself.
@@ -219,7 +224,7 @@ TensionDistribution distributeTensions(const Model& model, Data& data, const Eig
   if (newtonStep(rp)) dual = du.cwiseQuotient(Hinv).cwiseAbs().maxCoeff();
   const double primalScale = (C.size() ? C.cwiseAbs().rowwise().sum().maxCoeff() : 0.0) * u.cwiseAbs().maxCoeff() +
                              d.cwiseAbs().maxCoeff();
-  const double dualScale = (u.array().abs() + std::abs(rest) + mu / u.array()).maxCoeff();
+  const double dualScale = dualTermScale();
   converged = converged && !failed && primal <= 1e3 * eps * primalScale && dual <= 1e3 * eps * dualScale &&
               u.minCoeff() > 0.0;
   out.tension = u;
