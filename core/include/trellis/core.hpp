@@ -15,3 +15,4 @@
 #include "trellis/core/trajectory.hpp"
 #include "trellis/core/gain_schedule.hpp"
 #include "trellis/core/reference.hpp"
+#include "trellis/core/status.hpp"
