@@ -229,7 +229,7 @@ inline void addConstraintJacobianRow(const Model& model, const Data& data, const
   });
 }
 
-/// Constraint forces Aᵀλ of one row as wrenches on the bodies (data.fext).
+/// Constraint forces Aᵀλ of one row as wrenches on the bodies (ws.fext).
 inline void addConstraintWrenches(Data& data, const Constraint& c, double lambda) {
   withConstraintKind(c, [&](auto kind) {
     decltype(kind)::forces(data, c, [&](int joint, const Vector3d& p, const Vector3d& g, double) {

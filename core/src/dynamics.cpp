@@ -17,12 +17,13 @@ namespace detail {
 using namespace spatial;
 
 void updateAccelerations(const Model& model, Data& data, const Eigen::VectorXd& dq, const Eigen::VectorXd& qdd) {
+  auto& ws = detail::workspace(data);
   const auto& joints = model.joints();
   for (int i = 0; i < model.nq(); ++i) {
     const int p = joints[i].parent;
     // a_i = a_p + S_i q̈_i + Ṡ_i q̇_i with Ṡ_i = v_i × S_i (S_i moves with body i).
-    data.a[i] = data.S[i] * qdd[i] + crossMotion(data.v[i], data.S[i]) * dq[i];
-    if (p != kWorld) data.a[i] += data.a[p];
+    ws.a[i] = ws.S[i] * qdd[i] + crossMotion(ws.v[i], ws.S[i]) * dq[i];
+    if (p != kWorld) ws.a[i] += ws.a[p];
   }
 }
 
@@ -38,10 +39,11 @@ std::string formatNumber(double x) {
 
 void accumulateExternalWrenches(const Model& model, Data& data, const Eigen::VectorXd& u,
                                 bool conservative, bool nonConservative, const Eigen::VectorXd* lambda) {
-  for (auto& w : data.fext) w.setZero();
+  auto& ws = detail::workspace(data);
+  for (auto& w : ws.fext) w.setZero();
   const auto add = [&](int joint, const Vector6d& w) { addBodyWrench(data, joint, w); };
   forEachForceElement(model, [&](auto kind, const auto& e, size_t i) {
-    if (decltype(kind)::conservative ? conservative : nonConservative) decltype(kind)::wrenches(data, e, i, u, add);
+    if (decltype(kind)::conservative ? conservative : nonConservative) decltype(kind)::wrenches(model, data, e, i, u, add);
   });
   if (lambda) {
     const auto& cs = model.constraints();
@@ -50,17 +52,18 @@ void accumulateExternalWrenches(const Model& model, Data& data, const Eigen::Vec
 }
 
 void inverseDynamicsPass(const Model& model, Data& data, Eigen::VectorXd& tau) {
+  auto& ws = detail::workspace(data);
   const auto& joints = model.joints();
   const int n = model.nq();
   const Vector6d g = make(model.gravity(), Vector3d::Zero());
   for (int i = 0; i < n; ++i) {
-    data.Ia[i] = applyInertia(data.wm[i], data.wh[i], data.wI[i], data.a[i] - g);
-    data.Iv[i] = applyInertia(data.wm[i], data.wh[i], data.wI[i], data.v[i]);
-    data.f[i] = data.Ia[i] + crossForce(data.v[i], data.Iv[i]) - data.fext[i];
+    ws.Ia[i] = applyInertia(ws.wm[i], ws.wh[i], ws.wI[i], ws.a[i] - g);
+    ws.Iv[i] = applyInertia(ws.wm[i], ws.wh[i], ws.wI[i], ws.v[i]);
+    ws.f[i] = ws.Ia[i] + crossForce(ws.v[i], ws.Iv[i]) - ws.fext[i];
   }
   for (int i = n - 1; i >= 0; --i) {
-    tau[i] = data.S[i].dot(data.f[i]);
-    if (joints[i].parent != kWorld) data.f[joints[i].parent] += data.f[i];
+    tau[i] = ws.S[i].dot(ws.f[i]);
+    if (joints[i].parent != kWorld) ws.f[joints[i].parent] += ws.f[i];
   }
 }
 
@@ -71,6 +74,7 @@ void addConfigurationForces(const Model& model, const Eigen::VectorXd& q, const 
 
 void evaluateConstraints(const Model& model, Data& data, Eigen::VectorXd* h, Eigen::VectorXd* hdot,
                          Eigen::VectorXd* c, Eigen::MatrixXd* A) {
+  auto& ws = detail::workspace(data);
   const auto& cs = model.constraints();
   if (A) A->setZero();
   for (int r = 0; r < model.nc(); ++r) {
@@ -81,21 +85,22 @@ void evaluateConstraints(const Model& model, Data& data, Eigen::VectorXd* h, Eig
     if (A) {
       // Kinematic conditioning of the row: ‖A_r‖ over the norm it would have if every joint moved
       // the constraint's points along its gradient; → 0 at singular configurations.
-      data.tmpN.setZero();
-      addConstraintJacobianRow(model, data, cs[r], A->row(r), &data.tmpN);
-      data.constraintScale[r] = data.tmpN.norm();
+      ws.tmpN.setZero();
+      addConstraintJacobianRow(model, data, cs[r], A->row(r), &ws.tmpN);
+      ws.constraintScale[r] = ws.tmpN.norm();
     }
   }
 }
 
 void factorizeKkt(const Model& model, Data& data) {
+  auto& ws = detail::workspace(data);
   DynamicsStatus& st = data.status;
   st.code = DynamicsStatus::Code::kOk;
   st.message.clear();
   const int n = model.nq(), nc = model.nc();
   st.constraintRank = nc;
   st.constraintConditioning = 1.0;
-  data.schurUsesPinv = false;
+  ws.schurUsesPinv = false;
   if (!std::isfinite(data.M.sum())) {  // NaN or ±Inf if any entry is
     st.code = DynamicsStatus::Code::kNonFinite;
     st.message = "mass matrix has non-finite entries";
@@ -126,7 +131,7 @@ void factorizeKkt(const Model& model, Data& data) {
   double kinematic = 1.0;
   int worstRow = 0;
   for (int r = 0; r < nc; ++r) {
-    const double s = data.constraintScale[r];
+    const double s = ws.constraintScale[r];
     const double k = s > 0 ? data.constraintJacobian.row(r).norm() / s : 0.0;
     if (k < kinematic) {
       kinematic = k;
@@ -139,41 +144,41 @@ void factorizeKkt(const Model& model, Data& data) {
     st.code = DynamicsStatus::Code::kSingularConstraints;
     st.message = "degenerate constraint row " + std::to_string(worstRow) + " (" + model.constraints()[worstRow].name +
                  "): |A_row| = " + formatNumber(data.constraintJacobian.row(worstRow).norm()) +
-                 (data.constraintScale[worstRow] > 0
+                 (ws.constraintScale[worstRow] > 0
                       ? " is " + formatNumber(kinematic) + " of its natural scale " +
-                            formatNumber(data.constraintScale[worstRow])
+                            formatNumber(ws.constraintScale[worstRow])
                       : std::string(" and no configuration variable moves its points")) +
                  " (its gradient vanishes or the configuration is singular; the constraint force is undetermined)";
   };
   // M⁻¹ Aᵀ by one tree solve per row, inside the blocks the row touches; then A M⁻¹ Aᵀ, whose
   // entries between groups of rows on disjoint blocks are exactly zero.
   for (int r = 0; r < nc; ++r) {
-    auto x = data.massInverseAt.col(r);
+    auto x = ws.massInverseAt.col(r);
     x.setZero();
-    const int lo = data.rowLo[r], len = data.rowHi[r] - lo;
+    const int lo = model.topology().rowLo[r], len = model.topology().rowHi[r] - lo;
     x.segment(lo, len) = data.constraintJacobian.row(r).segment(lo, len).transpose();
-    solveMassVector(data, x, lo, lo + len);
+    solveMassVector(model, data, x, lo, lo + len);
   }
-  data.schur.setZero();
-  for (size_t g = 0; g + 1 < data.schurGroupStart.size(); ++g) {
-    for (int r = data.schurGroupStart[g]; r < data.schurGroupStart[g + 1]; ++r) {
-      for (int s = data.schurGroupStart[g]; s <= r; ++s) {
-        const int lo = std::max(data.rowLo[r], data.rowLo[s]), hi = std::min(data.rowHi[r], data.rowHi[s]);
+  ws.schur.setZero();
+  for (size_t g = 0; g + 1 < model.topology().rowGroupStart.size(); ++g) {
+    for (int r = model.topology().rowGroupStart[g]; r < model.topology().rowGroupStart[g + 1]; ++r) {
+      for (int s = model.topology().rowGroupStart[g]; s <= r; ++s) {
+        const int lo = std::max(model.topology().rowLo[r], model.topology().rowLo[s]), hi = std::min(model.topology().rowHi[r], model.topology().rowHi[s]);
         const double v =
-            hi > lo ? data.constraintJacobian.row(r).segment(lo, hi - lo).dot(data.massInverseAt.col(s).segment(lo, hi - lo))
+            hi > lo ? data.constraintJacobian.row(r).segment(lo, hi - lo).dot(ws.massInverseAt.col(s).segment(lo, hi - lo))
                     : 0.0;
-        data.schur(r, s) = v;
-        data.schur(s, r) = v;
+        ws.schur(r, s) = v;
+        ws.schur(s, r) = v;
       }
     }
   }
-  for (int r = 0; r < nc; ++r) data.schurScale[r] = data.schur(r, r) > 0 ? 1.0 / std::sqrt(data.schur(r, r)) : 1.0;
-  data.schur = data.schurScale.asDiagonal() * data.schur * data.schurScale.asDiagonal();
-  data.schurLLT.compute(data.schur);
-  const double sScale = data.schur.diagonal().maxCoeff();
-  if (data.schurLLT.info() == Eigen::Success && sScale > 0) {
+  for (int r = 0; r < nc; ++r) ws.schurScale[r] = ws.schur(r, r) > 0 ? 1.0 / std::sqrt(ws.schur(r, r)) : 1.0;
+  ws.schur = ws.schurScale.asDiagonal() * ws.schur * ws.schurScale.asDiagonal();
+  ws.schurLLT.compute(ws.schur);
+  const double sScale = ws.schur.diagonal().maxCoeff();
+  if (ws.schurLLT.info() == Eigen::Success && sScale > 0) {
     // (min L_ii / max L_ii)² tracks λ_min/λ_max of Ŝ without the allocations of LLT::rcond().
-    const auto diag = data.schurLLT.matrixLLT().diagonal();
+    const auto diag = ws.schurLLT.matrixLLT().diagonal();
     const double ratio = diag.minCoeff() / diag.maxCoeff();
     const double rcond = ratio * ratio;
     st.constraintConditioning = std::min(kinematic, rcond);
@@ -184,16 +189,16 @@ void factorizeKkt(const Model& model, Data& data) {
   }
   // Rank-deficient Ŝ (redundant or degenerate rows): pivoted LDLᵀ, dropping the pivots below
   // 1e-12 (Ŝ has unit diagonal). q̈ stays exact when the rows are consistent; λ is one valid choice.
-  data.schurLDLT.compute(data.schur);
-  const auto D = data.schurLDLT.vectorD();
+  ws.schurLDLT.compute(ws.schur);
+  const auto D = ws.schurLDLT.vectorD();
   const double tol = 1e-12 * std::max(1.0, D.cwiseAbs().maxCoeff());
   int rank = 0, dropped = -1;
   for (int k = 0; k < nc; ++k) {
     if (D[k] > tol) {
-      data.schurPivotInverse[k] = 1.0 / D[k];
+      ws.schurPivotInverse[k] = 1.0 / D[k];
       ++rank;
     } else {
-      data.schurPivotInverse[k] = 0.0;
+      ws.schurPivotInverse[k] = 0.0;
       if (dropped < 0) dropped = k;
     }
   }
@@ -201,28 +206,28 @@ void factorizeKkt(const Model& model, Data& data) {
   // solveKkt can remove that component and return the minimum-norm λ̂.
   int nullity = 0;
   for (int k = 0; k < nc; ++k) {
-    if (data.schurPivotInverse[k] != 0.0) continue;
-    auto x = data.schurNullBasis.col(nullity);
+    if (ws.schurPivotInverse[k] != 0.0) continue;
+    auto x = ws.schurNullBasis.col(nullity);
     x.setZero();
     x[k] = 1.0;
-    data.schurLDLT.matrixU().solveInPlace(x);
-    x = data.schurLDLT.transpositionsP().transpose() * x;
-    for (int j = 0; j < nullity; ++j) x -= data.schurNullBasis.col(j).dot(x) * data.schurNullBasis.col(j);
+    ws.schurLDLT.matrixU().solveInPlace(x);
+    x = ws.schurLDLT.transpositionsP().transpose() * x;
+    for (int j = 0; j < nullity; ++j) x -= ws.schurNullBasis.col(j).dot(x) * ws.schurNullBasis.col(j);
     const double norm = x.norm();
     if (norm > 0) {
       x /= norm;
       ++nullity;
     }
   }
-  data.schurNullity = nullity;
-  data.schurUsesPinv = true;
+  ws.schurNullity = nullity;
+  ws.schurUsesPinv = true;
   st.constraintRank = rank;
   st.constraintConditioning = 0.0;
   st.code = DynamicsStatus::Code::kRedundantConstraints;
   // Which constraint the first dropped pivot belongs to: undo the row swaps (applied in order
   // i = 0, 1, … as swap(i, indices[i])) for that one position.
   int worst = std::max(dropped, 0);
-  const auto& swaps = data.schurLDLT.transpositionsP().indices();
+  const auto& swaps = ws.schurLDLT.transpositionsP().indices();
   for (int i = nc - 1; i >= 0; --i) {
     if (worst == i) worst = swaps[i];
     else if (worst == swaps[i]) worst = i;
@@ -237,11 +242,12 @@ void factorizeKkt(const Model& model, Data& data) {
 }
 
 void solveMass(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X) {
-  if (data.massInverseCurrent && X.cols() > 1) {
-    applyMassInverse(data, X);
+  auto& ws = detail::workspace(data);
+  if (ws.massInverseCurrent && X.cols() > 1) {
+    applyMassInverse(model, data, X);
     return;
   }
-  for (Eigen::Index c = 0; c < X.cols(); ++c) solveMassVector(data, X.col(c), 0, model.nq());
+  for (Eigen::Index c = 0; c < X.cols(); ++c) solveMassVector(model, data, X.col(c), 0, model.nq());
 }
 
 namespace {
@@ -298,26 +304,27 @@ void correctGroupColumns(const GroupColumns& g) {
 
 void correctForConstraints(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X,
                            Eigen::Ref<Eigen::MatrixXd> Lambda) {
+  auto& ws = detail::workspace(data);
   const int nc = model.nc();
   if (nc == 0) return;
-  if (!data.schurUsesPinv) {
+  if (!ws.schurUsesPinv) {
     // Group by group (rows g0…g1 on the coordinates [lo, hi) of their blocks) and column by
     // column: Λ = (A M⁻¹ Aᵀ)⁻¹ (C − A X), X += M⁻¹Aᵀ Λ, with the group's block of the Cholesky
     // factor of Ŝ; every operand is a few contiguous numbers (a digit: 3 rows on 4 coordinates).
-    const Eigen::MatrixXd &A = data.constraintJacobian, &U = data.massInverseAt, &LL = data.schurLLT.matrixLLT();
-    for (size_t g = 0; g + 1 < data.schurGroupStart.size(); ++g) {
-      const int g0 = data.schurGroupStart[g], g1 = data.schurGroupStart[g + 1], ng = g1 - g0;
+    const Eigen::MatrixXd &A = data.constraintJacobian, &U = ws.massInverseAt, &LL = ws.schurLLT.matrixLLT();
+    for (size_t g = 0; g + 1 < model.topology().rowGroupStart.size(); ++g) {
+      const int g0 = model.topology().rowGroupStart[g], g1 = model.topology().rowGroupStart[g + 1], ng = g1 - g0;
       int lo = model.nq(), hi = 0;
       for (int r = g0; r < g1; ++r)
-        if (data.rowHi[r] > data.rowLo[r]) {
-          lo = std::min(lo, data.rowLo[r]);
-          hi = std::max(hi, data.rowHi[r]);
+        if (model.topology().rowHi[r] > model.topology().rowLo[r]) {
+          lo = std::min(lo, model.topology().rowLo[r]);
+          hi = std::max(hi, model.topology().rowHi[r]);
         }
       if (hi <= lo) lo = hi = 0;  // rows that touch no coordinate: Λ = (A M⁻¹ Aᵀ)⁻¹ C
       // Copies of the group's operands, coordinate-major (entry (i, r) at i ng + r), then the
       // column loop with the row count fixed at compile time for the usual groups.
       const int len = hi - lo;
-      double* ag = data.correctionWork.data();  // A_g
+      double* ag = ws.correctionWork.data();  // A_g
       double* ug = ag + ng * len;               // (M⁻¹Aᵀ)_g
       double* sg = ug + ng * len;               // the group's Cholesky factor
       for (int i = 0; i < len; ++i)
@@ -327,7 +334,7 @@ void correctForConstraints(const Model& model, Data& data, Eigen::Ref<Eigen::Mat
         }
       for (int r = 0; r < ng; ++r)
         for (int t = 0; t < ng; ++t) sg[r * ng + t] = t <= r ? LL(g0 + r, g0 + t) : 0.0;
-      GroupColumns cols{ng, len, ag, ug, sg, data.schurScale.data() + g0, sg + ng * ng, X.data() + lo, X.outerStride(), Lambda.data() + g0, Lambda.outerStride(),
+      GroupColumns cols{ng, len, ag, ug, sg, ws.schurScale.data() + g0, sg + ng * ng, X.data() + lo, X.outerStride(), Lambda.data() + g0, Lambda.outerStride(),
                         X.cols()};
       switch (ng) {
         case 1: correctGroupColumns<1>(cols); break;
@@ -341,26 +348,26 @@ void correctForConstraints(const Model& model, Data& data, Eigen::Ref<Eigen::Mat
   // Rank-deficient Ŝ: the pivoted LDLᵀ on all rows at once.
   // C − A M⁻¹ R, each row of A over the coordinates it touches.
   for (int r = 0; r < nc; ++r) {
-    const int lo = data.rowLo[r], len = data.rowHi[r] - lo;
+    const int lo = model.topology().rowLo[r], len = model.topology().rowHi[r] - lo;
     if (len > 0) Lambda.row(r) -= data.constraintJacobian.row(r).segment(lo, len).lazyProduct(X.middleRows(lo, len));
   }
   // (A M⁻¹ Aᵀ)⁺ = D Ŝ⁺ D with the row-normalized Ŝ of factorizeKkt.
-  Lambda = data.schurScale.asDiagonal() * Lambda;
-  Lambda = data.schurLDLT.transpositionsP() * Lambda;
-  data.schurLDLT.matrixL().solveInPlace(Lambda);
-  Lambda = data.schurPivotInverse.asDiagonal() * Lambda;
-  data.schurLDLT.matrixU().solveInPlace(Lambda);
-  Lambda = data.schurLDLT.transpositionsP().transpose() * Lambda;
+  Lambda = ws.schurScale.asDiagonal() * Lambda;
+  Lambda = ws.schurLDLT.transpositionsP() * Lambda;
+  ws.schurLDLT.matrixL().solveInPlace(Lambda);
+  Lambda = ws.schurPivotInverse.asDiagonal() * Lambda;
+  ws.schurLDLT.matrixU().solveInPlace(Lambda);
+  Lambda = ws.schurLDLT.transpositionsP().transpose() * Lambda;
   // Minimum norm: remove the null-space component, Λ −= N (Nᵀ Λ).
-  const auto N = data.schurNullBasis.leftCols(data.schurNullity);
-  Eigen::Ref<Eigen::MatrixXd> t = data.tmpCX.topLeftCorner(data.schurNullity, Lambda.cols());
+  const auto N = ws.schurNullBasis.leftCols(ws.schurNullity);
+  Eigen::Ref<Eigen::MatrixXd> t = ws.tmpCX.topLeftCorner(ws.schurNullity, Lambda.cols());
   t.noalias() = N.transpose() * Lambda;
   Lambda.noalias() -= N * t;
-  Lambda = data.schurScale.asDiagonal() * Lambda;
+  Lambda = ws.schurScale.asDiagonal() * Lambda;
   // M⁻¹ (R + Aᵀ Λ): one rank-1 update per row, on the blocks of that row.
   for (int r = 0; r < nc; ++r) {
-    const int lo = data.rowLo[r], len = data.rowHi[r] - lo;
-    if (len > 0) X.middleRows(lo, len).noalias() += data.massInverseAt.col(r).segment(lo, len) * Lambda.row(r);
+    const int lo = model.topology().rowLo[r], len = model.topology().rowHi[r] - lo;
+    if (len > 0) X.middleRows(lo, len).noalias() += ws.massInverseAt.col(r).segment(lo, len) * Lambda.row(r);
   }
 }
 
@@ -376,26 +383,27 @@ void inputMatrixPass(const Model& model, Data& data) {
 }
 
 void massMatrixPass(const Model& model, Data& data) {
+  auto& ws = detail::workspace(data);
   const auto& joints = model.joints();
   const int n = model.nq();
   for (int i = 0; i < n; ++i) {
-    data.cm[i] = data.wm[i];
-    data.ch[i] = data.wh[i];
-    data.cI[i] = data.wI[i];
+    ws.cm[i] = ws.wm[i];
+    ws.ch[i] = ws.wh[i];
+    ws.cI[i] = ws.wI[i];
   }
   for (int i = n - 1; i >= 0; --i) {
     const int p = joints[i].parent;
     if (p == kWorld) continue;
-    data.cm[p] += data.cm[i];
-    data.ch[p] += data.ch[i];
-    data.cI[p] += data.cI[i];
+    ws.cm[p] += ws.cm[i];
+    ws.ch[p] += ws.ch[i];
+    ws.cI[p] += ws.cI[i];
   }
   // M(j, i) = S_jᵀ Ic_i S_i for j = i and its ancestors, walked as runs of consecutive indices.
   for (int i = 0; i < n; ++i) {
-    const Vector6d F = applyInertia(data.cm[i], data.ch[i], data.cI[i], data.S[i]);
+    const Vector6d F = applyInertia(ws.cm[i], ws.ch[i], ws.cI[i], ws.S[i]);
     double* col = &data.M(0, i);
-    forAncestorRuns(data, i, true, [&](int s, int e) {
-      for (int j = s; j <= e; ++j) data.M(i, j) = col[j] = data.S[j].dot(F);
+    forAncestorRuns(model.topology(), i, true, [&](int s, int e) {
+      for (int j = s; j <= e; ++j) data.M(i, j) = col[j] = ws.S[j].dot(F);
     });
   }
 }
@@ -434,31 +442,35 @@ bool inputsAreFinite(const Model& model, Data& data, const Eigen::VectorXd& q, c
 }  // namespace detail
 
 void computeMassMatrix(const Model& model, Data& data, const Eigen::VectorXd& q) {
+  auto& ws = detail::workspace(data);
   detail::checkSize(q, model.nq(), "computeMassMatrix: q");
-  data.tmpN.setZero();
-  detail::updateJoints(model, data, q, data.tmpN);
+  ws.tmpN.setZero();
+  detail::updateJoints(model, data, q, ws.tmpN);
   detail::massMatrixPass(model, data);
 }
 
 void computeConstraints(const Model& model, Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq) {
+  auto& ws = detail::workspace(data);
   detail::checkSize(q, model.nq(), "computeConstraints: q");
   detail::checkSize(dq, model.nq(), "computeConstraints: dq");
   detail::updateJoints(model, data, q, dq);
-  data.qddZero.setZero();
-  detail::updateAccelerations(model, data, dq, data.qddZero);
+  ws.qddZero.setZero();
+  detail::updateAccelerations(model, data, dq, ws.qddZero);
   detail::evaluateConstraints(model, data, &data.constraintValue, nullptr, &data.constraintDrift,
                               &data.constraintJacobian);
 }
 
 void computeInputMatrix(const Model& model, Data& data, const Eigen::VectorXd& q) {
+  auto& ws = detail::workspace(data);
   detail::checkSize(q, model.nq(), "computeInputMatrix: q");
-  data.tmpN.setZero();
-  detail::updateJoints(model, data, q, data.tmpN);
+  ws.tmpN.setZero();
+  detail::updateJoints(model, data, q, ws.tmpN);
   detail::inputMatrixPass(model, data);
 }
 
 DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::VectorXd& q,
                                const Eigen::VectorXd& dq, const Eigen::VectorXd& u) {
+  auto& ws = detail::workspace(data);
   using namespace detail;
   const int n = model.nq();
   checkSize(q, n, "computeDynamics: q");
@@ -467,15 +479,15 @@ DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::Vect
   if (!inputsAreFinite(model, data, q, dq, u)) return data.status;
   updateJoints(model, data, q, dq);
   massMatrixPass(model, data);
-  data.qddZero.setZero();
-  updateAccelerations(model, data, dq, data.qddZero);
+  ws.qddZero.setZero();
+  updateAccelerations(model, data, dq, ws.qddZero);
   accumulateExternalWrenches(model, data, u, true, true, nullptr);
   inverseDynamicsPass(model, data, data.bias);  // ID(q, q̇, 0) − Q_wrenches
-  data.tmpN.setZero();
-  addConfigurationForces(model, q, dq, u, data.tmpN);
-  data.bias -= data.tmpN;
+  ws.tmpN.setZero();
+  addConfigurationForces(model, q, dq, u, ws.tmpN);
+  data.bias -= ws.tmpN;
   evaluateConstraints(model, data, &data.constraintValue, nullptr, &data.constraintDrift, &data.constraintJacobian);
-  if (model.nc() == 0 && n > 0 && blocksAreChains(data) && std::isfinite(data.M.sum())) {
+  if (model.nc() == 0 && n > 0 && blocksAreChains(model) && std::isfinite(data.M.sum())) {
     // No constraints, chains: M q̈ = −b by the articulated factor (mass_factor.hpp), O(n) instead
     // of the dense factor's O(n³), and the linearization's M⁻¹ from it in O(n²). (Branched trees
     // keep the tree factor, cheap there, so that q̈ is the same computation in both.) The pivot
@@ -487,9 +499,9 @@ DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::Vect
       st.message.clear();
       st.constraintRank = 0;
       st.constraintConditioning = 1.0;
-      data.schurUsesPinv = false;
-      data.massInverseCurrent = false;  // the tree factor was not updated
-      data.articulatedCurrent = true;
+      ws.schurUsesPinv = false;
+      ws.massInverseCurrent = false;  // the tree factor was not updated
+      ws.articulatedCurrent = true;
       data.qdd = -data.bias;
       solveArticulated(model, data, data.qdd);
       if (!data.qdd.allFinite()) {
@@ -510,16 +522,16 @@ DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::Vect
   solveKkt(model, data, data.qdd, data.lambda);
   if (data.status.code == DynamicsStatus::Code::kRedundantConstraints) {
     // The pseudo-inverse solves consistent redundant rows exactly; inconsistent ones are not.
-    data.tmpC.noalias() = data.constraintJacobian * data.qdd;
-    data.tmpC += data.constraintDrift;
+    ws.tmpC.noalias() = data.constraintJacobian * data.qdd;
+    ws.tmpC += data.constraintDrift;
     double scale = 1.0 + data.constraintDrift.cwiseAbs().maxCoeff();
     for (int r = 0; r < model.nc(); ++r)
       scale = std::max(scale, data.constraintJacobian.row(r).cwiseAbs().dot(data.qdd.cwiseAbs()));
     int worst = 0;
-    if (data.tmpC.cwiseAbs().maxCoeff(&worst) > 1e-8 * scale) {
+    if (ws.tmpC.cwiseAbs().maxCoeff(&worst) > 1e-8 * scale) {
       data.status.code = DynamicsStatus::Code::kSingularConstraints;
       data.status.message = "constraints are singular and inconsistent at this state: A q̈ + Ȧ q̇ = " +
-                            std::to_string(data.tmpC[worst]) + " on " + model.constraints()[worst].name;
+                            std::to_string(ws.tmpC[worst]) + " on " + model.constraints()[worst].name;
     }
   }
   if (!(data.qdd.allFinite() && data.lambda.allFinite())) {
@@ -531,13 +543,14 @@ DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::Vect
 }
 
 Energy computeEnergy(const Model& model, Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq) {
+  auto& ws = detail::workspace(data);
   detail::checkSize(q, model.nq(), "computeEnergy: q");
   detail::checkSize(dq, model.nq(), "computeEnergy: dq");
   detail::updateJoints(model, data, q, dq);
   Energy e;
   for (int i = 0; i < model.nq(); ++i) {
-    e.kinetic += 0.5 * data.v[i].dot(spatial::applyInertia(data.wm[i], data.wh[i], data.wI[i], data.v[i]));
-    e.potential -= model.gravity().dot(data.wh[i]);  // V = −m g·c
+    e.kinetic += 0.5 * ws.v[i].dot(spatial::applyInertia(ws.wm[i], ws.wh[i], ws.wI[i], ws.v[i]));
+    e.potential -= model.gravity().dot(ws.wh[i]);  // V = −m g·c
   }
   detail::forEachForceElement(model, [&](auto kind, const auto& el, size_t) {
     if constexpr (decltype(kind)::conservative) e.potential += decltype(kind)::potential(data, q, el);
@@ -547,19 +560,20 @@ Energy computeEnergy(const Model& model, Data& data, const Eigen::VectorXd& q, c
 
 double computeNonConservativePower(const Model& model, Data& data, const Eigen::VectorXd& q,
                                    const Eigen::VectorXd& dq, const Eigen::VectorXd& u) {
+  auto& ws = detail::workspace(data);
   detail::checkSize(q, model.nq(), "computeNonConservativePower: q");
   detail::checkSize(dq, model.nq(), "computeNonConservativePower: dq");
   detail::checkSize(u, model.nu(), "computeNonConservativePower: u");
   detail::updateJoints(model, data, q, dq);
   detail::accumulateExternalWrenches(model, data, u, false, true, nullptr);
   double power = 0.0;
-  for (int i = 0; i < model.nq(); ++i) power += data.fext[i].dot(data.v[i]);
+  for (int i = 0; i < model.nq(); ++i) power += ws.fext[i].dot(ws.v[i]);
   // Non-conservative generalized forces on coordinates (inputs, damping): Q_nc · q̇.
-  data.tmpN.setZero();
+  ws.tmpN.setZero();
   detail::forEachForceElement(model, [&](auto kind, const auto& e, size_t) {
-    if constexpr (!decltype(kind)::conservative) decltype(kind)::generalizedForce(q, dq, u, e, data.tmpN);
+    if constexpr (!decltype(kind)::conservative) decltype(kind)::generalizedForce(q, dq, u, e, ws.tmpN);
   });
-  return power + data.tmpN.dot(dq);
+  return power + ws.tmpN.dot(dq);
 }
 
 }  // namespace trellis

@@ -4,14 +4,14 @@
 // forEachForceElement (besides its storage in Model).
 //
 // Every quantity has a default that contributes nothing (ForceKindBase); a kind defines what it has:
-//   wrenches(data, e, i, u, emit)      body wrenches as emit(joint, W) (world axes, at the origin)
+//   wrenches(model, data, e, i, u, emit)    body wrenches as emit(joint, W) (world axes, at the origin)
 //   generalizedForce(q, dq, u, e, Q)    forces that act on coordinates directly, Q += …
 //   addInputColumns(model, data, e, i, Bq)  Bq += ∂Q/∂u
-//   wrenchTangents(data, dir, e, i, u, emit)  ∂W/∂q_k as emit(joint, δW) (q-directions only)
+//   wrenchTangents(model, data, dir, e, i, u, emit)  ∂W/∂q_k as emit(joint, δW) (q-directions only)
 //   generalizedForceTangent(dir, e, add)  add(i, ∂Q_i/∂q_k or ∂Q_i/∂q̇_k) for the direction's k
 //   potential(data, q, e)               V (conservative kinds)
 // `conservative` says whether the element's forces derive from its potential.
-// i is the element's index in its list (tendons use it to find their workspace in Data).
+// i is the element's index in its list (tendons use it to find their paths in model.topology()).
 #pragma once
 
 #include "point_kinematics.hpp"
@@ -41,14 +41,14 @@ inline void segmentWrenchTangents(const Direction& dir, int ja, int jb, const Ve
 struct ForceKindBase {
   static constexpr bool conservative = false;
   template <class E, class Emit>
-  static void wrenches(Data&, const E&, size_t, const Eigen::VectorXd&, Emit&&) {}
+  static void wrenches(const Model&, Data&, const E&, size_t, const Eigen::VectorXd&, Emit&&) {}
   template <class E>
   static void generalizedForce(const Eigen::VectorXd&, const Eigen::VectorXd&, const Eigen::VectorXd&, const E&,
                                Eigen::VectorXd&) {}
   template <class E>
   static void addInputColumns(const Model&, const Data&, const E&, size_t, Eigen::MatrixXd&) {}
   template <class E, class Emit>
-  static void wrenchTangents(const Data&, const Direction&, const E&, size_t, const Eigen::VectorXd&, Emit&&) {}
+  static void wrenchTangents(const Model&, const Data&, const Direction&, const E&, size_t, const Eigen::VectorXd&, Emit&&) {}
   template <class E, class Add>
   static void generalizedForceTangent(const Direction&, const E&, Add&&) {}
   template <class E>
@@ -60,12 +60,12 @@ struct ForceKindBase {
 struct LinearSpringKind : ForceKindBase {
   static constexpr bool conservative = true;
   template <class Emit>
-  static void wrenches(Data& data, const LinearSpring& s, size_t, const Eigen::VectorXd&, Emit&& emit) {
+  static void wrenches(const Model&, Data& data, const LinearSpring& s, size_t, const Eigen::VectorXd&, Emit&& emit) {
     const Vector3d pa = pointPosition(data, s.a), pb = pointPosition(data, s.b);
     segmentWrenches(s.a.joint, s.b.joint, pa, pb, springTensionPerLength(s, (pb - pa).norm()), emit);
   }
   template <class Emit>
-  static void wrenchTangents(const Data& data, const Direction& dir, const LinearSpring& s, size_t,
+  static void wrenchTangents(const Model&, const Data& data, const Direction& dir, const LinearSpring& s, size_t,
                              const Eigen::VectorXd&, Emit&& emit) {
     if (!dir.moves(s.a.joint) && !dir.moves(s.b.joint)) return;
     const Vector3d pa = pointPosition(data, s.a), pb = pointPosition(data, s.b);
@@ -80,46 +80,50 @@ struct LinearSpringKind : ForceKindBase {
 };
 
 /// A cable of tension T = u[input] through its path points: on each segment the force T/L · d.
-/// Segments within one body exert no net wrench and are skipped (data.tendonSegmentPoint); a
+/// Segments within one body exert no net wrench and are skipped (model.topology().tendonSegmentPoint); a
 /// direction q_k moves only the segments with an end in the subtree of k (the ancestors' rule).
-/// wrenches() and addInputColumns() store the world path points in data.tendonPoint, where
+/// wrenches() and addInputColumns() store the world path points in ws.tendonPoint, where
 /// wrenchTangents() finds them (the linearization calls it after the nominal pass).
 struct TendonKind : ForceKindBase {
   template <class Emit>
-  static void wrenches(Data& data, const Tendon& t, size_t i, const Eigen::VectorXd& u, Emit&& emit) {
-    storePoints(data, t, i);
+  static void wrenches(const Model& model, Data& data, const Tendon& t, size_t i, const Eigen::VectorXd& u, Emit&& emit) {
+    auto& ws = detail::workspace(data);
+    storePoints(model, data, t, i);
     const double T = u[t.input];
-    for (int s = data.tendonSegmentStart[i]; s < data.tendonSegmentStart[i + 1]; ++s) {
-      const int a = data.tendonSegmentPoint[static_cast<size_t>(s)];
-      const Vector3d &pa = data.tendonPoint[a], &pb = data.tendonPoint[a + 1];
-      segmentWrenches(data.tendonPointJoint[a], data.tendonPointJoint[a + 1], pa, pb, T / (pb - pa).norm(), emit);
+    for (int s = model.topology().tendonSegmentStart[i]; s < model.topology().tendonSegmentStart[i + 1]; ++s) {
+      const int a = model.topology().tendonSegmentPoint[static_cast<size_t>(s)];
+      const Vector3d &pa = ws.tendonPoint[a], &pb = ws.tendonPoint[a + 1];
+      segmentWrenches(model.topology().tendonPointJoint[a], model.topology().tendonPointJoint[a + 1], pa, pb, T / (pb - pa).norm(), emit);
     }
   }
-  static void storePoints(Data& data, const Tendon& t, size_t i) {
-    Vector3d* p = &data.tendonPoint[static_cast<size_t>(data.tendonFirst[i])];
+  static void storePoints(const Model& model, Data& data, const Tendon& t, size_t i) {
+    auto& ws = detail::workspace(data);
+    Vector3d* p = &ws.tendonPoint[static_cast<size_t>(model.topology().tendonFirst[i])];
     for (size_t k = 0; k < t.path.size(); ++k) p[k] = pointPosition(data, t.path[k]);
   }
   static void addInputColumns(const Model& model, Data& data, const Tendon& t, size_t i, Eigen::MatrixXd& Bq) {
+    auto& ws = detail::workspace(data);
     // ∂l/∂q with l = Σ L: a unit tension pulls a toward b and b toward a, Q = −(∂l/∂q)ᵀ u.
-    storePoints(data, t, i);
-    for (int s = data.tendonSegmentStart[i]; s < data.tendonSegmentStart[i + 1]; ++s) {
-      const int a = data.tendonSegmentPoint[static_cast<size_t>(s)];
-      const Vector3d &pa = data.tendonPoint[a], &pb = data.tendonPoint[a + 1];
+    storePoints(model, data, t, i);
+    for (int s = model.topology().tendonSegmentStart[i]; s < model.topology().tendonSegmentStart[i + 1]; ++s) {
+      const int a = model.topology().tendonSegmentPoint[static_cast<size_t>(s)];
+      const Vector3d &pa = ws.tendonPoint[a], &pb = ws.tendonPoint[a + 1];
       const Vector3d e = (pb - pa).normalized();
-      addPointGradient(model, data, data.tendonPointJoint[a], pa, e, Bq.col(t.input));
-      addPointGradient(model, data, data.tendonPointJoint[a + 1], pb, Vector3d(-e), Bq.col(t.input));
+      addPointGradient(model, data, model.topology().tendonPointJoint[a], pa, e, Bq.col(t.input));
+      addPointGradient(model, data, model.topology().tendonPointJoint[a + 1], pb, Vector3d(-e), Bq.col(t.input));
     }
   }
   template <class Emit>
-  static void wrenchTangents(const Data& data, const Direction& dir, const Tendon& t, size_t i,
+  static void wrenchTangents(const Model& model, const Data& data, const Direction& dir, const Tendon& t, size_t i,
                              const Eigen::VectorXd& u, Emit&& emit) {
-    if (data.tendonJointHi[i] < dir.k || data.tendonJointLo[i] >= dir.end) return;
+    auto& ws = detail::workspace(data);
+    if (model.topology().tendonJointHi[i] < dir.k || model.topology().tendonJointLo[i] >= dir.end) return;
     const double T = u[t.input];
-    for (int s = data.tendonSegmentStart[i]; s < data.tendonSegmentStart[i + 1]; ++s) {
-      const int a = data.tendonSegmentPoint[static_cast<size_t>(s)];
-      const int ja = data.tendonPointJoint[a], jb = data.tendonPointJoint[a + 1];
+    for (int s = model.topology().tendonSegmentStart[i]; s < model.topology().tendonSegmentStart[i + 1]; ++s) {
+      const int a = model.topology().tendonSegmentPoint[static_cast<size_t>(s)];
+      const int ja = model.topology().tendonPointJoint[a], jb = model.topology().tendonPointJoint[a + 1];
       if (!dir.moves(ja) && !dir.moves(jb)) continue;
-      const Vector3d &pa = data.tendonPoint[a], &pb = data.tendonPoint[a + 1];
+      const Vector3d &pa = ws.tendonPoint[a], &pb = ws.tendonPoint[a + 1];
       const double L = (pb - pa).norm();
       segmentWrenchTangents(dir, ja, jb, pa, pb, T / L, -T / (L * L), emit);
     }
@@ -135,22 +139,23 @@ struct BodyWrenchKind : ForceKindBase {
     return w;
   }
   template <class Emit>
-  static void wrenches(Data& data, const BodyWrench& bw, size_t, const Eigen::VectorXd& u, Emit&& emit) {
+  static void wrenches(const Model&, Data& data, const BodyWrench& bw, size_t, const Eigen::VectorXd& u, Emit&& emit) {
     if (bw.joint != kWorld) emit(bw.joint, bodyWrenchWorld(data, bw, local(bw, u)));
   }
   static void addInputColumns(const Model& model, const Data& data, const BodyWrench& bw, size_t, Eigen::MatrixXd& Bq) {
+    auto& ws = detail::workspace(data);
     if (bw.joint == kWorld) return;
-    const Eigen::Matrix3d R = data.jointR[bw.joint] * bw.R;
-    const Vector3d p = data.jointP[bw.joint] + data.jointR[bw.joint] * bw.p;
+    const Eigen::Matrix3d R = ws.jointR[bw.joint] * bw.R;
+    const Vector3d p = ws.jointP[bw.joint] + ws.jointR[bw.joint] * bw.p;
     for (int k = 0; k < 6; ++k) {
       if (bw.input[k] < 0) continue;
       const Vector3d e = R.col(k % 3);
       const Vector6d w = k < 3 ? forceAt(p, e) : make(Vector3d::Zero(), e);
-      for (int j = bw.joint; j != kWorld; j = model.joints()[j].parent) Bq(j, bw.input[k]) += data.S[j].dot(w);
+      for (int j = bw.joint; j != kWorld; j = model.joints()[j].parent) Bq(j, bw.input[k]) += ws.S[j].dot(w);
     }
   }
   template <class Emit>
-  static void wrenchTangents(const Data& data, const Direction& dir, const BodyWrench& bw, size_t,
+  static void wrenchTangents(const Model&, const Data& data, const Direction& dir, const BodyWrench& bw, size_t,
                              const Eigen::VectorXd& u, Emit&& emit) {
     if (dir.moves(bw.joint)) emit(bw.joint, crossForce(dir.Sk, bodyWrenchWorld(data, bw, local(bw, u))));
   }

@@ -2,7 +2,7 @@
 #pragma once
 
 #include "spatial.hpp"
-#include "trellis/core/data.hpp"
+#include "data_workspace.hpp"
 
 namespace trellis::detail {
 
@@ -15,13 +15,13 @@ void updateJoints(const Model& model, Data& data, const Eigen::VectorXd& q, cons
 /// Spatial accelerations a_i = a_parent + S_i q̈_i + v_i × S_i q̇_i (no gravity), O(n).
 void updateAccelerations(const Model& model, Data& data, const Eigen::VectorXd& dq, const Eigen::VectorXd& qdd);
 
-/// data.fext: wrenches of springs, tendons and body wrenches at inputs u (conservative and not,
+/// ws.fext: wrenches of springs, tendons and body wrenches at inputs u (conservative and not,
 /// selected by the flags), plus, with lambda non-null, the constraint forces Aᵀλ.
 void accumulateExternalWrenches(const Model& model, Data& data, const Eigen::VectorXd& u,
                                 bool conservative, bool nonConservative, const Eigen::VectorXd* lambda);
 
 /// Newton-Euler backward pass: tau = Σ S_iᵀ F_i with f_i = I(a − g) + v ×* I v − fext; leaves the
-/// subtree wrenches in data.f. Uses data.a as set by updateAccelerations.
+/// subtree wrenches in ws.f. Uses ws.a as set by updateAccelerations.
 void inverseDynamicsPass(const Model& model, Data& data, Eigen::VectorXd& tau);
 
 /// Generalized forces of the configuration-level elements (config springs, config forces,
@@ -56,10 +56,10 @@ inline bool solvable(const DynamicsStatus& s) {
 }
 
 /// Solves M X = R + Aᵀ Λ, A X = C for X (n×p) and Λ (nc×p) with the current factorization.
-/// X may alias R; Λ may alias C. Workspace: data.tmpN/tmpC (p = 1) or data.tmpNX/tmpCX.
+/// X may alias R; Λ may alias C. Workspace: ws.tmpN/tmpC (p = 1) or ws.tmpNX/tmpCX.
 void solveKkt(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X, Eigen::Ref<Eigen::MatrixXd> Lambda);
 
-/// X ← M⁻¹ X through the tree factor (column by column), or with data.massInverse when it is
+/// X ← M⁻¹ X through the tree factor (column by column), or with ws.massInverse when it is
 /// current and X has several columns.
 void solveMass(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X);
 

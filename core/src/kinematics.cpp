@@ -18,6 +18,7 @@ void checkSize(const Eigen::VectorXd& v, int expected, const char* what) {
 }
 
 void updateJoints(const Model& model, Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq) {
+  auto& ws = detail::workspace(data);
   const auto& joints = model.joints();
   const int n = model.nq();
   for (int i = 0; i < n; ++i) {
@@ -30,35 +31,35 @@ void updateJoints(const Model& model, Data& data, const Eigen::VectorXd& q, cons
       ppre = j.p0;
       vParent.setZero();
     } else {
-      const Eigen::Matrix3d& Rp = data.jointR[j.parent];
+      const Eigen::Matrix3d& Rp = ws.jointR[j.parent];
       Rpre.noalias() = Rp * j.R0;
-      ppre = data.jointP[j.parent] + Rp * j.p0;
-      vParent = data.v[j.parent];
+      ppre = ws.jointP[j.parent] + Rp * j.p0;
+      vParent = ws.v[j.parent];
     }
     const Vector3d e = Rpre.col(j.axis);
     if (j.revolute) {
       // R = Rpre · rot_axis(q): rotate the two columns orthogonal to the axis.
       const double c = std::cos(q[i]), s = std::sin(q[i]);
       const int a1 = (j.axis + 1) % 3, a2 = (j.axis + 2) % 3;
-      Eigen::Matrix3d& R = data.jointR[i];
+      Eigen::Matrix3d& R = ws.jointR[i];
       R.col(j.axis) = e;
       R.col(a1) = c * Rpre.col(a1) + s * Rpre.col(a2);
       R.col(a2) = -s * Rpre.col(a1) + c * Rpre.col(a2);
-      data.jointP[i] = ppre;
-      data.S[i] = make(ppre.cross(e), e);  // rotation about the axis through the joint origin
+      ws.jointP[i] = ppre;
+      ws.S[i] = make(ppre.cross(e), e);  // rotation about the axis through the joint origin
     } else {
-      data.jointR[i] = Rpre;
-      data.jointP[i] = ppre + q[i] * e;
-      data.S[i] = make(e, Vector3d::Zero());
+      ws.jointR[i] = Rpre;
+      ws.jointP[i] = ppre + q[i] * e;
+      ws.S[i] = make(e, Vector3d::Zero());
     }
-    data.v[i] = vParent + data.S[i] * dq[i];
+    ws.v[i] = vParent + ws.S[i] * dq[i];
 
     // World inertia: h = m p + R h_l; I_O = R I_l Rᵀ − m[p][p] − [p][R h_l] − [R h_l][p].
-    const Eigen::Matrix3d& R = data.jointR[i];
-    const Vector3d& p = data.jointP[i];
+    const Eigen::Matrix3d& R = ws.jointR[i];
+    const Vector3d& p = ws.jointP[i];
     const Vector3d hs = R * j.firstMoment;
-    data.wm[i] = j.mass;
-    data.wh[i] = j.mass * p + hs;
+    ws.wm[i] = j.mass;
+    ws.wh[i] = j.mass * p + hs;
     Eigen::Matrix3d I = R * j.inertiaAtOrigin * R.transpose();
     const double pp = p.dot(p), ph = p.dot(hs);
     // −m[p][p] = m(|p|² E − p pᵀ); −[p][h] − [h][p] = 2(p·h) E − p hᵀ − h pᵀ.
@@ -66,13 +67,14 @@ void updateJoints(const Model& model, Data& data, const Eigen::VectorXd& q, cons
     I.noalias() -= j.mass * p * p.transpose();
     I.noalias() -= p * hs.transpose();
     I.noalias() -= hs * p.transpose();
-    data.wI[i] = I;
+    ws.wI[i] = I;
   }
 }
 
 }  // namespace detail
 
 void computeKinematics(const Model& model, Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq) {
+  auto& ws = detail::workspace(data);
   detail::checkSize(q, model.nq(), "computeKinematics: q");
   detail::checkSize(dq, model.nq(), "computeKinematics: dq");
   detail::updateJoints(model, data, q, dq);
@@ -86,10 +88,10 @@ void computeKinematics(const Model& model, Data& data, const Eigen::VectorXd& q,
       data.frameVelocity[k].setZero();
       continue;
     }
-    const Eigen::Matrix3d& R = data.jointR[fp.joint];
+    const Eigen::Matrix3d& R = ws.jointR[fp.joint];
     g.linear().noalias() = R * fp.R;
-    g.translation() = data.jointP[fp.joint] + R * fp.p;
-    const Vector6d& vj = data.v[fp.joint];
+    g.translation() = ws.jointP[fp.joint] + R * fp.p;
+    const Vector6d& vj = ws.v[fp.joint];
     const Eigen::Matrix3d Rf = g.linear();
     const Eigen::Vector3d vPoint = spatial::pointVelocity(vj, g.translation());
     data.frameVelocity[k] << Rf.transpose() * vPoint, Rf.transpose() * spatial::ang(vj);

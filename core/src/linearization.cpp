@@ -20,7 +20,7 @@ template <class Emit>
 void forceTangents(const Model& model, const Data& data, const Direction& dir, const Eigen::VectorXd& u,
                    Emit&& emit) {
   forEachForceElement(model, [&](auto kind, const auto& e, size_t i) {
-    decltype(kind)::wrenchTangents(data, dir, e, i, u, emit);
+    decltype(kind)::wrenchTangents(model, data, dir, e, i, u, emit);
   });
   const auto& cs = model.constraints();
   for (int r = 0; r < model.nc(); ++r)
@@ -44,37 +44,38 @@ inline Vector3d dPlusCrossAngular(const Vector6d& H, const Eigen::Matrix3d& B, c
 
 /// Subtree sums used by tangentPass (after the nominal Newton-Euler pass at the solved q̈, λ).
 void compositePass(const Model& model, Data& data) {
+  auto& ws = detail::workspace(data);
   const auto& joints = model.joints();
   const int n = model.nq();
   for (int i = 0; i < n; ++i) {
-    const Vector6d& v = data.v[i];
-    data.inertialForce[i] = data.Ia[i] + crossForce(v, data.Iv[i]);
-    data.compositeMomentum[i] = data.Iv[i];
-    const Vector3d& h = data.wh[i];
+    const Vector6d& v = ws.v[i];
+    ws.inertialForce[i] = ws.Ia[i] + crossForce(v, ws.Iv[i]);
+    ws.compositeMomentum[i] = ws.Iv[i];
+    const Vector3d& h = ws.wh[i];
     const Vector3d vl = lin(v);
     Eigen::Matrix3d X;  // Ī ω̂ + v hᵀ; B_i = X + Xᵀ − 2 (h·v) E
-    X.noalias() = data.wI[i] * skew(ang(v));
+    X.noalias() = ws.wI[i] * skew(ang(v));
     X.noalias() += vl * h.transpose();
-    Eigen::Matrix3d& B = data.compositeB[i];
+    Eigen::Matrix3d& B = ws.compositeB[i];
     B = X + X.transpose();
     B.diagonal().array() -= 2.0 * h.dot(vl);
   }
-  // Subtree sums; data.fext is reused for the subtree sum of the external wrenches.
+  // Subtree sums; ws.fext is reused for the subtree sum of the external wrenches.
   for (int i = n - 1; i >= 0; --i) {
     const int p = joints[i].parent;
     if (p == kWorld) continue;
-    data.inertialForce[p] += data.inertialForce[i];
-    data.compositeMomentum[p] += data.compositeMomentum[i];
-    data.compositeB[p] += data.compositeB[i];
-    data.fext[p] += data.fext[i];
+    ws.inertialForce[p] += ws.inertialForce[i];
+    ws.compositeMomentum[p] += ws.compositeMomentum[i];
+    ws.compositeB[p] += ws.compositeB[i];
+    ws.fext[p] += ws.fext[i];
   }
   for (int j = 0; j < n; ++j) {
-    const Vector6d& S = data.S[j];
-    auto t = data.tangentABG.col(j);
-    t.segment<6>(0) = crossForce(S, data.fext[j]);
-    t.segment<6>(6) = applyInertia(data.cm[j], data.ch[j], data.cI[j], S);
+    const Vector6d& S = ws.S[j];
+    auto t = ws.tangentABG.col(j);
+    t.segment<6>(0) = crossForce(S, ws.fext[j]);
+    t.segment<6>(6) = applyInertia(ws.cm[j], ws.ch[j], ws.cI[j], S);
     t.segment<3>(12).setZero();
-    t.segment<3>(15) = dPlusCrossAngular(data.compositeMomentum[j], data.compositeB[j], S);
+    t.segment<3>(15) = dPlusCrossAngular(ws.compositeMomentum[j], ws.compositeB[j], S);
   }
 }
 
@@ -91,6 +92,7 @@ void compositePass(const Model& model, Data& data) {
 template <class ColR, class ColC, class ColH>
 void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const Direction& dir, ColR&& dr,
                  ColC&& dc, ColH&& dhdot) {
+  auto& ws = detail::workspace(data);
   const auto& joints = model.joints();
   const int k = dir.k;
   const Vector6d g = make(model.gravity(), Vector3d::Zero());
@@ -104,17 +106,17 @@ void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const
     const Vector6d c = crossMotion(dir.Sk, dir.aP - g) - crossMotion(dir.w, dir.vP);
     Eigen::Matrix<double, 18, 1> coef;
     coef << dir.Sk, c, -dir.w;
-    for (int j = k; j < dir.end; ++j) dr(j) = coef.dot(data.tangentABG.col(j));
-    dFk = crossForce(dir.Sk, data.inertialForce[k]) - applyInertia(data.cm[k], data.ch[k], data.cI[k], c) +
-          dMinusCross(data.compositeMomentum[k], data.compositeB[k], dir.w);
+    for (int j = k; j < dir.end; ++j) dr(j) = coef.dot(ws.tangentABG.col(j));
+    dFk = crossForce(dir.Sk, ws.inertialForce[k]) - applyInertia(ws.cm[k], ws.ch[k], ws.cI[k], c) +
+          dMinusCross(ws.compositeMomentum[k], ws.compositeB[k], dir.w);
   } else {
     Eigen::Matrix<double, 12, 1> coef;  // against [β; γ]
     coef << 2.0 * dir.w, dir.Sk;
-    for (int j = k; j < dir.end; ++j) dr(j) = coef.dot(data.tangentABG.col(j).segment<12>(6));
-    dFk = -dMinusCross(data.compositeMomentum[k], data.compositeB[k], dir.Sk) -
-          2.0 * applyInertia(data.cm[k], data.ch[k], data.cI[k], dir.w);
+    for (int j = k; j < dir.end; ++j) dr(j) = coef.dot(ws.tangentABG.col(j).segment<12>(6));
+    dFk = -dMinusCross(ws.compositeMomentum[k], ws.compositeB[k], dir.Sk) -
+          2.0 * applyInertia(ws.cm[k], ws.ch[k], ws.cI[k], dir.w);
   }
-  for (int j = joints[k].parent; j != kWorld; j = joints[j].parent) dr(j) = -data.S[j].dot(dFk);
+  for (int j = joints[k].parent; j != kWorld; j = joints[j].parent) dr(j) = -ws.S[j].dot(dFk);
 
   if (!dir.velocity) {
     // External wrenches enter r with a minus sign; positions do not depend on q̇.
@@ -123,14 +125,14 @@ void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const
     int hi = -1, lo = model.nq();
     forceTangents(model, data, dir, u, [&](int joint, const Vector6d& dW) {
       if (joint == kWorld) return;
-      data.tangentWrench[joint] += dW;
+      ws.tangentWrench[joint] += dW;
       hi = std::max(hi, joint);
-      lo = std::min(lo, data.treeRoot[joint]);
+      lo = std::min(lo, model.topology().treeRoot[joint]);
     });
     for (int j = hi; j >= lo; --j) {
-      Vector6d& w = data.tangentWrench[j];
-      dr(j) += data.S[j].dot(w);
-      if (joints[j].parent != kWorld) data.tangentWrench[joints[j].parent] += w;
+      Vector6d& w = ws.tangentWrench[j];
+      dr(j) += ws.S[j].dot(w);
+      if (joints[j].parent != kWorld) ws.tangentWrench[joints[j].parent] += w;
       w.setZero();
     }
   }
@@ -150,6 +152,7 @@ void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const
 
 DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen::VectorXd& q,
                                     const Eigen::VectorXd& dq, const Eigen::VectorXd& u) {
+  auto& ws = detail::workspace(data);
   const int n = model.nq(), m = model.nu(), nc = model.nc();
   computeDynamics(model, data, q, dq, u);  // and the factor of M that invertMass uses below
   // Near-singular or inconsistent constraints still give finite numbers, flagged by the status.
@@ -158,49 +161,49 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
   // Nominal pass at the solved q̈ and λ: subtree wrenches F_i, I v, I (a − g).
   detail::updateAccelerations(model, data, dq, data.qdd);
   detail::accumulateExternalWrenches(model, data, u, true, true, &data.lambda);
-  detail::inverseDynamicsPass(model, data, data.tmpN);
+  detail::inverseDynamicsPass(model, data, ws.tmpN);
   detail::inputMatrixPass(model, data);
 
   detail::compositePass(model, data);  // (the tendons' path points were stored by the passes above)
   // Columns of −∂r/∂[q, q̇, u] and −∂c/∂[q, q̇, u]; c does not depend on u at fixed q̈.
   for (int k = 0; k < n; ++k) {
-    detail::tangentPass(model, data, u, detail::makeDirection(model, data, k, false), data.rhsX.col(k),
-                        data.crhsX.col(k), data.constraintVelocityJacobian.col(k));
-    detail::tangentPass(model, data, u, detail::makeDirection(model, data, k, true), data.rhsX.col(n + k),
-                        data.crhsX.col(n + k), data.constraintVelocityJacobian.col(k));
+    detail::tangentPass(model, data, u, detail::makeDirection(model, data, k, false), ws.rhsX.col(k),
+                        ws.crhsX.col(k), data.constraintVelocityJacobian.col(k));
+    detail::tangentPass(model, data, u, detail::makeDirection(model, data, k, true), ws.rhsX.col(n + k),
+                        ws.crhsX.col(n + k), data.constraintVelocityJacobian.col(k));
   }
-  data.crhsX.rightCols(m).setZero();
+  ws.crhsX.rightCols(m).setZero();
   // ∂q̈/∂[q, q̇, u] = M⁻¹ R block by block with the explicit block-diagonal M⁻¹ (its columns are
   // themselves wanted: an input that is a force on one coordinate has M⁻¹ e_c as its column of
   // ∂q̈/∂u), written straight into the results, then corrected for the constraints.
-  detail::invertMass(data);
-  detail::applyMassInverse(data, data.rhsX.leftCols(n), data.dqdd_dq);
-  detail::applyMassInverse(data, data.rhsX.middleCols(n, n), data.dqdd_ddq);
+  detail::invertMass(model, data);
+  detail::applyMassInverse(model, data, ws.rhsX.leftCols(n), data.dqdd_dq);
+  detail::applyMassInverse(model, data, ws.rhsX.middleCols(n, n), data.dqdd_ddq);
   for (int k = 0; k < m;) {
-    const int c = data.unitInputConfig[k];
+    const int c = model.topology().unitInputConfig[k];
     if (c >= 0) {
-      data.dqdd_du.col(k) = data.unitInputGain[k] * data.massInverse.col(c);
+      data.dqdd_du.col(k) = model.topology().unitInputGain[k] * ws.massInverse.col(c);
       ++k;
       continue;
     }
     int e = k + 1;  // a run of inputs with general columns ∂Q/∂u_k
-    while (e < m && data.unitInputConfig[e] < 0) ++e;
-    detail::applyMassInverse(data, data.inputMatrix.middleCols(k, e - k), data.dqdd_du.middleCols(k, e - k));
+    while (e < m && model.topology().unitInputConfig[e] < 0) ++e;
+    detail::applyMassInverse(model, data, data.inputMatrix.middleCols(k, e - k), data.dqdd_du.middleCols(k, e - k));
     k = e;
   }
   if (nc > 0) {
-    detail::correctForConstraints(model, data, data.dqdd_dq, data.crhsX.leftCols(n));
-    detail::correctForConstraints(model, data, data.dqdd_ddq, data.crhsX.middleCols(n, n));
-    if (m > 0) detail::correctForConstraints(model, data, data.dqdd_du, data.crhsX.rightCols(m));
+    detail::correctForConstraints(model, data, data.dqdd_dq, ws.crhsX.leftCols(n));
+    detail::correctForConstraints(model, data, data.dqdd_ddq, ws.crhsX.middleCols(n, n));
+    if (m > 0) detail::correctForConstraints(model, data, data.dqdd_du, ws.crhsX.rightCols(m));
   }
 
   // A sum is NaN or ±Inf if any term is (or if finite terms overflow, which is no result either).
   if (detail::solvable(data.status) &&
-      !(std::isfinite(data.dqdd_dq.sum() + data.dqdd_ddq.sum() + data.dqdd_du.sum()) && std::isfinite(data.crhsX.sum()))) {
+      !(std::isfinite(data.dqdd_dq.sum() + data.dqdd_ddq.sum() + data.dqdd_du.sum()) && std::isfinite(ws.crhsX.sum()))) {
     data.status.code = DynamicsStatus::Code::kNonFinite;
     data.status.message = "linearization produced non-finite values";
   }
-  if (nc > 0) data.dlambda_dx = data.crhsX;
+  if (nc > 0) data.dlambda_dx = ws.crhsX;
   // The top rows of A = [[0, I], ·] and B = [[0], ·] were set when Data was built.
   data.A.bottomLeftCorner(n, n) = data.dqdd_dq;
   data.A.bottomRightCorner(n, n) = data.dqdd_ddq;
@@ -210,6 +213,7 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
 }
 
 int computeConstraintTangentBasis(const Model& model, Data& data) {
+  auto& ws = detail::workspace(data);
   const int n = model.nq(), nc = model.nc();
   if (nc == 0) {
     data.tangentBasis.setIdentity(2 * n, 2 * n);
@@ -218,7 +222,7 @@ int computeConstraintTangentBasis(const Model& model, Data& data) {
     return 2 * n;
   }
   // ∂Φ/∂x with Φ = [h_holonomic(q); A(q) q̇].
-  Eigen::MatrixXd& J = data.constraintStateJacobian;
+  Eigen::MatrixXd& J = ws.constraintStateJacobian;
   J.setZero();
   int row = 0;
   for (int r = 0; r < nc; ++r)
@@ -227,12 +231,12 @@ int computeConstraintTangentBasis(const Model& model, Data& data) {
     J.row(row).head(n) = data.constraintVelocityJacobian.row(r);
     J.row(row).tail(n) = data.constraintJacobian.row(r);
   }
-  data.basisQR.compute(J.transpose());
-  const int rank = static_cast<int>(data.basisQR.rank());
-  data.basisQR.householderQ().evalTo(data.basisQ, data.basisWorkspace);  // no allocation
+  ws.basisQR.compute(J.transpose());
+  const int rank = static_cast<int>(ws.basisQR.rank());
+  ws.basisQR.householderQ().evalTo(ws.basisQ, ws.basisWorkspace);  // no allocation
   const int d = 2 * n - rank;
-  data.tangentBasis = data.basisQ.rightCols(d);
-  Eigen::Ref<Eigen::MatrixXd> AT = data.basisWorkMatrix.leftCols(d);
+  data.tangentBasis = ws.basisQ.rightCols(d);
+  Eigen::Ref<Eigen::MatrixXd> AT = ws.basisWorkMatrix.leftCols(d);
   AT.noalias() = data.A * data.tangentBasis;
   data.reducedA.noalias() = data.tangentBasis.transpose() * AT;
   data.reducedB.noalias() = data.tangentBasis.transpose() * data.B;

@@ -77,22 +77,23 @@ inline void dot2x2(const double* a0, const double* a1, const double* b0, const d
 /// LTDL of one branched block [bs, be): eliminate the leaves first. With D_k = H(k, k) and
 /// L(k, i) = H(i, k) / D_k for i an ancestor of k, H(j, i) −= H(i, k) H(j, k) / D_k for j an
 /// ancestor of i (or i): ancestors of k only, no fill-in.
-int factorTreeBlock(Data& data, int bs, int be, double tol) {
-  Eigen::MatrixXd& H = data.massFactor;
+int factorTreeBlock(const Model& model, Data& data, int bs, int be, double tol) {
+  auto& ws = detail::workspace(data);
+  Eigen::MatrixXd& H = ws.massFactor;
   for (int k = be - 1; k >= bs; --k) {
     const double d = H(k, k);
     if (!(d > tol)) return k;
     double* hk = &H(0, k);
-    forAncestorRuns(data, k, false, [&](int s, int e) {
+    forAncestorRuns(model.topology(), k, false, [&](int s, int e) {
       for (int i = s; i <= e; ++i) {
         const double a = hk[i] / d;
         if (a == 0.0) continue;
         double* hi = &H(0, i);
-        forAncestorRuns(data, i, true, [&](int s2, int e2) { subtractScaled(hi + s2, hk + s2, a, e2 - s2 + 1); });
+        forAncestorRuns(model.topology(), i, true, [&](int s2, int e2) { subtractScaled(hi + s2, hk + s2, a, e2 - s2 + 1); });
       }
     });
     const double dInv = 1.0 / d;
-    forAncestorRuns(data, k, false, [&](int s, int e) {
+    forAncestorRuns(model.topology(), k, false, [&](int s, int e) {
       for (int t = s; t <= e; ++t) hk[t] *= dInv;
     });
   }
@@ -104,7 +105,8 @@ int factorTreeBlock(Data& data, int bs, int be, double tol) {
 /// two columns t per pass. Eigen's blocked LLT spends 3× the instructions at n = 40 on setting up
 /// its small panels (callgrind).
 int factorChainBlock(Data& data, int bs, int nb, double tol) {
-  Eigen::MatrixXd& H = data.massFactor;
+  auto& ws = detail::workspace(data);
+  Eigen::MatrixXd& H = ws.massFactor;
   const int be = bs + nb;
   for (int k = bs; k < be; ++k) {
     double* hk = &H(0, k) + k;
@@ -121,31 +123,33 @@ int factorChainBlock(Data& data, int bs, int nb, double tol) {
   return -1;
 }
 
-void solveTreeBlock(Data& data, double* x, int bs, int be) {
-  const Eigen::MatrixXd& H = data.massFactor;
+void solveTreeBlock(const Model& model, Data& data, double* x, int bs, int be) {
+  auto& ws = detail::workspace(data);
+  const Eigen::MatrixXd& H = ws.massFactor;
   // Lᵀ y = x: y_i is final once every descendant is done; it then reaches the ancestors of i.
   for (int i = be - 1; i >= bs; --i) {
     const double yi = x[i];
     if (yi == 0.0) continue;
     const double* hi = &H(0, i);
-    forAncestorRuns(data, i, false, [&](int s, int e) { subtractScaled(x + s, hi + s, yi, e - s + 1); });
+    forAncestorRuns(model.topology(), i, false, [&](int s, int e) { subtractScaled(x + s, hi + s, yi, e - s + 1); });
   }
   for (int i = bs; i < be; ++i) x[i] /= H(i, i);
   // L x = z, from the roots down.
   for (int i = bs; i < be; ++i) {
     double acc = 0.0;
     const double* hi = &H(0, i);
-    forAncestorRuns(data, i, false, [&](int s, int e) { acc += dotRun(hi + s, x + s, e - s + 1); });
+    forAncestorRuns(model.topology(), i, false, [&](int s, int e) { acc += dotRun(hi + s, x + s, e - s + 1); });
     x[i] -= acc;
   }
 }
 
-void invertTreeBlock(Data& data, int bs, int be) {
-  const Eigen::MatrixXd& H = data.massFactor;
-  Eigen::MatrixXd& W = data.massInverseFactor;
-  Eigen::MatrixXd& Minv = data.massInverse;
-  const double* dis = data.massPivotInvSqrt.data();
-  for (int i = bs; i < be; ++i) data.massPivotInvSqrt[i] = 1.0 / std::sqrt(H(i, i));
+void invertTreeBlock(const Model& model, Data& data, int bs, int be) {
+  auto& ws = detail::workspace(data);
+  const Eigen::MatrixXd& H = ws.massFactor;
+  Eigen::MatrixXd& W = ws.massInverseFactor;
+  Eigen::MatrixXd& Minv = ws.massInverse;
+  const double* dis = ws.massPivotInvSqrt.data();
+  for (int i = bs; i < be; ++i) ws.massPivotInvSqrt[i] = 1.0 / std::sqrt(H(i, i));
   // Column i of W holds row i of L⁻¹: from L W = I, W_i = e_i − Σ_{a ancestor of i} L(i, a) W_a,
   // and W_a is supported on the ancestors of a (and a), so everything stays on i's ancestors.
   for (int i = bs; i < be; ++i) {
@@ -153,12 +157,12 @@ void invertTreeBlock(Data& data, int bs, int be) {
     for (int t = bs; t < i; ++t) wi[t] = 0.0;
     wi[i] = 1.0;
     const double* hi = &H(0, i);
-    forAncestorRuns(data, i, false, [&](int s, int e) {
+    forAncestorRuns(model.topology(), i, false, [&](int s, int e) {
       for (int a = s; a <= e; ++a) {
         const double l = hi[a];
         if (l == 0.0) continue;
         const double* wa = &W(0, a);
-        forAncestorRuns(data, a, true, [&](int s2, int e2) { subtractScaled(wi + s2, wa + s2, l, e2 - s2 + 1); });
+        forAncestorRuns(model.topology(), a, true, [&](int s2, int e2) { subtractScaled(wi + s2, wa + s2, l, e2 - s2 + 1); });
       }
     });
   }
@@ -173,7 +177,7 @@ void invertTreeBlock(Data& data, int bs, int be) {
     for (int i = j; i < be; ++i) {
       const double* wi = &W(0, i);
       double v = 0.0;
-      forAncestorRuns(data, j, true, [&](int s, int e) { v += dotRun(wi + s, wj + s, e - s + 1); });
+      forAncestorRuns(model.topology(), j, true, [&](int s, int e) { v += dotRun(wi + s, wj + s, e - s + 1); });
       Minv(i, j) = v;
       Minv(j, i) = v;
     }
@@ -186,11 +190,12 @@ void invertTreeBlock(Data& data, int bs, int be) {
 /// Σ_{k ≥ i} W(k, i) W(k, j) for i ≥ j in 2×2 tiles (W is stored with its zeros above the diagonal,
 /// so a tile's four sums all run from k = i).
 void invertChainBlock(Data& data, int bs, int nb) {
-  const Eigen::MatrixXd& F = data.massFactor;
-  Eigen::MatrixXd& W = data.massInverseFactor;
-  Eigen::MatrixXd& Minv = data.massInverse;
+  auto& ws = detail::workspace(data);
+  const Eigen::MatrixXd& F = ws.massFactor;
+  Eigen::MatrixXd& W = ws.massInverseFactor;
+  Eigen::MatrixXd& Minv = ws.massInverse;
   const int be = bs + nb;
-  double* r = data.massPivotInvSqrt.data();  // workspace here: 1 / L(k, k)
+  double* r = ws.massPivotInvSqrt.data();  // workspace here: 1 / L(k, k)
   for (int k = bs; k < be; ++k) r[k] = 1.0 / F(k, k);
   for (int j = bs; j < be; ++j) {
     double* x = &W(0, j);
@@ -231,14 +236,15 @@ void invertChainBlock(Data& data, int bs, int nb) {
 
 /// M_b⁻¹ of an unbranched block from the articulated factor. Column j of M⁻¹ is the forward
 /// dynamics at rest for τ = e_j; all columns at once, each joint's 6-vectors side by side in
-/// data.articulatedColumns (column j for τ = e_j), and only j ≥ i for joint i (M⁻¹ symmetric):
+/// ws.articulatedColumns (column j for τ = e_j), and only j ≥ i for joint i (M⁻¹ symmetric):
 ///   from the tip, u_i(j) = δ_ij − S_i·p_j,  p_j += U_i u_i(j) / D_i   (p: the bias of the parent),
 ///   from the root, M⁻¹(i, j) = (u_i(j) − U_i·a_j) / D_i,  a_j += S_i M⁻¹(i, j)   (a: the parent's).
 /// One joint has one child here, so p and a are updated in place. O(n_b²) 6-vector operations
 /// (three two-lane packets each) against the dense factor's n_b³/2 multiply-adds.
 void invertChainArticulated(Data& data, int bs, int be) {
-  Eigen::MatrixXd& Minv = data.massInverse;
-  double* W = data.articulatedColumns.data();  // column j at W + 6 j
+  auto& ws = detail::workspace(data);
+  Eigen::MatrixXd& Minv = ws.massInverse;
+  double* W = ws.articulatedColumns.data();  // column j at W + 6 j
   const auto dot6 = [](const Pack* x, const double* y) {
     const Pack t = x[0] * loadPack(y) + x[1] * loadPack(y + 2) + x[2] * loadPack(y + 4);
     return t[0] + t[1];
@@ -255,8 +261,8 @@ void invertChainArticulated(Data& data, int bs, int be) {
   std::fill(W + 6 * bs, W + 6 * be, 0.0);
   for (int i = be - 1; i >= bs; --i) {
     Pack S[3], Ud[3];
-    load6(data.S[i], 1.0, S);
-    load6(data.articulatedU[i], 1.0 / data.articulatedPivot[i], Ud);
+    load6(ws.S[i], 1.0, S);
+    load6(ws.articulatedU[i], 1.0 / ws.articulatedPivot[i], Ud);
     double* col = &Minv(0, i);  // u_i(j) in M⁻¹(j, i) until the second sweep
     for (int j = i; j < be; ++j) {
       double* p = W + 6 * j;
@@ -268,9 +274,9 @@ void invertChainArticulated(Data& data, int bs, int be) {
   std::fill(W + 6 * bs, W + 6 * be, 0.0);
   for (int i = bs; i < be; ++i) {
     Pack S[3], U[3];
-    load6(data.S[i], 1.0, S);
-    load6(data.articulatedU[i], 1.0, U);
-    const double dInv = 1.0 / data.articulatedPivot[i];
+    load6(ws.S[i], 1.0, S);
+    load6(ws.articulatedU[i], 1.0, U);
+    const double dInv = 1.0 / ws.articulatedPivot[i];
     double* col = &Minv(0, i);
     for (int j = i; j < be; ++j) {
       double* a = W + 6 * j;
@@ -286,31 +292,32 @@ void invertChainArticulated(Data& data, int bs, int be) {
 /// branching there is nothing for the tree to skip, and Eigen's blocked kernels run the O(n³)
 /// work with fewer instructions than the run loops (measured with callgrind on chains of 10–40).
 constexpr int kDenseChain = 6;
-bool denseBlock(const Data& data, int bs, int be) {
-  return be - bs >= kDenseChain && data.runStart[static_cast<size_t>(be - 1)] == bs;
+bool denseBlock(const Model& model, int bs, int be) {
+  return be - bs >= kDenseChain && model.topology().runStart[static_cast<size_t>(be - 1)] == bs;
 }
 }  // namespace
 
 int factorMass(const Model& model, Data& data, double tol) {
-  (void)model;
-  data.massInverseCurrent = false;
-  data.articulatedCurrent = false;
-  data.massFactor = data.M;  // zero off the ancestor pattern, as M is
-  for (size_t b = 0; b + 1 < data.blockStart.size(); ++b) {
-    const int bs = data.blockStart[b], be = data.blockStart[b + 1];
-    const int bad = denseBlock(data, bs, be) ? factorChainBlock(data, bs, be - bs, tol) : factorTreeBlock(data, bs, be, tol);
+  auto& ws = detail::workspace(data);
+  ws.massInverseCurrent = false;
+  ws.articulatedCurrent = false;
+  ws.massFactor = data.M;  // zero off the ancestor pattern, as M is
+  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
+    const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];
+    const int bad = denseBlock(model, bs, be) ? factorChainBlock(data, bs, be - bs, tol) : factorTreeBlock(model, data, bs, be, tol);
     if (bad >= 0) return bad;
   }
   return -1;
 }
 
-void solveMassVector(Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi) {
-  for (size_t b = 0; b + 1 < data.blockStart.size(); ++b) {
-    const int bs = data.blockStart[b], be = data.blockStart[b + 1];
+void solveMassVector(const Model& model, Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi) {
+  auto& ws = detail::workspace(data);
+  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
+    const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];
     if (be <= lo || bs >= hi) continue;
-    if (denseBlock(data, bs, be)) {
+    if (denseBlock(model, bs, be)) {
       // L y = x in axpy form, then Lᵀ z = y in dot form, both on contiguous columns of L.
-      const Eigen::MatrixXd& F = data.massFactor;
+      const Eigen::MatrixXd& F = ws.massFactor;
       double* xp = x.data();
       for (int k = bs; k < be; ++k) {
         xp[k] /= F(k, k);
@@ -318,43 +325,44 @@ void solveMassVector(Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi) 
       }
       for (int k = be - 1; k >= bs; --k) xp[k] = (xp[k] - dotRun(&F(0, k) + k + 1, xp + k + 1, be - k - 1)) / F(k, k);
     } else {
-      solveTreeBlock(data, x.data(), bs, be);
+      solveTreeBlock(model, data, x.data(), bs, be);
     }
   }
 }
 
-bool blocksAreChains(const Data& data) {
-  for (size_t b = 0; b + 1 < data.blockStart.size(); ++b)
-    if (data.runStart[static_cast<size_t>(data.blockStart[b + 1] - 1)] != data.blockStart[b]) return false;
+bool blocksAreChains(const Model& model) {
+  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b)
+    if (model.topology().runStart[static_cast<size_t>(model.topology().blockStart[b + 1] - 1)] != model.topology().blockStart[b]) return false;
   return true;
 }
 
-void invertMass(Data& data) {
-  for (size_t b = 0; b + 1 < data.blockStart.size(); ++b) {
-    const int bs = data.blockStart[b], be = data.blockStart[b + 1];
-    if (data.articulatedCurrent) {
+void invertMass(const Model& model, Data& data) {
+  auto& ws = detail::workspace(data);
+  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
+    const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];
+    if (ws.articulatedCurrent) {
       invertChainArticulated(data, bs, be);
-    } else if (denseBlock(data, bs, be)) {
+    } else if (denseBlock(model, bs, be)) {
       invertChainBlock(data, bs, be - bs);
     } else {
-      invertTreeBlock(data, bs, be);
+      invertTreeBlock(model, data, bs, be);
     }
   }
-  data.massInverseCurrent = true;
+  ws.massInverseCurrent = true;
 }
 
 int factorArticulated(const Model& model, Data& data, double tol) {
-  (void)model;
+  auto& ws = detail::workspace(data);
   // On a chain joint i has one child c: IA_i = I_i + IA_c − U_c U_cᵀ / D_c, carried from the tip
   // of each block to its root in one running 6×6 matrix.
   Eigen::Matrix<double, 6, 6> IA;
-  for (size_t b = 0; b + 1 < data.blockStart.size(); ++b) {
-    const int bs = data.blockStart[b], be = data.blockStart[b + 1];
+  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
+    const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];
     IA.setZero();
     for (int i = be - 1; i >= bs; --i) {
       // + I_i = [[m E, −ĥ], [ĥ, I_O]] (applyInertia as a matrix), entry by entry.
-      const Eigen::Vector3d& h = data.wh[i];
-      const double m = data.wm[i];
+      const Eigen::Vector3d& h = ws.wh[i];
+      const double m = ws.wm[i];
       IA(0, 0) += m;
       IA(1, 1) += m;
       IA(2, 2) += m;
@@ -370,12 +378,12 @@ int factorArticulated(const Model& model, Data& data, double tol) {
       IA(4, 2) -= h[0];
       IA(5, 0) -= h[1];
       IA(5, 1) += h[0];
-      IA.bottomRightCorner<3, 3>() += data.wI[i];
-      Vector6d& U = data.articulatedU[i];
-      U.noalias() = IA * data.S[i];
-      const double d = data.S[i].dot(U);
+      IA.bottomRightCorner<3, 3>() += ws.wI[i];
+      Vector6d& U = ws.articulatedU[i];
+      U.noalias() = IA * ws.S[i];
+      const double d = ws.S[i].dot(U);
       if (!(d > tol)) return i;
-      data.articulatedPivot[i] = d;
+      ws.articulatedPivot[i] = d;
       IA.noalias() -= (U / d) * U.transpose();
     }
   }
@@ -383,61 +391,64 @@ int factorArticulated(const Model& model, Data& data, double tol) {
 }
 
 void solveArticulated(const Model& model, Data& data, Eigen::VectorXd& x) {
+  auto& ws = detail::workspace(data);
   const auto& joints = model.joints();
   const int n = model.nq();
-  std::vector<Vector6d>& w = data.articulatedWork;  // p_i from the leaves, then a_i from the roots
+  std::vector<Vector6d>& w = ws.articulatedWork;  // p_i from the leaves, then a_i from the roots
   for (int i = 0; i < n; ++i) w[i].setZero();
   for (int i = n - 1; i >= 0; --i) {
-    const double ui = x[i] - data.S[i].dot(w[i]);
+    const double ui = x[i] - ws.S[i].dot(w[i]);
     x[i] = ui;
     const int p = joints[i].parent;
-    if (p != kWorld) w[p] += w[i] + data.articulatedU[i] * (ui / data.articulatedPivot[i]);
+    if (p != kWorld) w[p] += w[i] + ws.articulatedU[i] * (ui / ws.articulatedPivot[i]);
   }
   for (int i = 0; i < n; ++i) {
     const int p = joints[i].parent;
     if (p == kWorld) {
-      x[i] /= data.articulatedPivot[i];
-      w[i] = data.S[i] * x[i];
+      x[i] /= ws.articulatedPivot[i];
+      w[i] = ws.S[i] * x[i];
     } else {
-      x[i] = (x[i] - data.articulatedU[i].dot(w[p])) / data.articulatedPivot[i];
-      w[i] = w[p] + data.S[i] * x[i];
+      x[i] = (x[i] - ws.articulatedU[i].dot(w[p])) / ws.articulatedPivot[i];
+      w[i] = w[p] + ws.S[i] * x[i];
     }
   }
 }
 
-void applyMassInverse(Data& data, Eigen::Ref<Eigen::MatrixXd> X) {
-  for (size_t b = 0; b + 1 < data.blockStart.size(); ++b) {
-    const int bs = data.blockStart[b], nb = data.blockStart[b + 1] - bs;
+void applyMassInverse(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X) {
+  auto& ws = detail::workspace(data);
+  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
+    const int bs = model.topology().blockStart[b], nb = model.topology().blockStart[b + 1] - bs;
     if (nb <= 8) {
       // Small blocks (a digit): plain dot products with the symmetric block, column by column;
       // Eigen's product kernels cost several times the few multiply-adds here.
       double t[8];
       for (Eigen::Index c = 0; c < X.cols(); ++c) {
         double* x = &X(bs, c);
-        for (int i = 0; i < nb; ++i) t[i] = dotRun(&data.massInverse(bs, bs + i), x, nb);
+        for (int i = 0; i < nb; ++i) t[i] = dotRun(&ws.massInverse(bs, bs + i), x, nb);
         for (int i = 0; i < nb; ++i) x[i] = t[i];
       }
       continue;
     }
     auto Xb = X.middleRows(bs, nb);
-    Eigen::Ref<Eigen::MatrixXd> t = data.tmpNX.topLeftCorner(nb, X.cols());
-    t.noalias() = data.massInverse.block(bs, bs, nb, nb) * Xb;
+    Eigen::Ref<Eigen::MatrixXd> t = ws.tmpNX.topLeftCorner(nb, X.cols());
+    t.noalias() = ws.massInverse.block(bs, bs, nb, nb) * Xb;
     Xb = t;
   }
 }
 
-void applyMassInverse(Data& data, const Eigen::Ref<const Eigen::MatrixXd>& R, Eigen::Ref<Eigen::MatrixXd> X) {
-  for (size_t b = 0; b + 1 < data.blockStart.size(); ++b) {
-    const int bs = data.blockStart[b], nb = data.blockStart[b + 1] - bs;
+void applyMassInverse(const Model& model, Data& data, const Eigen::Ref<const Eigen::MatrixXd>& R, Eigen::Ref<Eigen::MatrixXd> X) {
+  auto& ws = detail::workspace(data);
+  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
+    const int bs = model.topology().blockStart[b], nb = model.topology().blockStart[b + 1] - bs;
     if (nb <= 8) {
       for (Eigen::Index c = 0; c < X.cols(); ++c) {
         const double* r = R.data() + c * R.outerStride() + bs;
         double* x = &X(bs, c);
-        for (int i = 0; i < nb; ++i) x[i] = dotRun(&data.massInverse(bs, bs + i), r, nb);
+        for (int i = 0; i < nb; ++i) x[i] = dotRun(&ws.massInverse(bs, bs + i), r, nb);
       }
       continue;
     }
-    X.middleRows(bs, nb).noalias() = data.massInverse.block(bs, bs, nb, nb) * R.middleRows(bs, nb);
+    X.middleRows(bs, nb).noalias() = ws.massInverse.block(bs, bs, nb, nb) * R.middleRows(bs, nb);
   }
 }
 

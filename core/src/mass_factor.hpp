@@ -11,7 +11,7 @@
 // run of consecutive indices [runStart(i), i], so every inner loop is a vectorized segment
 // operation (one run for a chain, one per digit for a hand).
 //
-// Storage (data.massFactor, n×n): D on the diagonal and L(i, j) at (j, i) — column i holds row i
+// Storage (ws.massFactor, n×n): D on the diagonal and L(i, j) at (j, i) — column i holds row i
 // of L, so that each run is contiguous in memory. Entries off the ancestor pattern stay exactly 0.
 //
 // An unbranched block of 12 or more joints (a long chain) has nothing for the tree to skip; there
@@ -26,36 +26,36 @@ namespace trellis::detail {
 /// Calls f(first, last) for the runs [first, last] of consecutive indices that make up the
 /// ancestors of joint i (with `self`, i included), nearest run first.
 template <class F>
-inline void forAncestorRuns(const Data& data, int i, bool self, F&& f) {
-  int t = self ? i : data.treeParent[static_cast<size_t>(i)];
+inline void forAncestorRuns(const ModelTopology& topo, int i, bool self, F&& f) {
+  int t = self ? i : topo.parent[static_cast<size_t>(i)];
   while (t != kWorld) {
-    const int s = data.runStart[static_cast<size_t>(t)];
+    const int s = topo.runStart[static_cast<size_t>(t)];
     f(s, t);
-    t = data.treeParent[static_cast<size_t>(s)];
+    t = topo.parent[static_cast<size_t>(s)];
   }
 }
 
-/// Factors data.M into data.massFactor. Returns −1 on success, else the joint whose pivot Dᵢ is
+/// Factors data.M into ws.massFactor. Returns −1 on success, else the joint whose pivot Dᵢ is
 /// not above tol (then the factor is unusable).
 int factorMass(const Model& model, Data& data, double tol);
 
 /// x ← M⁻¹ x on the coordinates [lo, hi), a union of whole blocks (x is 0 elsewhere or ignored).
-void solveMassVector(Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi);
+void solveMassVector(const Model& model, Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi);
 
-/// data.massInverse = M⁻¹ (block diagonal, zero between blocks) from the current factor: the tree
+/// ws.massInverse = M⁻¹ (block diagonal, zero between blocks) from the current factor: the tree
 /// factor, M⁻¹ = W D⁻¹ Wᵀ with W = L⁻¹, which keeps the ancestor pattern of L, O(Σ per block
-/// n_b³/3); or, when data.articulatedCurrent (only used when blocksAreChains), the articulated
+/// n_b³/3); or, when ws.articulatedCurrent (only used when blocksAreChains), the articulated
 /// factor, O(Σ n_b²) (invertChainArticulated in mass_factor.cpp).
-void invertMass(Data& data);
+void invertMass(const Model& model, Data& data);
 
 /// Whether every top-level tree is unbranched (a chain).
-bool blocksAreChains(const Data& data);
+bool blocksAreChains(const Model& model);
 
-/// X ← M⁻¹ X for many columns, block by block with data.massInverse (invertMass first).
-void applyMassInverse(Data& data, Eigen::Ref<Eigen::MatrixXd> X);
+/// X ← M⁻¹ X for many columns, block by block with ws.massInverse (invertMass first).
+void applyMassInverse(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X);
 
-/// X = M⁻¹ R (X and R distinct, same shape), block by block with data.massInverse.
-void applyMassInverse(Data& data, const Eigen::Ref<const Eigen::MatrixXd>& R, Eigen::Ref<Eigen::MatrixXd> X);
+/// X = M⁻¹ R (X and R distinct, same shape), block by block with ws.massInverse.
+void applyMassInverse(const Model& model, Data& data, const Eigen::Ref<const Eigen::MatrixXd>& R, Eigen::Ref<Eigen::MatrixXd> X);
 
 // The same factor in spatial form (forward dynamics without constraints, and M⁻¹ of chains for
 // the linearization: invertMass). Articulated-body inertias from the leaves (Featherstone, RBDA §7.3, at
@@ -64,7 +64,7 @@ void applyMassInverse(Data& data, const Eigen::Ref<const Eigen::MatrixXd>& R, Ei
 // factor's O(Σ dᵢ²) (M itself is still formed: data.M is a result of computeDynamics). Used for
 // models whose trees are all chains and have no constraints (computeDynamics).
 
-/// Fills data.articulatedU, articulatedPivot from the world inertias (needs updateJoints), for a
+/// Fills ws.articulatedU, articulatedPivot from the world inertias (needs updateJoints), for a
 /// model whose blocks are chains (blocksAreChains). Returns −1 on success, else the joint whose
 /// pivot D_i is not above tol.
 int factorArticulated(const Model& model, Data& data, double tol);

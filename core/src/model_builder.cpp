@@ -3,8 +3,8 @@
 
 #include <Eigen/Eigenvalues>
 
+#include <algorithm>
 #include <cmath>
-#include <functional>
 #include <sstream>
 
 namespace trellis {
@@ -88,6 +88,87 @@ Transform primitive(TransformType type, std::string config) {
   Transform t;
   t.type = type;
   t.config = std::move(config);
+  return t;
+}
+
+/// The top-level tree (block) that contains joint j, as [first, end); the world is no block.
+std::pair<int, int> blockOf(const Model& model, int j) {
+  if (j == kWorld) return {model.nq(), 0};  // empty: neutral for min/max
+  while (model.joints()[j].parent != kWorld) j = model.joints()[j].parent;
+  return {j, model.joints()[j].subtreeEnd};
+}
+
+/// The structure the algorithms walk (model.hpp: ModelTopology), from the folded joints and the
+/// elements. Loops only (no recursion): O(n + path points + nc³) for the row groups.
+ModelTopology describeTopology(const Model& model) {
+  const int n = model.nq(), nc = model.nc(), m = model.nu();
+  ModelTopology t;
+  t.parent.resize(n);
+  t.runStart.resize(n);
+  t.treeRoot.resize(n);
+  for (int i = 0; i < n; ++i) {
+    const int p = model.joints()[i].parent;
+    t.parent[i] = p;
+    t.runStart[i] = (p != kWorld && p == i - 1) ? t.runStart[i - 1] : i;
+    t.treeRoot[i] = p == kWorld ? i : t.treeRoot[p];  // p < i: pre-order
+    if (p == kWorld) t.blockStart.push_back(i);
+  }
+  t.blockStart.push_back(n);
+  t.tendonFirst.assign(1, 0);
+  t.tendonSegmentStart.assign(1, 0);
+  for (const Tendon& td : model.tendons()) {
+    int lo = n, hi = -1;
+    for (size_t k = 0; k < td.path.size(); ++k) {
+      const int j = td.path[k].joint;
+      if (j != kWorld) {
+        lo = std::min(lo, j);
+        hi = std::max(hi, j);
+      }
+      if (k + 1 < td.path.size() && j != td.path[k + 1].joint)
+        t.tendonSegmentPoint.push_back(static_cast<int>(t.tendonPointJoint.size()));
+      t.tendonPointJoint.push_back(j);
+    }
+    t.tendonJointLo.push_back(lo);
+    t.tendonJointHi.push_back(hi);
+    t.tendonFirst.push_back(t.tendonFirst.back() + static_cast<int>(td.path.size()));
+    t.tendonSegmentStart.push_back(static_cast<int>(t.tendonSegmentPoint.size()));
+  }
+  // Row r of A (and column r of M⁻¹Aᵀ) lives on the blocks of the constraint's two bodies.
+  t.rowLo.assign(nc, 0);
+  t.rowHi.assign(nc, 0);
+  for (int r = 0; r < nc; ++r) {
+    const Constraint& c = model.constraints()[r];
+    const auto [a0, a1] = blockOf(model, c.a.joint);
+    const auto [b0, b1] = blockOf(model, c.b.joint);
+    t.rowLo[r] = std::min(a0, b0);
+    t.rowHi[r] = std::max(a1, b1);
+    if (t.rowHi[r] <= t.rowLo[r]) t.rowLo[r] = t.rowHi[r] = 0;  // touches no coordinate
+  }
+  // Groups of consecutive rows: a boundary s is kept when no row before it shares a coordinate
+  // with a row after it; A M⁻¹ Aᵀ is then block diagonal over the groups.
+  t.rowGroupStart.assign(1, 0);
+  for (int s = 1; s < nc; ++s) {
+    bool split = true;
+    for (int r = 0; r < s && split; ++r)
+      for (int q = s; q < nc && split; ++q)
+        split = std::min(t.rowHi[r], t.rowHi[q]) <= std::max(t.rowLo[r], t.rowLo[q]);
+    if (split) t.rowGroupStart.push_back(s);
+  }
+  if (nc > 0) t.rowGroupStart.push_back(nc);
+  // Inputs that are generalized forces on one coordinate: their column of B is a column of M⁻¹.
+  t.unitInputConfig.assign(m, -2);
+  t.unitInputGain.assign(m, 0.0);
+  for (const ConfigForce& cf : model.configForces()) {
+    int& c = t.unitInputConfig[cf.input];
+    c = (c == -2 || c == cf.config) ? cf.config : -1;
+    t.unitInputGain[cf.input] += 1.0;
+  }
+  for (const BodyWrench& bw : model.bodyWrenches())
+    for (int k : bw.input)
+      if (k >= 0 && bw.joint != kWorld) t.unitInputConfig[k] = -1;
+  for (const Tendon& td : model.tendons()) t.unitInputConfig[td.input] = -1;
+  for (int& c : t.unitInputConfig)
+    if (c == -2) c = -1;
   return t;
 }
 
@@ -373,13 +454,17 @@ Model ModelBuilder::finalize() && {
   std::vector<std::vector<int>> children(nf);
   std::vector<int> roots;
   for (int i = 0; i < nf; ++i) (frames_[i].parent == kWorld ? roots : children[frames_[i].parent]).push_back(i);
+  // Iterative (an explicit stack, children pushed in reverse so the first is visited first): a
+  // recursion per frame would overflow the call stack on a chain of kMaxFrames frames.
   std::vector<int> order;
   order.reserve(nf);
-  std::function<void(int)> visit = [&](int f) {
+  std::vector<int> stack(roots.rbegin(), roots.rend());
+  while (!stack.empty()) {
+    const int f = stack.back();
+    stack.pop_back();
     order.push_back(f);
-    for (int c : children[f]) visit(c);
-  };
-  for (int r : roots) visit(r);
+    stack.insert(stack.end(), children[f].rbegin(), children[f].rend());
+  }
 
   // Fold constant transforms: every frame becomes (joint body, constant placement in it).
   std::vector<int> newIndex(nf);
@@ -508,6 +593,7 @@ Model ModelBuilder::finalize() && {
     if (k.holonomic()) ++model.nholonomic_;
     model.constraints_.push_back(k);
   }
+  model.topology_ = describeTopology(model);
   return model;
 }
 

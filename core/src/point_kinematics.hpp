@@ -16,17 +16,19 @@ struct PointKin {  ///< world position, velocity, acceleration of a body point
 };
 
 inline Vector3d pointPosition(const Data& data, const BodyPoint& bp) {
+  auto& ws = detail::workspace(data);
   if (bp.joint == kWorld) return bp.local;
-  return data.jointP[bp.joint] + data.jointR[bp.joint] * bp.local;
+  return ws.jointP[bp.joint] + ws.jointR[bp.joint] * bp.local;
 }
 
 /// ṗ = v + ω × p, p̈ = a_v + α × p + ω × ṗ (a: spatial acceleration).
 inline PointKin pointKin(const Data& data, const BodyPoint& bp) {
+  auto& ws = detail::workspace(data);
   PointKin k;
   k.p = pointPosition(data, bp);
   if (bp.joint == kWorld) return k;
-  const Vector6d& v = data.v[bp.joint];
-  const Vector6d& a = data.a[bp.joint];
+  const Vector6d& v = ws.v[bp.joint];
+  const Vector6d& a = ws.a[bp.joint];
   k.v = pointVelocity(v, k.p);
   k.a = lin(a) + ang(a).cross(k.p) + ang(v).cross(k.v);
   return k;
@@ -34,15 +36,16 @@ inline PointKin pointKin(const Data& data, const BodyPoint& bp) {
 
 /// A unit-free direction n = R d fixed on a body: n, ṅ = ω × n, n̈ = α × n + ω × ṅ.
 inline PointKin directionKin(const Data& data, int joint, const Vector3d& local) {
+  auto& ws = detail::workspace(data);
   PointKin k;
   if (joint == kWorld) {
     k.p = local;
     return k;
   }
-  k.p = data.jointR[joint] * local;
-  const Vector3d w = ang(data.v[joint]);
+  k.p = ws.jointR[joint] * local;
+  const Vector3d w = ang(ws.v[joint]);
   k.v = w.cross(k.p);
-  k.a = ang(data.a[joint]).cross(k.p) + w.cross(k.v);
+  k.a = ang(ws.a[joint]).cross(k.p) + w.cross(k.v);
   return k;
 }
 
@@ -62,14 +65,15 @@ struct Direction {
 };
 
 inline Direction makeDirection(const Model& model, const Data& data, int k, bool velocity) {
+  auto& ws = detail::workspace(data);
   Direction d;
   d.k = k;
   d.end = model.joints()[k].subtreeEnd;
   d.velocity = velocity;
-  d.Sk = data.S[k];
+  d.Sk = ws.S[k];
   const int p = model.joints()[k].parent;
-  d.vP = p == kWorld ? Vector6d::Zero() : data.v[p];
-  d.aP = p == kWorld ? Vector6d::Zero() : data.a[p];
+  d.vP = p == kWorld ? Vector6d::Zero() : ws.v[p];
+  d.aP = p == kWorld ? Vector6d::Zero() : ws.a[p];
   d.w = crossMotion(d.Sk, d.vP);
   return d;
 }
@@ -78,13 +82,14 @@ inline Direction makeDirection(const Model& model, const Data& data, int k, bool
 ///  ∂/∂q_k:  δθ = S_k, δv = S_k × v − w, δa = S_k × (a − a_p) − w × (v − v_p);
 ///  ∂/∂q̇_k:  δθ = 0,   δv = S_k,         δa = S_k × v − 2 w.
 inline BodyTangent bodyTangent(const Data& data, const Direction& d, int joint) {
+  auto& ws = detail::workspace(data);
   BodyTangent t;
   if (!d.moves(joint)) return t;
-  const Vector6d& v = data.v[joint];
+  const Vector6d& v = ws.v[joint];
   if (!d.velocity) {
     t.theta = d.Sk;
     t.v = crossMotion(d.Sk, v) - d.w;
-    t.a = crossMotion(d.Sk, data.a[joint] - d.aP) - crossMotion(d.w, v - d.vP);
+    t.a = crossMotion(d.Sk, ws.a[joint] - d.aP) - crossMotion(d.w, v - d.vP);
   } else {
     t.v = d.Sk;
     t.a = crossMotion(d.Sk, v) - 2.0 * d.w;
@@ -94,10 +99,11 @@ inline BodyTangent bodyTangent(const Data& data, const Direction& d, int joint) 
 
 /// Tangent of pointKin.
 inline PointKin pointTangent(const Data& data, const Direction& dir, int joint, const PointKin& k) {
+  auto& ws = detail::workspace(data);
   PointKin d;
   if (!dir.moves(joint)) return d;
   const BodyTangent t = bodyTangent(data, dir, joint);
-  const Vector3d w = ang(data.v[joint]), al = ang(data.a[joint]);
+  const Vector3d w = ang(ws.v[joint]), al = ang(ws.a[joint]);
   d.p = lin(t.theta) + ang(t.theta).cross(k.p);
   d.v = lin(t.v) + ang(t.v).cross(k.p) + w.cross(d.p);
   d.a = lin(t.a) + ang(t.a).cross(k.p) + al.cross(d.p) + ang(t.v).cross(k.v) + w.cross(d.v);
@@ -112,10 +118,11 @@ inline Vector3d pointDisplacement(const Direction& dir, int joint, const Vector3
 
 /// Tangent of directionKin.
 inline PointKin directionTangent(const Data& data, const Direction& dir, int joint, const PointKin& k) {
+  auto& ws = detail::workspace(data);
   PointKin d;
   if (!dir.moves(joint)) return d;
   const BodyTangent t = bodyTangent(data, dir, joint);
-  const Vector3d w = ang(data.v[joint]), al = ang(data.a[joint]);
+  const Vector3d w = ang(ws.v[joint]), al = ang(ws.a[joint]);
   d.p = ang(t.theta).cross(k.p);
   d.v = ang(t.v).cross(k.p) + w.cross(d.p);
   d.a = ang(t.a).cross(k.p) + al.cross(d.p) + ang(t.v).cross(k.v) + w.cross(d.v);
@@ -128,8 +135,9 @@ inline double springTensionPerLengthDerivative(const LinearSpring& s, double L) 
 
 /// World wrench of a body wrench w = [f; τ] given in the frame's axes at its origin.
 inline Vector6d bodyWrenchWorld(const Data& data, const BodyWrench& bw, const Vector6d& w) {
-  const Eigen::Matrix3d R = data.jointR[bw.joint] * bw.R;
-  const Vector3d p = data.jointP[bw.joint] + data.jointR[bw.joint] * bw.p;
+  auto& ws = detail::workspace(data);
+  const Eigen::Matrix3d R = ws.jointR[bw.joint] * bw.R;
+  const Vector3d p = ws.jointP[bw.joint] + ws.jointR[bw.joint] * bw.p;
   const Vector3d f = R * w.head<3>();
   return make(f, p.cross(f) + R * w.tail<3>());
 }
@@ -140,15 +148,17 @@ inline Vector6d bodyWrenchWorld(const Data& data, const BodyWrench& bw, const Ve
 template <class Row>
 inline void addPointGradient(const Model& model, const Data& data, int joint, const Vector3d& p,
                              const Vector3d& g, Row&& row, Eigen::VectorXd* bound = nullptr, double gScale = 0.0) {
+  auto& ws = detail::workspace(data);
   for (int j = joint; j != kWorld; j = model.joints()[j].parent) {
-    const Vector3d dp = lin(data.S[j]) + ang(data.S[j]).cross(p);
+    const Vector3d dp = lin(ws.S[j]) + ang(ws.S[j]).cross(p);
     row(j) += g.dot(dp);
     if (bound) (*bound)[j] += gScale * dp.norm();
   }
 }
 
 inline void addBodyWrench(Data& data, int joint, const Vector6d& w) {
-  if (joint != kWorld) data.fext[joint] += w;
+  auto& ws = detail::workspace(data);
+  if (joint != kWorld) ws.fext[joint] += w;
 }
 
 /// Tangent of a force f applied at a moving point p: [δf; δp × f + p × δf].

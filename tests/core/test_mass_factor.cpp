@@ -12,6 +12,9 @@
 
 #include <trellis/core.hpp>
 
+// The workspace is private to the library; these tests read its factor (core/src on the path).
+#include "data_workspace.hpp"
+
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
@@ -49,7 +52,7 @@ TEST_CASE("Mass factor: M⁻¹, q̈ and B on chains across the kernels' switches
 
     REQUIRE(computeLinearization(model, data, s.q, s.dq, s.u).ok());
     // The explicit inverse the linearization forms, and B = M⁻¹ ∂Q/∂u.
-    TRELLIS_CHECK_MATRIX(Minv, data.massInverse, tol, Scale::kMatrix);
+    TRELLIS_CHECK_MATRIX(Minv, detail::workspace(data).massInverse, tol, Scale::kMatrix);
     const Eigen::MatrixXd Bq = data.inputMatrix;
     TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(ldlt.solve(Bq)), Eigen::MatrixXd(data.B.bottomRows(n)), tol,
                          Scale::kColumn);
@@ -112,7 +115,7 @@ TEST_CASE("Articulated factor: q̈ and M⁻¹ equal dense solves and balance ene
     const State s = nc > 0 ? randomConsistentState(model, rng) : randomState(model, rng, 0.8, 1.0, 0.5);
     Data data(model);
     REQUIRE(computeDynamics(model, data, s.q, s.dq, s.u).ok());
-    CHECK(data.articulatedCurrent == c.articulated);
+    CHECK(detail::workspace(data).articulatedCurrent == c.articulated);
     const Eigen::MatrixXd M = data.M;
     const Eigen::VectorXd qdd = data.qdd;
     Eigen::MatrixXd K = Eigen::MatrixXd::Zero(n + nc, n + nc);
@@ -129,9 +132,9 @@ TEST_CASE("Articulated factor: q̈ and M⁻¹ equal dense solves and balance ene
     TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(ref.head(n)), Eigen::MatrixXd(qdd), tol, Scale::kMatrix);
 
     REQUIRE(computeLinearization(model, data, s.q, s.dq, s.u).ok());
-    CHECK(data.articulatedCurrent == c.articulated);
+    CHECK(detail::workspace(data).articulatedCurrent == c.articulated);
     const Eigen::MatrixXd Minv = M.ldlt().solve(Eigen::MatrixXd::Identity(n, n));
-    TRELLIS_CHECK_MATRIX(Minv, data.massInverse, tol, Scale::kMatrix);
+    TRELLIS_CHECK_MATRIX(Minv, detail::workspace(data).massInverse, tol, Scale::kMatrix);
     TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(qdd), Eigen::MatrixXd(data.qdd), 0.0, Scale::kAbsolute);
 
     if (nc > 0) continue;  // the constraint forces do work on a path off the manifold

@@ -5,7 +5,10 @@
 
 #include <trellis/core.hpp>
 
+#include <pthread.h>
+
 #include <functional>
+#include <optional>
 #include <limits>
 #include <string>
 
@@ -125,4 +128,100 @@ TEST_CASE("Model builder: invalid descriptions throw ModelError naming the offen
     });
     CHECK_THAT(msg, Contains("ghost"));
   }
+}
+
+namespace {
+
+/// Runs f on a thread whose stack is `bytes` long (pthread), so that a recursion per frame shows
+/// as a crash here rather than passing on the main thread's 8 MiB.
+void runOnSmallStack(std::size_t bytes, const std::function<void()>& f) {
+  pthread_attr_t attr;
+  REQUIRE(pthread_attr_init(&attr) == 0);
+  REQUIRE(pthread_attr_setstacksize(&attr, bytes) == 0);
+  pthread_t thread;
+  auto body = [](void* arg) -> void* {
+    (*static_cast<const std::function<void()>*>(arg))();
+    return nullptr;
+  };
+  REQUIRE(pthread_create(&thread, &attr, body, const_cast<std::function<void()>*>(&f)) == 0);
+  REQUIRE(pthread_join(thread, nullptr) == 0);
+  pthread_attr_destroy(&attr);
+}
+
+}  // namespace
+
+TEST_CASE("Model builder: a chain at the 20,000-frame limit builds on a 512 KiB stack",
+          "[model][builder][limits]") {
+  // Issue 24: the builder walked the frame tree recursively and overflowed small stacks (Python
+  // threads, ASan) on a 19,999-frame chain. 20 joints (rz every 1000 frames) and 19,980 constant
+  // links of 1 mm: folded to 20 joints, the tip hangs 19.98 m below the origin at q = 0.
+  const int nf = ModelBuilder::kMaxFrames;
+  std::string error;
+  int nq = -1, nframes = -1;
+  double tipY = 0.0;
+  bool ok = false;
+  std::vector<int> parents;
+  runOnSmallStack(512 * 1024, [&] {
+    try {
+      ModelBuilder b;
+      std::string parent = "world";
+      for (int k = 0; k < nf; ++k) {
+        const std::string name = "f" + std::to_string(k);
+        const Transform t = k % 1000 == 0 ? Transform::rz("q" + std::to_string(k / 1000)) : Transform::ty(-1e-3);
+        b.addFrame(name, parent, t, k + 1 == nf ? std::optional<Mass>(Mass{1.0, Eigen::Matrix3d::Identity()}) : std::nullopt);
+        parent = name;
+      }
+      b.addGravity({0.0, -9.81, 0.0});
+      const Model model = std::move(b).finalize();
+      nq = model.nq();
+      nframes = model.nframes();
+      parents = model.topology().parent;
+      Data data(model);
+      const Eigen::VectorXd q = Eigen::VectorXd::Zero(model.nq());
+      ok = computeDynamics(model, data, q, q, Eigen::VectorXd::Zero(model.nu())).ok();
+      computeKinematics(model, data, q, q);
+      tipY = data.framePose[static_cast<size_t>(model.frameIndex("f" + std::to_string(nf - 1)))].translation().y();
+    } catch (const std::exception& e) {
+      error = e.what();
+    }
+  });
+  REQUIRE(error.empty());
+  CHECK(nframes == nf);
+  REQUIRE(nq == 20);
+  for (int i = 0; i < nq; ++i) CHECK(parents[static_cast<size_t>(i)] == i - 1);
+  CHECK(ok);
+  // 19,980 additions of 1e-3: rounding below 1e-12 relative per step.
+  CHECK(tipY == Approx(-19.98).epsilon(1e-10));
+}
+
+TEST_CASE("Model builder: the topology is computed once, at finalize", "[model][builder][topology]") {
+  // Two trees: a (b (c), d) and e (f). Pre-order: a=0 b=1 c=2 d=3 e=4 f=5.
+  ModelBuilder b;
+  const Mass unit{1.0, Eigen::Matrix3d::Identity()};
+  b.addFrame("a", "world", Transform::rz("a"), unit);
+  b.addFrame("b", "a", Transform::rx("b"), unit);
+  b.addFrame("c", "b", Transform::ry("c"), unit);
+  b.addFrame("d", "a", Transform::tx("d"), unit);
+  b.addFrame("e", "world", Transform::rz("e"), unit);
+  b.addFrame("f", "e", Transform::rz("f"), unit);
+  b.addFrame("tip_d", "d", Transform::tx(0.5));
+  b.addFrame("tip_f", "f", Transform::tx(0.5));
+  b.addPointConstraint("tip_d", "world", 0);  // touches the first tree only
+  b.addPointConstraint("tip_f", "world", 1);  // the second only
+  b.addConfigForce("c", "uc");
+  b.addTendon({"tip_d", "tip_f"}, "ut");
+  const Model model = std::move(b).finalize();
+  const ModelTopology& t = model.topology();
+  CHECK(t.parent == std::vector<int>{kWorld, 0, 1, 0, kWorld, 4});
+  CHECK(t.runStart == std::vector<int>{0, 0, 0, 3, 4, 4});
+  CHECK(t.treeRoot == std::vector<int>{0, 0, 0, 0, 4, 4});
+  CHECK(t.blockStart == std::vector<int>{0, 4, 6});
+  CHECK(t.rowLo == std::vector<int>{0, 4});
+  CHECK(t.rowHi == std::vector<int>{4, 6});
+  CHECK(t.rowGroupStart == std::vector<int>{0, 1, 2});
+  CHECK(t.unitInputConfig == std::vector<int>{2, -1});  // uc acts on c alone; the tendon does not
+  CHECK(t.tendonFirst == std::vector<int>{0, 2});
+  CHECK(t.tendonPointJoint == std::vector<int>{3, 5});
+  CHECK(t.tendonSegmentPoint == std::vector<int>{0});
+  for (int i = 0; i < model.nq(); ++i) CHECK(t.parent[static_cast<size_t>(i)] == model.joints()[static_cast<size_t>(i)].parent);
 }

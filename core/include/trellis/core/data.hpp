@@ -1,16 +1,18 @@
-// trellis/core/data.hpp — the preallocated workspace that goes beside a Model.
+// trellis/core/data.hpp — the results of the algorithms, beside a Model.
 //
-// Every buffer an algorithm writes is sized here, once; after the first evaluation no algorithm
-// allocates (tests/core/test_no_allocation.cpp proves it with Eigen's malloc guard). One Data per
-// thread. Results are plain public members, documented with their dimensions.
+// A Data holds what a user reads after an evaluation (poses, M, q̈, λ, the linearization, the
+// status), each documented with its dimensions; the scratch every algorithm writes lives in a
+// private workspace (core/src/data_workspace.hpp) that the Data owns. Everything is sized once, at
+// construction, from the Model; after the first evaluation no algorithm allocates
+// (tests/core/no_malloc proves it with Eigen's malloc guard). One Data per thread, used only with
+// the Model it was built for (the algorithms check the sizes they rely on).
+// n = model.nq(), m = model.nu(), nc = model.nc(), nf = model.nframes().
 #pragma once
 
 #include "trellis/core/model.hpp"
 
-#include <Eigen/Cholesky>
-#include <Eigen/Eigenvalues>
-#include <Eigen/QR>
-
+#include <memory>
+#include <string>
 #include <vector>
 
 namespace trellis {
@@ -48,14 +50,27 @@ struct Energy {
   double total() const { return kinetic + potential; }
 };
 
+class Data;
+
+namespace detail {
+struct DataWorkspace;  // core/src/data_workspace.hpp: the algorithms' scratch
+inline DataWorkspace& workspace(Data& data);  // defined in data_workspace.hpp
+inline const DataWorkspace& workspace(const Data& data);
+}  // namespace detail
+
 class Data {
  public:
+  /// Sizes every result and every scratch buffer for `model` (allocates; the algorithms do not).
   explicit Data(const Model& model);
+  Data(const Data& other);
+  Data(Data&& other) noexcept;
+  Data& operator=(const Data& other);
+  Data& operator=(Data&& other) noexcept;
+  ~Data();
 
-  // ---- Results --------------------------------------------------------------------------------
-  /// World pose of every frame (model.frames() order).
+  /// World pose of every frame (nf, model.frames() order): updateFramePoses, computeDynamics.
   std::vector<Eigen::Isometry3d> framePose;
-  /// Body velocity of every frame, [v_b; ω_b] in the frame's own axes.
+  /// Body velocity of every frame (nf), [v_b; ω_b] in the frame's own axes: updateFrameVelocities.
   std::vector<Vector6d> frameVelocity;
   Eigen::MatrixXd M;                  ///< n×n mass matrix ∂²L/∂q̇∂q̇
   Eigen::VectorXd bias;               ///< n: inverse dynamics at q̈ = 0 minus all forces, ID(q,q̇,0) − Q
@@ -67,91 +82,22 @@ class Data {
   Eigen::MatrixXd inputMatrix;        ///< n×m: ∂Q/∂u
   Eigen::MatrixXd A;                  ///< 2n×2n: ∂ẋ/∂x, x = [q; q̇]
   Eigen::MatrixXd B;                  ///< 2n×m:  ∂ẋ/∂u
-  Eigen::MatrixXd dqdd_dq, dqdd_ddq, dqdd_du;   ///< blocks of A and B (n×n, n×n, n×m)
+  Eigen::MatrixXd dqdd_dq;            ///< n×n: ∂q̈/∂q (the lower-left block of A)
+  Eigen::MatrixXd dqdd_ddq;           ///< n×n: ∂q̈/∂q̇ (the lower-right block of A)
+  Eigen::MatrixXd dqdd_du;            ///< n×m: ∂q̈/∂u (the lower block of B)
   Eigen::MatrixXd dlambda_dx;         ///< nc×(2n+m): ∂λ/∂[q; q̇; u]
   Eigen::MatrixXd constraintVelocityJacobian;  ///< nc×n: ∂(A q̇)/∂q
-  /// Orthonormal basis (2n×d) of the tangent space of {h(q) = 0, A(q) q̇ = 0} at x, and the
-  /// linearization expressed on it: Ar = Tᵀ A T (d×d), Br = Tᵀ B (d×m).
-  Eigen::MatrixXd tangentBasis, reducedA, reducedB;
-  DynamicsStatus status;
-
-  // ---- Workspace (algorithms only) ------------------------------------------------------------
-  std::vector<Eigen::Matrix3d> jointR;   ///< world rotation of each joint body
-  std::vector<Eigen::Vector3d> jointP;   ///< world position of each joint body origin
-  std::vector<Vector6d> S;               ///< joint motion subspace (world spatial twist)
-  std::vector<Vector6d> v, a;            ///< body spatial velocity, acceleration (no gravity)
-  std::vector<Vector6d> f;               ///< per body: I(a − g) + v ×* I v − F_ext, then subtree sum
-  std::vector<Vector6d> fext;            ///< external wrench on each body
-  // world-frame inertia of each body: m, h = m c, I about the world origin
-  std::vector<double> wm;
-  std::vector<Eigen::Vector3d> wh;
-  std::vector<Eigen::Matrix3d> wI;
-  std::vector<Eigen::Vector3d> ch;       ///< composite (subtree) inertia for the mass matrix
-  std::vector<double> cm;
-  std::vector<Eigen::Matrix3d> cI;
-  std::vector<Vector6d> Iv, Ia;          ///< I v and I (a − g) per body
-  // Subtree sums for the linearization: inertial wrench Σ I(a − g) + v ×* I v, momentum Σ I v,
-  // and the 3×3 block B of D = Σ (I crm(v) − crf(v) I) (linearization.cpp: applyD), which make
-  // each tangent O(1) per joint pair.
-  std::vector<Vector6d> inertialForce, compositeMomentum;
-  std::vector<Eigen::Matrix3d> compositeB;
-  // Per-joint vectors that reduce each (direction k, joint j) pair of the linearization to one
-  // dot product (linearization.cpp): column j = [α; β; γ] with α = S ×* F_ext, β = Ic S,
-  // γ = D S + S ×* H.
-  Eigen::Matrix<double, 18, Eigen::Dynamic> tangentABG;
-  std::vector<Vector6d> tangentWrench;   ///< per body: external wrench tangents of one direction
-  std::vector<int> treeRoot;             ///< n: the top-level joint of i's tree
-  std::vector<int> tendonFirst;          ///< per tendon: offset of its path in tendonPoint, then the total
-  std::vector<int> tendonJointLo, tendonJointHi;  ///< per tendon: lowest and highest joint on its path
-  std::vector<Eigen::Vector3d> tendonPoint;       ///< world positions of every tendon path point
-  std::vector<int> tendonPointJoint;              ///< joint body of every tendon path point
-  /// Per tendon: offset into tendonSegmentPoint, then the total. tendonSegmentPoint lists, by the
-  /// index in tendonPoint of its first end, each segment whose ends lie on different bodies (a
-  /// segment within one body exerts equal and opposite forces along one line: no net wrench).
-  std::vector<int> tendonSegmentStart, tendonSegmentPoint;
-  Eigen::VectorXd u;                     ///< inputs of the current evaluation
-  Eigen::VectorXd qddZero;
-  Eigen::MatrixXd rhsX;                  ///< n×(2n+m): −∂r/∂[x; u]
-  Eigen::MatrixXd crhsX;                 ///< nc×(2n+m): −∂c/∂[x; u]
-  // The joint tree's structure, fixed at construction (core/src/mass_factor.hpp):
-  std::vector<int> treeParent;           ///< n: parent joint (kWorld for a root)
-  std::vector<int> runStart;             ///< n: first index of the unbranched run of ancestors ending at i
-  std::vector<int> blockStart;           ///< starts of the top-level trees (M is block diagonal over them), then n
-  std::vector<int> rowLo, rowHi;         ///< nc: the coordinates row r of A can touch (whole blocks)
-  std::vector<int> schurGroupStart;      ///< starts of the groups of rows that share no block, then nc
-  std::vector<int> unitInputConfig;      ///< m: c when input k only adds unitInputGain[k]·u_k to Q_c, else −1
-  std::vector<double> unitInputGain;
-  Eigen::MatrixXd massFactor;            ///< n×n: M = Lᵀ D L, D on the diagonal, L(i, j) at (j, i)
-  Eigen::VectorXd massPivotInvSqrt;      ///< n: D^(−1/2)
-  Eigen::MatrixXd massInverseFactor;     ///< n×n: rows of L⁻¹ D^(−1/2), stored as columns
-  Eigen::MatrixXd massInverse;           ///< n×n, block diagonal M⁻¹ when many right-hand sides are solved
-  bool massInverseCurrent = false;       ///< massInverse belongs to the current factor
-  // The factor in spatial form (forward dynamics without constraints; mass_factor.hpp):
-  std::vector<Vector6d> articulatedU, articulatedWork;          ///< n: U_i = IA_i S_i; solve workspace
-  Eigen::VectorXd articulatedPivot;                             ///< n: D_i = S_iᵀ IA_i S_i
-  Eigen::Matrix<double, 6, Eigen::Dynamic> articulatedColumns;  ///< 6×n workspace of invertMass
-  bool articulatedCurrent = false;                              ///< the articulated factor is the current one
-  Eigen::MatrixXd massInverseAt;         ///< n×nc: M⁻¹ Aᵀ
-  Eigen::MatrixXd schur;                 ///< nc×nc: D A M⁻¹ Aᵀ D, rows normalized by D
-  Eigen::VectorXd constraintScale;       ///< nc: largest possible ‖A_r‖ (see factorizeKkt)
-  Eigen::VectorXd schurScale;            ///< nc: D = 1 / constraintScale
-  Eigen::LLT<Eigen::MatrixXd> schurLLT;
-  Eigen::VectorXd correctionWork;        ///< 2 nc n + nc² + nc: one row group's operands (correctForConstraints)
-  Eigen::LDLT<Eigen::MatrixXd> schurLDLT;  ///< pivoted, for rank-deficient Ŝ
-  Eigen::VectorXd schurPivotInverse;     ///< 1/D_i of schurLDLT, 0 for the dropped pivots
-  Eigen::MatrixXd schurNullBasis;        ///< nc×nc, first schurNullity columns: null space of Ŝ
-  int schurNullity = 0;
-  bool schurUsesPinv = false;
-  Eigen::VectorXd tmpN, tmpC;
-  Eigen::MatrixXd tmpNX, tmpCX;
-  Eigen::MatrixXd constraintStateJacobian;  ///< rows of the map Φ(x) = [h(q); A q̇]
-  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> basisQR;
-  Eigen::MatrixXd basisQ;
-  Eigen::VectorXd basisWorkspace;
-  Eigen::MatrixXd basisWorkMatrix;       ///< 2n×2n scratch for A T
+  /// 2n×d: orthonormal basis T of the tangent space of {h(q) = 0, A(q) q̇ = 0} at x
+  /// (computeTangentBasis; d = 2n − rank, identity without constraints).
+  Eigen::MatrixXd tangentBasis;
+  Eigen::MatrixXd reducedA;           ///< d×d: Tᵀ A T, the linearization on the tangent space
+  Eigen::MatrixXd reducedB;           ///< d×m: Tᵀ B
+  DynamicsStatus status;              ///< outcome of the last computeDynamics / computeLinearization
 
  private:
-  void describeTree(const Model& model);  ///< fills the tree structure above
+  friend detail::DataWorkspace& detail::workspace(Data& data);
+  friend const detail::DataWorkspace& detail::workspace(const Data& data);
+  std::unique_ptr<detail::DataWorkspace> work_;  ///< never null
 };
 
 }  // namespace trellis

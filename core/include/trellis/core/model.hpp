@@ -159,6 +159,38 @@ struct Constraint {
   bool holonomic() const { return type != ConstraintType::kKnifeEdge; }
 };
 
+/// The structure of the joint tree and of the elements that refer to it: fixed by the Model,
+/// computed once by ModelBuilder::finalize (like Pinocchio's parents / supports / subtrees), read by
+/// the algorithms. n = nq, nc = constraint rows. Blocks are the top-level trees (joints with
+/// parent kWorld and their subtrees); M is block diagonal over them.
+struct ModelTopology {
+  std::vector<int> parent;      ///< n: parent joint of i (kWorld for a root); = joints()[i].parent
+  /// n: first index of the unbranched run of ancestors that ends at i (in pre-order an unbranched
+  /// stretch of the tree is a run of consecutive indices [runStart[i], i]).
+  std::vector<int> runStart;
+  std::vector<int> treeRoot;    ///< n: the top-level joint of i's tree (the start of its block)
+  std::vector<int> blockStart;  ///< starts of the blocks in increasing order, then n (size blocks + 1)
+  /// nc: the coordinates [rowLo[r], rowHi[r]) that row r of A can touch (the whole blocks of the
+  /// constraint's two bodies; both 0 for a row that touches no coordinate).
+  std::vector<int> rowLo, rowHi;
+  /// Starts of the groups of consecutive constraint rows that share no block with another group,
+  /// then nc (just {0} when nc = 0): A M⁻¹ Aᵀ is block diagonal over the groups.
+  std::vector<int> rowGroupStart;
+  /// m: the coordinate c when input k only adds unitInputGain[k]·u_k to Q_c (config forces alone),
+  /// else −1; then column k of ∂q̈/∂u is a multiple of a column of M⁻¹.
+  std::vector<int> unitInputConfig;
+  std::vector<double> unitInputGain;  ///< m: see unitInputConfig
+  /// Tendon t's path points are [tendonFirst[t], tendonFirst[t + 1]) in the flat list of all
+  /// path points (size tendons + 1; the last entry is the number of points).
+  std::vector<int> tendonFirst;
+  std::vector<int> tendonJointLo, tendonJointHi;  ///< per tendon: lowest and highest joint on its path (n, −1 if none)
+  std::vector<int> tendonPointJoint;  ///< per path point (flat list): the joint body it is fixed to
+  /// Tendon t's segments with ends on different bodies are tendonSegmentPoint[tendonSegmentStart[t]
+  /// .. tendonSegmentStart[t + 1]), each named by the flat index of its first end (a segment within
+  /// one body exerts equal and opposite forces along one line: no net wrench).
+  std::vector<int> tendonSegmentStart, tendonSegmentPoint;
+};
+
 /// The validated, immutable system. Built only by ModelBuilder::finalize() or loadScene().
 class Model {
  public:
@@ -187,6 +219,8 @@ class Model {
   const std::vector<BodyWrench>& bodyWrenches() const { return bodyWrenches_; }
   const std::vector<Tendon>& tendons() const { return tendons_; }
   const std::vector<Constraint>& constraints() const { return constraints_; }
+  /// The tree's structure and the elements' index maps, computed once at finalize.
+  const ModelTopology& topology() const { return topology_; }
 
  private:
   friend class ModelBuilder;
@@ -203,6 +237,7 @@ class Model {
   std::vector<Tendon> tendons_;
   std::vector<Constraint> constraints_;
   int nholonomic_ = 0;
+  ModelTopology topology_;
 };
 
 }  // namespace trellis
