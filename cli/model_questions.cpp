@@ -109,16 +109,7 @@ OutputJson stateObject(const Model& model, const Eigen::VectorXd& q, const Eigen
   return out;
 }
 
-std::string dynamicsStatusName(DynamicsStatus::Code code) {
-  switch (code) {
-    case DynamicsStatus::Code::kOk: return "ok";
-    case DynamicsStatus::Code::kRedundantConstraints: return "redundant_constraints";
-    case DynamicsStatus::Code::kSingularMassMatrix: return "singular_mass_matrix";
-    case DynamicsStatus::Code::kSingularConstraints: return "singular_constraints";
-    case DynamicsStatus::Code::kNonFinite: return "non_finite";
-  }
-  return "unknown";
-}
+std::string dynamicsStatusName(DynamicsStatus::Code code) { return toString(code); }
 
 void requireLinearization(const DynamicsStatus& status, const Data& data, const std::string& where) {
   if (!status.ok()) {

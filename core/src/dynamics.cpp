@@ -5,6 +5,7 @@
 #include "mass_factor.hpp"
 #include "constraint_kinds.hpp"
 #include "force_elements.hpp"
+#include "trellis/core/detail/report_json.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -12,6 +13,21 @@
 #include <string>
 
 namespace trellis {
+
+std::string DynamicsStatus::describe() const {
+  std::string line = Status<DynamicsCode>::describe();
+  if (constraintRank > 0 || !ok())
+    line += " (constraint rank " + std::to_string(constraintRank) + ", conditioning " +
+            formatStatusNumber(constraintConditioning) + ")";
+  return line;
+}
+
+std::string DynamicsStatus::json() const {
+  detail::ReportJson j = detail::statusJson(static_cast<const Status<DynamicsCode>&>(*this));
+  j["constraint_rank"] = constraintRank;
+  j["constraint_conditioning"] = detail::toJson(constraintConditioning);
+  return j.dump();
+}
 namespace detail {
 
 using namespace spatial;

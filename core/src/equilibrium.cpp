@@ -3,6 +3,7 @@
 
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/linearization.hpp"
+#include "trellis/core/detail/report_json.hpp"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
@@ -14,13 +15,29 @@
 
 namespace trellis {
 
-const char* toString(EquilibriumStatus status) {
-  switch (status) {
-    case EquilibriumStatus::kOk: return "ok";
-    case EquilibriumStatus::kNotConverged: return "not_converged";
-    case EquilibriumStatus::kDynamicsFailure: return "dynamics_failure";
-  }
-  return "unknown";
+std::string EquilibriumResult::describe() const {
+  Status<EquilibriumStatus> s;
+  s.set(status, message);
+  return s.describe() + " (" + std::to_string(iterations) + " iterations, |qdd| " +
+         formatStatusNumber(accelerationResidual) + ", |h| " + formatStatusNumber(constraintResidual) +
+         ", rank " + std::to_string(jacobianRank) + (isolated ? "" : ", not isolated") +
+         ", max Re(eig) " + formatStatusNumber(maxRealEigenvalue) + ")";
+}
+
+std::string EquilibriumResult::json() const {
+  Status<EquilibriumStatus> s;
+  s.set(status, message);
+  detail::ReportJson j = detail::statusJson(s);
+  j["iterations"] = iterations;
+  j["qdd_residual"] = detail::toJson(accelerationResidual);
+  j["h_residual"] = detail::toJson(constraintResidual);
+  j["jacobian_rank"] = jacobianRank;
+  j["isolated"] = isolated;
+  j["max_real_eigenvalue"] = detail::toJson(maxRealEigenvalue);
+  j["q"] = detail::toJson(q);
+  j["u"] = detail::toJson(u);
+  j["lambda"] = detail::toJson(lambda);
+  return j.dump();
 }
 
 EquilibriumResult findEquilibrium(const Model& model, Data& data, const Eigen::VectorXd& q0,

@@ -260,6 +260,7 @@ GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) 
   double rate = 0.0;
   bool haveMetadata = false;
   std::string interpolation;
+  GainInterpolation interpolationRule = GainInterpolation::kLinear;
   std::vector<std::string> names;
   const detail::NumericCsv csv = detail::readNumericCsv(
       in, source, [&](const std::vector<std::string>& comments, const std::vector<std::string>& header, int lineNo) {
@@ -278,9 +279,14 @@ GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) 
           }
         }
         const std::string hat = source + ": header (line " + std::to_string(lineNo) + ")";
-        if (!interpolation.empty() && interpolation != "linear" && interpolation != "cubic") {
-          throw TrajectoryError(source + ": the metadata line before " + "line " + std::to_string(lineNo) +
-                                ": interpolation=" + interpolation + " (expected linear or cubic)");
+        if (!interpolation.empty()) {
+          try {
+            interpolationRule = parseEnum<GainInterpolation>(interpolation, "interpolation");
+          } catch (const std::invalid_argument&) {
+            throw TrajectoryError(source + ": the metadata line before " + "line " + std::to_string(lineNo) +
+                                  ": interpolation=" + interpolation + " (expected one of " +
+                                  enumNameList<GainInterpolation>() + ")");
+          }
         }
         if (header[0] != "t") {
           throw TrajectoryError(hat + ", column 1: must be 't', got '" + header[0] + "'");
@@ -345,7 +351,7 @@ GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) 
       std::move(gains));
   schedule.sampleRate_ = rate;
   schedule.columnNames_ = std::move(names);
-  if (interpolation == "cubic") schedule.setInterpolation(GainInterpolation::kCubic);
+  if (interpolationRule == GainInterpolation::kCubic) schedule.setInterpolation(interpolationRule);
   return schedule;
 }
 

@@ -2,6 +2,7 @@
 #include "trellis/core/inverse_dynamics.hpp"
 
 #include "trellis/core/dynamics.hpp"
+#include "trellis/core/detail/report_json.hpp"
 
 #include <Eigen/QR>
 
@@ -13,15 +14,27 @@
 
 namespace trellis {
 
-const char* toString(InverseDynamicsStatus status) {
-  switch (status) {
-    case InverseDynamicsStatus::kOk: return "ok";
-    case InverseDynamicsStatus::kUnreachable: return "unreachable";
-    case InverseDynamicsStatus::kInadmissibleAcceleration: return "inadmissible_acceleration";
-    case InverseDynamicsStatus::kInputBounds: return "input_bounds";
-    case InverseDynamicsStatus::kNonFinite: return "non_finite";
-  }
-  return "unknown";
+std::string InverseDynamicsResult::describe() const {
+  Status<InverseDynamicsStatus> s;
+  s.set(status, message);
+  return s.describe() + " (residual " + formatStatusNumber(residualNorm) + ", constraint residual " +
+         formatStatusNumber(constraintResidual) + ", rank " + std::to_string(rank) +
+         (unique ? "" : ", not unique") + ")";
+}
+
+std::string InverseDynamicsResult::json() const {
+  Status<InverseDynamicsStatus> s;
+  s.set(status, message);
+  detail::ReportJson j = detail::statusJson(s);
+  j["residual"] = detail::toJson(residualNorm);
+  j["constraint_residual"] = detail::toJson(constraintResidual);
+  j["rank"] = rank;
+  j["unique"] = unique;
+  j["bound_iterations"] = boundIterations;
+  j["u"] = detail::toJson(u);
+  j["lambda"] = detail::toJson(lambda);
+  j["bound_excess"] = detail::toJson(boundExcess);
+  return j.dump();
 }
 
 InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, const Eigen::VectorXd& qIn,

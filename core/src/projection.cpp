@@ -2,6 +2,7 @@
 #include "trellis/core/projection.hpp"
 
 #include "trellis/core/dynamics.hpp"
+#include "trellis/core/detail/report_json.hpp"
 
 #include <Eigen/QR>
 
@@ -52,13 +53,29 @@ std::string format(double x) {
 
 }  // namespace
 
-const char* toString(ProjectionStatus status) {
-  switch (status) {
-    case ProjectionStatus::kOk: return "ok";
-    case ProjectionStatus::kNotConverged: return "not_converged";
-    case ProjectionStatus::kNonFinite: return "non_finite";
-  }
-  return "unknown";
+std::string ProjectionResult::describe() const {
+  Status<ProjectionStatus> s;
+  s.set(status, message);
+  return s.describe() + " (" + std::to_string(iterations) + " iterations, |h| " +
+         formatStatusNumber(positionResidualBefore) + " -> " + formatStatusNumber(positionResidual) +
+         ", |A dq| " + formatStatusNumber(velocityResidualBefore) + " -> " +
+         formatStatusNumber(velocityResidual) + (massWeighted ? "" : ", Euclidean metric") + ")";
+}
+
+std::string ProjectionResult::json() const {
+  Status<ProjectionStatus> s;
+  s.set(status, message);
+  detail::ReportJson j = detail::statusJson(s);
+  j["iterations"] = iterations;
+  j["h_before"] = detail::toJson(positionResidualBefore);
+  j["h_after"] = detail::toJson(positionResidual);
+  j["velocity_before"] = detail::toJson(velocityResidualBefore);
+  j["velocity_after"] = detail::toJson(velocityResidual);
+  j["last_step"] = detail::toJson(lastStep);
+  j["mass_weighted"] = massWeighted;
+  j["q"] = detail::toJson(q);
+  j["dq"] = detail::toJson(dq);
+  return j.dump();
 }
 
 void ProjectionOptions::validate(const Model& model) const {

@@ -154,7 +154,8 @@ TEST_CASE("Model builder: a chain at the 20,000-frame limit builds on a 512 KiB 
           "[model][builder][limits]") {
   // Issue 24: the builder walked the frame tree recursively and overflowed small stacks (Python
   // threads, ASan) on a 19,999-frame chain. 20 joints (rz every 1000 frames) and 19,980 constant
-  // links of 1 mm: folded to 20 joints, the tip hangs 19.98 m below the origin at q = 0.
+  // links of 1 mm, 1 kg at the end of each link: folded to 20 joints, the tip hangs 19.98 m below
+  // the origin at q = 0.
   const int nf = ModelBuilder::kMaxFrames;
   std::string error;
   int nq = -1, nframes = -1;
@@ -168,7 +169,9 @@ TEST_CASE("Model builder: a chain at the 20,000-frame limit builds on a 512 KiB 
       for (int k = 0; k < nf; ++k) {
         const std::string name = "f" + std::to_string(k);
         const Transform t = k % 1000 == 0 ? Transform::rz("q" + std::to_string(k / 1000)) : Transform::ty(-1e-3);
-        b.addFrame(name, parent, t, k + 1 == nf ? std::optional<Mass>(Mass{1.0, Eigen::Matrix3d::Identity()}) : std::nullopt);
+        // 1 kg at the end of every 1000-frame link (the last frame before the next joint).
+        const bool linkEnd = k % 1000 == 999;
+        b.addFrame(name, parent, t, linkEnd ? std::optional<Mass>(Mass{1.0, Eigen::Matrix3d::Identity()}) : std::nullopt);
         parent = name;
       }
       b.addGravity({0.0, -9.81, 0.0});

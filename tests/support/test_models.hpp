@@ -39,29 +39,8 @@ struct SystemBuilder {
   TestSystem finish() && { return TestSystem{std::move(b).finalize(), std::move(masses)}; }
 };
 
-inline const char* transformTypeName(TransformType t) {
-  switch (t) {
-    case TransformType::kTx:
-      return "tx";
-    case TransformType::kTy:
-      return "ty";
-    case TransformType::kTz:
-      return "tz";
-    case TransformType::kRx:
-      return "rx";
-    case TransformType::kRy:
-      return "ry";
-    case TransformType::kRz:
-      return "rz";
-    case TransformType::kConstSE3:
-      return "const_se3";
-    case TransformType::kRotAxis:
-      return "r_axis";
-    case TransformType::kTransAxis:
-      return "t_axis";
-  }
-  return "?";
-}
+/// The scene-file name of a transform type (the library's table, model.hpp).
+inline const char* transformTypeName(TransformType t) { return toString(t); }
 
 /// The tilted unit axis and origin the tests give r_axis / t_axis transforms.
 inline Eigen::Vector3d testAxis() { return Eigen::Vector3d(0.3, -0.5, 0.8).normalized(); }

@@ -10,6 +10,7 @@
 #pragma once
 
 #include "trellis/core/model.hpp"
+#include "trellis/core/status.hpp"
 
 #include <memory>
 #include <string>
@@ -17,30 +18,47 @@
 
 namespace trellis {
 
-/// Outcome of an evaluation that solves the KKT system [M Aᵀ; A 0].
-struct DynamicsStatus {
-  enum class Code {
-    kOk,
-    kRedundantConstraints,   ///< A is rank deficient beyond round-off (rows that depend on the others):
-                             ///< q̈ is computed exactly, λ is one choice (minimum norm in the
-                             ///< row-normalized coordinates of A M⁻¹ Aᵀ); not ok, the message names the row
-    kSingularMassMatrix,     ///< M is not positive definite (a joint moves no mass); no result
-    kSingularConstraints,    ///< a degenerate row (its gradient vanishes: e.g. a distance constraint whose
-                             ///< points coincide) or a singular or near-singular configuration, judged
-                             ///< relative to the row's natural scale: the results are finite but
-                             ///< inaccurate (or A q̈ + Ȧ q̇ = 0 has no solution); the message names
-                             ///< the constraint, its row and the state
-    kNonFinite,              ///< an input or result is NaN/Inf
-  };
-  Code code = Code::kOk;
+/// Outcome codes of an evaluation that solves the KKT system [M Aᵀ; A 0] (computeDynamics,
+/// computeLinearization); success is kOk only.
+enum class DynamicsCode {
+  kOk,
+  kRedundantConstraints,   ///< A is rank deficient beyond round-off (rows that depend on the others):
+                           ///< q̈ is computed exactly, λ is one choice (minimum norm in the
+                           ///< row-normalized coordinates of A M⁻¹ Aᵀ); not ok, the message names the row
+  kSingularMassMatrix,     ///< M is not positive definite (a joint moves no mass); no result
+  kSingularConstraints,    ///< a degenerate row (its gradient vanishes: e.g. a distance constraint whose
+                           ///< points coincide) or a singular or near-singular configuration, judged
+                           ///< relative to the row's natural scale: the results are finite but
+                           ///< inaccurate (or A q̈ + Ȧ q̇ = 0 has no solution); the message names
+                           ///< the constraint, its row and the state
+  kNonFinite,              ///< an input or result is NaN/Inf
+};
+
+/// Names: ok, redundant_constraints, singular_mass_matrix, singular_constraints, non_finite.
+inline EnumNameTable<DynamicsCode> enumNames(DynamicsCode) {
+  static constexpr EnumName<DynamicsCode> table[] = {
+      {DynamicsCode::kOk, "ok"},
+      {DynamicsCode::kRedundantConstraints, "redundant_constraints"},
+      {DynamicsCode::kSingularMassMatrix, "singular_mass_matrix"},
+      {DynamicsCode::kSingularConstraints, "singular_constraints"},
+      {DynamicsCode::kNonFinite, "non_finite"}};
+  return table;
+}
+
+/// The status of the last evaluation (Status<DynamicsCode>: code, message naming the constraint
+/// and the state; t and index unused) with the constraints' rank and conditioning beside it.
+/// ok() is true when q̈, λ (and the linearization) are valid and determined: kOk only.
+struct DynamicsStatus : Status<DynamicsCode> {
+  using Code = DynamicsCode;       ///< DynamicsStatus::Code::kOk reads as before
   int constraintRank = 0;          ///< numerical rank of A (= nc when full)
   /// In [0, 1]: min of the constraints' kinematic conditioning (‖A_r‖ over its largest possible
   /// value; 0 at a singular configuration) and the reciprocal condition estimate of the
   /// row-normalized A M⁻¹ Aᵀ (0 for redundant rows). 1 without constraints.
   double constraintConditioning = 1.0;
-  std::string message;             ///< empty when ok; names the configuration / constraint and the state otherwise
-  /// True when q̈, λ (and the linearization) are valid and determined: kOk only.
-  bool ok() const { return code == Code::kOk; }
+  /// One line: Status::describe(), then the rank and conditioning when constraints exist.
+  std::string describe() const;
+  /// {"status", "ok", "message", "t", "index", "constraint_rank", "constraint_conditioning"}.
+  std::string json() const;
 };
 
 /// Kinetic and potential energy, T = ½ q̇ᵀ M q̇, V = gravity + springs.

@@ -32,7 +32,14 @@ enum class EquilibriumStatus {
   kDynamicsFailure,  ///< the forward dynamics failed at an iterate (singular M or constraints)
 };
 
-const char* toString(EquilibriumStatus status);
+/// Names: ok, not_converged, dynamics_failure.
+inline EnumNameTable<EquilibriumStatus> enumNames(EquilibriumStatus) {
+  static constexpr EnumName<EquilibriumStatus> table[] = {
+      {EquilibriumStatus::kOk, "ok"},
+      {EquilibriumStatus::kNotConverged, "not_converged"},
+      {EquilibriumStatus::kDynamicsFailure, "dynamics_failure"}};
+  return table;
+}
 
 struct EquilibriumResult {
   EquilibriumStatus status = EquilibriumStatus::kOk;
@@ -50,6 +57,11 @@ struct EquilibriumResult {
   /// undamped stable equilibrium, whose eigenvalues are ± i ω).
   double maxRealEigenvalue = 0.0;
   bool ok() const { return status == EquilibriumStatus::kOk; }
+  /// One line: "<status>[: message] (iterations, residuals, rank, stability)".
+  std::string describe() const;
+  /// {"status", "ok", "message", "t": null, "index": null, "iterations", "qdd_residual",
+  /// "h_residual", "jacobian_rank", "isolated", "max_real_eigenvalue", "q", "u", "lambda"}.
+  std::string json() const;
 };
 
 /// Searches an equilibrium from the guess q0 (n) under the inputs u (m). Uses `data` as workspace.

@@ -33,6 +33,8 @@
 // metadata line (the older layout) are read as continuous gains.
 #pragma once
 
+#include "trellis/core/enum_names.hpp"
+
 #include <Eigen/Core>
 
 #include <functional>
@@ -47,6 +49,13 @@ enum class GainInterpolation {
   kLinear,  ///< piecewise linear (C⁰), second order; the default
   kCubic,   ///< cubic Hermite with parabola slopes from the table (C¹), third order
 };
+
+/// Names as in the CSV metadata line (interpolation=…) and the CLI: linear, cubic.
+inline EnumNameTable<GainInterpolation> enumNames(GainInterpolation) {
+  static constexpr EnumName<GainInterpolation> table[] = {{GainInterpolation::kLinear, "linear"},
+                                                          {GainInterpolation::kCubic, "cubic"}};
+  return table;
+}
 
 /// Feedback gains K(t) (m × nx each) at ascending times; piecewise-linear (or cubic) in between.
 class GainSchedule {

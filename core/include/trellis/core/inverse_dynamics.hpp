@@ -39,7 +39,16 @@ enum class InverseDynamicsStatus {
   kNonFinite,               ///< an input or a result is NaN/Inf
 };
 
-const char* toString(InverseDynamicsStatus status);
+/// Names: ok, unreachable, inadmissible_acceleration, input_bounds, non_finite.
+inline EnumNameTable<InverseDynamicsStatus> enumNames(InverseDynamicsStatus) {
+  static constexpr EnumName<InverseDynamicsStatus> table[] = {
+      {InverseDynamicsStatus::kOk, "ok"},
+      {InverseDynamicsStatus::kUnreachable, "unreachable"},
+      {InverseDynamicsStatus::kInadmissibleAcceleration, "inadmissible_acceleration"},
+      {InverseDynamicsStatus::kInputBounds, "input_bounds"},
+      {InverseDynamicsStatus::kNonFinite, "non_finite"}};
+  return table;
+}
 
 struct InverseDynamicsResult {
   InverseDynamicsStatus status = InverseDynamicsStatus::kOk;
@@ -55,6 +64,11 @@ struct InverseDynamicsResult {
   Eigen::VectorXd boundExcess;
   int boundIterations = 0;          ///< active-set iterations (0: the unbounded answer was feasible)
   bool ok() const { return status == InverseDynamicsStatus::kOk; }
+  /// One line: "<status>[: message] (residuals, rank)".
+  std::string describe() const;
+  /// {"status", "ok", "message", "t": null, "index": null, "residual", "constraint_residual",
+  /// "rank", "unique", "bound_iterations", "u", "lambda", "bound_excess"}.
+  std::string json() const;
 };
 
 /// u and λ for the acceleration qdd at (q, dq) (n-vectors each). Uses `data` as workspace (its

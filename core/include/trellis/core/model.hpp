@@ -18,6 +18,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "trellis/core/enum_names.hpp"
+
 #include <array>
 #include <string>
 #include <string_view>
@@ -34,6 +36,17 @@ inline constexpr int kWorld = -1;
 /// about / translation along an arbitrary unit axis (after an optional constant placement).
 enum class TransformType { kTx, kTy, kTz, kRx, kRy, kRz, kConstSE3, kRotAxis, kTransAxis };
 
+/// Names as in scene files: tx, ty, tz, rx, ry, rz, const_se3, r_axis, t_axis.
+inline EnumNameTable<TransformType> enumNames(TransformType) {
+  static constexpr EnumName<TransformType> table[] = {
+      {TransformType::kTx, "tx"},         {TransformType::kTy, "ty"},
+      {TransformType::kTz, "tz"},         {TransformType::kRx, "rx"},
+      {TransformType::kRy, "ry"},         {TransformType::kRz, "rz"},
+      {TransformType::kConstSE3, "const_se3"}, {TransformType::kRotAxis, "r_axis"},
+      {TransformType::kTransAxis, "t_axis"}};
+  return table;
+}
+
 /// A frame's local transform g_local from the frame to its parent:
 /// g_world,k = g_world,parent · g_local. Either driven by a configuration variable or constant.
 ///
@@ -49,18 +62,21 @@ struct Transform {
   Eigen::Matrix4d matrix = Eigen::Matrix4d::Identity();  ///< kConstSE3: the transform; axis types: G
   Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();     ///< kRotAxis / kTransAxis only
 
+  /// Constant primitives: a translation along / rotation about the parent's x, y or z axis.
   static Transform tx(double value);
   static Transform ty(double value);
   static Transform tz(double value);
   static Transform rx(double angle);
   static Transform ry(double angle);
   static Transform rz(double angle);
+  /// Driven primitives: the same motions by the configuration variable `config`.
   static Transform tx(std::string config);
   static Transform ty(std::string config);
   static Transform tz(std::string config);
   static Transform rx(std::string config);
   static Transform ry(std::string config);
   static Transform rz(std::string config);
+  /// A constant homogeneous transform (4×4, rigid: checked by ModelBuilder::addFrame).
   static Transform constSE3(const Eigen::Matrix4d& matrix);
   /// Rotation about / translation along the unit vector `axis` (given in the axes of `origin`),
   /// after the constant placement `origin`; driven by `config` or constant (`value`).
@@ -73,6 +89,7 @@ struct Transform {
   static Transform transAxis(const Eigen::Vector3d& axis, double distance,
                              const Eigen::Matrix4d& origin = Eigen::Matrix4d::Identity());
 
+  /// Whether a configuration variable drives this transform.
   bool isDriven() const { return !config.empty(); }
   /// The 4×4 homogeneous matrix of this transform at coordinate value `q` (ignored if constant).
   Eigen::Isometry3d evaluate(double q) const;
@@ -149,6 +166,15 @@ enum class ConstraintType {
   kPointOnPlane,  ///< h = n_w·(p_a − p_b), n_w = R_a n  (holonomic; a = plane frame, b = point)
   kKnifeEdge,     ///< e_w·ṗ_a = 0, e_w = R_a e          (nonholonomic A(q) q̇ = 0, one row)
 };
+/// Names as in scene files: distance, point, point_on_plane, knife_edge.
+inline EnumNameTable<ConstraintType> enumNames(ConstraintType) {
+  static constexpr EnumName<ConstraintType> table[] = {{ConstraintType::kDistance, "distance"},
+                                                       {ConstraintType::kPoint, "point"},
+                                                       {ConstraintType::kPointOnPlane, "point_on_plane"},
+                                                       {ConstraintType::kKnifeEdge, "knife_edge"}};
+  return table;
+}
+
 struct Constraint {
   ConstraintType type = ConstraintType::kDistance;
   std::string name;                                   ///< for messages
@@ -156,6 +182,7 @@ struct Constraint {
   double distance = 0.0;                              ///< kDistance
   int axis = 0;                                       ///< kPoint
   Eigen::Vector3d direction = Eigen::Vector3d::UnitX();  ///< kPointOnPlane normal / kKnifeEdge axis, in a's body axes
+  /// Whether the row is h(q) = 0 (all kinds but the knife edge, a velocity constraint A(q) q̇ = 0).
   bool holonomic() const { return type != ConstraintType::kKnifeEdge; }
 };
 
@@ -198,17 +225,20 @@ class Model {
   int nu() const { return static_cast<int>(inputNames_.size()); }  ///< inputs
   int nc() const { return static_cast<int>(constraints_.size()); }  ///< constraint rows
   int nholonomic() const { return nholonomic_; }                    ///< rows of h(q) = 0
-  int nframes() const { return static_cast<int>(frames_.size()); }
+  int nframes() const { return static_cast<int>(frames_.size()); }     ///< named frames (world excluded)
 
+  /// Names of the configuration variables (n, configuration order) and of the inputs (m).
   const std::vector<std::string>& configNames() const { return configNames_; }
   const std::vector<std::string>& inputNames() const { return inputNames_; }
-  const std::string& name() const { return name_; }
+  const std::string& name() const { return name_; }  ///< the model's name (may be empty)
 
   /// Index lookups; throw std::out_of_range naming the missing name.
   int frameIndex(std::string_view name) const;
   int configIndex(std::string_view name) const;
   int inputIndex(std::string_view name) const;
 
+  /// The folded description (model.hpp types): joints (n, pre-order), frames (nf), gravity (world
+  /// axes), force elements, damping c (n) and constraint rows (nc), as finalize produced them.
   const std::vector<Joint>& joints() const { return joints_; }
   const std::vector<FramePlacement>& frames() const { return frames_; }
   const Eigen::Vector3d& gravity() const { return gravity_; }

@@ -43,9 +43,16 @@ class ModelBuilder {
   const std::string& addFrame(const std::string& name, const std::string& parent,
                               const Transform& transform, std::optional<Mass> mass = {});
 
+  /// Adds g (world axes, m/s²) to the gravity: V = −Σ m_b gᵀ p_b. Throws on a non-finite entry.
   void addGravity(const Eigen::Vector3d& g);
+  /// V = ½ k (‖p1 − p2‖ − x0)² between the origins of two frames ("world" allowed). Throws on an
+  /// unknown frame, a non-finite k or x0, or x0 < 0.
   void addLinearSpring(const std::string& frame1, const std::string& frame2, double k, double x0);
+  /// V = ½ k (q_config − q0)². Throws on a non-finite k or q0; an unknown configuration throws at
+  /// finalize.
   void addConfigSpring(const std::string& config, double k, double q0);
+  /// Q[config] += u[input]: input `input` (created on first use) is a generalized force on one
+  /// coordinate. Throws on an empty input name; an unknown configuration throws at finalize.
   void addConfigForce(const std::string& config, const std::string& input);
   /// Q_i −= c_i q̇_i with c_i = coefficients[config] if listed, else `defaultCoefficient`.
   void addDamping(double defaultCoefficient, const std::map<std::string, double>& coefficients = {});
@@ -53,9 +60,14 @@ class ModelBuilder {
   void addBodyWrench(const std::string& frame, const std::array<WrenchEntry, 6>& wrench);
   /// A cable through the origins of `path` (≥ 2 frames) with tension u[input] ≥ 0.
   void addTendon(const std::vector<std::string>& path, const std::string& input);
+  /// h = ‖p1 − p2‖² − d² = 0 between two frames' origins (one holonomic row). Throws on an
+  /// unknown frame or d not > 0 (at d = 0 the gradient vanishes where the constraint holds).
   void addDistanceConstraint(const std::string& frame1, const std::string& frame2, double distance);
   /// axis: 0 = x, 1 = y, 2 = z (world axes).
   void addPointConstraint(const std::string& frame1, const std::string& frame2, int axis);
+  /// h = n_wᵀ (p_point − p_plane) = 0 with n_w = R_plane n: `pointFrame`'s origin stays on the plane
+  /// through `planeFrame`'s origin with normal `normal` (plane frame axes; one holonomic row).
+  /// Throws on an unknown frame or a zero or non-finite normal.
   void addPointOnPlaneConstraint(const std::string& planeFrame, const Eigen::Vector3d& normal,
                                  const std::string& pointFrame);
   /// Nonholonomic knife edge: the velocity of `frame`'s origin along its own axis `axis` (in the

@@ -30,6 +30,14 @@ class Model;
 
 enum class DifferenceScheme { kForward, kCentral, kCentralFourthOrder };
 
+/// Names: forward, central, central4.
+inline EnumNameTable<DifferenceScheme> enumNames(DifferenceScheme) {
+  static constexpr EnumName<DifferenceScheme> table[] = {{DifferenceScheme::kForward, "forward"},
+                                                         {DifferenceScheme::kCentral, "central"},
+                                                         {DifferenceScheme::kCentralFourthOrder, "central4"}};
+  return table;
+}
+
 struct NumDiffOptions {
   DifferenceScheme scheme = DifferenceScheme::kCentral;
   double relativeStep = 0.0;  ///< 0: the scheme's default (defaultRelativeStep)

@@ -48,7 +48,14 @@ enum class ProjectionStatus {
   kNonFinite,     ///< h, A or M became NaN/Inf; q, dq are the last finite iterate
 };
 
-const char* toString(ProjectionStatus status);
+/// Names: ok, not_converged, non_finite.
+inline EnumNameTable<ProjectionStatus> enumNames(ProjectionStatus) {
+  static constexpr EnumName<ProjectionStatus> table[] = {
+      {ProjectionStatus::kOk, "ok"},
+      {ProjectionStatus::kNotConverged, "not_converged"},
+      {ProjectionStatus::kNonFinite, "non_finite"}};
+  return table;
+}
 
 struct ProjectionResult {
   ProjectionStatus status = ProjectionStatus::kOk;
@@ -62,6 +69,11 @@ struct ProjectionResult {
   double lastStep = 0;               ///< ‖Δq‖∞ of the last accepted descent step
   bool massWeighted = true;          ///< false: M was not positive definite, Euclidean metric used
   bool ok() const { return status == ProjectionStatus::kOk; }
+  /// One line: "<status>[: message] (iterations, residuals before and after)".
+  std::string describe() const;
+  /// {"status", "ok", "message", "t": null, "index": null, "iterations", "h_before", "h_after",
+  /// "velocity_before", "velocity_after", "last_step", "mass_weighted", "q", "dq"}.
+  std::string json() const;
 };
 
 /// Projects (q, dq) (n each) onto the constraints (see the file comment). Without constraints the

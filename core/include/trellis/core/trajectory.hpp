@@ -59,10 +59,10 @@ class Trajectory {
   int nx() const { return 2 * nq(); }                                ///< 2n
   int nu() const { return static_cast<int>(inputNames_.size()); }   ///< m
   int size() const { return static_cast<int>(times_.size()); }      ///< N knots
-  double startTime() const { return times_(0); }
-  double endTime() const { return times_(times_.size() - 1); }
+  double startTime() const { return times_(0); }                    ///< t_0 (needs N ≥ 1)
+  double endTime() const { return times_(times_.size() - 1); }      ///< t_{N−1}
 
-  const Eigen::VectorXd& times() const { return times_; }
+  const Eigen::VectorXd& times() const { return times_; }     ///< N, strictly increasing
   const Eigen::MatrixXd& states() const { return states_; }   ///< 2n×N
   const Eigen::MatrixXd& inputs() const { return inputs_; }   ///< m×N
   const std::vector<std::string>& configNames() const { return configNames_; }
@@ -94,6 +94,7 @@ class Trajectory {
   /// The same and the spline's derivative ẋ(t) (2n; at a knot ẋ_k exactly) — what the reference
   /// moves at, to compare with f(x(t), u(t)).
   void evaluate(double t, Eigen::VectorXd& x, Eigen::VectorXd& u, Eigen::VectorXd& xdot) const;
+  /// x(t) (2n) and u(t) (m) as new vectors (allocating; evaluate() is the allocation-free form).
   Eigen::VectorXd state(double t) const;
   Eigen::VectorXd input(double t) const;
 
@@ -101,10 +102,12 @@ class Trajectory {
   /// first n with columns n+1..2n equal to "d" + columns 1..n; rate_<input> columns, when present,
   /// become the input derivatives. `source` names the stream in messages.
   static Trajectory readCsv(std::istream& in, const std::string& source = "<stream>");
+  /// readCsv on the file at `path`; a file that cannot be opened or read throws, naming the path.
   static Trajectory readCsvFile(const std::string& path);
   /// Writes the CSV layout with 17 significant digits (round trip exact); the rate columns when the
   /// trajectory has input derivatives.
   void writeCsv(std::ostream& out) const;
+  /// writeCsv to `path`, atomically (io.hpp); throws FileError.
   void writeCsvFile(const std::string& path) const;
 
  private:
