@@ -231,9 +231,10 @@ inline void addConstraintJacobianRow(const Model& model, const Data& data, const
 
 /// Constraint forces Aᵀλ of one row as wrenches on the bodies (ws.fext).
 inline void addConstraintWrenches(Data& data, const Constraint& c, double lambda) {
+  DataWorkspace& ws = workspace(data);
   withConstraintKind(c, [&](auto kind) {
     decltype(kind)::forces(data, c, [&](int joint, const Vector3d& p, const Vector3d& g, double) {
-      addBodyWrench(data, joint, forceAt(p, lambda * g));
+      addBodyWrench(ws, joint, forceAt(p, lambda * g));
     });
   });
 }

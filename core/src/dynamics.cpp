@@ -57,7 +57,7 @@ void accumulateExternalWrenches(const Model& model, Data& data, const Eigen::Vec
                                 bool conservative, bool nonConservative, const Eigen::VectorXd* lambda) {
   auto& ws = detail::workspace(data);
   for (auto& w : ws.fext) w.setZero();
-  const auto add = [&](int joint, const Vector6d& w) { addBodyWrench(data, joint, w); };
+  const auto add = [&](int joint, const Vector6d& w) { addBodyWrench(ws, joint, w); };
   forEachForceElement(model, [&](auto kind, const auto& e, size_t i) {
     if (decltype(kind)::conservative ? conservative : nonConservative) decltype(kind)::wrenches(model, data, e, i, u, add);
   });

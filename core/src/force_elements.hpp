@@ -87,13 +87,19 @@ struct LinearSpringKind : ForceKindBase {
 struct TendonKind : ForceKindBase {
   template <class Emit>
   static void wrenches(const Model& model, Data& data, const Tendon& t, size_t i, const Eigen::VectorXd& u, Emit&& emit) {
-    auto& ws = detail::workspace(data);
     storePoints(model, data, t, i);
+    // Local pointers: the wrenches emitted below are stored through Eigen's packet types, which
+    // may alias anything, so members read in the loop would be loaded again on every segment.
+    const ModelTopology& topo = model.topology();
+    const int* segment = topo.tendonSegmentPoint.data();
+    const int* joint = topo.tendonPointJoint.data();
+    const Vector3d* point = detail::workspace(data).tendonPoint.data();
+    const int s0 = topo.tendonSegmentStart[i], s1 = topo.tendonSegmentStart[i + 1];
     const double T = u[t.input];
-    for (int s = model.topology().tendonSegmentStart[i]; s < model.topology().tendonSegmentStart[i + 1]; ++s) {
-      const int a = model.topology().tendonSegmentPoint[static_cast<size_t>(s)];
-      const Vector3d &pa = ws.tendonPoint[a], &pb = ws.tendonPoint[a + 1];
-      segmentWrenches(model.topology().tendonPointJoint[a], model.topology().tendonPointJoint[a + 1], pa, pb, T / (pb - pa).norm(), emit);
+    for (int s = s0; s < s1; ++s) {
+      const int a = segment[s];
+      const Vector3d &pa = point[a], &pb = point[a + 1];
+      segmentWrenches(joint[a], joint[a + 1], pa, pb, T / (pb - pa).norm(), emit);
     }
   }
   static void storePoints(const Model& model, Data& data, const Tendon& t, size_t i) {

@@ -156,8 +156,7 @@ inline void addPointGradient(const Model& model, const Data& data, int joint, co
   }
 }
 
-inline void addBodyWrench(Data& data, int joint, const Vector6d& w) {
-  auto& ws = detail::workspace(data);
+inline void addBodyWrench(DataWorkspace& ws, int joint, const Vector6d& w) {
   if (joint != kWorld) ws.fext[joint] += w;
 }
 

@@ -5,7 +5,8 @@
 // private workspace (core/src/data_workspace.hpp) that the Data owns. Everything is sized once, at
 // construction, from the Model; after the first evaluation no algorithm allocates
 // (tests/core/no_malloc proves it with Eigen's malloc guard). One Data per thread, used only with
-// the Model it was built for (the algorithms check the sizes they rely on).
+// the Model it was built for (the algorithms read that Model's topology and this Data's buffers).
+// A moved-from Data may only be assigned to or destroyed.
 // n = model.nq(), m = model.nu(), nc = model.nc(), nf = model.nframes().
 #pragma once
 
