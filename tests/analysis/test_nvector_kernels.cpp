@@ -1,6 +1,6 @@
 // Tests for control/src/nvector_kernels.hpp (private): every replaced N_Vector operation against
 // SUNDIALS's own serial implementation on the same data.
-#include "dense_kernels.hpp"
+#include "trellis/analysis/detail/dense_kernels.hpp"
 #include "nvector_kernels.hpp"
 #include "sundials_raii.hpp"
 

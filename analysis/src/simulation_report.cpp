@@ -1,8 +1,8 @@
 // simulation_report.cpp — the simulator's names, option checks and JSON summary (no numerics).
-#include "trellis/control/simulation.hpp"
+#include "trellis/analysis/simulation.hpp"
 
-#include "enum_names.hpp"
-#include "trellis/control/tvlqr.hpp"
+#include "trellis/analysis/detail/option_check.hpp"
+#include "trellis/core/detail/report_json.hpp"
 
 #include <cmath>
 #include <limits>
@@ -37,28 +37,36 @@ IntegrationMethod parseIntegrationMethod(const std::string& text) {
 }
 
 std::string simulationJson(const SimulationResult& r) {
-  std::ostringstream o;
+  using detail::ReportJson;
+  using detail::toJson;
   const Trajectory& tr = r.trajectory;
   const bool have = tr.size() > 0;
   const Eigen::VectorXd& e = r.trackingError;
   Eigen::Index worst = 0;
   if (e.size() > 0) e.maxCoeff(&worst);
-  o << "{\"ok\": " << (r.ok() ? "true" : "false") << ", \"status\": " << jsonString(toString(r.status))
-    << ", \"message\": " << jsonString(r.message) << ", \"rows\": " << tr.size()
-    << ", \"t0\": " << (have ? jsonNumber(tr.startTime()) : "null")
-    << ", \"t1\": " << (have ? jsonNumber(tr.endTime()) : "null")
-    << ", \"tracking_error_initial\": " << (e.size() > 0 ? jsonNumber(e(0)) : "null")
-    << ", \"tracking_error_final\": " << (e.size() > 0 ? jsonNumber(e(e.size() - 1)) : "null")
-    << ", \"tracking_error_max\": " << (e.size() > 0 ? jsonNumber(e(worst)) : "null")
-    << ", \"tracking_error_max_time\": " << (e.size() > 0 && have ? jsonNumber(tr.times()(worst)) : "null")
-    << ", \"max_constraint_drift\": " << jsonNumber(r.maxConstraintDrift)
-    << ", \"saturated_samples\": " << r.saturatedSamples << ", \"control_samples\": " << r.controlSamples
-    << ", \"saturated_fraction\": " << jsonNumber(r.saturatedFraction) << ", \"steps\": " << r.steps
-    << ", \"rhs_evaluations\": " << r.rhsEvaluations
-    << ", \"difference_quotient_rhs_evaluations\": " << r.linearRhsEvaluations
-    << ", \"jacobian_evaluations\": " << r.jacobianEvaluations << ", \"restarts\": " << r.restarts
-    << ", \"projections\": " << r.projections << "}";
-  return o.str();
+  const ReportJson null(nullptr);
+  ReportJson j;
+  j["ok"] = r.ok();
+  j["status"] = toString(r.status);
+  j["message"] = r.message;
+  j["rows"] = tr.size();
+  j["t0"] = have ? toJson(tr.startTime()) : null;
+  j["t1"] = have ? toJson(tr.endTime()) : null;
+  j["tracking_error_initial"] = e.size() > 0 ? toJson(e(0)) : null;
+  j["tracking_error_final"] = e.size() > 0 ? toJson(e(e.size() - 1)) : null;
+  j["tracking_error_max"] = e.size() > 0 ? toJson(e(worst)) : null;
+  j["tracking_error_max_time"] = e.size() > 0 && have ? toJson(tr.times()(worst)) : null;
+  j["max_constraint_drift"] = toJson(r.maxConstraintDrift);
+  j["saturated_samples"] = r.saturatedSamples;
+  j["control_samples"] = r.controlSamples;
+  j["saturated_fraction"] = toJson(r.saturatedFraction);
+  j["steps"] = r.steps;
+  j["rhs_evaluations"] = r.rhsEvaluations;
+  j["difference_quotient_rhs_evaluations"] = r.linearRhsEvaluations;
+  j["jacobian_evaluations"] = r.jacobianEvaluations;
+  j["restarts"] = r.restarts;
+  j["projections"] = r.projections;
+  return j.dump();
 }
 
 void SimulationOptions::validate() const {

@@ -1,5 +1,5 @@
 // dense_kernels.cpp — matmul: Eigen's product, or an AVX2+FMA kernel chosen at run time.
-#include "dense_kernels.hpp"
+#include "trellis/analysis/detail/dense_kernels.hpp"
 
 #include <immintrin.h>
 

@@ -3,7 +3,7 @@
 #pragma once
 
 #include "closed_loop_system.hpp"
-#include "trellis/control/simulation.hpp"
+#include "trellis/analysis/simulation.hpp"
 
 #include <Eigen/Core>
 

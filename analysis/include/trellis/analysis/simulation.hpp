@@ -1,4 +1,4 @@
-// trellis/control/simulation.hpp — open- and closed-loop simulation of the NONLINEAR plant.
+// trellis/analysis/simulation.hpp — open- and closed-loop simulation of the NONLINEAR plant.
 //
 // The state x = [q; q̇] (2n) evolves by ẋ = f(t, x) = [q̇; q̈(q, q̇, u)], q̈ from computeDynamics
 // (the KKT solve that enforces A q̈ + Ȧ q̇ = 0), integrated with SUNDIALS CVODES (the control

@@ -1,4 +1,4 @@
-// Tests for trellis/control/simulation.hpp: open loop against closed forms (pendulum period and
+// Tests for trellis/analysis/simulation.hpp: open loop against closed forms (pendulum period and
 // energy, spring–mass), constraint drift with and without projection, closed-loop stabilization
 // (cart-pole, TV-LQR tracking of a swinging pendulum), sampled feedback, saturation, failures.
 #include "control_test_support.hpp"
@@ -6,7 +6,7 @@
 #include <trellis/core/gain_schedule.hpp>
 #include <trellis/control/lqr.hpp>
 #include <trellis/control/riccati.hpp>
-#include <trellis/control/simulation.hpp>
+#include <trellis/analysis/simulation.hpp>
 #include <trellis/core/trajectory.hpp>
 #include <trellis/core.hpp>
 

@@ -2,7 +2,7 @@
 // times of sampled feedback and the breakpoints, merged into one increasing list of events.
 #pragma once
 
-#include "trellis/control/simulation.hpp"
+#include "trellis/analysis/simulation.hpp"
 
 #include <vector>
 

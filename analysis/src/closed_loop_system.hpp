@@ -16,8 +16,8 @@
 // x_ref + y), so the fallback integrates x itself.
 #pragma once
 
-#include "ode_driver.hpp"
-#include "trellis/control/simulation.hpp"
+#include "trellis/analysis/detail/ode_driver.hpp"
+#include "trellis/analysis/simulation.hpp"
 #include "trellis/core/data.hpp"
 
 #include <Eigen/Core>

@@ -1,9 +1,9 @@
 // consistency.cpp — the a-posteriori check of consistency.hpp, integrated with the control
 // module's one CVODES driver (ode_driver.hpp): Adams with fixed-point iterations, per-component
 // absolute tolerances scaled to the state's range, a fresh start at every knot.
-#include "trellis/control/consistency.hpp"
+#include "trellis/analysis/consistency.hpp"
 
-#include "ode_driver.hpp"
+#include "trellis/analysis/detail/ode_driver.hpp"
 
 #include "trellis/core/data.hpp"
 #include "trellis/core/dynamics.hpp"
@@ -114,13 +114,11 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
   }
 
   Integrand integrand(model, *reference);
-  detail::OdeOptions ode;
-  ode.method = detail::OdeMethod::Adams;
-  ode.linearSolver = detail::OdeLinearSolver::FixedPoint;
-  ode.rtol = options.rtol;
+  // The driver's step budget restarts at every start(): maxStepsPerInterval per interval.
+  detail::OdeOptions ode = detail::makeOdeOptions(
+      "checkConsistency", detail::OdeMethod::Adams, detail::OdeLinearSolver::FixedPoint,
+      options.rtol, detail::OdeOptions{}.atol, options.maxStepsPerInterval);
   ode.atolVector = options.atolFraction * result.stateScale;
-  ode.maxSteps = options.maxStepsPerInterval;  // the driver's budget restarts at every start()
-  ode.what = "checkConsistency";
   detail::OdeDriver driver(integrand, nx, ode);
 
   result.intervalDefects = Eigen::VectorXd::Zero(N - 1);

@@ -2,7 +2,7 @@
 // CVODES driver (exactly to the stop events, dense output elsewhere), measure the drift and
 // project above the tolerance, sample the held input, record the outputs (see simulation.hpp).
 #include "constraint_drift.hpp"
-#include "ode_driver.hpp"
+#include "trellis/analysis/detail/ode_driver.hpp"
 #include "simulation_events.hpp"
 #include "simulation_run.hpp"
 
@@ -16,16 +16,11 @@ namespace trellis::detail {
 namespace {
 
 OdeOptions integratorOptions(const SimulationOptions& options) {
-  OdeOptions ode;
   const bool bdf = options.method == IntegrationMethod::kBDF;
-  ode.method = bdf ? OdeMethod::Bdf : OdeMethod::Adams;
-  ode.linearSolver = bdf ? OdeLinearSolver::Dense : OdeLinearSolver::FixedPoint;
+  OdeOptions ode = makeOdeOptions("closed-loop simulation", bdf ? OdeMethod::Bdf : OdeMethod::Adams,
+                                  bdf ? OdeLinearSolver::Dense : OdeLinearSolver::FixedPoint,
+                                  options.rtol, options.atol, options.maxSteps, options.maxStep);
   ode.exactJacobian = options.exactJacobian;
-  ode.rtol = options.rtol;
-  ode.atol = options.atol;
-  ode.maxSteps = options.maxSteps;
-  ode.maxStep = options.maxStep;
-  ode.what = "closed-loop simulation";
   return ode;
 }
 

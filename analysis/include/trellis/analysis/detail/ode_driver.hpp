@@ -1,6 +1,7 @@
-// ode_driver.hpp (private) — the one CVODES driver of trellis::control.
+// trellis/analysis/detail/ode_driver.hpp (internal: for trellis's own libraries, not an API) — the
+// one CVODES driver of trellis.
 //
-// Every integration in the control module (Riccati equation, tangent-basis transport, manifold
+// Every integration in analysis/ and control/ (Riccati equation, tangent-basis transport, manifold
 // Riccati, Gramian, closed-loop simulation, sampled-data discretization, consistency check) goes
 // through OdeDriver: one place for the SUNDIALS objects (owned, freed in reverse order), the
 // choice of method and linear solver, stop times, dense output, root finding, step budget,
@@ -111,6 +112,41 @@ struct OdeOptions {
   double quadratureAtol = 1e-10;
   int rootCount = 0;
   std::string what = "integration";  ///< named first in every message ("Riccati equation", ...)
+};
+
+/// OdeOptions with the fields every solver sets (the rest at their defaults), so that each solver's
+/// options map onto the driver in one statement: what names the integration in messages.
+OdeOptions makeOdeOptions(const char* what, OdeMethod method, OdeLinearSolver linearSolver,
+                          double rtol, double atol, long maxSteps, double maxStep = 0.0);
+
+/// A linear ODE ẏ = J(t) y + g(t) (the variational equations of trellis: tangent transport,
+/// Gramian, sampled-data discretization). The system provides J(t) as a product and g(t); the
+/// right-hand side and CVODES's Jacobian-vector products follow from them, so the Krylov solver
+/// never takes a difference quotient:
+///   f(t, y) = J(t) y + g(t),   J(t) v = applyJacobian(v).
+class LinearOdeSystem : public OdeSystem {
+ public:
+  /// Evaluates what J(t) and g(t) need at t (cache it: called for every product at the same t).
+  /// Returns false, with OdeSystem::failure set, when that fails.
+  virtual bool prepareAt(double t) = 0;
+  /// out = J(t) v at the prepared t.
+  virtual void applyJacobian(ConstVectorMap v, VectorMap out) = 0;
+  /// out += g(t) at the prepared t (none by default: ẏ = J(t) y).
+  virtual void addForcing(VectorMap /*out*/) {}
+
+  int rhs(double t, ConstVectorMap y, VectorMap ydot) final {
+    if (!prepareAt(t)) return -1;
+    applyJacobian(y, ydot);
+    addForcing(ydot);
+    return 0;
+  }
+  bool hasJacTimes() const final { return true; }
+  int jacTimesSetup(double t, ConstVectorMap, ConstVectorMap) final { return prepareAt(t) ? 0 : -1; }
+  int jacTimes(double t, ConstVectorMap, ConstVectorMap, ConstVectorMap v, VectorMap Jv) final {
+    if (!prepareAt(t)) return -1;
+    applyJacobian(v, Jv);
+    return 0;
+  }
 };
 
 /// Counters summed over every start() of one driver.

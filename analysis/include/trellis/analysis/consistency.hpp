@@ -1,4 +1,4 @@
-// trellis/control/consistency.hpp — is a trajectory file something the plant can follow?
+// trellis/analysis/consistency.hpp — is a trajectory file something the plant can follow?
 //
 // A-posteriori check of any trajectory (an optimizer's output, a hand-made CSV): for every
 // interval [t_k, t_{k+1}] the exact dynamics ẋ = f(x, u(t)) (the core's computeDynamics) are

@@ -7,7 +7,7 @@
 
 #include <trellis/core/gain_schedule.hpp>
 #include <trellis/control/lqr.hpp>
-#include <trellis/control/simulation.hpp>
+#include <trellis/analysis/simulation.hpp>
 #include <trellis/core/trajectory.hpp>
 #include <trellis/core.hpp>
 

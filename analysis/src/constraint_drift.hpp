@@ -2,7 +2,7 @@
 // and its projection back onto h = 0, A q̇ = 0 (core's projectState, feasibility only).
 #pragma once
 
-#include "trellis/control/simulation.hpp"
+#include "trellis/analysis/simulation.hpp"
 #include "trellis/core/data.hpp"
 #include "trellis/core/projection.hpp"
 

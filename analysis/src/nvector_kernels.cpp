@@ -2,7 +2,7 @@
 // header). Semantics follow the N_Vector specification of SUNDIALS 6 (operation by operation).
 #include "nvector_kernels.hpp"
 
-#include "dense_kernels.hpp"
+#include "trellis/analysis/detail/dense_kernels.hpp"
 
 #include <Eigen/Core>
 

@@ -1,5 +1,5 @@
 // ode_driver.cpp — OdeDriver: the CVODES calls of trellis::control, written once.
-#include "ode_driver.hpp"
+#include "trellis/analysis/detail/ode_driver.hpp"
 
 #include "nvector_kernels.hpp"
 #include "sundials_raii.hpp"
@@ -20,6 +20,20 @@
 #include <stdexcept>
 
 namespace trellis::detail {
+
+OdeOptions makeOdeOptions(const char* what, OdeMethod method, OdeLinearSolver linearSolver,
+                          double rtol, double atol, long maxSteps, double maxStep) {
+  OdeOptions o;
+  o.what = what;
+  o.method = method;
+  o.linearSolver = linearSolver;
+  o.rtol = rtol;
+  o.atol = atol;
+  o.maxSteps = maxSteps;
+  o.maxStep = maxStep;
+  return o;
+}
+
 
 namespace {
 

@@ -1,5 +1,5 @@
 // Tests for control/src/ode_driver.hpp (private): the one CVODES driver of trellis::control.
-#include "ode_driver.hpp"
+#include "trellis/analysis/detail/ode_driver.hpp"
 
 #include <catch2/catch.hpp>
 
