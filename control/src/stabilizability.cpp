@@ -89,6 +89,8 @@ StabilizabilityCheck stabilizabilityImpl(const MatrixXd& A, const MatrixXd& B, b
 
 }  // namespace detail::are
 
+using namespace detail::are;
+
 StabilizabilityCheck checkStabilizability(const MatrixXd& A, const MatrixXd& B, bool discrete,
                                           double tolerance) {
   checkSystem(A, B, "checkStabilizability");

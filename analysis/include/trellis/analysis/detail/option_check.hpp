@@ -1,5 +1,7 @@
-// enum_names.hpp (private) — one mechanism for the control module's enum ↔ text tables and the
-// "Options.field = value must be rule" errors of the option checks.
+// trellis/analysis/detail/option_check.hpp (internal to trellis's libraries) — the "Options.field =
+// value must be rule" errors of the option checks of analysis/ and control/, and the enum ↔ text
+// tables of their older enums (SimulationStatus, IntegrationMethod, RiccatiMethod, …; new enums
+// declare core's enumNames table, trellis/core/enum_names.hpp, which is to replace these).
 //
 //   constexpr EnumName<IntegrationMethod> kMethods[] = {{IntegrationMethod::kAdams, "adams"}, …};
 //   nameOf(kMethods, m)                  → "adams" ("unknown" for a value not in the table)
