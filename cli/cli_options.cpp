@@ -3,6 +3,7 @@
 
 #include "command.hpp"
 
+#include "trellis/control/tvlqr.hpp"
 #include "trellis/core/reference.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/core/data.hpp"
@@ -203,32 +204,17 @@ Trajectory checkReference(const Model& model, const std::string& scenePath, cons
     throw std::runtime_error(trajectoryPath + ": a reference needs at least 2 knots, got " +
                              std::to_string(file.size()));
   }
-  Data data(model);
-  if (model.nc() > 0) {
-    // h(q) and A(q) q' at each knot, each relative to the size of its terms (‖A_r‖·‖q'‖ for the
-    // velocity rows; 1 + the constraint's own scale for h, which for a distance row is d²).
-    for (int k = 0; k < file.size(); ++k) {
-      const Eigen::VectorXd q = file.states().col(k).head(model.nq());
-      const Eigen::VectorXd dq = file.states().col(k).tail(model.nq());
-      computeConstraints(model, data, q, dq);
-      const Eigen::VectorXd hdot = data.constraintJacobian * dq;
-      for (int r = 0; r < model.nc(); ++r) {
-        const Constraint& c = model.constraints()[static_cast<std::size_t>(r)];
-        const double hScale = 1.0 + (c.type == ConstraintType::kDistance ? c.distance * c.distance : 0.0);
-        const double vScale = std::max(1.0, data.constraintJacobian.row(r).norm() * dq.norm());
-        const bool hBad = !(std::abs(data.constraintValue(r)) <= kReferenceConstraintTolerance * hScale);
-        const bool vBad = !(std::abs(hdot(r)) <= kReferenceConstraintTolerance * vScale);
-        if (hBad || vBad) {
-          throw std::runtime_error(
-              trajectoryPath + ": row " + std::to_string(k + 1) + " (t = " + formatNumber(file.times()(k)) +
-              ") violates the constraint '" + c.name + "' of " + scenePath + ": " +
-              (hBad ? "h(q) = " + formatNumber(data.constraintValue(r), 3)
-                    : "A(q) q' = " + formatNumber(hdot(r), 3)) +
-              " (tolerance " + formatNumber(kReferenceConstraintTolerance, 3) +
-              " relative); a reference must lie on the constraints");
-        }
-      }
-    }
+  // The library's check (core/reference.hpp): each residual relative to the size of its terms.
+  const ReferenceConstraintCheck onManifold =
+      checkReferenceOnConstraints(model, file, kReferenceConstraintTolerance);
+  if (!onManifold.ok()) {
+    const Constraint& c = model.constraints()[static_cast<std::size_t>(onManifold.constraint)];
+    throw std::runtime_error(
+        trajectoryPath + ": row " + std::to_string(onManifold.status.index + 1) + " (t = " +
+        formatNumber(onManifold.status.t) + ") violates the constraint '" + c.name + "' of " + scenePath +
+        ": " + (onManifold.position ? "h(q) = " : "A(q) q' = ") + formatNumber(onManifold.value, 3) +
+        " (size of its terms " + formatNumber(onManifold.scale, 3) + ", tolerance " +
+        formatNumber(kReferenceConstraintTolerance, 3) + " relative); a reference must lie on the constraints");
   }
   // The file's meaning: knot derivatives from the scene's dynamics (the failing knot named),
   // the file's input rule (linear, or cubic Hermite with rate_<input> columns).
@@ -244,8 +230,7 @@ Trajectory checkReference(const Model& model, const std::string& scenePath, cons
 
 void checkSemidefinite(const std::string& command, const std::string& what, double minEigenvalue,
                        double maxEigenvalue) {
-  const double scale = std::max(std::abs(minEigenvalue), std::abs(maxEigenvalue));
-  if (minEigenvalue < -1e-6 * scale || !std::isfinite(scale)) {
+  if (!isSemidefiniteToRoundoff(minEigenvalue, maxEigenvalue)) {
     throw std::runtime_error(command + ": " + what + " is indefinite beyond round-off: smallest eigenvalue " +
                              formatNumber(minEigenvalue) + ", largest " + formatNumber(maxEigenvalue) +
                              " (the integration did not resolve the Riccati equation; tighten --rtol/--atol)");

@@ -130,8 +130,9 @@ std::string formatNumber(double value, int digits = 6);
 
 /// Reads the reference trajectory CSV at `trajectoryPath`, checks that its names match the model
 /// of `scenePath`, that it has ≥ 2 knots and, for a scene with constraints, that every knot
-/// satisfies them (|h(q)| and |A(q) q'| within kReferenceConstraintTolerance, relative to the
-/// size of the terms), and computes its state derivatives. Throws std::runtime_error naming the
+/// satisfies them (the library's checkReferenceOnConstraints, core/reference.hpp: |h(q)| and
+/// |A(q) q'| within kReferenceConstraintTolerance relative to the size of their terms, so that the
+/// verdict does not change with the model's units), and computes its state derivatives. Throws std::runtime_error naming the
 /// file and the problem (exit status 1): a reference off the constraint manifold has no
 /// meaningful linearization and would be tracked with a drift as large as its violation.
 Trajectory loadReference(const Model& model, const std::string& scenePath,

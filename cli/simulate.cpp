@@ -4,10 +4,12 @@
 #include "command.hpp"
 
 #include "trellis/core/gain_schedule.hpp"
-#include "trellis/control/simulation.hpp"
+#include "trellis/analysis/simulation.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/control/tvlqr.hpp"
 #include "trellis/core/scene.hpp"
+
+#include <nlohmann/json.hpp>
 
 #include <cmath>
 #include <algorithm>
@@ -259,11 +261,14 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
 
   // The summary, after the file is written.
   if (options.flag("--json")) {
-    std::string body = simulationJson(result);
-    body.pop_back();
-    out << body << ", \"out\": " << jsonString(outPath) << ", \"sample_rate_hz\": "
-        << jsonNumber(simulation.sampleRate) << ", \"gains_sample_rate_hz\": " << jsonNumber(gains.sampleRate())
-        << ", \"perturbation_norm\": " << jsonNumber(delta.norm()) << "}\n";
+    // The library's report, and what only the command knows, with the JSON library.
+    nlohmann::ordered_json report = nlohmann::ordered_json::parse(simulationJson(result));
+    const auto number = [](double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(); };
+    report["out"] = outPath;
+    report["sample_rate_hz"] = number(simulation.sampleRate);
+    report["gains_sample_rate_hz"] = number(gains.sampleRate());
+    report["perturbation_norm"] = number(delta.norm());
+    out << report.dump() << "\n";
     return 0;
   }
   const Eigen::VectorXd& error = result.trackingError;

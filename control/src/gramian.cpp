@@ -3,7 +3,7 @@
 // the exact Lyapunov product and the exact Newton-matrix solve as preconditioner — O(d³) per
 // product or solve, where a dense Newton matrix on the N = d(d+1)/2 unknowns costs O(d⁶) per
 // factorization.
-#include "ode_driver.hpp"
+#include "trellis/analysis/detail/ode_driver.hpp"
 #include "riccati_lyapunov.hpp"
 #include "trellis/control/controllability.hpp"
 #include "trellis/core/trajectory.hpp"
@@ -31,39 +31,32 @@ void GramianOptions::validate() const {
 namespace {
 
 /// Ẇ = Ar W + W Arᵀ + Br Brᵀ on the packed upper triangle of W (column by column).
-/// Jacobian: the Lyapunov operator L(E) = Ar E + E Arᵀ (products only). Linear solver: the exact
+/// A linear ODE (detail::LinearOdeSystem): J = the Lyapunov operator L(E) = Ar E + E Arᵀ (products
+/// only), g = Br Brᵀ. Linear solver: the exact
 /// solve of the Newton matrix, (I − γL) X = R, by detail::SchurLyapunov (real Schur form of Arᵀ,
 /// Bartels–Stewart; shared with the Riccati solver).
-class GramianSystem final : public detail::OdeSystem {
+class GramianSystem final : public detail::LinearOdeSystem {
  public:
   GramianSystem(const Model& model, const TangentBasisTrajectory& basis)
       : lin(model, basis), d(basis.dimension()), W(d, d), F(d, d), G(d, d), ArT(d, d), lyap(d) {}
 
-  int rhs(double t, detail::ConstVectorMap y, detail::VectorMap ydot) override {
-    if (!ready(t)) return -1;
-    unpack(y.data(), W);
-    F.noalias() = lin.Ar() * W;
-    G.noalias() = lin.Br() * lin.Br().transpose();
-    for (Eigen::Index j = 0; j < d; ++j) {  // (ArW + (ArW)ᵀ + BrBrᵀ)_ij, i ≤ j
-      double* col = ydot.data() + j * (j + 1) / 2;
-      for (Eigen::Index i = 0; i <= j; ++i) col[i] = F(i, j) + F(j, i) + G(i, j);
-    }
-    return 0;
-  }
-  bool hasJacTimes() const override { return true; }
-  int jacTimesSetup(double t, detail::ConstVectorMap, detail::ConstVectorMap) override {
-    return ready(t) ? 0 : -1;
-  }
-  int jacTimes(double t, detail::ConstVectorMap, detail::ConstVectorMap, detail::ConstVectorMap v,
-               detail::VectorMap Jv) override {
-    if (!ready(t)) return -1;
+  bool prepareAt(double t) override { return ready(t); }
+  // Packed L(V) = Ar V + V Arᵀ, entries i ≤ j.
+  void applyJacobian(detail::ConstVectorMap v, detail::VectorMap Jv) override {
     unpack(v.data(), W);
     F.noalias() = lin.Ar() * W;
     for (Eigen::Index j = 0; j < d; ++j) {
       double* col = Jv.data() + j * (j + 1) / 2;
       for (Eigen::Index i = 0; i <= j; ++i) col[i] = F(i, j) + F(j, i);
     }
-    return 0;
+  }
+  // Packed Br Brᵀ.
+  void addForcing(detail::VectorMap ydot) override {
+    G.noalias() = lin.Br() * lin.Br().transpose();
+    for (Eigen::Index j = 0; j < d; ++j) {
+      double* col = ydot.data() + j * (j + 1) / 2;
+      for (Eigen::Index i = 0; i <= j; ++i) col[i] += G(i, j);
+    }
   }
   bool hasPreconditioner() const override { return true; }
   // The Newton matrix I − γL acts on symmetric X as X − γ(ArX + XArᵀ): the Riccati solver's
@@ -109,13 +102,9 @@ class GramianSystem final : public detail::OdeSystem {
 
  private:
   bool ready(double t) {
-    try {
-      lin.evaluate(t);
-      return true;
-    } catch (const std::exception& e) {
-      failure = e.what();
-      return false;
-    }
+    const ReferenceStatus st = lin.evaluate(t);
+    if (!st.ok()) failure = st.message;
+    return st.ok();
   }
   Eigen::Index d;
   Eigen::MatrixXd W, F, G, ArT;
@@ -153,15 +142,11 @@ GramianReport computeControllabilityGramian(const Model& model, const Trajectory
   }
   GramianSystem system(model, basis);
   const Eigen::Index N = d * (d + 1) / 2;
-  detail::OdeOptions o;
-  o.method = detail::OdeMethod::Bdf;
   // The Schur solve is exact for the Newton matrix (L depends on t only): the direct solver, no
   // Krylov iterations (a stale Schur form, from an earlier t, is CVODES's modified Newton).
-  o.linearSolver = detail::OdeLinearSolver::SystemSolve;
-  o.rtol = options.rtol;
-  o.atol = options.atol;
-  o.maxSteps = options.transport.maxSteps;
-  o.what = "Gramian integration";
+  const detail::OdeOptions o = detail::makeOdeOptions(
+      "Gramian integration", detail::OdeMethod::Bdf, detail::OdeLinearSolver::SystemSolve,
+      options.rtol, options.atol, options.transport.maxSteps);
   detail::OdeDriver driver(system, N, o);
   driver.start(t0, Eigen::VectorXd::Zero(N));
   const detail::OdeStatus st = driver.advanceTo(t1);

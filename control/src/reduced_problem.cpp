@@ -7,7 +7,9 @@
 namespace trellis::detail {
 
 Eigen::MatrixXd ReducedProblem::reducedTerminal(const Eigen::MatrixXd& Qf, double t) const {
-  evaluator->evaluate(t);
+  // Callers report a throw as a failed solve (the callback contract of solveRiccati).
+  const ReferenceStatus st = evaluator->evaluate(t);
+  if (!st.ok()) throw std::runtime_error(st.message);
   const Eigen::MatrixXd& T = evaluator->T();
   const Eigen::MatrixXd Qr = T.transpose() * Qf * T;
   return 0.5 * (Qr + Qr.transpose());
@@ -19,7 +21,8 @@ ReducedProblem makeReducedProblem(const Model& model, const TangentBasisTrajecto
   p.evaluator = std::make_shared<ReducedLinearization>(model, basis);
   const std::shared_ptr<ReducedLinearization> lin = p.evaluator;
   p.linearization = [lin](double t, Eigen::MatrixXd& A, Eigen::MatrixXd& B) {
-    lin->evaluate(t);
+    const ReferenceStatus st = lin->evaluate(t);
+    if (!st.ok()) throw std::runtime_error(st.message);  // kCallbackFailure, the message kept
     A = lin->Ar();
     B = lin->Br();
   };
@@ -31,7 +34,8 @@ ReducedProblem makeReducedProblem(const Model& model, const TangentBasisTrajecto
   };
   auto scratch = std::make_shared<Scratch>();
   p.weights.Qfun = [lin, scratch, Qconst = weights.Q, Qfull = weights.Qfun, nx](double t, Eigen::MatrixXd& Qr) {
-    lin->evaluate(t);  // cached on t: no extra dynamics
+    const ReferenceStatus st = lin->evaluate(t);  // cached on t: no extra dynamics
+    if (!st.ok()) throw std::runtime_error(st.message);
     const Eigen::MatrixXd& T = lin->T();
     if (Qfull) {
       scratch->Q.setZero(nx, nx);

@@ -3,8 +3,8 @@
 // sides and their derivatives are in riccati_system.*, the integrator in ode_driver.*.
 #include "trellis/control/riccati.hpp"
 
-#include "dense_kernels.hpp"
-#include "ode_driver.hpp"
+#include "trellis/analysis/detail/dense_kernels.hpp"
+#include "trellis/analysis/detail/ode_driver.hpp"
 #include "riccati_packing.hpp"
 #include "riccati_system.hpp"
 
@@ -65,30 +65,23 @@ void checkProblem(double t0, double T, int nx, int nu, const LinearizationCallba
 // The factored form keeps GMRES: its Newton matrix is not a Lyapunov operator.
 detail::OdeOptions integratorOptions(const RiccatiOptions& options, int nx, bool factored,
                                      bool& usesLyapunov) {
-  detail::OdeOptions o;
-  o.what = "Riccati equation (in reversed time tau = T - t)";
-  o.rtol = options.rtol;
-  o.atol = options.atol;
-  o.maxSteps = options.maxSteps;
-  o.maxStep = options.maxStep;
-  o.initialStep = options.initialStep;
-  o.exactJacobian = options.exactJacobian;
   const bool bdf = options.method != RiccatiMethod::kAdams;
   RiccatiLinearSolver ls = options.linearSolver;
   if (ls == RiccatiLinearSolver::kAuto) {
     ls = nx <= 10 ? RiccatiLinearSolver::kDense
                   : (factored ? RiccatiLinearSolver::kKrylov : RiccatiLinearSolver::kLyapunov);
   }
-  o.method = bdf ? detail::OdeMethod::Bdf : detail::OdeMethod::Adams;
-  if (!bdf) {
-    o.linearSolver = detail::OdeLinearSolver::FixedPoint;
-  } else if (ls == RiccatiLinearSolver::kLyapunov) {
-    o.linearSolver = detail::OdeLinearSolver::SystemSolve;
-  } else if (ls == RiccatiLinearSolver::kKrylov) {
-    o.linearSolver = detail::OdeLinearSolver::Gmres;
-  } else {
-    o.linearSolver = detail::OdeLinearSolver::Dense;
-  }
+  const detail::OdeLinearSolver solver =
+      !bdf ? detail::OdeLinearSolver::FixedPoint
+      : ls == RiccatiLinearSolver::kLyapunov ? detail::OdeLinearSolver::SystemSolve
+      : ls == RiccatiLinearSolver::kKrylov   ? detail::OdeLinearSolver::Gmres
+                                             : detail::OdeLinearSolver::Dense;
+  detail::OdeOptions o = detail::makeOdeOptions(
+      "Riccati equation (in reversed time tau = T - t)",
+      bdf ? detail::OdeMethod::Bdf : detail::OdeMethod::Adams, solver, options.rtol, options.atol,
+      options.maxSteps, options.maxStep);
+  o.initialStep = options.initialStep;
+  o.exactJacobian = options.exactJacobian;
   usesLyapunov = (o.linearSolver == detail::OdeLinearSolver::Gmres && options.krylovPreconditioner) ||
                  o.linearSolver == detail::OdeLinearSolver::SystemSolve;
   return o;
@@ -191,7 +184,12 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
       worstTime = t;
     }
   };
-  sol.steps_.push_back({0.0, y0, factored});  // τ = 0: S = Qf (a constant "polynomial")
+  // Every stored step polynomial, counting the leading ones that hold the factor U.
+  auto store = [&](double tauEnd, Eigen::MatrixXd D) {
+    sol.steps_.append(tauEnd, std::move(D));
+    if (factored) ++sol.factoredSteps_;
+  };
+  store(0.0, y0);  // τ = 0: S = Qf (a constant "polynomial")
   inspect(y0.data(), T);
 
   // G = R⁻¹Bᵀ at a node, so that K(t) needs neither the model nor the callbacks later. The
@@ -245,16 +243,16 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
     }
     tau = st.t;
     const int q = driver->lastOrder();
-    RiccatiSolution::Step step{tau, Eigen::MatrixXd(N, q + 1), factored};
+    Eigen::MatrixXd D(N, q + 1);
     for (int k = 0; k <= q; ++k) {
-      if (!driver->interpolate(tau, k, step.D.col(k))) {
-        step.D.conservativeResize(N, k);
+      if (!driver->interpolate(tau, k, D.col(k))) {
+        D.conservativeResize(N, k);
         break;
       }
     }
     const double* y = driver->state().data();
     const double norm = normOf(y);
-    if (!std::isfinite(norm) || !step.D.allFinite()) {
+    if (!std::isfinite(norm) || !D.allFinite()) {
       sol.status = RiccatiStatus::kNonFinite;
       sol.failureTime = T - tau;
       sol.failureNorm = lastNorm;
@@ -264,7 +262,7 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
       sol.message = m.str();
       break;
     }
-    const double tauPrev = sol.steps_.back().tau;
+    const double tauPrev = sol.steps_.back();
     // Step end first: its coefficients are cached from the step's last Newton iteration.
     if (!storeGain(T - tau) || !storeGain(T - 0.5 * (tauPrev + tau))) {
       gainFailure(T - tau);
@@ -276,7 +274,7 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
     // Keep the nodes in descending t (reversed at the end): midpoint before the step end.
     std::iter_swap(sol.gainTimes_.end() - 1, sol.gainTimes_.end() - 2);
     std::iter_swap(sol.gainNodes_.end() - 1, sol.gainNodes_.end() - 2);
-    sol.steps_.push_back(std::move(step));
+    store(tau, std::move(D));
     inspect(y, T - tau);
     if (norm > options.maxNorm) {
       sol.status = RiccatiStatus::kBlowUp;

@@ -1,7 +1,7 @@
 // riccati_lyapunov.cpp — Bartels–Stewart solve of the Riccati Newton matrix (see the header).
 #include "riccati_lyapunov.hpp"
 
-#include "dense_kernels.hpp"
+#include "trellis/analysis/detail/dense_kernels.hpp"
 
 #include <cmath>
 #include <utility>

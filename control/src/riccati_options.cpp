@@ -2,7 +2,7 @@
 // solver.
 #include "trellis/control/riccati.hpp"
 
-#include "enum_names.hpp"
+#include "trellis/analysis/detail/option_check.hpp"
 
 #include <Eigen/Eigenvalues>
 

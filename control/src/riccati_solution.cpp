@@ -10,30 +10,28 @@
 namespace trellis {
 
 double RiccatiSolution::validFrom() const {
-  return steps_.empty() ? tf_ : tf_ - steps_.back().tau;
+  return steps_.empty() ? tf_ : tf_ - steps_.back();
 }
 
 std::vector<double> RiccatiSolution::stepTimes() const {
   std::vector<double> t;
   t.reserve(steps_.size());
-  for (auto it = steps_.rbegin(); it != steps_.rend(); ++it) t.push_back(tf_ - it->tau);
+  for (std::size_t i = steps_.size(); i-- > 0;) t.push_back(tf_ - steps_.end(i));
   return t;
 }
 
 std::vector<int> RiccatiSolution::stepOrders() const {
   std::vector<int> q;
   q.reserve(steps_.size());
-  for (auto it = steps_.rbegin(); it != steps_.rend(); ++it) {
-    q.push_back(static_cast<int>(it->D.cols()) - 1);
-  }
+  for (std::size_t i = steps_.size(); i-- > 0;) q.push_back(steps_.order(i));
   return q;
 }
 
-// The step's interpolating polynomial Σ D_k (τ − τ_k)ᵏ / k! (CVODES's own dense output), in S or
-// in its factor U (then S = UᵀU, symmetric PSD by construction).
+// The step's interpolating polynomial (CVODES's own dense output, DenseOutput), in S or in its
+// factor U (then S = UᵀU, symmetric PSD by construction).
 void RiccatiSolution::S(double t, Eigen::MatrixXd& out) const {
   if (steps_.empty()) throw std::out_of_range("RiccatiSolution: empty solution");
-  const double tauMax = steps_.back().tau;
+  const double tauMax = steps_.back();
   double tau = tf_ - t;
   const double slack = 1e-12 * std::max({1.0, std::abs(t0_), std::abs(tf_)});
   if (!(tau >= -slack && tau <= tauMax + slack)) {
@@ -42,16 +40,10 @@ void RiccatiSolution::S(double t, Eigen::MatrixXd& out) const {
     throw std::out_of_range(m.str());
   }
   tau = std::clamp(tau, 0.0, tauMax);
-  // First stored step with τ_k ≥ τ; its polynomial covers [τ_{k-1}, τ_k].
-  const auto it = std::lower_bound(steps_.begin(), steps_.end(), tau,
-                                   [](const Step& s, double v) { return s.tau < v; });
-  const Step& st = *it;
-  const double dt = tau - st.tau;
-  const Eigen::Index q = st.D.cols() - 1;
-  Eigen::VectorXd y = st.D.col(q);  // Horner
-  for (Eigen::Index k = q; k-- > 0;) y = st.D.col(k) + (dt / static_cast<double>(k + 1)) * y;
+  Eigen::VectorXd y(steps_.dimension());
+  steps_.evaluate(tau, y);
   out.resize(nx_, nx_);
-  if (st.factored) {
+  if (steps_.locate(tau) < factoredSteps_) {
     Eigen::MatrixXd U = Eigen::MatrixXd::Zero(nx_, nx_);
     detail::unpackUpper(y.data(), nx_, U);
     out.noalias() = U.transpose() * U;

@@ -1,7 +1,7 @@
 // riccati_system.cpp — right-hand sides, Jacobian and preconditioner of the Riccati equation.
 #include "riccati_system.hpp"
 
-#include "dense_kernels.hpp"
+#include "trellis/analysis/detail/dense_kernels.hpp"
 #include "riccati_packing.hpp"
 
 #include <sstream>

@@ -17,7 +17,7 @@
 // AVX2+FMA when the CPU has it). Nothing allocates after construction.
 #pragma once
 
-#include "ode_driver.hpp"
+#include "trellis/analysis/detail/ode_driver.hpp"
 #include "riccati_lyapunov.hpp"
 #include "trellis/control/riccati.hpp"
 

@@ -1,10 +1,8 @@
 // riccati_trajectory.cpp — the Riccati solve along a trajectory: A(t), B(t) from the exact
 // linearization at the trajectory's interpolated state and input.
 #include "trellis/control/riccati.hpp"
+#include "trellis/core/reference.hpp"
 #include "trellis/core/trajectory.hpp"
-#include "trellis/core/data.hpp"
-#include "trellis/core/linearization.hpp"
-#include "trellis/core/model.hpp"
 
 #include <memory>
 #include <stdexcept>
@@ -13,34 +11,18 @@
 namespace trellis {
 
 LinearizationCallback makeTrajectoryLinearization(const Model& model, const Trajectory& trajectory) {
-  trajectory.checkCompatible(model);
-  if (!trajectory.hasStateDerivatives()) {
-    throw std::logic_error(
-        "makeTrajectoryLinearization: the trajectory has no state derivatives "
-        "(call computeStateDerivatives)");
-  }
-  struct State {
-    const Model* model;
-    Trajectory traj;
-    Data data;
-    Eigen::VectorXd x, u, q, dq;
-  };
-  auto st = std::make_shared<State>(State{&model, trajectory, Data(model), {}, {}, {}, {}});
-  const int n = trajectory.nq();
-  st->q.resize(n);
-  st->dq.resize(n);
-  return [st](double t, Eigen::MatrixXd& A, Eigen::MatrixXd& B) {
-    st->traj.evaluate(t, st->x, st->u);
-    const Eigen::Index n = st->q.size();
-    st->q = st->x.head(n);
-    st->dq = st->x.tail(n);
-    const DynamicsStatus s = computeLinearization(*st->model, st->data, st->q, st->dq, st->u);
-    if (!s.ok()) {
-      throw std::runtime_error("linearization failed at t = " + std::to_string(t) + ": " +
-                               s.message);
-    }
-    A = st->data.A;
-    B = st->data.B;
+  // The one evaluator along a reference: it checks the names and the supplied state derivatives
+  // once and owns its copy of the trajectory and its Data.
+  ReferenceOptions checks;
+  checks.stateDerivatives = ReferenceOptions::StateDerivatives::kRequireSupplied;
+  checks.caller = "makeTrajectoryLinearization";
+  auto reference = std::make_shared<ReferenceEvaluator>(model, trajectory, checks);
+  return [reference](double t, Eigen::MatrixXd& A, Eigen::MatrixXd& B) {
+    // The Riccati solver's callback contract: a failure is thrown and reported as kCallbackFailure.
+    const ReferenceStatus status = reference->linearize(t);
+    if (!status.ok()) throw std::runtime_error(status.message);
+    A = reference->A();
+    B = reference->B();
   };
 }
 

@@ -3,7 +3,7 @@
 // cross term. See sampled_lqr.hpp for the math.
 #include "trellis/control/sampled_lqr.hpp"
 
-#include "ode_driver.hpp"
+#include "trellis/analysis/detail/ode_driver.hpp"
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
@@ -50,7 +50,7 @@ namespace {
 
 /// The variational equation Y = [Φ Γ] (nx × (nx+m), column-major) and the cost quadrature
 /// W = ∫ [Φ Γ]ᵀ Q [Φ Γ] + blkdiag(0, R) ((nx+m)² entries), for OdeDriver.
-class Discretizer final : public detail::OdeSystem {
+class Discretizer final : public detail::LinearOdeSystem {
  public:
   int nx, nu, cols;
   const LinearizationCallback& lin;
@@ -116,14 +116,14 @@ class Discretizer final : public detail::OdeSystem {
     return true;
   }
 
-  // Ẏ = A Y + [0 B].
-  int rhs(double t, detail::ConstVectorMap y, detail::VectorMap ydot) override {
-    if (!evaluate(t)) return -1;
-    Eigen::Map<const Eigen::MatrixXd> Y(y.data(), nx, cols);
-    Eigen::Map<Eigen::MatrixXd> Yd(ydot.data(), nx, cols);
-    Yd.noalias() = A * Y;
-    Yd.rightCols(nu) += B;
-    return 0;
+  // Ẏ = A Y + [0 B]: a linear ODE (detail::LinearOdeSystem), J V = A V (one A per column).
+  bool prepareAt(double t) override { return evaluate(t); }
+  void applyJacobian(detail::ConstVectorMap v, detail::VectorMap Jv) override {
+    Eigen::Map<Eigen::MatrixXd>(Jv.data(), nx, cols).noalias() =
+        A * Eigen::Map<const Eigen::MatrixXd>(v.data(), nx, cols);
+  }
+  void addForcing(detail::VectorMap ydot) override {
+    Eigen::Map<Eigen::MatrixXd>(ydot.data(), nx, cols).rightCols(nu) += B;
   }
 
   // Ẇ = Yᵀ Q Y + blkdiag(0, R).
@@ -134,20 +134,6 @@ class Discretizer final : public detail::OdeSystem {
     QY.noalias() = Q * Y;
     Wd.noalias() = Y.transpose() * QY;
     Wd.bottomRightCorner(nu, nu) += R;
-    return 0;
-  }
-
-  // Jacobian-vector product: J V = A V (block diagonal, one A per column).
-  bool hasJacTimes() const override { return true; }
-  int jacTimesSetup(double t, detail::ConstVectorMap, detail::ConstVectorMap) override {
-    return evaluate(t) ? 0 : -1;
-  }
-  int jacTimes(double t, detail::ConstVectorMap, detail::ConstVectorMap, detail::ConstVectorMap v,
-               detail::VectorMap Jv) override {
-    if (!evaluate(t)) return -1;
-    Eigen::Map<const Eigen::MatrixXd> V(v.data(), nx, cols);
-    Eigen::Map<Eigen::MatrixXd> out(Jv.data(), nx, cols);
-    out.noalias() = A * V;
     return 0;
   }
 
@@ -215,13 +201,9 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
   Eigen::Map<Eigen::MatrixXd>(y0.data(), nx, cols).leftCols(nx).setIdentity();
   Eigen::VectorXd wq(NQ);
 
-  detail::OdeOptions o;
-  o.what = "sampled-data discretization";
-  o.method = detail::OdeMethod::Bdf;
-  o.linearSolver = detail::OdeLinearSolver::Gmres;
-  o.rtol = options.rtol;
-  o.atol = options.atol;
-  o.maxSteps = options.maxSteps;
+  detail::OdeOptions o = detail::makeOdeOptions(
+      "sampled-data discretization", detail::OdeMethod::Bdf, detail::OdeLinearSolver::Gmres,
+      options.rtol, options.atol, options.maxSteps);
   o.quadratureSize = static_cast<int>(NQ);
   o.quadratureErrorControl = true;
   o.quadratureRtol = options.rtol;

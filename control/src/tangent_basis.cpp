@@ -1,6 +1,6 @@
 // tangent_basis.cpp — the held tangent basis (plain data: Hermite interpolation of the corrected
 // nodes, then the polar factor) and ReducedLinearization, its model-bound evaluation for solvers.
-#include "reference_point.hpp"
+#include "trellis/core/reference.hpp"
 #include "trellis/control/manifold_lqr.hpp"
 
 #include <Eigen/Eigenvalues>
@@ -94,23 +94,16 @@ Eigen::MatrixXd TangentBasisTrajectory::transportedBasis(double t) const {
     return T;
   }
   t = std::clamp(t, t0_, validUntil_);
-  // First stored step with t_k ≥ t; its polynomial covers [t_{k−1}, t_k].
-  auto it = std::lower_bound(stored_.begin(), stored_.end(), t,
-                             [](const Step& s, double v) { return s.t < v; });
-  if (it == stored_.end()) it = stored_.end() - 1;
-  const Step& st = *it;
-  const double dt = t - st.t;
-  const Eigen::Index q = st.D.cols() - 1;
   Eigen::Map<Eigen::VectorXd> y(T.data(), T.size());
-  y = st.D.col(q);
-  for (Eigen::Index k = q; k-- > 0;) y = st.D.col(k) + (dt / static_cast<double>(k + 1)) * y;
+  stored_.evaluate(t, y);  // the step polynomial covering t (CVODES's dense output)
   return T;
 }
 
 void TangentBasisTrajectory::reducedLinearization(const Model& model, double t, Eigen::MatrixXd& T,
                                                   Eigen::MatrixXd& Ar, Eigen::MatrixXd& Br) const {
   ReducedLinearization lin(model, *this);
-  lin.evaluate(t);
+  const ReferenceStatus st = lin.evaluate(t);
+  if (!st.ok()) throw std::runtime_error(st.message);
   T = lin.T();
   Ar = lin.Ar();
   Br = lin.Br();
@@ -157,7 +150,7 @@ void hermiteThreePoint(const std::vector<double>& x, const std::vector<Eigen::Ma
 }  // namespace
 
 struct ReducedLinearization::Work {
-  detail::ReferencePoint point;
+  ReferenceEvaluator point;  // checks the reference against the model once
   Eigen::MatrixXd Th, C, AT, m0, m1;
   Eigen::JacobiSVD<Eigen::MatrixXd> svd;
   Work(const Model& m, const Trajectory& tr) : point(m, tr) {}
@@ -165,7 +158,6 @@ struct ReducedLinearization::Work {
 
 ReducedLinearization::ReducedLinearization(const Model& model, TangentBasisTrajectory basis)
     : model_(model), basis_(std::move(basis)) {
-  basis_.reference().checkCompatible(model_);
   work_ = std::make_unique<Work>(model_, basis_.reference());
 }
 
@@ -175,8 +167,8 @@ const Eigen::MatrixXd& ReducedLinearization::A() const { return work_->point.A()
 
 // T = polar(P T_h) with P = Tc Tcᵀ (Tc the core's basis at x(t)): P T_h = Tc (Tcᵀ T_h), and for
 // Tcᵀ T_h = U Σ Vᵀ the polar factor is Tc U Vᵀ (Tc has orthonormal columns).
-void ReducedLinearization::evaluate(double t) {
-  if (cached_ && cachedTime_ == t) return;
+ReferenceStatus ReducedLinearization::evaluate(double t) {
+  if (cached_ && cachedTime_ == t) return {};
   cached_ = false;
   Work& w = *work_;
   const TangentBasisTrajectory& b = basis_;
@@ -188,19 +180,20 @@ void ReducedLinearization::evaluate(double t) {
     hermiteThreePoint(b.nodeTimes_, b.nodeBr_, t, Br_, w.m0, w.m1);
     cached_ = true;
     cachedTime_ = t;
-    return;
+    return {};
   }
-  w.point.evaluate(t, constrained);
+  const ReferenceStatus st = constrained ? w.point.linearizeWithTangentBasis(t, b.d_)
+                                         : w.point.linearize(t);
   ++evaluations_;  // dynamics evaluations (the node path above takes none)
+  if (!st.ok()) return st;
   if (!constrained) {
     T_.setIdentity(b.nx_, b.nx_);
     Ar_ = w.point.A();
     Br_ = w.point.B();
   } else {
     const Eigen::Index d = b.d_;
-    w.point.requireDimension(t, d);
     b.interpolate(t, w.Th);
-    const Eigen::MatrixXd& Tc = w.point.Tc();
+    const Eigen::MatrixXd& Tc = w.point.tangentBasis();
     w.C.noalias() = Tc.transpose() * w.Th;
     w.svd.compute(w.C, Eigen::ComputeThinU | Eigen::ComputeThinV);
     const double smin = w.svd.singularValues()(d - 1);
@@ -210,7 +203,9 @@ void ReducedLinearization::evaluate(double t) {
         << " the transported basis has drifted off the tangent space (smallest singular value of "
            "its projection "
         << smin << ")";
-      throw std::runtime_error(m.str());
+      ReferenceStatus drift;
+      drift.set(ReferenceCode::kBasisDrift, m.str(), t);
+      return drift;
     }
     T_.noalias() = Tc * (w.svd.matrixU() * w.svd.matrixV().transpose());
     w.AT.noalias() = w.point.A() * T_;
@@ -219,6 +214,7 @@ void ReducedLinearization::evaluate(double t) {
   }
   cached_ = true;
   cachedTime_ = t;
+  return {};
 }
 
 }  // namespace trellis

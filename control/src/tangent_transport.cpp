@@ -1,8 +1,8 @@
 // tangent_transport.cpp — transportTangentBasis: the parallel transport Ṫ = (I − P(t)) A(t) T on
 // the one CVODES driver (kIntegrated), or the discrete projection on the knots (kProjected); then
 // the corrected basis and its derivative at the nodes the held result interpolates.
-#include "ode_driver.hpp"
-#include "reference_point.hpp"
+#include "trellis/analysis/detail/ode_driver.hpp"
+#include "trellis/core/reference.hpp"
 #include "trellis/control/manifold_lqr.hpp"
 
 #include <Eigen/LU>
@@ -28,40 +28,30 @@ namespace {
 /// Newton: matrix-free GMRES with the exact product W V and the exact preconditioner
 /// (I − γW)⁻¹ applied blockwise (one nx×nx LU per Newton-matrix update): GMRES converges in one
 /// iteration and no difference quotient is ever taken.
-class TransportSystem final : public detail::OdeSystem {
+class TransportSystem final : public detail::LinearOdeSystem {
  public:
   TransportSystem(const Model& m, const Trajectory& tr, Eigen::Index d)
       : point(m, tr), nx(tr.nx()), d(d), W(nx, nx), M(nx, nx), R(nx, d), lu(nx) {}
 
-  /// W = (I − P)A at t (evaluated once per t: W depends on t only). Throws std::runtime_error.
-  void prepare(double t) {
-    if (prepared && t == preparedTime) return;
+  /// W = (I − P)A at t (evaluated once per t: W depends on t only); the reference's status.
+  ReferenceStatus prepare(double t) {
+    if (prepared && t == preparedTime) return {};
     prepared = false;
-    point.evaluate(t, true);
-    point.requireDimension(t, d);
-    const Eigen::MatrixXd& Tc = point.Tc();
+    const ReferenceStatus st = point.linearizeWithTangentBasis(t, d);
+    if (!st.ok()) return st;
+    const Eigen::MatrixXd& Tc = point.tangentBasis();
     W = point.A();
     W.noalias() -= Tc * (Tc.transpose() * point.A());
     prepared = true;
     preparedTime = t;
+    return st;
   }
 
-  int rhs(double t, detail::ConstVectorMap y, detail::VectorMap ydot) override {
-    if (!ready(t)) return -1;
-    Eigen::Map<Eigen::MatrixXd>(ydot.data(), nx, d).noalias() =
-        W * Eigen::Map<const Eigen::MatrixXd>(y.data(), nx, d);
-    return 0;
-  }
-  bool hasJacTimes() const override { return true; }
-  int jacTimesSetup(double t, detail::ConstVectorMap, detail::ConstVectorMap) override {
-    return ready(t) ? 0 : -1;
-  }
-  int jacTimes(double t, detail::ConstVectorMap, detail::ConstVectorMap, detail::ConstVectorMap v,
-               detail::VectorMap Jv) override {
-    if (!ready(t)) return -1;
+  // Ẏ = W Y: a linear ODE (detail::LinearOdeSystem) without forcing.
+  bool prepareAt(double t) override { return ready(t); }
+  void applyJacobian(detail::ConstVectorMap v, detail::VectorMap Jv) override {
     Eigen::Map<Eigen::MatrixXd>(Jv.data(), nx, d).noalias() =
         W * Eigen::Map<const Eigen::MatrixXd>(v.data(), nx, d);
-    return 0;
   }
   bool hasPreconditioner() const override { return true; }
   int preconditionerSetup(double t, detail::ConstVectorMap, detail::ConstVectorMap, bool,
@@ -80,20 +70,16 @@ class TransportSystem final : public detail::OdeSystem {
     return 0;
   }
 
-  detail::ReferencePoint point;
+  ReferenceEvaluator point;
   Eigen::Index nx, d;
   Eigen::MatrixXd W, M, R;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu;
 
  private:
   bool ready(double t) {
-    try {
-      prepare(t);
-      return true;
-    } catch (const std::exception& e) {
-      failure = e.what();
-      return false;
-    }
+    const ReferenceStatus st = prepare(t);
+    if (!st.ok()) failure = st.message;
+    return st.ok();
   }
   bool prepared = false;
   double preparedTime = 0.0;
@@ -113,18 +99,21 @@ std::vector<double> nodeGrid(const Eigen::VectorXd& times, int substeps) {
   return grid;
 }
 
-/// polar(P T̃) = Tc U Vᵀ (Tcᵀ T̃ = U Σ Vᵀ). Throws when T̃ has drifted off the tangent space.
-void correctOnto(const Eigen::MatrixXd& Tc, const Eigen::MatrixXd& Ttilde, double t,
-                 Eigen::JacobiSVD<Eigen::MatrixXd>& svd, Eigen::MatrixXd& T) {
+/// polar(P T̃) = Tc U Vᵀ (Tcᵀ T̃ = U Σ Vᵀ). False, with `why` set, when T̃ has drifted off the
+/// tangent space.
+bool correctOnto(const Eigen::MatrixXd& Tc, const Eigen::MatrixXd& Ttilde, double t,
+                 Eigen::JacobiSVD<Eigen::MatrixXd>& svd, Eigen::MatrixXd& T, std::string& why) {
   svd.compute(Tc.transpose() * Ttilde, Eigen::ComputeThinU | Eigen::ComputeThinV);
   const double smin = svd.singularValues()(svd.singularValues().size() - 1);
   if (!(smin > 1e-3)) {
     std::ostringstream m;
     m << "the tangent space turned by more than the transport can follow at t = " << t
       << " (smallest singular value of the projected basis " << smin << ")";
-    throw std::runtime_error(m.str());
+    why = m.str();
+    return false;
   }
   T.noalias() = Tc * (svd.matrixU() * svd.matrixV().transpose());
+  return true;
 }
 
 }  // namespace
@@ -132,12 +121,11 @@ void correctOnto(const Eigen::MatrixXd& Tc, const Eigen::MatrixXd& Ttilde, doubl
 TangentBasisTrajectory transportTangentBasis(const Model& model, const Trajectory& reference,
                                              const TangentTransportOptions& options) {
   options.validate();
-  reference.checkCompatible(model);
-  if (!reference.hasStateDerivatives()) {
-    throw std::logic_error(
-        "transportTangentBasis: the trajectory has no state derivatives (call "
-        "computeStateDerivatives)");
-  }
+  // The one check of the reference (names, supplied state derivatives), by its evaluator.
+  ReferenceOptions checks;
+  checks.stateDerivatives = ReferenceOptions::StateDerivatives::kRequireSupplied;
+  checks.caller = "transportTangentBasis";
+  ReferenceEvaluator start(model, reference, checks);
   if (reference.size() < 2) {
     throw std::invalid_argument("transportTangentBasis: the trajectory needs at least 2 knots, got " +
                                 std::to_string(reference.size()));
@@ -156,9 +144,10 @@ TangentBasisTrajectory transportTangentBasis(const Model& model, const Trajector
   }
 
   // T(t0): the core's basis at x(t0).
-  detail::ReferencePoint start(model, *out.trajectory_);
-  start.evaluate(out.t0_, true);  // throws (bad start) std::runtime_error naming t0
-  const Eigen::Index d = start.Tc().cols();
+  // A reference whose dynamics fail at t0 has no basis to transport: refused like bad input.
+  const ReferenceStatus first = start.linearizeWithTangentBasis(out.t0_);
+  if (!first.ok()) throw std::runtime_error(first.message);
+  const Eigen::Index d = start.tangentBasis().cols();
   if (d == 0) {
     throw std::invalid_argument(
         "transportTangentBasis: the constraint manifold has no tangent directions at t0 = " +
@@ -168,15 +157,15 @@ TangentBasisTrajectory transportTangentBasis(const Model& model, const Trajector
   const Eigen::Index nx = out.nx_, N = nx * d;
   const std::vector<double> grid = nodeGrid(reference.times(), options.substeps);
   Eigen::JacobiSVD<Eigen::MatrixXd> svd;
-  Eigen::MatrixXd T = start.Tc(), Ttilde(nx, d);
+  Eigen::MatrixXd T = start.tangentBasis(), Ttilde(nx, d);
 
   // Stores node t with the corrected T there and Ṫ = (I − P)A T (point evaluated at t).
-  auto addNode = [&](double t, const Eigen::MatrixXd& corrected, const detail::ReferencePoint& p,
+  auto addNode = [&](double t, const Eigen::MatrixXd& corrected, const ReferenceEvaluator& p,
                      const Eigen::MatrixXd& uncorrected) {
     const Eigen::MatrixXd AT = p.A() * corrected;
     out.nodeTimes_.push_back(t);
     out.nodeT_.push_back(corrected);
-    out.nodeDT_.push_back(AT - p.Tc() * (p.Tc().transpose() * AT));
+    out.nodeDT_.push_back(AT - p.tangentBasis() * (p.tangentBasis().transpose() * AT));
     out.nodeAr_.push_back(corrected.transpose() * AT);
     out.nodeBr_.push_back(corrected.transpose() * p.B());
     out.maxCorrection_ = std::max(out.maxCorrection_, (corrected - uncorrected).norm());
@@ -194,20 +183,18 @@ TangentBasisTrajectory transportTangentBasis(const Model& model, const Trajector
     // Steps stored as {t_{k+1}, T_k}: transportedBasis returns T_k on (t_k, t_{k+1}], and the
     // node at t_{k+1} holds T_{k+1} = polar(P_{k+1} T_k) (see the header).
     out.stored_.reserve(grid.size());
-    out.stored_.push_back({out.t0_, Eigen::Map<const Eigen::VectorXd>(T.data(), N)});
+    out.stored_.append(out.t0_, Eigen::Map<const Eigen::VectorXd>(T.data(), N));
     addNode(grid[0], T, start, T);
     for (std::size_t i = 1; i < grid.size(); ++i) {
       const double t = grid[i];
-      try {
-        start.evaluate(t, true);
-        start.requireDimension(t, d);
-        Ttilde = T;
-        correctOnto(start.Tc(), Ttilde, t, svd, T);
-      } catch (const std::exception& e) {
-        out.message_ = std::string("tangent basis transport: ") + e.what();
+      const ReferenceStatus st = start.linearizeWithTangentBasis(t, d);
+      std::string why = st.message;
+      Ttilde = T;
+      if (!st.ok() || !correctOnto(start.tangentBasis(), Ttilde, t, svd, T, why)) {
+        out.message_ = "tangent basis transport: " + why;
         break;
       }
-      out.stored_.push_back({t, Eigen::Map<const Eigen::VectorXd>(Ttilde.data(), N)});
+      out.stored_.append(t, Eigen::Map<const Eigen::VectorXd>(Ttilde.data(), N));
       addNode(t, T, start, Ttilde);
       ++out.steps_;
     }
@@ -215,16 +202,12 @@ TangentBasisTrajectory transportTangentBasis(const Model& model, const Trajector
   }
 
   TransportSystem system(model, *out.trajectory_, d);
-  detail::OdeOptions o;
-  o.method = detail::OdeMethod::Bdf;
-  o.linearSolver = detail::OdeLinearSolver::Gmres;
-  o.rtol = options.rtol;
-  o.atol = options.atol;
-  o.maxSteps = options.maxSteps;
-  o.what = "tangent basis transport";
+  const detail::OdeOptions o = detail::makeOdeOptions(
+      "tangent basis transport", detail::OdeMethod::Bdf, detail::OdeLinearSolver::Gmres,
+      options.rtol, options.atol, options.maxSteps);
   detail::OdeDriver driver(system, N, o);
   driver.start(out.t0_, Eigen::Map<const Eigen::VectorXd>(T.data(), N));
-  out.stored_.push_back({out.t0_, Eigen::Map<const Eigen::VectorXd>(T.data(), N)});
+  out.stored_.append(out.t0_, Eigen::Map<const Eigen::VectorXd>(T.data(), N));
   addNode(grid[0], T, start, T);
   Eigen::VectorXd dky(N);
   for (std::size_t i = 1; i < grid.size() && out.message_.empty(); ++i) {
@@ -241,17 +224,16 @@ TangentBasisTrajectory transportTangentBasis(const Model& model, const Trajector
         break;
       }
       const int q = driver.stats().lastOrder;
-      TangentBasisTrajectory::Step step{st.t, Eigen::MatrixXd(N, q + 1)};
-      for (int k = 0; k <= q; ++k) driver.interpolate(st.t, k, dky), step.D.col(k) = dky;
-      out.stored_.push_back(std::move(step));
+      Eigen::MatrixXd D(N, q + 1);
+      for (int k = 0; k <= q; ++k) driver.interpolate(st.t, k, dky), D.col(k) = dky;
+      out.stored_.append(st.t, std::move(D));
     }
     if (!out.message_.empty()) break;
     Ttilde = Eigen::Map<const Eigen::MatrixXd>(driver.state().data(), nx, d);
-    try {
-      system.prepare(tn);
-      correctOnto(system.point.Tc(), Ttilde, tn, svd, T);
-    } catch (const std::exception& e) {
-      out.message_ = std::string("tangent basis transport: ") + e.what();
+    const ReferenceStatus st = system.prepare(tn);
+    std::string why = st.message;
+    if (!st.ok() || !correctOnto(system.point.tangentBasis(), Ttilde, tn, svd, T, why)) {
+      out.message_ = "tangent basis transport: " + why;
       break;
     }
     addNode(tn, T, system.point, Ttilde);

@@ -11,6 +11,7 @@
 #include <Eigen/Eigenvalues>
 
 #include <chrono>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -262,6 +263,11 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
   sol.maxBasisCorrection = sol.constrained ? basis.maxCorrection() : 0.0;
   finish(times, std::move(K));
   return sol;
+}
+
+bool isSemidefiniteToRoundoff(double minEigenvalue, double maxEigenvalue, double relativeSlack) {
+  const double scale = std::max(std::abs(minEigenvalue), std::abs(maxEigenvalue));
+  return std::isfinite(scale) && !(minEigenvalue < -relativeSlack * scale);
 }
 
 }  // namespace trellis

@@ -1,10 +1,15 @@
 // reference.cpp — ReferenceEvaluator: the checks once, then allocation-free queries.
 #include "trellis/core/reference.hpp"
 
+#include "trellis/core/dynamics.hpp"
 #include "trellis/core/linearization.hpp"
 #include "trellis/core/model.hpp"
 
+#include <algorithm>
+#include <cmath>
+
 #include <sstream>
+#include <stdexcept>
 
 namespace trellis {
 
@@ -17,8 +22,13 @@ ReferenceEvaluator::ReferenceEvaluator(const Model& model, Trajectory trajectory
                           (trajectory_.size() == 1 ? "" : "s") + ", need at least " +
                           std::to_string(options.minimumKnots));
   }
-  const bool keep = options.stateDerivatives == ReferenceOptions::StateDerivatives::kKeepSupplied &&
-                    trajectory_.hasStateDerivatives();
+  using Derivatives = ReferenceOptions::StateDerivatives;
+  if (options.stateDerivatives == Derivatives::kRequireSupplied && !trajectory_.hasStateDerivatives()) {
+    throw std::logic_error(options.caller +
+                           ": the trajectory has no state derivatives (call computeStateDerivatives)");
+  }
+  const bool keep =
+      options.stateDerivatives != Derivatives::kFromDynamics && trajectory_.hasStateDerivatives();
   if (!keep) trajectory_.computeStateDerivatives(model, data_);  // names the failing knot
   const int n = model.nq();
   x_.resize(2 * n);
@@ -35,16 +45,102 @@ ReferenceStatus ReferenceEvaluator::linearize(double t) {
   const int n = nq();
   q_ = x_.head(n);
   dq_ = x_.tail(n);
+  ++linearizations_;
   const DynamicsStatus status = computeLinearization(*model_, data_, q_, dq_, u_);
   ReferenceStatus out;
-  out.t = t;
   if (!status.ok() || !data_.A.allFinite() || !data_.B.allFinite()) {
-    out.ok = false;
     std::ostringstream m;
     m.precision(17);
     m << "linearization failed at t = " << t << ": "
       << (status.ok() ? std::string("A or B is not finite") : status.message);
-    out.message = m.str();
+    out.set(status.ok() ? ReferenceCode::kNonFinite : ReferenceCode::kLinearizationFailed, m.str(), t);
+  }
+  return out;
+}
+
+ReferenceStatus ReferenceEvaluator::linearizeWithTangentBasis(double t,
+                                                              Eigen::Index expectedDimension) {
+  ReferenceStatus out = linearize(t);
+  if (!out.ok()) return out;
+  const Eigen::Index d = computeConstraintTangentBasis(*model_, data_);
+  if (expectedDimension >= 0 && d != expectedDimension) {
+    std::ostringstream m;
+    m << "the tangent space changed dimension from " << expectedDimension << " to " << d
+      << " at t = " << t << " (the constraints changed rank)";
+    out.set(ReferenceCode::kTangentRankChanged, m.str(), t, static_cast<long>(d));
+  }
+  return out;
+}
+
+namespace {
+
+/// The model's length scale: the largest constant offset it is built from (joint placements,
+/// frame placements, constraint points, distances). Scaling the model's lengths by s scales it by s.
+double modelLengthScale(const Model& model) {
+  double L = 0.0;
+  for (const Joint& j : model.joints()) L = std::max(L, j.p0.norm());
+  for (const FramePlacement& f : model.frames()) L = std::max(L, f.p.norm());
+  for (const Constraint& c : model.constraints()) {
+    L = std::max({L, c.a.local.norm(), c.b.local.norm(), std::abs(c.distance)});
+  }
+  return L;
+}
+
+}  // namespace
+
+ReferenceConstraintCheck checkReferenceOnConstraints(const Model& model, const Trajectory& trajectory,
+                                                     double tolerance) {
+  if (!(tolerance > 0.0) || !std::isfinite(tolerance)) {
+    throw std::invalid_argument("checkReferenceOnConstraints: tolerance = " + std::to_string(tolerance) +
+                                " must be > 0 and finite");
+  }
+  trajectory.checkCompatible(model);
+  ReferenceConstraintCheck out;
+  out.tolerance = tolerance;
+  if (model.nc() == 0) return out;
+  const int n = model.nq();
+  const double L = modelLengthScale(model);
+  const double duration = trajectory.size() > 1 ? trajectory.endTime() - trajectory.startTime() : 1.0;
+  Data data(model);
+  Eigen::VectorXd q(n), dq(n), hdot(model.nc());
+  for (int k = 0; k < trajectory.size(); ++k) {
+    q = trajectory.states().col(k).head(n);
+    dq = trajectory.states().col(k).tail(n);
+    computeConstraints(model, data, q, dq);
+    hdot.noalias() = data.constraintJacobian * dq;
+    for (int r = 0; r < model.nc(); ++r) {
+      const Constraint& c = model.constraints()[static_cast<std::size_t>(r)];
+      const double h = data.constraintValue(r);
+      const double rowNorm = data.constraintJacobian.row(r).norm();
+      // hScale: the size of h's terms; lengthScale: the row's own size in h's units.
+      double hScale = 0.0, lengthScale = L;
+      switch (c.type) {
+        case ConstraintType::kDistance:
+          lengthScale = 2.0 * c.distance * c.distance;
+          hScale = h + lengthScale;  // ‖d‖² + ℓ²
+          break;
+        case ConstraintType::kPoint:
+        case ConstraintType::kPointOnPlane: hScale = std::max(L, rowNorm * q.norm()); break;
+        case ConstraintType::kKnifeEdge: hScale = 0.0; break;  // nonholonomic: h = 0
+      }
+      // A q̇ against ‖A_r‖‖q̇‖, floored by the row's size over the reference's duration (a knot at
+      // rest must not be held to the rounding of a zero velocity).
+      const double vScale = std::max(rowNorm * dq.norm(), lengthScale / duration);
+      const bool hBad = !(std::abs(h) <= tolerance * hScale);
+      const bool vBad = !(std::abs(hdot(r)) <= tolerance * vScale);
+      if (!hBad && !vBad) continue;
+      out.constraint = r;
+      out.position = hBad;
+      out.value = hBad ? h : hdot(r);
+      out.scale = hBad ? hScale : vScale;
+      std::ostringstream m;
+      m.precision(3);
+      m << "knot " << k << " violates the constraint '" << c.name << "': "
+        << (hBad ? "h(q) = " : "A(q) q' = ") << out.value << " against the size of its terms "
+        << out.scale << " (tolerance " << tolerance << " relative)";
+      out.status.set(ReferenceCode::kOffConstraints, m.str(), trajectory.times()(k), k);
+      return out;
+    }
   }
   return out;
 }

@@ -15,7 +15,7 @@
 #include "trellis/control/lqr.hpp"
 #include "trellis/control/manifold_lqr.hpp"
 #include "trellis/control/riccati.hpp"
-#include "trellis/control/simulation.hpp"
+#include "trellis/analysis/simulation.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/core/data.hpp"
 
@@ -274,7 +274,14 @@ void bindControl(py::module_& m) {
         py::arg("options") = py::none(),
         "Discrete algebraic Riccati equation S = Ad^T S Ad - Ad^T S Bd (R + Bd^T S Bd)^-1 Bd^T S Ad + Q; "
         "K = (R + Bd^T S Bd)^-1 Bd^T S Ad.");
-  m.def("solve_lyapunov", &solveLyapunov, py::arg("F"), py::arg("C"),
+  m.def("solve_lyapunov",
+        [](const Eigen::MatrixXd& F, const Eigen::MatrixXd& C) {
+          // The library returns a singular equation as a status; Python keeps raising it.
+          MatrixEquationSolution sol = solveLyapunov(F, C);
+          if (!sol.ok()) throw std::runtime_error(sol.status.message);
+          return sol.X;
+        },
+        py::arg("F"), py::arg("C"),
         "X with F^T X + X F + C = 0 (Bartels-Stewart); raises NumericalError when singular.");
   m.def("discretize_zero_order_hold",
         [](const Eigen::MatrixXd& A, const Eigen::MatrixXd& B, double h) {

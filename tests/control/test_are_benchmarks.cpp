@@ -434,7 +434,7 @@ TEST_CASE("Riccati: results agree with Newton-Kleinman / Hewer iterations", "[lq
     MatrixXd K = MatrixXd::Zero(m, n), X;
     for (int it = 0; it < 60; ++it) {
       const MatrixXd Acl = As - B * K;
-      X = trellis::solveLyapunov(Acl, Q + K.transpose() * R * K);
+      X = trellis::solveLyapunov(Acl, Q + K.transpose() * R * K).X;
       K = R.inverse() * B.transpose() * X;
     }
     const auto res = trellis::solveCare(As, B, Q, R);
@@ -447,7 +447,7 @@ TEST_CASE("Riccati: results agree with Newton-Kleinman / Hewer iterations", "[lq
     MatrixXd K = MatrixXd::Zero(m, n), X;
     for (int it = 0; it < 60; ++it) {
       const MatrixXd Acl = As - B * K;
-      X = trellis::solveStein(Acl, Q + K.transpose() * R * K);
+      X = trellis::solveStein(Acl, Q + K.transpose() * R * K).X;
       K = (R + B.transpose() * X * B).inverse() * B.transpose() * X * As;
     }
     const auto res = trellis::solveDare(As, B, Q, R);

@@ -3,7 +3,7 @@
 // kernel's edges handle (rows not a multiple of 8 or 4, 1…3 trailing columns, k = 0), op(B) = B
 // and Bᵀ, the upper-triangle mode and accumulation, with leading dimensions larger than the
 // blocks; and the Lyapunov solve on both paths.
-#include "dense_kernels.hpp"
+#include "trellis/analysis/detail/dense_kernels.hpp"
 #include "riccati_lyapunov.hpp"
 
 #include <catch2/catch.hpp>

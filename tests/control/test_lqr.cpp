@@ -111,10 +111,36 @@ TEST_CASE("Lyapunov solver", "[lqr]") {
   const MatrixXd F = randomMatrix(rng, 8, 8) - 4.0 * MatrixXd::Identity(8, 8);
   const MatrixXd L = randomMatrix(rng, 8, 8);
   const MatrixXd C = L * L.transpose();
-  const MatrixXd X = trellis::solveLyapunov(F, C);
+  const trellis::MatrixEquationSolution sol = trellis::solveLyapunov(F, C);
+  REQUIRE(sol.ok());
+  const MatrixXd& X = sol.X;
   const MatrixXd res = F.transpose() * X + X * F + C;
   CHECK(res.norm() / C.norm() < 1e-13);
-  CHECK_THROWS(trellis::solveLyapunov(MatrixXd::Zero(2, 2), MatrixXd::Identity(2, 2)));
+  // A singular equation (F = 0: every λ_i + λ̄_j = 0) is a returned status, not an exception;
+  // only bad sizes throw.
+  const trellis::MatrixEquationSolution singular =
+      trellis::solveLyapunov(MatrixXd::Zero(2, 2), MatrixXd::Identity(2, 2));
+  CHECK(singular.status.code == trellis::MatrixEquationCode::kSingular);
+  CHECK(singular.status.index == 0);
+  CHECK(singular.X.size() == 0);
+  CHECK_THROWS_AS(trellis::solveLyapunov(MatrixXd::Zero(2, 3), MatrixXd::Identity(2, 2)),
+                  std::invalid_argument);
+}
+
+TEST_CASE("Stein solver", "[lqr][discrete]") {
+  std::mt19937 rng(11);
+  const MatrixXd F = 0.1 * randomMatrix(rng, 6, 6);
+  const MatrixXd L = randomMatrix(rng, 6, 6);
+  const MatrixXd C = L * L.transpose();
+  const trellis::MatrixEquationSolution sol = trellis::solveStein(F, C);
+  REQUIRE(sol.ok());
+  const MatrixXd res = F.transpose() * sol.X * F - sol.X + C;
+  CHECK(res.norm() / C.norm() < 1e-13);
+  // F = I: every λ_i λ̄_j = 1, singular.
+  const trellis::MatrixEquationSolution singular =
+      trellis::solveStein(MatrixXd::Identity(3, 3), MatrixXd::Identity(3, 3));
+  CHECK(singular.status.code == trellis::MatrixEquationCode::kSingular);
+  CHECK_THAT(singular.json(), Catch::Matchers::Contains("\"status\":\"singular\""));
 }
 
 TEST_CASE("zero-order hold is exact", "[lqr][discrete]") {

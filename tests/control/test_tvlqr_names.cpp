@@ -5,6 +5,7 @@
 
 #include <catch2/catch.hpp>
 
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -32,4 +33,15 @@ TEST_CASE("names: Riccati and integration methods round-trip; bad names list the
   CHECK(names[0] == "ok");
   for (int i = 0; i < 4; ++i)
     for (int j = i + 1; j < 4; ++j) CHECK(names[i] != names[j]);
+}
+
+TEST_CASE("the S >= 0 check of a solution's spectrum is relative to its size", "[tvlqr]") {
+  CHECK(trellis::isSemidefiniteToRoundoff(0.0, 0.0));          // not tracked
+  CHECK(trellis::isSemidefiniteToRoundoff(1e-3, 10.0));        // definite
+  CHECK(trellis::isSemidefiniteToRoundoff(-1e-6, 10.0));       // round-off: −1e-7 relative
+  CHECK_FALSE(trellis::isSemidefiniteToRoundoff(-1e-4, 10.0)); // −1e-5 relative
+  // The same spectra in other units give the same verdicts.
+  CHECK(trellis::isSemidefiniteToRoundoff(-1e-12, 1e-5));
+  CHECK_FALSE(trellis::isSemidefiniteToRoundoff(-1e-10, 1e-5));
+  CHECK_FALSE(trellis::isSemidefiniteToRoundoff(-1.0, std::numeric_limits<double>::infinity()));
 }

@@ -40,7 +40,7 @@ TEST_CASE("no allocation: ReferenceEvaluator::evaluate and linearize", "[no_mall
       const double tj = 0.3 * j / 40.0;
       ref.evaluate(tj);
       sink += ref.xdot()(0) + ref.u()(0);
-      if (!ref.linearize(tj).ok) ++failures;
+      if (!ref.linearize(tj).ok()) ++failures;
       sink += ref.A()(0, 0) + ref.B()(0, 0);
     }
     Eigen::internal::set_is_malloc_allowed(true);

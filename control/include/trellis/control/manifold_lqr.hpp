@@ -49,7 +49,9 @@
 // off-manifold directions (I − TTᵀ) is zero. The full cost-to-go matrix is S = T Sr Tᵀ (2n×2n).
 #pragma once
 
+#include "trellis/analysis/dense_output.hpp"
 #include "trellis/control/riccati.hpp"
+#include "trellis/core/reference.hpp"
 
 #include <Eigen/Core>
 
@@ -150,10 +152,6 @@ class TangentBasisTrajectory {
   friend class ReducedLinearization;
   friend TangentBasisTrajectory transportTangentBasis(const Model&, const Trajectory&,
                                                       const TangentTransportOptions&);
-  struct Step {
-    double t;            // step end
-    Eigen::MatrixXd D;   // (2n·d) × (q+1): d^k vec(T)/dt^k at t
-  };
   void checkRange(double t, const char* what) const;
   void interpolate(double t, Eigen::MatrixXd& T) const;  // Hermite, not yet orthonormal
 
@@ -161,7 +159,7 @@ class TangentBasisTrajectory {
   int nx_ = 0, d_ = 0;
   double t0_ = 0.0, tf_ = 0.0, validUntil_ = 0.0;
   bool identity_ = false;      // no constraints: T = I, nothing stored
-  std::vector<Step> stored_;   // transported T̃, ascending t; stored_[0] is t0
+  DenseOutput stored_;         // transported vec(T̃) (2n·d) in t, ascending; the first step is t0
   std::vector<double> nodeTimes_;
   std::vector<Eigen::MatrixXd> nodeT_, nodeDT_;  // corrected T and Ṫ at the nodes
   std::vector<Eigen::MatrixXd> nodeAr_, nodeBr_;  // TᵀAT, TᵀB at the nodes
@@ -193,9 +191,10 @@ class ReducedLinearization {
   ReducedLinearization(const ReducedLinearization&) = delete;
   ReducedLinearization& operator=(const ReducedLinearization&) = delete;
 
-  /// Throws std::out_of_range outside the valid range, std::runtime_error (naming t) when the
-  /// dynamics fail or the tangent space changes dimension.
-  void evaluate(double t);
+  /// Throws std::out_of_range outside the valid range (bad input). A failure of the dynamics, a
+  /// change of the tangent space's dimension or a basis drifted off it is the returned status
+  /// naming t (then T, Ar, Br are not valid).
+  ReferenceStatus evaluate(double t);
   const Eigen::MatrixXd& T() const { return T_; }
   const Eigen::MatrixXd& Ar() const { return Ar_; }
   const Eigen::MatrixXd& Br() const { return Br_; }

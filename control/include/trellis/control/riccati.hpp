@@ -57,6 +57,8 @@
 // error the integrator accepted (≈ rtol·|S| + atol per entry), not an extra interpolation error.
 #pragma once
 
+#include "trellis/analysis/dense_output.hpp"
+
 #include <Eigen/Core>
 
 #include <functional>
@@ -211,14 +213,10 @@ class RiccatiSolution {
  private:
   friend RiccatiSolution solveRiccati(double, double, int, int, const LinearizationCallback&,
                                       const LqrWeights&, const RiccatiOptions&);
-  struct Step {
-    double tau;            // τ = T − t at the step end
-    Eigen::MatrixXd D;     // N × (q+1): derivatives d^k y/dτ^k at tau
-    bool factored;         // D holds the packed factor U (S = UᵀU) instead of S
-  };
   int nx_ = 0, nu_ = 0;
   double t0_ = 0.0, tf_ = 0.0;
-  std::vector<Step> steps_;  // ascending τ; steps_[0] is τ = 0 (S = Qf)
+  DenseOutput steps_;              // packed S (or U) in τ = T − t, ascending; first: τ = 0 (S = Qf)
+  std::size_t factoredSteps_ = 0;  // steps [0, factoredSteps_) hold the packed factor U (S = UᵀU)
   std::vector<double> gainTimes_;           // ascending t
   std::vector<Eigen::MatrixXd> gainNodes_;  // G = R⁻¹Bᵀ at gainTimes_
 };

@@ -79,6 +79,12 @@ struct TvlqrSolution {
 TvlqrSolution solveTvlqr(const Model& model, const Trajectory& reference, const LqrWeights& weights,
                          const TvlqrOptions& options = {});
 
+/// The S ⪰ 0 test on a solution's spectrum (TvlqrSolution::minEigenvalueS, maxEigenvalueS): S is
+/// a sum of positive semidefinite terms, so a clearly negative eigenvalue means the integration did
+/// not resolve the Riccati equation. True when λmin ≥ −relativeSlack·max(|λmin|, |λmax|) and both
+/// are finite (λmin = λmax = 0, "not tracked", passes).
+bool isSemidefiniteToRoundoff(double minEigenvalue, double maxEigenvalue, double relativeSlack = 1e-6);
+
 /// Escapes a string for JSON ("…", with \", \\, \n and control characters escaped).
 std::string jsonString(const std::string& text);
 /// A number for JSON: %.17g, or null when not finite.

@@ -12,9 +12,15 @@
 //   - the buffers x, u, ẋ it answers in.
 // It keeps a pointer to the Model (like an algorithm's arguments, the model must outlive it). One
 // evaluator per thread: queries write its buffers.
+//
+// It is THE way to evaluate along a reference: the Riccati solve's A(t), B(t)
+// (makeTrajectoryLinearization), the tangent-basis transport and the reduced linearization on the
+// constraint manifold (linearizeWithTangentBasis), the consistency check and the TV-LQR entry all
+// go through it. A failure of the dynamics at a query is a returned Status, never thrown.
 #pragma once
 
 #include "trellis/core/data.hpp"
+#include "trellis/core/status.hpp"
 #include "trellis/core/trajectory.hpp"
 
 #include <Eigen/Core>
@@ -25,12 +31,31 @@ namespace trellis {
 
 class Model;
 
-/// A query's outcome: ok, or the time and what failed there (the core's status message).
-struct ReferenceStatus {
-  bool ok = true;
-  double t = 0.0;
-  std::string message;  ///< "linearization failed at t = …: …" when not ok
+/// Why a query along the reference failed.
+enum class ReferenceCode {
+  kOk,
+  kLinearizationFailed,  ///< computeLinearization's status was not ok (singular M, constraints)
+  kNonFinite,            ///< A or B has a non-finite entry
+  kTangentRankChanged,   ///< the constraint tangent space changed dimension (the rank of the
+                         ///< constraints changed; index: the new dimension)
+  kOffConstraints,       ///< a knot violates a constraint (checkReferenceOnConstraints)
+  kBasisDrift,           ///< a transported tangent basis no longer spans the tangent space
+                         ///< (control's ReducedLinearization)
 };
+inline EnumNameTable<ReferenceCode> enumNames(ReferenceCode) {
+  static constexpr EnumName<ReferenceCode> table[] = {
+      {ReferenceCode::kOk, "ok"},
+      {ReferenceCode::kLinearizationFailed, "linearization_failed"},
+      {ReferenceCode::kNonFinite, "non_finite"},
+      {ReferenceCode::kTangentRankChanged, "tangent_rank_changed"},
+      {ReferenceCode::kOffConstraints, "off_constraints"},
+      {ReferenceCode::kBasisDrift, "basis_drift"}};
+  return table;
+}
+
+/// A query's outcome: ok, or the time t and what failed there (the message names t and the core's
+/// status message: "linearization failed at t = …: …").
+using ReferenceStatus = Status<ReferenceCode>;
 
 struct ReferenceOptions {
   /// Where the knot derivatives ẋ_k come from.
@@ -38,10 +63,44 @@ struct ReferenceOptions {
   ///                 of a trajectory file; supplied derivatives are replaced);
   ///  kKeepSupplied: the trajectory's own (setStateDerivatives, e.g. a designed motion's exact
   ///                 q̈) when it has them, else from the dynamics as above.
-  enum class StateDerivatives { kFromDynamics, kKeepSupplied };
+  ///  kRequireSupplied: the trajectory's own; a trajectory without them is refused
+  ///                 (std::logic_error "<caller>: the trajectory has no state derivatives (call
+  ///                 computeStateDerivatives)"): for solvers whose reference was prepared before.
+  enum class StateDerivatives { kFromDynamics, kKeepSupplied, kRequireSupplied };
   StateDerivatives stateDerivatives = StateDerivatives::kKeepSupplied;
   int minimumKnots = 1;  ///< fewer knots are refused (a reference to follow needs 2)
+  /// Names the caller in the messages of a refusal ("transportTangentBasis: …").
+  std::string caller = "reference";
 };
+
+/// The verdict of checkReferenceOnConstraints: ok, or the first violation (status.index: the
+/// knot, status.t: its time, status.message: a sentence naming the constraint and the values).
+struct ReferenceConstraintCheck {
+  ReferenceStatus status;
+  int constraint = -1;     ///< the violated row (Model::constraints() index)
+  bool position = true;    ///< h(q) (true) or A(q) q̇ (false) is off
+  double value = 0.0;      ///< h(q) or A(q) q̇ there
+  double scale = 0.0;      ///< the size of the compared terms (see below)
+  double tolerance = 0.0;  ///< the relative tolerance used
+  bool ok() const { return status.ok(); }
+};
+
+/// Is every knot of `trajectory` on the constraints of `model` (names must match: else
+/// TrajectoryError)? A reference off the constraint manifold has no meaningful linearization and
+/// would be tracked with a drift as large as its violation. Each residual is measured against the
+/// size of the terms it compares, so that changing the model's units (lengths scaled by any s)
+/// leaves the verdict unchanged:
+///  - velocity row: |A_r q̇| ≤ tol · max(‖A_r‖ ‖q̇‖, ℓ_r / T), T the reference's duration and ℓ_r
+///    the row's own size in h's units (2ℓ² for a distance, L otherwise): a knot at rest is not held
+///    to the rounding of a zero velocity;
+///  - distance row, h = ‖d‖² − ℓ²: |h| ≤ tol · (‖d‖² + ℓ²) = tol · (h + 2ℓ²);
+///  - point and point-on-plane rows (h a length): |h| ≤ tol · max(L, ‖A_r‖ ‖q‖), L the model's
+///    length scale (the largest joint offset, frame offset or constraint point; lengths scale it
+///    like h), ‖A_r‖ ‖q‖ the size of the motion's contribution;
+///  - knife edges are velocity rows only.
+/// A model without constraints is ok. Bad input throws; a violation is the returned verdict.
+ReferenceConstraintCheck checkReferenceOnConstraints(const Model& model, const Trajectory& trajectory,
+                                                     double tolerance = 1e-6);
 
 class ReferenceEvaluator {
  public:
@@ -66,12 +125,21 @@ class ReferenceEvaluator {
   /// into A(), B() (and everything else data() holds: M, the constraint Jacobian, ...). A failure of
   /// the dynamics is the returned status naming t, never thrown. No allocation when ok.
   ReferenceStatus linearize(double t);
+  /// linearize(t), then the orthonormal basis Tc (2n×d_c) of the constraint tangent space at x(t)
+  /// (computeConstraintTangentBasis; T = I without constraints) into tangentBasis(). With
+  /// expectedDimension ≥ 0, a different d_c is the status kTangentRankChanged naming t and both
+  /// dimensions. No allocation when ok and d_c is unchanged.
+  ReferenceStatus linearizeWithTangentBasis(double t, Eigen::Index expectedDimension = -1);
 
   const Eigen::VectorXd& x() const { return x_; }        ///< 2n: x(t) of the last query
   const Eigen::VectorXd& u() const { return u_; }        ///< m: u(t)
   const Eigen::VectorXd& xdot() const { return xdot_; }  ///< 2n: the spline's dx/dt at t
   const Eigen::MatrixXd& A() const { return data_.A; }   ///< 2n×2n, valid after linearize ok
   const Eigen::MatrixXd& B() const { return data_.B; }   ///< 2n×m
+  /// 2n×d_c, valid after linearizeWithTangentBasis ok.
+  const Eigen::MatrixXd& tangentBasis() const { return data_.tangentBasis; }
+  /// Number of linearizations (dynamics evaluations) so far.
+  long linearizations() const { return linearizations_; }
   Data& data() { return data_; }                          ///< the workspace of the last query
   const Data& data() const { return data_; }
 
@@ -80,6 +148,7 @@ class ReferenceEvaluator {
   Trajectory trajectory_;
   Data data_;
   Eigen::VectorXd x_, u_, xdot_, q_, dq_;
+  long linearizations_ = 0;
 };
 
 }  // namespace trellis

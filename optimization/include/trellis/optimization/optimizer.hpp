@@ -6,7 +6,7 @@
 // quasi-Newton (L-BFGS) update. Linear solver: MUMPS (Debian's build).
 //
 // "solved" means the plant can follow the result: after Ipopt converges, the knots are checked a
-// posteriori (checkConsistency, trellis/control/consistency.hpp: the exact dynamics integrated by
+// posteriori (checkConsistency, trellis/analysis/consistency.hpp: the exact dynamics integrated by
 // CVODES over every interval from every knot under the linear input every reader applies), and
 // with a closed chain the slack's share of the defect is measured on the same scale. When either
 // exceeds `consistencyTolerance`, the mesh is refined and the problem solved again (below); when
@@ -22,7 +22,7 @@
 // maxRefinements, or when the knots would exceed maxKnots.
 #pragma once
 
-#include "trellis/control/consistency.hpp"
+#include "trellis/analysis/consistency.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/optimization/problem.hpp"
 #include "trellis/optimization/transcription.hpp"

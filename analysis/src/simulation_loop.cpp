@@ -1,0 +1,204 @@
+// simulation_loop.cpp — the simulator's event loop: integrate from event to event with the one
+// CVODES driver (exactly to the stop events, dense output elsewhere), measure the drift and
+// project above the tolerance, sample the held input, record the outputs (see simulation.hpp).
+#include "constraint_drift.hpp"
+#include "trellis/analysis/detail/ode_driver.hpp"
+#include "simulation_events.hpp"
+#include "simulation_run.hpp"
+
+#include "trellis/core/model.hpp"
+
+#include <memory>
+#include <string>
+
+namespace trellis::detail {
+
+namespace {
+
+OdeOptions integratorOptions(const SimulationOptions& options) {
+  const bool bdf = options.method == IntegrationMethod::kBDF;
+  OdeOptions ode = makeOdeOptions("closed-loop simulation", bdf ? OdeMethod::Bdf : OdeMethod::Adams,
+                                  bdf ? OdeLinearSolver::Dense : OdeLinearSolver::FixedPoint,
+                                  options.rtol, options.atol, options.maxSteps, options.maxStep);
+  ode.exactJacobian = options.exactJacobian;
+  return ode;
+}
+
+}  // namespace
+
+SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, double t0, double t1,
+                               const InputLaw& law, const SimulationOptions& options,
+                               const Trajectory* reference) {
+  const std::vector<SimulationEvent> events = simulationEvents(t0, t1, options, reference);
+  const int m = model.nu(), nx = 2 * model.nq();
+  const bool constrained = model.nc() > 0;
+  const bool projecting = constrained && options.constraints == ConstraintHandling::kProject;
+  const bool sampled = options.sampleRate > 0.0;
+  // Drift is integration error: a few times the tolerances' size is what one interval may add.
+  const double driftTolerance =
+      options.driftTolerance > 0.0 ? options.driftTolerance : 10.0 * (options.atol + options.rtol);
+
+  long outputs = 0;
+  for (const SimulationEvent& e : events) outputs += e.output ? 1 : 0;
+  SimulationRecord record;
+  record.times.reserve(static_cast<std::size_t>(outputs));
+  record.states.resize(nx, outputs);
+  record.inputs.resize(m, outputs);
+  record.drift = Eigen::VectorXd::Zero(outputs);
+  record.tracking.resize(reference ? outputs : 0);
+
+  SimulationResult result;
+  ClosedLoopSystem system(model, law, options);
+  OdeDriver driver(system, nx, integratorOptions(options));
+  std::unique_ptr<ConstraintDrift> monitor;
+  if (constrained) monitor = std::make_unique<ConstraintDrift>(model, options.projectionIterations);
+
+  auto setFailure = [&](SimulationStatus s, double t, const Eigen::VectorXd& state,
+                        const std::string& what) {
+    result.status = s;
+    result.failureTime = t;
+    result.failureState = state;
+    result.message =
+        "simulation stopped at t = " + formatTime(t) + ", x = " + formatVector(state) + ": " + what;
+  };
+
+  Eigen::VectorXd x = x0, xr(nx), ur(m), u(m), y(nx);
+  // The state x at the integrator's current time (the integrator holds x or x − x_ref, see
+  // closed_loop_system.hpp).
+  auto integratorState = [&]() {
+    Eigen::VectorXd state(nx);
+    system.toState(driver.time(), driver.state(), state);
+    return state;
+  };
+  long steps = 0;
+  double stopTime = t0;  // the next stop event: the integrator never steps past it
+  for (std::size_t e = 0; e < events.size(); ++e) {
+    const SimulationEvent& ev = events[e];
+    const double te = ev.t;
+    // 1. the state at te: step until the integrator passes te, then its dense output
+    if (e > 0) {
+      bool failed = false;
+      // Failures count per event interval: a run creeping towards a point beyond which the
+      // right-hand side fails takes ever smaller successful steps, each with a few failures.
+      system.resetCallState();
+      while (driver.time() < te) {
+        if (steps >= options.maxSteps) {
+          setFailure(SimulationStatus::kIntegratorFailure, driver.time(),
+                     integratorState(),
+                     "more than maxSteps = " + std::to_string(options.maxSteps) + " internal steps");
+          failed = true;
+          break;
+        }
+        const OdeStatus st = driver.step(stopTime);
+        if (!st.ok()) {
+          if (system.failed && st.callbackFailed()) {
+            setFailure(system.failStatus, system.failTime, system.failState, st.message);
+          } else {
+            std::string what = st.message;
+            if (st.tooMuchWork())
+              what = "more than maxSteps = " + std::to_string(options.maxSteps) +
+                     " internal steps; " + what;
+            if (system.failed) what += " (last right-hand-side failure: " + system.failMessage + ")";
+            setFailure(SimulationStatus::kIntegratorFailure, st.t, integratorState(),
+                       what);
+          }
+          failed = true;
+          break;
+        }
+        ++steps;
+      }
+      if (failed) break;
+      if (driver.time() == te) {
+        system.toState(te, driver.state(), x);
+      } else if (driver.interpolate(te, 0, y)) {
+        system.toState(te, y, x);
+      } else {
+        setFailure(SimulationStatus::kIntegratorFailure, te, integratorState(),
+                   "the dense output is not available at t = " + formatTime(te));
+        break;
+      }
+      if (!x.allFinite()) {
+        setFailure(SimulationStatus::kNonFinite, te, x, "the state became non-finite");
+        break;
+      }
+    }
+    // 2. drift (before projecting); projection where it exceeds the tolerance
+    double d = 0.0;
+    bool projected = false;
+    if (constrained && (ev.output || ev.stop)) {
+      d = monitor->drift(x);
+      result.maxConstraintDrift = std::max(result.maxConstraintDrift, d);
+    }
+    if (projecting && d > driftTolerance) {
+      const ConstraintProjection p = monitor->project(x);
+      ++result.projections;
+      projected = true;
+      if (!x.allFinite()) {
+        setFailure(SimulationStatus::kNonFinite, te, x,
+                   "the constraint projection produced a non-finite state");
+        break;
+      }
+      if (!(p.driftAfter <= driftTolerance)) {
+        setFailure(SimulationStatus::kConstraintDrift, te, x,
+                   "the constraint drift " + formatTime(p.driftBefore) + " is still " +
+                       formatTime(p.driftAfter) + " after projection (" +
+                       std::to_string(p.iterations) + " Newton steps), above the tolerance " +
+                       formatTime(driftTolerance));
+        break;
+      }
+    }
+    // 3. a new sample of the held input
+    if (ev.sample) {
+      bool clipped = false;
+      if (!system.sample(te, x, clipped)) {
+        setFailure(system.failStatus, te, x, system.failMessage);
+        break;
+      }
+      ++result.controlSamples;
+      if (clipped) ++result.saturatedSamples;
+    }
+    // 4. output
+    if (ev.output) {
+      const auto k = static_cast<Eigen::Index>(record.times.size());
+      if (sampled) {
+        u = system.heldInput();
+      } else {
+        bool clipped = false;
+        if (!system.control(te, x, u, clipped)) {
+          setFailure(system.failStatus, te, x, system.failMessage);
+          break;
+        }
+        ++result.controlSamples;
+        if (clipped) ++result.saturatedSamples;
+      }
+      record.times.push_back(te);
+      record.states.col(k) = x;
+      record.inputs.col(k) = u;
+      record.drift(k) = d;
+      if (reference) {
+        reference->evaluate(te, xr, ur);
+        record.tracking(k) = (x - xr).norm();
+      }
+    }
+    if (e + 1 == events.size()) break;
+    // 5. (re)start where the right-hand side jumps (a sample, a breakpoint) or the state did
+    if (e == 0 || ev.stop || projected) {
+      system.toIntegrator(te, x, y);
+      driver.start(te, y);
+      std::size_t next = e + 1;
+      while (!events[next].stop) ++next;  // the last event (t1) is a stop
+      stopTime = events[next].t;
+    }
+  }
+
+  const OdeStats s = driver.stats();
+  result.steps = s.steps;
+  result.rhsEvaluations = s.rhsEvaluations;
+  result.linearRhsEvaluations = s.linearRhsEvaluations;
+  result.jacobianEvaluations = s.jacobianEvaluations;
+  result.restarts = s.restarts;
+  assembleResult(model, record, reference != nullptr, result);
+  return result;
+}
+
+}  // namespace trellis::detail
