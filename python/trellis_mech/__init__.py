@@ -36,7 +36,7 @@ from ._trellis_mech import (Data, DynamicsStatus, compute_constraint_tangent_bas
                             compute_dynamics, compute_linearization, solve_manifold_riccati,
                             solve_riccati)
 
-__version__ = "0.1.0"
+from ._version import __version__  # written by CMake from project(trellis VERSION ...)
 
 
 @dataclass
