@@ -45,3 +45,15 @@ def test_a_difference_is_reported(tm):
     changed = text.replace("class Model", "class Modell", 1)
     diff = gen.compare(changed, text, hasattr(ext, "hand"))
     assert "-class Modell" in diff and "+class Model" in diff
+
+
+def test_builds_without_the_hand_compare_without_its_section(tm):
+    """A build without the examples has no trellis_mech.hand: the check drops the stub's hand
+    section, and what remains is exactly the stub of such a module."""
+    gen = generator()
+    ext = tm._trellis_mech
+    if not hasattr(ext, "hand"):
+        return  # this build is the hand-less case itself, checked above
+    full = gen.generate(ext)
+    assert gen.HAND_BEGIN in full
+    assert gen.strip_hand(full) == gen.generate(gen._without(ext, "hand"))
