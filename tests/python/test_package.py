@@ -39,7 +39,9 @@ def build_dir():
 def test_pip_install_into_a_target_and_import(tmp_path):
     build = build_dir()
     target = tmp_path / "site"
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    # pip and the CMake it runs are not sanitized programs: no sanitizer preload for them (an ASan
+    # build's CTest sets LD_PRELOAD for the interpreter); the import below keeps it.
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "LD_PRELOAD")}
     done = subprocess.run(
         [sys.executable, "-m", "pip", "install", "--no-build-isolation", "--no-deps", "--no-index",
          "--disable-pip-version-check", "--target", str(target),
@@ -56,6 +58,8 @@ def test_pip_install_into_a_target_and_import(tmp_path):
              "print(tm.__file__); print(tm.__version__, md.version('trellis-mech')); "
              "print(tm.linearize(m, [0.3], [0.0], [0.0]).A[1, 0])" % (SOURCE_DIR / "examples/scenes/pendulum.json"))
     env["PYTHONPATH"] = str(target)
+    if "LD_PRELOAD" in os.environ:
+        env["LD_PRELOAD"] = os.environ["LD_PRELOAD"]
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env, cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     where, versions, a10 = out.stdout.splitlines()
@@ -92,10 +96,11 @@ def test_backend_metadata(tmp_path):
     assert b.get_requires_for_build_wheel() == [] and b.get_requires_for_build_sdist() == []
 
 
-def test_wheel_contents_and_record(tmp_path):
+def test_wheel_contents_and_record(tmp_path, monkeypatch):
     """A wheel from the existing build: every file listed in RECORD with its hash, the package
     layout of the build tree, and the platform tag of this interpreter."""
     build = build_dir()
+    monkeypatch.delenv("LD_PRELOAD", raising=False)  # for the CMake the backend runs (see above)
     b = backend()
     name = b.build_wheel(str(tmp_path), {"build-dir": str(build)})
     tag = sys.implementation.cache_tag.replace("cpython-", "cp")
