@@ -4,7 +4,7 @@
 // to evaluate it. Constrained variants anchor the constrained point to a world-fixed frame placed
 // where that point is at the sampled q, and project q̇ onto the null space of A(q), so the state
 // lies on the constraint manifold (h(q) = 0, A(q) q̇ = 0) — the states where every formulation of
-// the constraint gives the same linearization (shared/paper/ERRATA.md).
+// the constraint gives the same linearization (docs/paper_errata.md).
 #pragma once
 
 #include "trellis/core/model.hpp"

@@ -613,6 +613,22 @@ def section_hand(summary, path, fig_dir, rel):
 
 # ---- Main -------------------------------------------------------------------------------------
 
+# The report is regenerated whole, except what follows this line in the existing file: the
+# measurements taken by hand (comparisons, history) that no benchmark program reproduces.
+KEPT_MARKER = "<!-- Everything below this line is written by hand; bench/perf_report.py keeps it. -->"
+
+
+def kept_section(path):
+    """The hand-written tail of an existing report, from KEPT_MARKER on ("" when there is none)."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            text = fh.read()
+    except FileNotFoundError:
+        return ""
+    at = text.find(KEPT_MARKER)
+    return text[at:] if at >= 0 else ""
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", required=True, help="directory with <program>.json / .status")
@@ -734,8 +750,11 @@ def write_report(args):
            ""]
     if failures:
         md += ["## Failures", ""] + [f"- {f}" for f in failures] + [""]
+    kept = kept_section(args.md)
     with open(args.md, "w", encoding="utf-8") as fh:
         fh.write("\n".join(md).rstrip() + "\n")
+        if kept:
+            fh.write("\n" + kept.rstrip() + "\n")
     print(f"perf_report.py: wrote {args.md} and the plots in {args.figures}")
     for f in failures:
         print(f"perf_report.py: FAILED {f}", file=sys.stderr)

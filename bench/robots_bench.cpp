@@ -1,4 +1,4 @@
-// bench/robots_bench.cpp — the real robots of ../shared/robots (URDF) and the arbitrary-axis joint.
+// bench/robots_bench.cpp — the real robots of tests/data/robots (URDF) and the arbitrary-axis joint.
 //
 //   RobotLinearization/<robot>     computeLinearization at a seeded random state (A, B exact)
 //   RobotLinearizationFD/<robot>   central differences of computeDynamics (2(2n+m) evaluations)
@@ -54,7 +54,7 @@ Eigen::MatrixXd exactJ(const Fixture& f, trellis::Data& data) {
 }
 
 void robotExact(benchmark::State& state, const std::string& file) {
-  const Fixture f = withState(trellis::loadUrdf(std::string(TRELLIS_SHARED_DIR) + "/robots/" + file).model, 7);
+  const Fixture f = withState(trellis::loadUrdf(std::string(TRELLIS_ROBOTS_DIR) + "/" + file).model, 7);
   trellis::Data data(f.model);
   for (auto _ : state) {
     trellis::computeLinearization(f.model, data, f.q, f.dq, f.u);
@@ -70,7 +70,7 @@ void robotExact(benchmark::State& state, const std::string& file) {
 }
 
 void robotFd(benchmark::State& state, const std::string& file) {
-  const Fixture f = withState(trellis::loadUrdf(std::string(TRELLIS_SHARED_DIR) + "/robots/" + file).model, 7);
+  const Fixture f = withState(trellis::loadUrdf(std::string(TRELLIS_ROBOTS_DIR) + "/" + file).model, 7);
   trellis::Data data(f.model);
   trellis::bench::FdWorkspace ws(f.model);
   Eigen::MatrixXd J(f.model.nq(), 2 * f.model.nq() + f.model.nu());

@@ -1,8 +1,8 @@
 // paper_example — the constrained double pendulum of Johnson & Murphey (2010), Sec. IV.
 //
 // Loads examples/scenes/paper_pendulum.json, computes the exact linearization at the state of
-// shared/paper/ERRATA.md (q0 = [0.5246, 1.0472], dq0 = [1, -2.00116], with u0 = 0 and u0 = 2) and
-// prints [dq''/dq | dq''/dq' | dq''/du] beside the verified values of ERRATA.md. Exits with status 1
+// docs/paper_errata.md (q0 = [0.5246, 1.0472], dq0 = [1, -2.00116], with u0 = 0 and u0 = 2) and
+// prints [dq''/dq | dq''/dq' | dq''/du] beside the verified values of docs/paper_errata.md. Exits with status 1
 // if an entry differs from them by more than 1e-6 (they are printed to 7 decimals). Then shows the
 // same on the constraint manifold, at q = (pi/6, pi/3) with a velocity in the null space of A(q).
 //
@@ -23,7 +23,7 @@ constexpr double kTolerance = 1e-6;
 
 using Table = Eigen::Matrix<double, 2, 5>;  // [dq''/dq | dq''/dq' | dq''/du]
 
-// ERRATA.md, "Section IV example": exact values at q0, dq0 with u0 = 0 ...
+// docs/paper_errata.md, "Section IV example": exact values at q0, dq0 with u0 = 0 ...
 const Table kReferenceU0 = (Table() << -1.1325464, 7.6892986, -0.5800373, -1.4472350, 0.4997086,  //
                             5.6196650, -10.6978349, -1.1553703, 0.5773514, -0.9999972)
                                .finished();
@@ -80,7 +80,7 @@ double compare(const trellis::Model& model, const Evaluation& e, const Table& re
   double worst = 0.0;
   for (int i = 0; i < 2; ++i) {
     printRow(c[i] + "''", "trellis", e.table.row(i), "%14.7f");
-    printRow("", "ERRATA.md", reference.row(i), "%14.7f");
+    printRow("", "verified", reference.row(i), "%14.7f");
     const Eigen::RowVectorXd diff = e.table.row(i) - reference.row(i);
     printRow("", "difference", diff, "%14.1e");
     worst = std::max(worst, diff.cwiseAbs().maxCoeff());
@@ -107,15 +107,15 @@ int run(const std::string& scenePath) {
               model.configNames()[1].c_str(), model.inputNames()[0].c_str(),
               model.constraints()[0].name.c_str());
 
-  // The scene stores the state of ERRATA.md; say so if someone edits it.
+  // The scene stores the state of docs/paper_errata.md; say so if someone edits it.
   if ((scene.q - kQ0).norm() > 0 || (scene.dq - kDq0).norm() > 0 || scene.u[0] != 0.0) {
-    std::printf("note: the scene's state differs from ERRATA.md's; using ERRATA.md's\n\n");
+    std::printf("note: the scene's state differs from the one of docs/paper_errata.md; using the latter\n\n");
   }
 
   int section = 1;
   for (const auto& [u0, reference] : {std::pair{0.0, kReferenceU0}, std::pair{2.0, kReferenceU2}}) {
     const Eigen::VectorXd u = Eigen::VectorXd::Constant(1, u0);
-    std::printf("%d. ERRATA.md state (the paper's printed q0, corrected velocity), u0 = %g\n", section++, u0);
+    std::printf("%d. the state of docs/paper_errata.md (the paper's printed q0, corrected velocity), u0 = %g\n", section++, u0);
     const Evaluation e = evaluate(model, data, kQ0, kDq0, u);
     printState(kQ0, kDq0, u0, e);
     if (!e.status.ok()) {
@@ -157,7 +157,7 @@ int run(const std::string& scenePath) {
 int main(int argc, char** argv) {
   if (argc > 2 || (argc == 2 && (std::string(argv[1]) == "-h" || std::string(argv[1]) == "--help"))) {
     std::printf("usage: paper_example [SCENE.json]\n"
-                "Reproduces the verified linearization of the paper's Sec. IV example (ERRATA.md);\n"
+                "Reproduces the verified linearization of the paper's Sec. IV example (docs/paper_errata.md);\n"
                 "default scene: %s/paper_pendulum.json\n", TRELLIS_EXAMPLE_SCENES_DIR);
     return argc > 2 ? 2 : 0;
   }

@@ -21,6 +21,10 @@ packages=(
   python3 python3-matplotlib
   # the Python module trellis_mech (python/) and its tests
   pybind11-dev python3-dev python3-numpy python3-pytest
+  # `pip install .` of trellis_mech (pyproject.toml), and its test
+  python3-pip
+  # the C++ API reference (docs/Doxyfile) and its test
+  doxygen
 )
 
 missing=()

@@ -1,15 +1,14 @@
 #!/usr/bin/env python3
 """The paper's Sec. IV example from Python: the exact linearization of the constrained double
-pendulum (examples/scenes/paper_pendulum.json) at the state of shared/paper/ERRATA.md, with u0 = 0
-and u0 = 2, checked against the verified table that ERRATA.md prints (read from the file, 7
+pendulum (examples/scenes/paper_pendulum.json) at the state of docs/paper_errata.md, with u0 = 0
+and u0 = 2, checked against the verified table that page prints (read from the file, 7
 decimals); then the linearization on the constraint manifold at a consistent state.
 Exit status 0 when every entry agrees to 1e-6.
 
-usage: python3 examples/python/paper_example.py [path/to/ERRATA.md]
-(default: $TRELLIS_SHARED_DIR/paper/ERRATA.md, else ../shared/paper/ERRATA.md beside the repository)
+usage: python3 examples/python/paper_example.py [path/to/paper_errata.md]
+(default: docs/paper_errata.md of this source tree)
 """
 import math
-import os
 import pathlib
 import re
 import sys
@@ -22,23 +21,22 @@ ROOT = _setup_path.ROOT
 
 
 def errata_tables(path):
-    """{u0: 2x5 array [dqdd/dq | dqdd/ddq | dqdd/du]} from ERRATA.md's "Section IV example"."""
+    """{u0: 2x5 array [dqdd/dq | dqdd/ddq | dqdd/du]} from the page's "Verified linearization" table,
+    whose rows are | u0 | row | five values |."""
     text = pathlib.Path(path).read_text(encoding="utf-8")
-    number = lambda s: float(s.replace("−", "-"))  # noqa: E731  (ERRATA.md uses U+2212)
-    rows = [[number(v) for v in m.group(1).split("|")]
-            for m in (re.match(r"\s*\|\s*θ̈[12]\s*\|(.*)\|\s*$", line) for line in text.splitlines()) if m]
-    match = re.search(r"columns\s+are \[([^\]]+)\]", text)
-    if len(rows) != 2 or not match:
-        raise ValueError(f"{path}: the Section IV table was not found")
-    u0 = np.array(rows)
-    u2 = u0.copy()
-    u2[:, :2] = [[number(v) for v in row.split(",")] for row in match.group(1).split(";")]
-    return {0.0: u0, 2.0: u2}
+    number = lambda s: float(s.replace("−", "-"))  # noqa: E731  (the page uses U+2212)
+    tables = {}
+    for line in text.splitlines():
+        m = re.match(r"\s*\|\s*([0-9.]+)\s*\|\s*θ̈[₁₂]\s*\|(.*)\|\s*$", line)
+        if m:
+            tables.setdefault(float(m.group(1)), []).append([number(v) for v in m.group(2).split("|")])
+    if sorted(tables) != [0.0, 2.0] or any(len(rows) != 2 for rows in tables.values()):
+        raise ValueError(f"{path}: the verified table (rows u0 = 0 and 2) was not found")
+    return {u0: np.array(rows) for u0, rows in sorted(tables.items())}
 
 
 def main():
-    shared = pathlib.Path(os.environ.get("TRELLIS_SHARED_DIR", ROOT.parent / "shared"))
-    errata = sys.argv[1] if len(sys.argv) > 1 else shared / "paper" / "ERRATA.md"
+    errata = sys.argv[1] if len(sys.argv) > 1 else ROOT / "docs" / "paper_errata.md"
     tables = errata_tables(errata)
     model = tm.load_scene(str(ROOT / "examples" / "scenes" / "paper_pendulum.json")).model
     data = tm.Data(model)
@@ -55,7 +53,7 @@ def main():
         diff = np.abs(table - reference).max()
         worst = max(worst, diff)
         print(f"u0 = {u0:g}: q = {q0}, dq = {dq0}   columns {' '.join(columns)}")
-        print("  trellis_mech\n", table, "\n  ERRATA.md\n", reference)
+        print("  trellis_mech\n", table, "\n  verified\n", reference)
         print(f"  max |difference| = {diff:.1e}\n")
 
     # On the manifold: h(pi/6, pi/3) = 0, dq in the null space of A(q).

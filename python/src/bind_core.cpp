@@ -120,7 +120,7 @@ void bindCore(py::module_& m) {
 
   m.def("load_scene", [](const std::string& path) { return toPyScene(loadScene(path)); },
         py::arg("path"),
-        "Reads a scene file (JSON, shared/SCENE_FORMAT.md). Raises ModelError (a ValueError) naming "
+        "Reads a scene file (JSON, docs/scene_format.md). Raises ModelError (a ValueError) naming "
         "the element, field and value, also when the file cannot be read.");
   m.def("parse_scene",
         [](const std::string& text, const std::string& source) {

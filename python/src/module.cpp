@@ -3,16 +3,21 @@
 //
 // Exceptions: bad input becomes ValueError — plain std::invalid_argument / std::out_of_range /
 // std::logic_error, and the descriptive trellis types ModelError, TrajectoryError, ProblemError,
-// which are ValueError subclasses here. A std::runtime_error the C++ throws for a numerical failure
+// which are ValueError subclasses here. A trellis::FileError (a file that cannot be read or written)
+// becomes OSError with the errno its message names, so that Python picks the subclass
+// (FileNotFoundError, PermissionError, IsADirectoryError, …). A std::runtime_error the C++ throws
+// for a numerical failure
 // (e.g. computeControllabilityAt when the dynamics fail, solveLyapunov when singular) becomes
 // trellis_mech.NumericalError (a RuntimeError). Failures the C++ reports as a status stay a status.
 #include "common.hpp"
 
+#include "trellis/core/io.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/core/model_builder.hpp"
 #include "trellis/optimization/problem.hpp"
 
 #include <bit>
+#include <cerrno>
 #include <cstring>
 #include <string>
 
@@ -94,6 +99,26 @@ PyObject* gTrajectoryError = nullptr;
 PyObject* gProblemError = nullptr;
 PyObject* gNumericalError = nullptr;
 
+/// Raises OSError for a FileError. Its message is "path: action (reason)" with the reason the
+/// C library's text for an errno (describeOsError in core/src/io.cpp), so the errno is found by
+/// matching that text; OSError(errno, message) then is the errno's subclass. A message without
+/// a known reason ("path: is a directory, not a …") stays a plain OSError.
+void setOsError(const FileError& e) {
+  static constexpr int kCodes[] = {ENOENT, EACCES, EPERM,  EISDIR, ENOTDIR, EEXIST,       EROFS,
+                                   ENOSPC, EFBIG,  EDQUOT, EIO,    ELOOP,   ENAMETOOLONG, EMFILE};
+  const std::string_view what = e.what();
+  for (const int code : kCodes) {
+    if (what.ends_with("(" + std::string(std::strerror(code)) + ")")) {
+      PyObject* error = PyObject_CallFunction(PyExc_OSError, "is", code, e.what());
+      if (!error) return;  // the call's own exception is set
+      PyErr_SetObject(reinterpret_cast<PyObject*>(Py_TYPE(error)), error);
+      Py_DECREF(error);
+      return;
+    }
+  }
+  PyErr_SetString(PyExc_OSError, e.what());
+}
+
 PyObject* newError(py::module_& m, const char* name, PyObject* base, const char* doc) {
   const std::string qualified = std::string("trellis_mech.") + name;
   // One reference is kept for the life of the process (exception types are never unloaded).
@@ -135,6 +160,8 @@ void bindErrors(py::module_& m) {
       PyErr_SetString(gProblemError, e.what());
     } catch (const std::logic_error& e) {  // invalid_argument, out_of_range, domain_error, …
       PyErr_SetString(PyExc_ValueError, e.what());
+    } catch (const FileError& e) {  // before runtime_error, its base
+      setOsError(e);
     } catch (const std::runtime_error& e) {
       PyErr_SetString(gNumericalError, e.what());
     }

@@ -20,7 +20,9 @@ Conventions (the C++ ones, in snake_case):
   ValueError subclasses) with the C++ message naming the element, field and value; a numerical
   failure the C++ reports as a status stays a status (``DynamicsStatus``, ``LqrResult.status``,
   ``RiccatiSolution.status``, ``SimulationResult.status``, ``OptimizationResult.status``); where the
-  C++ throws for a numerical failure, ``NumericalError`` (a RuntimeError) is raised;
+  C++ throws for a numerical failure, ``NumericalError`` (a RuntimeError) is raised; a file that
+  cannot be written raises ``OSError`` of the matching kind (``FileNotFoundError`` for a missing
+  directory, ``PermissionError``, ``IsADirectoryError``), with the path in the message;
 * long computations (linearization, Riccati, simulation, optimization) release the GIL.
 """
 
@@ -34,7 +36,7 @@ from ._trellis_mech import (Data, DynamicsStatus, compute_constraint_tangent_bas
                             compute_dynamics, compute_linearization, solve_manifold_riccati,
                             solve_riccati)
 
-__version__ = "0.1.0"
+from ._version import __version__  # written by CMake from project(trellis VERSION ...)
 
 
 @dataclass

@@ -5,7 +5,7 @@
 #         [-DSTDOUT_ONE_LINE=ON] [-DCHECK_PAPER_JSON=ON] [-DINPUT_FILE=<stdin>] -P run_cli.cmake
 #
 # CHECK_PAPER_JSON parses stdout as the JSON of `trellis linearize` on paper_pendulum.json and
-# checks its keys, sizes and A[2][0] against ERRATA.md (-1.1325464, within 1e-6).
+# checks its keys, sizes and A[2][0] against docs/paper_errata.md (-1.1325464, within 1e-6).
 cmake_minimum_required(VERSION 3.25)
 
 string(REPLACE "|" ";" ARGS "${ARGS}")
@@ -80,7 +80,7 @@ if(CHECK_PAPER_JSON)
   if(NOT nlambda EQUAL 1)
     message(FATAL_ERROR "lambda has ${nlambda} entries, expected 1")
   endif()
-  # ERRATA.md: dq''1/dtheta1 = -1.1325464 at the scene's state (CMake compares numbers as doubles)
+  # docs/paper_errata.md: dq''1/dtheta1 = -1.1325464 at the scene's state (CMake compares numbers as doubles)
   string(JSON a20 GET "${out}" A 2 0)
   if(NOT (a20 GREATER -1.1325474 AND a20 LESS -1.1325454))
     message(FATAL_ERROR "A[2][0] = ${a20}, expected -1.1325464 within 1e-6")

@@ -57,7 +57,7 @@ trellis_cli_test(kinematics.error.unknown_frame ARGS kinematics --frames bob,nos
   CHECKS -DEXPECT_EXIT=2 ${_error_checks} "-DSTDERR_REGEX=unknown frame 'nose' \\(known: pivot, bob\\)")
 
 # ---- project ------------------------------------------------------------------------------------
-# The paper's stored state is off its constraint (h = -3.47e-3, ERRATA.md): projected, |h| and
+# The paper's stored state is off its constraint (h = -3.47e-3, docs/paper_errata.md): projected, |h| and
 # |A q'| are at rounding level, and the linearization at the projected state (read back through
 # --state) sees the same.
 trellis_mq_test(project.paper_then_linearize

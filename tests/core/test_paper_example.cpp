@@ -1,10 +1,10 @@
 // tests/core/test_paper_example.cpp — leg 3: the verified example of Johnson & Murphey (2010),
-// Sec. IV, with the corrections of shared/paper/ERRATA.md.
+// Sec. IV, with the corrections of docs/paper_errata.md.
 //
-// The system (ERRATA tree): world → Link1 rz(θ1) → A ty(−1), mass 1 at A → Link2 rz(θ2) → B ty(−1),
+// The system (docs/paper_errata.md): world → Link1 rz(θ1) → A ty(−1), mass 1 at A → Link2 rz(θ2) → B ty(−1),
 // mass 1 at B; world → C tx(2); gravity (0, −9.8, 0); torque u on θ1; h = ‖p_B − p_C‖² − 1.
-// At q0 = [0.5246, 1.0472], q̇0 = [1, −2.00116] (ERRATA: the printed +2.00116 violates A q̇ = 0),
-// the printed matrix is reproduced with u0 = 0. The ERRATA table has 7 decimals (rounding error
+// At q0 = [0.5246, 1.0472], q̇0 = [1, −2.00116] (docs/paper_errata.md: the printed +2.00116 violates A q̇ = 0),
+// the printed matrix is reproduced with u0 = 0. The table of docs/paper_errata.md has 7 decimals (rounding error
 // ≤ 5e-8); the comparison is to 1e-6 absolute. (An exact symbolic evaluation of the constrained
 // Euler-Lagrange equations, done while writing this test, reproduces every table entry to all
 // printed digits.)
@@ -24,7 +24,7 @@ using namespace trellis::test;
 
 namespace {
 
-/// Built here, from the ERRATA description, rather than from a scene file.
+/// Built here, from the description in docs/paper_errata.md, rather than from a scene file.
 Model buildPaperPendulum() {
   ModelBuilder b("paper pendulum");
   b.addFrame("Link1", "world", Transform::rz("theta1"));
@@ -80,7 +80,7 @@ TEST_CASE("Paper example: linearization reproduces the corrected table", "[paper
     TRELLIS_CHECK_MATRIX(ddq, data.dqdd_ddq, kTableTolerance, Scale::kAbsolute);
     TRELLIS_CHECK_MATRIX(du, data.dqdd_du, kTableTolerance, Scale::kAbsolute);
 
-    // The full first-order system of the ERRATA: x = [θ1, θ2, θ̇1, θ̇2].
+    // The full first-order system (docs/paper_errata.md): x = [θ1, θ2, θ̇1, θ̇2].
     Eigen::MatrixXd A(4, 4), B(4, 1);
     A << 0, 0, 1, 0,  //
         0, 0, 0, 1,   //
@@ -127,9 +127,9 @@ TEST_CASE("Paper example: dynamics at the example state", "[paper][dynamics]") {
     CHECK(data.qdd[1] == Approx(-3.14974503473).margin(1e-9));
     CHECK(data.lambda[0] == Approx(-6.21992395144).margin(1e-9));
   }
-  SECTION("the example state is slightly off the constraint (ERRATA)") {
+  SECTION("the example state is slightly off the constraint (docs/paper_errata.md)") {
     computeConstraints(model, data, kQ0, kDq0);
-    // h(q0) = −3.47e-3 and A(q0) q̇0 ≈ −1.1e-6 (ERRATA.md).
+    // h(q0) = −3.47e-3 and A(q0) q̇0 ≈ −1.1e-6 (docs/paper_errata.md).
     CHECK(data.constraintValue[0] == Approx(-3.47e-3).margin(5e-6));
     const double Aqd = (data.constraintJacobian * kDq0)(0);
     CHECK(std::abs(Aqd) < 5e-6);

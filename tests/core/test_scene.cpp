@@ -63,10 +63,10 @@ std::string oneFrame(const std::string& frame) { return R"({"frames": [)" + fram
 }  // namespace
 
 TEST_CASE("scene: the example scenes load with the documented orderings", "[scene]") {
-  SECTION("paper_pendulum: the state of ERRATA.md") {
+  SECTION("paper_pendulum: the state of docs/paper_errata.md") {
     const trellis::Scene s = trellis::loadScene(scenePath("paper_pendulum.json"));
     CHECK(s.name == "paper_pendulum");
-    CHECK_THAT(s.description, Contains("ERRATA"));
+    CHECK_THAT(s.description, Contains("docs/paper_errata.md"));
     CHECK(s.model.configNames() == Names{"theta1", "theta2"});
     CHECK(s.model.inputNames() == Names{"u"});
     REQUIRE(s.model.nc() == 1);

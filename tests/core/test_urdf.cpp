@@ -1,5 +1,5 @@
 // tests/core/test_urdf.cpp — URDF import (trellis/core/urdf.hpp): the real robots of
-// ../shared/robots (structure, M symmetric positive definite, linearization against central
+// tests/data/robots (structure, M symmetric positive definite, linearization against central
 // differences, B = [0; M⁻¹], energy balance), the same robots written as a scene or built in C++
 // (A, B equal to 1e-14), scenes that include a URDF, compound joints, and the refusals.
 #include <catch2/catch.hpp>
@@ -27,7 +27,7 @@ using namespace trellis::test;
 
 namespace {
 
-std::string robotPath(const std::string& file) { return std::string(TRELLIS_SHARED_DIR) + "/robots/" + file; }
+std::string robotPath(const std::string& file) { return std::string(TRELLIS_SOURCE_DIR) + "/tests/data/robots/" + file; }
 
 struct RobotCase {
   const char* file;
@@ -35,7 +35,7 @@ struct RobotCase {
   int nframes;  ///< links + "<link>:inertial" frames
   double uRange;  ///< inputs of the random states: torques the robot's scale makes sensible
 };
-// Link counts from ../shared/robots/README.md; the inertial frames are the links (not the root)
+// Link counts from tests/data/robots/README.md; the inertial frames are the links (not the root)
 // whose <inertial> origin is not the identity. Input ranges: the Leap hand's phalanges weigh
 // 10–40 g with inertias near 1e-5 kg m², so 1 N m would give q̈ ~ 1e5 rad/s² and central
 // differences (of q̈ and of the energy) that lose five digits to rounding; 1e-3 N m is its scale.

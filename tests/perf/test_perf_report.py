@@ -183,6 +183,24 @@ class PerfReportTest(unittest.TestCase):
         self.assertEqual(self.generate(), 1)
         self.assertIn("exit status 134", self.read_md())
 
+    def test_hand_written_tail_is_kept(self):
+        """The generated part is replaced, the part after the marker survives regeneration."""
+        write_program(self.results, "linearization_sweep", sweep_benchmarks())
+        os.makedirs(os.path.dirname(self.md))
+        tail = perf_report.KEPT_MARKER + "\n\n## History\n\n| model | before | after |\n|---|---|---|\n"
+        with open(self.md, "w", encoding="utf-8") as fh:
+            fh.write("# an old generated report\n\nstale figures\n\n" + tail)
+        self.assertEqual(self.generate(), 0)
+        md = self.read_md()
+        self.assertNotIn("stale figures", md)
+        self.assertTrue(md.startswith("# trellis performance report"))
+        self.assertTrue(md.endswith(tail), md[-300:])
+        self.assertEqual(md.count(perf_report.KEPT_MARKER), 1)
+        self.assertEqual(self.generate(), 0)  # again: the tail is kept once, not duplicated
+        again = self.read_md()
+        self.assertTrue(again.endswith(tail))
+        self.assertEqual(again.count(perf_report.KEPT_MARKER), 1)
+
     def test_missing_sweep_cannot_make_a_report(self):
         write_program(self.results, "linearization_sweep", [], status="failed: exit status 1")
         self.assertEqual(self.generate(), 2)

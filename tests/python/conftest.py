@@ -1,7 +1,8 @@
-"""Shared fixtures of the Python tests: where the source tree, shared/ and the CLI are.
+"""Shared fixtures of the Python tests: where the source tree, its data and the CLI are.
 
 CTest (python/CMakeLists.txt) sets PYTHONPATH to the build tree's package and TRELLIS_SOURCE_DIR,
-TRELLIS_SHARED_DIR, TRELLIS_CLI; run by hand, the defaults below find them from this file."""
+TRELLIS_CLI; run by hand, the defaults below find them from this file. Everything the tests read
+is inside the source tree."""
 import os
 import pathlib
 import subprocess
@@ -10,7 +11,8 @@ import pytest
 
 SOURCE_DIR = pathlib.Path(os.environ.get("TRELLIS_SOURCE_DIR",
                                          pathlib.Path(__file__).resolve().parents[2]))
-SHARED_DIR = pathlib.Path(os.environ.get("TRELLIS_SHARED_DIR", SOURCE_DIR.parent / "shared"))
+ROBOTS = SOURCE_DIR / "tests" / "data" / "robots"
+PAPER_ERRATA = SOURCE_DIR / "docs" / "paper_errata.md"
 SCENES = SOURCE_DIR / "examples" / "scenes"
 TRAJECTORIES = SOURCE_DIR / "examples" / "trajectories"
 PROBLEMS = SOURCE_DIR / "examples" / "problems"

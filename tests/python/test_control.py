@@ -1,6 +1,7 @@
 """trellis_mech control bindings: CARE/DARE, discretization, trajectories and gain schedules (NumPy
 and CSV), TV-LQR against `trellis gains`, simulation against `trellis simulate`, lifetimes, errors
 and the GIL."""
+import errno
 import gc
 import math
 import re
@@ -110,6 +111,25 @@ def test_trajectory_errors(tm, tmp_path):
     traj = tm.Trajectory(["a"], [], [0.0, 1.0], np.zeros((2, 2)), np.zeros((0, 2)))
     with pytest.raises(ValueError):
         traj.evaluate(0.5)  # no state derivatives: std::logic_error → ValueError
+
+
+def test_file_errors_are_os_errors(tm, tmp_path):
+    """trellis::FileError becomes OSError of the errno's kind (issue 23 part 5), never
+    NumericalError; the message keeps the path, and nothing is left behind."""
+    traj = tm.Trajectory(["a"], [], [0.0, 1.0], np.zeros((2, 2)), np.zeros((0, 2)))
+    gains = tm.GainSchedule([0.0, 1.0], np.zeros((2, 1, 2)))
+    missing = tmp_path / "no such dir" / "out.csv"
+    for obj in (traj, gains):
+        with pytest.raises(FileNotFoundError, match="no such dir") as err:
+            obj.write_csv(str(missing))
+        assert err.value.errno == errno.ENOENT
+        assert not isinstance(err.value, tm.NumericalError)
+    assert not (tmp_path / "no such dir").exists()
+    # A directory given as the file to write: OSError (no errno in the C++ message).
+    with pytest.raises(OSError, match="is a directory") as err:
+        traj.write_csv(str(tmp_path))
+    assert not isinstance(err.value, tm.NumericalError)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_gain_schedule_numpy_and_csv(tm, tmp_path):

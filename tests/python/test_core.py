@@ -1,5 +1,6 @@
 """trellis_mech core bindings: models, builder, Data, dynamics and linearization, NumPy handling,
-errors — each checked against the C++ CLI on the same input, a closed form, or ERRATA.md."""
+errors — each checked against the C++ CLI on the same input, a closed form, or the verified table of
+docs/paper_errata.md."""
 import json
 import math
 import re
@@ -8,7 +9,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from conftest import SCENES, SHARED_DIR
+from conftest import PAPER_ERRATA, SCENES
 
 SCENE_NAMES = ["pendulum", "cart_pole", "acrobot", "paper_pendulum", "all_elements_3d", "hand"]
 
@@ -58,22 +59,17 @@ def test_pendulum_closed_form(tm):
 
 
 def errata_tables():
-    """The verified Sec. IV linearization of shared/paper/ERRATA.md: {u0: 2x5 table}."""
-    text = (SHARED_DIR / "paper" / "ERRATA.md").read_text(encoding="utf-8")
-    number = lambda s: float(s.replace("−", "-"))  # noqa: E731  (ERRATA uses U+2212)
-    rows = []
+    """The verified Sec. IV linearization of docs/paper_errata.md: {u0: 2x5 table}."""
+    text = PAPER_ERRATA.read_text(encoding="utf-8")
+    number = lambda s: float(s.replace("−", "-"))  # noqa: E731  (the page uses U+2212)
+    tables = {}
     for line in text.splitlines():
-        m = re.match(r"\s*\|\s*θ̈[12]\s*\|(.*)\|\s*$", line)
+        m = re.match(r"\s*\|\s*([0-9.]+)\s*\|\s*θ̈[₁₂]\s*\|(.*)\|\s*$", line)
         if m:
-            rows.append([number(v) for v in m.group(1).split("|")])
-    assert len(rows) == 2, "ERRATA.md's table has changed"
-    u0 = np.array(rows)
-    m = re.search(r"columns\s+are \[([^\]]+)\]", text)
-    assert m, "ERRATA.md's u0 = 2 values have changed"
-    dq = np.array([[number(v) for v in row.split(",")] for row in m.group(1).split(";")])
-    u2 = u0.copy()
-    u2[:, :2] = dq
-    return {0.0: u0, 2.0: u2}
+            tables.setdefault(float(m.group(1)), []).append([number(v) for v in m.group(2).split("|")])
+    assert sorted(tables) == [0.0, 2.0], f"{PAPER_ERRATA}: the verified table has changed"
+    assert all(len(rows) == 2 and all(len(r) == 5 for r in rows) for rows in tables.values())
+    return {u0: np.array(rows) for u0, rows in tables.items()}
 
 
 @pytest.mark.parametrize("u0", [0.0, 2.0])
@@ -83,7 +79,7 @@ def test_paper_example_errata(tm, u0):
     status = tm.compute_linearization(model, data, [0.5246, 1.0472], [1.0, -2.00116], [u0])
     assert status.ok
     table = np.hstack([data.dqdd_dq, data.dqdd_ddq, data.dqdd_du])
-    # ERRATA.md prints 7 decimals.
+    # docs/paper_errata.md prints 7 decimals.
     np.testing.assert_allclose(table, errata_tables()[u0], rtol=0, atol=1e-6)
 
 

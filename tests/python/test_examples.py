@@ -22,6 +22,16 @@ def test_paper_example():
     assert "PASS" in out
 
 
+def test_readme_example():
+    """The README's Python block (examples/readme/cart_pole.py), run from the source root as the
+    README says: the balancing gain stabilizes the upright cart-pole."""
+    done = subprocess.run([sys.executable, str(SOURCE_DIR / "examples" / "readme" / "cart_pole.py")],
+                          capture_output=True, text=True, timeout=120, cwd=SOURCE_DIR)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "states: ['x', 'theta', 'dx', 'dtheta']" in done.stdout
+    assert "closed loop:" in done.stdout
+
+
 def test_cart_pole(tmp_path):
     out = run("cart_pole.py", tmp_path)
     assert "optimize: SOLVED" in out

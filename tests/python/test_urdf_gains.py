@@ -6,15 +6,14 @@ import json
 import numpy as np
 import pytest
 
-from conftest import SHARED_DIR
+from conftest import ROBOTS
 
-URDF = SHARED_DIR / "robots" / "double_pendulum_continuous.urdf"
+URDF = ROBOTS / "double_pendulum_continuous.urdf"
 
 
 @pytest.fixture()
 def urdf():
-    if not URDF.exists():
-        pytest.skip(f"{URDF} is not there (TRELLIS_SHARED_DIR)")
+    assert URDF.exists(), f"{URDF}: a test robot of the source tree is missing"
     return URDF
 
 

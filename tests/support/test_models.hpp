@@ -109,7 +109,7 @@ inline Eigen::Matrix4d se3(double angle, const Eigen::Vector3d& axis, const Eige
   return g;
 }
 
-/// The paper's example (Sec. IV, tree as in ERRATA.md): world→Link1 rz(θ1)→A ty(−1), mass 1 at A
+/// The paper's example (Sec. IV, tree as in docs/paper_errata.md): world→Link1 rz(θ1)→A ty(−1), mass 1 at A
 /// →Link2 rz(θ2)→B ty(−1), mass 1 at B; world→C tx(2); gravity (0, −9.8, 0); torque u on θ1;
 /// h = ‖p_B − p_C‖² − 1, added `distanceCopies` times (0: unconstrained double pendulum).
 inline TestSystem paperPendulum(int distanceCopies = 1) {

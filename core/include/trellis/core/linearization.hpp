@@ -6,7 +6,7 @@
 // are differentiated analytically with q̈ and λ held fixed (one tangent Newton-Euler pass per
 // state direction, touching only the joints a coordinate moves), and
 //   [M Aᵀ; A 0] [∂q̈; −∂λ] = −[∂r; ∂c]
-// is solved with the factorization already used for the dynamics (ERRATA.md: this is the paper's
+// is solved with the factorization already used for the dynamics (docs/paper_errata.md: this is the paper's
 // ∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂u, ∂λ/∂· written without expanding the inverse).
 #pragma once
 

@@ -1,4 +1,4 @@
-// trellis/core/scene.hpp — scene files (../shared/SCENE_FORMAT.md, version 1, JSON).
+// trellis/core/scene.hpp — scene files (docs/scene_format.md, JSON).
 #pragma once
 
 #include "trellis/core/model_builder.hpp"
