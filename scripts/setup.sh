@@ -21,6 +21,9 @@ packages=(
   python3 python3-matplotlib
   # the Python module trellis_mech (python/) and its tests
   pybind11-dev python3-dev python3-numpy python3-pytest
+  # the 3D viewer (viewer/, `trellis view`): three.js, included in every page it writes, and the
+  # headless browser its tests open the pages in (tests/viewer/)
+  libjs-three chromium
 )
 
 missing=()
