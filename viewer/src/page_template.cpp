@@ -86,7 +86,8 @@ function fragment() {
 const nb = D.bodies.length;
 const state = decode(D.state, Float64Array);
 const trajectories = D.trajectories.map(function (t) {
-  return {name: t.name, ghost: t.ghost, knots: t.knots, t: decode(t.t, Float64Array), poses: decode(t.poses, Float64Array)};
+  return {name: t.name, ghost: t.ghost, knots: t.knots, t: decode(t.t, Float64Array), poses: decode(t.poses, Float64Array),
+          tensions: t.tensions ? decode(t.tensions, Float64Array) : null, maxTension: t.maxTension || 0};
 });
 const R = D.view.radius;
 const up = new THREE.Vector3().fromArray(D.view.up);
@@ -106,7 +107,7 @@ const side = [new THREE.Vector3(0, 0, 1), new THREE.Vector3(1, 0, 0), new THREE.
 side.addScaledVector(up, -side.dot(up)).normalize();
 const across = new THREE.Vector3().crossVectors(up, side);
 const eye = side.clone().multiplyScalar(0.8).addScaledVector(across, -0.45).addScaledVector(up, 0.45).normalize();
-camera.position.copy(centre).addScaledVector(eye, 3.0 * R);
+camera.position.copy(centre).addScaledVector(eye, 2.4 * R);
 const controls = new THREE.OrbitControls(camera, renderer.domElement);
 controls.target.copy(centre);
 controls.update();
@@ -156,28 +157,38 @@ const visualGeometry = D.visuals.map(function (v) {
   return g;
 });
 
-// The parent–child pairs drawn as capsules: frames on different bodies, or apart on one body.
-function staticWorld(index) {
+// The parent–child pairs drawn as capsules: those apart (more than 1e-4 R) in the state or at the
+// first, middle or last sample of a trajectory (a revolute joint's frames coincide: no capsule).
+function worldAt(poses, k, index) {
   const f = D.frames[index];
   const p = new THREE.Vector3(), q = new THREE.Quaternion();
+  if (index < 0) return p;
   if (f.body >= 0) {
-    const o = 7 * f.body;
-    p.set(state[o], state[o + 1], state[o + 2]);
-    q.set(state[o + 4], state[o + 5], state[o + 6], state[o + 3]);
+    const o = 7 * (k * nb + f.body);
+    p.set(poses[o], poses[o + 1], poses[o + 2]);
+    q.set(poses[o + 4], poses[o + 5], poses[o + 6], poses[o + 3]);
     if (f.p) p.add(new THREE.Vector3().fromArray(f.p).applyQuaternion(q));
   } else {
     p.fromArray(f.p);
   }
   return p;
 }
+const poseChecks = [[state, 0]];
+for (const t of trajectories) {
+  const last = t.t.length - 1;
+  poseChecks.push([t.poses, 0], [t.poses, last >> 1], [t.poses, last]);
+}
 const linkPairs = [];
 D.frames.forEach(function (f, i) {
-  const parentBody = f.parent >= 0 ? D.frames[f.parent].body : -1;
-  const parentPos = f.parent >= 0 ? staticWorld(f.parent) : new THREE.Vector3();
-  if (parentBody !== f.body || staticWorld(i).distanceTo(parentPos) > 1e-4 * R) linkPairs.push([f.parent, i]);
+  if (f.marker) return;  // a tendon via point or constraint point: its line shows it
+  const apart = poseChecks.some(function (c) {
+    return worldAt(c[0], c[1], i).distanceTo(worldAt(c[0], c[1], f.parent)) > 1e-4 * R;
+  });
+  if (apart) linkPairs.push([f.parent, i]);
 });
 
 // ---- one drawing per trajectory (or one for the state) -------------------------------------------
+let instanceCount = 0;
 function makeInstance(ghost) {
   const inst = {group: new THREE.Group(), bodies: [], frames: [], links: [], lines: []};
   scene.add(inst.group);
@@ -211,12 +222,15 @@ function makeInstance(ghost) {
   });
   const knuckle = new Set();
   for (const pair of linkPairs) {
+    // Links between world-fixed frames do not move: drawn once, with the first trajectory.
+    const fixed = (pair[0] < 0 || D.frames[pair[0]].body < 0) && D.frames[pair[1]].body < 0;
+    if (fixed && instanceCount > 0) continue;
     const m = new THREE.Mesh(unitCylinder, mats.link);
     inst.group.add(m);
     inst.links.push({mesh: m, a: pair[0], b: pair[1]});
     categories.links.push(m);
     for (const f of pair) {
-      if (f < 0 || knuckle.has(f)) continue;
+      if (ghost || f < 0 || knuckle.has(f)) continue;  // ghosts: capsules without joints (fewer draws)
       knuckle.add(f);
       const k = new THREE.Mesh(unitSphere, mats.link);
       k.scale.setScalar(linkRadius);
@@ -225,6 +239,7 @@ function makeInstance(ghost) {
     }
   }
   D.visuals.forEach(function (v, i) {
+    if (D.frames[v.f].body < 0 && instanceCount > 0) return;  // world-fixed: drawn once
     const m = new THREE.Mesh(visualGeometry[i], v.shape === "standin" ? mats.standin : mats.visual);
     m.position.fromArray(v.p);
     m.quaternion.set(v.q[1], v.q[2], v.q[3], v.q[0]);
@@ -241,8 +256,11 @@ function makeInstance(ghost) {
     inst.lines.push({line: line, points: points});
     categories[category].push(line);
   }
-  for (const c of D.constraints) polyline([c.a, c.b], colours.constraint, "constraints");
-  for (const t of D.tendons) polyline(t.points, colours.tendon, "tendons");
+  ++instanceCount;
+  if (!ghost) {  // ghosts show the bodies' motion; lines of twenty ghosts would hide the reference
+    for (const c of D.constraints) polyline([c.a, c.b], colours.constraint, "constraints");
+    for (const t of D.tendons) polyline(t.points, colours.tendon, "tendons");
+  }
   return inst;
 }
 
@@ -306,7 +324,21 @@ const instances = [];
 if (trajectories.length === 0) {
   instances.push({inst: makeInstance(false), poses: state, t: new Float64Array([0]), name: "state", shown: true});
 } else {
-  for (const tr of trajectories) instances.push({inst: makeInstance(tr.ghost), poses: tr.poses, t: tr.t, name: tr.name, ghost: tr.ghost, shown: true});
+  for (const tr of trajectories) {
+    instances.push({inst: makeInstance(tr.ghost), poses: tr.poses, t: tr.t, name: tr.name, ghost: tr.ghost, shown: true,
+                    tensions: tr.tensions, maxTension: tr.maxTension});
+  }
+}
+// Tendon colour by tension u / max u over the trajectory: pale green (slack) to dark green.
+const slack = new THREE.Color(0xb9e4c9), taut = new THREE.Color(0x0a5c2e);
+function colourTendons(i, k, alpha) {
+  const nt = D.tendons.length, lines = i.inst.lines.slice(D.constraints.length);
+  lines.forEach(function (l, j) {
+    let u = i.tensions[k * nt + j];
+    if (alpha > 0) u += alpha * (i.tensions[(k + 1) * nt + j] - u);
+    const s = i.maxTension > 0 ? Math.min(Math.max(u / i.maxTension, 0), 1) : 0;
+    l.line.material.color.copy(slack).lerp(taut, s);
+  });
 }
 let tmin = Infinity, tmax = -Infinity;
 for (const i of instances) { tmin = Math.min(tmin, i.t[0]); tmax = Math.max(tmax, i.t[i.t.length - 1]); }
@@ -316,6 +348,7 @@ function setTime(value) {
   for (const i of instances) {
     const [k, alpha] = locate(i.t, time);
     setPoses(i.inst, i.poses, k, alpha);
+    if (i.tensions) colourTendons(i, k, alpha);
   }
 }
 
@@ -451,6 +484,7 @@ if ("bench" in hash) {
   }
   status.benchFrames = frames;
   status.benchMsPerFrame = (performance.now() - start) / frames;
+  status.drawCalls = renderer.info.render.calls;
   setTime("t" in hash ? Number(hash.t) : tmin);
   renderer.render(scene, camera);
 }

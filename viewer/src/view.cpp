@@ -39,6 +39,13 @@ std::string formatVector(const Eigen::Vector3d& v) {
   return s.str();
 }
 
+std::string formatNumber(double x) {
+  std::ostringstream s;
+  s.precision(17);
+  s << x;
+  return s.str();
+}
+
 Json vec(const Eigen::Vector3d& v) { return Json::array({v(0), v(1), v(2)}); }
 
 /// Unit quaternion (w, x, y, z) of R with w >= 0, as `trellis kinematics` prints it.
@@ -117,20 +124,23 @@ void appendBodyPoses(const Model& model, Data& data, const BodyLayout& layout, c
   }
 }
 
-/// Knots ∪ {t_0 + k / rate}, sorted; a grid time within 1e-9 of the interval length from a knot
-/// is dropped (the knot is kept: the page then shows the knot's exact pose there).
+/// Every knot, and the display grid t_0 + k / rate where the knots are sparser: a grid time is
+/// added when no knot lies within half a display interval of it. So consecutive samples are at most
+/// about 1 / rate apart, and a trajectory whose knots are denser than the display rate (a
+/// simulation's output) is shown at its knots alone.
 std::vector<double> sampleTimes(const Trajectory& trajectory, double rate) {
   const Eigen::VectorXd& knots = trajectory.times();
   std::vector<double> times(knots.data(), knots.data() + knots.size());
   const double t0 = trajectory.startTime(), t1 = trajectory.endTime();
-  const double tolerance = 1e-9 * std::max(t1 - t0, 1e-300);
+  const double halfInterval = 0.5 / rate;
   std::size_t k = 0;
   for (long i = 1;; ++i) {
     const double t = t0 + static_cast<double>(i) / rate;
     if (!(t < t1)) break;
-    while (k + 1 < times.size() && times[k + 1] <= t) ++k;
-    const double nearest = std::min(t - times[k], k + 1 < times.size() ? times[k + 1] - t : INFINITY);
-    if (nearest > tolerance) times.push_back(t);
+    while (k + 1 < knots.size() && knots(static_cast<Eigen::Index>(k) + 1) <= t) ++k;
+    const double before = t - knots(static_cast<Eigen::Index>(k));
+    const double after = k + 1 < static_cast<std::size_t>(knots.size()) ? knots(static_cast<Eigen::Index>(k) + 1) - t : INFINITY;
+    if (std::min(before, after) > halfInterval) times.push_back(t);
   }
   std::sort(times.begin(), times.end());
   return times;
@@ -148,11 +158,11 @@ void checkVisual(const VisualGeometry& v, int index) {
       if (!(v.size.minCoeff() > 0.0)) fail("<box size>", formatVector(v.size) + ": every edge must be > 0");
       break;
     case VisualGeometry::Shape::kCylinder:
-      if (!(v.size(0) > 0.0)) fail("<cylinder radius>", std::to_string(v.size(0)) + " must be > 0");
-      if (!(v.size(1) > 0.0)) fail("<cylinder length>", std::to_string(v.size(1)) + " must be > 0");
+      if (!(v.size(0) > 0.0)) fail("<cylinder radius>", formatNumber(v.size(0)) + " must be > 0");
+      if (!(v.size(1) > 0.0)) fail("<cylinder length>", formatNumber(v.size(1)) + " must be > 0");
       break;
     case VisualGeometry::Shape::kSphere:
-      if (!(v.size(0) > 0.0)) fail("<sphere radius>", std::to_string(v.size(0)) + " must be > 0");
+      if (!(v.size(0) > 0.0)) fail("<sphere radius>", formatNumber(v.size(0)) + " must be > 0");
       break;
     case VisualGeometry::Shape::kMesh:
       if ((v.size.array() == 0.0).any()) fail("<mesh scale>", formatVector(v.size) + " must have no zero entry");
@@ -245,7 +255,7 @@ std::string renderView(const Scene& scene, const Eigen::VectorXd& q, const std::
   }
   if (!q.allFinite()) throw ViewError("the state to show is not finite");
   if (!(options.displayRate > 0.0) || !std::isfinite(options.displayRate)) {
-    throw ViewError("ViewOptions.displayRate: " + std::to_string(options.displayRate) + " must be > 0 and finite");
+    throw ViewError("ViewOptions.displayRate: " + formatNumber(options.displayRate) + " must be > 0 and finite");
   }
   ViewReport local;
   ViewReport& out = report ? *report : local;
@@ -287,6 +297,28 @@ std::string renderView(const Scene& scene, const Eigen::VectorXd& q, const std::
   data["title"] = options.title.empty() ? (scene.name.empty() ? std::string("trellis view") : scene.name) : options.title;
   data["model"] = model.name();
 
+  // Markers: leaf frames (not joint frames) at a tendon path point or a constraint point. The
+  // page draws no capsule to them (the tendon or constraint line shows them), which keeps a model
+  // with many via points (the hand) legible.
+  std::vector<bool> hasChildren(model.nframes(), false), marker(model.nframes(), false);
+  for (const FramePlacement& p : model.frames()) {
+    if (p.parentFrame >= 0) hasChildren[p.parentFrame] = true;
+  }
+  auto markPoint = [&](const BodyPoint& point) {
+    for (int f = 0; f < model.nframes(); ++f) {
+      const FramePlacement& p = model.frames()[f];
+      const bool jointFrame = p.joint != kWorld && layout.rep[p.joint] == f;
+      if (!hasChildren[f] && !jointFrame && p.joint == point.joint && (p.p - point.local).norm() <= 1e-12) marker[f] = true;
+    }
+  };
+  for (const Tendon& t : model.tendons()) {
+    for (const BodyPoint& p : t.path) markPoint(p);
+  }
+  for (const Constraint& c : model.constraints()) {
+    markPoint(c.a);
+    markPoint(c.b);
+  }
+
   Json frames = Json::array();
   for (int f = 0; f < model.nframes(); ++f) {
     const FramePlacement& p = model.frames()[f];
@@ -298,6 +330,7 @@ std::string renderView(const Scene& scene, const Eigen::VectorXd& q, const std::
       t = r.R.transpose() * (p.p - r.p);
     }
     Json frame{{"name", p.name}, {"body", p.joint}, {"parent", p.parentFrame}};
+    if (marker[f]) frame["marker"] = true;
     // The joint frames themselves are shown at their stored pose: identity, so the page's world
     // position of such a frame is the stored number exactly.
     if (p.joint == kWorld || f != layout.rep[p.joint]) {
@@ -408,15 +441,31 @@ std::string renderView(const Scene& scene, const Eigen::VectorXd& q, const std::
     }
     poses.clear();
     poses.reserve(times.size() * model.nq() * 7);
+    // Tendon tensions, the forces a trajectory carries (its inputs, by its input rule), for the
+    // solid trajectories (ghosts draw no tendons).
+    const bool tensions = !trajectories[i].ghost && !model.tendons().empty();
+    std::vector<double> tension;
+    double maxTension = 0.0;
     for (double time : times) {
       t.evaluate(time, x, u);
       appendBodyPoses(model, work, layout, x.head(n), zero, poses, bounds);
+      if (tensions) {
+        for (const Tendon& tendon : model.tendons()) {
+          tension.push_back(u(tendon.input));
+          maxTension = std::max(maxTension, u(tendon.input));
+        }
+      }
     }
-    shown.push_back({{"name", trajectories[i].name},
-                     {"ghost", trajectories[i].ghost},
-                     {"knots", t.size()},
-                     {"t", encodeArray(times)},
-                     {"poses", encodeArray(poses)}});
+    Json entry{{"name", trajectories[i].name},
+               {"ghost", trajectories[i].ghost},
+               {"knots", t.size()},
+               {"t", encodeArray(times)},
+               {"poses", encodeArray(poses)}};
+    if (tensions) {
+      entry["tensions"] = encodeArray(tension);
+      entry["maxTension"] = maxTension;
+    }
+    shown.push_back(std::move(entry));
   }
   data["trajectories"] = std::move(shown);
 
