@@ -18,7 +18,8 @@ namespace trellis::cli {
 namespace {
 
 constexpr std::string_view kHelp = R"(usage: trellis view SCENE.json|ROBOT.urdf [--state STATE.json] [--trajectory TRAJ.csv ...]
-                    [--rate HZ] [--title TEXT] [--package-path DIR ...] [--all-solid] --out VIEW.html
+                    [--rate HZ] [--title TEXT] [--package-path DIR ...] [--all-solid] [--exact-ghosts]
+                    --out VIEW.html
 
 Writes one self-contained HTML page (three.js included, with its licence notice) that opens offline
 from disk in a current browser and shows the model in 3D: a sphere per body at its centre of mass
@@ -43,6 +44,8 @@ options:
   --package-path DIR   where package://PKG/... meshes are looked for (DIR/PKG/...), repeatable;
                        then ROS_PACKAGE_PATH, then the URDF's ancestor directories named PKG
   --all-solid          draw every trajectory solid, none ghosted
+  --exact-ghosts       store ghosted trajectories in float64 like solid ones (default float32:
+                       half the size, positions rounded by about 6e-8 relative)
   -h, --help           show this help
 
 Environment: TRELLIS_THREE_DIR, a directory holding three.min.js and
@@ -86,7 +89,7 @@ std::string megabytes(std::size_t bytes) {
 int runView(std::span<const std::string> args, std::ostream& out) {
   const ParsedOptions options(
       "view", args,
-      {{"--out", "--state", "--trajectory", "--rate", "--title", "--package-path"}, {"--all-solid"},
+      {{"--out", "--state", "--trajectory", "--rate", "--title", "--package-path"}, {"--all-solid", "--exact-ghosts"},
        {"--trajectory", "--package-path"}});
   const std::string path = options.required("--out", "the HTML file to write");
   if (options.has("--state") && options.has("--trajectory")) {
@@ -97,6 +100,7 @@ int runView(std::span<const std::string> args, std::ostream& out) {
   if (const auto rate = options.value("--rate")) view.displayRate = options.numberInRange("--rate", *rate, 1e-3, 1e4, "samples per second");
   if (const auto title = options.value("--title")) view.title = *title;
   view.packagePath = options.values("--package-path");
+  view.exactGhosts = options.flag("--exact-ghosts");
 
   const LoadedScene loaded = loadSceneArgument(options.singlePositional("scene file"));
   view.meshBaseDirectory = meshBaseDirectory(loaded);

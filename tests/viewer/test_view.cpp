@@ -359,3 +359,22 @@ TEST_CASE("the page includes three.js with its licence notice and cannot be cut 
   // Same input, same bytes.
   CHECK(trellis::renderView(scene, scene.q, {}, options) == page);
 }
+
+TEST_CASE("ghost trajectories: float32 by default, float64 with exactGhosts", "[viewer]") {
+  const trellis::Scene scene = trellis::loadScene(kSource + "/examples/scenes/pendulum.json");
+  trellis::ViewTrajectory reference = pendulumSwing(), ghost = pendulumSwing();
+  ghost.name = "ghost";
+  ghost.ghost = true;
+  trellis::ViewOptions options;
+  const nlohmann::json rounded = pageData(trellis::renderView(scene, scene.q, {reference, ghost}, options));
+  options.exactGhosts = true;
+  const nlohmann::json exact = pageData(trellis::renderView(scene, scene.q, {reference, ghost}, options));
+  CHECK(rounded["trajectories"][0]["precision"] == 64);
+  CHECK(rounded["trajectories"][1]["precision"] == 32);
+  CHECK(exact["trajectories"][1]["precision"] == 64);
+  const std::vector<double> full = decodeArray<double>(exact["trajectories"][1]["poses"]);
+  const std::vector<float> single = decodeArray<float>(rounded["trajectories"][1]["poses"]);
+  REQUIRE(full.size() == single.size());
+  CHECK(full == decodeArray<double>(rounded["trajectories"][0]["poses"]));  // the same motion
+  for (std::size_t i = 0; i < full.size(); ++i) CHECK(single[i] == static_cast<float>(full[i]));
+}

@@ -83,12 +83,14 @@ function fragment() {
   return out;
 }
 
+const marks = {parseMs: performance.now() - t0};
 const nb = D.bodies.length;
 const state = decode(D.state, Float64Array);
 const trajectories = D.trajectories.map(function (t) {
-  return {name: t.name, ghost: t.ghost, knots: t.knots, t: decode(t.t, Float64Array), poses: decode(t.poses, Float64Array),
+  return {name: t.name, ghost: t.ghost, knots: t.knots, t: decode(t.t, Float64Array), poses: decode(t.poses, t.precision === 32 ? Float32Array : Float64Array),
           tensions: t.tensions ? decode(t.tensions, Float64Array) : null, maxTension: t.maxTension || 0};
 });
+marks.decodeMs = performance.now() - t0 - marks.parseMs;
 const R = D.view.radius;
 const up = new THREE.Vector3().fromArray(D.view.up);
 const centre = new THREE.Vector3().fromArray(D.view.centre);
@@ -340,6 +342,7 @@ function colourTendons(i, k, alpha) {
     l.line.material.color.copy(slack).lerp(taut, s);
   });
 }
+marks.buildMs = performance.now() - t0 - marks.parseMs - marks.decodeMs;
 let tmin = Infinity, tmax = -Infinity;
 for (const i of instances) { tmin = Math.min(tmin, i.t[0]); tmax = Math.max(tmax, i.t[i.t.length - 1]); }
 let time = tmin;
@@ -448,7 +451,7 @@ if ("probe" in hash) {
     return i;
   });
   const result = {times: times, trajectories: []};
-  for (const i of instances) result.trajectories.push({name: i.name, frames: {}});
+  for (const i of instances) result.trajectories.push({name: i.name, ghost: !!i.ghost, frames: {}});
   const p = new THREE.Vector3();
   for (const t of times) {
     setTime(t);
@@ -471,7 +474,7 @@ dirty = false;
 const status = {ready: true, errors: window.trellisErrors, loadMs: performance.now(), scriptMs: performance.now() - t0,
                 bodies: nb, frames: D.frames.length, trajectories: trajectories.length,
                 samples: trajectories.reduce(function (s, t) { return s + t.t.length; }, 0),
-                warnings: D.warnings.length};
+                warnings: D.warnings.length, marks: marks, drawCalls: renderer.info.render.calls};
 if ("bench" in hash) {
   // N frames of playback (every drawing posed and rendered, the GPU waited for): the cost per frame.
   const frames = Math.max(1, Number(hash.bench) || 120);

@@ -10,7 +10,8 @@
 // Where the poses come from: the library's kinematics (computeKinematics), never the page. For
 // every sample time and every joint body the page holds the world pose of the body's joint frame
 // (the frame that carries the configuration variable), exactly the numbers `trellis kinematics`
-// prints for that frame (float64: position, then the unit quaternion w, x, y, z). Every other
+// prints for that frame (float64: position, then the unit quaternion w, x, y, z; ghost
+// trajectories in float32 unless ViewOptions::exactGhosts). Every other
 // frame sits on a body at the model's constant placement relative to the joint frame; the page's
 // scene graph applies it (one rigid-transform product). Between samples the page interpolates:
 // positions linearly, orientations by spherical linear interpolation. The sample times of a
@@ -58,6 +59,9 @@ struct ViewOptions {
   /// three.js directory (holding three.min.js); empty: $TRELLIS_THREE_DIR, else the directory
   /// found when trellis was configured (Debian: /usr/share/javascript/three).
   std::string threeDirectory;
+  /// Ghost trajectories are stored in float32 (half the size; positions rounded by ~6e-8
+  /// relative) unless this is set; solid trajectories and the state are always float64.
+  bool exactGhosts = false;
   /// Upper limit of samples × bodies over all trajectories (memory and file size guard).
   long maxPoseSamples = 20'000'000;
 };
