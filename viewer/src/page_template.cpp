@@ -379,9 +379,15 @@ function addToggle(text, swatch, checked, onChange) {
   label.appendChild(document.createTextNode(text));
   legend.appendChild(label);
 }
+const ghosts = instances.filter(function (i) { return i.ghost; });
 for (const i of instances) {
+  if (i.ghost && ghosts.length > 4) continue;  // many ghosts: one switch for all (below)
   addToggle(i.name + (i.ghost ? " (ghost)" : ""), i.ghost ? "rgba(47,109,181,0.3)" : "#2f6db5", true,
             function (on) { i.inst.group.visible = on; });
+}
+if (ghosts.length > 4) {
+  addToggle(ghosts.length + " ghosts (" + ghosts[0].name + " … " + ghosts[ghosts.length - 1].name + ")",
+            "rgba(47,109,181,0.3)", true, function (on) { for (const i of ghosts) i.inst.group.visible = on; });
 }
 for (const name of Object.keys(toggles)) {
   if (categories[name].length === 0 && name !== "links") continue;
