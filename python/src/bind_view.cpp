@@ -44,15 +44,28 @@ void bindView(py::module_& m) {
   });
   m.def(
       "view",
-      [](py::object model, py::args trajectories, const std::string& path, py::object q,
+      [](py::object model, py::args arguments, py::object pathArgument, py::object q,
          std::vector<std::string> names, double rate, const std::string& title, std::vector<std::string> packagePath,
          bool allSolid, py::object show) {
+        // view(model, t1, t2, path=...) or view(model, t1, t2, "page.html"): the path as keyword,
+        // or as the last positional argument (a str or os.PathLike).
+        const py::object fspath = py::module_::import("os").attr("fspath");
+        py::list trajectories;
+        for (const py::handle a : arguments) trajectories.append(a);
+        if (pathArgument.is_none()) {
+          const bool last = !trajectories.empty() && (py::isinstance<py::str>(trajectories[trajectories.size() - 1]) ||
+                                                      py::hasattr(trajectories[trajectories.size() - 1], "__fspath__"));
+          if (!last) throw py::type_error("view: no path (give path=\"page.html\" or a path as the last argument)");
+          pathArgument = trajectories[trajectories.size() - 1];
+          trajectories.attr("pop")();
+        }
+        const std::string path = fspath(pathArgument).cast<std::string>();
         // The model: a scene or URDF file (keeps URDF visuals and resolves meshes against its
         // directory), a Scene (its stored q), or a Model.
         Scene scene{Model{}, {}, {}, {}, {}, {}, {}};
         ViewOptions options;
-        if (py::isinstance<py::str>(model)) {
-          const std::string file = model.cast<std::string>();
+        if (py::isinstance<py::str>(model) || py::hasattr(model, "__fspath__")) {
+          const std::string file = fspath(model).cast<std::string>();
           scene = loadScene(file);
           const std::filesystem::path parent = std::filesystem::path(file).parent_path();
           options.meshBaseDirectory = parent.empty() ? "." : parent.string();
@@ -92,20 +105,21 @@ void bindView(py::module_& m) {
         const py::object warn = py::module_::import("warnings").attr("warn");
         for (const std::string& w : report.warnings) warn(w);
         if (show.is_none() ? inNotebook() : show.cast<bool>()) displayInline(page);
-        return path;
+        return pathArgument;
       },
-      py::arg("model"), py::kw_only(), py::arg("path"), py::arg("q") = py::none(),
+      py::arg("model"), py::kw_only(), py::arg("path") = py::none(), py::arg("q") = py::none(),
       py::arg("names") = std::vector<std::string>{}, py::arg("rate") = 60.0, py::arg("title") = "",
       py::arg("package_path") = std::vector<std::string>{}, py::arg("all_solid") = false,
       py::arg("show") = py::none(),
-      R"(view(model, *trajectories, path, q=None, names=[], rate=60.0, title="", package_path=[], all_solid=False, show=None)
+      R"(view(model, *trajectories, path=None, q=None, names=[], rate=60.0, title="", package_path=[], all_solid=False, show=None)
 
 Writes a self-contained HTML page (three.js included) that shows the model in 3D in a browser,
 with a time slider, play/pause, speed and looping when trajectories are given: the first drawn
 solid, the others ghosted (all_solid=True: all solid). The same page as `trellis view`
 (docs/viewer.md); poses are the library's kinematics, sampled at every knot and `rate` times per
 second. `model`: a scene or URDF file path (keeps URDF visual geometry, meshes relative to the
-file), a Scene (shown at its stored q) or a Model (at q = 0); `q` overrides the configuration
+file), a Scene (shown at its stored q) or a Model (at q = 0); `path`: the page to write, as a
+keyword or as the last positional argument (str or os.PathLike); `q` overrides the configuration
 shown without trajectories. The file is written atomically. In a Jupyter notebook (or show=True)
 the page is also displayed inline. Returns `path`. Raises ValueError (a trajectory that does not
 match the model, a bad visual, an unreadable mesh, three.js missing) and warns (warnings.warn)

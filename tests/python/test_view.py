@@ -27,6 +27,7 @@ def test_view_holds_the_library_kinematics_at_the_knots(tmp_path):
     swing = tm.Trajectory.read_csv(str(TRAJECTORIES / "pendulum_swing.csv"))
     out = tmp_path / "pendulum.html"
     assert tm.view(scene, swing, path=str(out), names=["swing"]) == str(out)
+    assert tm.view(scene, swing, str(tmp_path / "second.html")) == str(tmp_path / "second.html")
     data = page_data(out)
     (shown,) = data["trajectories"]
     assert shown["name"] == "swing" and not shown["ghost"]
@@ -53,7 +54,9 @@ def test_view_holds_the_library_kinematics_at_the_knots(tmp_path):
 
 def test_view_of_a_urdf_file_keeps_its_visuals_and_warns_for_a_stand_in(tmp_path):
     out = tmp_path / "arm.html"
-    tm.view(str(VIEWER_DATA / "arm.urdf"), path=str(out))
+    tm.view(VIEWER_DATA / "arm.urdf", out)  # the path as the last positional argument (os.PathLike)
+    with pytest.raises(TypeError, match="no path"):
+        tm.view(VIEWER_DATA / "arm.urdf")
     data = page_data(out)
     assert sorted(v["shape"] for v in data["visuals"]) == ["box", "cylinder", "mesh", "sphere"]
     with pytest.warns(UserWarning, match="not supported"):
