@@ -1,4 +1,4 @@
-# Runs `trellis view` and checks its exit status, its standard error and whether the page exists.
+# Runs `trellis view ARGS --out OUT` and checks its exit status, its standard error and whether the page exists.
 #
 #   cmake -DTRELLIS=<exe> -DARGS="a|b" -DOUT=<page> -DEXPECT_EXIT=N [-DSTDERR_REGEX=..]
 #         [-DEXPECT_FILE=ON|OFF] -P run_view.cmake
@@ -9,9 +9,9 @@ string(REPLACE "|" ";" ARGS "${ARGS}")
 file(REMOVE "${OUT}")
 get_filename_component(_dir "${OUT}" DIRECTORY)
 file(MAKE_DIRECTORY "${_dir}")
-execute_process(COMMAND "${TRELLIS}" ${ARGS} --out "${OUT}" INPUT_FILE /dev/null
+execute_process(COMMAND "${TRELLIS}" view ${ARGS} --out "${OUT}" INPUT_FILE /dev/null
   RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-set(context "trellis ${ARGS} --out ${OUT}\n  exit status: ${rc}\n  stdout: ${out}\n  stderr: ${err}")
+set(context "trellis view ${ARGS} --out ${OUT}\n  exit status: ${rc}\n  stdout: ${out}\n  stderr: ${err}")
 if(NOT rc STREQUAL "${EXPECT_EXIT}")
   message(FATAL_ERROR "expected exit status ${EXPECT_EXIT}\n${context}")
 endif()
