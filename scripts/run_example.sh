@@ -7,6 +7,7 @@
 #   3. trellis simulate  SCENE ... --perturb-random σ --seed k  → closed_loop_k.csv (nonlinear plant)
 #      (and once without feedback: the same perturbation with zero gains, to show what feedback buys)
 #   4. scripts/plot_run.py → states.png, inputs.png, gains.png, tracking_error.png
+#   5. trellis view      SCENE --trajectory reference.csv --trajectory closed_loop_k.csv → view.html (3D)
 # NAME: cart_pole_swingup, acrobot_swingup or paper_pendulum_transfer (any examples/problems/*.json
 # works with the default weights). Edit the problem file and run again to explore.
 # Needs a built tree (cmake --build --preset default); TRELLIS=path overrides the program.
@@ -73,4 +74,8 @@ fi
 step "4/4 plots"
 "$python" "$root/scripts/plot_run.py" --title "$name" --reference "$out/reference.csv" \
   --scene "$scene" --trellis "$trellis" --gains "$out/gains.csv" "${closed[@]}" --out "$out"
+step "view: the reference and the closed loops in 3D ($out/view.html, docs/viewer.md)"
+views=(--trajectory "$out/reference.csv")
+for seed in 1 2 3; do views+=(--trajectory "$out/closed_loop_$seed.csv"); done
+"$trellis" view "$scene" "${views[@]}" --title "$name: reference and closed loops" --out "$out/view.html"
 printf '\n%s: done in %d s; files in %s/\n' "$name" "$SECONDS" "$out"

@@ -25,6 +25,9 @@ packages=(
   python3-pip
   # the C++ API reference (docs/Doxyfile) and its test
   doxygen
+  # the 3D viewer (viewer/, `trellis view`): three.js, included in every page it writes, and the
+  # headless browser its tests open the pages in (tests/viewer/)
+  libjs-three chromium
 )
 
 missing=()

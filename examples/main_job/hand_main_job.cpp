@@ -14,7 +14,8 @@
 //      (simulateBatch) over the machine's cores;
 //   7. files in the output folder (default output/hand/): reference.csv, gains.csv,
 //      reference_accelerations.csv (q'' at the knots, for the plots' Hermite reference),
-//      controllability.csv, closed_loop_<k>.csv, summary.txt and the PNG plots (scripts/plot_run.py).
+//      controllability.csv, closed_loop_<k>.csv, summary.txt, the PNG plots (scripts/plot_run.py)
+//      and hand.html, the 3D view of the reference and every closed loop (docs/viewer.md).
 // The plots are ONE Python process, started as soon as the gains are written: matplotlib's start-up
 // and the gain and controllability plots overlap the closed loops; it is told "go" on its standard
 // input once the closed-loop files exist. The summary (with each stage's time) is printed first;
@@ -27,6 +28,7 @@
 #include "trellis/control.hpp"
 #include "trellis/core.hpp"
 #include "trellis/core/numdiff.hpp"
+#include "trellis/viewer/view.hpp"
 
 #include <Eigen/Core>
 #include <Eigen/Eigenvalues>
@@ -347,6 +349,18 @@ int main(int argc, char** argv) try {
                format(", %.0f exact Jacobians, %.0f difference-quotient right-hand sides", double(jacobians) / runs.size(),
                       double(quotientRhs) / runs.size()));
 
+  // The 3D view (docs/viewer.md): the reference and every closed loop, ghosted; poses from the
+  // library's kinematics at every knot and 60 times per second.
+  std::vector<trellis::ViewTrajectory> shown{{"reference", trajectory, false}};
+  for (int r = 0; r < options.runs; ++r) {
+    if (results[r].trajectory.size() > 0) {
+      shown.push_back({"closed loop " + std::to_string(r), results[r].trajectory, true});
+    }
+  }
+  trellis::ViewOptions viewOptions;
+  viewOptions.title = "human hand: reference motion and closed loops";
+  const trellis::ViewReport view = trellis::writeView(options.out + "/hand.html", scene, scene.q, shown, viewOptions);
+
   // 7. Summary; then the plots ----------------------------------------------------------------
   progress.begin("summary (the plots finish in parallel)");
   progress.end();
@@ -375,6 +389,9 @@ int main(int argc, char** argv) try {
                     double(steps) / runs.size(), double(restarts) / runs.size(), double(projections) / runs.size())
           << format("%.0f exact Jacobians, %.0f difference-quotient right-hand sides\n", double(jacobians) / runs.size(),
                     double(quotientRhs) / runs.size());
+  summary << format("  3D view: hand.html, %.2f MB, %.0f trajectories, %.0f pose samples (open it in a browser)\n",
+                    static_cast<double>(view.bytes) / 1e6, static_cast<double>(shown.size()),
+                    static_cast<double>(view.samples));
   summary << "  files: " << std::filesystem::absolute(options.out).string() << "/\n";
   std::printf("%s", summary.str().c_str());
   std::fflush(stdout);

@@ -170,6 +170,8 @@ void bindErrors(py::module_& m) {
 
 }  // namespace trellis::python
 
+namespace trellis::python { void bindView(py::module_& m); }  // bind_view.cpp: trellis_mech.view
+
 PYBIND11_MODULE(_trellis_mech, m) {
   namespace tp = trellis::python;
   m.doc() = "trellis: exact linearizations of constrained mechanical systems, TV-LQR and "
@@ -179,6 +181,7 @@ PYBIND11_MODULE(_trellis_mech, m) {
   tp::bindControl(m);
   tp::bindTvlqr(m);
   tp::bindOptimization(m);
+  tp::bindView(m);
 #ifdef TRELLIS_PYTHON_HAND
   tp::bindHand(m);
 #endif
