@@ -96,4 +96,12 @@ cat > chain.json <<'JSON'
 JSON
 run 1 "$TRELLIS" kinematics chain.json
 err_has "chain.json: the pose of frame 'b' at t = 0 (knot 1) is not finite"
+
+# simulate on knots 1e-300 apart: the first row is kept (the event merge had folded t0 into t1 with
+# an absolute tolerance of 1e-10); the integrator cannot step so far, which it reports.
+printf 't,x,theta,dx,dtheta,push\n0,0,0,0,0,0\n1e-300,0,0,0,0,0\n' > tiny.csv
+printf 't,K_0_0,K_0_1,K_0_2,K_0_3\n0,0,0,0,0\n1e-300,0,0,0,0\n' > tiny_gains.csv
+run 1 "$TRELLIS" simulate "$CART" --trajectory tiny.csv --gains tiny_gains.csv --out closed.csv
+[ "$(sed -n 2p closed.csv | cut -d, -f1)" = 0 ] || fail "simulate lost the first row: $(cat closed.csv)"
+err_has "(the trajectory up to t = 0 is in closed.csv)"
 exit 0
