@@ -80,9 +80,10 @@ std::string nameProblem(std::string_view name) {
 
 void checkColumnNames(const std::vector<std::string>& configNames, const std::vector<std::string>& inputNames) {
   const std::string rate = "rate_";
-  // The reader finds n as the first count whose next n columns are d<c>: the configurations and
-  // their velocity columns must be distinct names, and none of them 't'.
-  std::map<std::string, std::string> columns{{"t", "the time column 't'"}};
+  // The reader finds n as the first count whose next n columns (after the time column) are d<c>:
+  // the configurations and their velocity columns must be distinct names. (A configuration may
+  // be named t: the time column is always the first.)
+  std::map<std::string, std::string> columns;
   const auto add = [&](const std::string& column, const std::string& what) {
     const auto [it, inserted] = columns.emplace(column, what);
     if (!inserted) {

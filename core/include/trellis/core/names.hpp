@@ -8,9 +8,9 @@
 //     UTF-8), no control character (a newline would split a CSV line or a message), no ',' or
 //     '"' (CSV field separator and quote), no blank at either end (CSV readers trim fields), so
 //     not only blanks;
-//   - configuration and input names together (checkColumnNames): the columns t, c, d<c> all
+//   - configuration and input names together (checkColumnNames): the columns c, d<c> all
 //     distinct (the reader infers the number of configurations from the d<c> block) — so no
-//     pair x / dx of configurations and no configuration t; no input name beginning with "rate_"
+//     pair x / dx of configurations; no input name beginning with "rate_"
 //     (the input-derivative columns). Inputs are read by position, so an input may share a
 //     configuration's name (a URDF robot's joint inputs do).
 // ModelBuilder applies both (addFrame, the inputs, finalize), so scenes, URDF robots and code
@@ -35,8 +35,8 @@ std::size_t invalidUtf8Offset(std::string_view text);
 std::string printableName(std::string_view name);
 
 /// Throws ModelError when the CSV columns of a model with these configuration and input names
-/// would be ambiguous: an input name beginning with "rate_", or two columns among t, c, d<c> with
-/// the same name. The message names both.
+/// would be ambiguous: an input name beginning with "rate_", or two columns among c, d<c> with the
+/// same name. The message names both.
 void checkColumnNames(const std::vector<std::string>& configNames, const std::vector<std::string>& inputNames);
 
 }  // namespace trellis
