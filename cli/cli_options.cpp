@@ -4,6 +4,7 @@
 #include "command.hpp"
 
 #include "trellis/control/tvlqr.hpp"
+#include "trellis/core/io.hpp"
 #include "trellis/core/reference.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/core/data.hpp"
@@ -14,6 +15,8 @@
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
+
+#include <sys/stat.h>
 
 namespace trellis::cli {
 namespace {
@@ -234,6 +237,23 @@ void checkSemidefinite(const std::string& command, const std::string& what, doub
     throw std::runtime_error(command + ": " + what + " is indefinite beyond round-off: smallest eigenvalue " +
                              formatNumber(minEigenvalue) + ", largest " + formatNumber(maxEigenvalue) +
                              " (the integration did not resolve the Riccati equation; tighten --rtol/--atol)");
+  }
+}
+
+void checkOutputIsNotInput(const std::string& command, const std::string& outPath,
+                           const std::vector<std::pair<std::string, std::string>>& inputs) {
+  if (isStreamPath(outPath)) return;
+  struct stat out {};
+  const bool outExists = ::stat(outPath.c_str(), &out) == 0;
+  if (outExists && !S_ISREG(out.st_mode)) return;  // a device or FIFO is written in place
+  for (const auto& [option, path] : inputs) {
+    struct stat in {};
+    if (::stat(path.c_str(), &in) != 0) continue;  // not a file ("--Q 10"), or one that will fail to load
+    const bool same = path == outPath || (outExists && in.st_dev == out.st_dev && in.st_ino == out.st_ino);
+    if (same) {
+      throw UsageError(command + ": --out '" + outPath + "' is the " + option + " input '" + path +
+                       "'; writing it would destroy the input (name another file)");
+    }
   }
 }
 

@@ -155,4 +155,11 @@ void checkSemidefinite(const std::string& command, const std::string& what, doub
 /// "a, b, c" for messages.
 std::string joinNames(const std::vector<std::string>& names);
 
+/// Throws UsageError when the output `outPath` of `--out` is one of the command's inputs (the
+/// same file: equal device and inode, through links, or the same path): writing it would destroy
+/// the input. `inputs` pairs an option name ("--trajectory") with its path. Streams (/dev/stdout,
+/// "-") and devices are never inputs.
+void checkOutputIsNotInput(const std::string& command, const std::string& outPath,
+                           const std::vector<std::pair<std::string, std::string>>& inputs);
+
 }  // namespace trellis::cli

@@ -87,11 +87,22 @@ int runEquilibrium(std::span<const std::string> args, std::ostream& out) {
     for (const char* o : {"--inputs", "--max-iterations"})
       if (options.has(o)) throw UsageError(std::string("equilibrium: ") + o + " does not apply to --hold");
     InverseDynamicsOptions io;
-    if (const auto v = options.value("--tolerance")) io.tolerance = options.positiveNumber("--tolerance", *v);
+    if (const auto v = options.value("--tolerance"))
+      io.tolerance = options.numberInRange("--tolerance", *v, 1e-16, 0.1,
+                                           "relative to the forces compared: above, any answer would pass");
     const InverseDynamicsResult r = computeHoldingInputs(model, data, state.q, io);
     const bool accepted = r.ok() || (r.status == InverseDynamicsStatus::kUnreachable && options.flag("--allow-residual"));
     if (!accepted) {
       throw std::runtime_error(loaded.path + ": the pose cannot be held (" + toString(r.status) + "): " + r.message);
+    }
+    if (r.ok()) {
+      // The pose must lie on the constraints, as `gains --hold` requires: inverse dynamics at an
+      // infeasible q answers a question about a configuration the system cannot take.
+      Eigen::VectorXd x = Eigen::VectorXd::Zero(2 * model.nq());
+      x.head(model.nq()) = state.q;
+      checkReference(model, loaded.path, "the pose to hold",
+                     Trajectory(model.configNames(), model.inputNames(), Eigen::Vector2d(0.0, 1.0),
+                                x.replicate(1, 2), r.u.replicate(1, 2)));
     }
     result["status"] = toString(r.status);
     result["residual"] = r.residualNorm;
@@ -103,7 +114,9 @@ int runEquilibrium(std::span<const std::string> args, std::ostream& out) {
   } else {
     if (options.flag("--allow-residual")) throw UsageError("equilibrium: --allow-residual needs --hold");
     EquilibriumOptions eo;
-    if (const auto v = options.value("--tolerance")) eo.tolerance = options.positiveNumber("--tolerance", *v);
+    if (const auto v = options.value("--tolerance"))
+      eo.tolerance = options.numberInRange("--tolerance", *v, 1e-300, 1e-3,
+                                           "max |q''| and |h| at the answer: above, not an equilibrium");
     if (const auto v = options.value("--max-iterations")) {
       eo.maxIterations = options.integer<int>("--max-iterations", *v, 1, 100000);
     }

@@ -156,6 +156,13 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   const std::string trajectoryPath =
       hold ? std::string("the held pose") : options.required("--trajectory", "(the reference trajectory CSV, or --hold T)");
   const std::string outPath = options.required("--out", "(the gains CSV to write)");
+  {
+    std::vector<std::pair<std::string, std::string>> inputs{{"scene", scenePath}};
+    if (!hold) inputs.emplace_back("--trajectory", trajectoryPath);
+    for (const char* option : {"--state", "--Q", "--R", "--Qf"})
+      if (auto v = options.value(option)) inputs.emplace_back(option, *v);
+    checkOutputIsNotInput("gains", outPath, inputs);
+  }
 
   TvlqrOptions tvlqr;
   RiccatiOptions& riccati = tvlqr.riccati;
@@ -193,7 +200,17 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   const Trajectory trajectory = hold ? heldPose(loaded, options.value("--state"), holdSpan)
                                          : loadReference(model, scenePath, trajectoryPath);
   if (tvlqr.outputStep > 0.0) options.gridPoints("--dt", tvlqr.outputStep, trajectory.endTime() - trajectory.startTime(), kMaxOutputRows, "output rows");
-  if (tvlqr.sampleRate > 0.0) options.gridPoints("--rate", 1.0 / tvlqr.sampleRate, trajectory.endTime() - trajectory.startTime(), kMaxOutputRows, "output rows");
+  if (tvlqr.sampleRate > 0.0) {
+    const double span = trajectory.endTime() - trajectory.startTime();
+    // Sampled gains need two sample times inside the reference: a period longer than its span
+    // leaves one (the discretization would fail with a message about its internals).
+    if (!(1.0 / tvlqr.sampleRate <= span)) {
+      throw UsageError("gains: --rate: " + formatNumber(tvlqr.sampleRate) + " Hz samples every " +
+                       formatNumber(1.0 / tvlqr.sampleRate) + " s, longer than the reference's " + formatNumber(span) +
+                       " s; at least 2 samples are needed (a rate of at least " + formatNumber(1.0 / span) + " Hz)");
+    }
+    options.gridPoints("--rate", 1.0 / tvlqr.sampleRate, span, kMaxOutputRows, "output rows");
+  }
   Data data(model);
 
   const std::string states = "2n = " + std::to_string(nx) + " states";

@@ -58,7 +58,9 @@ int runInverseDynamics(std::span<const std::string> args, std::ostream& out) {
   const Model& model = loaded.scene.model;
   const int n = model.nq();
   InverseDynamicsOptions io;
-  if (const auto v = options.value("--tolerance")) io.tolerance = options.positiveNumber("--tolerance", *v);
+  if (const auto v = options.value("--tolerance"))
+    io.tolerance = options.numberInRange("--tolerance", *v, 1e-16, 0.1,
+                                         "relative to the forces compared: above, any answer would pass");
 
   Eigen::VectorXd times;
   Eigen::MatrixXd q, dq, ddq;

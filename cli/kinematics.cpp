@@ -91,6 +91,15 @@ int runKinematics(std::span<const std::string> args, std::ostream& out) {
   for (Eigen::Index k = 0; k < times.size(); ++k) {
     const Eigen::VectorXd q = qs.col(k);
     computeKinematics(model, data, q, zero);
+    // A pose that overflowed (a coordinate near the largest double) is an error, never "inf" in
+    // a CSV with exit status 0.
+    for (int f : frames) {
+      if (!data.framePose[f].matrix().allFinite()) {
+        throw std::runtime_error(loaded.path + ": the pose of frame '" + model.frames()[f].name + "' at t = " +
+                                 num(times(k)) + " (knot " + std::to_string(k + 1) +
+                                 ") is not finite: the configuration is too large to place it");
+      }
+    }
     out << num(times(k));
     for (int f : frames) {
       const Eigen::Isometry3d& g = data.framePose[f];

@@ -2,6 +2,8 @@
 // on stderr ("trellis: error: ...") with nothing on stdout.
 #include "command.hpp"
 
+#include "trellis/core/io.hpp"
+
 #include <csignal>
 #include <iostream>
 #include <new>
@@ -54,6 +56,8 @@ int main(int argc, char** argv) {
   // Under a file-size limit (ulimit -f) a write beyond it must fail with EFBIG, which the writer
   // reports, instead of SIGXFSZ killing the process with a partial file.
   std::signal(SIGXFSZ, SIG_IGN);
+  // Ctrl-C or a kill during a write removes the hidden temporary before the process dies.
+  trellis::removeTemporaryFilesOnSignals();
   const std::vector<std::string> args(argv + 1, argv + argc);
   if (args.empty()) {
     printUsage(std::cerr);

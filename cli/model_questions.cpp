@@ -3,6 +3,8 @@
 
 #include "command.hpp"
 
+#include "trellis/core/io.hpp"
+
 #include <algorithm>
 #include <iostream>
 #include <iterator>
@@ -37,7 +39,8 @@ std::string known(const std::vector<std::string>& names) {
 
 LoadedScene loadSceneArgument(const std::string& path) {
   if (path != "-") return {loadScene(path), path};
-  const std::string text{std::istreambuf_iterator<char>(std::cin), std::istreambuf_iterator<char>()};
+  // Bounded: an endless standard input is refused at the limit, not read to the end of memory.
+  const std::string text = trellis::readTextStream(0, kMaxSceneFileBytes, "<stdin>", "scene on standard input");
   return {parseScene(text, "<stdin>"), "<stdin>"};
 }
 

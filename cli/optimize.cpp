@@ -9,6 +9,8 @@
 #include <cstdio>
 #include <iostream>
 
+#include <unistd.h>
+
 namespace trellis::cli {
 namespace {
 
@@ -73,6 +75,7 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
   const ParsedOptions options("optimize", args, spec);
   const std::string path = options.singlePositional("the problem file");
 
+  if (auto out = options.value("--out")) checkOutputIsNotInput("optimize", *out, {{"problem", path}});
   OptimalControlProblem problem = loadProblem(path);
   if (auto v = options.value("--knots")) {
     problem.knots = options.integer<int>("--knots", *v, 2, 100000);
@@ -93,7 +96,8 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
     solver.printLevel = options.integer<int>("--print-level", *v, 0, 12);
   }
   if (auto v = options.value("--consistency-tol")) {
-    solver.consistencyTolerance = options.positiveNumber("--consistency-tol", *v);
+    solver.consistencyTolerance = options.numberInRange(
+        "--consistency-tol", *v, 1e-12, 0.5, "a defect relative to each state's range: above, any trajectory passes");
   }
   if (auto v = options.value("--max-refinements")) {
     solver.maxRefinements = options.integer<int>("--max-refinements", *v, 0, 50);
@@ -111,7 +115,26 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
     };
   }
 
-  const OptimizationResult result = optimizeTrajectory(problem, solver);
+  // Ipopt's own log (--print-level > 0) is written to the process's standard output by Ipopt;
+  // standard output carries the summary or the JSON object, so the log goes to standard error:
+  // descriptor 1 points at descriptor 2 for the solve, then back.
+  struct StdoutToStderr {
+    int saved = -1;
+    explicit StdoutToStderr(bool active) {
+      std::fflush(stdout);
+      if (active && (saved = ::dup(STDOUT_FILENO)) >= 0) ::dup2(STDERR_FILENO, STDOUT_FILENO);
+    }
+    ~StdoutToStderr() {
+      if (saved < 0) return;
+      std::fflush(stdout);
+      ::dup2(saved, STDOUT_FILENO);
+      ::close(saved);
+    }
+  };
+  const OptimizationResult result = [&] {
+    const StdoutToStderr redirect(solver.printLevel > 0);
+    return optimizeTrajectory(problem, solver);
+  }();
   const auto outPath = options.value("--out");
   if (outPath) result.trajectory.writeCsvFile(*outPath);
 
@@ -136,7 +159,10 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
     j["knots"] = result.trajectory.size();
     j["method"] = methodName;
     j["derivatives"] = derivativesName;
-    j["consistency_defect"] = num(result.consistency.maxDefect);
+    // null when the check did not run (Ipopt failed first, or an interval could not be
+    // integrated): a 0 would claim a consistency nobody measured.
+    j["consistency_defect"] = result.consistency.integrated ? num(result.consistency.maxDefect) : OutputJson(nullptr);
+    j["consistency_checked"] = result.consistency.integrated;
     if (result.consistency.worstInterval >= 0 && result.consistency.integrated) {
       j["consistency_where"] = {{"state", result.consistency.worstStateName},
                                 {"interval", result.consistency.worstInterval},
@@ -170,7 +196,10 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
       << "knots: " << result.trajectory.size() << '\n'
       << "method: " << methodName << '\n'
       << "derivatives: " << derivativesName << '\n'
-      << "consistency_defect: " << formatNumber(result.consistency.maxDefect, 3) << '\n';
+      << "consistency_defect: "
+      << (result.consistency.integrated ? formatNumber(result.consistency.maxDefect, 3)
+                                        : std::string("not checked (the solve or the integration failed first)"))
+      << '\n';
   if (result.consistency.worstInterval >= 0 && result.consistency.integrated) {
     out << "consistency_where: " << result.consistency.worstStateName << " on interval "
         << result.consistency.worstInterval << " at t = " << formatNumber(result.consistency.worstTime, 6)

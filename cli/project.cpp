@@ -56,7 +56,9 @@ int runProject(std::span<const std::string> args, std::ostream& out) {
   const ModelState state = stateFromFile(loaded, options.value("--state"));
   ProjectionOptions po;
   if (const auto v = options.value("--fix")) po.fixed = configIndices(model, "project", "--fix", *v);
-  if (const auto v = options.value("--tolerance")) po.tolerance = options.positiveNumber("--tolerance", *v);
+  if (const auto v = options.value("--tolerance"))
+    po.tolerance = options.numberInRange("--tolerance", *v, 1e-300, 1e-3,
+                                         "max |h| in the units of h: above, a state off the constraints passes");
   if (const auto v = options.value("--max-iterations")) {
     po.maxIterations = options.integer<int>("--max-iterations", *v, 1, 100000);
   }

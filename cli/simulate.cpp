@@ -155,6 +155,8 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
   const std::string trajectoryPath = options.required("--trajectory", "(the reference trajectory CSV)");
   const std::string gainsPath = options.required("--gains", "(the gain schedule CSV from 'trellis gains')");
   const std::string outPath = options.required("--out", "(the closed-loop trajectory CSV to write)");
+  checkOutputIsNotInput("simulate", outPath,
+                        {{"scene", scenePath}, {"--trajectory", trajectoryPath}, {"--gains", gainsPath}});
 
   SimulationOptions simulation;
   if (auto v = options.value("--rtol")) simulation.rtol = options.relativeTolerance("--rtol", *v);

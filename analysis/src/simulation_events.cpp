@@ -12,8 +12,10 @@ namespace trellis::detail {
 std::vector<SimulationEvent> simulationEvents(double t0, double t1,
                                               const SimulationOptions& options,
                                               const Trajectory* reference) {
-  const double scale = std::max({1.0, std::abs(t0), std::abs(t1)});
-  const double mergeTol = 1e-10 * scale;
+  // Events closer than the rounding of t0 + k h merge: relative to the size of the times, with no
+  // absolute floor (a floor of 1e-10 merged t0 into t1 on a horizon of 1e-300 and lost the first
+  // row), and below a quarter of the span, so that t0 and t1 never merge unless equal.
+  const double mergeTol = std::min(1e-10 * std::max(std::abs(t0), std::abs(t1)), 0.25 * (t1 - t0));
   // Event lists are materialized: refuse grids that would not fit in memory.
   constexpr double kMaxEvents = 1e7;
   if (options.outputStep > 0.0 && (t1 - t0) / options.outputStep > kMaxEvents) {

@@ -4,6 +4,8 @@
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/detail/report_json.hpp"
 
+#include "internal.hpp"
+
 #include <Eigen/QR>
 
 #include <algorithm>
@@ -49,8 +51,9 @@ InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, con
                                 ", " + std::to_string(dq.size()) + ", " + std::to_string(qdd.size()) +
                                 " entries, the model n = " + std::to_string(n));
   }
-  if (!(options.tolerance > 0.0)) {
-    throw std::invalid_argument("InverseDynamicsOptions: tolerance must be > 0");
+  if (!(options.tolerance > 0.0 && options.tolerance <= 0.1)) {
+    throw std::invalid_argument("InverseDynamicsOptions: tolerance " + std::to_string(options.tolerance) +
+                                " must be in (0, 0.1] (relative to the terms compared)");
   }
   const bool bounded = options.lowerBound.size() > 0 || options.upperBound.size() > 0;
   if (bounded) {
@@ -80,6 +83,15 @@ InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, con
   computeDynamics(model, data, q, dq, Eigen::VectorXd::Zero(m));
   computeInputMatrix(model, data, q);
   const Eigen::VectorXd rhs = data.M * qdd + data.bias;
+  // The size of the terms that make up each row of r = M q̈ + b, b = ID(q, q̇, 0) − Q_cfg: the
+  // residual of row i is judged against them, not against a fixed floor (a floor of 1 N·m held a
+  // 1 mg / 1 mm pendulum with u = 0). Row i carries the units of coordinate i's force, so the
+  // verdict is the same in any units. The wrench part and the configuration forces (springs)
+  // count apart: at a held pose they cancel, and b alone would be round-off.
+  Eigen::VectorXd configForces = Eigen::VectorXd::Zero(n);
+  detail::addConfigurationForces(model, q, dq, Eigen::VectorXd::Zero(m), configForces);
+  Eigen::VectorXd rowScale = (data.M.cwiseAbs() * qdd.cwiseAbs()) + (data.bias + configForces).cwiseAbs() +
+                             configForces.cwiseAbs();
   Eigen::MatrixXd G(n, m + nc);
   G << data.inputMatrix, data.constraintJacobian.transpose();
   if (!rhs.allFinite() || !G.allFinite()) {
@@ -117,9 +129,14 @@ InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, con
         } else {
           const Eigen::VectorXd g = G.transpose() * (G * z - rhs);
           int release = -1;
-          double gmax = options.tolerance * std::max(1.0, rhs.cwiseAbs().maxCoeff());
-          for (int i = 0; i < m; ++i)
-            if ((held[i] > 0 && g[i] > gmax) || (held[i] < 0 && -g[i] > gmax)) gmax = std::abs(g[i]), release = i;
+          // g_i = G_iᵀ(G z − r) is judged against G_iᵀ's weight of the rows' scales (units of u_i·force).
+          double worstRatio = 1.0;
+          for (int i = 0; i < m; ++i) {
+            const double gScale = options.tolerance * G.col(i).cwiseAbs().dot(rowScale);
+            const double ratio = gScale > 0.0 ? std::abs(g[i]) / gScale : (g[i] != 0.0 ? HUGE_VAL : 0.0);
+            if (((held[i] > 0 && g[i] > 0.0) || (held[i] < 0 && g[i] < 0.0)) && ratio > worstRatio)
+              worstRatio = ratio, release = i;
+          }
           if (release < 0) break;  // optimal: every held input is pushed against its bound
           held[release] = 0;
         }
@@ -148,26 +165,41 @@ InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, con
   r.residual = G * z - rhs;
   int worst = 0;
   r.residualNorm = n > 0 ? r.residual.cwiseAbs().maxCoeff(&worst) : 0.0;
-  const double gNorm = G.size() ? G.cwiseAbs().rowwise().sum().maxCoeff() : 0.0;
-  const double scale = std::max({1.0, rhs.cwiseAbs().maxCoeff(), gNorm * z.cwiseAbs().maxCoeff()});
+  // Row by row: |(G z − r)_i| ≤ tolerance · (Σ_j |M_ij q̈_j| + |ID_i| + |Q_cfg,i| + Σ_j |G_ij z_j|).
+  rowScale += G.cwiseAbs() * z.cwiseAbs();
+  const auto rowsExceed = [&](const Eigen::VectorXd& residual, const Eigen::VectorXd& scale, int& worstRow) {
+    double worstRatio = 1.0;
+    for (int i = 0; i < residual.size(); ++i) {
+      const double bound = options.tolerance * scale[i];
+      // A row whose terms are all zero has residual exactly zero (a sum of zeros).
+      const double ratio = bound > 0.0 ? std::abs(residual[i]) / bound : (residual[i] != 0.0 ? HUGE_VAL : 0.0);
+      if (ratio > worstRatio) worstRatio = ratio, worstRow = i;
+    }
+    return worstRatio > 1.0;
+  };
+  int worstRow = worst;
+  const bool residualExceeds = rowsExceed(r.residual, rowScale, worstRow);
+  if (residualExceeds) worst = worstRow;
 
   int worstConstraint = 0;
+  bool constraintExceeds = false;
   if (nc > 0) {
+    // A q̈ + Ȧ q̇ row by row against |A| |q̈| + |Ȧ q̇| (units of the constraint's acceleration).
     const Eigen::VectorXd c = data.constraintJacobian * qdd + data.constraintDrift;
     r.constraintResidual = c.cwiseAbs().maxCoeff(&worstConstraint);
+    const Eigen::VectorXd cScale =
+        data.constraintJacobian.cwiseAbs() * qdd.cwiseAbs() + data.constraintDrift.cwiseAbs();
+    constraintExceeds = rowsExceed(c, cScale, worstConstraint);
   }
-  const double aNorm = nc ? data.constraintJacobian.cwiseAbs().rowwise().sum().maxCoeff() : 0.0;
-  const double cScale = std::max({1.0, aNorm * qdd.cwiseAbs().maxCoeff(),
-                                  nc ? data.constraintDrift.cwiseAbs().maxCoeff() : 0.0});
   std::ostringstream msg;
   if (!z.allFinite()) {
     r.status = InverseDynamicsStatus::kNonFinite;
     msg << "the least-squares solution is not finite";
-  } else if (r.constraintResidual > options.tolerance * cScale) {
+  } else if (constraintExceeds) {
     r.status = InverseDynamicsStatus::kInadmissibleAcceleration;
     msg << "q̈ violates the constraint " << model.constraints()[worstConstraint].name
         << ": A q̈ + Ȧ q̇ = " << r.constraintResidual;
-  } else if (boundInput >= 0 && r.residualNorm > options.tolerance * scale) {
+  } else if (boundInput >= 0 && residualExceeds) {
     r.status = InverseDynamicsStatus::kInputBounds;
     const bool upper = zUnbounded[boundInput] > options.upperBound[boundInput];
     msg << "the inputs that produce this q̈ violate the " << (upper ? "upper" : "lower") << " bound "
@@ -175,7 +207,7 @@ InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, con
         << model.inputNames()[boundInput] << "' by " << r.boundExcess[boundInput]
         << "; within the bounds the least-squares residual is " << r.residualNorm << ", largest on "
         << model.configNames()[worst];
-  } else if (r.residualNorm > options.tolerance * scale) {
+  } else if (residualExceeds) {
     r.status = InverseDynamicsStatus::kUnreachable;
     msg << "no inputs produce this q̈ (rank of [B_u A^T] = " << r.rank << " < n = " << n
         << "): least-squares residual " << r.residualNorm << ", largest on " << model.configNames()[worst];

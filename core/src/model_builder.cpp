@@ -1,5 +1,6 @@
 // Validation, frame-tree folding and mass lumping (see model_builder.hpp).
 #include "trellis/core/model_builder.hpp"
+#include "trellis/core/names.hpp"
 
 #include <Eigen/Eigenvalues>
 
@@ -279,6 +280,7 @@ int ModelBuilder::frameId(const std::string& name, const std::string& element,
 int ModelBuilder::inputId(const std::string& input) {
   for (int i = 0; i < static_cast<int>(inputNames_.size()); ++i)
     if (inputNames_[i] == input) return i;
+  if (const std::string problem = nameProblem(input); !problem.empty()) throw ModelError("input: " + problem);
   inputNames_.push_back(input);
   return static_cast<int>(inputNames_.size()) - 1;
 }
@@ -288,11 +290,15 @@ const std::string& ModelBuilder::addFrame(const std::string& name, const std::st
   const std::string element = "frame '" + name + "'";
   if (name.empty()) throw ModelError("frame with parent '" + parent + "': field 'name': empty name");
   if (name == "world") throw ModelError("frame 'world': field 'name': 'world' is reserved");
+  if (const std::string problem = nameProblem(name); !problem.empty())
+    throw ModelError("frame '" + printableName(name) + "': field 'name': " + problem);
   if (frameIds_.count(name)) throw ModelError(element + ": field 'name': duplicate frame name '" + name + "'");
   const int parentId = frameId(parent, element, "parent");
   if (transform.isDriven()) {
     if (transform.type == TransformType::kConstSE3)
       throw ModelError(element + ": field 'config': a const_se3 transform cannot carry a configuration");
+    if (const std::string problem = nameProblem(transform.config); !problem.empty())
+      throw ModelError(element + ": field 'config': " + problem);
     auto it = configFrames_.find(transform.config);
     if (it != configFrames_.end())
       throw ModelError(element + ": field 'config': configuration '" + transform.config +
@@ -554,6 +560,7 @@ Model ModelBuilder::finalize() && {
 
   model.gravity_ = gravity_;
   model.inputNames_ = inputNames_;
+  checkColumnNames(model.configNames_, model.inputNames_);  // names.hpp: CSV columns that read back
   for (const auto& s : springs_) model.linearSprings_.push_back({point(s.f1), point(s.f2), s.k, s.x0});
   for (const auto& s : configSprings_) model.configSprings_.push_back({config(s.config, s.element, "config"), s.k, s.q0});
   for (const auto& s : configForces_) model.configForces_.push_back({config(s.config, s.element, "config"), s.input});

@@ -35,6 +35,9 @@ struct Metric {
   }
   /// δ of least δᵀWδ with J δ = rhs (least squares if inconsistent): δ = L⁻ᵀ (J L⁻ᵀ)⁺ rhs.
   Eigen::VectorXd minimumNormStep(const Eigen::MatrixXd& J, const Eigen::VectorXd& rhs) const {
+    // No free coordinate (every one fixed) or no row: nothing can move (a decomposition of an
+    // empty matrix is not defined).
+    if (J.rows() == 0 || J.cols() == 0) return Eigen::VectorXd::Zero(J.cols());
     Eigen::MatrixXd G = J;
     if (massWeighted) llt.matrixU().solveInPlace<Eigen::OnTheRight>(G);  // G = J L⁻ᵀ = J U⁻¹
     Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(G);
@@ -43,6 +46,10 @@ struct Metric {
     return y;
   }
 };
+
+/// The velocity projection's check, relative to the terms of A q̇: well above the rounding of a
+/// least-squares solve (≈ cond·eps), far below any real violation.
+constexpr double kVelocityTolerance = 1e-9;
 
 std::string format(double x) {
   std::ostringstream s;
@@ -146,6 +153,14 @@ ProjectionResult projectState(const Model& model, Data& data, const Eigen::Vecto
       return r;
     }
     r.positionResidualBefore = h.cwiseAbs().maxCoeff();
+    if (nf == 0 && r.positionResidualBefore > options.tolerance) {
+      r.positionResidual = r.positionResidualBefore;
+      fail(ProjectionStatus::kNotConverged, "every coordinate is fixed, so none can move onto h(q) = 0: |h|inf = " +
+                                                format(r.positionResidual));
+      computeConstraints(model, data, r.q, r.dq);
+      r.velocityResidual = (data.constraintJacobian * r.dq).cwiseAbs().maxCoeff();
+      return r;
+    }
     // Restoration: minimum-W-norm Newton steps q ← q − W⁻¹Aᵀ(A W⁻¹ Aᵀ)⁺ h (quadratic near the
     // manifold). Returns false (q left at the last finite iterate) if |h| ≤ tolerance is not
     // reached; leaves h, Ah evaluated at q.
@@ -179,7 +194,7 @@ ProjectionResult projectState(const Model& model, Data& data, const Eigen::Vecto
                      : "Gauss-Newton did not reach |h| <= " + format(options.tolerance) + " in " +
                            std::to_string(options.maxIterations) + " iterations: |h|inf = " +
                            format(r.positionResidual) + " (are the constraints reachable from this q?)");
-    } else if (std::isfinite(options.stepTolerance)) {
+    } else if (std::isfinite(options.stepTolerance) && nf > 0) {  // nf = 0: nothing can move
       // Closest point: descend ½ (q − q0)ᵀ W (q − q0) along the manifold. The direction is minus
       // the W-orthogonal tangent component of q − q0, d = −(I − W⁻¹Aᵀ(A W⁻¹ Aᵀ)⁺ A) (q − q0)
       // (zero exactly at the first-order conditions W (q − q0) = Aᵀ ν); each trial point is
@@ -236,7 +251,23 @@ ProjectionResult projectState(const Model& model, Data& data, const Eigen::Vecto
     }
   }
   computeConstraints(model, data, r.q, r.dq);
-  r.velocityResidual = (data.constraintJacobian * r.dq).cwiseAbs().maxCoeff();
+  const Eigen::VectorXd velocityRows = data.constraintJacobian * r.dq;
+  r.velocityResidual = velocityRows.cwiseAbs().maxCoeff();
+  if (options.velocities && r.status == ProjectionStatus::kOk) {
+    // kOk promises A q̇* = 0 to rounding: row by row against the terms Σ_j |A_rj| (|q̇*_j| + |q̇0_j|)
+    // (relative, so the verdict does not depend on units). It fails when the free coordinates
+    // cannot cancel a row (--fix holds the ones that could).
+    const Eigen::VectorXd rowScale = data.constraintJacobian.cwiseAbs() * (r.dq.cwiseAbs() + dq0.cwiseAbs());
+    for (int c = 0; c < model.nc(); ++c) {
+      if (std::abs(velocityRows(c)) > kVelocityTolerance * rowScale(c)) {
+        fail(ProjectionStatus::kNotConverged,
+             "the velocity constraint '" + model.constraints()[c].name + "' is still violated after the projection: " +
+                 "A q' = " + format(velocityRows(c)) + " (the free coordinates cannot cancel it; " +
+                 std::to_string(options.fixed.size()) + " of " + std::to_string(n) + " coordinates are fixed)");
+        break;
+      }
+    }
+  }
   return r;
 }
 

@@ -5,6 +5,7 @@
 // the ModelBuilder checks the values again (and is the authority on them). Everything is read
 // iteratively, so a deep frame tree cannot overflow the stack.
 #include "trellis/core/scene.hpp"
+#include "trellis/core/io.hpp"
 
 #include "trellis/core/urdf.hpp"
 #include "state_json.hpp"
@@ -33,7 +34,7 @@ using Json = nlohmann::json;
 // Limits that keep hostile input cheap: nesting depth (a frame level costs two: the frame object
 // and its "children" list, so chains of ~5000 frames fit) and text size.
 constexpr int kMaxNestingDepth = 10000;
-constexpr std::size_t kMaxSceneBytes = std::size_t{256} << 20;
+constexpr std::size_t kMaxSceneBytes = kMaxSceneFileBytes;
 // Limits on the size of the model, checked while reading (before any n×n matrix exists): the
 // workspace of the linearization (Data) holds about 25 dense n×n matrices (M, its inverse, A and
 // the tangent-space blocks of 2n×2n, the right-hand sides of 2n + m columns), ≈ 200·n² bytes:
@@ -554,14 +555,13 @@ class SceneReader {
     }
     std::filesystem::path path(file);
     if (path.is_relative()) path = baseDir_ / path;
-    std::ifstream in(path, std::ios::binary);
-    std::error_code ec;
-    if (!in || std::filesystem::is_directory(path, ec)) {
-      top.failValue("urdf", Json(file), "cannot be opened (looked for " + path.string() + ")");
+    std::string text;
+    try {
+      text = readTextFile(path.string(), kMaxSceneBytes, "URDF file");  // "/dev/zero" is refused
+    } catch (const FileError& e) {
+      top.failValue("urdf", Json(file), "cannot be read (looked for " + path.string() + "): " + e.what());
     }
-    std::ostringstream text;
-    text << in.rdbuf();
-    UrdfImport robot = importUrdf(text.str(), path.string(), options);
+    UrdfImport robot = importUrdf(text, path.string(), options);
     builder_ = std::move(robot.builder);
     for (const auto& f : robot.frames) frames_.emplace(f, "frame '" + f + "' of " + file);
     for (const auto& c : robot.configs) {
@@ -650,9 +650,11 @@ std::string jsonMessage(const nlohmann::json::exception& e) {
 }  // namespace
 
 Scene parseScene(const std::string& jsonText, const std::string& source) {
-  // A URDF robot (XML) loads wherever a scene does.
-  if (const auto first = jsonText.find_first_not_of(" \t\r\n"); first != std::string::npos && jsonText[first] == '<') {
-    return sceneFromUrdf(importUrdf(jsonText, source));
+  // A URDF robot (XML) loads wherever a scene does. A UTF-8 byte-order mark (editors on Windows
+  // write one) comes before either kind; it is skipped, not called invalid JSON.
+  const std::size_t start = jsonText.rfind("\xEF\xBB\xBF", 0) == 0 ? 3 : 0;
+  if (const auto first = jsonText.find_first_not_of(" \t\r\n", start); first != std::string::npos && jsonText[first] == '<') {
+    return sceneFromUrdf(importUrdf(start ? jsonText.substr(start) : jsonText, source));
   }
   try {
     if (jsonText.size() > kMaxSceneBytes) {
@@ -681,19 +683,12 @@ Scene parseScene(const std::string& jsonText, const std::string& source) {
 }
 
 Scene loadScene(const std::string& path) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec)) throw ModelError(path + ": is a directory, not a scene file");
-  std::ifstream file(path, std::ios::binary);
-  if (!file) throw ModelError(path + ": cannot open the scene file");
-  file.seekg(0, std::ios::end);
-  const std::streamoff size = file.tellg();
-  if (size < 0) throw ModelError(path + ": cannot read the scene file");
-  if (static_cast<std::size_t>(size) > kMaxSceneBytes) {
-    throw ModelError(path + ": the scene is larger than " + std::to_string(kMaxSceneBytes >> 20) + " MiB");
+  std::string text;
+  try {
+    text = readTextFile(path, kMaxSceneBytes, "scene file");  // bounded before it allocates
+  } catch (const FileError& e) {
+    throw ModelError(e.what());
   }
-  file.seekg(0, std::ios::beg);
-  std::string text(static_cast<std::size_t>(size), '\0');
-  if (!file.read(text.data(), size)) throw ModelError(path + ": cannot read the scene file");
   return parseScene(text, path);
 }
 

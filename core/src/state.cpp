@@ -1,6 +1,7 @@
 // State objects by name (state.hpp, state_json.hpp).
 #include "state_json.hpp"
 
+#include "trellis/core/io.hpp"
 #include "trellis/core/model_builder.hpp"
 
 #include <algorithm>
@@ -10,6 +11,9 @@
 #include <iterator>
 
 namespace trellis {
+namespace {
+constexpr std::size_t kMaxStateFileBytes = std::size_t{64} << 20;  // a state is a few numbers per coordinate
+}  // namespace
 namespace detail {
 namespace {
 
@@ -106,11 +110,12 @@ ModelState parseState(const Model& model, const std::string& jsonText, const std
 }
 
 ModelState loadState(const Model& model, const std::string& path, const ModelState& defaults) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec)) throw ModelError(path + ": is a directory, not a state file");
-  std::ifstream file(path, std::ios::binary);
-  if (!file) throw ModelError(path + ": cannot open the state file");
-  const std::string text{std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>()};
+  std::string text;
+  try {
+    text = readTextFile(path, kMaxStateFileBytes, "state file");  // "/dev/zero" is refused
+  } catch (const FileError& e) {
+    throw ModelError(e.what());
+  }
   return parseState(model, text, path, defaults);
 }
 

@@ -6,8 +6,12 @@
 // each message here reads "<file>:<line>: joint 'j': attribute 'xyz': value '…' <problem>", and we
 // decide ourselves what is supported. It is also one small library with a CMake config.
 #include "trellis/core/urdf.hpp"
+#include "trellis/core/io.hpp"
+#include "trellis/core/names.hpp"
 
 #include <tinyxml2.h>
+
+#include <Eigen/Eigenvalues>
 
 #include <algorithm>
 #include <cerrno>
@@ -15,6 +19,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <map>
 #include <optional>
 #include <set>
@@ -47,6 +52,19 @@ class UrdfReader {
   UrdfReader(std::string source, const UrdfOptions& options) : source_(std::move(source)), options_(options) {}
 
   UrdfImport read(const std::string& text) {
+    // Names and values travel on as UTF-8 (JSON output, messages): a file in another encoding is
+    // refused here with its line, not by a JSON library later with no file named.
+    if (const std::size_t bad = invalidUtf8Offset(text); bad != std::string_view::npos) {
+      const std::string_view before = std::string_view(text).substr(0, bad);
+      const std::size_t line = 1 + static_cast<std::size_t>(std::count(before.begin(), before.end(), '\n'));
+      const std::size_t newline = before.rfind('\n');
+      const std::size_t start = newline == std::string_view::npos ? 0 : newline + 1;
+      // The line up to the bad byte and a little after (at most 80 bytes), as \xNN where not UTF-8.
+      const std::string_view shown = std::string_view(text).substr(start, std::min<std::size_t>(bad - start + 4, 80));
+      throw ModelError(source_ + ":" + std::to_string(line) + ": the file is not valid UTF-8 (column " +
+                       std::to_string(bad - start + 1) + ": '" + printableName(shown) +
+                       "'); URDF names and values must be UTF-8 (convert with iconv -t UTF-8)");
+    }
     tinyxml2::XMLDocument doc;
     if (doc.Parse(text.data(), text.size()) != tinyxml2::XML_SUCCESS) {
       throw ModelError(source_ + ":" + std::to_string(doc.ErrorLineNum()) + ": invalid XML: " + doc.ErrorStr());
@@ -56,6 +74,7 @@ class UrdfReader {
       throw ModelError(source_ + ":" + std::to_string(robot ? robot->GetLineNum() : 1) +
                        ": the root element must be <robot>, not <" + (robot ? robot->Name() : "") + ">");
     }
+    checkStructure(robot);
     const std::string robotLabel = "robot";
     out_.robotName = attribute(robot, "name", robotLabel, false);
     out_.builder = ModelBuilder(out_.robotName);
@@ -94,13 +113,18 @@ class UrdfReader {
       if (!*p) break;
       errno = 0;
       const double x = std::strtod(p, &end);
-      if (end == p || !std::isfinite(x) || errno == ERANGE) {
+      // A number ends at a blank or the end: "1.5.2" or "0-1-2" are not split into 1.5, 0.2 or
+      // 0, −1, −2 (strtod alone would stop at the second '.' or '-' and go on from there).
+      const bool separated = *end == '\0' || *end == ' ' || *end == '\t' || *end == '\n' || *end == '\r';
+      if (end == p || !separated || !std::isfinite(x) || errno == ERANGE) {
         values.clear();
         break;
       }
       values.push_back(x);
       p = end;
     }
+    if (text.find("${") != std::string::npos || text.find("$(") != std::string::npos)
+      failXacro(e, element + ": <" + std::string(e->Name()) + "> attribute '" + name + "': value '" + text + "'");
     if (values.size() != count) {
       fail(e, element, "<" + std::string(e->Name()) + "> attribute '" + name + "': value '" + text +
                            "' must be " + std::to_string(count) + " finite number" + (count > 1 ? "s" : ""));
@@ -135,6 +159,78 @@ class UrdfReader {
       f();
     } catch (const ModelError& e) {
       fail(at, element, e.what());
+    }
+  }
+
+  // ---- structure: every element is one we read, or one the docs list as ignored --------------
+
+  /// The xacro refusal: macros, properties and includes are not URDF; importing the rest would
+  /// give a smaller robot.
+  [[noreturn]] void failXacro(const XMLElement* at, const std::string& what) const {
+    throw ModelError(source_ + ":" + std::to_string(at->GetLineNum()) + ": " + what +
+                     ": this is a xacro file; trellis reads plain URDF and does not expand xacro macros, "
+                     "properties or includes. Expand it first: xacro " +
+                     (source_.empty() || source_.front() == '<' ? std::string("robot.urdf.xacro") : source_) +
+                     " > robot.urdf");
+  }
+
+  /// One level of the URDF schema: the children `e` may have and how many of each (0: any).
+  /// An element not listed is refused with its line (it would otherwise be dropped silently:
+  /// a <link> inside a <joint>, a second <parent>).
+  void checkChildren(const XMLElement* e, const std::string& element,
+                     std::initializer_list<std::pair<const char*, int>> allowed) const {
+    std::map<std::string, const XMLElement*> seen;
+    for (const XMLElement* c = e->FirstChildElement(); c; c = c->NextSiblingElement()) {
+      const std::string name = c->Name();
+      if (name.rfind("xacro:", 0) == 0) failXacro(c, "<" + name + ">");
+      int limit = -1;
+      for (const auto& [n, max] : allowed)
+        if (name == n) limit = max;
+      if (limit < 0) {
+        std::string list;
+        for (const auto& [n, max] : allowed) list += (list.empty() ? "<" : ", <") + std::string(n) + ">";
+        fail(c, element, "unexpected element <" + name + "> inside <" + e->Name() + "> (expected " +
+                             (list.empty() ? std::string("no child elements") : list) + ")");
+      }
+      if (limit == 1) {
+        if (auto it = seen.find(name); it != seen.end()) {
+          fail(c, element, "a second <" + name + "> (the first is on line " + std::to_string(it->second->GetLineNum()) +
+                               "); <" + e->Name() + "> takes one");
+        }
+        seen[name] = c;
+      }
+    }
+  }
+
+  void checkStructure(const XMLElement* robot) const {
+    for (const tinyxml2::XMLAttribute* a = robot->FirstAttribute(); a; a = a->Next()) {
+      if (std::string(a->Name()) == "xmlns:xacro") failXacro(robot, "<robot> declares xmlns:xacro");
+    }
+    // <material>, <transmission>, <gazebo> at the top level are documented as ignored.
+    checkChildren(robot, "robot", {{"link", 0}, {"joint", 0}, {"material", 0}, {"transmission", 0}, {"gazebo", 0}});
+    for (const XMLElement* l = robot->FirstChildElement("link"); l; l = l->NextSiblingElement("link")) {
+      const std::string element = "link '" + attribute(l, "name", "link", false) + "'";
+      checkChildren(l, element, {{"inertial", 1}, {"visual", 0}, {"collision", 0}});
+      if (const XMLElement* in = l->FirstChildElement("inertial")) {
+        checkChildren(in, element + " <inertial>", {{"origin", 1}, {"mass", 1}, {"inertia", 1}});
+        for (const XMLElement* c = in->FirstChildElement(); c; c = c->NextSiblingElement())
+          checkChildren(c, element + " <inertial>", {});
+      }
+      for (const XMLElement* v = l->FirstChildElement("visual"); v; v = v->NextSiblingElement("visual")) {
+        checkChildren(v, element + " <visual>", {{"origin", 1}, {"geometry", 1}, {"material", 1}});
+        if (const XMLElement* g = v->FirstChildElement("geometry")) {
+          checkChildren(g, element + " <visual>", {{"box", 1}, {"cylinder", 1}, {"sphere", 1}, {"mesh", 1}, {"capsule", 1}});
+          if (g->FirstChildElement() && g->FirstChildElement() != g->LastChildElement())
+            fail(g, element + " <visual>", "<geometry> holds more than one shape");
+        }
+      }
+    }
+    for (const XMLElement* j = robot->FirstChildElement("joint"); j; j = j->NextSiblingElement("joint")) {
+      const std::string element = "joint '" + attribute(j, "name", "joint", false) + "'";
+      checkChildren(j, element,
+                    {{"origin", 1}, {"parent", 1}, {"child", 1}, {"axis", 1}, {"limit", 1}, {"dynamics", 1},
+                     {"mimic", 1}, {"calibration", 1}, {"safety_controller", 1}, {"joint_properties", 1}});
+      for (const XMLElement* c = j->FirstChildElement(); c; c = c->NextSiblingElement()) checkChildren(c, element, {});
     }
   }
 
@@ -198,12 +294,37 @@ class UrdfReader {
     double v[6];
     for (int i = 0; i < 6; ++i) v[i] = number(inertiaXml, names[i], element);
     mass.inertia << v[0], v[3], v[4], v[3], v[1], v[5], v[4], v[5], v[2];
+    if (mass.m == 0.0) {
+      // The docs' rule: mass 0 is a massless frame. An inertia without mass is no body.
+      if (!mass.inertia.isZero(0.0)) {
+        fail(inertiaXml, element, "mass 0 with a nonzero <inertia>: a link of mass 0 is massless (no inertia); "
+                                  "give it a mass or set ixx..iyz to 0");
+      }
+      return;
+    }
+    checkInertia(mass.inertia, inertiaXml, element);
     const Eigen::Matrix4d g = origin(in, element);
     if (g.isIdentity(0.0)) {
       pendingMass_[l.name] = mass;
       return;
     }
     inertialFrames_[l.name] = {l.name, g, mass, inertiaXml};
+  }
+
+  /// A rigid body's inertia about its centre of mass: symmetric positive semidefinite with principal
+  /// moments that satisfy the triangle inequality, I_1 ≤ I_2 + I_3 (I_1 + I_2 − I_3 = 2 ∫ z² dm ≥ 0).
+  /// Zero moments are allowed (a point mass, a thin rod). Slack: 1e-9 of the trace (round-off of
+  /// values written with ~10 digits).
+  void checkInertia(const Eigen::Matrix3d& I, const XMLElement* at, const std::string& element) const {
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(I, Eigen::EigenvaluesOnly);
+    const Eigen::Vector3d p = eig.eigenvalues();  // ascending
+    const double slack = 1e-9 * std::abs(I.trace());
+    const std::string values = "principal moments " + fmt(p[0]) + ", " + fmt(p[1]) + ", " + fmt(p[2]);
+    if (p[0] < -slack)
+      fail(at, element, "<inertia> is not positive semidefinite (" + values + "): no rigid body has it");
+    if (p[2] > p[0] + p[1] + slack)
+      fail(at, element, "<inertia> violates the triangle inequality (" + values + ": the largest exceeds the sum of "
+                        "the other two): no rigid body has it");
   }
 
   void build() {
@@ -300,6 +421,17 @@ class UrdfReader {
       if (d != 0.0 && !movable) {
         fail(dyn, element, "<dynamics> attribute 'damping': value '" + fmt(d) + "' on a " + j.type +
                                " joint is not supported");
+      }
+    }
+    // <joint_properties> (written by some CAD exporters, not URDF) is read only to refuse what it
+    // would add: friction or damping other than 0.
+    if (const XMLElement* jp = x->FirstChildElement("joint_properties")) {
+      for (const char* field : {"friction", "damping"}) {
+        const double value = optionalNumber(jp, field, element, 0.0);
+        if (value != 0.0) {
+          fail(jp, element, std::string("<joint_properties> attribute '") + field + "': value '" + fmt(value) +
+                                "' is not modelled (only <dynamics damping> is; 0 is accepted)");
+        }
       }
     }
     Eigen::Vector3d axis = Eigen::Vector3d::UnitX();  // the URDF default
@@ -437,11 +569,13 @@ Scene sceneFromUrdf(UrdfImport&& robot) {
 }
 
 Scene loadUrdf(const std::string& path, const UrdfOptions& options) {
-  std::ifstream file(path, std::ios::binary);
-  if (!file || std::filesystem::is_directory(path)) throw ModelError(path + ": cannot open the URDF file");
-  std::ostringstream text;
-  text << file.rdbuf();
-  return sceneFromUrdf(importUrdf(text.str(), path, options));
+  std::string text;
+  try {
+    text = readTextFile(path, kMaxSceneFileBytes, "URDF file");  // bounded before it allocates
+  } catch (const FileError& e) {
+    throw ModelError(e.what());
+  }
+  return sceneFromUrdf(importUrdf(text, path, options));
 }
 
 }  // namespace trellis

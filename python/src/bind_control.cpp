@@ -20,6 +20,7 @@
 #include "trellis/core/data.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <thread>
 
 namespace trellis::python {
@@ -79,8 +80,10 @@ auto withoutGil(F&& f) {
 /// becomes a C++ exception with its message (the simulator reports it as POLICY_FAILURE).
 /// The std::function holds a pointer to the caller's py::function (alive for the whole call), so
 /// copies made by the simulator without the GIL never touch a Python reference count.
-Policy pythonPolicy(const py::function& policy, Eigen::Index nu) {
-  return [fn = &policy, nu](double t, const Eigen::VectorXd& x, Eigen::VectorXd& u) {
+/// A KeyboardInterrupt (Ctrl-C while the policy runs) sets *interrupted: the caller raises it
+/// again after the simulation stops, instead of a POLICY_FAILURE status the script would go past.
+Policy pythonPolicy(const py::function& policy, Eigen::Index nu, std::atomic<bool>* interrupted) {
+  return [fn = &policy, nu, interrupted](double t, const Eigen::VectorXd& x, Eigen::VectorXd& u) {
     py::gil_scoped_acquire acquire;
     try {
       const auto result = py::array_t<double, py::array::forcecast>::ensure((*fn)(t, toArray(x)));
@@ -89,6 +92,7 @@ Policy pythonPolicy(const py::function& policy, Eigen::Index nu) {
       }
       for (Eigen::Index i = 0; i < nu; ++i) u(i) = result.data()[i];
     } catch (py::error_already_set& e) {
+      if (e.matches(PyExc_KeyboardInterrupt)) interrupted->store(true);
       throw std::runtime_error(std::string("policy raised ") + e.what());
     }
   };
@@ -286,10 +290,16 @@ void bindControl(py::module_& m) {
   m.def("discretize_zero_order_hold",
         [](const Eigen::MatrixXd& A, const Eigen::MatrixXd& B, double h) {
           const DiscreteSystem s = discretizeZeroOrderHold(A, B, h);
+          // e^(A h) overflows for a large step (|λ| h beyond ~709): an error, never NaN arrays.
+          if (!s.Ad.allFinite() || !s.Bd.allFinite()) {
+            throw std::runtime_error("discretize_zero_order_hold: e^(A h) is not finite at h = " + std::to_string(h) +
+                                     " (the step is too large for this A: |eigenvalue| * h overflows)");
+          }
           return py::make_tuple(toArray(s.Ad), toArray(s.Bd));
         },
         py::arg("A"), py::arg("B"), py::arg("h"),
-        "(Ad, Bd): Ad = e^(A h), Bd = int_0^h e^(A s) ds B (exact zero-order hold).");
+        "(Ad, Bd): Ad = e^(A h), Bd = int_0^h e^(A s) ds B (exact zero-order hold). Raises "
+        "NumericalError when the exponential overflows (a step too large for A).");
   m.def("solve_discrete_riccati_recursion",
         [](const Eigen::MatrixXd& Ad, const Eigen::MatrixXd& Bd, const Eigen::MatrixXd& Q,
            const Eigen::MatrixXd& R, const Eigen::MatrixXd& Qf, int N) {
@@ -602,11 +612,17 @@ void bindControl(py::module_& m) {
         [](const Model& model, const VectorRef& x0, double t0, double t1, const py::function& policy,
            const std::optional<SimulationOptions>& options, const Trajectory* reference) {
           const Eigen::VectorXd x = x0;
-          const Policy p = pythonPolicy(policy, model.nu());
-          return withoutGil([&] {
+          std::atomic<bool> interrupted{false};
+          const Policy p = pythonPolicy(policy, model.nu(), &interrupted);
+          auto result = withoutGil([&] {
             return trellis::simulate(model, x, t0, t1, p, options.value_or(SimulationOptions{}),
                                      reference);
           });
+          if (interrupted.load()) {
+            PyErr_SetNone(PyExc_KeyboardInterrupt);
+            throw py::error_already_set();
+          }
+          return result;
         },
         py::arg("model"), py::arg("x0"), py::arg("t0"), py::arg("t1"), py::arg("policy"),
         py::kw_only(), py::arg("options") = py::none(), py::arg("reference") = py::none(),

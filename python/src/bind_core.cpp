@@ -237,7 +237,8 @@ void bindCore(py::module_& m) {
       "The preallocated workspace of a model: every compute_* function writes its results here "
       "and reuses its buffers (one Data per thread; a Data in use by another thread raises). The "
       "properties return copies (fresh arrays) of the latest results.")
-      .def(py::init<ModelPtr>(), py::arg("model"))
+      // none(false): Data(None) is a TypeError naming the signature, not a null model dereferenced.
+      .def(py::init<ModelPtr>(), py::arg("model").none(false))
       .def_readonly("model", &D::model)
       .def_property_readonly("M", mat(&Data::M), "mass matrix (nq, nq)")
       .def_property_readonly("bias", vec(&Data::bias), "ID(q, dq, 0) - Q (nq,)")

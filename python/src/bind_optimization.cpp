@@ -5,6 +5,8 @@
 
 #include <pybind11/functional.h>
 
+#include <atomic>
+#include <memory>
 #include <mutex>
 
 #include "trellis/optimization/optimizer.hpp"
@@ -50,7 +52,7 @@ void bindOptimization(py::module_& m) {
       "Q = Qf = 0). Vector and matrix fields are copied in and out.");
   problem
       .def(py::init([](ModelPtr model) { return Problem(std::const_pointer_cast<const Model>(model)); }),
-           py::arg("model"))
+           py::arg("model").none(false))
       .def_property_readonly("model",
                              [](const Problem& p) { return std::const_pointer_cast<Model>(p.model); })
       .def_readwrite("method", &Problem::method)
@@ -140,12 +142,39 @@ void bindOptimization(py::module_& m) {
 
   m.def("optimize_trajectory",
         [](const Problem& problem, const std::optional<OptimizerOptions>& options) {
-          py::gil_scoped_release release;
-          // Ipopt with Debian's sequential MUMPS is not reentrant (two concurrent solves crash in
-          // the linear solver): solves are serialized here, while other Python threads run.
-          static std::mutex ipoptMutex;
-          const std::lock_guard<std::mutex> lock(ipoptMutex);
-          return optimizeTrajectory(problem, options.value_or(OptimizerOptions{}));
+          OptimizerOptions solver = options.value_or(OptimizerOptions{});
+          // Ctrl-C inside on_iteration is a KeyboardInterrupt in the callback; the optimizer would
+          // turn any exception into a stopped solve. It stops the solve here and is raised again
+          // once the solve has returned, so the script stops as Ctrl-C means.
+          auto interrupted = std::make_shared<std::atomic<bool>>(false);
+          if (solver.onIteration) {
+            solver.onIteration = [inner = std::move(solver.onIteration), interrupted](const IterationInfo& info) {
+              try {
+                return inner(info);
+              } catch (py::error_already_set& e) {
+                py::gil_scoped_acquire gil;
+                if (e.matches(PyExc_KeyboardInterrupt)) {
+                  interrupted->store(true);
+                  return false;
+                }
+                throw;
+              }
+            };
+          }
+          OptimizationResult result;
+          {
+            py::gil_scoped_release release;
+            // Ipopt with Debian's sequential MUMPS is not reentrant (two concurrent solves crash in
+            // the linear solver): solves are serialized here, while other Python threads run.
+            static std::mutex ipoptMutex;
+            const std::lock_guard<std::mutex> lock(ipoptMutex);
+            result = optimizeTrajectory(problem, solver);
+          }
+          if (interrupted->load()) {
+            PyErr_SetNone(PyExc_KeyboardInterrupt);
+            throw py::error_already_set();
+          }
+          return result;
         },
         py::arg("problem"), py::kw_only(), py::arg("options") = py::none(),
         "Transcribes (direct collocation) and solves with Ipopt, without the GIL (other Python threads "

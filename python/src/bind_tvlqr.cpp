@@ -5,6 +5,10 @@
 // (bind_control.cpp) stay available either way.
 #include "common.hpp"
 
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
 #if __has_include("trellis/control/tvlqr.hpp")
 #include "control_common.hpp"
 #include "options.hpp"
@@ -80,8 +84,23 @@ void bindTvlqr(py::module_& m) {
         [](const Model& model, const Trajectory& reference, const py::object& Q, const py::object& R,
            const py::object& Qf, const std::optional<TvlqrOptions>& options) {
           const LqrWeights w = makeWeights(Q, R, Qf, 2 * model.nq(), model.nu());
+          const TvlqrOptions o = options.value_or(TvlqrOptions{});
+          // The grids an option implies are bounded before any is allocated, as on the command
+          // line (`trellis gains`: 1e6 output rows): the count is computed in double, never wrapped.
+          constexpr double kMaxGridPoints = 1e6;
+          const double span = reference.endTime() - reference.startTime();
+          const auto bound = [&](const char* option, double step, const char* what) {
+            const double points = std::floor(span / step) + 2.0;
+            if (!(points <= kMaxGridPoints)) {
+              throw std::invalid_argument("solve_tvlqr: options." + std::string(option) + " gives a step of " +
+                                          std::to_string(step) + " s over " + std::to_string(span) + " s: " +
+                                          std::to_string(points) + " " + what + "; the limit is 1000000");
+            }
+          };
+          if (o.sampleRate > 0.0) bound("sample_rate", 1.0 / o.sampleRate, "samples");
+          if (o.outputStep > 0.0) bound("output_step", o.outputStep, "output rows");
           py::gil_scoped_release release;
-          return solveTvlqr(model, reference, w, options.value_or(TvlqrOptions{}));
+          return solveTvlqr(model, reference, w, o);
         },
         py::arg("model"), py::arg("reference"), py::kw_only(), py::arg("Q"), py::arg("R"),
         py::arg("Qf") = py::none(), py::arg("options") = py::none(),

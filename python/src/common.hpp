@@ -31,6 +31,15 @@ using ModelPtr = std::shared_ptr<Model>;
 using VectorRef = Eigen::Ref<const Eigen::VectorXd>;
 using StridedMap = Eigen::Map<Eigen::MatrixXd, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
 
+/// Throws ValueError when `src` is a NumPy array of complex numbers: converting it to float64 would
+/// keep the real part and drop the rest with only a warning.
+inline void refuseComplex(py::handle src, const char* expected = "a real (float64) array") {
+  if (py::isinstance<py::array>(src) && py::reinterpret_borrow<py::array>(src).dtype().kind() == 'c') {
+    throw py::value_error(std::string("got a complex array where ") + expected +
+                          " is expected; pass .real (or .imag) explicitly if that is what you mean");
+  }
+}
+
 /// The Python `Data`: the core workspace, the model it was sized for (kept alive), input buffers
 /// (so a call copies q, q̇, u into preallocated vectors instead of allocating), and a flag that
 /// refuses concurrent use from two threads (calls release the GIL).
@@ -112,3 +121,37 @@ void bindOptimization(py::module_& m);
 void bindHand(py::module_& m);
 
 }  // namespace trellis::python
+
+namespace pybind11::detail {
+
+/// Vector arguments (q, dq, u, ...) as pybind11's own Eigen::Ref caster reads them — a contiguous
+/// float64 array in place, anything else converted — except that a complex array is refused
+/// (refuseComplex) instead of cast to its real part. The inner caster reads into a Ref of an
+/// unaligned vector type (a distinct type, so pybind11's caster serves it) whose data the
+/// Ref<const VectorXd> then maps without a copy (both contiguous, inner stride 1).
+template <>
+struct type_caster<Eigen::Ref<const Eigen::VectorXd>> {
+  using Ref = Eigen::Ref<const Eigen::VectorXd>;
+  using InnerRef = Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::DontAlign>>;
+
+  bool load(handle src, bool convert) {
+    trellis::python::refuseComplex(src);
+    if (!inner_.load(src, convert)) return false;
+    const InnerRef& mapped = inner_;
+    ref_ = std::make_unique<Ref>(mapped);
+    return true;
+  }
+  static constexpr auto name = type_caster<InnerRef>::name;
+  // NOLINTNEXTLINE(google-explicit-constructor)
+  operator Ref*() { return ref_.get(); }
+  // NOLINTNEXTLINE(google-explicit-constructor)
+  operator Ref&() { return *ref_; }
+  template <typename T>
+  using cast_op_type = pybind11::detail::cast_op_type<T>;
+
+ private:
+  type_caster<InnerRef> inner_;
+  std::unique_ptr<Ref> ref_;
+};
+
+}  // namespace pybind11::detail

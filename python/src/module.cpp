@@ -158,6 +158,8 @@ void bindErrors(py::module_& m) {
       PyErr_SetString(gTrajectoryError, e.what());
     } catch (const ProblemError& e) {
       PyErr_SetString(gProblemError, e.what());
+    } catch (const FileError& e) {  // a file that cannot be read or written: OSError, as open() gives
+      PyErr_SetString(PyExc_OSError, e.what());
     } catch (const std::logic_error& e) {  // invalid_argument, out_of_range, domain_error, …
       PyErr_SetString(PyExc_ValueError, e.what());
     } catch (const FileError& e) {  // before runtime_error, its base

@@ -12,7 +12,8 @@ Conventions (the C++ ones, in snake_case):
   gains as ``(N, nu, nx)``;
 * array arguments accept anything convertible to float64: a contiguous float64 array is read in
   place, anything else (other dtype, Fortran/C order mismatch, a non-contiguous slice, a list) is
-  copied first. Results are fresh C-order float64 arrays that own their memory. The ``out``-style
+  copied first; a complex array given as a vector (q, dq, u, x0, ...) raises ValueError instead
+  of being cut to its real part. Results are fresh C-order float64 arrays that own their memory. The ``out``-style
   keywords (``compute_linearization(..., A=, B=)``, ``compute_dynamics(..., qdd=, lambda_=)``)
   write into the caller's float64 array of the exact shape, in any memory order (strided
   writes), and raise ValueError for a wrong dtype, shape or a read-only array;
@@ -21,8 +22,10 @@ Conventions (the C++ ones, in snake_case):
   failure the C++ reports as a status stays a status (``DynamicsStatus``, ``LqrResult.status``,
   ``RiccatiSolution.status``, ``SimulationResult.status``, ``OptimizationResult.status``); where the
   C++ throws for a numerical failure, ``NumericalError`` (a RuntimeError) is raised; a file that
-  cannot be written raises ``OSError`` of the matching kind (``FileNotFoundError`` for a missing
-  directory, ``PermissionError``, ``IsADirectoryError``), with the path in the message;
+  cannot be read or written raises ``OSError`` of the matching kind (``FileNotFoundError`` for a
+  missing file or directory, ``PermissionError``, ``IsADirectoryError``), with the path in the
+  message; Ctrl-C inside a Python callback (a simulation policy, ``on_iteration``) stops the
+  computation and raises ``KeyboardInterrupt``;
 * long computations (linearization, Riccati, simulation, optimization) release the GIL.
 """
 

@@ -6,7 +6,13 @@
 
 #include <nlohmann/json.hpp>
 
+#include <fcntl.h>
+#include <signal.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
 
 #include <filesystem>
 #include <functional>
@@ -102,6 +108,120 @@ TEST_CASE("readTextFile reads a file, and names a directory, a missing file and 
   CHECK_THAT(errorOf([&] { trellis::readTextFile("/dev/zero", 1 << 20, "test file"); }),
              Catch::Contains("larger than the limit"));
   fs::remove_all(dir);
+}
+
+TEST_CASE("writeFileAtomically appends to an open stream as the shell set it up, never replacing the file", "[io]") {
+  const fs::path dir = scratch("stream");
+  const std::string log = (dir / "app.log").string();
+  trellis::writeFileAtomically(log, "old line\n");
+  struct stat before {};
+  REQUIRE(::stat(log.c_str(), &before) == 0);
+  // `>> app.log`: the descriptor is opened for appending; each name of it appends.
+  const int fd = ::open(log.c_str(), O_WRONLY | O_APPEND | O_CLOEXEC);
+  REQUIRE(fd >= 0);
+  fs::create_symlink("/dev/fd/" + std::to_string(fd), dir / "link_to_fd");
+  trellis::writeFileAtomically("/dev/fd/" + std::to_string(fd), "a\n");
+  trellis::writeFileAtomically("/proc/self/fd/" + std::to_string(fd), "b\n");
+  trellis::writeFileAtomically((dir / "link_to_fd").string(), "c\n");
+  CHECK(trellis::isStreamPath("/dev/stdout"));
+  CHECK(trellis::isStreamPath("-"));
+  CHECK_FALSE(trellis::isStreamPath(log));
+  ::close(fd);
+  CHECK(contents(log) == "old line\na\nb\nc\n");
+  struct stat after {};
+  REQUIRE(::stat(log.c_str(), &after) == 0);
+  CHECK(after.st_ino == before.st_ino);  // the same file, not one renamed over it
+  // A descriptor that is not open is an error, not a file created somewhere.
+  CHECK_THAT(errorOf([&] { trellis::writeFileAtomically("/dev/fd/987", "x"); }), Catch::Contains("not an open stream"));
+  // "-" and /dev/stdout: standard output, here redirected (`>`) to a file that already holds text.
+  const std::string out = (dir / "stdout.txt").string();
+  std::fflush(stdout);
+  const int saved = ::dup(STDOUT_FILENO);
+  const int target = ::open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  REQUIRE(target >= 0);
+  ::dup2(target, STDOUT_FILENO);
+  std::printf("summary\n");  // buffered text goes first
+  trellis::writeFileAtomically("-", "csv1\n");
+  trellis::writeFileAtomically("/dev/stdout", "csv2\n");
+  std::fflush(stdout);
+  ::dup2(saved, STDOUT_FILENO);
+  ::close(saved);
+  ::close(target);
+  CHECK(contents(out) == "summary\ncsv1\ncsv2\n");
+  fs::remove_all(dir);
+}
+
+TEST_CASE("writeFileAtomically refuses what it must not replace: read-only, another user's, a dangling link", "[io]") {
+  const fs::path dir = scratch("refuse");
+  const std::string ro = (dir / "ro.csv").string();
+  trellis::writeFileAtomically(ro, "keep");
+  ::chmod(ro.c_str(), 0444);
+  CHECK_THAT(errorOf([&] { trellis::writeFileAtomically(ro, "new"); }),
+             Catch::Contains(ro) && Catch::Contains("is read-only (mode 0444)"));
+  CHECK(contents(ro) == "keep");
+  ::chmod(ro.c_str(), 0644);
+  if (::geteuid() == 0) {  // only root can give a file away; as root the rule still holds
+    const std::string other = (dir / "other.csv").string();
+    trellis::writeFileAtomically(other, "theirs");
+    REQUIRE(::chown(other.c_str(), 65534, 65534) == 0);
+    CHECK_THAT(errorOf([&] { trellis::writeFileAtomically(other, "new"); }),
+               Catch::Contains("belongs to another user (uid 65534)"));
+    CHECK(contents(other) == "theirs");
+  }
+  fs::create_symlink(dir / "missing" / "target.csv", dir / "dangling");
+  CHECK_THAT(errorOf([&] { trellis::writeFileAtomically((dir / "dangling").string(), "x"); }),
+             Catch::Contains("is a symbolic link to") && Catch::Contains("cannot be resolved"));
+  CHECK(fs::is_symlink(dir / "dangling"));
+  // Nothing but the three files (no temporary, no file created through the link).
+  CHECK(std::distance(fs::directory_iterator(dir), fs::directory_iterator()) == (::geteuid() == 0 ? 3 : 2));
+  fs::remove_all(dir);
+}
+
+TEST_CASE("removeTemporaryFilesOnSignals: SIGTERM or SIGINT during a write leaves no temporary", "[io]") {
+  for (const int signal : {SIGTERM, SIGINT}) {
+    const fs::path dir = scratch("signal" + std::to_string(signal));
+    bool caught = false;
+    // The child writes 256 MiB; the parent signals it as soon as the hidden temporary exists.
+    // A child that finished first (a fast disk) leaves the complete file: try again, larger.
+    for (int attempt = 0; attempt < 4 && !caught; ++attempt) {
+      fs::remove_all(dir);
+      fs::create_directories(dir);
+      const pid_t child = ::fork();
+      REQUIRE(child >= 0);
+      if (child == 0) {
+        trellis::removeTemporaryFilesOnSignals();
+        try {
+          trellis::writeFileAtomically((dir / "big.csv").string(), std::string(std::size_t{256} << (20 + attempt), 'x'));
+        } catch (...) {
+        }
+        ::_exit(0);
+      }
+      bool seen = false;
+      for (int poll = 0; poll < 200000 && !seen; ++poll) {
+        for (const auto& entry : fs::directory_iterator(dir))
+          if (entry.path().filename().string().rfind(".big.csv.tmp-", 0) == 0) seen = true;
+        if (!seen) ::usleep(50);
+      }
+      if (seen) ::kill(child, signal);
+      int status = 0;
+      ::waitpid(child, &status, 0);
+      if (seen && WIFSIGNALED(status)) {
+        caught = true;
+        CHECK(WTERMSIG(status) == signal);  // died by the signal, as without the handler
+        CHECK(fs::is_empty(dir));            // and took its temporary with it
+      }
+    }
+    CHECK(caught);
+    fs::remove_all(dir);
+  }
+}
+
+TEST_CASE("readTextStream bounds what it reads from a descriptor without a size", "[io]") {
+  const int fd = ::open("/dev/zero", O_RDONLY | O_CLOEXEC);
+  REQUIRE(fd >= 0);
+  CHECK_THAT(errorOf([&] { trellis::readTextStream(fd, 100000, "<stdin>", "scene"); }),
+             Catch::Contains("<stdin>: the scene is larger than the limit of 100000 bytes"));
+  ::close(fd);
 }
 
 TEST_CASE("jsonInteger checks the range before converting: no count wraps around", "[io]") {

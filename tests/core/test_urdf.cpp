@@ -305,7 +305,8 @@ TEST_CASE("A scene can start from a URDF and add constraints, forces and state",
   }
   SECTION("errors name the include") {
     CHECK_THROWS_WITH(loadScene(write(R"({"urdf": "missing.urdf"})")),
-                      Catch::Contains("field 'urdf': \"missing.urdf\" cannot be opened"));
+                      Catch::Contains("field 'urdf': \"missing.urdf\" cannot be read") &&
+                          Catch::Contains("No such file or directory"));
     CHECK_THROWS_WITH(loadScene(write(R"({"urdf": ")" + rel + R"(", "urdf_options": {"inputs": false}})")),
                       Catch::Contains("urdf_options: field 'inputs': unknown option"));
     CHECK_THROWS_WITH(loadScene(write(R"({"urdf": ")" + rel + R"(", "constraints": [{"type": "distance", "frame1": "link9", "frame2": "world", "distance": 1}]})")),
@@ -371,7 +372,7 @@ TEST_CASE("URDF compound joints: planar and floating as primitive sequences", "[
 
 TEST_CASE("URDF root link named world is the world frame (ROS convention)", "[urdf]") {
   const std::string arm = R"(
-  <link name="b"><inertial><origin xyz="0 0 -0.3"/><mass value="0.7"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.005"/></inertial></link>
+  <link name="b"><inertial><origin xyz="0 0 -0.3"/><mass value="0.7"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.012"/></inertial></link>
   <joint name="h" type="revolute"><parent link="base"/><child link="b"/><origin xyz="0 0.1 0.2"/><axis xyz="0 1 0"/></joint>
 )";
   const std::string mount = R"(<origin xyz="0.5 -0.2 1" rpy="0.1 0.2 0.3"/>)";
@@ -429,7 +430,7 @@ TEST_CASE("URDF errors name link, joint, attribute, value and line", "[urdf][err
           "link 'b' <inertial>: <mass> attribute 'value': value '-1' must be >= 0");
     fails(R"(<link name="a"/><link name="b"><inertial><mass value="1"/><inertia ixx="1" ixy="5" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>
 <joint name="j" type="fixed"><parent link="a"/><child link="b"/></joint>)",
-          "joint 'j': frame 'b': field 'mass.inertia': tensor is not positive semidefinite");
+          "bad.urdf:3: link 'b' <inertial>: <inertia> is not positive semidefinite");
     // A bad second number of a cylinder (found by fuzz_urdf: with assertions on, the throw inside
     // an Eigen comma initializer aborted instead of reporting).
     fails(R"(<link name="a"><visual><geometry><cylinder radius="0.02" length="x"/></geometry></visual></link>)",
@@ -454,6 +455,69 @@ TEST_CASE("URDF errors name link, joint, attribute, value and line", "[urdf][err
   SECTION("the root must be <robot>") {
     CHECK_THROWS_WITH(parseScene("<?xml version=\"1.0\"?>\n<sdf/>", "x.sdf"),
                       Catch::Contains("x.sdf:2: the root element must be <robot>, not <sdf>"));
+  }
+}
+
+TEST_CASE("URDF content the importer would drop is refused with file, line and element", "[urdf][errors]") {
+  const auto fails = [](const std::string& text, const std::string& expected) {
+    INFO("expected message containing: " << expected);
+    CHECK_THROWS_WITH(parseScene(text, "bad.urdf"), Catch::Contains(expected));
+  };
+  const std::string joint = R"(<joint name="j" type="revolute"><parent link="a"/><child link="b"/>)";
+  SECTION("xacro: the namespace, a macro element, a ${property}") {
+    fails("<robot name=\"r\" xmlns:xacro=\"http://www.ros.org/wiki/xacro\">\n<link name=\"a\"/></robot>",
+          "bad.urdf:1: <robot> declares xmlns:xacro: this is a xacro file; trellis reads plain URDF and does not "
+          "expand xacro macros, properties or includes. Expand it first: xacro bad.urdf > robot.urdf");
+    fails(robot(std::string(kTwoLinks) + "<xacro:include filename=\"arm.xacro\"/>\n"), "bad.urdf:5: <xacro:include>: this is a xacro file");
+    fails(robot(std::string(kTwoLinks) + joint + "<origin xyz=\"${l} 0 0\"/></joint>"), "value '${l} 0 0': this is a xacro file");
+  }
+  SECTION("elements that are not where URDF puts them, and second copies") {
+    fails(robot(std::string(kTwoLinks) + "<group>\n<link name=\"c\"/></group>"),
+          "bad.urdf:5: robot: unexpected element <group> inside <robot>");
+    fails(robot(std::string(kTwoLinks) + joint + "\n<link name=\"c\"/></joint>"),
+          "bad.urdf:6: joint 'j': unexpected element <link> inside <joint>");
+    fails(robot(std::string(kTwoLinks) + joint + "\n<parent link=\"b\"/></joint>"),
+          "bad.urdf:6: joint 'j': a second <parent> (the first is on line 5); <joint> takes one");
+    fails(robot(std::string(kTwoLinks) + joint + "<axis xyz=\"1 0 0\"/>\n<axis xyz=\"0 1 0\"/></joint>"),
+          "bad.urdf:6: joint 'j': a second <axis>");
+    fails(robot(R"(<link name="a"/><link name="b"><inertial><mass value="1"/>
+<mass value="2"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>)"),
+          "bad.urdf:4: link 'b' <inertial>: a second <mass>");
+    fails(robot(R"(<link name="a"/><link name="b"><inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial>
+<inertial><mass value="2"/></inertial></link>)"),
+          "bad.urdf:4: link 'b': a second <inertial>");
+  }
+  SECTION("numbers without separators are not split") {
+    fails(robot(std::string(kTwoLinks) + joint + "<origin xyz=\"1.5.2 0\"/></joint>"),
+          "<origin> attribute 'xyz': value '1.5.2 0' must be 3 finite numbers");
+    fails(robot(std::string(kTwoLinks) + joint + "<origin xyz=\"0-1-2\"/></joint>"),
+          "value '0-1-2' must be 3 finite numbers");
+    fails(robot(std::string(kTwoLinks) + joint + "<axis xyz=\"0 0 1x\"/></joint>"), "value '0 0 1x' must be 3");
+  }
+  SECTION("inertias no rigid body has, and a massless link with an inertia") {
+    const auto link = [](const char* inertia, const char* m = "1") {
+      return robot(std::string(R"(<link name="a"/><link name="b"><inertial><mass value=")") + m + "\"/>\n" + inertia +
+                   R"(</inertial></link><joint name="j" type="fixed"><parent link="a"/><child link="b"/></joint>)");
+    };
+    fails(link(R"(<inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="3"/>)"),
+          "bad.urdf:4: link 'b' <inertial>: <inertia> violates the triangle inequality (principal moments 1, 1, 3");
+    fails(link(R"(<inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/>)", "0"),
+          "bad.urdf:4: link 'b' <inertial>: mass 0 with a nonzero <inertia>");
+    // Allowed: a thin rod (0, I, I), a point mass (0), a massless link with zero inertia.
+    CHECK_NOTHROW(parseScene(link(R"(<inertia ixx="0" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/>)"), "ok.urdf"));
+    CHECK_NOTHROW(parseScene(link(R"(<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/>)"), "ok.urdf"));
+    const Scene massless = parseScene(link(R"(<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/>)", "0"), "ok.urdf");
+    CHECK(massless.model.nq() == 0);
+  }
+  SECTION("a byte-order mark is skipped, not called invalid JSON") {
+    const Scene s = parseScene("\xEF\xBB\xBF" + robot(std::string(kTwoLinks) + joint + "</joint>"), "bom.urdf");
+    CHECK(s.model.nq() == 1);
+  }
+  SECTION("the documented ignored elements still load") {
+    const Scene s = parseScene(robot(std::string(kTwoLinks) + joint + R"(<calibration rising="0"/><safety_controller k_velocity="1"/></joint>
+<material name="grey"><color rgba="0.5 0.5 0.5 1"/></material><transmission name="t"><type>x</type></transmission><gazebo><anything/></gazebo>)"),
+                               "ok.urdf");
+    CHECK(s.model.nq() == 1);
   }
 }
 

@@ -19,8 +19,11 @@
 namespace trellis {
 
 struct InverseDynamicsOptions {
-  /// Exact when ‖G z − r‖∞ ≤ tolerance · max(1, ‖r‖∞, ‖G‖∞ ‖z‖∞), and likewise for the
-  /// constraint acceleration ‖A q̈ + Ȧ q̇‖∞ ≤ tolerance · max(1, ‖A‖∞ ‖q̈‖∞, ‖Ȧ q̇‖∞).
+  /// Exact when every row i of the residual, r = M q̈ + b with b = ID(q, q̇, 0) − Q_cfg, satisfies
+  /// |(G z − r)_i| ≤ tolerance · (Σ_j |M_ij q̈_j| + |ID_i| + |Q_cfg,i| + Σ_j |G_ij z_j|), and each
+  /// constraint row |(A q̈ + Ȧ q̇)_k| ≤ tolerance · (Σ_j |A_kj q̈_j| + |(Ȧ q̇)_k|): relative to the
+  /// terms compared, with no absolute floor, so scaling the model's units keeps the verdict.
+  /// In (0, 0.1]; larger would accept answers off by more than a tenth of the terms.
   double tolerance = 1e-9;
   /// Optional input bounds: empty (unbounded) or m entries each (±infinity allowed, lower ≤ upper).
   /// With bounds, u is the bounded least-squares solution (an active set on the bounds: inputs

@@ -42,7 +42,8 @@ struct ProjectionOptions {
 };
 
 enum class ProjectionStatus {
-  kOk,            ///< |h(q*)|∞ ≤ tolerance, the step test passed, |A q̇*| at rounding level
+  kOk,            ///< |h(q*)|∞ ≤ tolerance, the step test passed, and (velocities) each row
+                  ///< |(A q̇*)_r| ≤ 1e-9 Σ_j |A_rj| (|q̇*_j| + |q̇0_j|) (checked: kNotConverged if not)
   kNotConverged,  ///< maxIterations reached (or the constraints cannot be met, e.g. out of reach):
                   ///< q, dq are the last iterate, the residuals say how far off
   kNonFinite,     ///< h, A or M became NaN/Inf; q, dq are the last finite iterate

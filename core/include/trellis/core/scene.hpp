@@ -35,8 +35,12 @@ struct Scene {
 /// offending value.
 Scene parseScene(const std::string& jsonText, const std::string& source = "<scene>");
 
+/// The largest scene (or URDF) text read, in bytes (256 MiB): readers refuse more before allocating.
+inline constexpr std::size_t kMaxSceneFileBytes = std::size_t{256} << 20;
+
 /// Reads and parses a scene file or a URDF file (as parseScene); throws ModelError (also when the
-/// file cannot be read).
+/// file cannot be read, or is larger than kMaxSceneFileBytes: /dev/zero is refused, not read to
+/// the end of memory).
 Scene loadScene(const std::string& path);
 
 }  // namespace trellis
