@@ -16,3 +16,4 @@
 #include "trellis/core/gain_schedule.hpp"
 #include "trellis/core/reference.hpp"
 #include "trellis/core/status.hpp"
+#include "trellis/core/second_order.hpp"
