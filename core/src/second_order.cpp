@@ -321,7 +321,7 @@ struct SecondOrderImpl {
     // Factor once at the right size (Eigen's size constructors leave the info flag unset).
     massLLT.compute(Eigen::MatrixXd::Identity(n, n));
     schurLLT.compute(Eigen::MatrixXd::Identity(nc, nc));
-    schurEigen.compute(Eigen::MatrixXd::Identity(nc, nc));
+    if (nc > 0) schurEigen.compute(Eigen::MatrixXd::Identity(nc, nc));  // (an empty one reads past its end)
     massInverseAt = Eigen::MatrixXd::Zero(n, nc);
     schur = Eigen::MatrixXd::Zero(nc, nc);
     schurScale = Eigen::VectorXd::Ones(nc);

@@ -24,6 +24,7 @@
 #include "support/test_models.hpp"
 
 #include <trellis/core.hpp>
+#include <trellis/core/numdiff.hpp>
 
 #include <cmath>
 #include <string>
