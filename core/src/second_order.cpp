@@ -14,9 +14,9 @@
 #include "hyper_dual.hpp"
 
 #include <Eigen/Cholesky>
-#include <Eigen/Eigenvalues>
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -261,6 +261,44 @@ struct ResidualPass {
   }
 };
 
+/// Cyclic Jacobi rotations: A (symmetric) → diagonal (its eigenvalues), V ← its eigenvectors, so
+/// that A_in = V diag(A_out) Vᵀ. Allocation-free (Eigen's tridiagonalization is not); for the
+/// small Schur complement of redundant constraint rows. Each rotation zeroes A(p, q) with
+/// θ = (A_qq − A_pp) / 2A_pq, t = sgn θ / (|θ| + √(θ² + 1)), c = 1/√(t² + 1), s = t c.
+void jacobiEigen(Eigen::MatrixXd& A, Eigen::MatrixXd& V) {
+  const Eigen::Index n = A.rows();
+  V.setIdentity();
+  const double scale = A.cwiseAbs().maxCoeff();
+  for (int sweep = 0; sweep < 60; ++sweep) {
+    double off = 0.0;
+    for (Eigen::Index p = 0; p < n; ++p)
+      for (Eigen::Index q = p + 1; q < n; ++q) off = std::max(off, std::abs(A(p, q)));
+    if (off <= 1e-17 * scale) return;
+    for (Eigen::Index p = 0; p < n; ++p)
+      for (Eigen::Index q = p + 1; q < n; ++q) {
+        if (A(p, q) == 0.0) continue;
+        const double theta = (A(q, q) - A(p, p)) / (2.0 * A(p, q));
+        const double t = (theta >= 0 ? 1.0 : -1.0) / (std::abs(theta) + std::sqrt(theta * theta + 1.0));
+        const double c = 1.0 / std::sqrt(t * t + 1.0), s = t * c;
+        for (Eigen::Index k = 0; k < n; ++k) {
+          const double akp = A(k, p), akq = A(k, q);
+          A(k, p) = c * akp - s * akq;
+          A(k, q) = s * akp + c * akq;
+        }
+        for (Eigen::Index k = 0; k < n; ++k) {
+          const double apk = A(p, k), aqk = A(q, k);
+          A(p, k) = c * apk - s * aqk;
+          A(q, k) = s * apk + c * aqk;
+        }
+        for (Eigen::Index k = 0; k < n; ++k) {
+          const double vkp = V(k, p), vkq = V(k, q);
+          V(k, p) = c * vkp - s * vkq;
+          V(k, q) = s * vkp + c * vkq;
+        }
+      }
+  }
+}
+
 struct SecondOrderImpl {
   int n, m, nc, N;
   std::vector<JointConstants> joints;
@@ -274,7 +312,7 @@ struct SecondOrderImpl {
   Eigen::MatrixXd schur;               ///< nc×nc: D A M⁻¹ Aᵀ D, D = diag(A M⁻¹ Aᵀ)^(−1/2)
   Eigen::VectorXd schurScale;          ///< D
   Eigen::LLT<Eigen::MatrixXd> schurLLT;
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> schurEigen;  ///< pseudo-inverse for redundant rows
+  Eigen::MatrixXd schurDiagonalized, schurVectors;  ///< redundant rows: Ŝ = V diag V ᵀ (jacobiEigen)
   Eigen::VectorXd schurEigenInverse;   ///< 1/eigenvalue, 0 for the dropped ones
   Eigen::VectorXd schurWork;
   bool schurPseudo = false;
@@ -295,8 +333,7 @@ struct SecondOrderImpl {
         nc(model.nc()),
         N(2 * model.nq() + model.nu()),
         massLLT(model.nq()),
-        schurLLT(model.nc()),
-        schurEigen(model.nc()) {
+        schurLLT(model.nc()) {
     joints.resize(n);
     for (int i = 0; i < n; ++i) {
       const Joint& j = model.joints()[i];
@@ -321,7 +358,8 @@ struct SecondOrderImpl {
     // Factor once at the right size (Eigen's size constructors leave the info flag unset).
     massLLT.compute(Eigen::MatrixXd::Identity(n, n));
     schurLLT.compute(Eigen::MatrixXd::Identity(nc, nc));
-    if (nc > 0) schurEigen.compute(Eigen::MatrixXd::Identity(nc, nc));  // (an empty one reads past its end)
+    schurDiagonalized = Eigen::MatrixXd::Zero(nc, nc);
+    schurVectors = Eigen::MatrixXd::Identity(nc, nc);
     massInverseAt = Eigen::MatrixXd::Zero(n, nc);
     schur = Eigen::MatrixXd::Zero(nc, nc);
     schurScale = Eigen::VectorXd::Ones(nc);
@@ -391,9 +429,10 @@ struct SecondOrderImpl {
       schurPseudo = schurLLT.info() != Eigen::Success;
     }
     if (schurPseudo) {
-      schurEigen.compute(schur);
-      const auto& ev = schurEigen.eigenvalues();
-      const double tol = 1e-12 * std::max(1.0, ev.cwiseAbs().maxCoeff());
+      schurDiagonalized = schur;
+      jacobiEigen(schurDiagonalized, schurVectors);
+      const auto ev = schurDiagonalized.diagonal();
+      const double tol = 1e-12 * std::max(1.0, ev.cwiseAbs().maxCoeff());  // Ŝ has unit diagonal
       for (int k = 0; k < nc; ++k) schurEigenInverse[k] = ev[k] > tol ? 1.0 / ev[k] : 0.0;
     }
   }
@@ -407,9 +446,9 @@ struct SecondOrderImpl {
       if (!schurPseudo) {
         schurLLT.solveInPlace(col);
       } else {
-        schurWork.noalias() = schurEigen.eigenvectors().transpose() * col;
+        schurWork.noalias() = schurVectors.transpose() * col;
         schurWork.array() *= schurEigenInverse.array();
-        col.noalias() = schurEigen.eigenvectors() * schurWork;
+        col.noalias() = schurVectors * schurWork;
       }
       col = schurScale.asDiagonal() * col;
     }

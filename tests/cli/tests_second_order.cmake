@@ -13,15 +13,15 @@ foreach(_scene IN LISTS _so_scenes)
   get_filename_component(_stem "${_scene}" NAME_WE)
   trellis_cli_test(linearize.second_order.example.${_stem}
     ARGS linearize --second-order --compact "${_scene}"
-    CHECKS "-DSTDOUT_REGEX=\"status\":\"ok\".*\"d2qdd_dqdq\":\\[\\[\\[.*\"d2qdd_dudu\":\\[" -DSTDERR_EMPTY=ON)
+    CHECKS "-DSTDOUT_REGEX=\"status\":\"ok\".*\"d2qdd_dqdq\":...-?[0-9].*\"d2qdd_dudu\":" -DSTDERR_EMPTY=ON)
 endforeach()
 # A scene that includes a URDF (a revolute joint about a tilted axis, a prismatic one).
 trellis_cli_test(linearize.second_order.urdf
   ARGS linearize --second-order --compact "${_data}/two_link_arm_scene.json"
-  CHECKS "-DSTDOUT_REGEX=\"configs\":\\[\"shoulder\",\"slide\"\\].*\"d2qdd_dqdq\":\\[\\[\\[-?[0-9]" -DSTDERR_EMPTY=ON)
+  CHECKS "-DSTDOUT_REGEX=\"configs\":.\"shoulder\",\"slide\".*\"d2qdd_dqdq\":...-?[0-9]" -DSTDERR_EMPTY=ON)
 # Along a trajectory: one line per knot, each with the tensors.
 trellis_mq_test(linearize.second_order.trajectory
   ARGS1 linearize --second-order --trajectory "${PROJECT_SOURCE_DIR}/examples/trajectories/pendulum_swing.csv" "${_so_pendulum}"
-  CHECKS1 -DLINES=81 "-DSTDOUT_REGEX=^\\{\"knot\":0,.*\"d2qdd_dudu\":\\[\\[\\[0(\\.0)?\\]\\]\\]\\}\n" -DSTDERR_EMPTY=ON)
+  CHECKS1 -DLINES=81 "-DSTDOUT_REGEX=^.\"knot\":0,.*\"d2qdd_dudu\":...0(.0)?...\}\n" -DSTDERR_EMPTY=ON)
 trellis_cli_test(linearize.second_order.help ARGS linearize --help
   CHECKS "-DSTDOUT_REGEX=--second-order.*d2qdd_dqdq" -DSTDERR_EMPTY=ON)

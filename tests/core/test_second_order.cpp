@@ -24,6 +24,7 @@
 #include "support/test_models.hpp"
 
 #include <trellis/core.hpp>
+#include <trellis/core/second_order.hpp>
 #include <trellis/core/numdiff.hpp>
 
 #include <cmath>
@@ -245,6 +246,32 @@ TEST_CASE("Second derivatives for a system with every element", "[second_order][
     const TestSystem sys = kitchenSink(3, true);
     std::mt19937 rng(703);
     checkSecondOrderAt(sys.model, randomConsistentState(sys.model, rng), 703);
+  }
+}
+
+TEST_CASE("Second derivatives with redundant constraints equal those without the copies",
+          "[second_order][constraints]") {
+  // The paper's pendulum with its distance constraint written twice: A has a dependent row and
+  // the solve takes the pseudo-inverse path (status kRedundantConstraints), but q̈(z) is the same
+  // function as with one copy, so its second derivatives must agree (the duplicated λ splits the
+  // force: each copy carries half of the single λ, and so do its derivatives).
+  const Model one = paperPendulum(1).model, two = paperPendulum(2).model;
+  Data d1(one), d2(two);
+  SecondOrderWorkspace w1(one), w2(two, true), c2(two, false);
+  std::mt19937 rng(880);
+  for (int k = 0; k < 3; ++k) {
+    const State s = randomState(one, rng);
+    REQUIRE(computeSecondOrderTensors(one, d1, w1, s.q, s.dq, s.u).ok());
+    REQUIRE(computeSecondOrderTensors(two, d2, w2, s.q, s.dq, s.u).code == DynamicsStatus::Code::kRedundantConstraints);
+    for (int i = 0; i < one.nq(); ++i) TRELLIS_CHECK_MATRIX(w1.qddHessian[i], w2.qddHessian[i], 1e-9, Scale::kMatrix);
+    for (int r = 0; r < 2; ++r)
+      TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(0.5 * w1.lambdaHessian[0]), w2.lambdaHessian[r], 1e-9, Scale::kMatrix);
+    const Eigen::VectorXd w = uniformVector(rng, one.nq(), -1.0, 1.0);
+    const int N = 2 * one.nq() + one.nu();
+    Eigen::MatrixXd H(N, N), expected = Eigen::MatrixXd::Zero(N, N);
+    for (int i = 0; i < one.nq(); ++i) expected += w[i] * w1.qddHessian[i];
+    computeSecondOrderContraction(two, d2, c2, s.q, s.dq, s.u, w, Eigen::VectorXd(), H);
+    TRELLIS_CHECK_MATRIX(expected, H, 1e-9, Scale::kMatrix);
   }
 }
 

@@ -16,4 +16,3 @@
 #include "trellis/core/gain_schedule.hpp"
 #include "trellis/core/reference.hpp"
 #include "trellis/core/status.hpp"
-#include "trellis/core/second_order.hpp"

@@ -11,6 +11,7 @@
 #include "support/test_models.hpp"
 
 #include <trellis/core.hpp>
+#include <trellis/core/second_order.hpp>
 
 #include <vector>
 
