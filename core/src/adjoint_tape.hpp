@@ -54,16 +54,36 @@ inline TapeVar recordBinary(const TapeVar& a, const TapeVar& b, double g, double
   return TapeVar(g, activeTape->push({a.idx, b.idx, da, db, 0.0, dab, 0.0}));
 }
 
-inline TapeVar operator+(const TapeVar& a, const TapeVar& b) { return recordBinary(a, b, a.v + b.v, 1.0, 1.0, 0.0); }
-inline TapeVar operator-(const TapeVar& a, const TapeVar& b) { return recordBinary(a, b, a.v - b.v, 1.0, -1.0, 0.0); }
-inline TapeVar operator*(const TapeVar& a, const TapeVar& b) { return recordBinary(a, b, a.v * b.v, b.v, a.v, 1.0); }
-inline TapeVar operator-(const TapeVar& a) { return recordUnary(a, -a.v, -1.0, 0.0); }
-inline TapeVar operator+(const TapeVar& a, double b) { return recordUnary(a, a.v + b, 1.0, 0.0); }
-inline TapeVar operator+(double b, const TapeVar& a) { return recordUnary(a, a.v + b, 1.0, 0.0); }
-inline TapeVar operator-(const TapeVar& a, double b) { return recordUnary(a, a.v - b, 1.0, 0.0); }
+// Constants are folded: an operation with a constant operand records a unary node, and the
+// exact identities x + 0 = x, x · 1 = x, x · 0 = 0 record none (the many zero entries of constant
+// placements, zero vectors and axis columns would otherwise each cost a node). Which operands are
+// constant, and their values, come from the model only, so the node count is the same at every state.
+inline TapeVar operator+(const TapeVar& a, double b) { return b == 0.0 ? a : recordUnary(a, a.v + b, 1.0, 0.0); }
+inline TapeVar operator+(double b, const TapeVar& a) { return a + b; }
+inline TapeVar operator-(const TapeVar& a, double b) { return b == 0.0 ? a : recordUnary(a, a.v - b, 1.0, 0.0); }
 inline TapeVar operator-(double b, const TapeVar& a) { return recordUnary(a, b - a.v, -1.0, 0.0); }
-inline TapeVar operator*(const TapeVar& a, double b) { return recordUnary(a, a.v * b, b, 0.0); }
-inline TapeVar operator*(double b, const TapeVar& a) { return recordUnary(a, a.v * b, b, 0.0); }
+inline TapeVar operator*(const TapeVar& a, double b) {
+  if (b == 0.0) return TapeVar(0.0);
+  if (b == 1.0) return a;
+  return recordUnary(a, a.v * b, b, 0.0);
+}
+inline TapeVar operator*(double b, const TapeVar& a) { return a * b; }
+inline TapeVar operator-(const TapeVar& a) { return recordUnary(a, -a.v, -1.0, 0.0); }
+inline TapeVar operator+(const TapeVar& a, const TapeVar& b) {
+  if (a.idx == 0) return b + a.v;
+  if (b.idx == 0) return a + b.v;
+  return recordBinary(a, b, a.v + b.v, 1.0, 1.0, 0.0);
+}
+inline TapeVar operator-(const TapeVar& a, const TapeVar& b) {
+  if (a.idx == 0) return a.v - b;
+  if (b.idx == 0) return a - b.v;
+  return recordBinary(a, b, a.v - b.v, 1.0, -1.0, 0.0);
+}
+inline TapeVar operator*(const TapeVar& a, const TapeVar& b) {
+  if (a.idx == 0) return b * a.v;
+  if (b.idx == 0) return a * b.v;
+  return recordBinary(a, b, a.v * b.v, b.v, a.v, 1.0);
+}
 inline TapeVar& operator+=(TapeVar& a, const TapeVar& b) { return a = a + b; }
 inline TapeVar& operator-=(TapeVar& a, const TapeVar& b) { return a = a - b; }
 inline TapeVar inverse(const TapeVar& x) {
