@@ -6,15 +6,18 @@
 #include "model_questions.hpp"
 
 #include "trellis/core/linearization.hpp"
+#include "trellis/core/second_order.hpp"
 #include "trellis/core/scene.hpp"
 
+#include <optional>
 #include <stdexcept>
+#include <utility>
 
 namespace trellis::cli {
 namespace {
 
-constexpr std::string_view kHelp = R"(usage: trellis linearize [--compact] [--state STATE.json] SCENE.json
-       trellis linearize --trajectory TRAJ.csv SCENE.json
+constexpr std::string_view kHelp = R"(usage: trellis linearize [--compact] [--second-order] [--state STATE.json] SCENE.json
+       trellis linearize [--second-order] --trajectory TRAJ.csv SCENE.json
        trellis linearize [options] -          (read the scene from standard input)
 
 Loads a scene (docs/scene_format.md) and evaluates, at the state stored in its "state" (missing
@@ -45,6 +48,15 @@ Output: one JSON object on standard output, with the keys
   A, B      the linearization (2n x 2n, 2n x m)
 Matrices are lists of rows; numbers are printed with 17 significant digits.
 
+With --second-order: also the exact second derivatives of q'' (n outputs), output index first,
+inputs in the configuration and input order (each a list of n matrices, lists of rows):
+  d2qdd_dqdq    [i][j][k] = d2 q''_i / dq_j dq_k     (n x n x n)
+  d2qdd_dqddq   [i][j][k] = d2 q''_i / dq_j dq'_k    (n x n x n)
+  d2qdd_ddqddq  [i][j][k] = d2 q''_i / dq'_j dq'_k   (n x n x n)
+  d2qdd_dudq    [i][j][k] = d2 q''_i / du_j dq_k     (n x m x n)
+  d2qdd_duddq   [i][j][k] = d2 q''_i / du_j dq'_k    (n x m x n)
+  d2qdd_dudu    [i][j][k] = d2 q''_i / du_j du_k     (n x m x m; 0: q'' is affine in u)
+
 With --trajectory: the linearization at every knot of the trajectory, as JSON Lines — one object
 per knot and line, in knot order, with the keys above preceded by "knot" (0-based) and "t".
 
@@ -55,6 +67,7 @@ options:
   --trajectory FILE  a trajectory CSV: t, <configs>, d<configs>, <inputs> (the layout of
                      `trellis simulate --out`; names equal to the scene's, in order; >= 1 row)
   --compact          print the object on one line (always so with --trajectory)
+  --second-order     add the six second-derivative tensors (above)
   -h, --help         show this help
 
 Exit status: 0 on success; 1 if the scene, state or trajectory cannot be read or is invalid, or
@@ -82,8 +95,21 @@ OutputJson linearizationJson(const Model& model, const Data& data, const Dynamic
   return result;
 }
 
+/// The six tensors of --second-order (ws holds computeSecondOrderTensors at the same state).
+void addSecondOrder(const SecondOrderWorkspace& ws, OutputJson& result) {
+  using Block = SecondOrderWorkspace::Block;
+  const std::pair<const char*, Block> blocks[] = {{"d2qdd_dqdq", Block::kQQ},   {"d2qdd_dqddq", Block::kQDq},
+                                                  {"d2qdd_ddqddq", Block::kDqDq}, {"d2qdd_dudq", Block::kUQ},
+                                                  {"d2qdd_duddq", Block::kUDq},  {"d2qdd_dudu", Block::kUU}};
+  for (const auto& [key, block] : blocks) {
+    OutputJson list = OutputJson::array();
+    for (const Eigen::MatrixXd& slice : ws.qddBlock(block)) list.push_back(toJson(slice));
+    result[key] = std::move(list);
+  }
+}
+
 int runLinearize(std::span<const std::string> args, std::ostream& out) {
-  const ParsedOptions options("linearize", args, {{"--state", "--trajectory"}, {"--compact"}, {}});
+  const ParsedOptions options("linearize", args, {{"--state", "--trajectory"}, {"--compact", "--second-order"}, {}});
   const LoadedScene loaded = loadSceneArgument(options.singlePositional("scene file"));
   const Model& model = loaded.scene.model;
   if (model.nq() == 0) {
@@ -93,27 +119,37 @@ int runLinearize(std::span<const std::string> args, std::ostream& out) {
     throw UsageError("linearize: give --state or --trajectory, not both");
   }
   Data data(model);
+  const bool secondOrder = options.flag("--second-order");
+  std::optional<SecondOrderWorkspace> ws;
+  if (secondOrder) ws.emplace(model);
+  // The tensors' pass computes the same linearization on the way (and returns its status).
+  const auto linearize = [&](const Eigen::VectorXd& q, const Eigen::VectorXd& dq, const Eigen::VectorXd& u) {
+    return secondOrder ? computeSecondOrderTensors(model, data, *ws, q, dq, u) : computeLinearization(model, data, q, dq, u);
+  };
   if (const auto path = options.value("--trajectory")) {
     const Trajectory trajectory = readTrajectoryFor(loaded, *path);
     const int n = model.nq();
     for (int k = 0; k < trajectory.size(); ++k) {
       const Eigen::VectorXd q = trajectory.states().col(k).head(n), dq = trajectory.states().col(k).tail(n);
       const Eigen::VectorXd u = trajectory.inputs().col(k);
-      const DynamicsStatus status = computeLinearization(model, data, q, dq, u);
+      const DynamicsStatus status = linearize(q, dq, u);
       requireLinearization(status, data,
                            *path + ": knot " + std::to_string(k) + " (t = " + formatNumber(trajectory.times()(k), 17) + ")");
       OutputJson head = OutputJson::object();
       head["knot"] = k;
       head["t"] = trajectory.times()(k);
-      writeJson(out, linearizationJson(model, data, status, q, dq, u, std::move(head)), true);
+      OutputJson result = linearizationJson(model, data, status, q, dq, u, std::move(head));
+      if (secondOrder) addSecondOrder(*ws, result);
+      writeJson(out, result, true);
     }
     return 0;
   }
   const ModelState state = stateFromFile(loaded, options.value("--state"));
-  const DynamicsStatus status = computeLinearization(model, data, state.q, state.dq, state.u);
+  const DynamicsStatus status = linearize(state.q, state.dq, state.u);
   requireLinearization(status, data, loaded.path + (options.has("--state") ? " at " + *options.value("--state") : " at the scene's state"));
-  writeJson(out, linearizationJson(model, data, status, state.q, state.dq, state.u, OutputJson::object()),
-            options.flag("--compact"));
+  OutputJson result = linearizationJson(model, data, status, state.q, state.dq, state.u, OutputJson::object());
+  if (secondOrder) addSecondOrder(*ws, result);
+  writeJson(out, result, options.flag("--compact"));
   return 0;
 }
 

@@ -119,6 +119,7 @@ void bindControl(py::module_& m);
 void bindTvlqr(py::module_& m);  // bind_tvlqr.cpp: solveTvlqr when the control library has it
 void bindOptimization(py::module_& m);
 void bindHand(py::module_& m);
+void bindSecondOrder(py::module_& m);  // bind_second_order.cpp
 
 }  // namespace trellis::python
 

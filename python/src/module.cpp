@@ -180,6 +180,7 @@ PYBIND11_MODULE(_trellis_mech, m) {
             "trajectory optimization (C++ core; see the trellis_mech package docstring)";
   tp::bindErrors(m);
   tp::bindCore(m);
+  tp::bindSecondOrder(m);
   tp::bindControl(m);
   tp::bindTvlqr(m);
   tp::bindOptimization(m);

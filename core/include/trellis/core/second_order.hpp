@@ -1,0 +1,104 @@
+// trellis/core/second_order.hpp — exact second derivatives of the constrained dynamics (issue 30).
+//
+// q̈ = f(q, q̇, u) and λ(q, q̇, u) are defined by F(z, y) = 0, z = [q; q̇; u] (N = 2n + m entries),
+// y = [q̈; λ], with the residuals of linearization.hpp:
+//   r(z, y) = ID(q, q̇, q̈) − Q(q, q̇, u) − A(q)ᵀ λ,    c(z, y) = A(q) q̈ + Ȧ(q, q̇) q̇,
+// and K = ∂F/∂y = [M −Aᵀ; A 0]. Differentiating F(z, y(z)) = 0 twice along directions a, b:
+//   K y_zz[a, b] = −G[a, b],   G[a, b] = ∂²/∂s∂t F(z + s a + t b, y + s Y a + t Y b) at s = t = 0,
+// with Y = y_z the exact first derivatives (computeLinearization). G holds F_zz[a, b] and the two
+// cross terms F_zy[a, Y b] + F_zy[b, Y a] (F is linear in y, so F_yy = 0).
+//
+// Both forms evaluate the residual's recursive Newton-Euler pass over the joint tree (kinematics
+// from the world outwards, the wrenches of every force element and of the constraint forces at
+// fixed λ, subtree sums inwards, forces on coordinates, constraint accelerations) in a
+// differentiating arithmetic; no step, no symbolic expression, exact to rounding.
+//  - Tensors: one pass in hyper-dual numbers (x + x_s ε1 + x_t ε2 + x_st ε1ε2) per pair (a, b)
+//    gives G[a, b] as the ε1ε2 part, then one KKT solve per pair: O(N² n) with N = 2n + m.
+//  - Contraction with weights w (on q̈) and ρ (on λ): one transposed KKT solve μ = K⁻ᵀ [w; ρ]
+//    turns it into the Hessian of one scalar, Σᵢ wᵢ ∇²q̈ᵢ + Σ_r ρ_r ∇²λ_r = −∇²φ,
+//    φ(z') = μᵀ F(z', y + Y (z' − z)), computed forward-over-reverse: the pass is recorded once
+//    as elementary operations, one reverse sweep gives φ's adjoints, and per q or q̇ direction a
+//    tangent sweep and a second reverse sweep give a row of ∇²φ — 2n pairs of sweeps, O(n · pass),
+//    and no tensor is formed.
+// Every input enters F linearly (configuration forces, body wrench entries, tendon tensions) and K
+// does not depend on u, so G[e_uj, e_uk] = 0 and ∂²q̈/∂u∂u = 0 exactly: those pairs (and, in the
+// contraction, the u directions, which follow by symmetry) are not evaluated.
+//
+// Allocation-free after the workspace is built (tests/core/no_malloc covers it).
+#pragma once
+
+#include "trellis/core/data.hpp"
+
+#include <Eigen/Core>
+
+#include <memory>
+#include <vector>
+
+namespace trellis {
+
+namespace detail {
+struct SecondOrderImpl;  // hyper-dual buffers and the KKT factors (core/src/second_order.cpp)
+}  // namespace detail
+
+/// Buffers and results of the second-order functions for one model (sized here, once; one per
+/// thread, beside a Data of the same model).
+class SecondOrderWorkspace {
+ public:
+  /// Sizes every buffer; `withTensors` also allocates the full tensors (n + nc matrices N×N).
+  explicit SecondOrderWorkspace(const Model& model, bool withTensors = true);
+  ~SecondOrderWorkspace();
+  SecondOrderWorkspace(SecondOrderWorkspace&&) noexcept;
+  SecondOrderWorkspace& operator=(SecondOrderWorkspace&&) noexcept;
+
+  // ---- Results of computeSecondOrderTensors --------------------------------------------------
+  /// n matrices N×N (N = 2n + m, z = [q; q̇; u]): qddHessian[i](a, b) = ∂²q̈ᵢ/∂z_a∂z_b (symmetric).
+  std::vector<Eigen::MatrixXd> qddHessian;
+  /// nc matrices N×N: ∂²λ_r/∂z_a∂z_b (with redundant constraints: of the minimum-norm λ).
+  std::vector<Eigen::MatrixXd> lambdaHessian;
+
+  /// The six blocks of the issue, output index first, each as a vector of n matrices:
+  /// d2qdd_dqdq[i](j, k) = ∂²q̈ᵢ/∂q_j∂q_k (n×n), d2qdd_dqddq (∂q_j ∂q̇_k, n×n), d2qdd_ddqddq
+  /// (∂q̇_j ∂q̇_k, n×n), d2qdd_dudq (∂u_j ∂q_k, m×n), d2qdd_duddq (∂u_j ∂q̇_k, m×n), d2qdd_dudu
+  /// (∂u_j ∂u_k, m×m). Copies of blocks of qddHessian (allocates; for output, not hot paths).
+  enum class Block { kQQ, kQDq, kDqDq, kUQ, kUDq, kUU };
+  std::vector<Eigen::MatrixXd> qddBlock(Block block) const;
+
+  int n() const { return n_; }
+  int m() const { return m_; }
+  int nc() const { return nc_; }
+  bool hasTensors() const { return withTensors_; }
+
+ private:
+  friend struct detail::SecondOrderImpl;
+  friend DynamicsStatus computeSecondOrderTensors(const Model&, Data&, SecondOrderWorkspace&,
+                                                  const Eigen::VectorXd&, const Eigen::VectorXd&,
+                                                  const Eigen::VectorXd&);
+  friend DynamicsStatus computeSecondOrderContraction(const Model&, Data&, SecondOrderWorkspace&,
+                                                      const Eigen::VectorXd&, const Eigen::VectorXd&,
+                                                      const Eigen::VectorXd&, const Eigen::VectorXd&,
+                                                      const Eigen::VectorXd&, Eigen::Ref<Eigen::MatrixXd>);
+  int n_ = 0, m_ = 0, nc_ = 0;
+  bool withTensors_ = true;
+  std::unique_ptr<detail::SecondOrderImpl> impl_;
+};
+
+/// The full second-derivative tensors of q̈ and λ at (q, q̇, u) (n, n, m entries) into
+/// ws.qddHessian and ws.lambdaHessian; computes the exact linearization on the way (data holds
+/// it afterwards). Returns the status of the KKT solve (also data.status): the results are valid
+/// when it is ok or kRedundantConstraints (q̈'s derivatives exact, λ's of the minimum-norm choice);
+/// for kSingularMassMatrix / kNonFinite nothing is computed. Throws std::invalid_argument on a
+/// size mismatch or a workspace built for another model size or without tensors.
+DynamicsStatus computeSecondOrderTensors(const Model& model, Data& data, SecondOrderWorkspace& ws,
+                                         const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
+                                         const Eigen::VectorXd& u);
+
+/// H = Σᵢ wᵢ ∇²_z q̈ᵢ + Σ_r ρ_r ∇²_z λ_r (N×N, symmetric; z = [q; q̇; u]) without forming the
+/// tensors: one transposed KKT solve and the second-order adjoint of one recorded residual pass. w: n entries;
+/// rho: nc entries, or empty for none. Computes the linearization on the way (in data). Status
+/// and throws as computeSecondOrderTensors (H must be N×N).
+DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, SecondOrderWorkspace& ws,
+                                             const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
+                                             const Eigen::VectorXd& u, const Eigen::VectorXd& w,
+                                             const Eigen::VectorXd& rho, Eigen::Ref<Eigen::MatrixXd> H);
+
+}  // namespace trellis

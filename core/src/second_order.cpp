@@ -1,0 +1,631 @@
+// Exact second derivatives of the constrained dynamics (see second_order.hpp for the formulation).
+//
+// The residual F = [r; c] is evaluated here by its own recursive pass, templated on the scalar
+// (hyper_dual.hpp), from the Model's public description and nothing else: joint kinematics from
+// the world outwards, the external wrenches of every force element and of the constraint forces
+// at fixed λ, the Newton-Euler subtree sums inwards, the forces that act on coordinates, and the
+// constraint accelerations c = A q̈ + Ȧ q̇. It is the computation dynamics.cpp performs (same
+// formulas, same constraint forms), so at double precision r and c vanish at the solved q̈, λ —
+// and in hyper-dual arithmetic it yields G[a, b] of the header exactly.
+#include "trellis/core/second_order.hpp"
+
+#include "trellis/core/linearization.hpp"
+#include "adjoint_tape.hpp"
+#include "hyper_dual.hpp"
+
+#include <Eigen/Cholesky>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+namespace trellis {
+namespace detail {
+
+namespace {
+
+Vec3<double> vec3(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+Mat3<double> mat3(const Eigen::Matrix3d& m) {
+  Mat3<double> r;
+  for (int j = 0; j < 3; ++j) r.c[j] = vec3(m.col(j));
+  return r;
+}
+template <class T, class U>
+Vec3<T> lift(const Vec3<U>& v) {
+  return {T(v.x), T(v.y), T(v.z)};
+}
+template <class T, class U>
+Mat3<T> lift(const Mat3<U>& m) {
+  Mat3<T> r;
+  for (int j = 0; j < 3; ++j) r.c[j] = lift<T>(m.c[j]);
+  return r;
+}
+
+}  // namespace
+
+/// The constants of one joint in the fixed-size types of the pass.
+struct JointConstants {
+  int parent = kWorld, axis = 2;
+  bool revolute = true;
+  Mat3<double> R0, inertia;  ///< placement in the parent body; rotational inertia about the origin
+  Vec3<double> p0, firstMoment;
+  double mass = 0.0;
+};
+
+/// The residual pass over scalar T: inputs q, dq, qdd (n), u (m), lambda (nc); outputs r (n), c (nc).
+template <class T>
+struct ResidualPass {
+  std::vector<T> q, dq, qdd, u, lambda, r, c;
+  std::vector<Mat3<T>> R;
+  std::vector<Vec3<T>> p;
+  std::vector<Vec6<T>> S, v, a, f;
+
+  void resize(int n, int m, int nc) {
+    for (auto* x : {&q, &dq, &qdd, &r}) x->assign(n, T{});
+    u.assign(m, T{});
+    lambda.assign(nc, T{});
+    c.assign(nc, T{});
+    R.assign(n, Mat3<T>{});
+    p.assign(n, Vec3<T>{});
+    for (auto* x : {&S, &v, &a, &f}) x->assign(n, Vec6<T>{});
+  }
+
+  struct Point {
+    Vec3<T> p, v, a;
+  };
+
+  Vec3<T> position(const BodyPoint& bp) const {
+    if (bp.joint == kWorld) return lift<T>(vec3(bp.local));
+    return p[bp.joint] + R[bp.joint] * vec3(bp.local);
+  }
+  /// ṗ = v + ω × p, p̈ = a_v + α × p + ω × ṗ.
+  Point kinematics(const BodyPoint& bp) const {
+    Point k{position(bp), {}, {}};
+    if (bp.joint == kWorld) return k;
+    const Vec6<T>&vj = v[bp.joint], &aj = a[bp.joint];
+    k.v = vj.l + cross(vj.a, k.p);
+    k.a = aj.l + cross(aj.a, k.p) + cross(vj.a, k.v);
+    return k;
+  }
+  /// A direction d fixed on body `joint`: n = R d, ṅ = ω × n, n̈ = α × n + ω × ṅ.
+  Point direction(int joint, const Eigen::Vector3d& local) const {
+    if (joint == kWorld) return {lift<T>(vec3(local)), {}, {}};
+    Point k;
+    k.p = R[joint] * vec3(local);
+    k.v = cross(v[joint].a, k.p);
+    k.a = cross(a[joint].a, k.p) + cross(v[joint].a, k.v);
+    return k;
+  }
+  void addWrench(int joint, const Vec6<T>& w) {
+    if (joint != kWorld) f[joint] = f[joint] - w;  // f holds −F_ext until the inertial terms are added
+  }
+  /// Equal and opposite forces τ d on a, −τ d on b, d = p_b − p_a.
+  void addSegment(int ja, int jb, const Vec3<T>& pa, const Vec3<T>& pb, const T& tau) {
+    const Vec3<T> force = tau * (pb - pa);
+    addWrench(ja, forceAt(pa, force));
+    addWrench(jb, forceAt(pb, -force));
+  }
+
+  /// [m x_v + x_ω × h; h × x_v + I x_ω] with the joint body's inertia in world axes about the
+  /// origin: h = m p + R h_l, I ω = R I_l Rᵀ ω + (m |p|² + 2 p·h_s) ω − m p (p·ω) − p (h_s·ω) − h_s (p·ω)
+  /// (the matrix of kinematics.cpp applied without forming it).
+  Vec6<T> applyInertia(const JointConstants& jc, int i, const Vec6<T>& x) const {
+    const Vec3<T>& pi = p[i];
+    const Vec3<T> hs = R[i] * jc.firstMoment;
+    const Vec3<T> h = jc.mass * pi + hs;
+    const Vec3<T>& w = x.a;
+    const T pw = dot(pi, w), hw = dot(hs, w);
+    const Vec3<T> Iw = R[i] * (jc.inertia * transposeTimes(R[i], w)) + (jc.mass * dot(pi, pi) + 2.0 * dot(pi, hs)) * w -
+                       (jc.mass * pw) * pi - hw * pi - pw * hs;
+    return {jc.mass * x.l + cross(w, h), cross(h, x.l) + Iw};
+  }
+
+  void evaluate(const Model& model, const std::vector<JointConstants>& jcs, const Vec3<double>& gravity) {
+    const int n = model.nq();
+    // Joint kinematics (kinematics.cpp: updateJoints) and accelerations a = a_p + S q̈ + (v × S) q̇.
+    for (int i = 0; i < n; ++i) {
+      const JointConstants& jc = jcs[i];
+      Mat3<T> Rpre;
+      Vec3<T> ppre;
+      Vec6<T> vParent, aParent;
+      if (jc.parent == kWorld) {
+        Rpre = lift<T>(jc.R0);
+        ppre = lift<T>(jc.p0);
+      } else {
+        Rpre = R[jc.parent] * jc.R0;
+        ppre = p[jc.parent] + R[jc.parent] * jc.p0;
+        vParent = v[jc.parent];
+        aParent = a[jc.parent];
+      }
+      const Vec3<T> e = Rpre.c[jc.axis];
+      if (jc.revolute) {
+        const T cq = cos(q[i]), sq = sin(q[i]);
+        const int a1 = (jc.axis + 1) % 3, a2 = (jc.axis + 2) % 3;
+        R[i].c[jc.axis] = e;
+        R[i].c[a1] = cq * Rpre.c[a1] + sq * Rpre.c[a2];
+        R[i].c[a2] = (-sq) * Rpre.c[a1] + cq * Rpre.c[a2];
+        p[i] = ppre;
+        S[i] = {cross(ppre, e), e};
+      } else {
+        R[i] = Rpre;
+        p[i] = ppre + q[i] * e;
+        S[i] = {e, Vec3<T>{}};
+      }
+      v[i] = vParent + dq[i] * S[i];
+      a[i] = aParent + qdd[i] * S[i] + dq[i] * crossMotion(v[i], S[i]);
+      f[i] = Vec6<T>{};
+    }
+    // External wrenches (force_elements.hpp), collected negated in f.
+    for (const LinearSpring& s : model.linearSprings()) {
+      const Vec3<T> pa = position(s.a), pb = position(s.b);
+      const T L = sqrt(dot(pb - pa, pb - pa));
+      addSegment(s.a.joint, s.b.joint, pa, pb, s.k * (1.0 - s.x0 / L));
+    }
+    for (const Tendon& t : model.tendons()) {
+      const T& tension = u[t.input];
+      for (size_t k = 0; k + 1 < t.path.size(); ++k) {
+        if (t.path[k].joint == t.path[k + 1].joint) continue;  // within one body: no net wrench
+        const Vec3<T> pa = position(t.path[k]), pb = position(t.path[k + 1]);
+        addSegment(t.path[k].joint, t.path[k + 1].joint, pa, pb, tension / sqrt(dot(pb - pa, pb - pa)));
+      }
+    }
+    for (const BodyWrench& bw : model.bodyWrenches()) {
+      if (bw.joint == kWorld) continue;
+      Vec3<T> fl, tl;  // the wrench in the frame's axes
+      for (int k = 0; k < 6; ++k) {
+        const T entry = bw.input[k] >= 0 ? u[bw.input[k]] : T(bw.constant[k]);
+        T& slot = k < 3 ? (k == 0 ? fl.x : (k == 1 ? fl.y : fl.z)) : (k == 3 ? tl.x : (k == 4 ? tl.y : tl.z));
+        slot = entry;
+      }
+      const Mat3<T> Rf = R[bw.joint] * mat3(bw.R);
+      const Vec3<T> pf = p[bw.joint] + R[bw.joint] * vec3(bw.p);
+      const Vec3<T> force = Rf * fl;
+      addWrench(bw.joint, Vec6<T>{force, cross(pf, force) + Rf * tl});
+    }
+    // Constraint forces Aᵀλ as point forces (constraint_kinds.hpp: forces()).
+    const auto& cs = model.constraints();
+    for (int k = 0; k < model.nc(); ++k) {
+      const Constraint& con = cs[k];
+      const T& lam = lambda[k];
+      switch (con.type) {
+        case ConstraintType::kDistance: {
+          const Vec3<T> pa = position(con.a), pb = position(con.b);
+          const Vec3<T> g = (2.0 * lam) * (pa - pb);
+          addWrench(con.a.joint, forceAt(pa, g));
+          addWrench(con.b.joint, forceAt(pb, -g));
+          break;
+        }
+        case ConstraintType::kPoint: {
+          Vec3<T> g;
+          (con.axis == 0 ? g.x : (con.axis == 1 ? g.y : g.z)) = lam;
+          addWrench(con.a.joint, forceAt(position(con.a), g));
+          addWrench(con.b.joint, forceAt(position(con.b), -g));
+          break;
+        }
+        case ConstraintType::kPointOnPlane: {
+          const Vec3<T> pb = position(con.b);
+          const Vec3<T> g = lam * direction(con.a.joint, con.direction).p;
+          addWrench(con.a.joint, forceAt(pb, g));
+          addWrench(con.b.joint, forceAt(pb, -g));
+          break;
+        }
+        case ConstraintType::kKnifeEdge:
+          addWrench(con.a.joint, forceAt(position(con.a), lam * direction(con.a.joint, con.direction).p));
+          break;
+      }
+    }
+    // Newton-Euler: F_i = I (a − g) + v ×* I v − F_ext, then subtree sums; r_i = S_i · F_i.
+    for (int i = 0; i < n; ++i) {
+      Vec6<T> ag = a[i];
+      ag.l = ag.l - gravity;
+      f[i] += applyInertia(jcs[i], i, ag) + crossForce(v[i], applyInertia(jcs[i], i, v[i]));
+    }
+    for (int i = n - 1; i >= 0; --i) {
+      r[i] = dot(S[i], f[i]);
+      if (jcs[i].parent != kWorld) f[jcs[i].parent] += f[i];
+    }
+    // Forces on coordinates enter r = ID − Q with a minus sign.
+    for (const ConfigForce& cf : model.configForces()) r[cf.config] -= u[cf.input];
+    for (const ConfigSpring& s : model.configSprings()) r[s.config] += s.k * (q[s.config] - s.q0);
+    const Eigen::VectorXd& damping = model.damping();
+    for (int i = 0; i < std::min<int>(n, static_cast<int>(damping.size())); ++i)
+      if (damping[i] != 0.0) r[i] += damping[i] * dq[i];
+    // Constraint accelerations c = A q̈ + Ȧ q̇ (constraint_kinds.hpp: value().c).
+    for (int k = 0; k < model.nc(); ++k) {
+      const Constraint& con = cs[k];
+      switch (con.type) {
+        case ConstraintType::kDistance: {
+          const Point pa = kinematics(con.a), pb = kinematics(con.b);
+          const Vec3<T> d = pa.p - pb.p, dd = pa.v - pb.v, ddd = pa.a - pb.a;
+          c[k] = 2.0 * dot(dd, dd) + 2.0 * dot(d, ddd);
+          break;
+        }
+        case ConstraintType::kPoint:
+          c[k] = component(kinematics(con.a).a - kinematics(con.b).a, con.axis);
+          break;
+        case ConstraintType::kPointOnPlane: {
+          const Point pa = kinematics(con.a), pb = kinematics(con.b), nk = direction(con.a.joint, con.direction);
+          const Vec3<T> d = pa.p - pb.p, dd = pa.v - pb.v, ddd = pa.a - pb.a;
+          c[k] = dot(nk.a, d) + 2.0 * dot(nk.v, dd) + dot(nk.p, ddd);
+          break;
+        }
+        case ConstraintType::kKnifeEdge: {
+          const Point pa = kinematics(con.a), nk = direction(con.a.joint, con.direction);
+          c[k] = dot(nk.v, pa.v) + dot(nk.p, pa.a);
+          break;
+        }
+      }
+    }
+  }
+};
+
+/// Cyclic Jacobi rotations: A (symmetric) → diagonal (its eigenvalues), V ← its eigenvectors, so
+/// that A_in = V diag(A_out) Vᵀ. Allocation-free (Eigen's tridiagonalization is not); for the
+/// small Schur complement of redundant constraint rows. Each rotation zeroes A(p, q) with
+/// θ = (A_qq − A_pp) / 2A_pq, t = sgn θ / (|θ| + √(θ² + 1)), c = 1/√(t² + 1), s = t c.
+void jacobiEigen(Eigen::MatrixXd& A, Eigen::MatrixXd& V) {
+  const Eigen::Index n = A.rows();
+  V.setIdentity();
+  const double scale = A.cwiseAbs().maxCoeff();
+  for (int sweep = 0; sweep < 60; ++sweep) {
+    double off = 0.0;
+    for (Eigen::Index p = 0; p < n; ++p)
+      for (Eigen::Index q = p + 1; q < n; ++q) off = std::max(off, std::abs(A(p, q)));
+    if (off <= 1e-17 * scale) return;
+    for (Eigen::Index p = 0; p < n; ++p)
+      for (Eigen::Index q = p + 1; q < n; ++q) {
+        if (A(p, q) == 0.0) continue;
+        const double theta = (A(q, q) - A(p, p)) / (2.0 * A(p, q));
+        const double t = (theta >= 0 ? 1.0 : -1.0) / (std::abs(theta) + std::sqrt(theta * theta + 1.0));
+        const double c = 1.0 / std::sqrt(t * t + 1.0), s = t * c;
+        for (Eigen::Index k = 0; k < n; ++k) {
+          const double akp = A(k, p), akq = A(k, q);
+          A(k, p) = c * akp - s * akq;
+          A(k, q) = s * akp + c * akq;
+        }
+        for (Eigen::Index k = 0; k < n; ++k) {
+          const double apk = A(p, k), aqk = A(q, k);
+          A(p, k) = c * apk - s * aqk;
+          A(q, k) = s * apk + c * aqk;
+        }
+        for (Eigen::Index k = 0; k < n; ++k) {
+          const double vkp = V(k, p), vkq = V(k, q);
+          V(k, p) = c * vkp - s * vkq;
+          V(k, q) = s * vkp + c * vkq;
+        }
+      }
+  }
+}
+
+struct SecondOrderImpl {
+  int n, m, nc, N;
+  std::vector<JointConstants> joints;
+  Vec3<double> gravity;
+  ResidualPass<HyperDual> pass;
+  Eigen::MatrixXd Y;                   ///< (n + nc)×N: ∂[q̈; λ]/∂z from the linearization
+  Eigen::VectorXd z, y;                ///< the point: [q; q̇; u], [q̈; λ]
+  std::vector<std::pair<int, int>> pairs;  ///< (a ≤ b), every pair but (u, u)
+  Eigen::LLT<Eigen::MatrixXd> massLLT;
+  Eigen::MatrixXd massInverseAt;       ///< n×nc: M⁻¹ Aᵀ
+  Eigen::MatrixXd schur;               ///< nc×nc: D A M⁻¹ Aᵀ D, D = diag(A M⁻¹ Aᵀ)^(−1/2)
+  Eigen::VectorXd schurScale;          ///< D
+  Eigen::LLT<Eigen::MatrixXd> schurLLT;
+  Eigen::MatrixXd schurDiagonalized, schurVectors;  ///< redundant rows: Ŝ = V diag V ᵀ (jacobiEigen)
+  Eigen::VectorXd schurEigenInverse;   ///< 1/eigenvalue, 0 for the dropped ones
+  Eigen::VectorXd schurWork;
+  bool schurPseudo = false;
+  static constexpr int kChunk = 32;    ///< pairs per block solve of the tensors
+  Eigen::MatrixXd G;                   ///< (n + nc)×kChunk: G[a, b] of a block of pairs
+  Eigen::MatrixXd Xr, Xc;              ///< n×kChunk, nc×kChunk
+  Eigen::VectorXd muR, muC, tmpC;      ///< the adjoint μ = K⁻ᵀ [w; ρ]
+  // The contraction's recording (adjoint_tape.hpp): inputs are nodes 1 … N (z) and N + 1 … N + n + nc (y).
+  Tape tape;
+  ResidualPass<TapeVar> recorded;
+  int inputs = 0;
+  Eigen::VectorXd xbar, xdot, xdotbar;  ///< per node: adjoint, tangent, tangent of the adjoint
+  Eigen::MatrixXd rows;                ///< N×2n: ∇²φ e_a for the q and q̇ directions a
+
+  SecondOrderImpl(const Model& model)
+      : n(model.nq()),
+        m(model.nu()),
+        nc(model.nc()),
+        N(2 * model.nq() + model.nu()),
+        massLLT(model.nq()),
+        schurLLT(model.nc()) {
+    joints.resize(n);
+    for (int i = 0; i < n; ++i) {
+      const Joint& j = model.joints()[i];
+      JointConstants& jc = joints[i];
+      jc.parent = j.parent;
+      jc.axis = j.axis;
+      jc.revolute = j.revolute;
+      jc.R0 = mat3(j.R0);
+      jc.p0 = vec3(j.p0);
+      jc.inertia = mat3(j.inertiaAtOrigin);
+      jc.firstMoment = vec3(j.firstMoment);
+      jc.mass = j.mass;
+    }
+    gravity = vec3(model.gravity());
+    pass.resize(n, m, nc);
+    Y = Eigen::MatrixXd::Zero(n + nc, N);
+    z = Eigen::VectorXd::Zero(N);
+    y = Eigen::VectorXd::Zero(n + nc);
+    for (int a = 0; a < N; ++a)
+      for (int b = a; b < N; ++b)
+        if (a < 2 * n) pairs.emplace_back(a, b);
+    // Factor once at the right size (Eigen's size constructors leave the info flag unset).
+    massLLT.compute(Eigen::MatrixXd::Identity(n, n));
+    schurLLT.compute(Eigen::MatrixXd::Identity(nc, nc));
+    schurDiagonalized = Eigen::MatrixXd::Zero(nc, nc);
+    schurVectors = Eigen::MatrixXd::Identity(nc, nc);
+    massInverseAt = Eigen::MatrixXd::Zero(n, nc);
+    schur = Eigen::MatrixXd::Zero(nc, nc);
+    schurScale = Eigen::VectorXd::Ones(nc);
+    schurEigenInverse = Eigen::VectorXd::Zero(nc);
+    schurWork = Eigen::VectorXd::Zero(nc);
+    G = Eigen::MatrixXd::Zero(n + nc, kChunk);
+    Xr = Eigen::MatrixXd::Zero(n, kChunk);
+    Xc = Eigen::MatrixXd::Zero(nc, kChunk);
+    muR = Eigen::VectorXd::Zero(n);
+    muC = Eigen::VectorXd::Zero(nc);
+    tmpC = Eigen::VectorXd::Zero(nc);
+    // One recording at z = 0 sizes the tape: its node count depends on the model only (which
+    // operands are constant is structural), so later recordings fit.
+    inputs = N + n + nc;
+    recorded.resize(n, m, nc);
+    record(model);
+    tape.nodes.resize(static_cast<size_t>(tape.size));
+    xbar = Eigen::VectorXd::Zero(tape.size);
+    xdot = Eigen::VectorXd::Zero(tape.size);
+    xdotbar = Eigen::VectorXd::Zero(tape.size);
+    rows = Eigen::MatrixXd::Zero(N, 2 * n);
+  }
+
+  /// Records the residual pass at (z, y) on the tape.
+  void record(const Model& model) {
+    tape.clear();
+    activeTape = &tape;
+    for (int k = 0; k < inputs; ++k) tape.push({});
+    for (int i = 0; i < n; ++i) {
+      recorded.q[i] = TapeVar(z[i], 1 + i);
+      recorded.dq[i] = TapeVar(z[n + i], 1 + n + i);
+      recorded.qdd[i] = TapeVar(y[i], 1 + N + i);
+    }
+    for (int k = 0; k < m; ++k) recorded.u[k] = TapeVar(z[2 * n + k], 1 + 2 * n + k);
+    for (int k = 0; k < nc; ++k) recorded.lambda[k] = TapeVar(y[n + k], 1 + N + n + k);
+    recorded.evaluate(model, joints, gravity);
+    activeTape = nullptr;
+  }
+
+  /// After computeLinearization: the point, Y, and the factors of M and A M⁻¹ Aᵀ.
+  void prepare(const Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq, const Eigen::VectorXd& u) {
+    z.head(n) = q;
+    z.segment(n, n) = dq;
+    z.tail(m) = u;
+    y.head(n) = data.qdd;
+    y.tail(nc) = data.lambda;
+    Y.topLeftCorner(n, n) = data.dqdd_dq;
+    Y.block(0, n, n, n) = data.dqdd_ddq;
+    if (m > 0) Y.topRightCorner(n, m) = data.dqdd_du;
+    if (nc > 0) Y.bottomRows(nc) = data.dlambda_dx;
+    massLLT.compute(data.M);
+    if (nc == 0) return;
+    // Column by column (vector solves and products never allocate; the blocked matrix ones may).
+    for (int r = 0; r < nc; ++r) {
+      auto x = massInverseAt.col(r);
+      x = data.constraintJacobian.row(r).transpose();
+      massLLT.solveInPlace(x);
+    }
+    for (int r = 0; r < nc; ++r) schur.col(r).noalias() = data.constraintJacobian * massInverseAt.col(r);
+    for (int r = 0; r < nc; ++r) schurScale[r] = schur(r, r) > 0 ? 1.0 / std::sqrt(schur(r, r)) : 1.0;
+    schur = schurScale.asDiagonal() * schur * schurScale.asDiagonal();
+    // Full-rank rows: Cholesky. Redundant rows (data.status, from the first-order solve): the
+    // pseudo-inverse of the row-normalized Ŝ, the minimum-norm choice the first-order path makes.
+    schurPseudo = data.status.code == DynamicsStatus::Code::kRedundantConstraints;
+    if (!schurPseudo) {
+      schurLLT.compute(schur);
+      schurPseudo = schurLLT.info() != Eigen::Success;
+    }
+    if (schurPseudo) {
+      schurDiagonalized = schur;
+      jacobiEigen(schurDiagonalized, schurVectors);
+      const auto ev = schurDiagonalized.diagonal();
+      const double tol = 1e-12 * std::max(1.0, ev.cwiseAbs().maxCoeff());  // Ŝ has unit diagonal
+      for (int k = 0; k < nc; ++k) schurEigenInverse[k] = ev[k] > tol ? 1.0 / ev[k] : 0.0;
+    }
+  }
+
+  /// x ← (A M⁻¹ Aᵀ)⁻¹ x (pseudo-inverse for redundant rows), column by column.
+  template <class Derived>
+  void solveSchur(Eigen::MatrixBase<Derived>& x) {
+    for (Eigen::Index j = 0; j < x.cols(); ++j) {
+      auto col = x.col(j);
+      col = schurScale.asDiagonal() * col;
+      if (!schurPseudo) {
+        schurLLT.solveInPlace(col);
+      } else {
+        schurWork.noalias() = schurVectors.transpose() * col;
+        schurWork.array() *= schurEigenInverse.array();
+        col.noalias() = schurVectors * schurWork;
+      }
+      col = schurScale.asDiagonal() * col;
+    }
+  }
+
+  /// G[e_a, e_b] (n + nc) into `out`: one hyper-dual residual pass with z + ε1 e_a + ε2 e_b and
+  /// y + ε1 Y e_a + ε2 Y e_b.
+  template <class Out>
+  void mixedSecondDerivative(const Model& model, int a, int b, Out&& out) {
+    auto seed = [&](std::vector<HyperDual>& x, int offset, int count) {
+      for (int i = 0; i < count; ++i) {
+        const int k = offset + i;
+        x[i] = HyperDual(z[k], k == a ? 1.0 : 0.0, k == b ? 1.0 : 0.0, 0.0);
+      }
+    };
+    seed(pass.q, 0, n);
+    seed(pass.dq, n, n);
+    seed(pass.u, 2 * n, m);
+    for (int i = 0; i < n; ++i) pass.qdd[i] = HyperDual(y[i], Y(i, a), Y(i, b), 0.0);
+    for (int k = 0; k < nc; ++k) pass.lambda[k] = HyperDual(y[n + k], Y(n + k, a), Y(n + k, b), 0.0);
+    pass.evaluate(model, joints, gravity);
+    for (int i = 0; i < n; ++i) out(i, pass.r[i].st);
+    for (int k = 0; k < nc; ++k) out(n + k, pass.c[k].st);
+  }
+};
+
+}  // namespace detail
+
+namespace {
+
+void checkWorkspace(const Model& model, const SecondOrderWorkspace& ws, const char* what) {
+  if (ws.n() != model.nq() || ws.m() != model.nu() || ws.nc() != model.nc())
+    throw std::invalid_argument(std::string(what) + ": the workspace was built for a model with (n, m, nc) = (" +
+                                std::to_string(ws.n()) + ", " + std::to_string(ws.m()) + ", " + std::to_string(ws.nc()) +
+                                "), this model has (" + std::to_string(model.nq()) + ", " + std::to_string(model.nu()) +
+                                ", " + std::to_string(model.nc()) + ")");
+}
+
+bool usable(const DynamicsStatus& s) {
+  return s.code != DynamicsStatus::Code::kSingularMassMatrix && s.code != DynamicsStatus::Code::kNonFinite;
+}
+
+}  // namespace
+
+SecondOrderWorkspace::SecondOrderWorkspace(const Model& model, bool withTensors)
+    : n_(model.nq()), m_(model.nu()), nc_(model.nc()), withTensors_(withTensors),
+      impl_(std::make_unique<detail::SecondOrderImpl>(model)) {
+  const int N = 2 * n_ + m_;
+  if (withTensors) {
+    qddHessian.assign(n_, Eigen::MatrixXd::Zero(N, N));
+    lambdaHessian.assign(nc_, Eigen::MatrixXd::Zero(N, N));
+  }
+}
+SecondOrderWorkspace::~SecondOrderWorkspace() = default;
+SecondOrderWorkspace::SecondOrderWorkspace(SecondOrderWorkspace&&) noexcept = default;
+SecondOrderWorkspace& SecondOrderWorkspace::operator=(SecondOrderWorkspace&&) noexcept = default;
+
+std::vector<Eigen::MatrixXd> SecondOrderWorkspace::qddBlock(Block block) const {
+  const int n = n_, m = m_;
+  int r0 = 0, c0 = 0, rows = n, cols = n;
+  switch (block) {
+    case Block::kQQ: break;
+    case Block::kQDq: c0 = n; break;
+    case Block::kDqDq: r0 = c0 = n; break;
+    case Block::kUQ: r0 = 2 * n; rows = m; break;
+    case Block::kUDq: r0 = 2 * n; c0 = n; rows = m; break;
+    case Block::kUU: r0 = c0 = 2 * n; rows = cols = m; break;
+  }
+  std::vector<Eigen::MatrixXd> out;
+  out.reserve(qddHessian.size());
+  for (const Eigen::MatrixXd& H : qddHessian) out.emplace_back(H.block(r0, c0, rows, cols));
+  return out;
+}
+
+DynamicsStatus computeSecondOrderTensors(const Model& model, Data& data, SecondOrderWorkspace& ws,
+                                         const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
+                                         const Eigen::VectorXd& u) {
+  checkWorkspace(model, ws, "computeSecondOrderTensors");
+  if (!ws.hasTensors())
+    throw std::invalid_argument("computeSecondOrderTensors: the workspace was built without tensors (withTensors = false)");
+  const DynamicsStatus& status = computeLinearization(model, data, q, dq, u);  // checks the sizes
+  if (!usable(status)) return status;
+  detail::SecondOrderImpl& s = *ws.impl_;
+  const int n = s.n, nc = s.nc, N = s.N;
+  s.prepare(data, q, dq, u);
+  for (auto& H : ws.qddHessian) H.bottomRightCorner(N - 2 * n, N - 2 * n).setZero();  // (u, u): 0
+  for (auto& H : ws.lambdaHessian) H.bottomRightCorner(N - 2 * n, N - 2 * n).setZero();
+  const int total = static_cast<int>(s.pairs.size());
+  for (int first = 0; first < total; first += s.kChunk) {
+    const int cols = std::min<int>(s.kChunk, total - first);
+    for (int j = 0; j < cols; ++j) {
+      const auto [a, b] = s.pairs[static_cast<size_t>(first + j)];
+      s.mixedSecondDerivative(model, a, b, [&](int i, double g) { s.G(i, j) = g; });
+    }
+    // K [δq̈; δλ] = −G with K = [M −Aᵀ; A 0]: X = M⁻¹ G_r, δλ = (A M⁻¹ Aᵀ)⁻¹ (A X − G_c),
+    // δq̈ = −X + M⁻¹Aᵀ δλ.
+    // (Column by column: vector solves and products never allocate.)
+    auto Xr = s.Xr.leftCols(cols);
+    auto Xc = s.Xc.leftCols(cols);
+    Xr = s.G.topLeftCorner(n, cols);
+    for (int j = 0; j < cols; ++j) {
+      auto xr = Xr.col(j);
+      s.massLLT.solveInPlace(xr);
+      if (nc == 0) continue;
+      auto xc = Xc.col(j);
+      xc.noalias() = data.constraintJacobian * xr;
+      xc -= s.G.col(j).tail(nc);
+      s.solveSchur(xc);
+      xr.noalias() -= s.massInverseAt * xc;
+    }
+    for (int j = 0; j < cols; ++j) {
+      const auto [a, b] = s.pairs[static_cast<size_t>(first + j)];
+      for (int i = 0; i < n; ++i) ws.qddHessian[i](a, b) = ws.qddHessian[i](b, a) = -Xr(i, j);
+      for (int k = 0; k < nc; ++k) ws.lambdaHessian[k](a, b) = ws.lambdaHessian[k](b, a) = Xc(k, j);
+    }
+  }
+  return status;
+}
+
+DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, SecondOrderWorkspace& ws,
+                                             const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
+                                             const Eigen::VectorXd& u, const Eigen::VectorXd& w,
+                                             const Eigen::VectorXd& rho, Eigen::Ref<Eigen::MatrixXd> H) {
+  checkWorkspace(model, ws, "computeSecondOrderContraction");
+  const int n = model.nq(), nc = model.nc(), N = 2 * n + model.nu();
+  if (w.size() != n)
+    throw std::invalid_argument("computeSecondOrderContraction: w: expected " + std::to_string(n) + " entries, got " +
+                                std::to_string(w.size()));
+  if (rho.size() != 0 && rho.size() != nc)
+    throw std::invalid_argument("computeSecondOrderContraction: rho: expected " + std::to_string(nc) +
+                                " entries (or none), got " + std::to_string(rho.size()));
+  if (H.rows() != N || H.cols() != N)
+    throw std::invalid_argument("computeSecondOrderContraction: H: expected " + std::to_string(N) + "×" +
+                                std::to_string(N) + ", got " + std::to_string(H.rows()) + "×" + std::to_string(H.cols()));
+  const DynamicsStatus& status = computeLinearization(model, data, q, dq, u);
+  if (!usable(status)) return status;
+  detail::SecondOrderImpl& s = *ws.impl_;
+  s.prepare(data, q, dq, u);
+  // μ = K⁻ᵀ [w; ρ], Kᵀ = [M Aᵀ; −A 0]: μ_c = (A M⁻¹ Aᵀ)⁻¹ (ρ + A M⁻¹ w), μ_r = M⁻¹ w − M⁻¹Aᵀ μ_c.
+  s.muR = w;
+  s.massLLT.solveInPlace(s.muR);
+  if (nc > 0) {
+    s.muC.noalias() = data.constraintJacobian * s.muR;
+    if (rho.size() == nc) s.muC += rho;
+    s.solveSchur(s.muC);
+    s.muR.noalias() -= s.massInverseAt * s.muC;
+  }
+  // wᵀ δq̈ + ρᵀ δλ = −μᵀ G[a, b] = −∂²φ/∂z_a∂z_b with φ(z') = μᵀ F(z', y + Y (z' − z)): the
+  // Hessian of one scalar, by forward-over-reverse on the recorded residual pass. One reverse
+  // sweep gives φ's adjoints; per q or q̇ direction a, a tangent sweep (z' = z + s e_a, y + s Y e_a)
+  // and a second reverse sweep give ∇²φ e_a = x̄̇_z + Yᵀ x̄̇_y. The u directions follow by symmetry,
+  // and the (u, u) block is 0 (F is linear in u, K does not depend on u).
+  s.record(model);
+  const int inputs = s.inputs, size = s.tape.size;
+  s.xbar.head(size).setZero();
+  for (int i = 0; i < n; ++i) s.xbar[s.recorded.r[i].idx] += s.muR[i];
+  for (int k = 0; k < nc; ++k) s.xbar[s.recorded.c[k].idx] += s.muC[k];
+  s.xbar[0] = 0.0;  // a constant output (index 0) has no adjoint
+  detail::reverseSweep(s.tape, s.xbar.data());
+  s.xdot.head(inputs + 1).setZero();
+  for (int a = 0; a < 2 * n; ++a) {
+    s.xdot[1 + a] = 1.0;
+    s.xdot.segment(1 + N, n + nc) = s.Y.col(a);
+    detail::tangentSweep(s.tape, inputs, s.xdot.data());
+    s.xdotbar.head(size).setZero();
+    detail::secondOrderReverseSweep(s.tape, inputs, s.xbar.data(), s.xdot.data(), s.xdotbar.data());
+    auto row = s.rows.col(a);
+    row = s.xdotbar.segment(1, N);
+    row.noalias() += s.Y.transpose() * s.xdotbar.segment(1 + N, n + nc);
+    s.xdot[1 + a] = 0.0;
+  }
+  // H = −∇²φ; the (q, q̇) block symmetrized (its two halves agree to rounding).
+  H.topLeftCorner(2 * n, 2 * n) = -0.5 * (s.rows.topRows(2 * n) + s.rows.topRows(2 * n).transpose());
+  H.bottomLeftCorner(N - 2 * n, 2 * n) = -s.rows.bottomRows(N - 2 * n);
+  H.topRightCorner(2 * n, N - 2 * n) = -s.rows.bottomRows(N - 2 * n).transpose();
+  H.bottomRightCorner(N - 2 * n, N - 2 * n).setZero();
+  return status;
+}
+
+}  // namespace trellis

@@ -1,0 +1,72 @@
+// tests/core/no_malloc/test_second_order_no_allocation.cpp — the second-order functions allocate
+// nothing through Eigen after the workspace is built and one warm-up call (see
+// test_no_allocation.cpp for the mechanism: an allocation under the guard aborts the program).
+#ifndef EIGEN_RUNTIME_NO_MALLOC
+#error "must be compiled with EIGEN_RUNTIME_NO_MALLOC (see tests/CMakeLists.txt)"
+#endif
+
+#include <catch2/catch.hpp>
+
+#include "support/random_state.hpp"
+#include "support/test_models.hpp"
+
+#include <trellis/core.hpp>
+#include <trellis/core/second_order.hpp>
+
+#include <vector>
+
+using namespace trellis;
+using namespace trellis::test;
+
+namespace {
+
+class MallocGuard {
+ public:
+  MallocGuard() { Eigen::internal::set_is_malloc_allowed(false); }
+  ~MallocGuard() { Eigen::internal::set_is_malloc_allowed(true); }
+  MallocGuard(const MallocGuard&) = delete;
+  MallocGuard& operator=(const MallocGuard&) = delete;
+};
+
+void checkNoAllocation(const Model& model, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::vector<State> states;
+  for (int k = 0; k < 3; ++k) states.push_back(randomState(model, rng));
+  const int n = model.nq(), N = 2 * n + model.nu();
+  Data data(model);
+  SecondOrderWorkspace ws(model);
+  const Eigen::VectorXd w = uniformVector(rng, n, -1.0, 1.0), rho = uniformVector(rng, model.nc(), -1.0, 1.0);
+  const Eigen::VectorXd none;
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(N, N);
+  computeSecondOrderTensors(model, data, ws, states[0].q, states[0].dq, states[0].u);  // warm-up
+  computeSecondOrderContraction(model, data, ws, states[0].q, states[0].dq, states[0].u, w, rho, H);
+  std::vector<DynamicsStatus::Code> codes;
+  codes.reserve(2 * states.size() + 2);
+  {
+    MallocGuard guard;
+    for (const State& s : states) {
+      codes.push_back(computeSecondOrderTensors(model, data, ws, s.q, s.dq, s.u).code);
+      codes.push_back(computeSecondOrderContraction(model, data, ws, s.q, s.dq, s.u, w, rho, H).code);
+      computeSecondOrderContraction(model, data, ws, s.q, s.dq, s.u, w, none, H);
+    }
+  }
+  for (const auto c : codes) CHECK(c != DynamicsStatus::Code::kNonFinite);
+  CHECK(H.allFinite());
+}
+
+}  // namespace
+
+TEST_CASE("No allocation after warm-up: second derivatives, every element, unconstrained",
+          "[no_malloc][second_order]") {
+  checkNoAllocation(kitchenSink(3, false).model, 71);
+}
+
+TEST_CASE("No allocation after warm-up: second derivatives with every constraint kind",
+          "[no_malloc][second_order]") {
+  checkNoAllocation(kitchenSink(3, true).model, 72);
+}
+
+TEST_CASE("No allocation after warm-up: second derivatives with redundant constraints",
+          "[no_malloc][second_order]") {
+  checkNoAllocation(paperPendulum(2).model, 73);  // the pseudo-inverse path
+}

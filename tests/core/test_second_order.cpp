@@ -1,0 +1,372 @@
+// tests/core/test_second_order.cpp — the exact second derivatives (second_order.hpp) on the three
+// legs of the derivative tests.
+//
+// Leg 1: for every transform kind, mass, potential, force and constraint kind (each in a small 3D
+// model, at seeded random states — constrained ones off the manifold too, where q̈(z) is still
+// defined), the tensors ∂²q̈ᵢ/∂z_a∂z_b and ∂²λ_r/∂z_a∂z_b against central differences of the
+// EXACT first derivatives (computeLinearization), step h = eps^(1/3)·max(1, |z_a|) (numdiff.hpp).
+// Tolerance: the difference of an exact Jacobian J has truncation error h²/6·|J'''| ≈ 6e-12·|J'''|
+// and rounding error ≈ eps·κ·|J|/h ≈ 4e-11·κ·|J| (κ: the amplification of the KKT solve, 1–100
+// on these models), so ≈ 1e-9 of the column's scale; 1e-6 (relative to max(1, ‖column‖∞)) leaves
+// three orders for the rounding of J itself on the constrained models, and is still six orders
+// below an error of a wrong term (which shows as O(1) of the column).
+// Identities: the (u, u) block of the differences is ~0 (q̈ is affine in u for every element
+// kind: inputs are configuration forces, body wrench entries, tendon tensions); the pure blocks
+// of the differences are symmetric (a test of the differences; the exact tensors are symmetric by
+// construction, each pair being evaluated once); the contraction Σ wᵢ ∇²q̈ᵢ + Σ ρ_r ∇²λ_r equals
+// the same sum of the tensors.
+// Leg 3: closed forms derived by hand (pendulum, cart-pole; below) to 1e-12.
+#include <catch2/catch.hpp>
+
+#include "support/cart_pole_model.hpp"
+#include "support/matrix_compare.hpp"
+#include "support/random_state.hpp"
+#include "support/test_models.hpp"
+
+#include <trellis/core.hpp>
+#include <trellis/core/second_order.hpp>
+#include <trellis/core/numdiff.hpp>
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+using namespace trellis;
+using namespace trellis::test;
+
+namespace {
+
+constexpr double kFdTolerance = 1e-6;  // file comment
+
+struct Tensors {
+  std::vector<Eigen::MatrixXd> qdd, lambda;  ///< [i](a, b): ∂²/∂z_a∂z_b
+};
+
+/// Central differences of the exact Jacobians: out[i](b, a) = ∂/∂z_a of ∂yᵢ/∂z_b. The matrices
+/// are not symmetrized (their symmetry is checked).
+Tensors differenceOfJacobians(const Model& model, const State& s) {
+  const int n = model.nq(), m = model.nu(), nc = model.nc(), N = 2 * n + m;
+  Data data(model);
+  Tensors out;
+  out.qdd.assign(n, Eigen::MatrixXd::Zero(N, N));
+  out.lambda.assign(nc, Eigen::MatrixXd::Zero(N, N));
+  Eigen::VectorXd z(N);
+  z << s.q, s.dq, s.u;
+  Eigen::MatrixXd Jp(n + nc, N), Jm(n + nc, N);
+  const NumDiffOptions options;  // central, h = eps^(1/3) max(1, |z|)
+  for (int a = 0; a < N; ++a) {
+    const double h = options.step(z[a]);
+    for (int sign = 0; sign < 2; ++sign) {
+      Eigen::VectorXd zz = z;
+      zz[a] += sign == 0 ? h : -h;
+      const DynamicsStatus st = computeLinearization(model, data, zz.head(n), zz.segment(n, n), zz.tail(m));
+      REQUIRE(st.code == DynamicsStatus::Code::kOk);
+      Eigen::MatrixXd& J = sign == 0 ? Jp : Jm;
+      J.topRows(n) << data.dqdd_dq, data.dqdd_ddq, data.dqdd_du;
+      if (nc > 0) J.bottomRows(nc) = data.dlambda_dx;
+    }
+    const double step = (z[a] + h) - (z[a] - h);
+    for (int i = 0; i < n; ++i) out.qdd[i].col(a) = (Jp.row(i) - Jm.row(i)).transpose() / step;
+    for (int r = 0; r < nc; ++r) out.lambda[r].col(a) = (Jp.row(n + r) - Jm.row(n + r)).transpose() / step;
+  }
+  return out;
+}
+
+void checkSecondOrderAt(const Model& model, const State& s, std::uint32_t seed) {
+  const int n = model.nq(), m = model.nu(), nc = model.nc(), N = 2 * n + m;
+  Data data(model);
+  SecondOrderWorkspace ws(model);
+  const DynamicsStatus st = computeSecondOrderTensors(model, data, ws, s.q, s.dq, s.u);
+  REQUIRE(st.code == DynamicsStatus::Code::kOk);
+  const Tensors fd = differenceOfJacobians(model, s);
+  for (int i = 0; i < n; ++i) {
+    INFO("q̈ output " << i << " (" << model.configNames()[i] << ")");
+    TRELLIS_CHECK_MATRIX(fd.qdd[i], ws.qddHessian[i], kFdTolerance, Scale::kColumn);
+    // Symmetry of the differences' pure blocks (q, q), (q̇, q̇) and of the mixed entries.
+    const double scale = std::max(1.0, fd.qdd[i].cwiseAbs().maxCoeff());
+    CHECK((fd.qdd[i] - fd.qdd[i].transpose()).cwiseAbs().maxCoeff() <= 2 * kFdTolerance * scale);
+    // q̈ is affine in u: the differences of ∂q̈/∂u in u vanish to their error.
+    if (m > 0) CHECK(fd.qdd[i].bottomRightCorner(m, m).cwiseAbs().maxCoeff() <= kFdTolerance * scale);
+    if (m > 0) CHECK(ws.qddHessian[i].bottomRightCorner(m, m).isZero(0.0));
+  }
+  for (int r = 0; r < nc; ++r) {
+    INFO("λ output " << r << " (" << model.constraints()[r].name << ")");
+    TRELLIS_CHECK_MATRIX(fd.lambda[r], ws.lambdaHessian[r], kFdTolerance, Scale::kColumn);
+  }
+  // The contraction against the same sum of the tensors (two computations that share only the
+  // hyper-dual residual pass: one KKT solve per pair against one adjoint solve).
+  std::mt19937 rng(seed);
+  const Eigen::VectorXd w = uniformVector(rng, n, -1.0, 1.0), rho = uniformVector(rng, nc, -1.0, 1.0);
+  Eigen::MatrixXd expected = Eigen::MatrixXd::Zero(N, N);
+  for (int i = 0; i < n; ++i) expected += w[i] * ws.qddHessian[i];
+  for (int r = 0; r < nc; ++r) expected += rho[r] * ws.lambdaHessian[r];
+  Eigen::MatrixXd H(N, N);
+  Data data2(model);
+  SecondOrderWorkspace ws2(model, false);
+  REQUIRE(computeSecondOrderContraction(model, data2, ws2, s.q, s.dq, s.u, w, rho, H).code ==
+          DynamicsStatus::Code::kOk);
+  // Both are O(1)·eps·κ apart: 1e-10 of the largest entry.
+  TRELLIS_CHECK_MATRIX(expected, H, 1e-10, Scale::kMatrix);
+  if (nc > 0) {  // without ρ: the q̈ part alone
+    Eigen::MatrixXd Hw(N, N), expectedW = Eigen::MatrixXd::Zero(N, N);
+    for (int i = 0; i < n; ++i) expectedW += w[i] * ws.qddHessian[i];
+    REQUIRE(computeSecondOrderContraction(model, data2, ws2, s.q, s.dq, s.u, w, Eigen::VectorXd(), Hw).ok());
+    TRELLIS_CHECK_MATRIX(expectedW, Hw, 1e-10, Scale::kMatrix);
+  }
+}
+
+constexpr int kStatesPerModel = 2;
+
+void checkAtRandomStates(const Model& model, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  for (int k = 0; k < kStatesPerModel; ++k) {
+    const State s = randomState(model, rng);
+    INFO("random state #" << k << " (seed " << seed << ")");
+    checkSecondOrderAt(model, s, seed + 1000u * static_cast<std::uint32_t>(k));
+  }
+}
+
+}  // namespace
+
+TEST_CASE("Second derivatives match differences of the exact Jacobians for every transform type",
+          "[second_order][fd]") {
+  const std::vector<TransformType> types = {
+      TransformType::kTx, TransformType::kTy, TransformType::kTz,      TransformType::kRx,
+      TransformType::kRy, TransformType::kRz, TransformType::kConstSE3,
+      TransformType::kRotAxis, TransformType::kTransAxis};
+  for (TransformType t : types) {
+    SECTION(transformTypeName(t)) { checkAtRandomStates(transformChain(t).model, 100 + static_cast<std::uint32_t>(t)); }
+  }
+}
+
+TEST_CASE("Second derivatives for masses with full inertia, potentials and forces", "[second_order][fd]") {
+  SECTION("inertia only, large velocities") {
+    const TestSystem sys = std::move(armBase(8)).finish();
+    std::mt19937 rng(202);
+    checkSecondOrderAt(sys.model, randomState(sys.model, rng, 1.2, 5.0), 202);
+  }
+  SECTION("gravity") {
+    SystemBuilder s = armBase();
+    s.b.addGravity(Eigen::Vector3d(0.3, -9.81, -1.2));
+    checkAtRandomStates(std::move(s).finish().model, 301);
+  }
+  SECTION("linear_spring between a body and the world") {
+    SystemBuilder s = armBase();
+    s.b.addLinearSpring("l4", "w1", 5.0, 0.3);
+    checkAtRandomStates(std::move(s).finish().model, 302);
+  }
+  SECTION("linear_spring between two bodies, zero rest length") {
+    SystemBuilder s = armBase();
+    s.b.addLinearSpring("j1", "l3", 4.0, 0.0);
+    checkAtRandomStates(std::move(s).finish().model, 303);
+  }
+  SECTION("config_spring") {
+    SystemBuilder s = armBase();
+    s.b.addConfigSpring("b", 3.0, 0.4);
+    s.b.addConfigSpring("d", 7.0, -0.1);
+    checkAtRandomStates(std::move(s).finish().model, 304);
+  }
+  SECTION("config_force") {
+    SystemBuilder s = armBase();
+    s.b.addConfigForce("a", "ua");
+    s.b.addConfigForce("d", "ud");
+    s.b.addConfigForce("b", "ua");
+    checkAtRandomStates(std::move(s).finish().model, 401);
+  }
+  SECTION("damping") {
+    SystemBuilder s = armBase();
+    s.b.addDamping(0.3, {{"c", 1.5}, {"d", 0.05}});
+    checkAtRandomStates(std::move(s).finish().model, 402);
+  }
+  SECTION("body_wrench with input and constant entries") {
+    SystemBuilder s = armBase();
+    s.b.addBodyWrench(
+        "l4", {WrenchEntry{std::string("fx")}, WrenchEntry{0.2}, WrenchEntry{std::string("fz")},
+               WrenchEntry{std::string("tx")}, WrenchEntry{-0.4}, WrenchEntry{std::string("tz")}});
+    checkAtRandomStates(std::move(s).finish().model, 404);
+  }
+  SECTION("tendon through four frames on three bodies and the world") {
+    SystemBuilder s = armBase();
+    s.b.addTendon({"w3", "l2", "l3", "l4"}, "tension");
+    checkAtRandomStates(std::move(s).finish().model, 405);
+  }
+}
+
+TEST_CASE("Second derivatives for every constraint kind", "[second_order][fd][constraints]") {
+  SECTION("distance between two bodies") {
+    SystemBuilder s = armBase();
+    s.b.addGravity(Eigen::Vector3d(0.0, 0.0, -9.81));
+    s.b.addConfigForce("a", "ua");
+    s.b.addDistanceConstraint("l2", "l4", 0.5);
+    checkAtRandomStates(std::move(s).finish().model, 502);
+  }
+  SECTION("distance between a body and the world") {
+    SystemBuilder s = armBase();
+    s.b.addGravity(Eigen::Vector3d(0.0, 0.0, -9.81));
+    s.b.addDistanceConstraint("l4", "w1", 0.9);
+    checkAtRandomStates(std::move(s).finish().model, 501);
+  }
+  for (int axis = 0; axis < 3; ++axis) {
+    SECTION("point along world axis " + std::to_string(axis)) {
+      SystemBuilder s = armBase();
+      s.b.addGravity(Eigen::Vector3d(0.0, 0.0, -9.81));
+      s.b.addConfigForce("c", "uc");
+      s.b.addPointConstraint("l4", "w3", axis);
+      checkAtRandomStates(std::move(s).finish().model, 510 + static_cast<std::uint32_t>(axis));
+    }
+  }
+  SECTION("point_on_plane, plane on a moving body") {
+    SystemBuilder s = armBase();
+    s.b.addGravity(Eigen::Vector3d(0.0, 0.0, -9.81));
+    s.b.addPointOnPlaneConstraint("l2", Eigen::Vector3d(0.3, -0.5, 1.0), "l4");
+    checkAtRandomStates(std::move(s).finish().model, 520);
+  }
+  SECTION("point_on_plane, plane in the world") {
+    SystemBuilder s = armBase();
+    s.b.addGravity(Eigen::Vector3d(0.0, 0.0, -9.81));
+    s.b.addPointOnPlaneConstraint("w1", Eigen::Vector3d(0.0, 0.0, 1.0), "l3");
+    checkAtRandomStates(std::move(s).finish().model, 521);
+  }
+  SECTION("knife edge (nonholonomic), planar skate") { checkAtRandomStates(planarSkate(0.3).model, 602); }
+  SECTION("knife edge on a 3D arm along a skewed axis") {
+    SystemBuilder s = armBase();
+    s.b.addGravity(Eigen::Vector3d(0.0, 0.0, -9.81));
+    s.b.addKnifeEdgeConstraint("l4", Eigen::Vector3d(1.0, 0.5, -0.2).normalized());
+    checkAtRandomStates(std::move(s).finish().model, 603);
+  }
+  SECTION("paper example (Sec. IV)") { checkAtRandomStates(paperPendulum().model, 604); }
+}
+
+TEST_CASE("Second derivatives for a system with every element", "[second_order][fd][constraints]") {
+  SECTION("unconstrained") { checkAtRandomStates(kitchenSink(3, false).model, 701); }
+  SECTION("with knife edge, distance, point and point_on_plane constraints") {
+    checkAtRandomStates(kitchenSink(3, true).model, 702);
+  }
+  SECTION("at a consistent state") {
+    const TestSystem sys = kitchenSink(3, true);
+    std::mt19937 rng(703);
+    checkSecondOrderAt(sys.model, randomConsistentState(sys.model, rng), 703);
+  }
+}
+
+TEST_CASE("Second derivatives with redundant constraints equal those without the copies",
+          "[second_order][constraints]") {
+  // The paper's pendulum with its distance constraint written twice: A has a dependent row and
+  // the solve takes the pseudo-inverse path (status kRedundantConstraints), but q̈(z) is the same
+  // function as with one copy, so its second derivatives must agree (the duplicated λ splits the
+  // force: each copy carries half of the single λ, and so do its derivatives).
+  const Model one = paperPendulum(1).model, two = paperPendulum(2).model;
+  Data d1(one), d2(two);
+  SecondOrderWorkspace w1(one), w2(two, true), c2(two, false);
+  std::mt19937 rng(880);
+  for (int k = 0; k < 3; ++k) {
+    const State s = randomState(one, rng);
+    REQUIRE(computeSecondOrderTensors(one, d1, w1, s.q, s.dq, s.u).ok());
+    REQUIRE(computeSecondOrderTensors(two, d2, w2, s.q, s.dq, s.u).code == DynamicsStatus::Code::kRedundantConstraints);
+    for (int i = 0; i < one.nq(); ++i) TRELLIS_CHECK_MATRIX(w1.qddHessian[i], w2.qddHessian[i], 1e-9, Scale::kMatrix);
+    for (int r = 0; r < 2; ++r)
+      TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(0.5 * w1.lambdaHessian[0]), w2.lambdaHessian[r], 1e-9, Scale::kMatrix);
+    const Eigen::VectorXd w = uniformVector(rng, one.nq(), -1.0, 1.0);
+    const int N = 2 * one.nq() + one.nu();
+    Eigen::MatrixXd H(N, N), expected = Eigen::MatrixXd::Zero(N, N);
+    for (int i = 0; i < one.nq(); ++i) expected += w[i] * w1.qddHessian[i];
+    computeSecondOrderContraction(two, d2, c2, s.q, s.dq, s.u, w, Eigen::VectorXd(), H);
+    TRELLIS_CHECK_MATRIX(expected, H, 1e-9, Scale::kMatrix);
+  }
+}
+
+// ---- Closed forms --------------------------------------------------------------------------------
+
+TEST_CASE("Second derivatives: closed form of the damped pendulum", "[second_order][closed_form]") {
+  // Bob of mass m at distance l below the pivot (rz(θ) then ty(−l)): p = (l sin θ, −l cos θ),
+  // V = −m g l cos θ, so m l² θ̈ = u − c θ̇ − m g l sin θ:
+  //   θ̈ = −(g/l) sin θ + (u − c θ̇)/(m l²).
+  // Its only nonzero second derivative is ∂²θ̈/∂θ² = (g/l) sin θ (θ̇ and u enter linearly).
+  const double m = 0.7, l = 1.3, g = 9.81, c = 0.4;
+  ModelBuilder b("pendulum");
+  b.addFrame("pin", "world", Transform::rz("theta"));
+  b.addFrame("bob", "pin", Transform::ty(-l), Mass{m, Eigen::Matrix3d::Zero()});
+  b.addGravity({0.0, -g, 0.0});
+  b.addConfigForce("theta", "u");
+  b.addDamping(c, {});
+  const Model model = std::move(b).finalize();
+  Data data(model);
+  SecondOrderWorkspace ws(model);
+  for (const double theta : {-2.1, -0.4, 0.0, 0.9, 2.7}) {
+    const Eigen::VectorXd q = Eigen::VectorXd::Constant(1, theta), dq = Eigen::VectorXd::Constant(1, 1.7),
+                          u = Eigen::VectorXd::Constant(1, -0.3);
+    REQUIRE(computeSecondOrderTensors(model, data, ws, q, dq, u).ok());
+    Eigen::MatrixXd expected = Eigen::MatrixXd::Zero(3, 3);
+    expected(0, 0) = g / l * std::sin(theta);
+    INFO("theta = " << theta);
+    TRELLIS_CHECK_MATRIX(expected, ws.qddHessian[0], 1e-12, Scale::kAbsolute);
+  }
+}
+
+TEST_CASE("Second derivatives: closed form of the cart-pole", "[second_order][closed_form]") {
+  // support/cart_pole_model.hpp: cart x (mass mc, force u), pole θ (rz) with a point mass mp at
+  // distance l along its +y: p = (x − l s, l c), s = sin θ, c = cos θ, ω = θ̇. With
+  //   T = ½ (mc + mp) ẋ² − mp l c ẋ ω + ½ mp l² ω²,  V = mp g l c,
+  // the equations are (mc + mp) ẍ − mp l c θ̈ + mp l s ω² = u and l θ̈ = c ẍ + g s, so
+  //   ẍ = N / D,  N = u + mp s (g c − l ω²),  D = mc + mp s²,   θ̈ = (c ẍ + g s) / l.
+  // Derivatives (by hand; x and ẋ do not enter):
+  //   N_θ = mp (g (c² − s²) − l ω² c),  N_θθ = mp (−4 g s c + l ω² s),  N_ω = −2 mp l s ω,
+  //   N_ωω = −2 mp l s,  N_θω = −2 mp l c ω,  N_u = 1;   D_θ = 2 mp s c,  D_θθ = 2 mp (c² − s²);
+  //   ẍ_θ = N_θ/D − N D_θ/D²,  ẍ_θθ = N_θθ/D − 2 N_θ D_θ/D² − N D_θθ/D² + 2 N D_θ²/D³,
+  //   ẍ_ω = N_ω/D,  ẍ_ωω = N_ωω/D,  ẍ_θω = N_θω/D − N_ω D_θ/D²,  ẍ_u = 1/D,  ẍ_uθ = −D_θ/D²;
+  //   θ̈_θθ = (−c ẍ − 2 s ẍ_θ + c ẍ_θθ − g s)/l,  θ̈_θω = (−s ẍ_ω + c ẍ_θω)/l,  θ̈_ωω = c ẍ_ωω/l,
+  //   θ̈_uθ = (−s ẍ_u + c ẍ_uθ)/l;  every pair with ω–u, u–u, x or ẋ is 0.
+  const double mc = 1.0, mp = 0.2, l = 0.5, g = 9.81;
+  const Model model = cartPole(mc, mp, l);
+  Data data(model);
+  SecondOrderWorkspace ws(model);
+  std::mt19937 rng(9001);
+  for (int k = 0; k < 5; ++k) {
+    const State st = randomState(model, rng, 3.0, 2.0, 5.0);
+    const double th = st.q[1], w = st.dq[1], u = st.u[0];
+    const double s = std::sin(th), c = std::cos(th);
+    const double N = u + mp * s * (g * c - l * w * w), D = mc + mp * s * s;
+    const double Nt = mp * (g * (c * c - s * s) - l * w * w * c), Ntt = mp * (-4 * g * s * c + l * w * w * s);
+    const double Nw = -2 * mp * l * s * w, Nww = -2 * mp * l * s, Ntw = -2 * mp * l * c * w;
+    const double Dt = 2 * mp * s * c, Dtt = 2 * mp * (c * c - s * s);
+    const double xdd = N / D, xt = Nt / D - N * Dt / (D * D);
+    const double xtt = Ntt / D - 2 * Nt * Dt / (D * D) - N * Dtt / (D * D) + 2 * N * Dt * Dt / (D * D * D);
+    const double xw = Nw / D, xww = Nww / D, xtw = Ntw / D - Nw * Dt / (D * D), xu = 1 / D, xut = -Dt / (D * D);
+    // z = [x, θ, ẋ, ω, u]
+    Eigen::MatrixXd Hx = Eigen::MatrixXd::Zero(5, 5), Ht = Eigen::MatrixXd::Zero(5, 5);
+    Hx(1, 1) = xtt;
+    Hx(1, 3) = Hx(3, 1) = xtw;
+    Hx(3, 3) = xww;
+    Hx(1, 4) = Hx(4, 1) = xut;
+    Ht(1, 1) = (-c * xdd - 2 * s * xt + c * xtt - g * s) / l;
+    Ht(1, 3) = Ht(3, 1) = (-s * xw + c * xtw) / l;
+    Ht(3, 3) = c * xww / l;
+    Ht(1, 4) = Ht(4, 1) = (-s * xu + c * xut) / l;
+    REQUIRE(computeSecondOrderTensors(model, data, ws, st.q, st.dq, st.u).ok());
+    INFO("state #" << k);
+    TRELLIS_CHECK_MATRIX(Hx, ws.qddHessian[0], 1e-12, Scale::kMatrix);
+    TRELLIS_CHECK_MATRIX(Ht, ws.qddHessian[1], 1e-12, Scale::kMatrix);
+    // The six blocks in the issue's layout, output index first.
+    const auto uq = ws.qddBlock(SecondOrderWorkspace::Block::kUQ);
+    REQUIRE(uq.size() == 2);
+    CHECK(uq[1](0, 1) == ws.qddHessian[1](4, 1));
+  }
+}
+
+TEST_CASE("Second-order functions reject bad input", "[second_order]") {
+  const Model model = cartPole();
+  Data data(model);
+  SecondOrderWorkspace ws(model, false);
+  const Eigen::VectorXd q = Eigen::VectorXd::Zero(2), u = Eigen::VectorXd::Zero(1);
+  CHECK_THROWS_WITH(computeSecondOrderTensors(model, data, ws, q, q, u), Catch::Contains("without tensors"));
+  Eigen::MatrixXd H(5, 5), bad(4, 5);
+  CHECK_THROWS_WITH(computeSecondOrderContraction(model, data, ws, q, q, u, Eigen::VectorXd::Zero(3), Eigen::VectorXd(), H),
+                    Catch::Contains("w: expected 2 entries, got 3"));
+  CHECK_THROWS_WITH(computeSecondOrderContraction(model, data, ws, q, q, u, q, Eigen::VectorXd(), bad),
+                    Catch::Contains("H: expected 5×5, got 4×5"));
+  CHECK_THROWS_WITH(computeSecondOrderContraction(model, data, ws, q, Eigen::VectorXd::Zero(3), u, q, Eigen::VectorXd(), H),
+                    Catch::Contains("dq"));
+  const Model other = planarChain(3).model;
+  CHECK_THROWS_WITH(computeSecondOrderContraction(other, data, ws, q, q, u, q, Eigen::VectorXd(), H),
+                    Catch::Contains("workspace was built for a model"));
+}
