@@ -159,11 +159,9 @@ void bindErrors(py::module_& m) {
     } catch (const ProblemError& e) {
       PyErr_SetString(gProblemError, e.what());
     } catch (const FileError& e) {  // a file that cannot be read or written: OSError, as open() gives
-      PyErr_SetString(PyExc_OSError, e.what());
+      setOsError(e);
     } catch (const std::logic_error& e) {  // invalid_argument, out_of_range, domain_error, …
       PyErr_SetString(PyExc_ValueError, e.what());
-    } catch (const FileError& e) {  // before runtime_error, its base
-      setOsError(e);
     } catch (const std::runtime_error& e) {
       PyErr_SetString(gNumericalError, e.what());
     }

@@ -902,6 +902,14 @@ class Scene:
     def x(self) -> numpy.typing.NDArray[numpy.float64]:
         """[q; dq] (nx,)"""
 
+class SecondOrderContraction:
+    """H(w, rho=None) = sum_i w_i Hess_z qdd_i + sum_r rho_r Hess_z lambda_r (N, N) at one state, without forming the tensors (one adjoint KKT solve and one hyper-dual residual pass per pair). Make one with second_order_contraction(model, q, dq, u)."""
+    def __call__(self: SecondOrderContraction, w: numpy.typing.NDArray[numpy.float64], rho: Optional[numpy.typing.NDArray[numpy.float64]] = None) -> numpy.typing.NDArray[numpy.float64]:
+        """The (N, N) contraction for weights w (nq,) on qdd and rho (nc,) on lambda; check .status."""
+    @property
+    def status(self) -> DynamicsStatus:
+        """DynamicsStatus of the last call (the result is valid when ok)"""
+
 class SimulationOptions:
     """Options of the CVODES simulation (keywords): rtol, atol, max_steps, sample_rate (0: continuous feedback; f > 0: sampled at f Hz with zero-order hold), input_lower / input_upper (nu,) box, output_step, constraints (ConstraintHandling), method, max_step, breakpoints, projection_iterations, drift_tolerance (0: 10 (atol + rtol); projection above it), exact_jacobian (BDF: exact A - B S K, else difference quotients)."""
     def __init__(self: SimulationOptions, **kwargs) -> None: ...
@@ -1324,11 +1332,14 @@ def compute_mass_matrix(model: Model, data: Data, q: numpy.typing.NDArray[numpy.
 def compute_non_conservative_power(model: Model, data: Data, q: numpy.typing.NDArray[numpy.float64], dq: numpy.typing.NDArray[numpy.float64], u: numpy.typing.NDArray[numpy.float64]) -> float:
     """Q_nc^T dq: power of inputs, damping, wrenches and tendons."""
 
+def compute_second_order(model: Model, data: Data, q: numpy.typing.NDArray[numpy.float64], dq: numpy.typing.NDArray[numpy.float64], u: numpy.typing.NDArray[numpy.float64]) -> dict:
+    """Exact second derivatives of qdd(q, dq, u) of the constrained system (lambda eliminated) and of lambda. Returns a dict: 'status' (DynamicsStatus; the arrays are valid when it is ok or redundant_constraints), the six blocks output index first — 'd2qdd_dqdq' (n, n, n) [i, j, k] = d2 qdd_i / dq_j dq_k, 'd2qdd_dqddq' (n, n, n) dq_j ddq_k, 'd2qdd_ddqddq' (n, n, n), 'd2qdd_dudq' (n, m, n) du_j dq_k, 'd2qdd_duddq' (n, m, n), 'd2qdd_dudu' (n, m, m) (zero: qdd is affine in u) — and the whole Hessians over z = [q; dq; u]: 'd2qdd_dz2' (n, N, N), 'd2lambda_dz2' (nc, N, N), N = 2n + m. data holds the linearization at the state afterwards."""
+
 def controllability_at_knots(model: Model, trajectory: Trajectory, relative_tolerance: float = 1e-10) -> List[ControllabilityReport]:
     """compute_controllability_at every knot (a failing knot: ok False and a message)."""
 
 def discretize_zero_order_hold(A: numpy.typing.NDArray[numpy.float64], B: numpy.typing.NDArray[numpy.float64], h: float) -> tuple:
-    """(Ad, Bd): Ad = e^(A h), Bd = int_0^h e^(A s) ds B (exact zero-order hold)."""
+    """(Ad, Bd): Ad = e^(A h), Bd = int_0^h e^(A s) ds B (exact zero-order hold). Raises NumericalError when the exponential overflows (a step too large for A)."""
 
 def load_problem(path: str) -> OptimalControlProblem:
     """Reads a problem file (JSON, optimization/README.md); paths inside are relative to it. Raises ProblemError (or ModelError for its scene)."""
@@ -1347,6 +1358,9 @@ def parse_scene(text: str, source: str = '<scene>') -> Scene:
 
 def project_onto_constraints(model: Model, x: numpy.typing.NDArray[numpy.float64], max_iterations: int = 10) -> tuple:
     """(x projected onto h(q) = 0, A(q) dq = 0 in the mass-matrix metric, ConstraintProjection)."""
+
+def second_order_contraction(model: Model, q: numpy.typing.NDArray[numpy.float64], dq: numpy.typing.NDArray[numpy.float64], u: numpy.typing.NDArray[numpy.float64]) -> SecondOrderContraction:
+    """The contraction of the exact second derivatives at the state (q, dq, u) as a function h(w, rho=None) -> (N, N) array, N = 2 nq + nu (see SecondOrderContraction)."""
 
 def simulate(model: Model, x0: numpy.typing.NDArray[numpy.float64], t0: float, t1: float, policy: Callable[..., Any], *, options: Optional[SimulationOptions] = None, reference: Trajectory = None) -> SimulationResult:
     """xdot = [dq; qdd(q, dq, sat(u))] from x(t0) = x0 (nx,) to t1 with u = policy(t, x) (a Python callable returning (nu,)); an exception in the policy is status POLICY_FAILURE."""
@@ -1383,6 +1397,22 @@ def solve_tvlqr(model: Model, reference: Trajectory, *, Q: object, R: object, Qf
 
 def transport_tangent_basis(model: Model, reference: Trajectory, *, options: Optional[TangentTransportOptions] = None) -> TangentBasisTrajectory:
     """T(t) along the reference (which needs state derivatives)."""
+
+def view(model: object, *args, path: object = None, q: object = None, names: List[str] = ..., rate: float = 60.0, title: str = '', package_path: List[str] = ..., all_solid: bool = False, show: object = None) -> object:
+    """view(model, *trajectories, path=None, q=None, names=[], rate=60.0, title="", package_path=[], all_solid=False, show=None)
+
+    Writes a self-contained HTML page (three.js included) that shows the model in 3D in a browser,
+    with a time slider, play/pause, speed and looping when trajectories are given: the first drawn
+    solid, the others ghosted (all_solid=True: all solid). The same page as `trellis view`
+    (docs/viewer.md); poses are the library's kinematics, sampled at every knot and `rate` times per
+    second. `model`: a scene or URDF file path (keeps URDF visual geometry, meshes relative to the
+    file), a Scene (shown at its stored q) or a Model (at q = 0); `path`: the page to write, as a
+    keyword or as the last positional argument (str or os.PathLike); `q` overrides the configuration
+    shown without trajectories. The file is written atomically. In a Jupyter notebook (or show=True)
+    the page is also displayed inline. Returns `path`. Raises ValueError (a trajectory that does not
+    match the model, a bad visual, an unreadable mesh, three.js missing) and warns (warnings.warn)
+    when a mesh is drawn as a stand-in.
+    """
 HAS_SOLVE_TVLQR: bool
 
 

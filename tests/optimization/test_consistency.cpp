@@ -1,7 +1,7 @@
 // Tests of "solved means the plant can follow it": the a-posteriori consistency check
 // (trellis/analysis/consistency.hpp) as the optimizer uses it, mesh refinement, closed chains
 // (slack, boundary states off the manifold), a knife edge in the optimizer.
-#include <trellis/control.hpp>
+#include <trellis/analysis.hpp>
 #include <trellis/core.hpp>
 #include <trellis/optimization.hpp>
 
