@@ -10,6 +10,9 @@
 #include <Eigen/Geometry>
 
 #include <array>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
 #include <cmath>
 #include <random>
 #include <stdexcept>
@@ -232,6 +235,23 @@ BenchModel makeBenchModel(const ModelSpec& spec, std::uint32_t seed) {
                              ", |A dq| = " + std::to_string(vErr));
   }
   return BenchModel{std::move(model), q, dq, u, kindName(spec.kind)};
+}
+
+bool parseProfileModel(const char* kind, const char* links, const char* constrained, ModelSpec& spec) {
+  const std::string k = kind;
+  if (k == "planar") {
+    spec.kind = ModelKind::kPlanarChain;
+  } else if (k == "spatial") {
+    spec.kind = ModelKind::kSpatialChain;
+  } else if (k == "hand" || k == "scene") {
+    spec.kind = ModelKind::kHandTree;
+  } else {
+    std::fprintf(stderr, "unknown model '%s' (planar, spatial, hand, scene)\n", kind);
+    return false;
+  }
+  spec.links = k == "scene" ? 0 : std::atoi(links);
+  spec.constrained = std::atoi(constrained) != 0;
+  return true;
 }
 
 }  // namespace trellis::bench

@@ -50,4 +50,9 @@ const char* kindName(ModelKind kind);
 /// ModelBuilder throws, and std::runtime_error when the sampled state cannot be made consistent.
 BenchModel makeBenchModel(const ModelSpec& spec, std::uint32_t seed = 20100503u);
 
+/// The profile drivers' model arguments: kind (planar, spatial, hand, or scene = the hand scene),
+/// links (ignored for scene) and constrained (0 or 1). Returns false, having printed why, for an
+/// unknown kind.
+bool parseProfileModel(const char* kind, const char* links, const char* constrained, ModelSpec& spec);
+
 }  // namespace trellis::bench

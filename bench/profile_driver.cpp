@@ -19,7 +19,6 @@
 #include <string>
 
 int main(int argc, char** argv) {
-  using trellis::bench::ModelKind;
   if (argc < 5) {
     std::fprintf(stderr,
                  "usage: %s <planar|spatial|hand> <N> <constrained 0|1> <lin|dyn|fd> [iterations]\n",
@@ -28,18 +27,7 @@ int main(int argc, char** argv) {
   }
   const std::string kind = argv[1], what = argv[4];
   trellis::bench::ModelSpec spec;
-  if (kind == "planar") {
-    spec.kind = ModelKind::kPlanarChain;
-  } else if (kind == "spatial") {
-    spec.kind = ModelKind::kSpatialChain;
-  } else if (kind == "hand" || kind == "scene") {
-    spec.kind = ModelKind::kHandTree;
-  } else {
-    std::fprintf(stderr, "unknown model '%s' (planar, spatial, hand)\n", kind.c_str());
-    return 2;
-  }
-  spec.links = kind == "scene" ? 0 : std::atoi(argv[2]);
-  spec.constrained = std::atoi(argv[3]) != 0;
+  if (!trellis::bench::parseProfileModel(argv[1], argv[2], argv[3], spec)) return 2;
   const long iterations = argc > 5 ? std::atol(argv[5]) : 1000;
   if (what != "lin" && what != "dyn" && what != "fd") {
     std::fprintf(stderr, "unknown algorithm '%s' (lin, dyn, fd)\n", what.c_str());

@@ -24,7 +24,6 @@
 #include <string>
 
 int main(int argc, char** argv) {
-  using trellis::bench::ModelKind;
   if (argc < 5) {
     std::fprintf(stderr, "usage: %s <planar|spatial|hand|scene> <N|file> <nc 0|1> <lin|contract|tensors|fdjac> [iterations]\n",
                  argv[0]);
@@ -32,18 +31,7 @@ int main(int argc, char** argv) {
   }
   const std::string kind = argv[1], what = argv[4];
   trellis::bench::ModelSpec spec;
-  if (kind == "planar") {
-    spec.kind = ModelKind::kPlanarChain;
-  } else if (kind == "spatial") {
-    spec.kind = ModelKind::kSpatialChain;
-  } else if (kind == "hand" || kind == "scene") {
-    spec.kind = ModelKind::kHandTree;
-  } else {
-    std::fprintf(stderr, "unknown model '%s'\n", kind.c_str());
-    return 2;
-  }
-  spec.links = kind == "scene" ? 0 : std::atoi(argv[2]);
-  spec.constrained = std::atoi(argv[3]) != 0;
+  if (!trellis::bench::parseProfileModel(argv[1], argv[2], argv[3], spec)) return 2;
   const long iterations = argc > 5 ? std::atol(argv[5]) : 10;
   if (what != "lin" && what != "contract" && what != "tensors" && what != "fdjac") {
     std::fprintf(stderr, "unknown algorithm '%s'\n", what.c_str());
