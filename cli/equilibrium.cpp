@@ -116,7 +116,8 @@ int runEquilibrium(std::span<const std::string> args, std::ostream& out) {
     EquilibriumOptions eo;
     if (const auto v = options.value("--tolerance"))
       eo.tolerance = options.numberInRange("--tolerance", *v, 1e-300, 1e-3,
-                                           "max |q''| and |h| at the answer: above, not an equilibrium");
+                                           "the residual [q''; h] at the answer as a configuration change (radians, or "
+                                           "model lengths): above, not an equilibrium");
     if (const auto v = options.value("--max-iterations")) {
       eo.maxIterations = options.integer<int>("--max-iterations", *v, 1, 100000);
     }
@@ -130,6 +131,7 @@ int runEquilibrium(std::span<const std::string> args, std::ostream& out) {
     result["iterations"] = r.iterations;
     result["qdd_residual"] = r.accelerationResidual;
     result["h_residual"] = r.constraintResidual;
+    result["relative_residual"] = r.relativeResidual;
     result["isolated"] = r.isolated;
     result["max_real_eigenvalue"] = r.maxRealEigenvalue;
     result["configs"] = nameList(model.configNames());

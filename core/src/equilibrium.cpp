@@ -31,6 +31,7 @@ std::string EquilibriumResult::json() const {
   j["iterations"] = iterations;
   j["qdd_residual"] = detail::toJson(accelerationResidual);
   j["h_residual"] = detail::toJson(constraintResidual);
+  j["relative_residual"] = detail::toJson(relativeResidual);
   j["jacobian_rank"] = jacobianRank;
   j["isolated"] = isolated;
   j["max_real_eigenvalue"] = detail::toJson(maxRealEigenvalue);
@@ -48,8 +49,12 @@ EquilibriumResult findEquilibrium(const Model& model, Data& data, const Eigen::V
                                 std::to_string(n) + "), u " + std::to_string(u.size()) +
                                 " (m = " + std::to_string(model.nu()) + ")");
   }
-  if (!(options.tolerance > 0.0) || options.maxIterations < 1) {
-    throw std::invalid_argument("EquilibriumOptions: tolerance must be > 0 and maxIterations >= 1");
+  if (!(options.tolerance > 0.0 && options.tolerance <= 1e-3) || options.maxIterations < 1) {
+    std::ostringstream m;
+    m << "EquilibriumOptions: tolerance = " << options.tolerance << " must be in (0, 1e-3] (relative: the "
+      << "configuration change, in radians or model lengths, the residual amounts to) and maxIterations = "
+      << options.maxIterations << " >= 1";
+    throw std::invalid_argument(m.str());
   }
   std::vector<int> holonomic;
   for (int c = 0; c < nc; ++c)
@@ -75,10 +80,23 @@ EquilibriumResult findEquilibrium(const Model& model, Data& data, const Eigen::V
     }
     return F.allFinite();
   };
+  // Converged when every row of F is no larger than what a configuration change of `tolerance`
+  // (in radians, or in the model's length scale L for a prismatic coordinate) would produce:
+  // |F_i| ≤ tol · Σ_j |∂F_i/∂q_j| s_j. Each side carries row i's units (q̈ᵢ's or hᵢ's), so
+  // scaling the model's lengths, masses or time leaves the verdict unchanged — a fixed floor on
+  // |q̈| would not (1e-10 m/s² is 1e-7 mm/s²). relativeResidual = max_i |F_i| / (Σ_j |J_ij| s_j).
+  const Eigen::VectorXd s = coordinateScales(model);
+  Eigen::VectorXd rowScale(n + nh);
   const auto converged = [&] {
     r.accelerationResidual = n ? F.head(n).cwiseAbs().maxCoeff() : 0.0;
     r.constraintResidual = nh ? F.tail(nh).cwiseAbs().maxCoeff() : 0.0;
-    return r.accelerationResidual <= options.tolerance && r.constraintResidual <= options.tolerance;
+    rowScale.noalias() = J.cwiseAbs() * s;
+    r.relativeResidual = 0.0;
+    for (int i = 0; i < n + nh; ++i) {
+      const double ratio = rowScale(i) > 0.0 ? std::abs(F(i)) / rowScale(i) : (F(i) != 0.0 ? HUGE_VAL : 0.0);
+      r.relativeResidual = std::max(r.relativeResidual, ratio);
+    }
+    return r.relativeResidual <= options.tolerance;
   };
   const auto dynamicsFailure = [&](const char* where) {
     r.status = EquilibriumStatus::kDynamicsFailure;
@@ -99,7 +117,8 @@ EquilibriumResult findEquilibrium(const Model& model, Data& data, const Eigen::V
       r.status = EquilibriumStatus::kNotConverged;
       std::ostringstream m;
       m << "no equilibrium within " << k << " Newton iterations: |q''|inf = " << r.accelerationResidual
-        << ", |h|inf = " << r.constraintResidual << " (rank of dF/dq " << r.jacobianRank << " of " << n << ")";
+        << ", |h|inf = " << r.constraintResidual << ", relative residual " << r.relativeResidual
+        << " > tolerance " << options.tolerance << " (rank of dF/dq " << r.jacobianRank << " of " << n << ")";
       r.message = m.str();
       break;
     }
@@ -122,7 +141,8 @@ EquilibriumResult findEquilibrium(const Model& model, Data& data, const Eigen::V
       std::ostringstream m;
       m << "the Newton step does not reduce |F| at iteration " << k + 1
         << " (a minimum of |q''|^2 + |h|^2 that is not an equilibrium?): |q''|inf = "
-        << r.accelerationResidual << ", |h|inf = " << r.constraintResidual;
+        << r.accelerationResidual << ", |h|inf = " << r.constraintResidual << ", relative residual "
+        << r.relativeResidual;
       r.message = m.str();
       break;
     }

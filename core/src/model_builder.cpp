@@ -250,6 +250,26 @@ Eigen::Isometry3d Transform::evaluate(double q) const {
   return g;
 }
 
+double modelLengthScale(const Model& model) {
+  double L = 0.0;
+  for (const Joint& j : model.joints()) L = std::max(L, j.p0.norm());
+  for (const FramePlacement& f : model.frames()) L = std::max(L, f.p.norm());
+  for (const Constraint& c : model.constraints()) {
+    L = std::max({L, c.a.local.norm(), c.b.local.norm(), std::abs(c.distance)});
+  }
+  for (const LinearSpring& s : model.linearSprings()) {
+    L = std::max({L, s.a.local.norm(), s.b.local.norm(), std::abs(s.x0)});
+  }
+  return L > 0.0 && std::isfinite(L) ? L : 1.0;
+}
+
+Eigen::VectorXd coordinateScales(const Model& model) {
+  const double L = modelLengthScale(model);
+  Eigen::VectorXd s(model.nq());
+  for (int j = 0; j < model.nq(); ++j) s(j) = model.joints()[static_cast<std::size_t>(j)].revolute ? 1.0 : L;
+  return s;
+}
+
 int Model::frameIndex(std::string_view name) const {
   for (int i = 0; i < nframes(); ++i)
     if (frames_[i].name == name) return i;

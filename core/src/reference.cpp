@@ -72,22 +72,6 @@ ReferenceStatus ReferenceEvaluator::linearizeWithTangentBasis(double t,
   return out;
 }
 
-namespace {
-
-/// The model's length scale: the largest constant offset it is built from (joint placements,
-/// frame placements, constraint points, distances). Scaling the model's lengths by s scales it by s.
-double modelLengthScale(const Model& model) {
-  double L = 0.0;
-  for (const Joint& j : model.joints()) L = std::max(L, j.p0.norm());
-  for (const FramePlacement& f : model.frames()) L = std::max(L, f.p.norm());
-  for (const Constraint& c : model.constraints()) {
-    L = std::max({L, c.a.local.norm(), c.b.local.norm(), std::abs(c.distance)});
-  }
-  return L;
-}
-
-}  // namespace
-
 ReferenceConstraintCheck checkReferenceOnConstraints(const Model& model, const Trajectory& trajectory,
                                                      double tolerance) {
   if (!(tolerance > 0.0) || !std::isfinite(tolerance)) {

@@ -335,6 +335,35 @@ TEST_CASE("Static equilibria match closed forms and have q'' = 0", "[equilibrium
     CHECK(r.q(0) == 0.7);
     CHECK_FALSE(r.isolated);
   }
+  SECTION("the verdict is relative to the model: the same answer in any units") {
+    // sin(theta) = u / (m g l) = 0.3 on a 1 mg / 1 mm pendulum, on a unit one and on a 10 000 km
+    // one (g/l = 1e-6 s^-2: a fixed floor of 1e-10 on |q''| would accept theta 1e-4 rad off).
+    for (const double scale : {1e-3, 1.0, 1e7}) {
+      const double m = 1e-3 * scale, l = scale;
+      const double u = 0.3 * m * kG * l;
+      const Model model = pendulum(m, l, 0.2);
+      Data data(model);
+      const EquilibriumResult r = findEquilibrium(model, data, Eigen::VectorXd::Constant(1, 0.05), Eigen::VectorXd::Constant(1, u));
+      INFO("scale " << scale << ": " << r.describe());
+      REQUIRE(r.ok());
+      CHECK(r.q(0) == Approx(std::asin(0.3)).margin(1e-9));
+      CHECK(r.relativeResidual <= 1e-10);
+      // A loose tolerance stops early, by the same relative measure whatever the units.
+      EquilibriumOptions loose;
+      loose.tolerance = 1e-3;
+      const EquilibriumResult early = findEquilibrium(model, data, Eigen::VectorXd::Constant(1, 0.05), Eigen::VectorXd::Constant(1, u), loose);
+      REQUIRE(early.ok());
+      CHECK(std::abs(early.q(0) - std::asin(0.3)) <= 2e-3);
+    }
+  }
+  SECTION("a tolerance outside (0, 1e-3] is refused, naming its value") {
+    const Model model = pendulum(1.0, 1.0);
+    Data data(model);
+    EquilibriumOptions bad;
+    bad.tolerance = 1e300;
+    REQUIRE_THROWS_WITH(findEquilibrium(model, data, Eigen::VectorXd::Zero(1), Eigen::VectorXd::Zero(1), bad),
+                        Catch::Contains("tolerance = 1e+300"));
+  }
   SECTION("a torque larger than m g l has no equilibrium: a status, not a success") {
     const Model model = pendulum(1.0, 1.0);
     Data data(model);

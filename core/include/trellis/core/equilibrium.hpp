@@ -6,7 +6,10 @@
 // by Gauss–Newton with the exact Jacobian ∂F/∂q = [∂q̈/∂q; A_h] from computeLinearization
 // (q̈ is tangent to the constraints, so its n rows alone are rank deficient by nh; the h rows
 // complete them). Steps are least squares of minimum norm (complete orthogonal decomposition),
-// with a backtracking line search on ½‖F‖². Converged when ‖q̈‖∞ and ‖h‖∞ are below tolerance.
+// with a backtracking line search on ½‖F‖². Converged when every row of F is within what a
+// configuration change of `tolerance` would produce, |F_i| ≤ tol · Σ_j |∂F_i/∂q_j| s_j, with s_j = 1
+// for a revolute coordinate and the model's length scale for a prismatic one (modelLengthScale):
+// relative to the model's own terms, so the verdict does not change with units.
 // A continuum of equilibria (a free coordinate, no gravity) gives a rank-deficient ∂F/∂q: the
 // step of minimum norm still converges, to the nearest one, and `isolated` is false.
 //
@@ -21,12 +24,14 @@
 namespace trellis {
 
 struct EquilibriumOptions {
-  double tolerance = 1e-10;  ///< on ‖q̈‖∞ (units of q̈) and ‖h‖∞ (units of h); > 0
+  /// Relative, in (0, 1e-3]: the configuration change (radians, or model lengths) the residual
+  /// F = [q̈; h] amounts to at the answer (file comment).
+  double tolerance = 1e-10;
   int maxIterations = 50;    ///< Newton iterations (≥ 1)
 };
 
 enum class EquilibriumStatus {
-  kOk,               ///< ‖q̈‖∞, ‖h‖∞ ≤ tolerance at q
+  kOk,               ///< relativeResidual ≤ tolerance at q
   kNotConverged,     ///< iteration limit, or the line search found no decrease of ‖F‖ (a local
                      ///< minimum of ‖F‖ that is not an equilibrium): q is the best iterate
   kDynamicsFailure,  ///< the forward dynamics failed at an iterate (singular M or constraints)
@@ -50,6 +55,8 @@ struct EquilibriumResult {
   int iterations = 0;
   double accelerationResidual = 0.0;   ///< ‖q̈(q, 0, u)‖∞
   double constraintResidual = 0.0;     ///< ‖h(q)‖∞ (holonomic rows)
+  /// max_i |F_i| / Σ_j |∂F_i/∂q_j| s_j: the residual as a configuration change (file comment).
+  double relativeResidual = 0.0;
   int jacobianRank = 0;                ///< rank of ∂F/∂q at q
   bool isolated = true;                ///< rank = n: no continuum of equilibria through q
   /// Largest real part of the eigenvalues of the linearization on the constraint tangent space
@@ -60,7 +67,7 @@ struct EquilibriumResult {
   /// One line: "<status>[: message] (iterations, residuals, rank, stability)".
   std::string describe() const;
   /// {"status", "ok", "message", "t": null, "index": null, "iterations", "qdd_residual",
-  /// "h_residual", "jacobian_rank", "isolated", "max_real_eigenvalue", "q", "u", "lambda"}.
+  /// "h_residual", "relative_residual", "jacobian_rank", "isolated", "max_real_eigenvalue", "q", "u", "lambda"}.
   std::string json() const;
 };
 

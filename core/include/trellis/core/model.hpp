@@ -270,4 +270,14 @@ class Model {
   ModelTopology topology_;
 };
 
+/// The model's length scale L: the largest constant offset it is built from (joint and frame
+/// placements, constraint points and distances, spring rest lengths); 1 when it has none. Scaling
+/// every length of a model by s scales L by s, so a check relative to L (or to
+/// coordinateScales) gives the same verdict in any unit of length.
+double modelLengthScale(const Model& model);
+
+/// Per configuration variable (n), the size of one unit of motion in the model's own terms: 1 for a
+/// revolute coordinate (radians need no scale), L = modelLengthScale(model) for a prismatic one.
+Eigen::VectorXd coordinateScales(const Model& model);
+
 }  // namespace trellis
