@@ -5,6 +5,7 @@
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/linearization.hpp"
 #include "trellis/core/numdiff.hpp"
+#include "trellis/core/second_order.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -70,7 +71,21 @@ struct Transcription::Impl {
   NumDiffWorkspace numdiff;
   Eigen::MatrixXd fdJ;  // n×(2n + m)
   std::string error;
-  long dynamicsCount = 0, linearizationCount = 0;
+  long dynamicsCount = 0, linearizationCount = 0, secondOrderCount = 0;
+
+  // ---- Lagrangian Hessian (lower triangle, structure fixed at construction) -------------------
+  bool hessianOk = true;         // false with nonholonomic rows (hessianUnavailable says why)
+  std::string hessianWhy;
+  std::vector<int> hessRows, hessCols;
+  Data hessData;
+  SecondOrderWorkspace secondOrder;
+  std::vector<Eigen::MatrixXd> Hp;          // P blocks stride×stride: ∇² w.r.t. [x_p; u_p]
+  Eigen::MatrixXd C;                        // nx×P: Σ_d (coefficient of f_p in defect d) μ_d
+  Eigen::MatrixXd Hz;                       // stride×stride: one contraction
+  Eigen::MatrixXd slackCross;               // (ncH + nc)×n per interval, stacked: ∂²L/∂s∂q_b
+  Eigen::VectorXd horizonRow;               // P·stride: ∂²L/∂T∂z_p
+  Eigen::VectorXd hq, hdq, hu, hw, noRho, rhoScratch;
+  Eigen::MatrixXd sumS, third, scratchNN;   // n×n
 
   Impl(OptimalControlProblem p, DerivativeMode mode)
       : problem((p.validate(), std::move(p))),
@@ -87,7 +102,9 @@ struct Transcription::Impl {
         stride(2 * model.nq() + model.nu()),
         data(model),
         constraintData(model),
-        numdiff(model) {
+        numdiff(model),
+        hessData(model),
+        secondOrder(model, false) {
     for (int r = 0; r < nc; ++r) {
       if (model.constraints()[r].holonomic()) {
         holonomicRows.push_back(r);
@@ -125,6 +142,7 @@ struct Transcription::Impl {
     w.rows = &jacRows;
     w.cols = &jacCols;
     writeJacobian(z.data(), w);
+    setUpHessian();
   }
 
   double horizonOf(const double* z) const { return freeT ? z[horizonIdx] : problem.horizon; }
@@ -524,6 +542,202 @@ struct Transcription::Impl {
       }
     }
   }
+
+  // ---- Lagrangian Hessian ----------------------------------------------------------------------
+  //
+  // L = σ J + Σ_c μ_c g_c. The defects are linear in the point variables except through f_p (the
+  // separated Hermite–Simpson form makes the midpoint state a variable: no midpoint map to
+  // compose), through h = T Δτ, and through the closed-chain terms. Hence:
+  //  - point p: ∇²_{[x_p; u_p]} L = σ ∇²J_p + Σ_i c_{p,n+i} ∇²q̈_i, c_p = Σ_d α_{d,p} μ_d (α: −h/6,
+  //    −4h/6, −h/6 in the Simpson defect, −h/8, +h/8 in the Hermite one, −h/2 in the trapezoid):
+  //    one computeSecondOrderContraction per point (the q̇ half of f is linear);
+  //  - free T: h/T = Δτ, so ∂²L/∂T∂z_p = c_pᵀ ∂f_p/∂z_p / T + σ ∂²J/∂T∂z_p, and ∂²L/∂T² = 0;
+  //  - closed chains (holonomic rows): the slack terms −γ_j λ_qᵀ ∇h_j(q_b) − μ_r λ_q̇ᵀ A_r(q_b)ᵀ
+  //    of interval k (λ its Simpson/trapezoid multipliers) give ∂²/∂γ_j∂q_b = −S_jᵀ λ_q,
+  //    ∂²/∂μ_r∂q_b = −S_rᵀ λ_q̇, ∂²/∂q_b² = −Σ γ_j T_j[λ_q] − Σ μ_r T_r[λ_q̇]; the knot rows
+  //    ν_j h_j(q) + ν'_r A_r(q) q̇ give ∂²/∂q² = Σ ν_j S_j + Σ ν'_r T_r[q̇] and ∂²/∂q̇_i∂q_a =
+  //    Σ ν'_r S_r(i, a), with T_r[v](a, b) = Σ_i v_i ∂³h_r/∂q_i∂q_a∂q_b (addThirdDerivative).
+
+  void setUpHessian() {
+    if (nonholonomic) {
+      hessianOk = false;
+      hessianWhy = "the exact Hessian needs ∂²(A(q) v)/∂q² of every constraint row, which the core "
+                   "gives for holonomic rows only; this model has nonholonomic (knife-edge) rows";
+      return;
+    }
+    const int blockRows = ncH + nc;
+    Hp.assign(P, Eigen::MatrixXd::Zero(stride, stride));
+    C = Eigen::MatrixXd::Zero(nx, P);
+    Hz = Eigen::MatrixXd::Zero(stride, stride);
+    slackCross = Eigen::MatrixXd::Zero(std::max(0, (N - 1) * blockRows), n);
+    horizonRow = Eigen::VectorXd::Zero(P * stride);
+    hq = Eigen::VectorXd::Zero(n);
+    hdq = Eigen::VectorXd::Zero(n);
+    hu = Eigen::VectorXd::Zero(m);
+    hw = Eigen::VectorXd::Zero(n);
+    noRho.resize(0);
+    rhoScratch = Eigen::VectorXd::Zero(nc);
+    sumS = third = scratchNN = Eigen::MatrixXd::Zero(n, n);
+    // Structure, lower triangle (row ≥ column): each point's [x; u] block whole, the slack rows
+    // against the end knot's q, and the T row against every point variable.
+    for (int p = 0; p < P; ++p)
+      for (int i = 0; i < stride; ++i)
+        for (int j = 0; j <= i; ++j) {
+          hessRows.push_back(p * stride + i);
+          hessCols.push_back(p * stride + j);
+        }
+    for (int k = 0; k + 1 < N && nc > 0; ++k)
+      for (int r = 0; r < blockRows; ++r)
+        for (int a = 0; a < n; ++a) {
+          hessRows.push_back(slackOf(k) + r);
+          hessCols.push_back(knotPoint(k + 1) * stride + a);
+        }
+    if (freeT) {
+      for (int c = 0; c < P * stride; ++c) {
+        hessRows.push_back(horizonIdx);
+        hessCols.push_back(c);
+      }
+    }
+  }
+
+  bool secondOrderOk(const DynamicsStatus& status, int p, double T) {
+    if ((status.ok() || status.code == DynamicsCode::kRedundantConstraints) && Hz.allFinite()) return true;
+    error = "the second derivatives of the dynamics failed at " + describePoint(p, T) + ": " +
+            (status.message.empty() ? std::string("non-finite values") : status.message);
+    return false;
+  }
+
+  /// out += scale · Σ_r ρ_r T_r[v] at knot k (holonomic rows). c_r = A_r(q) q̈ + q̇ᵀ ∇²h_r q̇
+  /// vanishes identically along the forward dynamics, so its q–q̇ block of second derivatives is
+  /// zero: S_rᵀ ∂q̈/∂q̇ + Σ_i A_{r,i} ∇²_{qq̇} q̈_i + 2 T_r[q̇] = 0. At q̇ = v/‖v‖ and the contraction
+  /// w = A(q)ᵀ ρ this gives Σ_r ρ_r T_r[v] = −‖v‖/2 ((Σ ρ_r S_r)ᵀ ∂q̈/∂q̇ + H_{qq̇}) — exact, from
+  /// one more contraction (T_r[v] is linear in v; the unit velocity keeps the dynamics' scale).
+  bool addThirdDerivative(int k, const double* v, const Eigen::VectorXd& rho, double scale,
+                          Eigen::Ref<Eigen::MatrixXd> out) {
+    const Eigen::Map<const Eigen::VectorXd> vel(v, n);
+    const double norm = vel.norm();
+    if (norm == 0.0 || rho.isZero(0.0)) return true;
+    const int p = knotPoint(k);
+    hq = state(cachedZ.data(), p).head(n);
+    hdq = vel / norm;
+    hu = input(cachedZ.data(), p);
+    hw.noalias() = Ac[k].transpose() * rho;
+    sumS.setZero();
+    for (int r = 0; r < nc; ++r) sumS += rho(r) * hessian[k * nc + r];
+    const DynamicsStatus status =
+        computeSecondOrderContraction(model, hessData, secondOrder, hq, hdq, hu, hw, noRho, Hz);
+    ++secondOrderCount;
+    if (!secondOrderOk(status, p, horizonOf(cachedZ.data()))) return false;
+    third.noalias() = sumS.transpose() * hessData.dqdd_ddq;
+    third += Hz.block(0, n, n, n);
+    scratchNN = third.transpose();
+    third += scratchNN;  // symmetric part, ×2
+    out.noalias() -= (0.25 * scale * norm) * third;
+    return true;
+  }
+
+  bool hessianValues(const double* z, double sigma, const double* mult, double* values) {
+    if (!hessianOk) {
+      error = hessianWhy;
+      return false;
+    }
+    if (!evaluate(z, true)) return false;  // f, and S_r at the knots
+    const double T = horizonOf(z);
+    C.setZero();
+    for (int k = 0; k < N - 1; ++k) {
+      const double h = T * intervalFraction(k);
+      const int a = knotPoint(k), b = knotPoint(k + 1);
+      const Eigen::Map<const Eigen::VectorXd> lam(mult + k * intervalRows, nx);
+      if (hermiteSimpson) {
+        const Eigen::Map<const Eigen::VectorXd> lamH(mult + k * intervalRows + nx, nx);
+        C.col(a) += (-h / 6.0) * lam + (-h / 8.0) * lamH;
+        C.col(a + 1) += (-4.0 * h / 6.0) * lam;
+        C.col(b) += (-h / 6.0) * lam + (h / 8.0) * lamH;
+      } else {
+        C.col(a) += (-h / 2.0) * lam;
+        C.col(b) += (-h / 2.0) * lam;
+      }
+    }
+    const int lastPoint = knotPoint(N - 1);
+    for (int p = 0; p < P; ++p) {
+      Eigen::MatrixXd& H = Hp[p];
+      H.setZero();
+      const double wT = weightOverT(p);
+      const Eigen::Map<const Eigen::VectorXd> x = state(z, p), uu = input(z, p);
+      H.topLeftCorner(nx, nx) += (2.0 * sigma * wT * T) * problem.Q;
+      H.bottomRightCorner(m, m) += (2.0 * sigma * wT * T) * problem.R;
+      if (p == lastPoint) H.topLeftCorner(nx, nx) += (2.0 * sigma) * problem.Qf;
+      hw = C.col(p).tail(n);
+      const bool dynamics = !hw.isZero(0.0);
+      if (dynamics) {
+        hq = x.head(n);
+        hdq = x.tail(n);
+        hu = uu;
+        const DynamicsStatus status =
+            computeSecondOrderContraction(model, hessData, secondOrder, hq, hdq, hu, hw, noRho, Hz);
+        ++secondOrderCount;
+        if (!secondOrderOk(status, p, T)) return false;
+        H += Hz;
+      }
+      if (freeT) {
+        // c_pᵀ ∂f_p/∂z_p / T (f = [q̇; q̈]) and σ ∂²J/∂T∂z_p = 2σ w/T (Q e, R u).
+        Eigen::Map<Eigen::VectorXd> row(horizonRow.data() + p * stride, stride);
+        row.setZero();
+        row.segment(n, n) = C.col(p).head(n) / T;
+        if (dynamics) {
+          row.segment(0, n).noalias() += hessData.dqdd_dq.transpose() * hw / T;
+          row.segment(n, n).noalias() += hessData.dqdd_ddq.transpose() * hw / T;
+          row.segment(nx, m).noalias() += hessData.dqdd_du.transpose() * hw / T;
+        }
+        row.head(nx).noalias() += (2.0 * sigma * wT) * (problem.Q * (x - problem.goalState));
+        row.segment(nx, m).noalias() += (2.0 * sigma * wT) * (problem.R * uu);
+      }
+    }
+    if (nc > 0) {
+      const int blockRows = ncH + nc;
+      for (int k = 0; k + 1 < N; ++k) {
+        const int b = knotPoint(k + 1);
+        const double* lamQ = mult + k * intervalRows;
+        const double* lamV = lamQ + n;
+        const Eigen::Map<const Eigen::RowVectorXd> lq(lamQ, n), lv(lamV, n);
+        for (int j = 0; j < ncH; ++j) {
+          slackCross.row(k * blockRows + j).noalias() = -lq * hessian[(k + 1) * nc + holonomicRows[j]];
+        }
+        for (int r = 0; r < nc; ++r) {
+          slackCross.row(k * blockRows + ncH + r).noalias() = -lv * hessian[(k + 1) * nc + r];
+        }
+        rhoScratch.setZero();
+        for (int j = 0; j < ncH; ++j) rhoScratch(holonomicRows[j]) = z[slackOf(k) + j];
+        if (!addThirdDerivative(k + 1, lamQ, rhoScratch, -1.0, Hp[b].topLeftCorner(n, n))) return false;
+        rhoScratch = Eigen::Map<const Eigen::VectorXd>(z + slackOf(k) + ncH, nc);
+        if (!addThirdDerivative(k + 1, lamV, rhoScratch, -1.0, Hp[b].topLeftCorner(n, n))) return false;
+      }
+      for (int k = 0; k < N; ++k) {
+        const int p = knotPoint(k);
+        const double* nu = mult + knotRow(k);
+        Eigen::MatrixXd& H = Hp[p];
+        for (int j = 0; j < ncH; ++j) H.topLeftCorner(n, n) += nu[j] * hessian[k * nc + holonomicRows[j]];
+        for (int r = 0; r < nc; ++r) {
+          H.block(n, 0, n, n) += nu[ncH + r] * hessian[k * nc + r];
+          H.block(0, n, n, n) += nu[ncH + r] * hessian[k * nc + r].transpose();
+        }
+        rhoScratch = Eigen::Map<const Eigen::VectorXd>(nu + ncH, nc);
+        if (!addThirdDerivative(k, z + p * stride + n, rhoScratch, 1.0, H.topLeftCorner(n, n))) return false;
+      }
+    }
+    // Values in the structure's order.
+    int next = 0;
+    for (int p = 0; p < P; ++p)
+      for (int i = 0; i < stride; ++i)
+        for (int j = 0; j <= i; ++j) values[next++] = Hp[p](i, j);
+    for (int k = 0; k + 1 < N && nc > 0; ++k)
+      for (int r = 0; r < ncH + nc; ++r)
+        for (int a = 0; a < n; ++a) values[next++] = slackCross(k * (ncH + nc) + r, a);
+    if (freeT) {
+      for (int c = 0; c < P * stride; ++c) values[next++] = horizonRow(c);
+    }
+    return true;
+  }
 };
 
 Transcription::Transcription(OptimalControlProblem problem, DerivativeMode derivatives)
@@ -578,6 +792,18 @@ bool Transcription::evalJacobian(const double* z, double* values) {
   impl_->writeJacobian(z, w);
   return true;
 }
+
+bool Transcription::hessianAvailable() const { return impl_->hessianOk; }
+const std::string& Transcription::hessianUnavailableReason() const { return impl_->hessianWhy; }
+const std::vector<int>& Transcription::hessianRows() const { return impl_->hessRows; }
+const std::vector<int>& Transcription::hessianCols() const { return impl_->hessCols; }
+
+bool Transcription::evalHessian(const double* z, double objectiveFactor, const double* multipliers,
+                                double* values) {
+  return impl_->hessianValues(z, objectiveFactor, multipliers, values);
+}
+
+long Transcription::secondOrderEvaluations() const { return impl_->secondOrderCount; }
 
 const std::string& Transcription::lastError() const { return impl_->error; }
 long Transcription::dynamicsEvaluations() const { return impl_->dynamicsCount; }

@@ -107,10 +107,23 @@ class Transcription {
   bool evalJacobian(const double* z, double* values);          ///< in jacobianRows/Cols order
   const std::string& lastError() const;
 
+  // ---- Lagrangian Hessian: σ ∇²J + Σ_c μ_c ∇²g_c, exact (the core's second derivatives of the
+  // dynamics, computeSecondOrderContraction, one per point per evaluation). Lower triangle
+  // (row ≥ column) in a pattern fixed at construction; values allocation-free.
+  /// False with nonholonomic (knife-edge) rows, whose ∂²(A(q) v)/∂q² the core does not give;
+  /// hessianUnavailableReason() says so and evalHessian returns false.
+  bool hessianAvailable() const;
+  const std::string& hessianUnavailableReason() const;
+  const std::vector<int>& hessianRows() const;
+  const std::vector<int>& hessianCols() const;
+  /// objectiveFactor σ, multipliers μ (numConstraints()); values in hessianRows/Cols order.
+  bool evalHessian(const double* z, double objectiveFactor, const double* multipliers, double* values);
+
   /// Number of core evaluations so far (computeDynamics and computeLinearization calls, per
   /// point), a measure of the caching.
   long dynamicsEvaluations() const;
   long linearizationEvaluations() const;
+  long secondOrderEvaluations() const;  ///< computeSecondOrderContraction calls
 
   // ---- Reading a solution --------------------------------------------------------------------
   double horizon(const double* z) const;
