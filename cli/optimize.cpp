@@ -18,8 +18,8 @@ constexpr std::string_view kHelp = R"(usage: trellis optimize PROBLEM.json [--ou
 
 Reads an optimal control problem file (optimization/README.md: a scene file, the horizon, knots,
 boundary states, bounds and cost weights), transcribes it by direct collocation (Hermite-Simpson
-or trapezoidal) with the exact derivatives of the dynamics, and solves it with Ipopt (MUMPS,
-limited-memory quasi-Newton Hessian). The solution is then checked a posteriori: the exact
+or trapezoidal) with the exact first and second derivatives of the dynamics, and solves it with
+Ipopt (MUMPS, exact Lagrangian Hessian by default). The solution is then checked a posteriori: the exact
 dynamics are integrated (CVODES, rtol 1e-10) over every interval from every knot under the input
 as every trellis tool reads the CSV (linear between knots), and the worst miss of the next knot
 or of the Hermite reference at the interval's midpoint, relative to each state's range, must be
@@ -51,6 +51,11 @@ options:
                         the progress lines (5 is Ipopt's usual iteration log)
   --consistency-tol X   tolerance of the a-posteriori check (default 1e-3 of each state's range)
   --max-refinements N   rounds of mesh refinement (default 6; 0: check only)
+  --hessian NAME        the Lagrangian Hessian: exact (the transcription's exact second
+                        derivatives; the default unless the problem file says "hessian": "lbfgs")
+                        or lbfgs (Ipopt's limited-memory quasi-Newton approximation)
+  --cold-refinement     start each refinement round from the previous solution's primal point
+                        only (no multipliers, no Ipopt warm start; for comparison)
   --finite-difference   build the constraint Jacobian from central differences of the dynamics
                         instead of the exact linearization (for comparison)
   --quiet               no progress lines
@@ -70,8 +75,8 @@ e.g. a fixed boundary state off the constraint manifold); 2 on a usage error.
 int runOptimize(std::span<const std::string> args, std::ostream& out) {
   OptionSpec spec;
   spec.valued = {"--out", "--knots", "--method", "--max-iter", "--tol", "--print-level",
-                 "--consistency-tol", "--max-refinements"};
-  spec.flags = {"--finite-difference", "--quiet", "--json"};
+                 "--consistency-tol", "--max-refinements", "--hessian"};
+  spec.flags = {"--finite-difference", "--quiet", "--json", "--cold-refinement"};
   const ParsedOptions options("optimize", args, spec);
   const std::string path = options.singlePositional("the problem file");
 
@@ -103,6 +108,14 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
     solver.maxRefinements = options.integer<int>("--max-refinements", *v, 0, 50);
   }
   if (options.flag("--finite-difference")) solver.derivatives = DerivativeMode::kFiniteDifference;
+  if (auto v = options.value("--hessian")) {
+    try {
+      solver.hessian = parseEnum<HessianMode>(*v, "optimize: --hessian");
+    } catch (const std::invalid_argument& e) {
+      throw UsageError(e.what());
+    }
+  }
+  if (options.flag("--cold-refinement")) solver.warmStart = false;
   if (!options.flag("--quiet") && solver.printLevel == 0) {
     std::cerr << "iter        cost      constr_viol   dual_infeas     step\n";
     solver.onIteration = [](const IterationInfo& info) {

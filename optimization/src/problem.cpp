@@ -357,7 +357,7 @@ class FileParser {
     if (!root.is_object()) fail(source_ + ": expected a JSON object at the top level");
     checkKeys(root, "", {"description", "scene", "method", "knots", "horizon", "initial_state",
                          "final_state", "free_initial", "free_final", "state_bounds",
-                         "input_bounds", "cost", "initial_guess"});
+                         "input_bounds", "cost", "initial_guess", "hessian"});
     if (!root.contains("scene")) bad("scene", "missing (the path of a scene file)");
     const std::string scenePath = resolve(string(root["scene"], "scene"));
     Scene scene = loadScene(scenePath);
@@ -373,6 +373,14 @@ class FileParser {
         problem.method = CollocationMethod::kTrapezoidal;
       } else {
         bad("method", "'" + method + "' (expected \"hermite_simpson\" or \"trapezoidal\")");
+      }
+    }
+    if (root.contains("hessian")) {
+      const std::string mode = string(root["hessian"], "hessian");
+      try {
+        problem.hessian = parseEnum<HessianMode>(mode, "hessian");
+      } catch (const std::invalid_argument& e) {
+        fail(source_ + ": " + e.what());
       }
     }
     if (root.contains("knots")) {

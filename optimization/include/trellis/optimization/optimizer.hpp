@@ -30,6 +30,7 @@
 #include <Eigen/Core>
 
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -53,6 +54,14 @@ struct OptimizerOptions {
   double maxCpuTime = 1e6;         ///< max_cpu_time, seconds
   int limitedMemorySize = 6;       ///< limited_memory_max_history
   DerivativeMode derivatives = DerivativeMode::kExact;
+  /// The Lagrangian Hessian; unset: the problem's (OptimalControlProblem::hessian, default exact).
+  /// With nonholonomic constraints the exact Hessian is not available and L-BFGS is used (the
+  /// result's `hessian` and message say so).
+  std::optional<HessianMode> hessian;
+  /// Refinement rounds start from the previous round's primal and multipliers (carried onto the
+  /// refined mesh) with Ipopt's warm_start_init_point and μ_init = warmStartBarrier.
+  bool warmStart = true;
+  double warmStartBarrier = 1e-6;
   /// The a-posteriori check (file comment): "solved" requires the worst relative defect, and
   /// the slack's relative share, ≤ consistencyTolerance.
   double consistencyTolerance = 1e-3;
@@ -83,6 +92,7 @@ enum class OptimizationStatus {
 struct RefinementRound {
   int knots = 0;
   int iterations = 0;
+  HessianMode hessian = HessianMode::kExact;  ///< the Hessian Ipopt used
   std::string ipoptStatus;
   double maxDefect = 0.0;       ///< checkConsistency's worst relative defect (NaN when not checked)
   double maxSlackDefect = 0.0;  ///< the slack's worst relative share of a defect
@@ -112,7 +122,11 @@ struct OptimizationResult {
   double solveTime = 0.0;      ///< wall-clock seconds of all rounds (Ipopt and checks)
   double solveCpuTime = 0.0;   ///< CPU seconds of the process during them (std::clock)
   double horizon = 0.0;        ///< T of the returned iterate
-  long dynamicsEvaluations = 0, linearizationEvaluations = 0;
+  long dynamicsEvaluations = 0, linearizationEvaluations = 0, secondOrderEvaluations = 0;
+  HessianMode hessian = HessianMode::kExact;  ///< the Hessian Ipopt used (last round)
+  /// Ipopt's final multipliers (transcription layout): of g(z) = 0, and of the lower and upper
+  /// variable bounds.
+  Eigen::VectorXd constraintMultipliers, lowerBoundMultipliers, upperBoundMultipliers;
   /// The returned iterate at the knots — the solution, or the last iterate when the solve failed
   /// (empty only if that iterate is not finite; the message then says so).
   Trajectory trajectory;

@@ -14,6 +14,7 @@
 // A problem can also be read from a JSON problem file (optimization/README.md describes it).
 #pragma once
 
+#include "trellis/core/enum_names.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/core/model.hpp"
 
@@ -39,6 +40,20 @@ enum class CollocationMethod {
   kHermiteSimpson,  ///< separated Hermite–Simpson, midpoint states and inputs are variables (O(h⁴))
   kTrapezoidal,     ///< trapezoidal rule (O(h²)), the cheap option
 };
+
+/// The Hessian of the Lagrangian Ipopt works with (problem file "hessian", OptimizerOptions,
+/// CLI --hessian).
+enum class HessianMode {
+  kExact,          ///< the transcription's exact second derivatives (Transcription::evalHessian)
+  kLimitedMemory,  ///< Ipopt's limited-memory quasi-Newton (L-BFGS) approximation
+};
+
+/// Names: exact, lbfgs.
+inline EnumNameTable<HessianMode> enumNames(HessianMode) {
+  static constexpr EnumName<HessianMode> table[] = {{HessianMode::kExact, "exact"},
+                                                    {HessianMode::kLimitedMemory, "lbfgs"}};
+  return table;
+}
 
 struct OptimalControlProblem {
   /// The model; shared so that the problem, its transcription and results can outlive the scene.
@@ -73,6 +88,10 @@ struct OptimalControlProblem {
   Eigen::MatrixXd R, Q, Qf;
   Eigen::VectorXd goalState;
   double timeWeight = 0.0;
+
+  /// The Hessian the solver uses unless OptimizerOptions::hessian overrides it (problem file
+  /// "hessian": "exact" | "lbfgs"; default exact).
+  HessianMode hessian = HessianMode::kExact;
 
   /// Initial guess. Without one, the states are interpolated linearly from initialState to
   /// finalState and the inputs are 0 (clamped into their bounds).
