@@ -50,7 +50,7 @@ void solve(benchmark::State& state) {
   }
   state.SetLabel(name + (state.range(2) == 0 ? " exact" : " finite-difference"));
   state.counters["iterations"] = result.iterations;
-  state.counters["success"] = result.success() ? 1.0 : 0.0;
+  state.counters["success"] = result.ok() ? 1.0 : 0.0;
   state.counters["cost"] = result.cost;
   state.counters["viol"] = result.constraintViolation;
   state.counters["defect"] = result.consistency.maxDefect;
@@ -81,7 +81,7 @@ void refine(benchmark::State& state) {
   state.counters["iterations"] = result.iterations;
   state.counters["defect"] = result.consistency.maxDefect;
   state.counters["slack"] = result.maxSlackDefect;
-  state.counters["success"] = result.success() ? 1.0 : 0.0;
+  state.counters["success"] = result.ok() ? 1.0 : 0.0;
   state.counters["cpu_ms"] = 1e3 * cpu / static_cast<double>(state.iterations());
 }
 

@@ -3,6 +3,7 @@
 
 #include "trellis/core/data.hpp"
 #include "trellis/core/reference.hpp"
+#include "trellis/core/detail/report_json.hpp"
 
 #include <IpIpoptApplication.hpp>
 #include <IpIpoptCalculatedQuantities.hpp>
@@ -18,19 +19,6 @@
 #include <stdexcept>
 
 namespace trellis {
-
-const char* toString(OptimizationStatus status) {
-  switch (status) {
-    case OptimizationStatus::kSolved: return "solved";
-    case OptimizationStatus::kSolvedAcceptable: return "solved_acceptable";
-    case OptimizationStatus::kInconsistent: return "inconsistent";
-    case OptimizationStatus::kInfeasible: return "infeasible";
-    case OptimizationStatus::kIterationLimit: return "iteration_limit";
-    case OptimizationStatus::kStopped: return "stopped";
-    case OptimizationStatus::kFailed: return "failed";
-  }
-  return "unknown";
-}
 
 void OptimizerOptions::validate() const {
   auto bad = [](const std::string& what) { throw std::invalid_argument("OptimizerOptions." + what); };
@@ -86,15 +74,15 @@ std::string applicationStatusName(Ipopt::ApplicationReturnStatus s) {
   return "Unknown_Status";
 }
 
-OptimizationStatus classify(Ipopt::ApplicationReturnStatus s) {
+OptimizationCode classify(Ipopt::ApplicationReturnStatus s) {
   switch (s) {
-    case Ipopt::Solve_Succeeded: return OptimizationStatus::kSolved;
-    case Ipopt::Solved_To_Acceptable_Level: return OptimizationStatus::kSolvedAcceptable;
-    case Ipopt::Infeasible_Problem_Detected: return OptimizationStatus::kInfeasible;
+    case Ipopt::Solve_Succeeded: return OptimizationCode::kSolved;
+    case Ipopt::Solved_To_Acceptable_Level: return OptimizationCode::kSolvedAcceptable;
+    case Ipopt::Infeasible_Problem_Detected: return OptimizationCode::kInfeasible;
     case Ipopt::Maximum_Iterations_Exceeded:
-    case Ipopt::Maximum_CpuTime_Exceeded: return OptimizationStatus::kIterationLimit;
-    case Ipopt::User_Requested_Stop: return OptimizationStatus::kStopped;
-    default: return OptimizationStatus::kFailed;
+    case Ipopt::Maximum_CpuTime_Exceeded: return OptimizationCode::kIterationLimit;
+    case Ipopt::User_Requested_Stop: return OptimizationCode::kStopped;
+    default: return OptimizationCode::kFailed;
   }
 }
 
@@ -370,7 +358,7 @@ OptimizationResult solveOnce(const OptimalControlProblem& problem, const Optimiz
   std::string hessianNote;
   if (hessian == HessianMode::kExact && !transcription.hessianAvailable()) {
     hessian = HessianMode::kLimitedMemory;
-    hessianNote = "; L-BFGS Hessian used: " + transcription.hessianUnavailableReason();
+    hessianNote = "L-BFGS used: " + transcription.hessianUnavailableReason();
   }
   const bool warm = options.warmStart && previous != nullptr && previousProblem != nullptr;
   StartPoint start;
@@ -421,7 +409,7 @@ OptimizationResult solveOnce(const OptimalControlProblem& problem, const Optimiz
   if (status == Ipopt::Solve_Succeeded) status = app->OptimizeTNLP(nlp);
 
   result.ipoptStatus = applicationStatusName(status);
-  result.status = classify(status);
+  result.status.code = classify(status);
   result.iterations = nlp->iterations();
   result.variables = nlp->finalVariables();
   result.constraintMultipliers = nlp->finalLambda();
@@ -455,21 +443,22 @@ OptimizationResult solveOnce(const OptimalControlProblem& problem, const Optimiz
   result.midpointStates = transcription.midpointStates(z);
   result.midpointInputs = transcription.midpointInputs(z);
 
-  message << toString(result.status) << " (Ipopt: " << result.ipoptStatus << ") after "
-          << result.iterations << " iterations, cost " << result.cost << ", constraint violation "
-          << result.constraintViolation;
-  if (result.status == OptimizationStatus::kInfeasible) {
-    message << ": Ipopt converged to a point of local infeasibility; the bounds, boundary states "
-               "and horizon admit no trajectory it can find (the last iterate is returned)";
-  } else if (!result.success()) {
-    message << "; the last iterate is returned";
+  if (!result.ok()) {
+    message << "Ipopt: " << result.ipoptStatus << " after " << result.iterations << " iterations, cost "
+            << result.cost << ", constraint violation " << result.constraintViolation;
+    if (result.status.code == OptimizationCode::kInfeasible) {
+      message << ": Ipopt converged to a point of local infeasibility; the bounds, boundary states "
+                 "and horizon admit no trajectory it can find (the last iterate is returned)";
+    } else {
+      message << "; the last iterate is returned";
+    }
+    if (!nlp->haveFinal()) message << "; Ipopt returned no iterate (the initial guess is returned)";
+    if (!nlp->evaluationError().empty()) message << "; last evaluation failure: " << nlp->evaluationError();
+    if (!nlp->callbackError().empty()) message << "; " << nlp->callbackError();
+    if (!trajectoryError.empty()) message << "; no trajectory: " << trajectoryError;
   }
-  if (!nlp->haveFinal()) message << "; Ipopt returned no iterate (the initial guess is returned)";
-  if (!nlp->evaluationError().empty()) message << "; last evaluation failure: " << nlp->evaluationError();
-  if (!nlp->callbackError().empty()) message << "; " << nlp->callbackError();
-  if (!trajectoryError.empty()) message << "; no trajectory: " << trajectoryError;
-  message << hessianNote;
-  result.message = message.str();
+  result.status.message = message.str();
+  result.hessianNote = hessianNote;
   return result;
 }
 
@@ -577,7 +566,7 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
     info.maxSlackDefect = std::numeric_limits<double>::quiet_NaN();
     bool consistent = false;
     Eigen::VectorXd errors;
-    if (result.success() && result.trajectory.size() > 0) {
+    if (result.ok() && result.trajectory.size() > 0) {
       result.consistency = checkConsistency(*problem.model, result.trajectory, check);
       const Eigen::VectorXd slackShare = measureSlack(problem, options, result);
       info.maxDefect = result.consistency.maxDefect;
@@ -587,16 +576,23 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
     }
     info.solveTime = std::chrono::duration<double>(std::chrono::steady_clock::now() - roundStart).count();
     rounds.push_back(info);
-    if (!result.success() || consistent) break;
+    if (!result.ok() || consistent) break;
     // Ipopt converged but the result is not consistent: refine or report.
     previousProblem = problem;
     const bool canRefine = round < options.maxRefinements && errors.size() > 0 &&
                            refine(problem, result, errors, options);
     if (!canRefine) {
-      result.status = OptimizationStatus::kInconsistent;
+      result.status.code = OptimizationCode::kInconsistent;
       std::ostringstream m;
-      m << "inconsistent (Ipopt: " << result.ipoptStatus << ") with " << problem.knots
-        << " knots after " << round << " refinement round(s): ";
+      m << "Ipopt: " << result.ipoptStatus << ", " << problem.knots << " knots after " << round
+        << " refinement round(s): ";
+      if (result.consistency.integrated && !result.consistency.consistent && result.consistency.worstInterval >= 0) {
+        result.status.index = result.consistency.worstInterval;
+        result.status.t = result.trajectory.times()(result.consistency.worstInterval);
+      } else if (result.worstSlackInterval >= 0) {
+        result.status.index = result.worstSlackInterval;
+        result.status.t = result.trajectory.times()(result.worstSlackInterval);
+      }
       if (!result.consistency.integrated) {
         m << "the consistency check could not run: " << result.consistency.message;
       } else if (!result.consistency.consistent) {
@@ -614,7 +610,7 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
         m << " (the knot limit " << options.maxKnots << " would be exceeded)";
       }
       m << "; the last solution is returned";
-      result.message = m.str();
+      result.status.message = m.str();
       break;
     }
   }
@@ -625,17 +621,57 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
   result.rounds = std::move(rounds);
   result.solveTime = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   result.solveCpuTime = static_cast<double>(std::clock() - cpuStart) / CLOCKS_PER_SEC;
-  if (result.success()) {
-    std::ostringstream m;
-    m << result.message << "; " << result.consistency.message;
-    if (result.rounds.size() > 1) m << "; " << iterations << " iterations in all rounds";
-    if (problem.model->nc() > 0) m << ", slack share " << fmt(result.maxSlackDefect);
-    if (result.rounds.size() > 1) {
-      m << " after " << result.rounds.size() - 1 << " refinement round(s), " << problem.knots << " knots";
-    }
-    result.message = m.str();
-  }
+  if (result.ok()) result.status.message.clear();
   return result;
+}
+
+std::string OptimizationResult::describe() const {
+  std::ostringstream s;
+  s << status.describe() << " (Ipopt: " << ipoptStatus << ", " << iterations << " iterations in "
+    << rounds.size() << " round(s), " << trajectory.size() << " knots, cost " << formatStatusNumber(cost)
+    << ", constraint violation " << fmt(constraintViolation) << ", consistency defect "
+    << (consistency.integrated ? fmt(consistency.maxDefect) : std::string("not checked"));
+  if (worstSlackInterval >= 0) s << ", slack share " << fmt(maxSlackDefect);
+  s << ", " << toString(hessian) << " Hessian, " << fmt(solveTime) << " s)";
+  if (!hessianNote.empty()) s << "; " << hessianNote;
+  return s.str();
+}
+
+std::string OptimizationResult::json() const {
+  detail::ReportJson j = detail::statusJson(status);
+  using detail::toJson;
+  j["ipopt_status"] = ipoptStatus;
+  j["iterations"] = iterations;
+  j["cost"] = toJson(cost);
+  j["constraint_violation"] = toJson(constraintViolation);
+  j["bound_violation"] = toJson(boundViolation);
+  j["max_slack"] = toJson(maxSlack);
+  j["horizon"] = toJson(horizon);
+  j["knots"] = trajectory.size();
+  j["hessian"] = toString(hessian);
+  if (!hessianNote.empty()) j["hessian_note"] = hessianNote;
+  // null when the check did not run (Ipopt failed first, or an interval could not be
+  // integrated): a 0 would claim a consistency nobody measured.
+  j["consistency_defect"] = consistency.integrated ? toJson(consistency.maxDefect) : detail::ReportJson(nullptr);
+  j["consistency_checked"] = consistency.integrated;
+  if (consistency.integrated && consistency.worstInterval >= 0) {
+    j["consistency_where"] = {{"state", consistency.worstStateName},
+                              {"interval", consistency.worstInterval},
+                              {"time", toJson(consistency.worstTime)}};
+  }
+  if (worstSlackInterval >= 0) j["slack_defect"] = toJson(maxSlackDefect);
+  j["refinement_rounds"] = rounds.empty() ? 0 : rounds.size() - 1;
+  detail::ReportJson list = detail::ReportJson::array();
+  for (const RefinementRound& r : rounds) {
+    list.push_back({{"knots", r.knots},
+                    {"iterations", r.iterations},
+                    {"defect", toJson(r.maxDefect)},
+                    {"hessian", toString(r.hessian)}});
+  }
+  j["rounds"] = std::move(list);
+  j["solve_time_ms"] = toJson(1e3 * solveTime);
+  j["solve_cpu_time_ms"] = toJson(1e3 * solveCpuTime);
+  return j.dump();
 }
 
 }  // namespace trellis

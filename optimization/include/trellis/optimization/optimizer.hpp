@@ -23,6 +23,7 @@
 #pragma once
 
 #include "trellis/analysis/consistency.hpp"
+#include "trellis/core/status.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/optimization/problem.hpp"
 #include "trellis/optimization/transcription.hpp"
@@ -76,8 +77,10 @@ struct OptimizerOptions {
   void validate() const;
 };
 
-enum class OptimizationStatus {
-  kSolved,              ///< Ipopt converged to tol (Solve_Succeeded)
+/// The outcome of optimizeTrajectory (Status<OptimizationCode>: success is solved or
+/// solved_acceptable).
+enum class OptimizationCode {
+  kSolved,              ///< Ipopt converged to tol (Solve_Succeeded) and the result is consistent
   kSolvedAcceptable,    ///< converged to its acceptable tolerances (Solved_To_Acceptable_Level)
                         ///< and consistent
   kInconsistent,        ///< Ipopt converged but the solution fails the consistency check (or the
@@ -87,6 +90,23 @@ enum class OptimizationStatus {
   kStopped,             ///< onIteration returned false
   kFailed,              ///< any other Ipopt failure (restoration failed, step too small, …)
 };
+
+/// Names: solved, solved_acceptable, inconsistent, infeasible, iteration_limit, stopped, failed.
+inline EnumNameTable<OptimizationCode> enumNames(OptimizationCode) {
+  static constexpr EnumName<OptimizationCode> table[] = {
+      {OptimizationCode::kSolved, "solved"},
+      {OptimizationCode::kSolvedAcceptable, "solved_acceptable"},
+      {OptimizationCode::kInconsistent, "inconsistent"},
+      {OptimizationCode::kInfeasible, "infeasible"},
+      {OptimizationCode::kIterationLimit, "iteration_limit"},
+      {OptimizationCode::kStopped, "stopped"},
+      {OptimizationCode::kFailed, "failed"}};
+  return table;
+}
+
+constexpr bool isSuccess(OptimizationCode code) {
+  return code == OptimizationCode::kSolved || code == OptimizationCode::kSolvedAcceptable;
+}
 
 /// One solve of the refinement sequence.
 struct RefinementRound {
@@ -99,14 +119,15 @@ struct RefinementRound {
   double solveTime = 0.0;       ///< wall-clock seconds (Ipopt and the check)
 };
 
-/// "solved", "solved_acceptable", "inconsistent", "infeasible", "iteration_limit", "stopped",
-/// "failed".
-const char* toString(OptimizationStatus status);
-
 struct OptimizationResult {
-  OptimizationStatus status = OptimizationStatus::kFailed;
+  /// code; message (empty on success; else why, with Ipopt's status and the last evaluation
+  /// failure, or for inconsistent the state, interval and time of the worst defect); for
+  /// inconsistent, t and index are the worst interval's start time and index (else NaN, −1).
+  Status<OptimizationCode> status{OptimizationCode::kFailed};
   std::string ipoptStatus;     ///< Ipopt's ApplicationReturnStatus name, e.g. "Solve_Succeeded"
-  std::string message;         ///< one line for a person: the status and, on failure, why
+  /// Non-empty when the exact Hessian was asked for but not available (knife edges): why, and
+  /// that L-BFGS was used.
+  std::string hessianNote;
   int iterations = 0;          ///< Ipopt iterations, summed over the rounds
   double cost = 0.0;           ///< J at the returned iterate
   double constraintViolation = 0.0;  ///< max |g(z)| of the returned iterate (unscaled)
@@ -133,9 +154,17 @@ struct OptimizationResult {
   Eigen::MatrixXd midpointStates, midpointInputs;  ///< Hermite–Simpson only (2n×(N−1), m×(N−1))
   Eigen::VectorXd variables;   ///< z (transcription layout)
 
-  bool success() const {
-    return status == OptimizationStatus::kSolved || status == OptimizationStatus::kSolvedAcceptable;
-  }
+  /// Solved (or solved_acceptable) and consistent: the trajectory is right and complete.
+  bool ok() const { return status.ok(); }
+  /// One line: the status, then Ipopt's status, iterations, rounds, knots, cost, constraint
+  /// violation, consistency defect (and the slack's share with constraints), Hessian, time.
+  std::string describe() const;
+  /// {"status", "ok", "message", "t", "index", "ipopt_status", "iterations", "cost",
+  /// "constraint_violation", "bound_violation", "max_slack", "horizon", "knots", "hessian",
+  /// "consistency_defect" (null when not checked), "consistency_checked", "consistency_where"
+  /// (when checked: state, interval, time), "slack_defect" (with constraints), "refinement_rounds",
+  /// "rounds" ([{knots, iterations, defect, hessian}]), "solve_time_ms", "solve_cpu_time_ms"}.
+  std::string json() const;
 };
 
 /// Transcribes, solves, checks and refines (file comment). Throws ProblemError / std::invalid_argument for a bad problem or bad
