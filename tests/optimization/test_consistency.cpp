@@ -261,6 +261,10 @@ TEST_CASE("consistency: a knife edge in the optimizer keeps A q' = 0", "[consist
   CHECK(recheck(p, r, 1e-3).consistent);
   // The skate turned (a straight push cannot reach y = 0.5).
   CHECK(r.trajectory.states().row(2).cwiseAbs().maxCoeff() > 0.1);
+  // A knife edge has no exact Hessian (transcription.hpp): L-BFGS, and the result says why.
+  CHECK(r.hessian == trellis::HessianMode::kLimitedMemory);
+  CHECK_THAT(r.hessianNote, Catch::Contains("nonholonomic"));
+  CHECK_THAT(r.describe(), Catch::Contains("lbfgs Hessian") && Catch::Contains("nonholonomic"));
 }
 
 TEST_CASE("consistency: checkConsistency on a hand-made trajectory file names a corrupted knot",
