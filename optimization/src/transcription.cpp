@@ -84,7 +84,7 @@ struct Transcription::Impl {
   Eigen::MatrixXd Hz;                       // stride×stride: one contraction
   Eigen::MatrixXd slackCross;               // (ncH + nc)×n per interval, stacked: ∂²L/∂s∂q_b
   Eigen::VectorXd horizonRow;               // P·stride: ∂²L/∂T∂z_p
-  Eigen::VectorXd hq, hdq, hu, hw, noRho, rhoScratch;
+  Eigen::VectorXd hq, hdq, hu, hw, hwScaled, stateError, noRho, rhoScratch;
   Eigen::MatrixXd sumS, third, scratchNN;   // n×n
 
   Impl(OptimalControlProblem p, DerivativeMode mode)
@@ -575,6 +575,8 @@ struct Transcription::Impl {
     hdq = Eigen::VectorXd::Zero(n);
     hu = Eigen::VectorXd::Zero(m);
     hw = Eigen::VectorXd::Zero(n);
+    hwScaled = Eigen::VectorXd::Zero(n);
+    stateError = Eigen::VectorXd::Zero(nx);
     noRho.resize(0);
     rhoScratch = Eigen::VectorXd::Zero(nc);
     sumS = third = scratchNN = Eigen::MatrixXd::Zero(n, n);
@@ -685,12 +687,14 @@ struct Transcription::Impl {
         row.setZero();
         row.segment(n, n) = C.col(p).head(n) / T;
         if (dynamics) {
-          row.segment(0, n).noalias() += hessData.dqdd_dq.transpose() * hw / T;
-          row.segment(n, n).noalias() += hessData.dqdd_ddq.transpose() * hw / T;
-          row.segment(nx, m).noalias() += hessData.dqdd_du.transpose() * hw / T;
+          hwScaled = hw / T;  // the products below then need no temporary
+          row.segment(0, n).noalias() += hessData.dqdd_dq.transpose() * hwScaled;
+          row.segment(n, n).noalias() += hessData.dqdd_ddq.transpose() * hwScaled;
+          row.segment(nx, m).noalias() += hessData.dqdd_du.transpose() * hwScaled;
         }
-        row.head(nx).noalias() += (2.0 * sigma * wT) * (problem.Q * (x - problem.goalState));
-        row.segment(nx, m).noalias() += (2.0 * sigma * wT) * (problem.R * uu);
+        stateError = x - problem.goalState;
+        row.head(nx).noalias() += (2.0 * sigma * wT) * problem.Q * stateError;
+        row.segment(nx, m).noalias() += (2.0 * sigma * wT) * problem.R * uu;
       }
     }
     if (nc > 0) {
