@@ -2,8 +2,9 @@
 //
 // The transcription (transcription.hpp) is handed to Ipopt 3.11 through its TNLP interface (kept
 // in src/, Ipopt appears in no public header): exact sparse constraint Jacobian, analytic cost
-// gradient, and the Hessian of the Lagrangian approximated by Ipopt's limited-memory
-// quasi-Newton (L-BFGS) update. Linear solver: MUMPS (Debian's build).
+// gradient, and the exact Hessian of the Lagrangian (Transcription::evalHessian; or, by choice or
+// with knife-edge constraints, Ipopt's limited-memory quasi-Newton (L-BFGS) update). Linear
+// solver: MUMPS (Debian's build).
 //
 // "solved" means the plant can follow the result: after Ipopt converges, the knots are checked a
 // posteriori (checkConsistency, trellis/analysis/consistency.hpp: the exact dynamics integrated by
@@ -18,7 +19,8 @@
 // local order of the defect (5 for Hermite–Simpson, 3 for trapezoidal): with ε ∝ h^(p+1), that
 // brings the interval to half the tolerance. The new problem is warm-started from the previous
 // solution (states from its Hermite spline, inputs exactly, since the input is piecewise linear
-// and the new knots subdivide the old intervals). Rounds stop at the tolerance, at
+// and the new knots subdivide the old intervals) and, with `warmStart`, from its multipliers
+// carried onto the new mesh (Ipopt's warm_start_init_point; optimizer.cpp: carryOver). Rounds stop at the tolerance, at
 // maxRefinements, or when the knots would exceed maxKnots.
 #pragma once
 

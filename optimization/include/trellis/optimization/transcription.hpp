@@ -4,7 +4,9 @@
 //   minimize J(z)   subject to   g(z) = 0,   z_lower ≤ z ≤ z_upper,
 //
 // with exact first derivatives: ∂g/∂z is assembled from the core's A = ∂f/∂x and B = ∂f/∂u
-// (computeLinearization) and ∂J/∂z is analytic. The NLP is independent of the solver; the Ipopt
+// (computeLinearization) and ∂J/∂z is analytic; and with exact second derivatives: the
+// Lagrangian Hessian from the core's computeSecondOrderContraction (evalHessian, formulas in
+// transcription.cpp and optimization/README.md). The NLP is independent of the solver; the Ipopt
 // adapter (optimizer.hpp) and the tests' finite-difference checker both call it.
 //
 // Knots t_k = T τ_k on the mesh τ (problem.mesh; uniform τ_k = k/(N − 1) by default), interval
