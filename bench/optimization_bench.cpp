@@ -24,7 +24,8 @@
 // The `swingup` family measures issue 30's exact Hessian against L-BFGS (hessian = 0: exact, 1:
 // lbfgs) with the default options (refinement up to 6 rounds, warm-started) on the example
 // problems and the swing-ups of examples/problems/swingups (turntable arm, 4- and 5-link chains,
-// turntable 4-link chain, two with joint speed limits). Counters: iterations (all rounds),
+// turntable 4-link chain, two with joint speed limits; the paper pendulum with its constraint
+// force bounded). Counters: iterations (all rounds),
 // rounds, knots (final), success (1 = solved and consistent), inconsistent (1 when the refinement
 // limit was reached first), iteration_limit (1 when a round hit Ipopt's limit), cost, defect,
 // cpu_ms; the label lists the iterations per round.
@@ -102,7 +103,8 @@ const char* const kSwingups[] = {"cart_pole_swingup",
                                  "swingups/chain4_swingup",
                                  "swingups/chain5_swingup",
                                  "swingups/chain5_speed_limit_swingup",
-                                 "swingups/turntable_chain4_swingup"};
+                                 "swingups/turntable_chain4_swingup",
+                                 "swingups/paper_pendulum_force_bound_transfer"};
 
 void swingup(benchmark::State& state) {
   const std::string name = kSwingups[state.range(0)];

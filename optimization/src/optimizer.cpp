@@ -102,6 +102,7 @@ class CollocationNlp : public Ipopt::TNLP {
                  StartPoint start)
       : t_(transcription), options_(options), exactHessian_(exactHessian), start_(std::move(start)) {
     t_.variableBounds(lower_, upper_);
+    t_.constraintBounds(gLower_, gUpper_);
     finalZ_ = start_.z;
     finalLambda_ = Eigen::VectorXd::Zero(t_.numConstraints());
     finalZL_ = finalZU_ = Eigen::VectorXd::Zero(t_.numVariables());
@@ -124,8 +125,11 @@ class CollocationNlp : public Ipopt::TNLP {
       x_l[i] = std::max(lower_(i), -kIpoptInfinity);
       x_u[i] = std::min(upper_(i), kIpoptInfinity);
     }
-    std::fill(g_l, g_l + m, 0.0);  // every constraint is an equality g(z) = 0
-    std::fill(g_u, g_u + m, 0.0);
+    // Equalities g(z) = 0, and the constraint-force rows between their bounds.
+    for (Index i = 0; i < m; ++i) {
+      g_l[i] = std::max(gLower_(i), -kIpoptInfinity);
+      g_u[i] = std::min(gUpper_(i), kIpoptInfinity);
+    }
     return true;
   }
 
@@ -227,7 +231,7 @@ class CollocationNlp : public Ipopt::TNLP {
   const OptimizerOptions& options_;
   bool exactHessian_;
   StartPoint start_;
-  Eigen::VectorXd lower_, upper_, finalZ_, finalLambda_, finalZL_, finalZU_;
+  Eigen::VectorXd lower_, upper_, gLower_, gUpper_, finalZ_, finalLambda_, finalZL_, finalZU_;
   bool haveFinal_ = false;
   int iterations_ = 0;
   std::string evaluationError_, callbackError_;
@@ -292,8 +296,10 @@ StartPoint carryOver(const Transcription& now, const OptimalControlProblem& befo
   const int rowsPer = hs ? 2 * nx + m : nx;
   const Eigen::VectorXd tauOld = before.meshFractions(), tauNew = p.meshFractions();
   const int No = static_cast<int>(tauOld.size()), Nn = static_cast<int>(tauNew.size());
-  const int knotRows = nc > 0 ? (now.numConstraints() - (Nn - 1) * rowsPer) / Nn : 0;
-  if (r.constraintMultipliers.size() != (No - 1) * rowsPer + No * knotRows ||
+  const int F = now.forceRowsPerPoint();
+  const int Pn0 = hs ? 2 * Nn - 1 : Nn, Po0 = hs ? 2 * No - 1 : No;
+  const int knotRows = nc > 0 ? (now.numConstraints() - (Nn - 1) * rowsPer - Pn0 * F) / Nn : 0;
+  if (r.constraintMultipliers.size() != (No - 1) * rowsPer + No * knotRows + Po0 * F ||
       r.lowerBoundMultipliers.size() != r.variables.size() || !r.constraintMultipliers.allFinite()) {
     return start;  // nothing usable to carry (Ipopt returned no multipliers)
   }
@@ -323,10 +329,21 @@ StartPoint carryOver(const Transcription& now, const OptimalControlProblem& befo
       interpolateColumns(tauOld, knotValues, tauNew(k), seg);
     }
   }
-  // Bound multipliers of the point variables as densities over the quadrature weight.
+  // Bound multipliers of the point variables, and the multipliers of the constraint-force rows,
+  // as densities over the quadrature weight.
   Eigen::VectorXd sOld, wOld, sNew, wNew;
   pointFractions(tauOld, hs, sOld, wOld);
   pointFractions(tauNew, hs, sNew, wNew);
+  if (F > 0) {
+    const int oldStart = (No - 1) * rowsPer + No * knotRows, newStart = now.forceRow(0);
+    Eigen::MatrixXd density(F, Po0);
+    for (int q = 0; q < Po0; ++q) density.col(q) = r.constraintMultipliers.segment(oldStart + q * F, F) / wOld(q);
+    for (int q = 0; q < Pn0; ++q) {
+      auto seg = start.lambda.segment(newStart + q * F, F);
+      interpolateColumns(sOld, density, sNew(q), seg);
+      seg *= wNew(q);
+    }
+  }
   const int stride = nx + m;
   const int Po = static_cast<int>(sOld.size()), Pn = static_cast<int>(sNew.size());
   start.zLower = Eigen::VectorXd::Zero(now.numVariables());
@@ -421,7 +438,10 @@ OptimizationResult solveOnce(const OptimalControlProblem& problem, const Optimiz
   Eigen::VectorXd g(transcription.numConstraints());
   std::ostringstream message;
   if (transcription.evalConstraints(z, g.data())) {
-    result.constraintViolation = g.size() > 0 ? g.cwiseAbs().maxCoeff() : 0.0;
+    Eigen::VectorXd gLower, gUpper;  // violation beyond each row's bounds (0 = 0 for equalities)
+    transcription.constraintBounds(gLower, gUpper);
+    result.constraintViolation =
+        g.size() > 0 ? (gLower - g).cwiseMax(g - gUpper).cwiseMax(0.0).maxCoeff() : 0.0;
   } else {
     result.constraintViolation = std::numeric_limits<double>::quiet_NaN();
   }

@@ -53,6 +53,8 @@ struct Transcription::Impl {
   int slackStart;     // first slack variable
   int horizonIdx;     // −1 when fixed
   int numVars, numCons, defectRows;
+  std::vector<int> forceRows;  // constraint rows r with a finite bound on λ_r (nF of them)
+  int nF = 0, forceStart = 0;  // nF rows per point, from row forceStart on (point by point)
 
   std::vector<int> jacRows, jacCols;
 
@@ -62,6 +64,8 @@ struct Transcription::Impl {
   bool haveDynamics = false, haveLinearization = false;
   Eigen::MatrixXd F;                        // nx×P: f at every point
   std::vector<Eigen::MatrixXd> Ap, Bp;      // P blocks: ∂f/∂x (nx×nx), ∂f/∂u (nx×m)
+  Eigen::MatrixXd Lam;                      // nc×P: λ at every point (with force bounds)
+  std::vector<Eigen::MatrixXd> DL;          // P blocks nc×(nx + m): ∂λ/∂[x; u] (with force bounds)
   Eigen::MatrixXd hValue;                   // nc×N: h(q_k)
   std::vector<Eigen::MatrixXd> Ac, Avq;     // N blocks nc×n: A_c(q_k), ∂(A_c q̇)/∂q at knot k
   // N·nc blocks n×n: S_r(q_k)(i, j) = ∂A_{r,i}/∂q_j (= ∇²h_r for a holonomic row)
@@ -84,7 +88,7 @@ struct Transcription::Impl {
   Eigen::MatrixXd Hz;                       // stride×stride: one contraction
   Eigen::MatrixXd slackCross;               // (ncH + nc)×n per interval, stacked: ∂²L/∂s∂q_b
   Eigen::VectorXd horizonRow;               // P·stride: ∂²L/∂T∂z_p
-  Eigen::VectorXd hq, hdq, hu, hw, hwScaled, stateError, noRho, rhoScratch;
+  Eigen::VectorXd hq, hdq, hu, hw, hwScaled, stateError, noRho, rhoScratch, rhoPoint;
   Eigen::MatrixXd sumS, third, scratchNN;   // n×n
 
   Impl(OptimalControlProblem p, DerivativeMode mode)
@@ -120,12 +124,19 @@ struct Transcription::Impl {
     numVars = slackStart + slackVars + (freeT ? 1 : 0);
     intervalRows = hermiteSimpson ? 2 * nx + m : nx;
     defectRows = (N - 1) * intervalRows;
-    numCons = defectRows + N * (ncH + nc);
+    for (int r = 0; r < nc; ++r) {
+      if (std::isfinite(problem.forceLower(r)) || std::isfinite(problem.forceUpper(r))) forceRows.push_back(r);
+    }
+    nF = static_cast<int>(forceRows.size());
+    forceStart = defectRows + N * (ncH + nc);
+    numCons = forceStart + P * nF;
 
     cachedZ = Eigen::VectorXd::Constant(numVars, std::numeric_limits<double>::quiet_NaN());
     F = Eigen::MatrixXd::Zero(nx, P);
     Ap.assign(P, Eigen::MatrixXd::Zero(nx, nx));
     Bp.assign(P, Eigen::MatrixXd::Zero(nx, m));
+    Lam = Eigen::MatrixXd::Zero(nc, P);
+    DL.assign(nF > 0 ? P : 0, Eigen::MatrixXd::Zero(nc, nx + m));
     hValue = Eigen::MatrixXd::Zero(nc, N);
     Ac.assign(N, Eigen::MatrixXd::Zero(nc, n));
     Avq.assign(N, Eigen::MatrixXd::Zero(nc, n));
@@ -318,7 +329,7 @@ struct Transcription::Impl {
       u = Eigen::Map<const Eigen::VectorXd>(x + nx, m);
       const bool isKnot = !hermiteSimpson || p % 2 == 0;
       const int k = hermiteSimpson ? p / 2 : p;
-      if (linearize && (derivatives == DerivativeMode::kExact || (isKnot && nc > 0))) {
+      if (linearize && (derivatives == DerivativeMode::kExact || (isKnot && nc > 0) || nF > 0)) {
         ++linearizationCount;
         if (!statusOk(computeLinearization(model, data, q, dq, u), p, T)) return false;
         if (!data.A.allFinite() || !data.B.allFinite()) {
@@ -330,12 +341,14 @@ struct Transcription::Impl {
           Bp[p] = data.B;
         }
         if (isKnot && nc > 0) Avq[k] = data.constraintVelocityJacobian;
+        if (nF > 0) DL[p] = data.dlambda_dx;
       } else {
         ++dynamicsCount;
         if (!statusOk(computeDynamics(model, data, q, dq, u), p, T)) return false;
       }
       F.col(p).head(n) = dq;
       F.col(p).tail(n) = data.qdd;
+      if (nc > 0) Lam.col(p) = data.lambda;
       if (isKnot && nc > 0) {
         hValue.col(k) = data.constraintValue;
         Ac[k] = data.constraintJacobian;
@@ -430,6 +443,8 @@ struct Transcription::Impl {
       for (int j = 0; j < ncH; ++j) g[knotRow(k) + j] = hValue(holonomicRows[j], k);
       Eigen::Map<Eigen::VectorXd>(g + knotRow(k) + ncH, nc) = Ac[k] * dqk;
     }
+    for (int p = 0; p < P; ++p)
+      for (int j = 0; j < nF; ++j) g[forceStart + p * nF + j] = Lam(forceRows[j], p);
   }
 
   // ---- Constraint Jacobian ---------------------------------------------------------------------
@@ -541,9 +556,16 @@ struct Transcription::Impl {
         for (int j = 0; j < n; ++j) w.put(row0 + ncH + r, col0 + n + j, Ac[k](r, j));
       }
     }
+    // λ_r at point p: ∂λ_r/∂[x_p; u_p] (the core's dlambda_dx).
+    for (int p = 0; p < P; ++p)
+      for (int j = 0; j < nF; ++j)
+        for (int c = 0; c < stride; ++c) w.put(forceStart + p * nF + j, p * stride + c, DL[p](forceRows[j], c));
   }
 
   // ---- Lagrangian Hessian ----------------------------------------------------------------------
+  //
+  // (With constraint-force bounds, the rows λ_r(x_p, u_p) add ρ_p = their multipliers to the
+  // point's contraction: Σ_i w_i ∇²q̈_i + Σ_r ρ_r ∇²λ_r in one call.)
   //
   // L = σ J + Σ_c μ_c g_c. The defects are linear in the point variables except through f_p (the
   // separated Hermite–Simpson form makes the midpoint state a variable: no midpoint map to
@@ -579,6 +601,7 @@ struct Transcription::Impl {
     stateError = Eigen::VectorXd::Zero(nx);
     noRho.resize(0);
     rhoScratch = Eigen::VectorXd::Zero(nc);
+    rhoPoint = Eigen::VectorXd::Zero(nc);
     sumS = third = scratchNN = Eigen::MatrixXd::Zero(n, n);
     // Structure, lower triangle (row ≥ column): each point's [x; u] block whole, the slack rows
     // against the end knot's q, and the T row against every point variable.
@@ -670,13 +693,17 @@ struct Transcription::Impl {
       H.bottomRightCorner(m, m) += (2.0 * sigma * wT * T) * problem.R;
       if (p == lastPoint) H.topLeftCorner(nx, nx) += (2.0 * sigma) * problem.Qf;
       hw = C.col(p).tail(n);
-      const bool dynamics = !hw.isZero(0.0);
+      // The force rows' multipliers weigh ∇²λ_r at this point (ρ of the contraction).
+      rhoPoint.setZero();
+      for (int j = 0; j < nF; ++j) rhoPoint(forceRows[j]) = mult[forceStart + p * nF + j];
+      const bool forces = nF > 0 && !rhoPoint.isZero(0.0);
+      const bool dynamics = !hw.isZero(0.0) || forces;
       if (dynamics) {
         hq = x.head(n);
         hdq = x.tail(n);
         hu = uu;
-        const DynamicsStatus status =
-            computeSecondOrderContraction(model, hessData, secondOrder, hq, hdq, hu, hw, noRho, Hz);
+        const DynamicsStatus status = computeSecondOrderContraction(model, hessData, secondOrder, hq, hdq, hu,
+                                                                    hw, forces ? rhoPoint : noRho, Hz);
         ++secondOrderCount;
         if (!secondOrderOk(status, p, T)) return false;
         H += Hz;
@@ -796,6 +823,20 @@ bool Transcription::evalJacobian(const double* z, double* values) {
   impl_->writeJacobian(z, w);
   return true;
 }
+
+void Transcription::constraintBounds(Eigen::VectorXd& lower, Eigen::VectorXd& upper) const {
+  const Impl& s = *impl_;
+  lower = Eigen::VectorXd::Zero(s.numCons);
+  upper = Eigen::VectorXd::Zero(s.numCons);
+  for (int p = 0; p < s.P; ++p) {
+    for (int j = 0; j < s.nF; ++j) {
+      lower(s.forceStart + p * s.nF + j) = s.problem.forceLower(s.forceRows[j]);
+      upper(s.forceStart + p * s.nF + j) = s.problem.forceUpper(s.forceRows[j]);
+    }
+  }
+}
+int Transcription::forceRowsPerPoint() const { return impl_->nF; }
+int Transcription::forceRow(int point) const { return impl_->nF > 0 ? impl_->forceStart + point * impl_->nF : -1; }
 
 bool Transcription::hessianAvailable() const { return impl_->hessianOk; }
 const std::string& Transcription::hessianUnavailableReason() const { return impl_->hessianWhy; }

@@ -88,6 +88,9 @@ void bindOptimization(py::module_& m) {
   vectorProperty(problem, "input_lower", &Problem::inputLower, "(nu,)");
   vectorProperty(problem, "input_upper", &Problem::inputUpper, "(nu,)");
   vectorProperty(problem, "goal_state", &Problem::goalState, "(nx,)");
+  vectorProperty(problem, "force_lower", &Problem::forceLower,
+                 "(nc,) bounds on the constraint forces at every collocation point, -inf for none");
+  vectorProperty(problem, "force_upper", &Problem::forceUpper, "(nc,), +inf for none");
   vectorProperty(problem, "R", &Problem::R, "(nu, nu) symmetric PSD");
   vectorProperty(problem, "Q", &Problem::Q, "(nx, nx) symmetric PSD");
   vectorProperty(problem, "Qf", &Problem::Qf, "(nx, nx) symmetric PSD");

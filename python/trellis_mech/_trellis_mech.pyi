@@ -521,6 +521,16 @@ class OptimalControlProblem:
     @final_state.setter
     def final_state(self, value: numpy.typing.NDArray[numpy.float64]) -> None: ...
     @property
+    def force_lower(self) -> numpy.typing.NDArray[numpy.float64]:
+        """(nc,) bounds on the constraint forces at every collocation point, -inf for none"""
+    @force_lower.setter
+    def force_lower(self, value: numpy.typing.NDArray[numpy.float64]) -> None: ...
+    @property
+    def force_upper(self) -> numpy.typing.NDArray[numpy.float64]:
+        """(nc,), +inf for none"""
+    @force_upper.setter
+    def force_upper(self, value: numpy.typing.NDArray[numpy.float64]) -> None: ...
+    @property
     def free_horizon(self) -> bool: ...
     @property
     def goal_state(self) -> numpy.typing.NDArray[numpy.float64]:

@@ -172,3 +172,59 @@ TEST_CASE("hessian: a knife edge says the exact Hessian is not available", "[tra
   CHECK_FALSE(t.hessianAvailable());
   CHECK(t.hessianUnavailableReason().find("nonholonomic") != std::string::npos);
 }
+
+TEST_CASE("hessian: constraint-force bounds add rows λ_r(x_p, u_p) with exact first and second derivatives",
+          "[transcription][hessian][force_bounds]") {
+  std::mt19937 rng(99);
+  for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
+    DYNAMIC_SECTION((method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : "trapezoidal")) {
+      OptimalControlProblem p = trellis::loadProblem(problemPath("paper_pendulum_transfer"));
+      p.knots = 3;
+      p.method = method;
+      p.forceLower(0) = -5.0;  // one side only is enough to add the rows
+      Transcription t(p);
+      const int P = t.numPoints();
+      REQUIRE(t.forceRowsPerPoint() == 1);
+      REQUIRE(t.numConstraints() == t.forceRow(0) + P);
+      VectorXd lower, upper;
+      t.constraintBounds(lower, upper);
+      CHECK(lower(t.forceRow(P - 1)) == -5.0);
+      CHECK(std::isinf(upper(t.forceRow(P - 1))));
+      CHECK(lower(0) == 0.0);
+      CHECK(upper(0) == 0.0);
+      const VectorXd z = randomPoint(t, rng);
+      // The rows are λ at each point (the core's forward dynamics there).
+      VectorXd g(t.numConstraints());
+      REQUIRE(t.evalConstraints(z.data(), g.data()));
+      trellis::Data data(*p.model);
+      for (int q = 0; q < P; ++q) {
+        const VectorXd x = z.segment(t.stateIndex(q), p.nx()), u = z.segment(t.inputIndex(q), p.nu());
+        trellis::computeDynamics(*p.model, data, x.head(p.nq()), x.tail(p.nq()), u);
+        CHECK(g(t.forceRow(q)) == Approx(data.lambda(0)).epsilon(1e-12));
+      }
+      // Jacobian rows against central differences of g.
+      VectorXd values(t.jacobianRows().size());
+      REQUIRE(t.evalJacobian(z.data(), values.data()));
+      MatrixXd exact = MatrixXd::Zero(t.numConstraints(), t.numVariables());
+      for (std::size_t k = 0; k < t.jacobianRows().size(); ++k) exact(t.jacobianRows()[k], t.jacobianCols()[k]) = values(k);
+      const double eps = std::cbrt(std::numeric_limits<double>::epsilon());
+      VectorXd zp = z, gp(g.size()), gm(g.size());
+      double worst = 0.0;
+      for (int j = 0; j < z.size(); ++j) {
+        const double step = eps * std::max(1.0, std::abs(z(j)));
+        zp(j) = z(j) + step;
+        REQUIRE(t.evalConstraints(zp.data(), gp.data()));
+        zp(j) = z(j) - step;
+        REQUIRE(t.evalConstraints(zp.data(), gm.data()));
+        zp(j) = z(j);
+        for (int r = t.forceRow(0); r < t.numConstraints(); ++r) {
+          const double fd = (gp(r) - gm(r)) / (2.0 * step);
+          worst = std::max(worst, std::abs(exact(r, j) - fd) / std::max(1.0, std::abs(fd)));
+        }
+      }
+      INFO("force rows of the Jacobian: worst relative error " << worst);
+      CHECK(worst < 1e-6);
+      checkHessian(t, z, 0.4, randomMultipliers(t, rng));
+    }
+  }
+}

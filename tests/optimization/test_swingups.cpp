@@ -133,3 +133,56 @@ TEST_CASE("swingups: the problem file's hessian key", "[optimizer][file][hessian
   options.hessian = HessianMode::kExact;
   CHECK(trellis::optimizeTrajectory(lbfgs, options).hessian == HessianMode::kExact);
 }
+
+TEST_CASE("swingups: a bound on the constraint force is active and held at every collocation point",
+          "[optimizer][force_bounds][hessian]") {
+  // The paper's closed chain (a distance constraint, one λ): solve free, then bound |λ| to 80 %
+  // of the free solution's largest |λ|: solved, consistent, the bound active and kept at the
+  // knots and midpoints, at a cost no lower than the free one.
+  const OptimalControlProblem free = trellis::loadProblem(problemPath("paper_pendulum_transfer"));
+  const auto largestForce = [](const OptimalControlProblem& p, const OptimizationResult& r) {
+    trellis::Data data(*p.model);
+    double largest = 0.0;
+    auto at = [&](const VectorXd& x, const VectorXd& u) {
+      REQUIRE(trellis::computeDynamics(*p.model, data, x.head(p.nq()), x.tail(p.nq()), u).ok());
+      largest = std::max(largest, std::abs(data.lambda(0)));
+    };
+    for (int k = 0; k < r.trajectory.size(); ++k) at(r.trajectory.states().col(k), r.trajectory.inputs().col(k));
+    for (int k = 0; k < r.midpointStates.cols(); ++k) at(r.midpointStates.col(k), r.midpointInputs.col(k));
+    return largest;
+  };
+  const OptimizationResult r0 = trellis::optimizeTrajectory(free);
+  INFO(r0.describe());
+  REQUIRE(r0.ok());
+  const double L = largestForce(free, r0);
+  REQUIRE(L > 0.0);
+  OptimalControlProblem bounded = free;
+  bounded.forceLower(0) = -0.8 * L;
+  bounded.forceUpper(0) = 0.8 * L;
+  const OptimizationResult r1 = trellis::optimizeTrajectory(bounded);
+  INFO(r1.describe());
+  checkSolved(bounded, r1);
+  const double L1 = largestForce(bounded, r1);
+  INFO("largest |lambda|: free " << L << ", bounded " << L1);
+  CHECK(L1 <= 0.8 * L * (1.0 + 1e-7));
+  CHECK(L1 >= 0.8 * L * (1.0 - 1e-4));  // active
+  CHECK(r1.cost >= r0.cost * (1.0 - 1e-9));
+}
+
+TEST_CASE("swingups: constraint_force_bounds in a problem file", "[optimizer][file][force_bounds]") {
+  const OptimalControlProblem p =
+      trellis::loadProblem(problemPath("swingups/paper_pendulum_force_bound_transfer"));
+  CHECK(p.forceLower(0) == -5.5);
+  CHECK(p.forceUpper(0) == 5.5);
+  std::ifstream in(problemPath("paper_pendulum_transfer"));
+  std::stringstream text;
+  text << in.rdbuf();
+  std::string bad = text.str();
+  bad.insert(bad.find("\"knots\""), "\"constraint_force_bounds\": {\"1\": [0, 1]}, ");
+  CHECK_THROWS_WITH(trellis::parseProblem(bad, "p.json", std::string(TRELLIS_SOURCE_DIR) + "/examples/problems"),
+                    Catch::Contains("constraint_force_bounds.1") && Catch::Contains("unknown constraint row '1'"));
+  std::string empty = text.str();
+  empty.insert(empty.find("\"knots\""), "\"constraint_force_bounds\": {\"0\": [2, 1]}, ");
+  CHECK_THROWS_WITH(trellis::parseProblem(empty, "p.json", std::string(TRELLIS_SOURCE_DIR) + "/examples/problems"),
+                    Catch::Contains("constraint_force_bounds.0") && Catch::Contains("lower bound 2 > upper bound 1"));
+}

@@ -147,3 +147,13 @@ def test_problem_file_hessian_key(tm):
     assert lbfgs.hessian == tm.HessianMode.LBFGS
     with pytest.raises(tm.ProblemError, match="p.json: hessian 'newton' is not one of exact, lbfgs"):
         tm.parse_problem(text.replace('"knots": 31', '"knots": 31, "hessian": "newton"'), "p.json", base)
+
+
+def test_constraint_force_bounds(tm):
+    problem = tm.load_problem(str(PROBLEMS / "swingups" / "paper_pendulum_force_bound_transfer.json"))
+    np.testing.assert_array_equal(problem.force_lower, [-5.5])
+    np.testing.assert_array_equal(problem.force_upper, [5.5])
+    result = tm.optimize_trajectory(problem)
+    assert result.ok, result.describe()
+    problem.force_upper = np.array([np.inf])
+    assert np.isinf(problem.force_upper[0])

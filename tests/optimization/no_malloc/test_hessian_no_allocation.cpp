@@ -32,6 +32,7 @@ TEST_CASE("no_malloc: the Lagrangian Hessian's values allocate nothing", "[no_ma
         trellis::OptimalControlProblem p =
             trellis::loadProblem(std::string(TRELLIS_SOURCE_DIR) + "/examples/problems/" + name + ".json");
         p.knots = 5;
+        if (p.model->nc() > 0) p.forceUpper(0) = 100.0;  // the constraint-force rows (ρ) too
         if (freeHorizon) {
           p.minHorizon = 0.5 * p.horizon;
           p.maxHorizon = 2.0 * p.horizon;

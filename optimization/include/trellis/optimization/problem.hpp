@@ -6,6 +6,7 @@
 //               h(q) = 0, A(q) q̇ = 0                      (closed chains: at every knot;
 //                                                          knife edges: A(q) q̇ = 0 only)
 //               x_lower ≤ x(t) ≤ x_upper, u_lower ≤ u(t) ≤ u_upper
+//               λ_lower ≤ λ(x, u) ≤ λ_upper                (constraint forces, at the points)
 //               x(0)_i = x_initial_i for the fixed entries, x(T)_i = x_final_i likewise
 //               T fixed, or T_min ≤ T ≤ T_max
 //
@@ -82,6 +83,10 @@ struct OptimalControlProblem {
 
   /// Bounds (2n, m); ±infinity for none (the defaults set by resize()).
   Eigen::VectorXd stateLower, stateUpper, inputLower, inputUpper;
+  /// Bounds on the constraint forces λ_r (nc, the model's constraint rows; M q̈ = … + Aᵀλ),
+  /// imposed at every collocation point (knots and Hermite–Simpson midpoints); ±infinity for none
+  /// (problem file "constraint_force_bounds": {"<constraint name>": [lower, upper]}).
+  Eigen::VectorXd forceLower, forceUpper;
 
   /// Cost weights: R (m×m), Q, Qf (2n×2n), all symmetric positive semidefinite; goal state
   /// (2n); w_T ≥ 0 weighs the horizon (minimum time when the other terms are small).

@@ -43,7 +43,10 @@
 // Variable layout: z = [x_0, u_0, x_1, u_1, …, x_{P−1}, u_{P−1}, γ_0, μ_0, …, γ_{N−2}, μ_{N−2}, T]
 // (slack only with constraints, T only when free). Constraint layout: per interval the Simpson
 // (or trapezoidal) defect, then for Hermite–Simpson the Hermite defect and the m input rows;
-// then the knot constraints knot by knot (h rows, then A q̇ rows).
+// then the knot constraints knot by knot (h rows, then A q̇ rows); then, with bounds on constraint
+// forces (problem.forceLower/Upper), point by point the rows λ_r(x_p, u_p) of the bounded
+// constraints r, with Jacobian ∂λ/∂[x; u] (the core's dlambda_dx): inequalities, whose bounds
+// constraintBounds() gives (every other row is an equality g = 0).
 //
 // Evaluations are cached: f (and A, B for derivatives) are computed once per distinct z, whatever
 // the order of the calls: z is compared with the cached copy (a memcmp), which covers Ipopt's
@@ -98,6 +101,13 @@ class Transcription {
 
   /// Bounds on z (fixed boundary entries have equal bounds; no bound is ±infinity).
   void variableBounds(Eigen::VectorXd& lower, Eigen::VectorXd& upper) const;
+  /// Bounds on g: 0 = 0 for every equality row; [λ_lower_r, λ_upper_r] for the constraint-force
+  /// rows (±infinity for no bound on one side).
+  void constraintBounds(Eigen::VectorXd& lower, Eigen::VectorXd& upper) const;
+  /// Constraint-force rows per point (the constraint rows with a finite bound; 0 without) and the
+  /// first of point p's (−1 without).
+  int forceRowsPerPoint() const;
+  int forceRow(int point) const;
   /// The initial guess z₀ (problem.initialGuess, else linear interpolation), inside the bounds.
   Eigen::VectorXd initialGuess() const;
 
