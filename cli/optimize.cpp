@@ -18,8 +18,8 @@ constexpr std::string_view kHelp = R"(usage: trellis optimize PROBLEM.json [--ou
 
 Reads an optimal control problem file (optimization/README.md: a scene file, the horizon, knots,
 boundary states, bounds and cost weights), transcribes it by direct collocation (Hermite-Simpson
-or trapezoidal) with the exact derivatives of the dynamics, and solves it with Ipopt (MUMPS,
-limited-memory quasi-Newton Hessian). The solution is then checked a posteriori: the exact
+or trapezoidal) with the exact first and second derivatives of the dynamics, and solves it with
+Ipopt (MUMPS, exact Lagrangian Hessian by default). The solution is then checked a posteriori: the exact
 dynamics are integrated (CVODES, rtol 1e-10) over every interval from every knot under the input
 as every trellis tool reads the CSV (linear between knots), and the worst miss of the next knot
 or of the Hermite reference at the interval's midpoint, relative to each state's range, must be
@@ -31,7 +31,7 @@ While solving, one progress line per Ipopt iteration goes to standard error:
   iter  cost  constraint-violation  dual-infeasibility  step
 At the end a summary goes to standard output (key: value lines): status, ipopt_status,
 iterations (all rounds), cost, constraint_violation, bound_violation, max_slack, horizon, knots
-(of the returned solution), method, derivatives, consistency_defect (worst relative defect),
+(of the returned solution), method, derivatives, hessian, consistency_defect (worst relative defect),
 consistency_where (state, interval, time), slack_defect (closed chains), refinement_rounds, one
 'round_K: knots N, iterations I, defect D' line per solve, solve_time_ms (wall clock, all
 rounds), solve_cpu_time_ms, and trajectory (the CSV written, if any).
@@ -51,11 +51,17 @@ options:
                         the progress lines (5 is Ipopt's usual iteration log)
   --consistency-tol X   tolerance of the a-posteriori check (default 1e-3 of each state's range)
   --max-refinements N   rounds of mesh refinement (default 6; 0: check only)
+  --hessian NAME        the Lagrangian Hessian: exact (the transcription's exact second
+                        derivatives; the default unless the problem file says "hessian": "lbfgs")
+                        or lbfgs (Ipopt's limited-memory quasi-Newton approximation)
+  --cold-refinement     start each refinement round from the previous solution's primal point
+                        only (no multipliers, no Ipopt warm start; for comparison)
   --finite-difference   build the constraint Jacobian from central differences of the dynamics
                         instead of the exact linearization (for comparison)
   --quiet               no progress lines
-  --json                print the summary as one JSON object (one line, the same keys, plus
-                        "ok" and "message"; "rounds" a list, "consistency_where" an object)
+  --json                print the result's report as one JSON object (one line: the keys above
+                        and "ok", "message", "t", "index" of the status; "rounds" a list,
+                        "consistency_where" an object)
   -h, --help            show this help
 
 Exit status: 0 when Ipopt converges (Solve_Succeeded or Solved_To_Acceptable_Level) AND the
@@ -70,8 +76,8 @@ e.g. a fixed boundary state off the constraint manifold); 2 on a usage error.
 int runOptimize(std::span<const std::string> args, std::ostream& out) {
   OptionSpec spec;
   spec.valued = {"--out", "--knots", "--method", "--max-iter", "--tol", "--print-level",
-                 "--consistency-tol", "--max-refinements"};
-  spec.flags = {"--finite-difference", "--quiet", "--json"};
+                 "--consistency-tol", "--max-refinements", "--hessian"};
+  spec.flags = {"--finite-difference", "--quiet", "--json", "--cold-refinement"};
   const ParsedOptions options("optimize", args, spec);
   const std::string path = options.singlePositional("the problem file");
 
@@ -103,6 +109,14 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
     solver.maxRefinements = options.integer<int>("--max-refinements", *v, 0, 50);
   }
   if (options.flag("--finite-difference")) solver.derivatives = DerivativeMode::kFiniteDifference;
+  if (auto v = options.value("--hessian")) {
+    try {
+      solver.hessian = parseEnum<HessianMode>(*v, "optimize: --hessian");
+    } catch (const std::invalid_argument& e) {
+      throw UsageError(e.what());
+    }
+  }
+  if (options.flag("--cold-refinement")) solver.warmStart = false;
   if (!options.flag("--quiet") && solver.printLevel == 0) {
     std::cerr << "iter        cost      constr_viol   dual_infeas     step\n";
     solver.onIteration = [](const IterationInfo& info) {
@@ -143,49 +157,19 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
   const char* derivativesName =
       solver.derivatives == DerivativeMode::kExact ? "exact" : "finite_difference";
   if (options.flag("--json")) {
-    // The summary below as one object (non-finite numbers become null).
-    auto num = [](double v) { return std::isfinite(v) ? OutputJson(v) : OutputJson(nullptr); };
-    OutputJson j = OutputJson::object();
-    j["ok"] = result.success();
-    j["message"] = result.success() ? std::string() : result.message;
-    j["status"] = toString(result.status);
-    j["ipopt_status"] = result.ipoptStatus;
-    j["iterations"] = result.iterations;
-    j["cost"] = num(result.cost);
-    j["constraint_violation"] = num(result.constraintViolation);
-    j["bound_violation"] = num(result.boundViolation);
-    j["max_slack"] = num(result.maxSlack);
-    j["horizon"] = num(result.horizon);
-    j["knots"] = result.trajectory.size();
+    // The result's own report (OptimizationResult::json) with what only the command knows.
+    OutputJson j = OutputJson::parse(result.json());
     j["method"] = methodName;
     j["derivatives"] = derivativesName;
-    // null when the check did not run (Ipopt failed first, or an interval could not be
-    // integrated): a 0 would claim a consistency nobody measured.
-    j["consistency_defect"] = result.consistency.integrated ? num(result.consistency.maxDefect) : OutputJson(nullptr);
-    j["consistency_checked"] = result.consistency.integrated;
-    if (result.consistency.worstInterval >= 0 && result.consistency.integrated) {
-      j["consistency_where"] = {{"state", result.consistency.worstStateName},
-                                {"interval", result.consistency.worstInterval},
-                                {"time", num(result.consistency.worstTime)}};
-    }
-    if (problem.model->nc() > 0) j["slack_defect"] = num(result.maxSlackDefect);
-    j["refinement_rounds"] = result.rounds.empty() ? 0 : result.rounds.size() - 1;
-    OutputJson rounds = OutputJson::array();
-    for (const RefinementRound& r : result.rounds) {
-      rounds.push_back({{"knots", r.knots}, {"iterations", r.iterations}, {"defect", num(r.maxDefect)}});
-    }
-    j["rounds"] = std::move(rounds);
-    j["solve_time_ms"] = num(1e3 * result.solveTime);
-    j["solve_cpu_time_ms"] = num(1e3 * result.solveCpuTime);
     j["trajectory"] = outPath ? OutputJson(*outPath) : OutputJson(nullptr);
     writeJson(out, j, true);
-    if (!result.success()) {
-      std::cerr << "trellis: optimize: " << result.message << '\n';
-      return result.status == OptimizationStatus::kInconsistent ? 4 : 3;
+    if (!result.ok()) {
+      std::cerr << "trellis: optimize: " << result.status.describe() << '\n';
+      return result.status.code == OptimizationCode::kInconsistent ? 4 : 3;
     }
     return 0;
   }
-  out << "status: " << toString(result.status) << '\n'
+  out << "status: " << result.status.name() << '\n'
       << "ipopt_status: " << result.ipoptStatus << '\n'
       << "iterations: " << result.iterations << '\n'
       << "cost: " << formatNumber(result.cost, 10) << '\n'
@@ -196,6 +180,7 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
       << "knots: " << result.trajectory.size() << '\n'
       << "method: " << methodName << '\n'
       << "derivatives: " << derivativesName << '\n'
+      << "hessian: " << toString(result.hessian) << '\n'
       << "consistency_defect: "
       << (result.consistency.integrated ? formatNumber(result.consistency.maxDefect, 3)
                                         : std::string("not checked (the solve or the integration failed first)"))
@@ -215,9 +200,10 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
   out << "solve_time_ms: " << formatNumber(1e3 * result.solveTime, 4) << '\n'
       << "solve_cpu_time_ms: " << formatNumber(1e3 * result.solveCpuTime, 4) << '\n';
   if (outPath) out << "trajectory: " << *outPath << '\n';
-  if (!result.success()) {
-    std::cerr << "trellis: optimize: " << result.message << '\n';
-    return result.status == OptimizationStatus::kInconsistent ? 4 : 3;
+  if (!result.hessianNote.empty()) out << "hessian_note: " << result.hessianNote << '\n';
+  if (!result.ok()) {
+    std::cerr << "trellis: optimize: " << result.status.describe() << '\n';
+    return result.status.code == OptimizationCode::kInconsistent ? 4 : 3;
   }
   return 0;
 }

@@ -32,7 +32,7 @@ def main():
     result = tm.optimize_trajectory(problem)
     print(f"optimize: {result.status.name}, {result.iterations} iterations, cost {result.cost:.6g}, "
           f"max |defect| {result.constraint_violation:.1e}, {result.solve_time:.2f} s")
-    if not result.success:
+    if not result.ok:
         sys.exit(f"optimization failed: {result.message}")
     reference = result.trajectory
     reference.compute_state_derivatives(model)

@@ -3,6 +3,7 @@
 
 #include "trellis/core/data.hpp"
 #include "trellis/core/reference.hpp"
+#include "trellis/core/detail/report_json.hpp"
 
 #include <IpIpoptApplication.hpp>
 #include <IpIpoptCalculatedQuantities.hpp>
@@ -19,19 +20,6 @@
 
 namespace trellis {
 
-const char* toString(OptimizationStatus status) {
-  switch (status) {
-    case OptimizationStatus::kSolved: return "solved";
-    case OptimizationStatus::kSolvedAcceptable: return "solved_acceptable";
-    case OptimizationStatus::kInconsistent: return "inconsistent";
-    case OptimizationStatus::kInfeasible: return "infeasible";
-    case OptimizationStatus::kIterationLimit: return "iteration_limit";
-    case OptimizationStatus::kStopped: return "stopped";
-    case OptimizationStatus::kFailed: return "failed";
-  }
-  return "unknown";
-}
-
 void OptimizerOptions::validate() const {
   auto bad = [](const std::string& what) { throw std::invalid_argument("OptimizerOptions." + what); };
   if (printLevel < 0 || printLevel > 12) bad("printLevel = " + std::to_string(printLevel) + " must be in [0, 12]");
@@ -47,6 +35,9 @@ void OptimizerOptions::validate() const {
   }
   if (maxRefinements < 0) bad("maxRefinements = " + std::to_string(maxRefinements) + " must be >= 0");
   if (maxKnots < 2) bad("maxKnots = " + std::to_string(maxKnots) + " must be >= 2");
+  if (!(warmStartBarrier > 0.0) || !std::isfinite(warmStartBarrier)) {
+    bad("warmStartBarrier must be > 0 and finite");
+  }
   if (maxSplit < 2) bad("maxSplit = " + std::to_string(maxSplit) + " must be >= 2");
 }
 
@@ -83,26 +74,38 @@ std::string applicationStatusName(Ipopt::ApplicationReturnStatus s) {
   return "Unknown_Status";
 }
 
-OptimizationStatus classify(Ipopt::ApplicationReturnStatus s) {
+OptimizationCode classify(Ipopt::ApplicationReturnStatus s) {
   switch (s) {
-    case Ipopt::Solve_Succeeded: return OptimizationStatus::kSolved;
-    case Ipopt::Solved_To_Acceptable_Level: return OptimizationStatus::kSolvedAcceptable;
-    case Ipopt::Infeasible_Problem_Detected: return OptimizationStatus::kInfeasible;
+    case Ipopt::Solve_Succeeded: return OptimizationCode::kSolved;
+    case Ipopt::Solved_To_Acceptable_Level: return OptimizationCode::kSolvedAcceptable;
+    case Ipopt::Infeasible_Problem_Detected: return OptimizationCode::kInfeasible;
     case Ipopt::Maximum_Iterations_Exceeded:
-    case Ipopt::Maximum_CpuTime_Exceeded: return OptimizationStatus::kIterationLimit;
-    case Ipopt::User_Requested_Stop: return OptimizationStatus::kStopped;
-    default: return OptimizationStatus::kFailed;
+    case Ipopt::Maximum_CpuTime_Exceeded: return OptimizationCode::kIterationLimit;
+    case Ipopt::User_Requested_Stop: return OptimizationCode::kStopped;
+    default: return OptimizationCode::kFailed;
   }
 }
 
-/// The TNLP: forwards every evaluation to the Transcription and keeps the final iterate.
-/// Nothing may throw through Ipopt: evaluation failures return false (Ipopt then shortens the step).
+/// Where Ipopt starts: the primal point, and with `multipliers` the constraint multipliers and
+/// the bound multipliers z_L, z_U (Ipopt's warm_start_init_point).
+struct StartPoint {
+  Eigen::VectorXd z, lambda, zLower, zUpper;
+  bool multipliers = false;
+};
+
+/// The TNLP: forwards every evaluation to the Transcription and keeps the final iterate and
+/// multipliers. Nothing may throw through Ipopt: evaluation failures return false (Ipopt then
+/// shortens the step).
 class CollocationNlp : public Ipopt::TNLP {
  public:
-  CollocationNlp(Transcription& transcription, const OptimizerOptions& options)
-      : t_(transcription), options_(options) {
+  CollocationNlp(Transcription& transcription, const OptimizerOptions& options, bool exactHessian,
+                 StartPoint start)
+      : t_(transcription), options_(options), exactHessian_(exactHessian), start_(std::move(start)) {
     t_.variableBounds(lower_, upper_);
-    finalZ_ = t_.initialGuess();
+    t_.constraintBounds(gLower_, gUpper_);
+    finalZ_ = start_.z;
+    finalLambda_ = Eigen::VectorXd::Zero(t_.numConstraints());
+    finalZL_ = finalZU_ = Eigen::VectorXd::Zero(t_.numVariables());
   }
 
   bool get_nlp_info(Index& n, Index& m, Index& nnz_jac_g, Index& nnz_h_lag,
@@ -110,7 +113,8 @@ class CollocationNlp : public Ipopt::TNLP {
     n = t_.numVariables();
     m = t_.numConstraints();
     nnz_jac_g = static_cast<Index>(t_.jacobianRows().size());
-    nnz_h_lag = 0;  // limited-memory quasi-Newton: eval_h is never called
+    // Limited-memory quasi-Newton: eval_h is never called.
+    nnz_h_lag = exactHessian_ ? static_cast<Index>(t_.hessianRows().size()) : 0;
     index_style = C_STYLE;
     return true;
   }
@@ -121,15 +125,23 @@ class CollocationNlp : public Ipopt::TNLP {
       x_l[i] = std::max(lower_(i), -kIpoptInfinity);
       x_u[i] = std::min(upper_(i), kIpoptInfinity);
     }
-    std::fill(g_l, g_l + m, 0.0);  // every constraint is an equality g(z) = 0
-    std::fill(g_u, g_u + m, 0.0);
+    // Equalities g(z) = 0, and the constraint-force rows between their bounds.
+    for (Index i = 0; i < m; ++i) {
+      g_l[i] = std::max(gLower_(i), -kIpoptInfinity);
+      g_u[i] = std::min(gUpper_(i), kIpoptInfinity);
+    }
     return true;
   }
 
-  bool get_starting_point(Index n, bool init_x, Number* x, bool init_z, Number*, Number*, Index,
-                          bool init_lambda, Number*) override {
-    if (init_z || init_lambda) return false;  // no warm start of the multipliers
-    if (init_x) std::copy(finalZ_.data(), finalZ_.data() + n, x);
+  bool get_starting_point(Index n, bool init_x, Number* x, bool init_z, Number* z_L, Number* z_U,
+                          Index m, bool init_lambda, Number* lambda) override {
+    if ((init_z || init_lambda) && !start_.multipliers) return false;
+    if (init_x) std::copy(start_.z.data(), start_.z.data() + n, x);
+    if (init_z) {
+      std::copy(start_.zLower.data(), start_.zLower.data() + n, z_L);
+      std::copy(start_.zUpper.data(), start_.zUpper.data() + n, z_U);
+    }
+    if (init_lambda) std::copy(start_.lambda.data(), start_.lambda.data() + m, lambda);
     return true;
   }
 
@@ -155,6 +167,19 @@ class CollocationNlp : public Ipopt::TNLP {
     }
     return noteFailure(t_.evalJacobian(x, values));
   }
+  bool eval_h(Index, const Number* x, bool, Number obj_factor, Index, const Number* lambda, bool,
+              Index nele_hess, Index* iRow, Index* jCol, Number* values) override {
+    if (values == nullptr) {  // structure call (lower triangle)
+      const std::vector<int>& rows = t_.hessianRows();
+      const std::vector<int>& cols = t_.hessianCols();
+      for (Index k = 0; k < nele_hess; ++k) {
+        iRow[k] = rows[k];
+        jCol[k] = cols[k];
+      }
+      return true;
+    }
+    return noteFailure(t_.evalHessian(x, obj_factor, lambda, values));
+  }
 
   bool intermediate_callback(Ipopt::AlgorithmMode mode, Index iter, Number obj_value,
                              Number inf_pr, Number inf_du, Number, Number, Number, Number, Number alpha_pr,
@@ -177,14 +202,20 @@ class CollocationNlp : public Ipopt::TNLP {
     }
   }
 
-  void finalize_solution(Ipopt::SolverReturn, Index n, const Number* x, const Number*,
-                         const Number*, Index, const Number*, const Number*, Number,
+  void finalize_solution(Ipopt::SolverReturn, Index n, const Number* x, const Number* z_L,
+                         const Number* z_U, Index m, const Number*, const Number* lambda, Number,
                          const Ipopt::IpoptData*, Ipopt::IpoptCalculatedQuantities*) override {
     if (x != nullptr) finalZ_ = Eigen::Map<const Eigen::VectorXd>(x, n);
     haveFinal_ = x != nullptr;
+    if (z_L != nullptr) finalZL_ = Eigen::Map<const Eigen::VectorXd>(z_L, n);
+    if (z_U != nullptr) finalZU_ = Eigen::Map<const Eigen::VectorXd>(z_U, n);
+    if (lambda != nullptr) finalLambda_ = Eigen::Map<const Eigen::VectorXd>(lambda, m);
   }
 
   const Eigen::VectorXd& finalVariables() const { return finalZ_; }
+  const Eigen::VectorXd& finalLambda() const { return finalLambda_; }
+  const Eigen::VectorXd& finalLowerMultipliers() const { return finalZL_; }
+  const Eigen::VectorXd& finalUpperMultipliers() const { return finalZU_; }
   bool haveFinal() const { return haveFinal_; }
   int iterations() const { return iterations_; }
   const std::string& evaluationError() const { return evaluationError_; }
@@ -198,7 +229,9 @@ class CollocationNlp : public Ipopt::TNLP {
 
   Transcription& t_;
   const OptimizerOptions& options_;
-  Eigen::VectorXd lower_, upper_, finalZ_;
+  bool exactHessian_;
+  StartPoint start_;
+  Eigen::VectorXd lower_, upper_, gLower_, gUpper_, finalZ_, finalLambda_, finalZL_, finalZU_;
   bool haveFinal_ = false;
   int iterations_ = 0;
   std::string evaluationError_, callbackError_;
@@ -208,12 +241,151 @@ class CollocationNlp : public Ipopt::TNLP {
 
 namespace {
 
+/// The τ of every point (knots, and for Hermite–Simpson the interval midpoints, in time order)
+/// and its quadrature weight over T (Simpson Δτ/6, 4Δτ/6, Δτ/6; trapezoid Δτ/2, Δτ/2).
+void pointFractions(const Eigen::VectorXd& tau, bool hs, Eigen::VectorXd& s, Eigen::VectorXd& w) {
+  const int N = static_cast<int>(tau.size());
+  const int P = hs ? 2 * N - 1 : N;
+  s.resize(P);
+  w = Eigen::VectorXd::Zero(P);
+  const double c = hs ? 1.0 / 6.0 : 0.5;
+  for (int k = 0; k < N; ++k) {
+    const int p = hs ? 2 * k : k;
+    s(p) = tau(k);
+    if (k > 0) w(p) += c * (tau(k) - tau(k - 1));
+    if (k + 1 < N) w(p) += c * (tau(k + 1) - tau(k));
+    if (hs && k + 1 < N) {
+      s(p + 1) = 0.5 * (tau(k) + tau(k + 1));
+      w(p + 1) = 4.0 / 6.0 * (tau(k + 1) - tau(k));
+    }
+  }
+}
+
+/// Linear interpolation of the columns of `values` (at the increasing abscissae `at`) at x.
+template <class Out>
+void interpolateColumns(const Eigen::VectorXd& at, const Eigen::MatrixXd& values, double x, Out&& out) {
+  const int n = static_cast<int>(at.size());
+  if (n == 1 || x <= at(0)) {
+    out = values.col(0);
+    return;
+  }
+  if (x >= at(n - 1)) {
+    out = values.col(n - 1);
+    return;
+  }
+  const int k = static_cast<int>(std::upper_bound(at.data(), at.data() + n, x) - at.data()) - 1;
+  const double a = (x - at(k)) / (at(k + 1) - at(k));
+  out = (1.0 - a) * values.col(k) + a * values.col(k + 1);
+}
+
+/// The previous round's solution carried onto a refined mesh (the new knots subdivide the old
+/// intervals): `z` from the new transcription's guess (the old solution's Hermite spline, refine()),
+/// and the multipliers by what they approximate. The Simpson (trapezoid) multipliers λ_S
+/// approximate the costate (∂L/∂x_b = λ_S,k − λ_S,k+1 + O(h)), so they are interpolated in
+/// time between interval centres; the Hermite and input-row multipliers balance O(h) terms
+/// (∂L/∂x_m = λ_H − 4h/6 f_xᵀ λ_S + …) and the bound multipliers of a point balance its
+/// quadrature-weighted gradient, so those are interpolated as densities (divided by h, or by the
+/// point's weight) and multiplied back on the new mesh. Knot-row multipliers are interpolated
+/// between knots; the slack's and T's bound multipliers keep their values.
+StartPoint carryOver(const Transcription& now, const OptimalControlProblem& before, const OptimizationResult& r) {
+  StartPoint start;
+  start.z = now.initialGuess();
+  const OptimalControlProblem& p = now.problem();
+  const bool hs = p.method == CollocationMethod::kHermiteSimpson;
+  const int nx = p.nx(), m = p.nu(), nc = p.model->nc();
+  const int rowsPer = hs ? 2 * nx + m : nx;
+  const Eigen::VectorXd tauOld = before.meshFractions(), tauNew = p.meshFractions();
+  const int No = static_cast<int>(tauOld.size()), Nn = static_cast<int>(tauNew.size());
+  const int F = now.forceRowsPerPoint();
+  const int Pn0 = hs ? 2 * Nn - 1 : Nn, Po0 = hs ? 2 * No - 1 : No;
+  const int knotRows = nc > 0 ? (now.numConstraints() - (Nn - 1) * rowsPer - Pn0 * F) / Nn : 0;
+  if (r.constraintMultipliers.size() != (No - 1) * rowsPer + No * knotRows + Po0 * F ||
+      r.lowerBoundMultipliers.size() != r.variables.size() || !r.constraintMultipliers.allFinite()) {
+    return start;  // nothing usable to carry (Ipopt returned no multipliers)
+  }
+  // Interval quantities at the old centres, as densities where they scale with h.
+  Eigen::VectorXd centres(No - 1);
+  Eigen::MatrixXd intervalValues(rowsPer, No - 1);
+  for (int k = 0; k + 1 < No; ++k) {
+    const double dt = tauOld(k + 1) - tauOld(k);
+    centres(k) = 0.5 * (tauOld(k) + tauOld(k + 1));
+    intervalValues.col(k) = r.constraintMultipliers.segment(k * rowsPer, rowsPer);
+    if (hs) intervalValues.col(k).tail(nx + m) /= dt;
+  }
+  start.lambda = Eigen::VectorXd::Zero(now.numConstraints());
+  for (int k = 0; k + 1 < Nn; ++k) {
+    const double dt = tauNew(k + 1) - tauNew(k);
+    auto seg = start.lambda.segment(k * rowsPer, rowsPer);
+    interpolateColumns(centres, intervalValues, 0.5 * (tauNew(k) + tauNew(k + 1)), seg);
+    if (hs) seg.tail(nx + m) *= dt;
+  }
+  if (knotRows > 0) {
+    Eigen::MatrixXd knotValues(knotRows, No);
+    for (int k = 0; k < No; ++k) {
+      knotValues.col(k) = r.constraintMultipliers.segment((No - 1) * rowsPer + k * knotRows, knotRows);
+    }
+    for (int k = 0; k < Nn; ++k) {
+      auto seg = start.lambda.segment((Nn - 1) * rowsPer + k * knotRows, knotRows);
+      interpolateColumns(tauOld, knotValues, tauNew(k), seg);
+    }
+  }
+  // Bound multipliers of the point variables, and the multipliers of the constraint-force rows,
+  // as densities over the quadrature weight.
+  Eigen::VectorXd sOld, wOld, sNew, wNew;
+  pointFractions(tauOld, hs, sOld, wOld);
+  pointFractions(tauNew, hs, sNew, wNew);
+  if (F > 0) {
+    const int oldStart = (No - 1) * rowsPer + No * knotRows, newStart = now.forceRow(0);
+    Eigen::MatrixXd density(F, Po0);
+    for (int q = 0; q < Po0; ++q) density.col(q) = r.constraintMultipliers.segment(oldStart + q * F, F) / wOld(q);
+    for (int q = 0; q < Pn0; ++q) {
+      auto seg = start.lambda.segment(newStart + q * F, F);
+      interpolateColumns(sOld, density, sNew(q), seg);
+      seg *= wNew(q);
+    }
+  }
+  const int stride = nx + m;
+  const int Po = static_cast<int>(sOld.size()), Pn = static_cast<int>(sNew.size());
+  start.zLower = Eigen::VectorXd::Zero(now.numVariables());
+  start.zUpper = Eigen::VectorXd::Zero(now.numVariables());
+  for (Eigen::VectorXd* out : {&start.zLower, &start.zUpper}) {
+    const Eigen::VectorXd& old = out == &start.zLower ? r.lowerBoundMultipliers : r.upperBoundMultipliers;
+    Eigen::MatrixXd density(stride, Po);
+    for (int q = 0; q < Po; ++q) density.col(q) = old.segment(q * stride, stride) / wOld(q);
+    for (int q = 0; q < Pn; ++q) {
+      auto seg = out->segment(q * stride, stride);
+      interpolateColumns(sOld, density, sNew(q), seg);
+      seg *= wNew(q);
+    }
+    if (now.horizonIndex() >= 0) (*out)(now.horizonIndex()) = old(old.size() - 1);
+  }
+  start.multipliers = true;
+  return start;
+}
+
 /// One Ipopt solve of `problem` (no check, no refinement): the fields of OptimizationResult that
-/// describe the solve; `result.message` gets Ipopt's part of the story.
-OptimizationResult solveOnce(const OptimalControlProblem& problem, const OptimizerOptions& options) {
+/// describe the solve; `result.message` gets Ipopt's part of the story. With `previous` (the
+/// last round's problem and result) the solve is warm-started from it (carryOver).
+OptimizationResult solveOnce(const OptimalControlProblem& problem, const OptimizerOptions& options,
+                             const OptimalControlProblem* previousProblem = nullptr,
+                             const OptimizationResult* previous = nullptr) {
   Transcription transcription(problem, options.derivatives);  // validates the problem
 
-  Ipopt::SmartPtr<CollocationNlp> nlp = new CollocationNlp(transcription, options);
+  HessianMode hessian = options.hessian.value_or(problem.hessian);
+  std::string hessianNote;
+  if (hessian == HessianMode::kExact && !transcription.hessianAvailable()) {
+    hessian = HessianMode::kLimitedMemory;
+    hessianNote = "L-BFGS used: " + transcription.hessianUnavailableReason();
+  }
+  const bool warm = options.warmStart && previous != nullptr && previousProblem != nullptr;
+  StartPoint start;
+  if (warm) {
+    start = carryOver(transcription, *previousProblem, *previous);
+  } else {
+    start.z = transcription.initialGuess();
+  }
+  Ipopt::SmartPtr<CollocationNlp> nlp =
+      new CollocationNlp(transcription, options, hessian == HessianMode::kExact, start);
   Ipopt::SmartPtr<Ipopt::IpoptApplication> app = IpoptApplicationFactory();
   Ipopt::OptionsList& o = *app->Options();
   o.SetStringValue("sb", "yes");  // no banner
@@ -222,31 +394,54 @@ OptimizationResult solveOnce(const OptimalControlProblem& problem, const Optimiz
   o.SetNumericValue("tol", options.tolerance);
   o.SetNumericValue("constr_viol_tol", options.constraintTolerance);
   o.SetNumericValue("max_cpu_time", options.maxCpuTime);
-  o.SetStringValue("hessian_approximation", "limited-memory");
-  o.SetIntegerValue("limited_memory_max_history", options.limitedMemorySize);
-  // The L-BFGS Hessian σI + V Vᵀ makes each step a low-rank update of the KKT system. Ipopt's
-  // default (Sherman–Morrison) pays 2·history extra MUMPS solves per iteration, and MUMPS's
-  // per-call overhead dominates on these small systems; "extended" factorizes the KKT matrix
-  // bordered by V once: the cart-pole swing-up (25 knots) takes half the CPU time, same iterates.
-  o.SetStringValue("limited_memory_aug_solver", "extended");
+  if (hessian == HessianMode::kExact) {
+    o.SetStringValue("hessian_approximation", "exact");
+  } else {
+    o.SetStringValue("hessian_approximation", "limited-memory");
+    o.SetIntegerValue("limited_memory_max_history", options.limitedMemorySize);
+    // The L-BFGS Hessian σI + V Vᵀ makes each step a low-rank update of the KKT system. Ipopt's
+    // default (Sherman–Morrison) pays 2·history extra MUMPS solves per iteration, and MUMPS's
+    // per-call overhead dominates on these small systems; "extended" factorizes the KKT matrix
+    // bordered by V once: the cart-pole swing-up (25 knots) takes half the CPU time, same iterates.
+    o.SetStringValue("limited_memory_aug_solver", "extended");
+  }
   o.SetStringValue("linear_solver", "mumps");
+  if (warm && start.multipliers) {
+    // The carried point is close to the refined problem's solution: start there with the
+    // multipliers, pushed only slightly off the bounds, and a small barrier parameter (a large
+    // μ_init would first pull the iterate back to the centre of the bounds).
+    o.SetStringValue("warm_start_init_point", "yes");
+    o.SetNumericValue("warm_start_bound_push", 1e-9);
+    o.SetNumericValue("warm_start_bound_frac", 1e-9);
+    o.SetNumericValue("warm_start_slack_bound_push", 1e-9);
+    o.SetNumericValue("warm_start_slack_bound_frac", 1e-9);
+    o.SetNumericValue("warm_start_mult_bound_push", 1e-9);
+    o.SetNumericValue("mu_init", options.warmStartBarrier);
+  }
 
   OptimizationResult result;
+  result.hessian = hessian;
   // "": no ipopt.opt from the working directory, so a solve depends only on its arguments.
   Ipopt::ApplicationReturnStatus status = app->Initialize("");
   if (status == Ipopt::Solve_Succeeded) status = app->OptimizeTNLP(nlp);
 
   result.ipoptStatus = applicationStatusName(status);
-  result.status = classify(status);
+  result.status.code = classify(status);
   result.iterations = nlp->iterations();
   result.variables = nlp->finalVariables();
+  result.constraintMultipliers = nlp->finalLambda();
+  result.lowerBoundMultipliers = nlp->finalLowerMultipliers();
+  result.upperBoundMultipliers = nlp->finalUpperMultipliers();
   const double* z = result.variables.data();
   result.horizon = transcription.horizon(z);
   transcription.evalCost(z, result.cost);
   Eigen::VectorXd g(transcription.numConstraints());
   std::ostringstream message;
   if (transcription.evalConstraints(z, g.data())) {
-    result.constraintViolation = g.size() > 0 ? g.cwiseAbs().maxCoeff() : 0.0;
+    Eigen::VectorXd gLower, gUpper;  // violation beyond each row's bounds (0 = 0 for equalities)
+    transcription.constraintBounds(gLower, gUpper);
+    result.constraintViolation =
+        g.size() > 0 ? (gLower - g).cwiseMax(g - gUpper).cwiseMax(0.0).maxCoeff() : 0.0;
   } else {
     result.constraintViolation = std::numeric_limits<double>::quiet_NaN();
   }
@@ -257,6 +452,7 @@ OptimizationResult solveOnce(const OptimalControlProblem& problem, const Optimiz
   result.maxSlack = transcription.maxSlack(z);
   result.dynamicsEvaluations = transcription.dynamicsEvaluations();
   result.linearizationEvaluations = transcription.linearizationEvaluations();
+  result.secondOrderEvaluations = transcription.secondOrderEvaluations();
   result.mesh = problem.meshFractions();
   std::string trajectoryError;
   try {
@@ -267,20 +463,22 @@ OptimizationResult solveOnce(const OptimalControlProblem& problem, const Optimiz
   result.midpointStates = transcription.midpointStates(z);
   result.midpointInputs = transcription.midpointInputs(z);
 
-  message << toString(result.status) << " (Ipopt: " << result.ipoptStatus << ") after "
-          << result.iterations << " iterations, cost " << result.cost << ", constraint violation "
-          << result.constraintViolation;
-  if (result.status == OptimizationStatus::kInfeasible) {
-    message << ": Ipopt converged to a point of local infeasibility; the bounds, boundary states "
-               "and horizon admit no trajectory it can find (the last iterate is returned)";
-  } else if (!result.success()) {
-    message << "; the last iterate is returned";
+  if (!result.ok()) {
+    message << "Ipopt: " << result.ipoptStatus << " after " << result.iterations << " iterations, cost "
+            << result.cost << ", constraint violation " << result.constraintViolation;
+    if (result.status.code == OptimizationCode::kInfeasible) {
+      message << ": Ipopt converged to a point of local infeasibility; the bounds, boundary states "
+                 "and horizon admit no trajectory it can find (the last iterate is returned)";
+    } else {
+      message << "; the last iterate is returned";
+    }
+    if (!nlp->haveFinal()) message << "; Ipopt returned no iterate (the initial guess is returned)";
+    if (!nlp->evaluationError().empty()) message << "; last evaluation failure: " << nlp->evaluationError();
+    if (!nlp->callbackError().empty()) message << "; " << nlp->callbackError();
+    if (!trajectoryError.empty()) message << "; no trajectory: " << trajectoryError;
   }
-  if (!nlp->haveFinal()) message << "; Ipopt returned no iterate (the initial guess is returned)";
-  if (!nlp->evaluationError().empty()) message << "; last evaluation failure: " << nlp->evaluationError();
-  if (!nlp->callbackError().empty()) message << "; " << nlp->callbackError();
-  if (!trajectoryError.empty()) message << "; no trajectory: " << trajectoryError;
-  result.message = message.str();
+  result.status.message = message.str();
+  result.hessianNote = hessianNote;
   return result;
 }
 
@@ -364,23 +562,31 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
   const std::clock_t cpuStart = std::clock();
   OptimizationResult result;
   int iterations = 0;
-  long dynamics = 0, linearizations = 0;
+  long dynamics = 0, linearizations = 0, secondOrder = 0;
   std::vector<RefinementRound> rounds;
+  OptimalControlProblem previousProblem;
   for (int round = 0;; ++round) {
     const auto roundStart = std::chrono::steady_clock::now();
-    result = solveOnce(problem, options);
+    if (round == 0) {
+      result = solveOnce(problem, options);
+    } else {
+      OptimizationResult previous = std::move(result);
+      result = solveOnce(problem, options, &previousProblem, &previous);
+    }
     iterations += result.iterations;
     dynamics += result.dynamicsEvaluations;
     linearizations += result.linearizationEvaluations;
+    secondOrder += result.secondOrderEvaluations;
     RefinementRound info;
     info.knots = problem.knots;
     info.iterations = result.iterations;
+    info.hessian = result.hessian;
     info.ipoptStatus = result.ipoptStatus;
     info.maxDefect = std::numeric_limits<double>::quiet_NaN();
     info.maxSlackDefect = std::numeric_limits<double>::quiet_NaN();
     bool consistent = false;
     Eigen::VectorXd errors;
-    if (result.success() && result.trajectory.size() > 0) {
+    if (result.ok() && result.trajectory.size() > 0) {
       result.consistency = checkConsistency(*problem.model, result.trajectory, check);
       const Eigen::VectorXd slackShare = measureSlack(problem, options, result);
       info.maxDefect = result.consistency.maxDefect;
@@ -390,15 +596,23 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
     }
     info.solveTime = std::chrono::duration<double>(std::chrono::steady_clock::now() - roundStart).count();
     rounds.push_back(info);
-    if (!result.success() || consistent) break;
+    if (!result.ok() || consistent) break;
     // Ipopt converged but the result is not consistent: refine or report.
+    previousProblem = problem;
     const bool canRefine = round < options.maxRefinements && errors.size() > 0 &&
                            refine(problem, result, errors, options);
     if (!canRefine) {
-      result.status = OptimizationStatus::kInconsistent;
+      result.status.code = OptimizationCode::kInconsistent;
       std::ostringstream m;
-      m << "inconsistent (Ipopt: " << result.ipoptStatus << ") with " << problem.knots
-        << " knots after " << round << " refinement round(s): ";
+      m << "Ipopt: " << result.ipoptStatus << ", " << problem.knots << " knots after " << round
+        << " refinement round(s): ";
+      if (result.consistency.integrated && !result.consistency.consistent && result.consistency.worstInterval >= 0) {
+        result.status.index = result.consistency.worstInterval;
+        result.status.t = result.trajectory.times()(result.consistency.worstInterval);
+      } else if (result.worstSlackInterval >= 0) {
+        result.status.index = result.worstSlackInterval;
+        result.status.t = result.trajectory.times()(result.worstSlackInterval);
+      }
       if (!result.consistency.integrated) {
         m << "the consistency check could not run: " << result.consistency.message;
       } else if (!result.consistency.consistent) {
@@ -416,27 +630,68 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
         m << " (the knot limit " << options.maxKnots << " would be exceeded)";
       }
       m << "; the last solution is returned";
-      result.message = m.str();
+      result.status.message = m.str();
       break;
     }
   }
   result.iterations = iterations;
   result.dynamicsEvaluations = dynamics;
   result.linearizationEvaluations = linearizations;
+  result.secondOrderEvaluations = secondOrder;
   result.rounds = std::move(rounds);
   result.solveTime = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   result.solveCpuTime = static_cast<double>(std::clock() - cpuStart) / CLOCKS_PER_SEC;
-  if (result.success()) {
-    std::ostringstream m;
-    m << result.message << "; " << result.consistency.message;
-    if (result.rounds.size() > 1) m << "; " << iterations << " iterations in all rounds";
-    if (problem.model->nc() > 0) m << ", slack share " << fmt(result.maxSlackDefect);
-    if (result.rounds.size() > 1) {
-      m << " after " << result.rounds.size() - 1 << " refinement round(s), " << problem.knots << " knots";
-    }
-    result.message = m.str();
-  }
+  if (result.ok()) result.status.message.clear();
   return result;
+}
+
+std::string OptimizationResult::describe() const {
+  std::ostringstream s;
+  s << status.describe() << " (Ipopt: " << ipoptStatus << ", " << iterations << " iterations in "
+    << rounds.size() << " round(s), " << trajectory.size() << " knots, cost " << formatStatusNumber(cost)
+    << ", constraint violation " << fmt(constraintViolation) << ", consistency defect "
+    << (consistency.integrated ? fmt(consistency.maxDefect) : std::string("not checked"));
+  if (worstSlackInterval >= 0) s << ", slack share " << fmt(maxSlackDefect);
+  s << ", " << toString(hessian) << " Hessian, " << fmt(solveTime) << " s)";
+  if (!hessianNote.empty()) s << "; " << hessianNote;
+  return s.str();
+}
+
+std::string OptimizationResult::json() const {
+  detail::ReportJson j = detail::statusJson(status);
+  using detail::toJson;
+  j["ipopt_status"] = ipoptStatus;
+  j["iterations"] = iterations;
+  j["cost"] = toJson(cost);
+  j["constraint_violation"] = toJson(constraintViolation);
+  j["bound_violation"] = toJson(boundViolation);
+  j["max_slack"] = toJson(maxSlack);
+  j["horizon"] = toJson(horizon);
+  j["knots"] = trajectory.size();
+  j["hessian"] = toString(hessian);
+  if (!hessianNote.empty()) j["hessian_note"] = hessianNote;
+  // null when the check did not run (Ipopt failed first, or an interval could not be
+  // integrated): a 0 would claim a consistency nobody measured.
+  j["consistency_defect"] = consistency.integrated ? toJson(consistency.maxDefect) : detail::ReportJson(nullptr);
+  j["consistency_checked"] = consistency.integrated;
+  if (consistency.integrated && consistency.worstInterval >= 0) {
+    j["consistency_where"] = {{"state", consistency.worstStateName},
+                              {"interval", consistency.worstInterval},
+                              {"time", toJson(consistency.worstTime)}};
+  }
+  if (worstSlackInterval >= 0) j["slack_defect"] = toJson(maxSlackDefect);
+  j["refinement_rounds"] = rounds.empty() ? 0 : rounds.size() - 1;
+  detail::ReportJson list = detail::ReportJson::array();
+  for (const RefinementRound& r : rounds) {
+    list.push_back({{"knots", r.knots},
+                    {"iterations", r.iterations},
+                    {"defect", toJson(r.maxDefect)},
+                    {"hessian", toString(r.hessian)}});
+  }
+  j["rounds"] = std::move(list);
+  j["solve_time_ms"] = toJson(1e3 * solveTime);
+  j["solve_cpu_time_ms"] = toJson(1e3 * solveCpuTime);
+  return j.dump();
 }
 
 }  // namespace trellis

@@ -73,6 +73,8 @@ OptimalControlProblem::OptimalControlProblem(std::shared_ptr<const Model> m) : m
   stateUpper = Eigen::VectorXd::Constant(nxs, kInf);
   inputLower = Eigen::VectorXd::Constant(m_, -kInf);
   inputUpper = Eigen::VectorXd::Constant(m_, kInf);
+  forceLower = Eigen::VectorXd::Constant(model->nc(), -kInf);
+  forceUpper = Eigen::VectorXd::Constant(model->nc(), kInf);
   R = Eigen::MatrixXd::Identity(m_, m_);
   Q = Eigen::MatrixXd::Zero(nxs, nxs);
   Qf = Eigen::MatrixXd::Zero(nxs, nxs);
@@ -192,6 +194,14 @@ void OptimalControlProblem::validate() const {
     if (std::isnan(inputLower(j)) || std::isnan(inputUpper(j)) || inputLower(j) > inputUpper(j)) {
       fail("problem: input bounds of '" + model->inputNames()[j] + "' [" + str(inputLower(j)) +
            ", " + str(inputUpper(j)) + "] are empty or NaN");
+    }
+  }
+  checkSize(forceLower, model->nc(), "forceLower");
+  checkSize(forceUpper, model->nc(), "forceUpper");
+  for (int r = 0; r < model->nc(); ++r) {
+    if (std::isnan(forceLower(r)) || std::isnan(forceUpper(r)) || forceLower(r) > forceUpper(r)) {
+      fail("problem: constraint force bounds of '" + model->constraints()[r].name + "' (row " +
+           std::to_string(r) + ") [" + str(forceLower(r)) + ", " + str(forceUpper(r)) + "] are empty or NaN");
     }
   }
   checkWeight(R, m, "R");
@@ -357,7 +367,7 @@ class FileParser {
     if (!root.is_object()) fail(source_ + ": expected a JSON object at the top level");
     checkKeys(root, "", {"description", "scene", "method", "knots", "horizon", "initial_state",
                          "final_state", "free_initial", "free_final", "state_bounds",
-                         "input_bounds", "cost", "initial_guess"});
+                         "input_bounds", "constraint_force_bounds", "cost", "initial_guess", "hessian"});
     if (!root.contains("scene")) bad("scene", "missing (the path of a scene file)");
     const std::string scenePath = resolve(string(root["scene"], "scene"));
     Scene scene = loadScene(scenePath);
@@ -373,6 +383,14 @@ class FileParser {
         problem.method = CollocationMethod::kTrapezoidal;
       } else {
         bad("method", "'" + method + "' (expected \"hermite_simpson\" or \"trapezoidal\")");
+      }
+    }
+    if (root.contains("hessian")) {
+      const std::string mode = string(root["hessian"], "hessian");
+      try {
+        problem.hessian = parseEnum<HessianMode>(mode, "hessian");
+      } catch (const std::invalid_argument& e) {
+        fail(source_ + ": " + e.what());
       }
     }
     if (root.contains("knots")) {
@@ -415,6 +433,14 @@ class FileParser {
     if (root.contains("input_bounds")) {
       namedBounds(root["input_bounds"], "input_bounds", inputs, "input", problem.inputLower,
                   problem.inputUpper);
+    }
+    if (root.contains("constraint_force_bounds")) {
+      // Keyed by the constraint's row ("0", "1", … in the scene's order; scene constraints have
+      // no names of their own).
+      std::vector<std::string> rows;
+      for (int r = 0; r < problem.model->nc(); ++r) rows.push_back(std::to_string(r));
+      namedBounds(root["constraint_force_bounds"], "constraint_force_bounds", rows,
+                  "constraint row", problem.forceLower, problem.forceUpper);
     }
     problem.goalState = problem.finalState;
     if (root.contains("cost")) {

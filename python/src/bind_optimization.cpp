@@ -36,13 +36,21 @@ void bindOptimization(py::module_& m) {
   py::enum_<DerivativeMode>(m, "DerivativeMode")
       .value("EXACT", DerivativeMode::kExact)
       .value("FINITE_DIFFERENCE", DerivativeMode::kFiniteDifference);
-  py::enum_<OptimizationStatus>(m, "OptimizationStatus")
-      .value("SOLVED", OptimizationStatus::kSolved)
-      .value("SOLVED_ACCEPTABLE", OptimizationStatus::kSolvedAcceptable)
-      .value("INFEASIBLE", OptimizationStatus::kInfeasible)
-      .value("ITERATION_LIMIT", OptimizationStatus::kIterationLimit)
-      .value("STOPPED", OptimizationStatus::kStopped)
-      .value("FAILED", OptimizationStatus::kFailed);
+  py::enum_<HessianMode>(m, "HessianMode",
+                         "The Lagrangian Hessian Ipopt uses: EXACT (the transcription's exact second "
+                         "derivatives) or LBFGS (limited-memory quasi-Newton).")
+      .value("EXACT", HessianMode::kExact)
+      .value("LBFGS", HessianMode::kLimitedMemory);
+  py::enum_<OptimizationCode>(m, "OptimizationCode",
+                              "The code of an OptimizationResult's status (SOLVED and "
+                              "SOLVED_ACCEPTABLE are success).")
+      .value("SOLVED", OptimizationCode::kSolved)
+      .value("SOLVED_ACCEPTABLE", OptimizationCode::kSolvedAcceptable)
+      .value("INCONSISTENT", OptimizationCode::kInconsistent)
+      .value("INFEASIBLE", OptimizationCode::kInfeasible)
+      .value("ITERATION_LIMIT", OptimizationCode::kIterationLimit)
+      .value("STOPPED", OptimizationCode::kStopped)
+      .value("FAILED", OptimizationCode::kFailed);
 
   py::class_<Problem> problem(m, "OptimalControlProblem",
       "minimize int_0^T u^T R u + (x - x_goal)^T Q (x - x_goal) dt + (x(T) - x_goal)^T Qf (x(T) - "
@@ -66,6 +74,8 @@ void bindOptimization(py::module_& m) {
       .def_readwrite("final_fixed", &Problem::finalFixed, "nx flags (list of bool)")
       .def_readwrite("time_weight", &Problem::timeWeight)
       .def_readwrite("initial_guess", &Problem::initialGuess, "a Trajectory or None")
+      .def_readwrite("hessian", &Problem::hessian,
+                     "HessianMode unless OptimizerOptions.hessian overrides it (file key \"hessian\")")
       .def_property_readonly("nq", &Problem::nq)
       .def_property_readonly("nx", &Problem::nx)
       .def_property_readonly("nu", &Problem::nu)
@@ -78,6 +88,9 @@ void bindOptimization(py::module_& m) {
   vectorProperty(problem, "input_lower", &Problem::inputLower, "(nu,)");
   vectorProperty(problem, "input_upper", &Problem::inputUpper, "(nu,)");
   vectorProperty(problem, "goal_state", &Problem::goalState, "(nx,)");
+  vectorProperty(problem, "force_lower", &Problem::forceLower,
+                 "(nc,) bounds on the constraint forces at every collocation point, -inf for none");
+  vectorProperty(problem, "force_upper", &Problem::forceUpper, "(nc,), +inf for none");
   vectorProperty(problem, "R", &Problem::R, "(nu, nu) symmetric PSD");
   vectorProperty(problem, "Q", &Problem::Q, "(nx, nx) symmetric PSD");
   vectorProperty(problem, "Qf", &Problem::Qf, "(nx, nx) symmetric PSD");
@@ -98,8 +111,11 @@ void bindOptimization(py::module_& m) {
 
   py::class_<OptimizerOptions>(m, "OptimizerOptions",
       "Ipopt options (keywords): print_level, max_iterations, tolerance, constraint_tolerance, "
-      "max_cpu_time, limited_memory_size, derivatives (DerivativeMode), on_iteration (a callable "
-      "taking an IterationInfo and returning False to stop; an exception in it stops the solve).")
+      "max_cpu_time, limited_memory_size, derivatives (DerivativeMode), hessian (HessianMode or None: "
+      "the problem's), warm_start (refinement rounds start from the carried primal and multipliers), "
+      "warm_start_barrier (Ipopt's mu_init then), consistency_tolerance, max_refinements, max_knots, "
+      "max_split, on_iteration (a callable taking an IterationInfo and returning False to stop; an "
+      "exception in it stops the solve).")
       .def(py::init(&makeFromKwargs<OptimizerOptions>))
       .def_readwrite("print_level", &OptimizerOptions::printLevel)
       .def_readwrite("max_iterations", &OptimizerOptions::maxIterations)
@@ -108,16 +124,50 @@ void bindOptimization(py::module_& m) {
       .def_readwrite("max_cpu_time", &OptimizerOptions::maxCpuTime)
       .def_readwrite("limited_memory_size", &OptimizerOptions::limitedMemorySize)
       .def_readwrite("derivatives", &OptimizerOptions::derivatives)
+      .def_readwrite("hessian", &OptimizerOptions::hessian)
+      .def_readwrite("warm_start", &OptimizerOptions::warmStart)
+      .def_readwrite("warm_start_barrier", &OptimizerOptions::warmStartBarrier)
+      .def_readwrite("consistency_tolerance", &OptimizerOptions::consistencyTolerance)
+      .def_readwrite("max_refinements", &OptimizerOptions::maxRefinements)
+      .def_readwrite("max_knots", &OptimizerOptions::maxKnots)
+      .def_readwrite("max_split", &OptimizerOptions::maxSplit)
       .def_readwrite("on_iteration", &OptimizerOptions::onIteration)
       .def("validate", &OptimizerOptions::validate);
 
   py::class_<OptimizationResult>(m, "OptimizationResult",
-      "status (OptimizationStatus), ipopt_status, message, iterations, cost, constraint_violation, "
-      "bound_violation, max_slack, solve_time, solve_cpu_time, horizon, evaluation counts, the "
-      "trajectory (knots), Hermite-Simpson midpoints and the NLP variables.")
-      .def_readonly("status", &OptimizationResult::status)
+      "status (OptimizationCode), ok, message, t, index (the status: t and index name the worst "
+      "interval when inconsistent), ipopt_status, iterations (all rounds), rounds, hessian, cost, "
+      "constraint_violation, bound_violation, max_slack, solve_time, solve_cpu_time, horizon, "
+      "evaluation counts, the trajectory (knots), Hermite-Simpson midpoints, the NLP variables and "
+      "multipliers; describe() and json() are the library's reports.")
+      .def_property_readonly("status", [](const OptimizationResult& r) { return r.status.code; })
+      .def_property_readonly("ok", &OptimizationResult::ok)
+      .def_property_readonly("message", [](const OptimizationResult& r) { return r.status.message; })
+      .def_property_readonly("t", [](const OptimizationResult& r) { return r.status.t; })
+      .def_property_readonly("index", [](const OptimizationResult& r) { return r.status.index; })
+      .def("describe", &OptimizationResult::describe)
+      .def("json", &OptimizationResult::json)
       .def_readonly("ipopt_status", &OptimizationResult::ipoptStatus)
-      .def_readonly("message", &OptimizationResult::message)
+      .def_readonly("hessian", &OptimizationResult::hessian)
+      .def_readonly("hessian_note", &OptimizationResult::hessianNote)
+      .def_property_readonly("rounds",
+                             [](const OptimizationResult& r) {
+                               py::list rounds;
+                               for (const RefinementRound& x : r.rounds) {
+                                 py::dict d;
+                                 d["knots"] = x.knots;
+                                 d["iterations"] = x.iterations;
+                                 d["ipopt_status"] = x.ipoptStatus;
+                                 d["defect"] = x.maxDefect;
+                                 d["slack_defect"] = x.maxSlackDefect;
+                                 d["hessian"] = x.hessian;
+                                 d["solve_time"] = x.solveTime;
+                                 rounds.append(d);
+                               }
+                               return rounds;
+                             },
+                             "one dict per solve (knots, iterations, ipopt_status, defect, "
+                             "slack_defect, hessian, solve_time)")
       .def_readonly("iterations", &OptimizationResult::iterations)
       .def_readonly("cost", &OptimizationResult::cost)
       .def_readonly("constraint_violation", &OptimizationResult::constraintViolation)
@@ -128,6 +178,7 @@ void bindOptimization(py::module_& m) {
       .def_readonly("horizon", &OptimizationResult::horizon)
       .def_readonly("dynamics_evaluations", &OptimizationResult::dynamicsEvaluations)
       .def_readonly("linearization_evaluations", &OptimizationResult::linearizationEvaluations)
+      .def_readonly("second_order_evaluations", &OptimizationResult::secondOrderEvaluations)
       .def_readonly("trajectory", &OptimizationResult::trajectory)
       .def_property_readonly("midpoint_states",
                              [](const OptimizationResult& r) { return toArray(r.midpointStates); })
@@ -135,10 +186,9 @@ void bindOptimization(py::module_& m) {
                              [](const OptimizationResult& r) { return toArray(r.midpointInputs); })
       .def_property_readonly("variables",
                              [](const OptimizationResult& r) { return toArray(r.variables); })
-      .def_property_readonly("success", &OptimizationResult::success)
-      .def("__repr__", [](const OptimizationResult& r) {
-        return std::string("<OptimizationResult ") + toString(r.status) + ": " + r.message + ">";
-      });
+      .def_property_readonly("constraint_multipliers",
+                             [](const OptimizationResult& r) { return toArray(r.constraintMultipliers); })
+      .def("__repr__", [](const OptimizationResult& r) { return "<OptimizationResult " + r.describe() + ">"; });
 
   m.def("optimize_trajectory",
         [](const Problem& problem, const std::optional<OptimizerOptions>& options) {

@@ -86,7 +86,7 @@ file(WRITE "${_optimize_dir}/infeasible.json" "{
 trellis_cli_test(optimize.infeasible
   ARGS optimize "${_optimize_dir}/infeasible.json" --quiet --out "${_optimize_dir}/infeasible.csv"
   CHECKS -DEXPECT_EXIT=3 "-DSTDOUT_REGEX=status: infeasible\nipopt_status: Infeasible_Problem_Detected"
-         "-DSTDERR_REGEX=^trellis: optimize: infeasible .*local infeasibility[^\n]*\n$")
+         "-DSTDERR_REGEX=^trellis: optimize: infeasible: .*local infeasibility[^\n]*\n$")
 
 # Errors: exit 1 or 2, nothing on stdout, one line naming the problem.
 set(_optimize_errors -DSTDOUT_EMPTY=ON -DSTDERR_ONE_LINE=ON)
@@ -109,13 +109,14 @@ trellis_cli_test(optimize.error.bad_method
   ARGS optimize "${_problems}/cart_pole_swingup.json" --method euler
   CHECKS -DEXPECT_EXIT=2 ${_optimize_errors} "-DSTDERR_REGEX=--method: 'euler'")
 
-# --json: the summary as one JSON object on one line (issue 10: gains/simulate/optimize --json),
+# --json: the result's report (OptimizationResult::json: the status vocabulary's "status", "ok",
+# "message", "t", "index" first) and the command's method, derivatives, trajectory, on one line;
 # solved and not solved (exit 4, "ok": false, the message, the rounds and where the defect is).
 trellis_cli_test(optimize.json
   ARGS optimize "${_problems}/cart_pole_swingup.json" --knots 8 --quiet --json
-  CHECKS "-DSTDOUT_REGEX=^\\{\"ok\":true,\"message\":\"\",\"status\":\"solved\",\"ipopt_status\":\"Solve_Succeeded\",\"iterations\":[1-9][0-9]*,\"cost\":[-0-9.e]+,.*\"knots\":[1-9][0-9]+,\"method\":\"hermite_simpson\",\"derivatives\":\"exact\",.*\"refinement_rounds\":[1-9],\"rounds\":\\[\\{\"knots\":8,.*\\}\\],\"solve_time_ms\":[0-9.e+-]+,\"solve_cpu_time_ms\":[0-9.e+-]+,\"trajectory\":null\\}\n$"
+  CHECKS "-DSTDOUT_REGEX=^\\{\"status\":\"solved\",\"ok\":true,\"message\":\"\",\"t\":null,\"index\":null,\"ipopt_status\":\"Solve_Succeeded\",\"iterations\":[1-9][0-9]*,\"cost\":[-0-9.e]+,.*\"knots\":[1-9][0-9]+,\"hessian\":\"exact\",.*\"refinement_rounds\":[1-9],\"rounds\":\\[\\{\"knots\":8,.*\\}\\],\"solve_time_ms\":[0-9.e+-]+,\"solve_cpu_time_ms\":[0-9.e+-]+,\"method\":\"hermite_simpson\",\"derivatives\":\"exact\",\"trajectory\":null\\}\n$"
          -DSTDERR_EMPTY=ON)
 trellis_cli_test(optimize.json_inconsistent
   ARGS optimize "${_problems}/cart_pole_swingup.json" --knots 8 --max-refinements 0 --quiet --json
-  CHECKS -DEXPECT_EXIT=4 "-DSTDOUT_REGEX=^\\{\"ok\":false,\"message\":\"inconsistent [^\"]*\",\"status\":\"inconsistent\",.*\"consistency_where\":\\{\"state\":\"[a-z]+\",\"interval\":[0-9]+,\"time\":[0-9.e+-]+\\},.*\"refinement_rounds\":0,.*\\}\n$"
+  CHECKS -DEXPECT_EXIT=4 "-DSTDOUT_REGEX=^\\{\"status\":\"inconsistent\",\"ok\":false,\"message\":\"[^\"]*worst defect[^\"]*\",\"t\":[0-9.e+-]+,\"index\":[0-9]+,.*\"consistency_where\":\\{\"state\":\"[a-z]+\",\"interval\":[0-9]+,\"time\":[0-9.e+-]+\\},.*\"refinement_rounds\":0,.*\\}\n$"
          "-DSTDERR_REGEX=^trellis: optimize: inconsistent ")

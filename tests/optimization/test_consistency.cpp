@@ -15,7 +15,7 @@ using Eigen::VectorXd;
 using trellis::CollocationMethod;
 using trellis::OptimalControlProblem;
 using trellis::OptimizationResult;
-using trellis::OptimizationStatus;
+using trellis::OptimizationCode;
 using trellis::OptimizerOptions;
 
 namespace {
@@ -91,8 +91,8 @@ TEST_CASE("consistency: minimum-energy transfer of a double integrator matches i
   p.finalState << d, 0.0;
   p.goalState = p.finalState;
   const OptimizationResult r = trellis::optimizeTrajectory(p);
-  INFO(r.message);
-  REQUIRE(r.status == OptimizationStatus::kSolved);
+  INFO(r.describe());
+  REQUIRE(r.status.code == OptimizationCode::kSolved);
   for (int k = 0; k < r.trajectory.size(); ++k) {
     const double t = r.trajectory.times()(k), s = t / T;
     CHECK(r.trajectory.inputs()(0, k) == Approx(6 * d / (T * T) * (1 - 2 * s)).margin(1e-6));
@@ -127,8 +127,8 @@ TEST_CASE("consistency: the defect falls at the transcription's order", "[consis
         p.method = method;
         p.knots = level == 0 ? 26 : 51;
         const OptimizationResult r = trellis::optimizeTrajectory(p, o);
-        INFO(r.message);
-        REQUIRE(r.status == OptimizationStatus::kSolved);
+        INFO(r.describe());
+        REQUIRE(r.status.code == OptimizationCode::kSolved);
         defect[level] = r.consistency.maxDefect;
         CHECK(recheck(p, r, 1.0).maxDefect == Approx(defect[level]).epsilon(1e-6));
       }
@@ -145,8 +145,8 @@ TEST_CASE("consistency: mesh refinement reaches the tolerance", "[consistency][r
   o.consistencyTolerance = 1e-4;
   SECTION("with refinement: solved, consistent by an independent check, defects falling") {
     const OptimizationResult r = trellis::optimizeTrajectory(p, o);
-    INFO(r.message);
-    REQUIRE(r.status == OptimizationStatus::kSolved);
+    INFO(r.describe());
+    REQUIRE(r.status.code == OptimizationCode::kSolved);
     REQUIRE(r.rounds.size() >= 2);
     CHECK(r.rounds.front().knots == 11);
     CHECK(r.rounds.back().knots == r.trajectory.size());
@@ -161,10 +161,10 @@ TEST_CASE("consistency: mesh refinement reaches the tolerance", "[consistency][r
   SECTION("without refinement the same solve is reported as inconsistent, with where") {
     o.maxRefinements = 0;
     const OptimizationResult r = trellis::optimizeTrajectory(p, o);
-    CHECK(r.status == OptimizationStatus::kInconsistent);
-    CHECK_FALSE(r.success());
+    CHECK(r.status.code == OptimizationCode::kInconsistent);
+    CHECK_FALSE(r.ok());
     CHECK(r.ipoptStatus == "Solve_Succeeded");
-    CHECK_THAT(r.message, Catch::Contains("inconsistent") && Catch::Contains("interval") &&
+    CHECK_THAT(r.describe(), Catch::Contains("inconsistent") && Catch::Contains("interval") &&
                               Catch::Contains("refinement limit 0"));
     CHECK(r.trajectory.size() == 11);
   }
@@ -212,15 +212,15 @@ TEST_CASE("consistency: a five-bar crossing its parallel singularity is refined 
   OptimizerOptions o;
   o.maxRefinements = 3;
   const OptimizationResult r = trellis::optimizeTrajectory(p, o);
-  INFO(r.message);
+  INFO(r.describe());
   CHECK(r.rounds.size() >= 1);
-  if (r.status == OptimizationStatus::kSolved || r.status == OptimizationStatus::kSolvedAcceptable) {
+  if (r.status.code == OptimizationCode::kSolved || r.status.code == OptimizationCode::kSolvedAcceptable) {
     CHECK(r.maxSlackDefect <= o.consistencyTolerance);
     CHECK(recheck(p, r, o.consistencyTolerance).consistent);
-  } else if (r.status == OptimizationStatus::kInconsistent) {
-    CHECK_THAT(r.message, Catch::Contains("interval"));
+  } else if (r.status.code == OptimizationCode::kInconsistent) {
+    CHECK_THAT(r.describe(), Catch::Contains("interval"));
   } else {
-    CHECK_FALSE(r.success());  // an Ipopt failure is reported as such, not as solved
+    CHECK_FALSE(r.ok());  // an Ipopt failure is reported as such, not as solved
   }
 }
 
@@ -245,8 +245,8 @@ TEST_CASE("consistency: a knife edge in the optimizer keeps A q' = 0", "[consist
   p.finalFixed[2] = false;  // heading free
   p.goalState = p.finalState;
   const OptimizationResult r = trellis::optimizeTrajectory(p);
-  INFO(r.message);
-  REQUIRE(r.status == OptimizationStatus::kSolved);
+  INFO(r.describe());
+  REQUIRE(r.status.code == OptimizationCode::kSolved);
   trellis::Data data(*p.model);
   double worst = 0.0;
   for (int k = 0; k < r.trajectory.size(); ++k) {
@@ -261,6 +261,10 @@ TEST_CASE("consistency: a knife edge in the optimizer keeps A q' = 0", "[consist
   CHECK(recheck(p, r, 1e-3).consistent);
   // The skate turned (a straight push cannot reach y = 0.5).
   CHECK(r.trajectory.states().row(2).cwiseAbs().maxCoeff() > 0.1);
+  // A knife edge has no exact Hessian (transcription.hpp): L-BFGS, and the result says why.
+  CHECK(r.hessian == trellis::HessianMode::kLimitedMemory);
+  CHECK_THAT(r.hessianNote, Catch::Contains("nonholonomic"));
+  CHECK_THAT(r.describe(), Catch::Contains("lbfgs Hessian") && Catch::Contains("nonholonomic"));
 }
 
 TEST_CASE("consistency: checkConsistency on a hand-made trajectory file names a corrupted knot",

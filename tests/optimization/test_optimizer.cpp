@@ -18,7 +18,7 @@ using Eigen::VectorXd;
 using trellis::CollocationMethod;
 using trellis::OptimalControlProblem;
 using trellis::OptimizationResult;
-using trellis::OptimizationStatus;
+using trellis::OptimizationCode;
 
 namespace {
 
@@ -91,9 +91,9 @@ trellis::OptimizerOptions singleSolve() {
 }
 
 void checkSolved(const OptimalControlProblem& p, const OptimizationResult& r) {
-  INFO(r.message);
-  REQUIRE(r.success());
-  CHECK(r.status == OptimizationStatus::kSolved);
+  INFO(r.describe());
+  REQUIRE(r.ok());
+  CHECK(r.status.code == OptimizationCode::kSolved);
   CHECK(r.ipoptStatus == "Solve_Succeeded");
   // Ipopt stops when the scaled violation is below constr_viol_tol = 1e-8; unscaled defects of
   // O(1) states stay within a decade of it.
@@ -231,11 +231,11 @@ TEST_CASE("optimizer: an impossible bound is reported as infeasible", "[optimize
   trellis::OptimizerOptions options;
   options.maxIterations = 300;
   const OptimizationResult r = trellis::optimizeTrajectory(p, options);
-  INFO(r.message);
-  CHECK_FALSE(r.success());
-  CHECK(r.status == OptimizationStatus::kInfeasible);
+  INFO(r.describe());
+  CHECK_FALSE(r.ok());
+  CHECK(r.status.code == OptimizationCode::kInfeasible);
   CHECK(r.ipoptStatus == "Infeasible_Problem_Detected");
-  CHECK(r.message.find("infeasib") != std::string::npos);
+  CHECK(r.status.message.find("infeasib") != std::string::npos);
   // The last iterate is still returned, and it does violate the dynamics.
   CHECK(r.trajectory.size() == p.knots);
   CHECK(r.constraintViolation > 1e-3);
@@ -297,7 +297,7 @@ TEST_CASE("optimizer: problem-file horizon bounds and a CSV initial guess", "[op
   SECTION("the solution as the guess of the same problem converges at once") {
     const OptimalControlProblem p = trellis::loadProblem(problemPath("cart_pole_swingup"));
     const OptimizationResult cold = trellis::optimizeTrajectory(p, singleSolve());
-    REQUIRE(cold.success());
+    REQUIRE(cold.ok());
     const std::string csv =
         (std::filesystem::temp_directory_path() / "trellis_optimization_guess.csv").string();
     cold.trajectory.writeCsvFile(csv);
@@ -327,8 +327,8 @@ TEST_CASE("optimizer: dynamics that cannot be evaluated are a status, not a cras
   CHECK_FALSE(t.evalConstraints(z.data(), g.data()));
   CHECK_THAT(t.lastError(), Catch::Contains("knot 0 (t = 0)"));
   const OptimizationResult r = trellis::optimizeTrajectory(p);
-  INFO(r.message);
-  CHECK_FALSE(r.success());
-  CHECK(r.message.find("the dynamics failed at knot 0") != std::string::npos);
+  INFO(r.describe());
+  CHECK_FALSE(r.ok());
+  CHECK(r.status.message.find("the dynamics failed at knot 0") != std::string::npos);
   CHECK(r.trajectory.size() == p.knots);  // the initial guess, returned as the last iterate
 }

@@ -16,7 +16,7 @@ def test_optimize_matches_cli(tm, cli, tmp_path, name):
     summary = dict(line.split(": ", 1) for line in text.strip().splitlines())
     problem = tm.load_problem(str(path))
     result = tm.optimize_trajectory(problem)
-    assert result.success, result.message
+    assert result.ok, result.message
     assert result.status.name.lower() == summary["status"]
     assert result.ipopt_status == summary["ipopt_status"]
     assert result.iterations == int(summary["iterations"])
@@ -48,7 +48,7 @@ def test_problem_built_in_python(tm):
     assert p.initial_fixed == [True, True]
     p.validate()
     result = tm.optimize_trajectory(p, options=tm.OptimizerOptions(tolerance=1e-9))
-    assert result.success, result.message
+    assert result.ok, result.message
     traj = result.trajectory
     assert traj.states.shape == (2, 21) and traj.inputs.shape == (1, 21)
     np.testing.assert_allclose(traj.states[:, 0], [0.0, 0.0], atol=1e-12)
@@ -90,16 +90,16 @@ def test_on_iteration_callback_and_statuses(tm):
         return info.iteration < 3
     result = tm.optimize_trajectory(pendulum_problem(tm),
                                     options=tm.OptimizerOptions(on_iteration=stop_at_three))
-    assert result.status == tm.OptimizationStatus.STOPPED and not result.success
+    assert result.status == tm.OptimizationCode.STOPPED and not result.ok
     assert [i for i, _ in seen] == [0, 1, 2, 3]
 
     def raises(info):
         raise KeyError("from the callback")
     result = tm.optimize_trajectory(pendulum_problem(tm), options=tm.OptimizerOptions(on_iteration=raises))
-    assert not result.success and "callback" in result.message
+    assert not result.ok and "callback" in result.message
 
     result = tm.optimize_trajectory(pendulum_problem(tm), options=tm.OptimizerOptions(max_iterations=2))
-    assert result.status == tm.OptimizationStatus.ITERATION_LIMIT
+    assert result.status == tm.OptimizationCode.ITERATION_LIMIT
     assert result.trajectory.states.shape == (2, 21)  # the last iterate is still returned
 
 
@@ -117,3 +117,43 @@ def test_optimize_releases_the_gil(tm):
     for r in results:
         assert r.iterations == one.iterations
         np.testing.assert_array_equal(r.trajectory.states, one.trajectory.states)
+
+
+def test_hessian_modes_and_reports(tm):
+    """The exact Hessian (default) and L-BFGS reach the same optimum, the exact one in fewer
+    iterations; the result's describe()/json() are the library's reports."""
+    import json
+
+    problem = tm.load_problem(str(PROBLEMS / "cart_pole_swingup.json"))
+    assert problem.hessian == tm.HessianMode.EXACT
+    exact = tm.optimize_trajectory(problem)
+    lbfgs = tm.optimize_trajectory(problem, options=tm.OptimizerOptions(hessian=tm.HessianMode.LBFGS))
+    assert exact.ok and lbfgs.ok, (exact.describe(), lbfgs.describe())
+    assert exact.hessian == tm.HessianMode.EXACT and lbfgs.hessian == tm.HessianMode.LBFGS
+    assert exact.iterations < lbfgs.iterations
+    assert exact.cost == pytest.approx(lbfgs.cost, rel=1e-8)
+    report = json.loads(exact.json())
+    assert list(report)[:5] == ["status", "ok", "message", "t", "index"]
+    assert report["status"] == "solved" and report["ok"] and report["hessian"] == "exact"
+    assert report["rounds"][0]["hessian"] == "exact"
+    assert exact.describe().startswith("solved (Ipopt: Solve_Succeeded")
+    assert exact.second_order_evaluations > 0 and lbfgs.second_order_evaluations == 0
+
+
+def test_problem_file_hessian_key(tm):
+    text = (PROBLEMS / "cart_pole_swingup.json").read_text()
+    base = str(PROBLEMS)
+    lbfgs = tm.parse_problem(text.replace('"knots": 31', '"knots": 31, "hessian": "lbfgs"'), "p.json", base)
+    assert lbfgs.hessian == tm.HessianMode.LBFGS
+    with pytest.raises(tm.ProblemError, match="p.json: hessian 'newton' is not one of exact, lbfgs"):
+        tm.parse_problem(text.replace('"knots": 31', '"knots": 31, "hessian": "newton"'), "p.json", base)
+
+
+def test_constraint_force_bounds(tm):
+    problem = tm.load_problem(str(PROBLEMS / "swingups" / "paper_pendulum_force_bound_transfer.json"))
+    np.testing.assert_array_equal(problem.force_lower, [-5.5])
+    np.testing.assert_array_equal(problem.force_upper, [5.5])
+    result = tm.optimize_trajectory(problem)
+    assert result.ok, result.describe()
+    problem.force_upper = np.array([np.inf])
+    assert np.isinf(problem.force_upper[0])

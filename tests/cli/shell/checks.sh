@@ -83,7 +83,7 @@ out_has "consistency_defect: not checked"
 # Ipopt's log (--print-level) goes to standard error: standard output stays one JSON object.
 run 0 "$TRELLIS" optimize "$PROBLEM" --knots 11 --quiet --json --print-level 5
 [ "$(wc -l < out.txt)" = 1 ] || fail "--json --print-level: stdout is not one line: $(head -c 300 out.txt)"
-grep -q '^{"ok":true' out.txt || fail "--json --print-level: stdout is not the JSON object: $(head -c 300 out.txt)"
+grep -q '^{"status":"solved","ok":true' out.txt || fail "--json --print-level: stdout is not the JSON object: $(head -c 300 out.txt)"
 grep -qi "ipopt" err.txt || fail "--print-level: Ipopt's log is not on stderr"
 
 # --rate slower than one sample per reference: a message in the option's terms.

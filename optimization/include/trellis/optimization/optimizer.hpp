@@ -2,8 +2,9 @@
 //
 // The transcription (transcription.hpp) is handed to Ipopt 3.11 through its TNLP interface (kept
 // in src/, Ipopt appears in no public header): exact sparse constraint Jacobian, analytic cost
-// gradient, and the Hessian of the Lagrangian approximated by Ipopt's limited-memory
-// quasi-Newton (L-BFGS) update. Linear solver: MUMPS (Debian's build).
+// gradient, and the exact Hessian of the Lagrangian (Transcription::evalHessian; or, by choice or
+// with knife-edge constraints, Ipopt's limited-memory quasi-Newton (L-BFGS) update). Linear
+// solver: MUMPS (Debian's build).
 //
 // "solved" means the plant can follow the result: after Ipopt converges, the knots are checked a
 // posteriori (checkConsistency, trellis/analysis/consistency.hpp: the exact dynamics integrated by
@@ -18,11 +19,13 @@
 // local order of the defect (5 for Hermite–Simpson, 3 for trapezoidal): with ε ∝ h^(p+1), that
 // brings the interval to half the tolerance. The new problem is warm-started from the previous
 // solution (states from its Hermite spline, inputs exactly, since the input is piecewise linear
-// and the new knots subdivide the old intervals). Rounds stop at the tolerance, at
+// and the new knots subdivide the old intervals) and, with `warmStart`, from its multipliers
+// carried onto the new mesh (Ipopt's warm_start_init_point; optimizer.cpp: carryOver). Rounds stop at the tolerance, at
 // maxRefinements, or when the knots would exceed maxKnots.
 #pragma once
 
 #include "trellis/analysis/consistency.hpp"
+#include "trellis/core/status.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/optimization/problem.hpp"
 #include "trellis/optimization/transcription.hpp"
@@ -30,6 +33,7 @@
 #include <Eigen/Core>
 
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -53,6 +57,14 @@ struct OptimizerOptions {
   double maxCpuTime = 1e6;         ///< max_cpu_time, seconds
   int limitedMemorySize = 6;       ///< limited_memory_max_history
   DerivativeMode derivatives = DerivativeMode::kExact;
+  /// The Lagrangian Hessian; unset: the problem's (OptimalControlProblem::hessian, default exact).
+  /// With nonholonomic constraints the exact Hessian is not available and L-BFGS is used (the
+  /// result's `hessian` and message say so).
+  std::optional<HessianMode> hessian;
+  /// Refinement rounds start from the previous round's primal and multipliers (carried onto the
+  /// refined mesh) with Ipopt's warm_start_init_point and μ_init = warmStartBarrier.
+  bool warmStart = true;
+  double warmStartBarrier = 1e-6;
   /// The a-posteriori check (file comment): "solved" requires the worst relative defect, and
   /// the slack's relative share, ≤ consistencyTolerance.
   double consistencyTolerance = 1e-3;
@@ -67,8 +79,10 @@ struct OptimizerOptions {
   void validate() const;
 };
 
-enum class OptimizationStatus {
-  kSolved,              ///< Ipopt converged to tol (Solve_Succeeded)
+/// The outcome of optimizeTrajectory (Status<OptimizationCode>: success is solved or
+/// solved_acceptable).
+enum class OptimizationCode {
+  kSolved,              ///< Ipopt converged to tol (Solve_Succeeded) and the result is consistent
   kSolvedAcceptable,    ///< converged to its acceptable tolerances (Solved_To_Acceptable_Level)
                         ///< and consistent
   kInconsistent,        ///< Ipopt converged but the solution fails the consistency check (or the
@@ -79,24 +93,43 @@ enum class OptimizationStatus {
   kFailed,              ///< any other Ipopt failure (restoration failed, step too small, …)
 };
 
+/// Names: solved, solved_acceptable, inconsistent, infeasible, iteration_limit, stopped, failed.
+inline EnumNameTable<OptimizationCode> enumNames(OptimizationCode) {
+  static constexpr EnumName<OptimizationCode> table[] = {
+      {OptimizationCode::kSolved, "solved"},
+      {OptimizationCode::kSolvedAcceptable, "solved_acceptable"},
+      {OptimizationCode::kInconsistent, "inconsistent"},
+      {OptimizationCode::kInfeasible, "infeasible"},
+      {OptimizationCode::kIterationLimit, "iteration_limit"},
+      {OptimizationCode::kStopped, "stopped"},
+      {OptimizationCode::kFailed, "failed"}};
+  return table;
+}
+
+constexpr bool isSuccess(OptimizationCode code) {
+  return code == OptimizationCode::kSolved || code == OptimizationCode::kSolvedAcceptable;
+}
+
 /// One solve of the refinement sequence.
 struct RefinementRound {
   int knots = 0;
   int iterations = 0;
+  HessianMode hessian = HessianMode::kExact;  ///< the Hessian Ipopt used
   std::string ipoptStatus;
   double maxDefect = 0.0;       ///< checkConsistency's worst relative defect (NaN when not checked)
   double maxSlackDefect = 0.0;  ///< the slack's worst relative share of a defect
   double solveTime = 0.0;       ///< wall-clock seconds (Ipopt and the check)
 };
 
-/// "solved", "solved_acceptable", "inconsistent", "infeasible", "iteration_limit", "stopped",
-/// "failed".
-const char* toString(OptimizationStatus status);
-
 struct OptimizationResult {
-  OptimizationStatus status = OptimizationStatus::kFailed;
+  /// code; message (empty on success; else why, with Ipopt's status and the last evaluation
+  /// failure, or for inconsistent the state, interval and time of the worst defect); for
+  /// inconsistent, t and index are the worst interval's start time and index (else NaN, −1).
+  Status<OptimizationCode> status{OptimizationCode::kFailed};
   std::string ipoptStatus;     ///< Ipopt's ApplicationReturnStatus name, e.g. "Solve_Succeeded"
-  std::string message;         ///< one line for a person: the status and, on failure, why
+  /// Non-empty when the exact Hessian was asked for but not available (knife edges): why, and
+  /// that L-BFGS was used.
+  std::string hessianNote;
   int iterations = 0;          ///< Ipopt iterations, summed over the rounds
   double cost = 0.0;           ///< J at the returned iterate
   double constraintViolation = 0.0;  ///< max |g(z)| of the returned iterate (unscaled)
@@ -112,16 +145,28 @@ struct OptimizationResult {
   double solveTime = 0.0;      ///< wall-clock seconds of all rounds (Ipopt and checks)
   double solveCpuTime = 0.0;   ///< CPU seconds of the process during them (std::clock)
   double horizon = 0.0;        ///< T of the returned iterate
-  long dynamicsEvaluations = 0, linearizationEvaluations = 0;
+  long dynamicsEvaluations = 0, linearizationEvaluations = 0, secondOrderEvaluations = 0;
+  HessianMode hessian = HessianMode::kExact;  ///< the Hessian Ipopt used (last round)
+  /// Ipopt's final multipliers (transcription layout): of g(z) = 0, and of the lower and upper
+  /// variable bounds.
+  Eigen::VectorXd constraintMultipliers, lowerBoundMultipliers, upperBoundMultipliers;
   /// The returned iterate at the knots — the solution, or the last iterate when the solve failed
   /// (empty only if that iterate is not finite; the message then says so).
   Trajectory trajectory;
   Eigen::MatrixXd midpointStates, midpointInputs;  ///< Hermite–Simpson only (2n×(N−1), m×(N−1))
   Eigen::VectorXd variables;   ///< z (transcription layout)
 
-  bool success() const {
-    return status == OptimizationStatus::kSolved || status == OptimizationStatus::kSolvedAcceptable;
-  }
+  /// Solved (or solved_acceptable) and consistent: the trajectory is right and complete.
+  bool ok() const { return status.ok(); }
+  /// One line: the status, then Ipopt's status, iterations, rounds, knots, cost, constraint
+  /// violation, consistency defect (and the slack's share with constraints), Hessian, time.
+  std::string describe() const;
+  /// {"status", "ok", "message", "t", "index", "ipopt_status", "iterations", "cost",
+  /// "constraint_violation", "bound_violation", "max_slack", "horizon", "knots", "hessian",
+  /// "consistency_defect" (null when not checked), "consistency_checked", "consistency_where"
+  /// (when checked: state, interval, time), "slack_defect" (with constraints), "refinement_rounds",
+  /// "rounds" ([{knots, iterations, defect, hessian}]), "solve_time_ms", "solve_cpu_time_ms"}.
+  std::string json() const;
 };
 
 /// Transcribes, solves, checks and refines (file comment). Throws ProblemError / std::invalid_argument for a bad problem or bad

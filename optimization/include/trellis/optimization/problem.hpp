@@ -6,6 +6,7 @@
 //               h(q) = 0, A(q) q̇ = 0                      (closed chains: at every knot;
 //                                                          knife edges: A(q) q̇ = 0 only)
 //               x_lower ≤ x(t) ≤ x_upper, u_lower ≤ u(t) ≤ u_upper
+//               λ_lower ≤ λ(x, u) ≤ λ_upper                (constraint forces, at the points)
 //               x(0)_i = x_initial_i for the fixed entries, x(T)_i = x_final_i likewise
 //               T fixed, or T_min ≤ T ≤ T_max
 //
@@ -14,6 +15,7 @@
 // A problem can also be read from a JSON problem file (optimization/README.md describes it).
 #pragma once
 
+#include "trellis/core/enum_names.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/core/model.hpp"
 
@@ -39,6 +41,20 @@ enum class CollocationMethod {
   kHermiteSimpson,  ///< separated Hermite–Simpson, midpoint states and inputs are variables (O(h⁴))
   kTrapezoidal,     ///< trapezoidal rule (O(h²)), the cheap option
 };
+
+/// The Hessian of the Lagrangian Ipopt works with (problem file "hessian", OptimizerOptions,
+/// CLI --hessian).
+enum class HessianMode {
+  kExact,          ///< the transcription's exact second derivatives (Transcription::evalHessian)
+  kLimitedMemory,  ///< Ipopt's limited-memory quasi-Newton (L-BFGS) approximation
+};
+
+/// Names: exact, lbfgs.
+inline EnumNameTable<HessianMode> enumNames(HessianMode) {
+  static constexpr EnumName<HessianMode> table[] = {{HessianMode::kExact, "exact"},
+                                                    {HessianMode::kLimitedMemory, "lbfgs"}};
+  return table;
+}
 
 struct OptimalControlProblem {
   /// The model; shared so that the problem, its transcription and results can outlive the scene.
@@ -67,12 +83,20 @@ struct OptimalControlProblem {
 
   /// Bounds (2n, m); ±infinity for none (the defaults set by resize()).
   Eigen::VectorXd stateLower, stateUpper, inputLower, inputUpper;
+  /// Bounds on the constraint forces λ_r (nc, the model's constraint rows; M q̈ = … + Aᵀλ),
+  /// imposed at every collocation point (knots and Hermite–Simpson midpoints); ±infinity for none
+  /// (problem file "constraint_force_bounds": {"<constraint name>": [lower, upper]}).
+  Eigen::VectorXd forceLower, forceUpper;
 
   /// Cost weights: R (m×m), Q, Qf (2n×2n), all symmetric positive semidefinite; goal state
   /// (2n); w_T ≥ 0 weighs the horizon (minimum time when the other terms are small).
   Eigen::MatrixXd R, Q, Qf;
   Eigen::VectorXd goalState;
   double timeWeight = 0.0;
+
+  /// The Hessian the solver uses unless OptimizerOptions::hessian overrides it (problem file
+  /// "hessian": "exact" | "lbfgs"; default exact).
+  HessianMode hessian = HessianMode::kExact;
 
   /// Initial guess. Without one, the states are interpolated linearly from initialState to
   /// finalState and the inputs are 0 (clamped into their bounds).

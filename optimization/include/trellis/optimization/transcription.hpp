@@ -4,7 +4,9 @@
 //   minimize J(z)   subject to   g(z) = 0,   z_lower ≤ z ≤ z_upper,
 //
 // with exact first derivatives: ∂g/∂z is assembled from the core's A = ∂f/∂x and B = ∂f/∂u
-// (computeLinearization) and ∂J/∂z is analytic. The NLP is independent of the solver; the Ipopt
+// (computeLinearization) and ∂J/∂z is analytic; and with exact second derivatives: the
+// Lagrangian Hessian from the core's computeSecondOrderContraction (evalHessian, formulas in
+// transcription.cpp and optimization/README.md). The NLP is independent of the solver; the Ipopt
 // adapter (optimizer.hpp) and the tests' finite-difference checker both call it.
 //
 // Knots t_k = T τ_k on the mesh τ (problem.mesh; uniform τ_k = k/(N − 1) by default), interval
@@ -41,7 +43,10 @@
 // Variable layout: z = [x_0, u_0, x_1, u_1, …, x_{P−1}, u_{P−1}, γ_0, μ_0, …, γ_{N−2}, μ_{N−2}, T]
 // (slack only with constraints, T only when free). Constraint layout: per interval the Simpson
 // (or trapezoidal) defect, then for Hermite–Simpson the Hermite defect and the m input rows;
-// then the knot constraints knot by knot (h rows, then A q̇ rows).
+// then the knot constraints knot by knot (h rows, then A q̇ rows); then, with bounds on constraint
+// forces (problem.forceLower/Upper), point by point the rows λ_r(x_p, u_p) of the bounded
+// constraints r, with Jacobian ∂λ/∂[x; u] (the core's dlambda_dx): inequalities, whose bounds
+// constraintBounds() gives (every other row is an equality g = 0).
 //
 // Evaluations are cached: f (and A, B for derivatives) are computed once per distinct z, whatever
 // the order of the calls: z is compared with the cached copy (a memcmp), which covers Ipopt's
@@ -96,6 +101,13 @@ class Transcription {
 
   /// Bounds on z (fixed boundary entries have equal bounds; no bound is ±infinity).
   void variableBounds(Eigen::VectorXd& lower, Eigen::VectorXd& upper) const;
+  /// Bounds on g: 0 = 0 for every equality row; [λ_lower_r, λ_upper_r] for the constraint-force
+  /// rows (±infinity for no bound on one side).
+  void constraintBounds(Eigen::VectorXd& lower, Eigen::VectorXd& upper) const;
+  /// Constraint-force rows per point (the constraint rows with a finite bound; 0 without) and the
+  /// first of point p's (−1 without).
+  int forceRowsPerPoint() const;
+  int forceRow(int point) const;
   /// The initial guess z₀ (problem.initialGuess, else linear interpolation), inside the bounds.
   Eigen::VectorXd initialGuess() const;
 
@@ -107,10 +119,23 @@ class Transcription {
   bool evalJacobian(const double* z, double* values);          ///< in jacobianRows/Cols order
   const std::string& lastError() const;
 
+  // ---- Lagrangian Hessian: σ ∇²J + Σ_c μ_c ∇²g_c, exact (the core's second derivatives of the
+  // dynamics, computeSecondOrderContraction, one per point per evaluation). Lower triangle
+  // (row ≥ column) in a pattern fixed at construction; values allocation-free.
+  /// False with nonholonomic (knife-edge) rows, whose ∂²(A(q) v)/∂q² the core does not give;
+  /// hessianUnavailableReason() says so and evalHessian returns false.
+  bool hessianAvailable() const;
+  const std::string& hessianUnavailableReason() const;
+  const std::vector<int>& hessianRows() const;
+  const std::vector<int>& hessianCols() const;
+  /// objectiveFactor σ, multipliers μ (numConstraints()); values in hessianRows/Cols order.
+  bool evalHessian(const double* z, double objectiveFactor, const double* multipliers, double* values);
+
   /// Number of core evaluations so far (computeDynamics and computeLinearization calls, per
   /// point), a measure of the caching.
   long dynamicsEvaluations() const;
   long linearizationEvaluations() const;
+  long secondOrderEvaluations() const;  ///< computeSecondOrderContraction calls
 
   // ---- Reading a solution --------------------------------------------------------------------
   double horizon(const double* z) const;

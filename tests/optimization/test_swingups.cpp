@@ -1,0 +1,188 @@
+// Tests for the optimizer on the exact Hessian (issue 30): the swing-up problems of
+// examples/problems/swingups that solve in a few seconds are solved and pass the a-posteriori
+// consistency check; refinement rounds warm-started from the carried multipliers reach the same
+// solution as cold ones; the problem file's "hessian" key. (The larger swing-ups are benchmarks:
+// bench/optimization_bench.cpp, family swingup.)
+#include <trellis/core.hpp>
+#include <trellis/optimization.hpp>
+
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+using Eigen::VectorXd;
+using trellis::HessianMode;
+using trellis::OptimalControlProblem;
+using trellis::OptimizationCode;
+using trellis::OptimizationResult;
+
+namespace {
+
+std::string problemPath(const std::string& name) {
+  return std::string(TRELLIS_SOURCE_DIR) + "/examples/problems/" + name + ".json";
+}
+
+/// Solved and consistent by the optimizer's own check, at the boundary states, inside the input
+/// and state bounds.
+void checkSolved(const OptimalControlProblem& p, const OptimizationResult& r) {
+  INFO(r.describe());
+  REQUIRE(r.ok());
+  CHECK(r.status.code == OptimizationCode::kSolved);
+  CHECK(r.hessian == HessianMode::kExact);
+  REQUIRE(r.consistency.integrated);
+  CHECK(r.consistency.consistent);
+  CHECK(r.consistency.maxDefect <= 1e-3);
+  const int last = r.trajectory.size() - 1;
+  CHECK((r.trajectory.states().col(0) - p.initialState).cwiseAbs().maxCoeff() < 1e-9);
+  CHECK((r.trajectory.states().col(last) - p.finalState).cwiseAbs().maxCoeff() < 1e-9);
+  for (int k = 0; k <= last; ++k) {
+    CHECK((r.trajectory.inputs().col(k) - p.inputUpper).maxCoeff() <= 1e-8);
+    CHECK((p.inputLower - r.trajectory.inputs().col(k)).maxCoeff() <= 1e-8);
+    CHECK((r.trajectory.states().col(k) - p.stateUpper).maxCoeff() <= 1e-8);
+    CHECK((p.stateLower - r.trajectory.states().col(k)).maxCoeff() <= 1e-8);
+  }
+}
+
+}  // namespace
+
+TEST_CASE("swingups: the turntable arm with joint speed limits solves and is consistent",
+          "[optimizer][swingup][hessian]") {
+  // Yaw joint + two pitch links, hanging to upright while the turntable turns 90 degrees in 3 s,
+  // torque bounds, |dq| <= 8 rad/s, 61 Hermite-Simpson knots (issue 30's arm).
+  const OptimalControlProblem p = trellis::loadProblem(problemPath("swingups/turntable_arm_speed_limit_swingup"));
+  REQUIRE(p.knots == 61);
+  const OptimizationResult r = trellis::optimizeTrajectory(p);
+  checkSolved(p, r);
+  // Ipopt converged in every round (no round at the iteration limit).
+  for (const auto& round : r.rounds) CHECK(round.ipoptStatus == "Solve_Succeeded");
+}
+
+TEST_CASE("swingups: the turntable arm under torque bounds alone solves with more refinement rounds",
+          "[optimizer][swingup][hessian]") {
+  // Without speed limits the minimum-effort motion is a whip (the elbow near 16 rad/s) that the
+  // 61-knot mesh resolves only after several rounds, each of which moves the fast phase: the
+  // default 6 rounds end "inconsistent" (an honest refusal, never an iteration limit); with 12
+  // the problem is solved and consistent.
+  const OptimalControlProblem p = trellis::loadProblem(problemPath("swingups/turntable_arm_swingup"));
+  SECTION("default refinement: inconsistent or solved, never an Ipopt failure") {
+    const OptimizationResult r = trellis::optimizeTrajectory(p);
+    INFO(r.describe());
+    CHECK((r.ok() || r.status.code == OptimizationCode::kInconsistent));
+    for (const auto& round : r.rounds) CHECK(round.ipoptStatus == "Solve_Succeeded");
+    if (!r.ok()) {
+      CHECK(r.status.index >= 0);  // where: the worst interval
+      CHECK_THAT(r.status.message, Catch::Contains("refinement limit 6"));
+    }
+  }
+  SECTION("12 refinement rounds: solved") {
+    trellis::OptimizerOptions options;
+    options.maxRefinements = 12;
+    checkSolved(p, trellis::optimizeTrajectory(p, options));
+  }
+}
+
+TEST_CASE("swingups: warm-started refinement rounds reach the cold rounds' solution in no more iterations",
+          "[optimizer][refinement][warm_start]") {
+  for (const char* name : {"cart_pole_swingup", "acrobot_swingup", "paper_pendulum_transfer"}) {
+    DYNAMIC_SECTION(name) {
+      OptimalControlProblem p = trellis::loadProblem(problemPath(name));
+      p.knots = std::string(name) == "paper_pendulum_transfer" ? 6 : 9;  // coarse: refinement runs
+      trellis::OptimizerOptions warm, cold;
+      cold.warmStart = false;
+      const OptimizationResult a = trellis::optimizeTrajectory(p, warm);
+      const OptimizationResult b = trellis::optimizeTrajectory(p, cold);
+      INFO(a.describe());
+      INFO(b.describe());
+      REQUIRE(a.ok());
+      REQUIRE(b.ok());
+      REQUIRE(a.rounds.size() > 1);
+      CHECK(a.rounds.size() == b.rounds.size());
+      CHECK(a.trajectory.size() == b.trajectory.size());
+      CHECK(a.cost == Approx(b.cost).epsilon(1e-7));
+      int warmRefined = 0, coldRefined = 0;
+      for (std::size_t k = 1; k < a.rounds.size(); ++k) warmRefined += a.rounds[k].iterations;
+      for (std::size_t k = 1; k < b.rounds.size(); ++k) coldRefined += b.rounds[k].iterations;
+      CHECK(warmRefined <= coldRefined);
+    }
+  }
+}
+
+TEST_CASE("swingups: the problem file's hessian key", "[optimizer][file][hessian]") {
+  std::ifstream in(problemPath("cart_pole_swingup"));
+  std::stringstream text;
+  text << in.rdbuf();
+  const std::string base = std::string(TRELLIS_SOURCE_DIR) + "/examples/problems";
+  auto with = [&](const std::string& value) {
+    std::string s = text.str();
+    s.insert(s.find("\"knots\""), "\"hessian\": " + value + ", ");
+    return s;
+  };
+  CHECK(trellis::parseProblem(text.str(), "p.json", base).hessian == HessianMode::kExact);
+  const OptimalControlProblem lbfgs = trellis::parseProblem(with("\"lbfgs\""), "p.json", base);
+  CHECK(lbfgs.hessian == HessianMode::kLimitedMemory);
+  CHECK_THROWS_WITH(trellis::parseProblem(with("\"newton\""), "p.json", base),
+                    "p.json: hessian 'newton' is not one of exact, lbfgs");
+  CHECK_THROWS_WITH(trellis::parseProblem(with("2"), "p.json", base), Catch::Contains("hessian"));
+  // The file's choice is used unless the options override it.
+  trellis::OptimizerOptions options;
+  options.maxRefinements = 0;
+  CHECK(trellis::optimizeTrajectory(lbfgs, options).hessian == HessianMode::kLimitedMemory);
+  options.hessian = HessianMode::kExact;
+  CHECK(trellis::optimizeTrajectory(lbfgs, options).hessian == HessianMode::kExact);
+}
+
+TEST_CASE("swingups: a bound on the constraint force is active and held at every collocation point",
+          "[optimizer][force_bounds][hessian]") {
+  // The paper's closed chain (a distance constraint, one λ): solve free, then bound |λ| to 80 %
+  // of the free solution's largest |λ|: solved, consistent, the bound active and kept at the
+  // knots and midpoints, at a cost no lower than the free one.
+  const OptimalControlProblem free = trellis::loadProblem(problemPath("paper_pendulum_transfer"));
+  const auto largestForce = [](const OptimalControlProblem& p, const OptimizationResult& r) {
+    trellis::Data data(*p.model);
+    double largest = 0.0;
+    auto at = [&](const VectorXd& x, const VectorXd& u) {
+      REQUIRE(trellis::computeDynamics(*p.model, data, x.head(p.nq()), x.tail(p.nq()), u).ok());
+      largest = std::max(largest, std::abs(data.lambda(0)));
+    };
+    for (int k = 0; k < r.trajectory.size(); ++k) at(r.trajectory.states().col(k), r.trajectory.inputs().col(k));
+    for (int k = 0; k < r.midpointStates.cols(); ++k) at(r.midpointStates.col(k), r.midpointInputs.col(k));
+    return largest;
+  };
+  const OptimizationResult r0 = trellis::optimizeTrajectory(free);
+  INFO(r0.describe());
+  REQUIRE(r0.ok());
+  const double L = largestForce(free, r0);
+  REQUIRE(L > 0.0);
+  OptimalControlProblem bounded = free;
+  bounded.forceLower(0) = -0.8 * L;
+  bounded.forceUpper(0) = 0.8 * L;
+  const OptimizationResult r1 = trellis::optimizeTrajectory(bounded);
+  INFO(r1.describe());
+  checkSolved(bounded, r1);
+  const double L1 = largestForce(bounded, r1);
+  INFO("largest |lambda|: free " << L << ", bounded " << L1);
+  CHECK(L1 <= 0.8 * L * (1.0 + 1e-7));
+  CHECK(L1 >= 0.8 * L * (1.0 - 1e-4));  // active
+  CHECK(r1.cost >= r0.cost * (1.0 - 1e-9));
+}
+
+TEST_CASE("swingups: constraint_force_bounds in a problem file", "[optimizer][file][force_bounds]") {
+  const OptimalControlProblem p =
+      trellis::loadProblem(problemPath("swingups/paper_pendulum_force_bound_transfer"));
+  CHECK(p.forceLower(0) == -5.5);
+  CHECK(p.forceUpper(0) == 5.5);
+  std::ifstream in(problemPath("paper_pendulum_transfer"));
+  std::stringstream text;
+  text << in.rdbuf();
+  std::string bad = text.str();
+  bad.insert(bad.find("\"knots\""), "\"constraint_force_bounds\": {\"1\": [0, 1]}, ");
+  CHECK_THROWS_WITH(trellis::parseProblem(bad, "p.json", std::string(TRELLIS_SOURCE_DIR) + "/examples/problems"),
+                    Catch::Contains("constraint_force_bounds.1") && Catch::Contains("unknown constraint row '1'"));
+  std::string empty = text.str();
+  empty.insert(empty.find("\"knots\""), "\"constraint_force_bounds\": {\"0\": [2, 1]}, ");
+  CHECK_THROWS_WITH(trellis::parseProblem(empty, "p.json", std::string(TRELLIS_SOURCE_DIR) + "/examples/problems"),
+                    Catch::Contains("constraint_force_bounds.0") && Catch::Contains("lower bound 2 > upper bound 1"));
+}
