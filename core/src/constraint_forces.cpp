@@ -18,9 +18,14 @@ std::vector<ConstraintPointForce> computeConstraintPointForces(const Model& mode
   std::vector<ConstraintPointForce> out;
   for (int r = 0; r < model.nc(); ++r) {
     const Constraint& c = model.constraints()[r];
+    // The kinds emit the force on a first, then the one on b (header); a point on a plane acts at
+    // the point body's point b on both.
+    int emitted = 0;
     detail::withConstraintKind(c, [&](auto kind) {
       decltype(kind)::forces(data, c, [&](int joint, const Eigen::Vector3d& p, const Eigen::Vector3d& g, double) {
-        out.push_back({r, joint, p, lambda(r) * g});
+        const int side = c.type == ConstraintType::kPointOnPlane ? 1 : emitted;
+        out.push_back({r, joint, side, p, lambda(r) * g});
+        ++emitted;
       });
     });
   }

@@ -59,7 +59,11 @@ TEST_CASE("constraint point forces sum to A^T lambda and follow each kind's form
     // knife edge: 1 force; distance, point, point on plane: 2 each.
     REQUIRE(forces.size() == 7);
     const std::vector<int> rows{0, 1, 1, 2, 2, 3, 3};
-    for (std::size_t f = 0; f < forces.size(); ++f) CHECK(forces[f].row == rows[f]);
+    const std::vector<int> sides{0, 0, 1, 0, 1, 1, 1};
+    for (std::size_t f = 0; f < forces.size(); ++f) {
+      CHECK(forces[f].row == rows[f]);
+      CHECK(forces[f].side == sides[f]);
+    }
     for (int r = 0; r < 4; ++r) {
       const Constraint& c = model.constraints()[r];
       const auto first = std::find_if(forces.begin(), forces.end(), [&](const auto& x) { return x.row == r; });

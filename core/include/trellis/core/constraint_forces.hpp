@@ -16,6 +16,9 @@ class Data;
 struct ConstraintPointForce {
   int row = 0;                                         ///< constraint row r (index into Model::constraints())
   int joint = kWorld;                                  ///< the body it acts on (kWorld: the world)
+  /// Which of the constraint's points it acts at: 0 its first point a, 1 its second point b (for
+  /// the plane body of a point on a plane: 1, the point body's point).
+  int side = 0;
   /// Where it acts, world coordinates [m]: a point of body `joint` (for the plane body of a point
   /// on a plane, its material point that coincides with the point body's point).
   Eigen::Vector3d point = Eigen::Vector3d::Zero();

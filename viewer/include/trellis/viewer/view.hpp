@@ -57,11 +57,21 @@ struct ViewOptions {
   /// the entries of ROS_PACKAGE_PATH, then each ancestor directory of meshBaseDirectory named PKG).
   std::vector<std::string> packagePath;
   /// three.js directory (holding three.min.js); empty: $TRELLIS_THREE_DIR, else the directory
-  /// found when trellis was configured (Debian: /usr/share/javascript/three).
+  /// found when trellis was configured (Debian: /usr/share/javascript/three), else the copy
+  /// installed with trellis (PREFIX/share/trellis/three, with its LICENSE).
   std::string threeDirectory;
-  /// Ghost trajectories are stored in float32 (half the size; positions rounded by ~6e-8
-  /// relative) unless this is set; solid trajectories and the state are always float64.
+  /// Ghost trajectories are stored in float32 (half the size) unless this is set; solid
+  /// trajectories and the state are always float64. A ghost sampled at the same times as the first
+  /// solid trajectory is stored as its float32 difference from that one (rounding ~6e-8 of the
+  /// deviation, ~1e-10 m for a closed loop beside its reference), any other ghost as float32
+  /// coordinates (rounding ~6e-8 relative). ViewReport::ghostRounding gives the largest rounding.
   bool exactGhosts = false;
+  /// Draw the constraint forces of the solid trajectories as arrows (a model with constraints):
+  /// λ(q, q̇, u) from computeDynamics at every sample, split into forces at the constraint points
+  /// by computeConstraintPointForces: the force each row exerts on its first body (on its second
+  /// when the first is the world), one arrow per body point (the x, y, z rows of a point
+  /// constraint add up to one arrow); the opposite force on the other body is not drawn.
+  bool constraintForces = true;
   /// Upper limit of samples × bodies over all trajectories (memory and file size guard).
   long maxPoseSamples = 20'000'000;
 };
@@ -71,6 +81,9 @@ struct ViewReport {
   std::vector<std::string> warnings;  ///< e.g. an unsupported mesh format drawn as a stand-in box
   long samples = 0;                   ///< pose samples over all trajectories (or 1 for a state)
   std::size_t bytes = 0;              ///< size of the page
+  /// Largest change of a stored ghost number by the float32 encoding (positions in m, quaternion
+  /// entries unitless); 0 without ghosts or with ViewOptions::exactGhosts.
+  double ghostRounding = 0.0;
 };
 
 /// The HTML page for `scene` at the configuration `q` (n; the state shown when there is no
