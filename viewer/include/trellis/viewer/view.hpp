@@ -44,9 +44,11 @@ class ViewError : public std::runtime_error {
 struct ViewTrajectory {
   std::string name;         ///< shown in the page's legend (e.g. "reference", "closed loop 3")
   Trajectory trajectory;    ///< names must equal the model's (checkCompatible)
-  bool ghost = false;
+  bool ghost = false;       ///< drawn translucent, bodies and capsules only (no lines, no arrows)
 };
 
+/// How renderView samples, stores and draws (defaults: 60 samples per second, ghosts in float32,
+/// force arrows on).
 struct ViewOptions {
   std::string title;               ///< page title; default: the scene's name
   double displayRate = 60.0;       ///< samples per second besides the knots; > 0, finite
