@@ -218,12 +218,30 @@ D.frames.forEach(function (f, i) {
 });
 
 // ---- one drawing per trajectory (or one for the state) -------------------------------------------
+// Ghosts share their materials, and their parts (body spheres, capsules, visuals) are drawn as one
+// InstancedMesh per geometry for all ghosts: a handful of draw calls instead of one per part and
+// ghost (the hand's twenty closed loops: 900). setPoses writes each part's world matrix.
+const ghostMats = {body: material(colours.body, true), link: material(colours.link, true),
+                   visual: material(colours.visual, true), standin: material(0xe0a030, true, {wireframe: true})};
+const ghostBatches = new Map();  // geometry and material → {geometry, material, category, items, mesh}
+function ghostPart(inst, key, geometry, mat, category, place) {
+  let batch = ghostBatches.get(key);
+  if (!batch) {
+    batch = {geometry: geometry, material: mat, category: category, items: [], mesh: null};
+    ghostBatches.set(key, batch);
+  }
+  const item = {batch: batch, index: batch.items.length, place: place};
+  batch.items.push(item);
+  inst.parts.push(item);
+  return item;
+}
 let instanceCount = 0;
 function makeInstance(ghost, withArrows) {
-  const inst = {group: new THREE.Group(), bodies: [], frames: [], links: [], lines: [], arrows: []};
+  const inst = {group: new THREE.Group(), bodies: [], frames: [], links: [], lines: [], arrows: [], parts: []};
   scene.add(inst.group);
-  const mats = {body: material(colours.body, ghost), link: material(colours.link, ghost),
-                visual: material(colours.visual, ghost), standin: material(0xe0a030, ghost, {wireframe: true})};
+  const mats = ghost ? ghostMats : {body: material(colours.body, false), link: material(colours.link, false),
+                                    visual: material(colours.visual, false),
+                                    standin: material(0xe0a030, false, {wireframe: true})};
   for (let j = 0; j < nb; ++j) {
     const o = new THREE.Object3D();
     inst.group.add(o);
@@ -244,6 +262,12 @@ function makeInstance(ghost, withArrows) {
   D.bodies.forEach(function (b, j) {
     if (!(b.mass > 0)) return;
     const r = Math.max(0.07 * R * Math.cbrt(b.mass / maxMass), 0.02 * R);
+    if (ghost) {
+      const local = new THREE.Matrix4().makeScale(r, r, r).setPosition(new THREE.Vector3().fromArray(b.com));
+      const body = inst.bodies[j];
+      ghostPart(inst, "body", unitSphere, mats.body, "bodies", function (m) { m.multiplyMatrices(body.matrixWorld, local); return true; });
+      return;
+    }
     const s = new THREE.Mesh(unitSphere, mats.body);
     s.scale.setScalar(r);
     s.position.fromArray(b.com);
@@ -255,6 +279,12 @@ function makeInstance(ghost, withArrows) {
     // Links between world-fixed frames do not move: drawn once, with the first trajectory.
     const fixed = (pair[0] < 0 || D.frames[pair[0]].body < 0) && D.frames[pair[1]].body < 0;
     if (fixed && instanceCount > 0) continue;
+    if (ghost) {
+      const link = {mesh: null, matrix: new THREE.Matrix4(), visible: false, a: pair[0], b: pair[1]};
+      inst.links.push(link);
+      ghostPart(inst, "link", unitCylinder, mats.link, "links", function (m) { m.copy(link.matrix); return link.visible; });
+      continue;  // ghosts: capsules without joints
+    }
     const m = new THREE.Mesh(unitCylinder, mats.link);
     inst.group.add(m);
     inst.links.push({mesh: m, a: pair[0], b: pair[1]});
@@ -270,6 +300,15 @@ function makeInstance(ghost, withArrows) {
   }
   D.visuals.forEach(function (v, i) {
     if (D.frames[v.f].body < 0 && instanceCount > 0) return;  // world-fixed: drawn once
+    if (ghost) {
+      const local = new THREE.Matrix4().compose(new THREE.Vector3().fromArray(v.p),
+                                                new THREE.Quaternion(v.q[1], v.q[2], v.q[3], v.q[0]),
+                                                v.shape === "mesh" ? new THREE.Vector3().fromArray(v.size) : new THREE.Vector3(1, 1, 1));
+      const frame = inst.frames[v.f];
+      ghostPart(inst, "visual" + i, visualGeometry[i], v.shape === "standin" ? mats.standin : mats.visual, "visuals",
+                function (m) { m.multiplyMatrices(frame.matrixWorld, local); return true; });
+      return;
+    }
     const m = new THREE.Mesh(visualGeometry[i], v.shape === "standin" ? mats.standin : mats.visual);
     m.position.fromArray(v.p);
     m.quaternion.set(v.q[1], v.q[2], v.q[3], v.q[0]);
@@ -309,6 +348,8 @@ function makeInstance(ghost, withArrows) {
 
 const yAxis = new THREE.Vector3(0, 1, 0);
 const pa = new THREE.Vector3(), pb = new THREE.Vector3(), qa = new THREE.Quaternion(), qb = new THREE.Quaternion();
+const partMatrix = new THREE.Matrix4(), hidden = new THREE.Matrix4().makeScale(0, 0, 0);
+const linkScale = new THREE.Vector3(), linkDirection = new THREE.Vector3(), linkRotation = new THREE.Quaternion();
 function worldPosition(inst, f, out) {
   return f < 0 ? out.set(0, 0, 0) : out.setFromMatrixPosition(inst.frames[f].matrixWorld);
 }
@@ -356,12 +397,26 @@ function setPoses(inst, poses, k, alpha) {
     worldPosition(inst, l.a, pa);
     worldPosition(inst, l.b, pb);
     const length = pa.distanceTo(pb);
-    l.mesh.visible = length > 1e-9 * R && toggles.links;
-    if (!l.mesh.visible) continue;
-    l.mesh.position.copy(pa).add(pb).multiplyScalar(0.5);
-    l.mesh.quaternion.setFromUnitVectors(yAxis, pb.sub(pa).divideScalar(length));
-    l.mesh.scale.set(linkRadius, length, linkRadius);
-    l.mesh.updateMatrixWorld();
+    const visible = length > 1e-9 * R && toggles.links;
+    if (l.mesh) l.mesh.visible = visible; else l.visible = visible;
+    if (!visible) continue;
+    linkRotation.setFromUnitVectors(yAxis, linkDirection.subVectors(pb, pa).divideScalar(length));
+    pa.add(pb).multiplyScalar(0.5);
+    linkScale.set(linkRadius, length, linkRadius);
+    if (l.mesh) {
+      l.mesh.position.copy(pa);
+      l.mesh.quaternion.copy(linkRotation);
+      l.mesh.scale.copy(linkScale);
+      l.mesh.updateMatrixWorld();
+    } else {
+      l.matrix.compose(pa, linkRotation, linkScale);
+    }
+  }
+  // Ghost parts: their world matrices into the shared instanced meshes (hidden: scale 0).
+  for (const item of inst.parts) {
+    const shown = inst.group.visible && item.place(partMatrix);
+    item.batch.mesh.setMatrixAt(item.index, shown ? partMatrix : hidden);
+    item.batch.mesh.instanceMatrix.needsUpdate = true;
   }
   for (const l of inst.lines) {
     const a = l.line.geometry.attributes.position;
@@ -396,6 +451,12 @@ if (trajectories.length === 0) {
                     ghost: tr.ghost, encoding: tr.encoding, shown: true, tensions: tr.tensions, maxTension: tr.maxTension,
                     forces: tr.forces});
   }
+}
+for (const batch of ghostBatches.values()) {
+  batch.mesh = new THREE.InstancedMesh(batch.geometry, batch.material, batch.items.length);
+  batch.mesh.frustumCulled = false;  // its bounding sphere is the geometry's, not the instances'
+  scene.add(batch.mesh);
+  categories[batch.category].push(batch.mesh);
 }
 // Tendon colour by tension u / max u over the trajectory: pale green (slack) to dark green.
 const slack = new THREE.Color(0xb9e4c9), taut = new THREE.Color(0x0a5c2e);
@@ -450,11 +511,11 @@ const ghosts = instances.filter(function (i) { return i.ghost; });
 for (const i of instances) {
   if (i.ghost && ghosts.length > 4) continue;  // many ghosts: one switch for all (below)
   addToggle(i.name + (i.ghost ? " (ghost)" : ""), i.ghost ? "rgba(47,109,181,0.3)" : "#2f6db5", true,
-            function (on) { i.inst.group.visible = on; });
+            function (on) { i.inst.group.visible = on; setTime(time); });
 }
 if (ghosts.length > 4) {
   addToggle(ghosts.length + " ghosts (" + ghosts[0].name + " … " + ghosts[ghosts.length - 1].name + ")",
-            "rgba(47,109,181,0.3)", true, function (on) { for (const i of ghosts) i.inst.group.visible = on; });
+            "rgba(47,109,181,0.3)", true, function (on) { for (const i of ghosts) i.inst.group.visible = on; setTime(time); });
 }
 for (const name of Object.keys(toggles)) {
   if (categories[name].length === 0 && name !== "links") continue;
