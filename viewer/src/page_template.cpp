@@ -590,11 +590,13 @@ if ("probe" in hash) {
     if (i < 0) throw new Error("probe: no frame '" + name + "'");
     return i;
   });
-  const result = {times: times, trajectories: []};
-  for (const i of instances) {
-    result.trajectories.push({name: i.name, ghost: !!i.ghost, encoding: i.encoding || "float64", frames: {},
+  const result = {times: times, radius: R, trajectories: []};
+  instances.forEach(function (i, n) {
+    const stored = D.trajectories[n] || {};
+    result.trajectories.push({name: i.name, ghost: !!i.ghost, encoding: i.encoding || "float64",
+                              rounding: stored.rounding || 0, frames: {},
                               arrows: i.inst.arrows.map(function (a) { return {names: a.group.names, values: []}; })});
-  }
+  });
   const axis = new THREE.Vector3();
   const p = new THREE.Vector3();
   for (const t of times) {

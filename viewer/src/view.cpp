@@ -587,13 +587,27 @@ std::string renderView(const Scene& scene, const Eigen::VectorXd& q, const std::
     if (shownTrajectory.ghost && !options.exactGhosts) {
       std::vector<float> single(poses.size());
       const bool delta = sameTimes && basePoses.size() == poses.size();
+      if (delta) {
+        // q and −q are the same rotation: the ghost's quaternion on the base's side (a rotation near
+        // a half turn, w ≈ 0, would otherwise differ by ~2 and lose the difference's precision).
+        for (std::size_t o = 0; o < poses.size(); o += 7) {
+          double dot = 0.0;
+          for (int k = 3; k < 7; ++k) dot += poses[o + k] * basePoses[o + k];
+          if (dot < 0.0) {
+            for (int k = 3; k < 7; ++k) poses[o + k] = -poses[o + k];
+          }
+        }
+      }
+      double rounding = 0.0;
       for (std::size_t k = 0; k < poses.size(); ++k) {
         const double reference = delta ? basePoses[k] : 0.0;
         single[k] = static_cast<float>(poses[k] - reference);
         // What the page reads back (float64 sum, as here): its difference from the exact number.
-        out.ghostRounding = std::max(out.ghostRounding, std::abs(reference + static_cast<double>(single[k]) - poses[k]));
+        rounding = std::max(rounding, std::abs(reference + static_cast<double>(single[k]) - poses[k]));
       }
+      out.ghostRounding = std::max(out.ghostRounding, rounding);
       entry["encoding"] = delta ? "delta32" : "float32";
+      entry["rounding"] = rounding;  // the largest change of a stored number (m, or unitless)
       if (delta) entry["base"] = base;
       entry["poses"] = encodeArray(single);
     } else {

@@ -65,8 +65,9 @@ struct ViewOptions {
   /// Ghost trajectories are stored in float32 (half the size) unless this is set; solid
   /// trajectories and the state are always float64. A ghost sampled at the same times as the first
   /// solid trajectory is stored as its float32 difference from that one (rounding ~6e-8 of the
-  /// deviation, ~1e-10 m for a closed loop beside its reference), any other ghost as float32
-  /// coordinates (rounding ~6e-8 relative). ViewReport::ghostRounding gives the largest rounding.
+  /// deviation, ~1e-10 m for a closed loop beside its reference; its quaternions signed like the
+  /// base's, q or −q, the same rotation), any other ghost as float32 coordinates (rounding ~6e-8
+  /// relative). ViewReport::ghostRounding gives the largest rounding (the page: each ghost's).
   bool exactGhosts = false;
   /// Draw the constraint forces of the solid trajectories as arrows (a model with constraints):
   /// λ(q, q̇, u) from computeDynamics at every sample, split into forces at the constraint points
