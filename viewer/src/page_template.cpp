@@ -611,7 +611,8 @@ if ("probe" in hash) {
       i.inst.arrows.forEach(function (a, g) {
         let value = null;
         if (a.valid) {
-          axis.copy(yAxis).applyQuaternion(a.object.quaternion).multiplyScalar(a.shaft.scale.y / forceScale);
+          // (No scale when every force of the page vanishes: the arrows are then all zero.)
+          axis.copy(yAxis).applyQuaternion(a.object.quaternion).multiplyScalar(forceScale > 0 ? a.shaft.scale.y / forceScale : 0);
           value = [a.object.position.x, a.object.position.y, a.object.position.z, axis.x, axis.y, axis.z];
         }
         result.trajectories[n].arrows[g].values.push(value);
