@@ -19,6 +19,7 @@ namespace {
 
 constexpr std::string_view kHelp = R"(usage: trellis view SCENE.json|ROBOT.urdf [--state STATE.json] [--trajectory TRAJ.csv ...]
                     [--rate HZ] [--title TEXT] [--package-path DIR ...] [--all-solid] [--exact-ghosts]
+                    [--no-forces]
                     --out VIEW.html
 
 Writes one self-contained HTML page (three.js included, with its licence notice) that opens offline
@@ -26,7 +27,9 @@ from disk in a current browser and shows the model in 3D: a sphere per body at i
 (volume proportional to its mass), the links between frames as capsules, URDF visual geometry (box,
 cylinder, sphere, STL meshes; other mesh formats as their bounding box or a stand-in, with a
 warning), constraints as red lines between their points, tendons as green polylines through their
-path points, world axes and a ground grid perpendicular to gravity. Orbit with the mouse (left:
+path points, world axes and a ground grid perpendicular to gravity; with trajectories of a model with
+constraints, the constraint forces on the bodies as arrows (λ from the forward dynamics at every
+sample, one arrow per constraint point, the scale in the legend). Orbit with the mouse (left:
 rotate, right: pan, wheel: zoom).
 
 With trajectories the page has a time slider, play/pause, speed and looping. The first trajectory is
@@ -45,7 +48,10 @@ options:
                        then ROS_PACKAGE_PATH, then the URDF's ancestor directories named PKG
   --all-solid          draw every trajectory solid, none ghosted
   --exact-ghosts       store ghosted trajectories in float64 like solid ones (default float32:
-                       half the size, positions rounded by about 6e-8 relative)
+                       half the size; a ghost sampled at the first trajectory's times is stored
+                       as its difference from it, rounded by ~6e-8 of the difference, others
+                       by ~6e-8 relative)
+  --no-forces          draw no constraint force arrows
   -h, --help           show this help
 
 Environment: TRELLIS_THREE_DIR, a directory holding three.min.js and
@@ -89,7 +95,7 @@ std::string megabytes(std::size_t bytes) {
 int runView(std::span<const std::string> args, std::ostream& out) {
   const ParsedOptions options(
       "view", args,
-      {{"--out", "--state", "--trajectory", "--rate", "--title", "--package-path"}, {"--all-solid", "--exact-ghosts"},
+      {{"--out", "--state", "--trajectory", "--rate", "--title", "--package-path"}, {"--all-solid", "--exact-ghosts", "--no-forces"},
        {"--trajectory", "--package-path"}});
   const std::string path = options.required("--out", "the HTML file to write");
   if (options.has("--state") && options.has("--trajectory")) {
@@ -101,6 +107,7 @@ int runView(std::span<const std::string> args, std::ostream& out) {
   if (const auto title = options.value("--title")) view.title = *title;
   view.packagePath = options.values("--package-path");
   view.exactGhosts = options.flag("--exact-ghosts");
+  view.constraintForces = !options.flag("--no-forces");
 
   const LoadedScene loaded = loadSceneArgument(options.singlePositional("scene file"));
   view.meshBaseDirectory = meshBaseDirectory(loaded);

@@ -13,28 +13,42 @@
 namespace trellis::python {
 namespace {
 
-/// True inside a Jupyter kernel (IPython with a kernel app), where display() shows HTML.
-bool inNotebook() {
-  try {
-    const py::object getIpython = py::module_::import("IPython").attr("get_ipython");
-    const py::object shell = getIpython();
-    return !shell.is_none() && py::hasattr(shell, "kernel");
-  } catch (const py::error_already_set&) {
-    return false;  // no IPython
-  }
-}
+/// What view() returns: the written page. os.PathLike (its path), and _repr_html_ for Jupyter,
+/// which calls it to show the object inline (no IPython needed here).
+struct ViewPage {
+  std::string path, html;
+  long samples = 0;
+  std::vector<std::string> warnings;
+};
 
-void displayInline(const std::string& page) {
+/// The page inside an iframe (srcdoc: the page itself, HTML-escaped; no server, no file access).
+std::string iframe(const std::string& page, int height) {
   const py::object escape = py::module_::import("html").attr("escape");
-  const std::string frame = "<iframe style=\"width: 100%; height: 520px; border: 0\" srcdoc=\"" +
-                            escape(page, true).cast<std::string>() + "\"></iframe>";
-  const py::module_ display = py::module_::import("IPython.display");
-  display.attr("display")(display.attr("HTML")(frame));
+  return "<iframe style=\"width: 100%; height: " + std::to_string(height) + "px; border: 0\" srcdoc=\"" +
+         escape(page, true).cast<std::string>() + "\"></iframe>";
 }
 
 }  // namespace
 
 void bindView(py::module_& m) {
+  py::class_<ViewPage>(m, "ViewPage",
+                       "The page view() wrote: os.PathLike (its path); shown inline in a Jupyter notebook "
+                       "(_repr_html_: the page in an iframe).")
+      .def_readonly("path", &ViewPage::path, "the file written")
+      .def_readonly("html", &ViewPage::html, "the page's text (what the file holds)")
+      .def_readonly("samples", &ViewPage::samples, "pose samples over all trajectories (1 for a state)")
+      .def_readonly("warnings", &ViewPage::warnings, "e.g. a mesh drawn as a stand-in (also given to warnings.warn)")
+      .def("__fspath__", [](const ViewPage& p) { return p.path; })
+      .def("__str__", [](const ViewPage& p) { return p.path; })
+      .def("__repr__",
+           [](const ViewPage& p) {
+             return "<ViewPage " + p.path + " (" + std::to_string(p.html.size()) + " bytes, " +
+                    std::to_string(p.samples) + " pose samples)>";
+           })
+      .def(
+          "_repr_html_", [](const ViewPage& p, int height) { return iframe(p.html, height); }, py::arg("height") = 520,
+          "The page in an iframe (srcdoc), as Jupyter shows the object: the page is self-contained, so it "
+          "needs neither a server nor the file.");
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
@@ -46,7 +60,7 @@ void bindView(py::module_& m) {
       "view",
       [](py::object model, py::args arguments, py::object pathArgument, py::object q,
          std::vector<std::string> names, double rate, const std::string& title, std::vector<std::string> packagePath,
-         bool allSolid, py::object show) {
+         bool allSolid, bool forces, bool show) {
         // view(model, t1, t2, path=...) or view(model, t1, t2, "page.html"): the path as keyword,
         // or as the last positional argument (a str or os.PathLike).
         const py::object fspath = py::module_::import("os").attr("fspath");
@@ -93,6 +107,7 @@ void bindView(py::module_& m) {
           list.push_back(std::move(t));
         }
         options.displayRate = rate;
+        options.constraintForces = forces;
         options.title = title;
         options.packagePath = std::move(packagePath);
         ViewReport report;
@@ -104,14 +119,18 @@ void bindView(py::module_& m) {
         writeFileAtomically(path, page);
         const py::object warn = py::module_::import("warnings").attr("warn");
         for (const std::string& w : report.warnings) warn(w);
-        if (show.is_none() ? inNotebook() : show.cast<bool>()) displayInline(page);
-        return pathArgument;
+        ViewPage written{path, std::move(page), report.samples, report.warnings};
+        if (show) {  // now, wherever the call is (Jupyter shows a returned ViewPage by itself)
+          const py::module_ display = py::module_::import("IPython.display");
+          display.attr("display")(display.attr("HTML")(iframe(written.html, 520)));
+        }
+        return written;
       },
       py::arg("model"), py::kw_only(), py::arg("path") = py::none(), py::arg("q") = py::none(),
       py::arg("names") = std::vector<std::string>{}, py::arg("rate") = 60.0, py::arg("title") = "",
       py::arg("package_path") = std::vector<std::string>{}, py::arg("all_solid") = false,
-      py::arg("show") = py::none(),
-      R"(view(model, *trajectories, path=None, q=None, names=[], rate=60.0, title="", package_path=[], all_solid=False, show=None)
+      py::arg("forces") = true, py::arg("show") = false,
+      R"(view(model, *trajectories, path=None, q=None, names=[], rate=60.0, title="", package_path=[], all_solid=False, forces=True, show=False)
 
 Writes a self-contained HTML page (three.js included) that shows the model in 3D in a browser,
 with a time slider, play/pause, speed and looping when trajectories are given: the first drawn
@@ -120,8 +139,10 @@ solid, the others ghosted (all_solid=True: all solid). The same page as `trellis
 second. `model`: a scene or URDF file path (keeps URDF visual geometry, meshes relative to the
 file), a Scene (shown at its stored q) or a Model (at q = 0); `path`: the page to write, as a
 keyword or as the last positional argument (str or os.PathLike); `q` overrides the configuration
-shown without trajectories. The file is written atomically. In a Jupyter notebook (or show=True)
-the page is also displayed inline. Returns `path`. Raises ValueError (a trajectory that does not
+shown without trajectories. The file is written atomically. Returns a ViewPage: os.PathLike (the
+path), and shown inline by Jupyter when it is a cell's value (its _repr_html_ embeds the page in an
+iframe); show=True displays it at once through IPython.display. With constraints, the solid
+trajectories' constraint forces are drawn as arrows (forces=False: none). Raises ValueError (a trajectory that does not
 match the model, a bad visual, an unreadable mesh, three.js missing) and warns (warnings.warn)
 when a mesh is drawn as a stand-in.)");
 }

@@ -1373,6 +1373,26 @@ class TvlqrSolution:
     @property
     def transport_steps(self) -> int: ...
 
+class ViewPage:
+    """The page view() wrote: os.PathLike (its path); shown inline in a Jupyter notebook (_repr_html_: the page in an iframe)."""
+    def __fspath__(self: ViewPage) -> str: ...
+    def __repr__(self: ViewPage) -> str: ...
+    def __str__(self: ViewPage) -> str: ...
+    def _repr_html_(self: ViewPage, height: int = 520) -> str:
+        """The page in an iframe (srcdoc), as Jupyter shows the object: the page is self-contained, so it needs neither a server nor the file."""
+    @property
+    def html(self) -> str:
+        """the page's text (what the file holds)"""
+    @property
+    def path(self) -> str:
+        """the file written"""
+    @property
+    def samples(self) -> int:
+        """pose samples over all trajectories (1 for a state)"""
+    @property
+    def warnings(self) -> List[str]:
+        """e.g. a mesh drawn as a stand-in (also given to warnings.warn)"""
+
 def _time_linearization_loop(model: Model, data: Data, q: numpy.typing.NDArray[numpy.float64], dq: numpy.typing.NDArray[numpy.float64], u: numpy.typing.NDArray[numpy.float64], repeats: int) -> float: ...
 
 def compute_constraint_tangent_basis(model: Model, data: Data) -> int:
@@ -1483,8 +1503,8 @@ def solve_tvlqr(model: Model, reference: Trajectory, *, Q: object, R: object, Qf
 def transport_tangent_basis(model: Model, reference: Trajectory, *, options: Optional[TangentTransportOptions] = None) -> TangentBasisTrajectory:
     """T(t) along the reference (which needs state derivatives)."""
 
-def view(model: object, *args, path: object = None, q: object = None, names: List[str] = ..., rate: float = 60.0, title: str = '', package_path: List[str] = ..., all_solid: bool = False, show: object = None) -> object:
-    """view(model, *trajectories, path=None, q=None, names=[], rate=60.0, title="", package_path=[], all_solid=False, show=None)
+def view(model: object, *args, path: object = None, q: object = None, names: List[str] = ..., rate: float = 60.0, title: str = '', package_path: List[str] = ..., all_solid: bool = False, forces: bool = True, show: bool = False) -> ViewPage:
+    """view(model, *trajectories, path=None, q=None, names=[], rate=60.0, title="", package_path=[], all_solid=False, forces=True, show=False)
 
     Writes a self-contained HTML page (three.js included) that shows the model in 3D in a browser,
     with a time slider, play/pause, speed and looping when trajectories are given: the first drawn
@@ -1493,8 +1513,10 @@ def view(model: object, *args, path: object = None, q: object = None, names: Lis
     second. `model`: a scene or URDF file path (keeps URDF visual geometry, meshes relative to the
     file), a Scene (shown at its stored q) or a Model (at q = 0); `path`: the page to write, as a
     keyword or as the last positional argument (str or os.PathLike); `q` overrides the configuration
-    shown without trajectories. The file is written atomically. In a Jupyter notebook (or show=True)
-    the page is also displayed inline. Returns `path`. Raises ValueError (a trajectory that does not
+    shown without trajectories. The file is written atomically. Returns a ViewPage: os.PathLike (the
+    path), and shown inline by Jupyter when it is a cell's value (its _repr_html_ embeds the page in an
+    iframe); show=True displays it at once through IPython.display. With constraints, the solid
+    trajectories' constraint forces are drawn as arrows (forces=False: none). Raises ValueError (a trajectory that does not
     match the model, a bad visual, an unreadable mesh, three.js missing) and warns (warnings.warn)
     when a mesh is drawn as a stand-in.
     """

@@ -1,7 +1,9 @@
 """trellis_mech.view: the same page as `trellis view` (docs/viewer.md), bad input as ValueError with
 no file left behind, stand-in meshes as warnings. The page in a browser: tests/viewer/."""
 import base64
+import html
 import json
+import os
 import re
 import warnings
 
@@ -26,8 +28,10 @@ def test_view_holds_the_library_kinematics_at_the_knots(tmp_path):
     scene = tm.load_scene(str(SCENES / "pendulum.json"))
     swing = tm.Trajectory.read_csv(str(TRAJECTORIES / "pendulum_swing.csv"))
     out = tmp_path / "pendulum.html"
-    assert tm.view(scene, swing, path=str(out), names=["swing"]) == str(out)
-    assert tm.view(scene, swing, str(tmp_path / "second.html")) == str(tmp_path / "second.html")
+    page = tm.view(scene, swing, path=str(out), names=["swing"])
+    assert page.path == str(out) and os.fspath(page) == str(out) and str(page) == str(out)
+    assert page.html == out.read_text() and page.samples > swing.times.size and page.warnings == []
+    assert tm.view(scene, swing, str(tmp_path / "second.html")).path == str(tmp_path / "second.html")
     data = page_data(out)
     (shown,) = data["trajectories"]
     assert shown["name"] == "swing" and not shown["ghost"]
@@ -74,3 +78,27 @@ def test_view_bad_input_is_a_value_error_and_writes_nothing(tmp_path):
     with pytest.raises(ValueError, match="q has 3 entries"):
         tm.view(cart_pole, path=str(out), q=np.zeros(3))
     assert not out.exists()
+
+
+def test_view_shows_inline_in_a_notebook_through_repr_html(tmp_path):
+    """Jupyter shows a cell's value by its _repr_html_: the page itself in an iframe's srcdoc."""
+    scene = tm.load_scene(str(SCENES / "pendulum.json"))
+    page = tm.view(scene, path=tmp_path / "state.html")
+    shown = page._repr_html_()
+    assert shown.startswith("<iframe ") and shown.endswith("></iframe>")
+    srcdoc = re.search(r'srcdoc="([^"]*)"', shown).group(1)
+    assert html.unescape(srcdoc) == page.html  # the whole page, escaped for the attribute
+    assert "<" not in srcdoc and '"' not in srcdoc
+    assert 'height: 300px' in page._repr_html_(height=300)
+    assert "ViewPage" in repr(page)
+
+
+def test_view_draws_constraint_forces_unless_asked_not_to(tmp_path):
+    scene = tm.load_scene(str(SCENES / "paper_pendulum.json"))
+    swing = tm.Trajectory.read_csv(str(TRAJECTORIES / "paper_pendulum_swing.csv"))
+    tm.view(scene, swing, path=tmp_path / "forces.html")
+    data = page_data(tmp_path / "forces.html")
+    assert len(data["arrows"]) == 1 and "forces" in data["trajectories"][0]
+    tm.view(scene, swing, path=tmp_path / "none.html", forces=False)
+    data = page_data(tmp_path / "none.html")
+    assert "arrows" not in data and "forces" not in data["trajectories"][0]

@@ -2,6 +2,7 @@
 // sample times, visual and mesh handling, bad input (clear errors, no partial file). The page in a
 // real browser: tests/viewer/browser_check.py.
 #include "trellis/core/data.hpp"
+#include "trellis/core/dynamics.hpp"
 #include "trellis/core/io.hpp"
 #include "trellis/core/kinematics.hpp"
 #include "trellis/core/scene.hpp"
@@ -360,21 +361,113 @@ TEST_CASE("the page includes three.js with its licence notice and cannot be cut 
   CHECK(trellis::renderView(scene, scene.q, {}, options) == page);
 }
 
-TEST_CASE("ghost trajectories: float32 by default, float64 with exactGhosts", "[viewer]") {
+TEST_CASE("ghost trajectories: float32 differences from the first trajectory, float32, or float64", "[viewer]") {
   const trellis::Scene scene = trellis::loadScene(kSource + "/examples/scenes/pendulum.json");
-  trellis::ViewTrajectory reference = pendulumSwing(), ghost = pendulumSwing();
+  trellis::ViewTrajectory reference = pendulumSwing(), ghost = pendulumSwing(), other = pendulumSwing();
   ghost.name = "ghost";
   ghost.ghost = true;
+  // The same knot times, another motion: θ scaled by 1.01 (a closed loop beside its reference).
+  {
+    const trellis::Trajectory& r = reference.trajectory;
+    ghost.trajectory = trellis::Trajectory(r.configNames(), r.inputNames(), r.times(), 1.01 * r.states(), r.inputs());
+  }
+  // Other times (shifted by 1 ms): stored as float32 coordinates.
+  other.name = "other";
+  other.ghost = true;
+  {
+    const trellis::Trajectory& r = reference.trajectory;
+    other.trajectory = trellis::Trajectory(r.configNames(), r.inputNames(), r.times().array() + 1e-3, r.states(), r.inputs());
+  }
   trellis::ViewOptions options;
-  const nlohmann::json rounded = pageData(trellis::renderView(scene, scene.q, {reference, ghost}, options));
+  trellis::ViewReport report;
+  const nlohmann::json rounded = pageData(trellis::renderView(scene, scene.q, {reference, ghost, other}, options, &report));
   options.exactGhosts = true;
-  const nlohmann::json exact = pageData(trellis::renderView(scene, scene.q, {reference, ghost}, options));
-  CHECK(rounded["trajectories"][0]["precision"] == 64);
-  CHECK(rounded["trajectories"][1]["precision"] == 32);
-  CHECK(exact["trajectories"][1]["precision"] == 64);
+  trellis::ViewReport exactReport;
+  const nlohmann::json exact = pageData(trellis::renderView(scene, scene.q, {reference, ghost, other}, options, &exactReport));
+  CHECK(rounded["trajectories"][0]["encoding"] == "float64");
+  CHECK(rounded["trajectories"][1]["encoding"] == "delta32");
+  CHECK(rounded["trajectories"][1]["base"] == 0);
+  CHECK(rounded["trajectories"][1]["timesOf"] == 0);  // the times are not stored twice
+  CHECK_FALSE(rounded["trajectories"][1].contains("t"));
+  CHECK(rounded["trajectories"][2]["encoding"] == "float32");
+  CHECK(rounded["trajectories"][2].contains("t"));
+  CHECK(exact["trajectories"][1]["encoding"] == "float64");
+  CHECK(exact["trajectories"][2]["encoding"] == "float64");
+  CHECK(exactReport.ghostRounding == 0.0);
+
+  const std::vector<double> base = decodeArray<double>(rounded["trajectories"][0]["poses"]);
   const std::vector<double> full = decodeArray<double>(exact["trajectories"][1]["poses"]);
-  const std::vector<float> single = decodeArray<float>(rounded["trajectories"][1]["poses"]);
-  REQUIRE(full.size() == single.size());
-  CHECK(full == decodeArray<double>(rounded["trajectories"][0]["poses"]));  // the same motion
-  for (std::size_t i = 0; i < full.size(); ++i) CHECK(single[i] == static_cast<float>(full[i]));
+  const std::vector<float> delta = decodeArray<float>(rounded["trajectories"][1]["poses"]);
+  REQUIRE(full.size() == delta.size());
+  REQUIRE(base.size() == delta.size());
+  // The page's reading, base + delta in float64, against the exact poses: the rounding of the
+  // difference (here ≤ 6e-8 of a deviation ≤ 0.03 m and ≤ 0.02 in quaternion entries), far below
+  // the rounding of float32 coordinates (6e-8 of 1 m).
+  double worst = 0.0;
+  for (std::size_t i = 0; i < full.size(); ++i) {
+    CHECK(delta[i] == static_cast<float>(full[i] - base[i]));
+    worst = std::max(worst, std::abs(base[i] + static_cast<double>(delta[i]) - full[i]));
+  }
+  CHECK(worst <= 1e-9);
+  const std::vector<double> otherFull = decodeArray<double>(exact["trajectories"][2]["poses"]);
+  const std::vector<float> otherSingle = decodeArray<float>(rounded["trajectories"][2]["poses"]);
+  REQUIRE(otherFull.size() == otherSingle.size());
+  double worstOther = 0.0;
+  for (std::size_t i = 0; i < otherFull.size(); ++i) {
+    CHECK(otherSingle[i] == static_cast<float>(otherFull[i]));
+    worstOther = std::max(worstOther, std::abs(static_cast<double>(otherSingle[i]) - otherFull[i]));
+  }
+  CHECK(report.ghostRounding == std::max(worst, worstOther));
+  CHECK(worstOther > worst);
+}
+
+TEST_CASE("force arrows: the constraint forces of the library at every sample", "[viewer]") {
+  // The paper's pendulum: one distance constraint between the frames B and C.
+  const trellis::Scene scene = trellis::loadScene(kSource + "/examples/scenes/paper_pendulum.json");
+  const trellis::Model& model = scene.model;
+  REQUIRE(model.nc() == 1);
+  trellis::ViewTrajectory swing{
+      "swing", trellis::Trajectory::readCsvFile(kSource + "/examples/trajectories/paper_pendulum_swing.csv"), false};
+  trellis::ViewTrajectory ghost = swing;
+  ghost.ghost = true;
+  const nlohmann::json data = pageData(trellis::renderView(scene, scene.q, {swing, ghost}, {}));
+  REQUIRE(data["arrows"].size() == 1);
+  CHECK(data["arrows"][0]["names"][0] == model.constraints()[0].name);
+  CHECK(data["arrows"][0]["rows"] == nlohmann::json::array({0}));
+  CHECK_FALSE(data["trajectories"][1].contains("forces"));  // ghosts draw no arrows
+  const std::vector<double> times = decodeArray<double>(data["trajectories"][0]["t"]);
+  const std::vector<double> forces = decodeArray<double>(data["trajectories"][0]["forces"]);
+  REQUIRE(forces.size() == 6 * times.size());
+
+  // At every sample: λ from computeDynamics at the trajectory's interpolated state and input, the
+  // force λ · 2(p_B − p_C) on B's body at p_B (h = ‖p_B − p_C‖² − ℓ²), computed here from the frames.
+  trellis::Trajectory reference = swing.trajectory;
+  trellis::Data work(model);
+  reference.computeStateDerivatives(model, work);
+  Eigen::VectorXd x, u;
+  double largest = 0.0;
+  const int n = model.nq();
+  for (std::size_t s = 0; s < times.size(); ++s) {
+    reference.evaluate(times[s], x, u);
+    REQUIRE(trellis::computeDynamics(model, work, x.head(n), x.tail(n), u).ok());
+    const double lambda = work.lambda(0);
+    trellis::computeKinematics(model, work, x.head(n), x.tail(n));  // the frames' poses
+    const Eigen::Vector3d pB = work.framePose[model.frameIndex("B")].translation();
+    const Eigen::Vector3d pC = work.framePose[model.frameIndex("C")].translation();
+    const Eigen::Vector3d force = lambda * 2.0 * (pB - pC);
+    largest = std::max(largest, force.norm());
+    for (int k = 0; k < 3; ++k) {
+      CHECK(forces[6 * s + k] == pB(k));
+      CHECK(std::abs(forces[6 * s + 3 + k] - force(k)) <= 1e-14 * force.norm());
+    }
+  }
+  CHECK(data["largestForce"].get<double>() == Approx(largest).epsilon(1e-14));
+
+  SECTION("ViewOptions::constraintForces = false: no arrows") {
+    trellis::ViewOptions options;
+    options.constraintForces = false;
+    const nlohmann::json none = pageData(trellis::renderView(scene, scene.q, {swing}, options));
+    CHECK_FALSE(none.contains("arrows"));
+    CHECK_FALSE(none["trajectories"][0].contains("forces"));
+  }
 }

@@ -4,13 +4,16 @@
 // interpolates (positions linearly, orientations by slerp). Hooks for tests and scripts, in the
 // URL's fragment (file:///…/view.html#probe=0.5,1&frames=a,b):
 //   probe=T1,T2,…   for every trajectory (or the state), the world position of every frame (or of
-//                   those in frames=…) at each time, read from the scene graph, written as JSON
-//                   into <pre id="trellis-probe">;
+//                   those in frames=…) at each time, read from the scene graph, and every force
+//                   arrow as drawn (its start and its direction × shaft length / scale), written
+//                   as JSON into <pre id="trellis-probe">;
 //   t=T             show time T, paused;
 //   bare            hide the title, legend, warnings and controls (only the drawing);
 //   bench=N         draw N frames of playback and report the time per frame in the status.
 // <pre id="trellis-status"> holds {"ready": true, "errors": [...], "loadMs": …} once the first
-// picture is drawn; every JavaScript error of the page (also in three.js) is listed in "errors".
+// picture is complete (loadMs: from the navigation's start; marks.scriptStartMs: when this script
+// began, after the markup and three.js); every JavaScript error of the page (also in three.js) is
+// listed in "errors".
 #include "page_template.hpp"
 
 namespace trellis {
@@ -67,11 +70,17 @@ const char* const kViewerScript = R"JS((function () {
 const t0 = performance.now();
 const D = JSON.parse(document.getElementById("trellis-data").textContent);
 
+// base64 → typed array: the browser's own decoder where it has one (Uint8Array.fromBase64), else atob.
 function decode(text, Type) {
-  const s = atob(text);
-  const bytes = new Uint8Array(s.length);
-  for (let i = 0; i < s.length; ++i) bytes[i] = s.charCodeAt(i);
-  return new Type(bytes.buffer);
+  let bytes;
+  if (typeof Uint8Array.fromBase64 === "function") {
+    bytes = Uint8Array.fromBase64(text);
+  } else {
+    const s = atob(text);
+    bytes = new Uint8Array(s.length);
+    for (let i = 0; i < s.length; ++i) bytes[i] = s.charCodeAt(i);
+  }
+  return new Type(bytes.buffer, bytes.byteOffset, bytes.byteLength / Type.BYTES_PER_ELEMENT);
 }
 function fragment() {
   const out = {};
@@ -83,13 +92,27 @@ function fragment() {
   return out;
 }
 
-const marks = {parseMs: performance.now() - t0};
+const marks = {scriptStartMs: t0, parseMs: performance.now() - t0};
 const nb = D.bodies.length;
 const state = decode(D.state, Float64Array);
-const trajectories = D.trajectories.map(function (t) {
-  return {name: t.name, ghost: t.ghost, knots: t.knots, t: decode(t.t, Float64Array), poses: decode(t.poses, t.precision === 32 ? Float32Array : Float64Array),
-          tensions: t.tensions ? decode(t.tensions, Float64Array) : null, maxTension: t.maxTension || 0};
-});
+// Poses: float64; float32 (ghosts); or delta32: float32 differences from the base trajectory's
+// float64 poses at the same times, added back here in float64.
+const trajectories = [];
+for (const t of D.trajectories) {
+  let poses;
+  if (t.encoding === "delta32") {
+    const delta = decode(t.poses, Float32Array), base = trajectories[t.base].poses;
+    poses = new Float64Array(delta.length);
+    for (let i = 0; i < delta.length; ++i) poses[i] = base[i] + delta[i];
+  } else {
+    poses = decode(t.poses, t.encoding === "float32" ? Float32Array : Float64Array);
+  }
+  trajectories.push({name: t.name, ghost: t.ghost, knots: t.knots, encoding: t.encoding, poses: poses,
+                     t: "timesOf" in t ? trajectories[t.timesOf].t : decode(t.t, Float64Array),
+                     tensions: t.tensions ? decode(t.tensions, Float64Array) : null, maxTension: t.maxTension || 0,
+                     forces: t.forces ? decode(t.forces, Float64Array) : null});
+}
+const arrowGroups = D.arrows || [];
 marks.decodeMs = performance.now() - t0 - marks.parseMs;
 const R = D.view.radius;
 const up = new THREE.Vector3().fromArray(D.view.up);
@@ -120,7 +143,7 @@ const sun = new THREE.DirectionalLight(0xffffff, 0.55);
 sun.position.copy(centre).addScaledVector(eye, 4 * R).addScaledVector(up, 4 * R);
 scene.add(sun);
 
-const categories = {bodies: [], links: [], visuals: [], constraints: [], tendons: [], ground: []};
+const categories = {bodies: [], links: [], visuals: [], constraints: [], tendons: [], forces: [], ground: []};
 const step = Math.pow(10, Math.floor(Math.log10(R)));
 const gridSize = Math.ceil(3 * R / step) * 2 * step;
 const grid = new THREE.GridHelper(gridSize, Math.round(gridSize / step), 0xaab3bd, 0xdde1e6);
@@ -132,7 +155,7 @@ scene.add(axes);
 categories.ground.push(grid, axes);
 
 // ---- shared geometry and materials ---------------------------------------------------------------
-const colours = {body: 0x2f6db5, link: 0x7d8ea3, visual: 0xaab4c2, constraint: 0xd0452f, tendon: 0x23955a};
+const colours = {body: 0x2f6db5, link: 0x7d8ea3, visual: 0xaab4c2, constraint: 0xd0452f, tendon: 0x23955a, force: 0xc2188b};
 function material(colour, ghost, extra) {
   const m = new THREE.MeshStandardMaterial(Object.assign({color: colour, roughness: 0.55, metalness: 0.05}, extra || {}));
   if (ghost) { m.transparent = true; m.opacity = 0.2; m.depthWrite = false; }
@@ -146,6 +169,11 @@ for (const b of D.bodies) maxMass = Math.max(maxMass, b.mass);
 const linkRadius = 0.012 * R;
 const unitSphere = new THREE.SphereGeometry(1, 20, 14);
 const unitCylinder = new THREE.CylinderGeometry(1, 1, 1, 14, 1, true);
+// Force arrows: the shaft's length is the force times forceScale (the largest force over the page
+// is a quarter of the scene's radius); the head has a fixed size.
+const forceScale = D.largestForce > 0 ? 0.25 * R / D.largestForce : 0;
+const arrowShaft = new THREE.CylinderGeometry(1, 1, 1, 10, 1, false).translate(0, 0.5, 0);
+const arrowHead = new THREE.ConeGeometry(2.5, 6, 12).translate(0, 3, 0);
 const visualGeometry = D.visuals.map(function (v) {
   let g;
   if (v.shape === "box" || v.shape === "standin") g = new THREE.BoxGeometry(Math.max(v.size[0], 1e-6), Math.max(v.size[1], 1e-6), Math.max(v.size[2], 1e-6));
@@ -190,12 +218,30 @@ D.frames.forEach(function (f, i) {
 });
 
 // ---- one drawing per trajectory (or one for the state) -------------------------------------------
+// Ghosts share their materials, and their parts (body spheres, capsules, visuals) are drawn as one
+// InstancedMesh per geometry for all ghosts: a handful of draw calls instead of one per part and
+// ghost (the hand's twenty closed loops: 900). setPoses writes each part's world matrix.
+const ghostMats = {body: material(colours.body, true), link: material(colours.link, true),
+                   visual: material(colours.visual, true), standin: material(0xe0a030, true, {wireframe: true})};
+const ghostBatches = new Map();  // geometry and material → {geometry, material, category, items, mesh}
+function ghostPart(inst, key, geometry, mat, category, place) {
+  let batch = ghostBatches.get(key);
+  if (!batch) {
+    batch = {geometry: geometry, material: mat, category: category, items: [], mesh: null};
+    ghostBatches.set(key, batch);
+  }
+  const item = {batch: batch, index: batch.items.length, place: place};
+  batch.items.push(item);
+  inst.parts.push(item);
+  return item;
+}
 let instanceCount = 0;
-function makeInstance(ghost) {
-  const inst = {group: new THREE.Group(), bodies: [], frames: [], links: [], lines: []};
+function makeInstance(ghost, withArrows) {
+  const inst = {group: new THREE.Group(), bodies: [], frames: [], links: [], lines: [], arrows: [], parts: []};
   scene.add(inst.group);
-  const mats = {body: material(colours.body, ghost), link: material(colours.link, ghost),
-                visual: material(colours.visual, ghost), standin: material(0xe0a030, ghost, {wireframe: true})};
+  const mats = ghost ? ghostMats : {body: material(colours.body, false), link: material(colours.link, false),
+                                    visual: material(colours.visual, false),
+                                    standin: material(0xe0a030, false, {wireframe: true})};
   for (let j = 0; j < nb; ++j) {
     const o = new THREE.Object3D();
     inst.group.add(o);
@@ -216,6 +262,12 @@ function makeInstance(ghost) {
   D.bodies.forEach(function (b, j) {
     if (!(b.mass > 0)) return;
     const r = Math.max(0.07 * R * Math.cbrt(b.mass / maxMass), 0.02 * R);
+    if (ghost) {
+      const local = new THREE.Matrix4().makeScale(r, r, r).setPosition(new THREE.Vector3().fromArray(b.com));
+      const body = inst.bodies[j];
+      ghostPart(inst, "body", unitSphere, mats.body, "bodies", function (m) { m.multiplyMatrices(body.matrixWorld, local); return true; });
+      return;
+    }
     const s = new THREE.Mesh(unitSphere, mats.body);
     s.scale.setScalar(r);
     s.position.fromArray(b.com);
@@ -227,6 +279,12 @@ function makeInstance(ghost) {
     // Links between world-fixed frames do not move: drawn once, with the first trajectory.
     const fixed = (pair[0] < 0 || D.frames[pair[0]].body < 0) && D.frames[pair[1]].body < 0;
     if (fixed && instanceCount > 0) continue;
+    if (ghost) {
+      const link = {mesh: null, matrix: new THREE.Matrix4(), visible: false, a: pair[0], b: pair[1]};
+      inst.links.push(link);
+      ghostPart(inst, "link", unitCylinder, mats.link, "links", function (m) { m.copy(link.matrix); return link.visible; });
+      continue;  // ghosts: capsules without joints
+    }
     const m = new THREE.Mesh(unitCylinder, mats.link);
     inst.group.add(m);
     inst.links.push({mesh: m, a: pair[0], b: pair[1]});
@@ -242,6 +300,15 @@ function makeInstance(ghost) {
   }
   D.visuals.forEach(function (v, i) {
     if (D.frames[v.f].body < 0 && instanceCount > 0) return;  // world-fixed: drawn once
+    if (ghost) {
+      const local = new THREE.Matrix4().compose(new THREE.Vector3().fromArray(v.p),
+                                                new THREE.Quaternion(v.q[1], v.q[2], v.q[3], v.q[0]),
+                                                v.shape === "mesh" ? new THREE.Vector3().fromArray(v.size) : new THREE.Vector3(1, 1, 1));
+      const frame = inst.frames[v.f];
+      ghostPart(inst, "visual" + i, visualGeometry[i], v.shape === "standin" ? mats.standin : mats.visual, "visuals",
+                function (m) { m.multiplyMatrices(frame.matrixWorld, local); return true; });
+      return;
+    }
     const m = new THREE.Mesh(visualGeometry[i], v.shape === "standin" ? mats.standin : mats.visual);
     m.position.fromArray(v.p);
     m.quaternion.set(v.q[1], v.q[2], v.q[3], v.q[0]);
@@ -263,13 +330,52 @@ function makeInstance(ghost) {
     for (const c of D.constraints) polyline([c.a, c.b], colours.constraint, "constraints");
     for (const t of D.tendons) polyline(t.points, colours.tendon, "tendons");
   }
+  if (withArrows) {
+    const m = material(colours.force, false);
+    const radius = 0.006 * R;
+    for (const g of arrowGroups) {
+      const arrow = new THREE.Group(), shaft = new THREE.Mesh(arrowShaft, m), head = new THREE.Mesh(arrowHead, m);
+      shaft.scale.set(radius, 1, radius);
+      head.scale.setScalar(radius);
+      arrow.add(shaft, head);
+      inst.group.add(arrow);
+      inst.arrows.push({object: arrow, shaft: shaft, head: head, group: g});
+      categories.forces.push(arrow);
+    }
+  }
   return inst;
 }
 
 const yAxis = new THREE.Vector3(0, 1, 0);
 const pa = new THREE.Vector3(), pb = new THREE.Vector3(), qa = new THREE.Quaternion(), qb = new THREE.Quaternion();
+const partMatrix = new THREE.Matrix4(), hidden = new THREE.Matrix4().makeScale(0, 0, 0);
+const linkScale = new THREE.Vector3(), linkDirection = new THREE.Vector3(), linkRotation = new THREE.Quaternion();
 function worldPosition(inst, f, out) {
   return f < 0 ? out.set(0, 0, 0) : out.setFromMatrixPosition(inst.frames[f].matrixWorld);
+}
+// Arrow a of a trajectory at samples k (and k + 1 with weight alpha): its point and force, linearly
+// interpolated; hidden where the dynamics failed (NaN) or the force vanishes.
+const fp = new THREE.Vector3(), ff = new THREE.Vector3(), fb = new THREE.Vector3();
+function setArrows(inst, forces, k, alpha) {
+  const na = arrowGroups.length;
+  inst.arrows.forEach(function (a, g) {
+    const o = 6 * (k * na + g);
+    fp.set(forces[o], forces[o + 1], forces[o + 2]);
+    ff.set(forces[o + 3], forces[o + 4], forces[o + 5]);
+    if (alpha > 0) {
+      const n = o + 6 * na;
+      fp.lerp(fb.set(forces[n], forces[n + 1], forces[n + 2]), alpha);
+      ff.lerp(fb.set(forces[n + 3], forces[n + 4], forces[n + 5]), alpha);
+    }
+    const length = ff.length() * forceScale;
+    a.object.visible = toggles.forces && isFinite(length) && length > 0;
+    a.valid = isFinite(length);
+    if (!a.valid) return;
+    a.object.position.copy(fp);
+    if (length > 0) a.object.quaternion.setFromUnitVectors(yAxis, ff.divideScalar(ff.length()));
+    a.shaft.scale.y = length;
+    a.head.position.y = length;
+  });
 }
 // Body poses at samples k (and k + 1 with weight alpha; alpha = 0 gives the sample exactly).
 function setPoses(inst, poses, k, alpha) {
@@ -291,12 +397,26 @@ function setPoses(inst, poses, k, alpha) {
     worldPosition(inst, l.a, pa);
     worldPosition(inst, l.b, pb);
     const length = pa.distanceTo(pb);
-    l.mesh.visible = length > 1e-9 * R && toggles.links;
-    if (!l.mesh.visible) continue;
-    l.mesh.position.copy(pa).add(pb).multiplyScalar(0.5);
-    l.mesh.quaternion.setFromUnitVectors(yAxis, pb.sub(pa).divideScalar(length));
-    l.mesh.scale.set(linkRadius, length, linkRadius);
-    l.mesh.updateMatrixWorld();
+    const visible = length > 1e-9 * R && toggles.links;
+    if (l.mesh) l.mesh.visible = visible; else l.visible = visible;
+    if (!visible) continue;
+    linkRotation.setFromUnitVectors(yAxis, linkDirection.subVectors(pb, pa).divideScalar(length));
+    pa.add(pb).multiplyScalar(0.5);
+    linkScale.set(linkRadius, length, linkRadius);
+    if (l.mesh) {
+      l.mesh.position.copy(pa);
+      l.mesh.quaternion.copy(linkRotation);
+      l.mesh.scale.copy(linkScale);
+      l.mesh.updateMatrixWorld();
+    } else {
+      l.matrix.compose(pa, linkRotation, linkScale);
+    }
+  }
+  // Ghost parts: their world matrices into the shared instanced meshes (hidden: scale 0).
+  for (const item of inst.parts) {
+    const shown = inst.group.visible && item.place(partMatrix);
+    item.batch.mesh.setMatrixAt(item.index, shown ? partMatrix : hidden);
+    item.batch.mesh.instanceMatrix.needsUpdate = true;
   }
   for (const l of inst.lines) {
     const a = l.line.geometry.attributes.position;
@@ -321,15 +441,22 @@ function locate(t, time) {
   return [lo, (time - t[lo]) / (t[lo + 1] - t[lo])];
 }
 
-const toggles = {bodies: true, links: true, visuals: true, constraints: true, tendons: true, ground: true};
+const toggles = {bodies: true, links: true, visuals: true, constraints: true, tendons: true, forces: true, ground: true};
 const instances = [];
 if (trajectories.length === 0) {
-  instances.push({inst: makeInstance(false), poses: state, t: new Float64Array([0]), name: "state", shown: true});
+  instances.push({inst: makeInstance(false, false), poses: state, t: new Float64Array([0]), name: "state", shown: true});
 } else {
   for (const tr of trajectories) {
-    instances.push({inst: makeInstance(tr.ghost), poses: tr.poses, t: tr.t, name: tr.name, ghost: tr.ghost, shown: true,
-                    tensions: tr.tensions, maxTension: tr.maxTension});
+    instances.push({inst: makeInstance(tr.ghost, tr.forces !== null), poses: tr.poses, t: tr.t, name: tr.name,
+                    ghost: tr.ghost, encoding: tr.encoding, shown: true, tensions: tr.tensions, maxTension: tr.maxTension,
+                    forces: tr.forces});
   }
+}
+for (const batch of ghostBatches.values()) {
+  batch.mesh = new THREE.InstancedMesh(batch.geometry, batch.material, batch.items.length);
+  batch.mesh.frustumCulled = false;  // its bounding sphere is the geometry's, not the instances'
+  scene.add(batch.mesh);
+  categories[batch.category].push(batch.mesh);
 }
 // Tendon colour by tension u / max u over the trajectory: pale green (slack) to dark green.
 const slack = new THREE.Color(0xb9e4c9), taut = new THREE.Color(0x0a5c2e);
@@ -352,6 +479,7 @@ function setTime(value) {
     const [k, alpha] = locate(i.t, time);
     setPoses(i.inst, i.poses, k, alpha);
     if (i.tensions) colourTendons(i, k, alpha);
+    if (i.forces) setArrows(i.inst, i.forces, k, alpha);
   }
 }
 
@@ -383,15 +511,21 @@ const ghosts = instances.filter(function (i) { return i.ghost; });
 for (const i of instances) {
   if (i.ghost && ghosts.length > 4) continue;  // many ghosts: one switch for all (below)
   addToggle(i.name + (i.ghost ? " (ghost)" : ""), i.ghost ? "rgba(47,109,181,0.3)" : "#2f6db5", true,
-            function (on) { i.inst.group.visible = on; });
+            function (on) { i.inst.group.visible = on; setTime(time); });
 }
 if (ghosts.length > 4) {
   addToggle(ghosts.length + " ghosts (" + ghosts[0].name + " … " + ghosts[ghosts.length - 1].name + ")",
-            "rgba(47,109,181,0.3)", true, function (on) { for (const i of ghosts) i.inst.group.visible = on; });
+            "rgba(47,109,181,0.3)", true, function (on) { for (const i of ghosts) i.inst.group.visible = on; setTime(time); });
 }
 for (const name of Object.keys(toggles)) {
   if (categories[name].length === 0 && name !== "links") continue;
-  addToggle(name, null, true, function (on) {
+  let text = name;
+  if (name === "forces") {
+    // The scale: the shaft of the largest force is a quarter of the scene's radius.
+    const metres = 0.25 * R, digits = function (x) { return Number(x.toPrecision(3)); };
+    text = "constraint forces (arrow " + digits(100 * metres) + " cm = " + digits(D.largestForce) + " N)";
+  }
+  addToggle(text, name === "forces" ? "#c2188b" : null, true, function (on) {
     toggles[name] = on;
     for (const o of categories[name]) o.visible = on;
     setTime(time);
@@ -456,8 +590,14 @@ if ("probe" in hash) {
     if (i < 0) throw new Error("probe: no frame '" + name + "'");
     return i;
   });
-  const result = {times: times, trajectories: []};
-  for (const i of instances) result.trajectories.push({name: i.name, ghost: !!i.ghost, frames: {}});
+  const result = {times: times, radius: R, trajectories: []};
+  instances.forEach(function (i, n) {
+    const stored = D.trajectories[n] || {};
+    result.trajectories.push({name: i.name, ghost: !!i.ghost, encoding: i.encoding || "float64",
+                              rounding: stored.rounding || 0, frames: {},
+                              arrows: i.inst.arrows.map(function (a) { return {names: a.group.names, values: []}; })});
+  });
+  const axis = new THREE.Vector3();
   const p = new THREE.Vector3();
   for (const t of times) {
     setTime(t);
@@ -465,6 +605,17 @@ if ("probe" in hash) {
       index.forEach(function (f, w) {
         worldPosition(i.inst, f, p);
         (result.trajectories[n].frames[wanted[w]] = result.trajectories[n].frames[wanted[w]] || []).push([p.x, p.y, p.z]);
+      });
+      // Each arrow as drawn: where it starts, and its direction times its shaft's length over the
+      // scale (null where the dynamics failed).
+      i.inst.arrows.forEach(function (a, g) {
+        let value = null;
+        if (a.valid) {
+          // (No scale when every force of the page vanishes: the arrows are then all zero.)
+          axis.copy(yAxis).applyQuaternion(a.object.quaternion).multiplyScalar(forceScale > 0 ? a.shaft.scale.y / forceScale : 0);
+          value = [a.object.position.x, a.object.position.y, a.object.position.z, axis.x, axis.y, axis.z];
+        }
+        result.trajectories[n].arrows[g].values.push(value);
       });
     });
   }
@@ -476,6 +627,9 @@ if ("bare" in hash) {
 setTime("t" in hash ? Number(hash.t) : tmin);
 showTime();
 renderer.render(scene, camera);
+// The first picture complete (the GPU, or the software renderer, waited for): the load time,
+// counted from the navigation's start (performance.now()'s origin).
+renderer.getContext().finish();
 dirty = false;
 const status = {ready: true, errors: window.trellisErrors, loadMs: performance.now(), scriptMs: performance.now() - t0,
                 bodies: nb, frames: D.frames.length, trajectories: trajectories.length,

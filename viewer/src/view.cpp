@@ -5,7 +5,9 @@
 #include "mesh_files.hpp"
 #include "page_template.hpp"
 
+#include "trellis/core/constraint_forces.hpp"
 #include "trellis/core/data.hpp"
+#include "trellis/core/dynamics.hpp"
 #include "trellis/core/io.hpp"
 #include "trellis/core/kinematics.hpp"
 
@@ -23,6 +25,9 @@
 
 #ifndef TRELLIS_THREE_JS_DIR
 #define TRELLIS_THREE_JS_DIR "/usr/share/javascript/three"
+#endif
+#ifndef TRELLIS_THREE_INSTALLED_DIR
+#define TRELLIS_THREE_INSTALLED_DIR ""
 #endif
 
 namespace trellis {
@@ -243,6 +248,12 @@ std::string encodeBase64(const unsigned char* bytes, std::size_t size) {
 std::string threeDirectory(const ViewOptions& options) {
   if (!options.threeDirectory.empty()) return options.threeDirectory;
   if (const char* env = std::getenv("TRELLIS_THREE_DIR"); env && *env) return env;
+  // The directory found when trellis was configured, else the copy installed with trellis.
+  const std::string installed = TRELLIS_THREE_INSTALLED_DIR;
+  if (!std::filesystem::is_regular_file(std::string(TRELLIS_THREE_JS_DIR) + "/three.min.js") && !installed.empty() &&
+      std::filesystem::is_regular_file(installed + "/three.min.js")) {
+    return installed;
+  }
   return TRELLIS_THREE_JS_DIR;
 }
 
@@ -411,9 +422,54 @@ std::string renderView(const Scene& scene, const Eigen::VectorXd& q, const std::
   data["visuals"] = std::move(visuals);
   data["meshes"] = std::move(meshes);
 
-  // Poses: the state, then each trajectory at its sample times.
+  // Force arrows: the force each constraint row exerts on its first body (computeConstraintPointForces;
+  // on its second body when the first is the world), one arrow per body point they act at (the
+  // rows of a point constraint, x, y and z, add up to one arrow). The equal and opposite force on
+  // the other body is not drawn: it would lie on the same line.
+  struct ArrowGroup {
+    int joint;
+    BodyPoint at;
+    std::vector<int> rows;
+  };
+  std::vector<ArrowGroup> arrowGroups;
+  std::vector<int> arrowOf;  // per entry of computeConstraintPointForces' list: its group, or −1
   Data work(model);
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nq());
+  const bool forces = options.constraintForces && model.nc() > 0 &&
+                      std::any_of(trajectories.begin(), trajectories.end(), [](const ViewTrajectory& t) { return !t.ghost; });
+  if (forces) {
+    computeKinematics(model, work, q, zero);
+    for (const ConstraintPointForce& f : computeConstraintPointForces(model, work, Eigen::VectorXd::Zero(model.nc()))) {
+      const Constraint& c = model.constraints()[f.row];
+      const BodyPoint& at = f.side == 0 ? c.a : c.b;
+      int group = -1;
+      const bool drawn = f.joint != kWorld && std::none_of(arrowGroups.begin(), arrowGroups.end(), [&](const ArrowGroup& g) {
+        return std::find(g.rows.begin(), g.rows.end(), f.row) != g.rows.end();
+      });
+      if (drawn) {
+        for (std::size_t g = 0; g < arrowGroups.size(); ++g) {
+          if (arrowGroups[g].joint == f.joint && arrowGroups[g].at.joint == at.joint && arrowGroups[g].at.local == at.local) {
+            group = static_cast<int>(g);
+          }
+        }
+        if (group < 0) {
+          group = static_cast<int>(arrowGroups.size());
+          arrowGroups.push_back({f.joint, at, {}});
+        }
+        arrowGroups[group].rows.push_back(f.row);
+      }
+      arrowOf.push_back(group);
+    }
+    Json arrows = Json::array();
+    for (const ArrowGroup& g : arrowGroups) {
+      Json names = Json::array();
+      for (int r : g.rows) names.push_back(model.constraints()[r].name);
+      arrows.push_back({{"body", g.joint}, {"rows", g.rows}, {"names", std::move(names)}});
+    }
+    data["arrows"] = std::move(arrows);
+  }
+
+  // Poses: the state, then each trajectory at its sample times.
   Bounds bounds;
   std::vector<double> poses;
   appendBodyPoses(model, work, layout, q, zero, poses, bounds);
@@ -422,11 +478,17 @@ std::string renderView(const Scene& scene, const Eigen::VectorXd& q, const std::
   Json shown = Json::array();
   const long bodiesPerSample = std::max(1, model.nq());
   Eigen::VectorXd x, u;
+  // The first solid trajectory, float64: ghosts sampled at the same times are stored as float32
+  // differences from it (see below).
+  int base = -1;
+  std::vector<double> baseTimes, basePoses;
+  double largestForce = 0.0;
   for (std::size_t i = 0; i < trajectories.size(); ++i) {
     // q(t) is the configuration part of Trajectory::evaluate: the cubic Hermite spline through
     // (q_k, q̇_k). Its value does not depend on the q̈ part of the knot derivatives, so [q̇_k; 0]
     // serves (no dynamics needed: a trajectory whose dynamics fail somewhere still shows).
-    Trajectory t = trajectories[i].trajectory;
+    const ViewTrajectory& shownTrajectory = trajectories[i];
+    Trajectory t = shownTrajectory.trajectory;
     const int n = t.nq();
     Eigen::MatrixXd derivatives = Eigen::MatrixXd::Zero(2 * n, t.size());
     derivatives.topRows(n) = t.states().bottomRows(n);
@@ -434,7 +496,7 @@ std::string renderView(const Scene& scene, const Eigen::VectorXd& q, const std::
     const std::vector<double> times = sampleTimes(t, options.displayRate);
     out.samples += static_cast<long>(times.size());
     if (out.samples * bodiesPerSample > options.maxPoseSamples) {
-      throw ViewError("trajectory " + std::to_string(i + 1) + " ('" + trajectories[i].name + "'): " +
+      throw ViewError("trajectory " + std::to_string(i + 1) + " ('" + shownTrajectory.name + "'): " +
                       std::to_string(out.samples) + " samples of " + std::to_string(bodiesPerSample) +
                       " bodies exceed ViewOptions.maxPoseSamples = " + std::to_string(options.maxPoseSamples) +
                       " (lower the display rate)");
@@ -443,7 +505,7 @@ std::string renderView(const Scene& scene, const Eigen::VectorXd& q, const std::
     poses.reserve(times.size() * model.nq() * 7);
     // Tendon tensions, the forces a trajectory carries (its inputs, by its input rule), for the
     // solid trajectories (ghosts draw no tendons).
-    const bool tensions = !trajectories[i].ghost && !model.tendons().empty();
+    const bool tensions = !shownTrajectory.ghost && !model.tendons().empty();
     std::vector<double> tension;
     double maxTension = 0.0;
     for (double time : times) {
@@ -456,22 +518,115 @@ std::string renderView(const Scene& scene, const Eigen::VectorXd& q, const std::
         }
       }
     }
-    // Ghosts in float32 unless asked otherwise: half the bytes (the page's size and load time are
-    // dominated by the twenty closed loops of the hand), a rounding of 6e-8 relative (0.1 µm at
-    // the hand's size) that no picture shows. Solid trajectories stay float64: exact.
-    const bool single = trajectories[i].ghost && !options.exactGhosts;
-    Json entry{{"name", trajectories[i].name},
-               {"ghost", trajectories[i].ghost},
-               {"knots", t.size()},
-               {"t", encodeArray(times)},
-               {"precision", single ? 32 : 64},
-               {"poses", single ? encodeArray(std::vector<float>(poses.begin(), poses.end())) : encodeArray(poses)}};
+    const std::string which = "trajectory " + std::to_string(i + 1) + " ('" + shownTrajectory.name + "')";
+    // Constraint forces of the solid trajectories: λ(q, q̇, u) from the forward dynamics at every
+    // sample, the state and input by the trajectory's own interpolation (its knot derivatives from
+    // the dynamics). Per sample and arrow: the point it acts at and the summed force, world
+    // coordinates; NaN where the dynamics fail (the page hides the arrow there; a warning says so).
+    std::vector<double> arrowData;
+    if (forces && !shownTrajectory.ghost) {
+      Trajectory dynamic = shownTrajectory.trajectory;
+      std::string failure;
+      try {
+        if (!dynamic.hasStateDerivatives()) dynamic.computeStateDerivatives(model, work);
+      } catch (const TrajectoryError& e) {
+        failure = e.what();
+      }
+      if (!failure.empty()) {
+        out.warnings.push_back(which + ": no constraint force arrows: " + failure);
+      } else {
+        const std::size_t na = arrowGroups.size();
+        arrowData.reserve(times.size() * na * 6);
+        long failed = 0;
+        std::string firstFailure;
+        for (double time : times) {
+          dynamic.evaluate(time, x, u);
+          const DynamicsStatus status = computeDynamics(model, work, x.head(n), x.tail(n), u);
+          std::vector<double> sample(na * 6, 0.0);
+          if (!status.ok() || !work.lambda.allFinite()) {
+            if (failed++ == 0) firstFailure = "t = " + formatNumber(time) + ": " + status.describe();
+            std::fill(sample.begin(), sample.end(), std::numeric_limits<double>::quiet_NaN());
+          } else {
+            const std::vector<ConstraintPointForce> list = computeConstraintPointForces(model, work, work.lambda);
+            std::vector<bool> placed(na, false);
+            for (std::size_t e = 0; e < list.size(); ++e) {
+              if (arrowOf[e] < 0) continue;
+              double* a = &sample[6 * static_cast<std::size_t>(arrowOf[e])];
+              if (!placed[arrowOf[e]]) {
+                for (int k = 0; k < 3; ++k) a[k] = list[e].point(k);
+                placed[arrowOf[e]] = true;
+              }
+              for (int k = 0; k < 3; ++k) a[3 + k] += list[e].force(k);
+            }
+            for (std::size_t g = 0; g < na; ++g) {
+              largestForce = std::max(largestForce, Eigen::Vector3d(sample[6 * g + 3], sample[6 * g + 4], sample[6 * g + 5]).norm());
+            }
+          }
+          arrowData.insert(arrowData.end(), sample.begin(), sample.end());
+        }
+        if (failed > 0) {
+          out.warnings.push_back(which + ": the dynamics fail at " + std::to_string(failed) + " of " +
+                                 std::to_string(times.size()) + " samples (first " + firstFailure +
+                                 "); no force arrows there");
+        }
+      }
+    }
+    Json entry{{"name", shownTrajectory.name}, {"ghost", shownTrajectory.ghost}, {"knots", t.size()}};
+    const bool sameTimes = base >= 0 && times == baseTimes;
+    if (sameTimes) {
+      entry["timesOf"] = base;  // the same sample times as the base trajectory: not stored twice
+    } else {
+      entry["t"] = encodeArray(times);
+    }
+    // Ghosts in float32 unless asked otherwise (half the bytes: the twenty closed loops dominate
+    // the hand's page). Sampled at the base trajectory's times (a closed loop beside its
+    // reference), a ghost is stored as the float32 difference from the base's float64 poses: the
+    // page adds them back in float64, and the rounding is that of the difference (~6e-8 of a
+    // deviation of millimetres: ~1e-10 m) instead of that of the coordinates (~6e-8 of the pose).
+    // Solid trajectories stay float64: exact.
+    if (shownTrajectory.ghost && !options.exactGhosts) {
+      std::vector<float> single(poses.size());
+      const bool delta = sameTimes && basePoses.size() == poses.size();
+      if (delta) {
+        // q and −q are the same rotation: the ghost's quaternion on the base's side (a rotation near
+        // a half turn, w ≈ 0, would otherwise differ by ~2 and lose the difference's precision).
+        for (std::size_t o = 0; o < poses.size(); o += 7) {
+          double dot = 0.0;
+          for (int k = 3; k < 7; ++k) dot += poses[o + k] * basePoses[o + k];
+          if (dot < 0.0) {
+            for (int k = 3; k < 7; ++k) poses[o + k] = -poses[o + k];
+          }
+        }
+      }
+      double rounding = 0.0;
+      for (std::size_t k = 0; k < poses.size(); ++k) {
+        const double reference = delta ? basePoses[k] : 0.0;
+        single[k] = static_cast<float>(poses[k] - reference);
+        // What the page reads back (float64 sum, as here): its difference from the exact number.
+        rounding = std::max(rounding, std::abs(reference + static_cast<double>(single[k]) - poses[k]));
+      }
+      out.ghostRounding = std::max(out.ghostRounding, rounding);
+      entry["encoding"] = delta ? "delta32" : "float32";
+      entry["rounding"] = rounding;  // the largest change of a stored number (m, or unitless)
+      if (delta) entry["base"] = base;
+      entry["poses"] = encodeArray(single);
+    } else {
+      entry["encoding"] = "float64";
+      entry["poses"] = encodeArray(poses);
+    }
     if (tensions) {
       entry["tensions"] = encodeArray(tension);
       entry["maxTension"] = maxTension;
     }
+    if (!arrowData.empty()) entry["forces"] = encodeArray(arrowData);
+    if (base < 0 && !shownTrajectory.ghost) {
+      base = static_cast<int>(i);
+      baseTimes = times;
+      basePoses = poses;
+    }
     shown.push_back(std::move(entry));
   }
+  if (forces) data["largestForce"] = largestForce;
   data["trajectories"] = std::move(shown);
 
   // Up = −gravity (z without gravity); the ground grid just below everything shown.

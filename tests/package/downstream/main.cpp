@@ -2,6 +2,7 @@
 // θ̈ = −(g/l) sin θ, so A = [[0, 1], [−(g/l) cos θ, 0]].
 #include <trellis/control.hpp>
 #include <trellis/core.hpp>
+#include <trellis/viewer/view.hpp>
 
 #include <cmath>
 #include <iostream>
@@ -45,6 +46,16 @@ int main() {
                                                     Eigen::MatrixXd::Identity(1, 1));
   if (!lqr.ok() || std::abs(lqr.K(0, 0) - 1.0) > 1e-9 || std::abs(lqr.K(0, 1) - std::sqrt(3.0)) > 1e-9) {
     std::cerr << "solveCare: " << lqr.message << " K = " << lqr.K << "\n";
+    return 1;
+  }
+  // trellis::viewer through the installed package, with the installed three.js and its licence.
+  trellis::Scene scene{model, q, dq, u, "pendulum", "", {}};
+  trellis::ViewOptions options;
+  options.threeDirectory = TRELLIS_THREE_DIR;
+  const std::string page = trellis::renderView(scene, q, {}, options);
+  if (page.find("OrbitControls") == std::string::npos ||
+      page.find(std::string(TRELLIS_THREE_DIR) + "/LICENSE") == std::string::npos) {
+    std::cerr << "renderView: the page lacks three.js or its licence notice\n";
     return 1;
   }
   std::cout << "downstream: ok\n";

@@ -25,17 +25,20 @@ namespace trellis {
 
 class Model;
 
+/// Options of checkConsistency: the verdict's tolerance and the integrator's settings.
 struct ConsistencyOptions {
   double tolerance = 1e-3;   ///< a trajectory is consistent when maxDefect ≤ tolerance
   double rtol = 1e-10;       ///< CVODES relative tolerance (Adams, fixed-point iteration)
   double atolFraction = 1e-10;  ///< CVODES absolute tolerance, per component: atolFraction · s_i
   double rangeFloor = 1e-2;  ///< see the file comment
-  long maxStepsPerInterval = 100000;
+  long maxStepsPerInterval = 100000;  ///< CVODES steps per knot interval (> 0); more fails that interval
 
   /// Throws std::invalid_argument naming the bad field.
   void validate() const;
 };
 
+/// The verdict of checkConsistency: how far the exact dynamics, integrated from each knot over its
+/// interval, land from the trajectory's own state (relative defects; the file comment defines them).
 struct ConsistencyResult {
   bool integrated = false;   ///< every interval was integrated (else `message` says where it failed)
   bool consistent = false;   ///< integrated and maxDefect ≤ options.tolerance
@@ -43,12 +46,15 @@ struct ConsistencyResult {
   double maxDefect = 0.0;    ///< worst relative defect (see the file comment)
   int worstInterval = -1;    ///< interval k of the worst defect
   double worstTime = 0.0;    ///< where it was measured: t_{k+1} or the interval's midpoint
-  bool worstAtMidpoint = false;
+  bool worstAtMidpoint = false;  ///< whether worstTime is the interval's midpoint (else its end)
   int worstState = -1;       ///< component i of x = [q; q̇]
   std::string worstStateName;  ///< its name ("theta", "dtheta")
   Eigen::VectorXd intervalDefects;  ///< N − 1: each interval's relative defect
   Eigen::VectorXd stateScale;       ///< 2n: s_i
-  long steps = 0, rhsEvaluations = 0;  ///< CVODES totals over all intervals
+  ///@{
+  /// CVODES totals over all intervals: internal steps and right-hand-side evaluations.
+  long steps = 0, rhsEvaluations = 0;
+  ///@}
   std::string message;       ///< one line for a person: the verdict and where
 };
 

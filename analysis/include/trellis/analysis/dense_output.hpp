@@ -16,6 +16,8 @@
 
 namespace trellis {
 
+/// The steps of an integration as polynomials (file comment): appended in order of their ends,
+/// evaluated anywhere in the span covered.
 class DenseOutput {
  public:
   /// Appends the polynomial of a step ending at s (D: dimension × (q+1), column j = d^j y/ds^j at
@@ -27,15 +29,18 @@ class DenseOutput {
   /// Reserves room for `steps` steps.
   void reserve(std::size_t steps);
 
-  bool empty() const { return ends_.empty(); }
-  std::size_t size() const { return ends_.size(); }
+  bool empty() const { return ends_.empty(); }          ///< no step stored
+  std::size_t size() const { return ends_.size(); }      ///< number of steps
   /// Length of y (0 when empty).
   Eigen::Index dimension() const { return coefficients_.empty() ? 0 : coefficients_[0].rows(); }
+  ///@{
   /// The first and last step ends (the span covered; throws std::out_of_range when empty).
   double front() const;
   double back() const;
+  ///@}
   /// End of step i and the degree q of its polynomial.
   double end(std::size_t i) const { return ends_[i]; }
+  /// The degree q of step i's polynomial (its columns − 1).
   int order(std::size_t i) const { return static_cast<int>(coefficients_[i].cols()) - 1; }
   /// D of step i (dimension × (q+1)).
   const Eigen::MatrixXd& coefficients(std::size_t i) const { return coefficients_[i]; }

@@ -86,6 +86,8 @@ const char* toString(IntegrationMethod method);
 /// The inverse of toString; throws std::invalid_argument "'TEXT' is not one of adams, bdf".
 IntegrationMethod parseIntegrationMethod(const std::string& text);
 
+/// Options of simulate / simulateBatch: integrator tolerances and method, sampled or continuous
+/// feedback, input limits, output times, constraint projection.
 struct SimulationOptions {
   double rtol = 1e-8;      ///< CVODES relative tolerance (> 0)
   double atol = 1e-10;     ///< CVODES absolute tolerance on each state entry (> 0)
@@ -93,13 +95,15 @@ struct SimulationOptions {
   /// 0: continuous feedback u(t) = π(t, x(t)); > 0: sampled at this rate (Hz), from t0, u held
   /// (zero-order hold) between samples.
   double sampleRate = 0.0;
+  ///@{
   /// Input box: empty = unbounded; else size m each (±inf allowed, lower ≤ upper). u is clipped.
   Eigen::VectorXd inputLower, inputUpper;
+  ///@}
   /// 0: output at the reference's knots inside [t0, t1] (plus t0 and t1; needs a reference);
   /// > 0: t0, t0 + h, t0 + 2h, …, and t1.
   double outputStep = 0.0;
-  ConstraintHandling constraints = ConstraintHandling::kProject;
-  IntegrationMethod method = IntegrationMethod::kAdams;
+  ConstraintHandling constraints = ConstraintHandling::kProject;  ///< project onto the constraints, or only report the drift
+  IntegrationMethod method = IntegrationMethod::kAdams;  ///< Adams (non-stiff) or BDF (stiff closed loops, e.g. high gains)
   double maxStep = 0.0;  ///< largest internal step; 0 = unlimited (≥ 0)
   /// Extra times where the policy jumps (integration restarts there). Times outside (t0, t1) are
   /// ignored. (Kinks need none: the reference knots and gain times are not restart points.)
@@ -138,8 +142,10 @@ struct SimulationResult;
 /// (initial, final, max, time of max), constraint drift, saturation, integrator work.
 std::string simulationJson(const SimulationResult& result);
 
+/// The closed loop x(t), u(t) at the output times, the tracking error and constraint drift there,
+/// the integrator's work, and the status (with the time and state of a failure).
 struct SimulationResult {
-  SimulationStatus status = SimulationStatus::kOk;
+  SimulationStatus status = SimulationStatus::kOk;  ///< kOk: integrated over [t0, t1]
   std::string message;           ///< empty when ok; names the time and the state of the failure
   double failureTime = 0.0;      ///< t of the failure (not ok only)
   Eigen::VectorXd failureState;  ///< x = [q; q̇] at failureTime (2n; not ok only)
@@ -168,7 +174,7 @@ struct SimulationResult {
   long jacobianEvaluations = 0;    ///< Newton-matrix Jacobians formed (exact or difference quotient)
   long restarts = 0;               ///< restarts after t0: samples, breakpoints, projections
   long projections = 0;            ///< projections that were applied
-  bool ok() const { return status == SimulationStatus::kOk; }
+  bool ok() const { return status == SimulationStatus::kOk; }  ///< status == kOk
 };
 
 /// u = policy(t, x): x is 2n, u arrives sized m and must be overwritten. It may throw (reported as

@@ -50,6 +50,7 @@ enum class LqrStatus {
 
 const char* toString(LqrStatus status);
 
+/// Options of solveCare and solveDare (the name is historical: both take them).
 struct CareOptions {
   int maxIterations = 100;        ///< sign-function (or doubling) iterations
   double tolerance = 1e-12;       ///< change that stops the iteration (DARE: per entry, rel. to √(S_ii S_jj))
@@ -60,8 +61,10 @@ struct CareOptions {
   bool balance = true;            ///< scale states to balance the Hamiltonian (off: D = I)
 };
 
+/// The stabilizing solution S of the CARE / DARE (file comment), the gain K, and the checks that
+/// make it ok: a stable closed loop and a scale-invariant residual below tolerance.
 struct LqrResult {
-  LqrStatus status = LqrStatus::kOk;
+  LqrStatus status = LqrStatus::kOk;  ///< kOk, or why no stabilizing solution was returned
   std::string message;            ///< empty when ok
   Eigen::MatrixXd S;              ///< nx×nx symmetric (PSD when Q − N R⁻¹ Nᵀ is PSD)
   Eigen::MatrixXd K;              ///< m×nx
@@ -70,7 +73,7 @@ struct LqrResult {
   int refinementSteps = 0;        ///< Newton steps kept
   Eigen::VectorXcd closedLoopEigenvalues;  ///< of A − BK (Ad − Bd K)
   Eigen::VectorXd stateScaling;   ///< the balancing D (x = D z), powers of 2
-  bool ok() const { return status == LqrStatus::kOk; }
+  bool ok() const { return status == LqrStatus::kOk; }  ///< status == kOk
 };
 
 }  // namespace trellis

@@ -28,16 +28,18 @@ class Model;
 class Data;
 class Trajectory;
 
+/// The rank of the Krylov matrix C = [B, ÂB, …, Â^{d−1}B] of a (reduced) linearization, Â = A/α,
+/// α = max(1, ‖A‖_F) (file comment), with its singular values.
 struct ControllabilityReport {
   int dimension = 0;                  ///< d, the (reduced) state dimension
   int rank = 0;                       ///< numerical rank of C (σ_i > tolerance·σ_max)
   double smallestSingularValue = 0.0; ///< σ_d of C (0 if C has fewer than d columns)
-  double largestSingularValue = 0.0;
+  double largestSingularValue = 0.0;  ///< σ_1 of C
   double scale = 1.0;                 ///< α used for Â = A/α
   Eigen::VectorXd singularValues;     ///< of C, descending
   bool ok = true;                     ///< false when the linearization failed (controllabilityAtKnots)
   std::string message;                ///< empty when ok; names the knot, time and cause
-  bool controllable() const { return ok && rank == dimension; }
+  bool controllable() const { return ok && rank == dimension; }  ///< ok and rank C = d
 };
 
 /// Throws std::invalid_argument on inconsistent sizes.
@@ -57,9 +59,14 @@ std::vector<ControllabilityReport> controllabilityAtKnots(const Model& model,
                                                           const Trajectory& trajectory,
                                                           double relativeTolerance = 1e-10);
 
+/// The reduced reachability Gramian W(t0, t1) along a trajectory (file comment: Ẇ = Ar W + W Arᵀ +
+/// Br Brᵀ, W(t0) = 0, integrated by CVODES), its eigenvalues and the integrator's work.
 struct GramianReport {
   Eigen::MatrixXd W;                  ///< d×d reduced reachability Gramian (symmetric PSD)
+  ///@{
+  /// The smallest and largest eigenvalue of W.
   double minEigenvalue = 0.0, maxEigenvalue = 0.0;
+  ///@}
   bool ok = false;                    ///< false on numerical failure (see message)
   std::string message;                ///< empty when ok; otherwise the time and the cause
   int dimension = 0;                  ///< d

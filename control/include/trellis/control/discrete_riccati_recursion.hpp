@@ -12,7 +12,10 @@ namespace trellis {
 ///   K_k = (R + BdᵀS_{k+1}Bd)⁻¹ BdᵀS_{k+1}Ad,  S_k = Q + AdᵀS_{k+1}(Ad − Bd K_k),  k = N−1 … 0
 /// (S_k symmetrized at every step). S has N+1 entries, K has N.
 struct DiscreteRiccatiRecursion {
+  ///@{
+  /// S_0 … S_N (nx×nx each, symmetric) and K_0 … K_{N−1} (m×nx each).
   std::vector<Eigen::MatrixXd> S, K;
+  ///@}
 };
 DiscreteRiccatiRecursion solveDiscreteRiccatiRecursion(const Eigen::MatrixXd& Ad,
                                                        const Eigen::MatrixXd& Bd,

@@ -88,9 +88,11 @@ enum class TangentTransport { kIntegrated, kProjected };
 ///  kAuto: kNodes with kProjected, kExact with kIntegrated.
 enum class ReducedLinearizationMode { kAuto, kExact, kNodes };
 
+/// Options of transportTangentBasis: how the tangent basis T(t) is carried along the reference,
+/// and how the reduced linearization is then evaluated.
 struct TangentTransportOptions {
-  TangentTransport method = TangentTransport::kIntegrated;
-  ReducedLinearizationMode linearization = ReducedLinearizationMode::kAuto;
+  TangentTransport method = TangentTransport::kIntegrated;  ///< integrated transport (CVODES) or projected steps
+  ReducedLinearizationMode linearization = ReducedLinearizationMode::kAuto;  ///< exact at every t, or from the nodes
   /// Steps per reference interval (≥ 1): kProjected's transport steps, and for both methods the
   /// nodes where the held basis is stored (the knots split `substeps` times).
   int substeps = 1;
@@ -108,15 +110,15 @@ class TangentBasisTrajectory {
  public:
   int dimension() const { return d_; }   ///< d
   int nx() const { return nx_; }         ///< 2n
-  double startTime() const { return t0_; }
-  double endTime() const { return tf_; }
+  double startTime() const { return t0_; }  ///< t_0 of the reference [s]
+  double endTime() const { return tf_; }    ///< t_{N−1} of the reference [s]
 
   /// True when the transport covered the whole trajectory (false for a default-constructed object).
   /// Otherwise message() names the time and the cause (dynamics failure at x(t), CVODES error), and
   /// T is available on [t0, validUntil()].
   bool ok() const { return nx_ > 0 && message_.empty(); }
-  const std::string& message() const { return message_; }
-  double validUntil() const { return validUntil_; }
+  const std::string& message() const { return message_; }  ///< empty when ok(); else time and cause
+  double validUntil() const { return validUntil_; }         ///< T is available on [startTime(), validUntil()]
   long steps() const { return steps_; }  ///< CVODES internal steps (kProjected: transport steps)
   /// Right-hand sides spent on difference-quotient Jacobian products (0: the exact ones were used).
   long differenceQuotientEvaluations() const { return linearRhsEvaluations_; }
@@ -186,6 +188,7 @@ TangentBasisTrajectory transportTangentBasis(const Model& model, const Trajector
 /// dynamics evaluation. Allocation-free after the first call, except the d×d SVD/eigensolver.
 class ReducedLinearization {
  public:
+  /// Binds `basis` to `model` (which must outlive this object); sizes the workspace.
   ReducedLinearization(const Model& model, TangentBasisTrajectory basis);
   ~ReducedLinearization();
   ReducedLinearization(const ReducedLinearization&) = delete;
@@ -195,11 +198,11 @@ class ReducedLinearization {
   /// change of the tangent space's dimension or a basis drifted off it is the returned status
   /// naming t (then T, Ar, Br are not valid).
   ReferenceStatus evaluate(double t);
-  const Eigen::MatrixXd& T() const { return T_; }
-  const Eigen::MatrixXd& Ar() const { return Ar_; }
-  const Eigen::MatrixXd& Br() const { return Br_; }
+  const Eigen::MatrixXd& T() const { return T_; }    ///< 2n×d tangent basis at the last t
+  const Eigen::MatrixXd& Ar() const { return Ar_; }  ///< d×d: TᵀA T at the last t
+  const Eigen::MatrixXd& Br() const { return Br_; }  ///< d×m: TᵀB at the last t
   const Eigen::MatrixXd& A() const;  ///< the full-state A at the last t
-  const TangentBasisTrajectory& basis() const { return basis_; }
+  const TangentBasisTrajectory& basis() const { return basis_; }  ///< the transported basis it uses
   long evaluations() const { return evaluations_; }  ///< dynamics evaluations so far
 
  private:
@@ -225,8 +228,8 @@ struct ManifoldRiccatiSolution {
   bool ok() const { return basis.ok() && reduced.ok(); }
   /// Empty when ok; otherwise the transport's or the Riccati solve's message (with the time).
   const std::string& message() const;
-  int nx() const { return basis.nx(); }
-  int dimension() const { return basis.dimension(); }
+  int nx() const { return basis.nx(); }                ///< 2n (full state)
+  int dimension() const { return basis.dimension(); }  ///< d (tangent space)
   /// K(t) = Kr(t) T(t)ᵀ (m×2n), T(t) the held basis (Hermite + polar, see above): exact at the
   /// nodes, and within O(h⁴) of the basis the solve used elsewhere; Kr(t) as RiccatiSolution::K.
   Eigen::MatrixXd K(double t) const;

@@ -26,9 +26,9 @@ inline EnumNameTable<MatrixEquationCode> enumNames(MatrixEquationCode) {
 /// X of a Lyapunov or Stein equation (n×n, symmetric) and the status. When not ok, X is empty and
 /// status.index is the column of the Schur form where the substitution met a zero pivot.
 struct MatrixEquationSolution {
-  Status<MatrixEquationCode> status;
-  Eigen::MatrixXd X;
-  bool ok() const { return status.ok(); }
+  Status<MatrixEquationCode> status;  ///< kOk, kSingular (status.index: the Schur column), kNonFinite
+  Eigen::MatrixXd X;                  ///< n×n symmetric solution; empty when not ok
+  bool ok() const { return status.ok(); }  ///< status.ok()
   /// One line: the status (and n).
   std::string describe() const;
   /// {"status", "ok", "message", "t", "index", "n"}.

@@ -81,8 +81,16 @@ using WeightCallback = std::function<void(double t, Eigen::MatrixXd& W)>;
 /// The quadratic cost. Q (nx×nx, symmetric PSD) and R (m×m, symmetric PD) are constants unless the
 /// matching callback is set, in which case the callback wins. Qf (nx×nx, symmetric PSD) is required.
 struct LqrWeights {
+  ///@{
+  /// Constant weights: Q (nx×nx, PSD) on the state error, R (m×m, PD) on the input, Qf (nx×nx,
+  /// PSD) on the final state error.
   Eigen::MatrixXd Q, R, Qf;
+  ///@}
+  ///@{
+  /// Time-varying Q(t), R(t) (the callback wins over the constant when set; same sizes and
+  /// definiteness).
   WeightCallback Qfun, Rfun;
+  ///@}
 };
 
 /// kBDF and kAdams integrate the entries of S; kFactored integrates the Cholesky factor U of
@@ -112,10 +120,11 @@ const char* toString(RiccatiLinearSolver solver);
 /// The inverse of toString; throws std::invalid_argument "'TEXT' is not one of auto, …".
 RiccatiLinearSolver parseRiccatiLinearSolver(const std::string& text);
 
+/// Options of solveRiccati: integrator, tolerances, limits, linear solver.
 struct RiccatiOptions {
   double rtol = 1e-8;           ///< CVODES relative tolerance (> 0)
   double atol = 1e-10;          ///< CVODES absolute tolerance on each entry of S (> 0)
-  RiccatiMethod method = RiccatiMethod::kBDF;
+  RiccatiMethod method = RiccatiMethod::kBDF;  ///< plain entries of S by BDF or Adams, or the Cholesky factor
   long maxSteps = 100000;       ///< total internal steps over the horizon (> 0)
   double maxNorm = 1e15;        ///< max |S_ij| above which the solve stops with kBlowUp (> 0)
   double initialStep = 0.0;     ///< first step size in τ; 0 lets CVODES choose (≥ 0)
@@ -164,13 +173,13 @@ const char* toString(RiccatiStatus status);
 /// The solve's outcome and S(t) on [validFrom(), T] (the whole horizon when ok()).
 class RiccatiSolution {
  public:
-  RiccatiStatus status = RiccatiStatus::kOk;
+  RiccatiStatus status = RiccatiStatus::kOk;  ///< kOk: S on the whole horizon; else why it stopped
   std::string message;              ///< empty when ok; otherwise what failed, at which t and ‖S‖
   double failureTime = 0.0;         ///< t where the failure happened (not ok only)
   double failureNorm = 0.0;         ///< max |S_ij| at the last accepted step before the failure
   long steps = 0;                   ///< CVODES internal steps
-  long rhsEvaluations = 0;
-  long jacobianEvaluations = 0;
+  long rhsEvaluations = 0;          ///< right-hand sides of the Riccati ODE evaluated by CVODES
+  long jacobianEvaluations = 0;     ///< Jacobians of the right-hand side formed (BDF, dense)
   long linearIterations = 0;        ///< GMRES iterations (Krylov solver only; 0 for kLyapunov)
   long preconditionerSolves = 0;    ///< Lyapunov solves (Krylov preconditioner or kLyapunov)
   long newtonIterations = 0;        ///< nonlinear iterations of BDF (Newton) or Adams (fixed point)
@@ -183,13 +192,13 @@ class RiccatiSolution {
   double indefiniteRatio = 0.0;     ///< kIndefinite: λmin(S)/λmax(S) at failureTime (< −ε)
   long linearizations = 0;          ///< calls of the linearization callback (solve and gains)
   double minEigenvalue = 0.0;       ///< of S over the stored steps (if tracked)
-  double maxEigenvalue = 0.0;
+  double maxEigenvalue = 0.0;       ///< of S over the stored steps (if tracked)
 
-  bool ok() const { return status == RiccatiStatus::kOk; }
-  int nx() const { return nx_; }
-  int nu() const { return nu_; }
-  double startTime() const { return t0_; }
-  double endTime() const { return tf_; }
+  bool ok() const { return status == RiccatiStatus::kOk; }  ///< status == kOk
+  int nx() const { return nx_; }            ///< states (S is nx×nx)
+  int nu() const { return nu_; }            ///< inputs (K is m×nx)
+  double startTime() const { return t0_; }  ///< t0 of the horizon [s]
+  double endTime() const { return tf_; }    ///< T, the end of the horizon [s]
   /// Earliest time where S is available: t0 when ok(), else the last accepted step's time.
   double validFrom() const;
   /// Times (ascending) of the stored step points, T included.
@@ -200,6 +209,7 @@ class RiccatiSolution {
 
   /// S(t) (nx×nx, symmetric). Throws std::out_of_range outside [validFrom(), T].
   Eigen::MatrixXd S(double t) const;
+  /// S(t) into `out` (resized only when its size is wrong: no allocation in a loop).
   void S(double t, Eigen::MatrixXd& out) const;
   /// K(t) = G(t) S(t), G = R⁻¹Bᵀ (m×nx). The solution owns everything it needs (no reference to
   /// the model or the callbacks: it may outlive them): G is stored at every step end and step

@@ -38,7 +38,10 @@ namespace trellis {
 
 /// One sample interval [t0, t1] of the exact discretization (see the file comment).
 struct SampledInterval {
+  ///@{
+  /// The interval's start and end [s].
   double t0 = 0.0, t1 = 0.0;
+  ///@}
   Eigen::MatrixXd Phi;    ///< nx×nx, Φ(t1, t0)
   Eigen::MatrixXd Gamma;  ///< nx×m
   Eigen::MatrixXd Q;      ///< nx×nx, symmetric PSD
@@ -46,6 +49,7 @@ struct SampledInterval {
   Eigen::MatrixXd R;      ///< m×m, symmetric PD
 };
 
+/// Options of discretizeSampledData (the integration of Φ, Γ and the cost over each interval).
 struct SampledDiscretizationOptions {
   double rtol = 1e-10;     ///< CVODES relative tolerance on Φ, Γ and the cost (> 0)
   double atol = 1e-12;     ///< absolute tolerance on the entries of Φ, Γ (> 0); the cost's is
@@ -54,13 +58,14 @@ struct SampledDiscretizationOptions {
   void validate() const;   ///< throws std::invalid_argument naming the field
 };
 
+/// The exact discretization over the sample intervals, and how it went.
 struct SampledDiscretization {
   std::vector<SampledInterval> intervals;  ///< those completed (all of them when ok)
-  bool ok = true;
+  bool ok = true;            ///< every interval integrated
   std::string message;       ///< empty when ok; the time and the cause otherwise
-  double failureTime = 0.0;
+  double failureTime = 0.0;  ///< t of the failure (not ok only) [s]
   long steps = 0;            ///< CVODES internal steps over all intervals
-  long rhsEvaluations = 0;
+  long rhsEvaluations = 0;   ///< right-hand sides evaluated by CVODES
   long linearizations = 0;   ///< calls of the linearization callback
 };
 
@@ -78,9 +83,12 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
 /// entries, K N. ok = false (message naming the step and its time) when G_k is not positive
 /// definite or S_k is not finite.
 struct SampledRiccatiRecursion {
+  ///@{
+  /// S_0 … S_N (nx×nx, symmetric) and K_0 … K_{N−1} (m×nx): u_k = −K_k x_k held over interval k.
   std::vector<Eigen::MatrixXd> S, K;
-  bool ok = true;
-  std::string message;
+  ///@}
+  bool ok = true;        ///< every step's G_k positive definite and S_k finite
+  std::string message;   ///< empty when ok; names the step and its time
 };
 SampledRiccatiRecursion solveSampledRiccatiRecursion(const std::vector<SampledInterval>& intervals,
                                                      const Eigen::MatrixXd& Qf);

@@ -16,7 +16,7 @@ namespace trellis {
 /// checked by the PBH singular value σ_min[A − λI, B] / ‖[A, B]‖. The solvers apply it to the
 /// balanced problem; callers with badly scaled data should balance first.
 struct StabilizabilityCheck {
-  bool stabilizable = true;
+  bool stabilizable = true;                   ///< every unstable mode's margin above the tolerance
   std::complex<double> eigenvalue{0.0, 0.0};  ///< the least controllable unstable eigenvalue
   double margin = 1.0;                        ///< its controllability margin (1 if none unstable)
   std::string message;                        ///< empty when stabilizable

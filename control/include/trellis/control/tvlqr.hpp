@@ -32,6 +32,8 @@ namespace trellis {
 class Model;
 class Trajectory;
 
+/// Options of the TV-LQR along a trajectory (solveTvlqr): continuous or zero-order-hold gains,
+/// where they are tabulated, and the options of the solvers it uses.
 struct TvlqrOptions {
   double sampleRate = 0.0;  ///< 0: continuous gains; > 0: zero-order-hold gains at this rate (Hz)
   double outputStep = 0.0;  ///< continuous only: tabulate K every outputStep from t0 (T included);
@@ -43,12 +45,17 @@ struct TvlqrOptions {
   void validate() const;
 };
 
+/// The TV-LQR gains K(t) along a trajectory (on the constraint manifold's tangent space when the
+/// scene has constraints), the cost-to-go S at the gains' times, and the solve's diagnostics.
 struct TvlqrSolution {
-  bool ok = false;
+  bool ok = false;                ///< the gains cover the whole trajectory
   std::string message;            ///< empty when ok; what failed, where, when
   double sampleRate = 0.0;        ///< as requested (0 = continuous)
   bool constrained = false;       ///< solved on the tangent space of the constraint manifold
-  int nx = 0, nu = 0;             ///< 2n, m
+  ///@{
+  /// The full state's size 2n and the inputs m.
+  int nx = 0, nu = 0;
+  ///@}
   int dimension = 0;              ///< d: tangent dimension (2n without constraints)
   /// K (m×2n) at its times, with the scene's column names and the sample rate set.
   GainSchedule gains;
@@ -57,11 +64,14 @@ struct TvlqrSolution {
   // Diagnostics.
   double seconds = 0.0;           ///< wall time of the solve
   long steps = 0;                 ///< CVODES internal steps (Riccati ODE, or all intervals)
-  long rhsEvaluations = 0;
+  long rhsEvaluations = 0;        ///< right-hand sides evaluated by CVODES
   long linearizations = 0;        ///< sampled: evaluations of the (reduced) linearization
   long transportSteps = 0;        ///< basis transport steps (constrained)
   double maxBasisCorrection = 0.0;  ///< TangentBasisTrajectory::maxCorrection (constrained)
-  double minEigenvalueS = 0.0, maxEigenvalueS = 0.0;  ///< of S (reduced Sr) over the solve
+  ///@{
+  /// The smallest and largest eigenvalue of S (of the reduced Sr when constrained) over the solve.
+  double minEigenvalueS = 0.0, maxEigenvalueS = 0.0;
+  ///@}
   std::string method;             ///< "bdf", "adams", "factored" or "sampled-zoh"
 
   /// A few lines for people (what was solved, work, S's spectrum).

@@ -64,9 +64,9 @@ struct DynamicsStatus : Status<DynamicsCode> {
 
 /// Kinetic and potential energy, T = ½ q̇ᵀ M q̇, V = gravity + springs.
 struct Energy {
-  double kinetic = 0.0;
-  double potential = 0.0;
-  double total() const { return kinetic + potential; }
+  double kinetic = 0.0;    ///< T = ½ q̇ᵀ M(q) q̇ [J]
+  double potential = 0.0;  ///< V: gravity, linear and configuration springs [J]
+  double total() const { return kinetic + potential; }  ///< T + V [J]
 };
 
 class Data;
@@ -77,14 +77,21 @@ inline DataWorkspace& workspace(Data& data);  // defined in data_workspace.hpp
 inline const DataWorkspace& workspace(const Data& data);
 }  // namespace detail
 
+/// The workspace of one Model: every result the algorithms write (named members below) and their
+/// scratch buffers, sized once; one per thread. The algorithms take (model, data, ...) and do not
+/// allocate. A Data belongs to the model it was made for (same sizes); using it with another throws.
 class Data {
  public:
   /// Sizes every result and every scratch buffer for `model` (allocates; the algorithms do not).
   explicit Data(const Model& model);
+  ///@{
+  /// Copies and moves carry the results and the scratch (a deep copy: the copy is independent,
+  /// e.g. one per thread made from a prototype).
   Data(const Data& other);
   Data(Data&& other) noexcept;
   Data& operator=(const Data& other);
   Data& operator=(Data&& other) noexcept;
+  ///@}
   ~Data();
 
   /// World pose of every frame (nf, model.frames() order): updateFramePoses, computeDynamics.

@@ -26,10 +26,12 @@
 
 namespace trellis {
 
+/// One entry of an enum's name table: the enumerator and its name (snake_case, as in files and
+/// JSON reports).
 template <class E>
 struct EnumName {
-  E value;
-  const char* name;
+  E value;           ///< the enumerator
+  const char* name;  ///< its name (a string literal)
 };
 
 /// The table's entries (a static array), in the order a person should read them (success first).

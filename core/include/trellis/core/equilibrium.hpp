@@ -23,6 +23,7 @@
 
 namespace trellis {
 
+/// Options of findEquilibrium (Gauss–Newton on F(q) = [q̈(q, 0, u); h(q)] with a line search).
 struct EquilibriumOptions {
   /// Relative, in (0, 1e-3]: the configuration change (radians, or model lengths) the residual
   /// F = [q̈; h] amounts to at the answer (file comment).
@@ -46,13 +47,15 @@ inline EnumNameTable<EquilibriumStatus> enumNames(EquilibriumStatus) {
   return table;
 }
 
+/// What findEquilibrium found: the equilibrium or the best iterate, the status saying which, and
+/// the residuals, rank and stability at q.
 struct EquilibriumResult {
-  EquilibriumStatus status = EquilibriumStatus::kOk;
+  EquilibriumStatus status = EquilibriumStatus::kOk;  ///< kOk only when both residuals are within tolerance
   std::string message;                 ///< empty when ok
   Eigen::VectorXd q;                   ///< n: the equilibrium (the best iterate if not ok)
   Eigen::VectorXd u;                   ///< m: the inputs used
   Eigen::VectorXd lambda;              ///< nc: constraint forces holding it
-  int iterations = 0;
+  int iterations = 0;                  ///< Newton iterations taken
   double accelerationResidual = 0.0;   ///< ‖q̈(q, 0, u)‖∞
   double constraintResidual = 0.0;     ///< ‖h(q)‖∞ (holonomic rows)
   /// max_i |F_i| / Σ_j |∂F_i/∂q_j| s_j: the residual as a configuration change (file comment).
@@ -63,7 +66,7 @@ struct EquilibriumResult {
   /// (data.reducedA) at (q, 0, u): < 0 asymptotically stable, > 0 unstable, ≈ 0 marginal (e.g. an
   /// undamped stable equilibrium, whose eigenvalues are ± i ω).
   double maxRealEigenvalue = 0.0;
-  bool ok() const { return status == EquilibriumStatus::kOk; }
+  bool ok() const { return status == EquilibriumStatus::kOk; }  ///< status == kOk
   /// One line: "<status>[: message] (iterations, residuals, rank, stability)".
   std::string describe() const;
   /// {"status", "ok", "message", "t": null, "index": null, "iterations", "qdd_residual",

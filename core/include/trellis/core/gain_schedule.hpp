@@ -72,12 +72,12 @@ class GainSchedule {
   double startTime() const;  ///< t_0; throws std::logic_error when empty
   double endTime() const;    ///< t_{N-1}; throws std::logic_error when empty
 
-  const Eigen::VectorXd& times() const { return times_; }
-  const std::vector<Eigen::MatrixXd>& gains() const { return gains_; }
+  const Eigen::VectorXd& times() const { return times_; }             ///< N knot times, strictly increasing [s]
+  const std::vector<Eigen::MatrixXd>& gains() const { return gains_; }  ///< N gains K_k, each m×nx
 
   /// 0: continuous gains; f > 0: zero-order-hold gains for a controller sampling at f Hz.
   double sampleRate() const { return sampleRate_; }
-  bool isSampled() const { return sampleRate_ > 0.0; }
+  bool isSampled() const { return sampleRate_ > 0.0; }  ///< sampleRate() > 0
   /// Throws std::invalid_argument unless hz is finite and ≥ 0.
   void setSampleRate(double hz);
 
@@ -95,7 +95,7 @@ class GainSchedule {
   void checkNames(const std::vector<std::string>& inputNames,
                   const std::vector<std::string>& stateNames, const std::string& source) const;
 
-  GainInterpolation interpolation() const { return interpolation_; }
+  GainInterpolation interpolation() const { return interpolation_; }  ///< the rule between rows (file comment)
   /// Chooses the rule between rows (file comment); kCubic computes the slopes here.
   void setInterpolation(GainInterpolation rule);
   /// The slopes K̇_k of the cubic rule (N matrices m×nx; empty for the linear rule).
@@ -105,6 +105,7 @@ class GainSchedule {
   /// throws std::out_of_range (inside the slack t is clamped). No allocation when K is already
   /// m×nx. Throws std::logic_error on an empty schedule.
   void evaluate(double t, Eigen::MatrixXd& K) const;
+  /// K(t) as a new matrix (allocating); see evaluate(double, Eigen::MatrixXd&).
   Eigen::MatrixXd evaluate(double t) const;
 
   /// Samples any gain function (e.g. RiccatiSolution::K) at the given times (strictly increasing).
@@ -117,9 +118,12 @@ class GainSchedule {
   /// and file line) and column (1-based and its header name) for a bad header, a value that is not
   /// a number or not finite, a time not greater than the previous one, or a wrong column count.
   static GainSchedule readCsv(std::istream& in, const std::string& source = "<stream>");
+  /// readCsv on the file at `path`; a directory or a file that cannot be opened throws
+  /// TrajectoryError naming the path and the reason (and as readCsv for its content).
   static GainSchedule readCsvFile(const std::string& path);
   /// Writes the CSV layout with 17 significant digits. Throws TrajectoryError on an empty schedule.
   void writeCsv(std::ostream& out) const;
+  /// writeCsv to `path`, atomically (io.hpp: complete or absent); throws FileError, TrajectoryError.
   void writeCsvFile(const std::string& path) const;
 
  private:

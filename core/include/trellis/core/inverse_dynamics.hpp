@@ -18,6 +18,7 @@
 
 namespace trellis {
 
+/// Options of computeInverseDynamics: the exactness test's tolerance and optional input bounds.
 struct InverseDynamicsOptions {
   /// Exact when every row i of the residual, r = M q̈ + b with b = ID(q, q̇, 0) − Q_cfg, satisfies
   /// |(G z − r)_i| ≤ tolerance · (Σ_j |M_ij q̈_j| + |ID_i| + |Q_cfg,i| + Σ_j |G_ij z_j|), and each
@@ -29,7 +30,10 @@ struct InverseDynamicsOptions {
   /// With bounds, u is the bounded least-squares solution (an active set on the bounds: inputs
   /// that would leave their interval are held at the bound and the others re-solved, until the
   /// held ones satisfy the optimality sign conditions); λ stays free.
+  ///@{
+  /// The bounds [N, N m or the inputs' units]: empty, or m entries each (see above).
   Eigen::VectorXd lowerBound, upperBound;
+  ///@}
 };
 
 enum class InverseDynamicsStatus {
@@ -53,8 +57,10 @@ inline EnumNameTable<InverseDynamicsStatus> enumNames(InverseDynamicsStatus) {
   return table;
 }
 
+/// The inputs u and constraint forces λ that give the accelerations asked for, M q̈ = Q(q, q̇, u) + Aᵀλ
+/// (least squares over [B_u Aᵀ] when that is not possible exactly), and how well they do.
 struct InverseDynamicsResult {
-  InverseDynamicsStatus status = InverseDynamicsStatus::kOk;
+  InverseDynamicsStatus status = InverseDynamicsStatus::kOk;  ///< kOk: reproduced to tolerance
   std::string message;              ///< empty when ok; names the worst coordinate or constraint
   Eigen::VectorXd u;                ///< m inputs
   Eigen::VectorXd lambda;           ///< nc constraint forces (M q̈ = … + Aᵀ λ)
@@ -66,7 +72,7 @@ struct InverseDynamicsResult {
   /// With bounds: by how much the unbounded answer exceeds each input's interval (m; 0 inside).
   Eigen::VectorXd boundExcess;
   int boundIterations = 0;          ///< active-set iterations (0: the unbounded answer was feasible)
-  bool ok() const { return status == InverseDynamicsStatus::kOk; }
+  bool ok() const { return status == InverseDynamicsStatus::kOk; }  ///< status == kOk
   /// One line: "<status>[: message] (residuals, rank)".
   std::string describe() const;
   /// {"status", "ok", "message", "t": null, "index": null, "residual", "constraint_residual",

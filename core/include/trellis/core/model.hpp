@@ -56,30 +56,39 @@ inline EnumNameTable<TransformType> enumNames(TransformType) {
 /// into one joint (a rotation about or translation along the joint body's z axis, body chosen so
 /// that z = a), so it costs what rz/tz cost, with the same exact derivatives.
 struct Transform {
-  TransformType type = TransformType::kConstSE3;
+  TransformType type = TransformType::kConstSE3;      ///< which motion (a primitive, constant, or about/along an axis)
   std::string config;                                  ///< empty: constant transform
   double value = 0.0;                                  ///< constant value (all but kConstSE3)
   Eigen::Matrix4d matrix = Eigen::Matrix4d::Identity();  ///< kConstSE3: the transform; axis types: G
   Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();     ///< kRotAxis / kTransAxis only
 
-  /// Constant primitives: a translation along / rotation about the parent's x, y or z axis.
+  ///@{
+  /// Constant primitives: a translation by `value` [m] along, or a rotation by `angle` [rad] about,
+  /// the parent's x, y or z axis.
   static Transform tx(double value);
   static Transform ty(double value);
   static Transform tz(double value);
   static Transform rx(double angle);
   static Transform ry(double angle);
   static Transform rz(double angle);
-  /// Driven primitives: the same motions by the configuration variable `config`.
+  ///@}
+  ///@{
+  /// Driven primitives: the same motions by the configuration variable `config` (metres or
+  /// radians); `config` must be non-empty (ModelBuilder::addFrame checks the names).
   static Transform tx(std::string config);
   static Transform ty(std::string config);
   static Transform tz(std::string config);
   static Transform rx(std::string config);
   static Transform ry(std::string config);
   static Transform rz(std::string config);
+  ///@}
   /// A constant homogeneous transform (4×4, rigid: checked by ModelBuilder::addFrame).
   static Transform constSE3(const Eigen::Matrix4d& matrix);
+  ///@{
   /// Rotation about / translation along the unit vector `axis` (given in the axes of `origin`),
-  /// after the constant placement `origin`; driven by `config` or constant (`value`).
+  /// after the constant placement `origin` (4×4 rigid): g_local = origin · exp(x [axis]) with x
+  /// the configuration variable `config` or the constant `angle` [rad] / `distance` [m]. The axis
+  /// must be nonzero (normalized by the builder, which throws ModelError naming the frame otherwise).
   static Transform rotAxis(const Eigen::Vector3d& axis, std::string config,
                            const Eigen::Matrix4d& origin = Eigen::Matrix4d::Identity());
   static Transform rotAxis(const Eigen::Vector3d& axis, double angle,
@@ -88,6 +97,7 @@ struct Transform {
                              const Eigen::Matrix4d& origin = Eigen::Matrix4d::Identity());
   static Transform transAxis(const Eigen::Vector3d& axis, double distance,
                              const Eigen::Matrix4d& origin = Eigen::Matrix4d::Identity());
+  ///@}
 
   /// Whether a configuration variable drives this transform.
   bool isDriven() const { return !config.empty(); }
@@ -98,13 +108,13 @@ struct Transform {
 /// A point mass at a frame's origin (its centre of mass) with rotational inertia about that point
 /// in the frame's own axes. Kinetic energy ½ m |v|² + ½ ω_bᵀ I ω_b.
 struct Mass {
-  double m = 0.0;
-  Eigen::Matrix3d inertia = Eigen::Matrix3d::Zero();
+  double m = 0.0;                                      ///< mass [kg], ≥ 0
+  Eigen::Matrix3d inertia = Eigen::Matrix3d::Zero();   ///< 3×3 symmetric PSD [kg m²] about the frame origin, frame axes
 };
 
 /// A point fixed on the body of `joint` (kWorld: fixed in the world), in that body's axes.
 struct BodyPoint {
-  int joint = kWorld;
+  int joint = kWorld;                                  ///< the joint whose body carries the point (kWorld: the world)
   Eigen::Vector3d local = Eigen::Vector3d::Zero();
 };
 
@@ -118,48 +128,68 @@ struct Joint {
   int parent = kWorld;     ///< parent joint (kWorld if the chain starts at the world)
   int subtreeEnd = 0;      ///< one past the last joint of this joint's subtree
   int depth = 0;           ///< number of joints on the path to the world, this one included
-  bool revolute = true;
+  bool revolute = true;    ///< rotation about `axis` (true) or translation along it (false)
   int axis = 2;            ///< 0 = x, 1 = y, 2 = z of the joint frame
   Eigen::Matrix3d R0 = Eigen::Matrix3d::Identity();  ///< constant placement in the parent body
-  Eigen::Vector3d p0 = Eigen::Vector3d::Zero();
+  Eigen::Vector3d p0 = Eigen::Vector3d::Zero();  ///< constant offset in the parent body [m] (with R0)
   // Lumped rigid-body inertia of everything fixed to this joint's body, in the joint frame:
-  double mass = 0.0;
+  double mass = 0.0;       ///< total mass fixed to the body [kg]
   Eigen::Vector3d firstMoment = Eigen::Vector3d::Zero();  ///< h = m · c (c: centre of mass)
   Eigen::Matrix3d inertiaAtOrigin = Eigen::Matrix3d::Zero();  ///< about the joint origin
 };
 
 /// Where a named frame sits: on which joint body, at which constant placement.
 struct FramePlacement {
-  std::string name;
+  std::string name;          ///< the frame's name (unique in the model)
   int parentFrame = kWorld;  ///< the frame tree as given
   int joint = kWorld;        ///< body the frame is fixed to
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  ///< frame axes in body axes
   Eigen::Vector3d p = Eigen::Vector3d::Zero();      ///< frame origin in body coordinates
 };
 
-struct LinearSpring {            ///< V = ½ k (‖p1 − p2‖ − x0)²
+/// A spring between two body points: potential V = ½ k (‖p_a − p_b‖ − x0)².
+struct LinearSpring {
+  ///@{
+  /// The two ends (points on bodies, or in the world).
   BodyPoint a, b;
+  ///@}
+  ///@{
+  /// Stiffness k [N/m] (≥ 0) and rest length x0 [m] (≥ 0).
   double k = 0.0, x0 = 0.0;
+  ///@}
 };
-struct ConfigSpring {            ///< V = ½ k (q_i − q0)²
-  int config = 0;
+/// A spring on one coordinate: potential V = ½ k (q_i − q0)².
+struct ConfigSpring {
+  int config = 0;                ///< the coordinate i
+  ///@{
+  /// Stiffness k [N/m or N m/rad] and rest value q0 [m or rad].
   double k = 0.0, q0 = 0.0;
+  ///@}
 };
-struct ConfigForce {             ///< Q[config] += u[input]
+/// An input acting directly on one coordinate: Q[config] += u[input].
+struct ConfigForce {
+  ///@{
+  /// The coordinate and the input (indices into configNames() and inputNames()).
   int config = 0, input = 0;
+  ///@}
 };
-struct BodyWrench {              ///< Q = J_bᵀ w, w = [f; τ] in the frame's axes at its origin
-  int joint = kWorld;
+/// A wrench on a body: Q = J_bᵀ w, w = [f; τ] in the frame's axes at its origin, each of the six
+/// entries a constant or an input.
+struct BodyWrench {
+  int joint = kWorld;            ///< the body it acts on
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  ///< frame axes in body axes
   Eigen::Vector3d p = Eigen::Vector3d::Zero();      ///< frame origin in body coordinates
   std::array<double, 6> constant{};                 ///< used where input[i] < 0
-  std::array<int, 6> input{-1, -1, -1, -1, -1, -1};
+  std::array<int, 6> input{-1, -1, -1, -1, -1, -1};  ///< per entry: the input driving it, or −1 (constant)
 };
-struct Tendon {                  ///< cable through points; Q = −(∂l/∂q)ᵀ u, l = Σ‖p_{i+1} − p_i‖
-  std::vector<BodyPoint> path;
-  int input = 0;
+/// A cable through points: Q = −(∂l/∂q)ᵀ u with length l = Σ‖p_{i+1} − p_i‖ and tension u ≥ 0
+/// (the input; a negative u pushes, which the saturating controllers avoid).
+struct Tendon {
+  std::vector<BodyPoint> path;   ///< the points it runs through, in order (≥ 2)
+  int input = 0;                 ///< the input giving its tension [N]
 };
 
+/// The kinds of constraint rows (docs/scene_format.md).
 enum class ConstraintType {
   kDistance,      ///< h = ‖p_a − p_b‖² − d²            (holonomic, one row)
   kPoint,         ///< h = (p_a − p_b)·e_axis           (holonomic, one row)
@@ -175,10 +205,16 @@ inline EnumNameTable<ConstraintType> enumNames(ConstraintType) {
   return table;
 }
 
+/// One constraint row: h(q) = 0 (holonomic) or A(q) q̇ = 0 (knife edge); see ConstraintType for
+/// each kind's h, and constraint_forces.hpp for the forces Aᵀλ it exerts.
 struct Constraint {
-  ConstraintType type = ConstraintType::kDistance;
+  ConstraintType type = ConstraintType::kDistance;    ///< which kind of row
   std::string name;                                   ///< for messages
+  ///@{
+  /// Its two points (a: frame1 / the plane frame / the knife's frame; b: frame2 / the point frame;
+  /// b unused for a knife edge).
   BodyPoint a, b;
+  ///@}
   double distance = 0.0;                              ///< kDistance
   int axis = 0;                                       ///< kPoint
   Eigen::Vector3d direction = Eigen::Vector3d::UnitX();  ///< kPointOnPlane normal / kKnifeEdge axis, in a's body axes
@@ -199,7 +235,10 @@ struct ModelTopology {
   std::vector<int> blockStart;  ///< starts of the blocks in increasing order, then n (size blocks + 1)
   /// nc: the coordinates [rowLo[r], rowHi[r]) that row r of A can touch (the whole blocks of the
   /// constraint's two bodies; both 0 for a row that touches no coordinate).
+  ///@{
+  /// nc: the coordinates [rowLo[r], rowHi[r]) that row r of A can touch (see above).
   std::vector<int> rowLo, rowHi;
+  ///@}
   /// Starts of the groups of consecutive constraint rows that share no block with another group,
   /// then nc (just {0} when nc = 0): A M⁻¹ Aᵀ is block diagonal over the groups.
   std::vector<int> rowGroupStart;
@@ -210,12 +249,17 @@ struct ModelTopology {
   /// Tendon t's path points are [tendonFirst[t], tendonFirst[t + 1]) in the flat list of all
   /// path points (size tendons + 1; the last entry is the number of points).
   std::vector<int> tendonFirst;
-  std::vector<int> tendonJointLo, tendonJointHi;  ///< per tendon: lowest and highest joint on its path (n, −1 if none)
+  ///@{
+  /// Per tendon: lowest and highest joint on its path (−1 if none).
+  std::vector<int> tendonJointLo, tendonJointHi;
+  ///@}
   std::vector<int> tendonPointJoint;  ///< per path point (flat list): the joint body it is fixed to
+  ///@{
   /// Tendon t's segments with ends on different bodies are tendonSegmentPoint[tendonSegmentStart[t]
-  /// .. tendonSegmentStart[t + 1]), each named by the flat index of its first end (a segment within
+  /// to tendonSegmentStart[t + 1]), each named by the flat index of its first end (a segment within
   /// one body exerts equal and opposite forces along one line: no net wrench).
   std::vector<int> tendonSegmentStart, tendonSegmentPoint;
+  ///@}
 };
 
 /// The validated, immutable system. Built only by ModelBuilder::finalize() or loadScene().
@@ -227,28 +271,38 @@ class Model {
   int nholonomic() const { return nholonomic_; }                    ///< rows of h(q) = 0
   int nframes() const { return static_cast<int>(frames_.size()); }     ///< named frames (world excluded)
 
+  ///@{
   /// Names of the configuration variables (n, configuration order) and of the inputs (m).
   const std::vector<std::string>& configNames() const { return configNames_; }
   const std::vector<std::string>& inputNames() const { return inputNames_; }
+  ///@}
   const std::string& name() const { return name_; }  ///< the model's name (may be empty)
 
-  /// Index lookups; throw std::out_of_range naming the missing name.
+  ///@{
+  /// Index of a frame (into frames()), a configuration variable or an input, by name; throw
+  /// std::out_of_range naming the missing name.
   int frameIndex(std::string_view name) const;
   int configIndex(std::string_view name) const;
   int inputIndex(std::string_view name) const;
+  ///@}
 
+  ///@{
   /// The folded description (model.hpp types): joints (n, pre-order), frames (nf), gravity (world
-  /// axes), force elements, damping c (n) and constraint rows (nc), as finalize produced them.
+  /// axes, m/s²), force elements, damping c (n) and constraint rows (nc), as finalize produced them.
   const std::vector<Joint>& joints() const { return joints_; }
   const std::vector<FramePlacement>& frames() const { return frames_; }
   const Eigen::Vector3d& gravity() const { return gravity_; }
   const std::vector<LinearSpring>& linearSprings() const { return linearSprings_; }
   const std::vector<ConfigSpring>& configSprings() const { return configSprings_; }
   const std::vector<ConfigForce>& configForces() const { return configForces_; }
+  ///@}
   const Eigen::VectorXd& damping() const { return damping_; }  ///< c_i per configuration
+  ///@{
+  /// The body wrenches, tendons and constraint rows (nc), in the order they were added.
   const std::vector<BodyWrench>& bodyWrenches() const { return bodyWrenches_; }
   const std::vector<Tendon>& tendons() const { return tendons_; }
   const std::vector<Constraint>& constraints() const { return constraints_; }
+  ///@}
   /// The tree's structure and the elements' index maps, computed once at finalize.
   const ModelTopology& topology() const { return topology_; }
 

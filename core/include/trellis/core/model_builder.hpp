@@ -30,9 +30,13 @@ using WrenchEntry = std::variant<double, std::string>;
 /// roll-pitch-yaw, R = Rz(yaw) · Ry(pitch) · Rx(roll).
 Eigen::Matrix4d poseFromXyzRpy(const Eigen::Vector3d& xyz, const Eigen::Vector3d& rpy);
 
+/// Builds a Model from frames, masses, forces and constraints, checking each call (ModelError
+/// naming the element, the field and the value), then finalize() folds the frame tree into joints
+/// and validates the whole (paper Sec. II; docs/scene_format.md for the elements).
 class ModelBuilder {
  public:
   ModelBuilder() = default;
+  /// A builder for a model named `name` (Model::name(); may be empty).
   explicit ModelBuilder(std::string name) : name_(std::move(name)) {}
 
   /// Adds frame `name` under `parent` ("world" or an earlier frame). Returns the frame's name.
@@ -76,12 +80,13 @@ class ModelBuilder {
 
   /// Size limits of a model, the same as a scene file's: the workspace of the linearization (Data)
   /// holds about 25 dense n×n matrices, ≈ 200·n² bytes — 200 MB at 1000 configuration variables.
-  static constexpr int kMaxConfigs = 1000;
-  static constexpr int kMaxFrames = 20000;
+  static constexpr int kMaxConfigs = 1000;  ///< configuration variables
+  static constexpr int kMaxFrames = 20000;  ///< frames
 
   /// Validates cross references and the size limits above (before any Data can allocate) and
   /// returns the immutable model. Throws ModelError naming the count and the limit.
   Model finalize() &&;
+  /// finalize() on a copy: the builder stays usable (e.g. to add a constraint and build again).
   Model finalize() const&;
 
  private:

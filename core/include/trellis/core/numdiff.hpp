@@ -38,8 +38,9 @@ inline EnumNameTable<DifferenceScheme> enumNames(DifferenceScheme) {
   return table;
 }
 
+/// Which difference scheme, and its step h = relativeStep · max(1, |z|) per variable z.
 struct NumDiffOptions {
-  DifferenceScheme scheme = DifferenceScheme::kCentral;
+  DifferenceScheme scheme = DifferenceScheme::kCentral;  ///< forward, central or fourth-order central
   double relativeStep = 0.0;  ///< 0: the scheme's default (defaultRelativeStep)
   double step(double z) const;  ///< h = relativeStep · max(1, |z|)
 };
@@ -49,9 +50,16 @@ double defaultRelativeStep(DifferenceScheme scheme);
 
 /// Buffers for differenceDynamics (sized once; no allocation in the call).
 struct NumDiffWorkspace {
+  /// Sized for `model` (n, m): allocates; differenceDynamics then does not.
   explicit NumDiffWorkspace(const Model& model);
-  Eigen::VectorXd q, dq, u;          ///< the perturbed point
-  Eigen::VectorXd qddBase, qddPlus, qddMinus;  ///< q̈ at z (forward), at z ± h e_j
+  ///@{
+  /// The perturbed point (q: n, q̇: n, u: m).
+  Eigen::VectorXd q, dq, u;
+  ///@}
+  ///@{
+  /// q̈ (n) at z (forward differences) and at z ± h e_j.
+  Eigen::VectorXd qddBase, qddPlus, qddMinus;
+  ///@}
 };
 
 /// J = ∂q̈/∂[q; q̇; u] (n × (2n + m); resized only if its size is wrong) by `options` from
@@ -74,10 +82,22 @@ Eigen::MatrixXd differenceJacobian(const DifferenceFunction& f, const Eigen::Vec
 struct LinearizationCheck {
   bool evaluated = false;  ///< both paths evaluated (else `message` says which failed)
   double maxError = 0.0;   ///< worst column-relative error
-  int row = -1, column = -1;     ///< the worst entry in J (row i: q̈_i; column j of [q; q̇; u])
-  std::string rowName, columnName;  ///< e.g. "ddtheta" and "dx" / an input name
-  double exact = 0.0, difference = 0.0;  ///< the two values at the worst entry
-  Eigen::MatrixXd exactJ, differenceJ;   ///< both n × (2n + m)
+  ///@{
+  /// The worst entry in J (row i: q̈_i; column j of [q; q̇; u]); −1 when not evaluated.
+  int row = -1, column = -1;
+  ///@}
+  ///@{
+  /// Names of the worst entry's row and column, e.g. "ddtheta" and "dx" / an input name.
+  std::string rowName, columnName;
+  ///@}
+  ///@{
+  /// The exact and the difference value at the worst entry.
+  double exact = 0.0, difference = 0.0;
+  ///@}
+  ///@{
+  /// Both Jacobians, n × (2n + m).
+  Eigen::MatrixXd exactJ, differenceJ;
+  ///@}
   std::string message;     ///< one line: the worst entry, both values, the error
 };
 LinearizationCheck checkLinearization(const Model& model, const Eigen::VectorXd& q,

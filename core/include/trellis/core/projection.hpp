@@ -27,6 +27,7 @@
 
 namespace trellis {
 
+/// Options of projectToConstraints: tolerances, iteration limit, held coordinates.
 struct ProjectionOptions {
   /// Positions count as on the manifold when |h(q)|∞ ≤ tolerance (units of h; a distance
   /// constraint's h is a squared length). > 0.
@@ -58,10 +59,15 @@ inline EnumNameTable<ProjectionStatus> enumNames(ProjectionStatus) {
   return table;
 }
 
+/// The projected state (q*, q̇*): the mass-weighted closest point on h = 0 and A q̇ = 0, with the
+/// status and the residuals before and after.
 struct ProjectionResult {
-  ProjectionStatus status = ProjectionStatus::kOk;
+  ProjectionStatus status = ProjectionStatus::kOk;  ///< kOk: on the manifold, to the options' tolerances
   std::string message;               ///< empty when ok
-  Eigen::VectorXd q, dq;             ///< the projected state (n each)
+  ///@{
+  /// The projected state (n each; the last iterate when not ok).
+  Eigen::VectorXd q, dq;
+  ///@}
   int iterations = 0;                ///< restoration (Newton) steps taken in all
   double positionResidualBefore = 0; ///< |h(q0)|∞ over the holonomic rows
   double positionResidual = 0;       ///< |h(q*)|∞
@@ -69,7 +75,7 @@ struct ProjectionResult {
   double velocityResidual = 0;       ///< |A(q*) q̇*|∞
   double lastStep = 0;               ///< ‖Δq‖∞ of the last accepted descent step
   bool massWeighted = true;          ///< false: M was not positive definite, Euclidean metric used
-  bool ok() const { return status == ProjectionStatus::kOk; }
+  bool ok() const { return status == ProjectionStatus::kOk; }  ///< status == kOk
   /// One line: "<status>[: message] (iterations, residuals before and after)".
   std::string describe() const;
   /// {"status", "ok", "message", "t": null, "index": null, "iterations", "h_before", "h_after",

@@ -57,6 +57,7 @@ inline EnumNameTable<ReferenceCode> enumNames(ReferenceCode) {
 /// status message: "linearization failed at t = …: …").
 using ReferenceStatus = Status<ReferenceCode>;
 
+/// How a ReferenceEvaluator prepares its trajectory.
 struct ReferenceOptions {
   /// Where the knot derivatives ẋ_k come from.
   ///  kFromDynamics: ẋ_k = [q̇_k; q̈(q_k, q̇_k, u_k)] by computeDynamics at every knot (the meaning
@@ -67,7 +68,7 @@ struct ReferenceOptions {
   ///                 (std::logic_error "<caller>: the trajectory has no state derivatives (call
   ///                 computeStateDerivatives)"): for solvers whose reference was prepared before.
   enum class StateDerivatives { kFromDynamics, kKeepSupplied, kRequireSupplied };
-  StateDerivatives stateDerivatives = StateDerivatives::kKeepSupplied;
+  StateDerivatives stateDerivatives = StateDerivatives::kKeepSupplied;  ///< see StateDerivatives
   int minimumKnots = 1;  ///< fewer knots are refused (a reference to follow needs 2)
   /// Names the caller in the messages of a refusal ("transportTangentBasis: …").
   std::string caller = "reference";
@@ -76,13 +77,13 @@ struct ReferenceOptions {
 /// The verdict of checkReferenceOnConstraints: ok, or the first violation (status.index: the
 /// knot, status.t: its time, status.message: a sentence naming the constraint and the values).
 struct ReferenceConstraintCheck {
-  ReferenceStatus status;
+  ReferenceStatus status;  ///< ok, or kind, knot (index), time (t) and message of the first violation
   int constraint = -1;     ///< the violated row (Model::constraints() index)
   bool position = true;    ///< h(q) (true) or A(q) q̇ (false) is off
   double value = 0.0;      ///< h(q) or A(q) q̇ there
   double scale = 0.0;      ///< the size of the compared terms (see below)
   double tolerance = 0.0;  ///< the relative tolerance used
-  bool ok() const { return status.ok(); }
+  bool ok() const { return status.ok(); }  ///< every knot on the constraints
 };
 
 /// Is every knot of `trajectory` on the constraints of `model` (names must match: else
@@ -102,6 +103,10 @@ struct ReferenceConstraintCheck {
 ReferenceConstraintCheck checkReferenceOnConstraints(const Model& model, const Trajectory& trajectory,
                                                      double tolerance = 1e-6);
 
+/// A reference trajectory prepared for queries at any time t: x(t), u(t), ẋ(t) by the
+/// trajectory's interpolation rule (trajectory.hpp), the exact linearization A(t), B(t) and the
+/// constraint tangent basis there, into buffers sized once (no allocation per query). One per
+/// thread; the model must outlive it.
 class ReferenceEvaluator {
  public:
   /// Checks, once: the configuration and input names equal the model's (in order), at least
@@ -110,13 +115,13 @@ class ReferenceEvaluator {
   /// failed. (The knot values are finite by construction of a Trajectory.)
   ReferenceEvaluator(const Model& model, Trajectory trajectory, const ReferenceOptions& options = {});
 
-  const Model& model() const { return *model_; }
+  const Model& model() const { return *model_; }  ///< the model it was made for
   const Trajectory& trajectory() const { return trajectory_; }  ///< with state derivatives
-  int nq() const { return trajectory_.nq(); }
-  int nx() const { return trajectory_.nx(); }
-  int nu() const { return trajectory_.nu(); }
-  double startTime() const { return trajectory_.startTime(); }
-  double endTime() const { return trajectory_.endTime(); }
+  int nq() const { return trajectory_.nq(); }                   ///< n
+  int nx() const { return trajectory_.nx(); }                   ///< 2n
+  int nu() const { return trajectory_.nu(); }                   ///< m
+  double startTime() const { return trajectory_.startTime(); }  ///< t_0 [s]
+  double endTime() const { return trajectory_.endTime(); }      ///< t_{N−1} [s]
 
   /// x(t), u(t) and the spline's ẋ(t) into x(), u(), xdot(). Throws std::out_of_range outside
   /// [t_0, t_{N-1}] (a relative slack of 1e-12 is clamped). No allocation.
@@ -140,8 +145,11 @@ class ReferenceEvaluator {
   const Eigen::MatrixXd& tangentBasis() const { return data_.tangentBasis; }
   /// Number of linearizations (dynamics evaluations) so far.
   long linearizations() const { return linearizations_; }
-  Data& data() { return data_; }                          ///< the workspace of the last query
+  ///@{
+  /// The workspace of the last query (its results: M, λ, the constraint Jacobian, ...).
+  Data& data() { return data_; }
   const Data& data() const { return data_; }
+  ///@}
 
  private:
   const Model* model_;

@@ -8,23 +8,30 @@
 
 namespace trellis {
 
-/// Visual geometry of a frame (kept from URDF <visual> elements for viewers; no effect on the
+/// Visual geometry of a frame (kept from URDF `<visual>` elements for viewers; no effect on the
 /// dynamics). `size`: box: edge lengths; cylinder: (radius, length, 0); sphere: (radius, 0, 0);
 /// mesh: scale. `pose`: the shape's placement in the frame's axes.
 struct VisualGeometry {
+  /// The URDF geometry kinds (`<box>`, `<cylinder>` along z, `<sphere>`, `<mesh>`).
   enum class Shape { kBox, kCylinder, kSphere, kMesh };
-  std::string frame;
-  Shape shape = Shape::kBox;
-  Eigen::Vector3d size = Eigen::Vector3d::Zero();
+  std::string frame;                                   ///< the frame (link) it is drawn on
+  Shape shape = Shape::kBox;                           ///< which geometry
+  Eigen::Vector3d size = Eigen::Vector3d::Zero();      ///< [m] or, for a mesh, the scale (see above)
   std::string mesh;  ///< file name as written (kMesh only)
-  Eigen::Matrix4d pose = Eigen::Matrix4d::Identity();
+  Eigen::Matrix4d pose = Eigen::Matrix4d::Identity();  ///< 4×4 placement in the frame's axes (`<origin>`)
 };
 
 /// A model together with the state stored in its scene file (missing names are 0).
 struct Scene {
-  Model model;
-  Eigen::VectorXd q, dq, u;  ///< n, n, m
+  Model model;               ///< the validated model
+  ///@{
+  /// The stored state: q (n), q̇ (n), u (m); names the file omits are 0.
+  Eigen::VectorXd q, dq, u;
+  ///@}
+  ///@{
+  /// The scene's "name" and "description" (may be empty).
   std::string name, description;
+  ///@}
   std::vector<VisualGeometry> visuals;  ///< from an imported URDF; empty otherwise
 };
 

@@ -47,8 +47,11 @@ class SecondOrderWorkspace {
   /// Sizes every buffer; `withTensors` also allocates the full tensors (n + nc matrices N×N).
   explicit SecondOrderWorkspace(const Model& model, bool withTensors = true);
   ~SecondOrderWorkspace();
+  ///@{
+  /// Movable (the buffers move with it), not copyable.
   SecondOrderWorkspace(SecondOrderWorkspace&&) noexcept;
   SecondOrderWorkspace& operator=(SecondOrderWorkspace&&) noexcept;
+  ///@}
 
   // ---- Results of computeSecondOrderTensors --------------------------------------------------
   /// n matrices N×N (N = 2n + m, z = [q; q̇; u]): qddHessian[i](a, b) = ∂²q̈ᵢ/∂z_a∂z_b (symmetric).
@@ -61,12 +64,14 @@ class SecondOrderWorkspace {
   /// (∂q̇_j ∂q̇_k, n×n), d2qdd_dudq (∂u_j ∂q_k, m×n), d2qdd_duddq (∂u_j ∂q̇_k, m×n), d2qdd_dudu
   /// (∂u_j ∂u_k, m×m). Copies of blocks of qddHessian (allocates; for output, not hot paths).
   enum class Block { kQQ, kQDq, kDqDq, kUQ, kUDq, kUU };
+  /// The n matrices of one block (above), copied out of qddHessian (none when the workspace was
+  /// made without tensors).
   std::vector<Eigen::MatrixXd> qddBlock(Block block) const;
 
-  int n() const { return n_; }
-  int m() const { return m_; }
-  int nc() const { return nc_; }
-  bool hasTensors() const { return withTensors_; }
+  int n() const { return n_; }    ///< configuration variables of the model
+  int m() const { return m_; }    ///< inputs
+  int nc() const { return nc_; }  ///< constraint rows
+  bool hasTensors() const { return withTensors_; }  ///< made with withTensors (the full Hessians allocated)
 
  private:
   friend struct detail::SecondOrderImpl;

@@ -13,7 +13,10 @@ namespace trellis {
 
 /// q, q̇ (n), u (m) and, for inverse dynamics, q̈ (n).
 struct ModelState {
+  ///@{
+  /// The configuration q (n), velocities q̇ (n), inputs u (m) and accelerations q̈ (n).
   Eigen::VectorXd q, dq, u, ddq;
+  ///@}
   bool hasAcceleration = false;  ///< "ddq" was present in the parsed text
 };
 

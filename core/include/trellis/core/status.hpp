@@ -39,6 +39,9 @@ constexpr bool statusSucceeded(Code code) {
   }
 }
 
+/// The outcome of a numerical computation (file comment): its code, a message for a person, and
+/// where it happened (time t, index). ok() when the code is a success; describe() and json() as
+/// every result offers them.
 template <NamedEnum Code>
 struct Status {
   Code code{};          ///< the computation's own code; value-initialized: success

@@ -46,6 +46,8 @@ class TrajectoryError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// A nominal trajectory: knot times, states x = [q; q̇] and inputs u, with the interpolation rule of
+/// the file comment (cubic Hermite state, linear or cubic input) and its CSV form.
 class Trajectory {
  public:
   Trajectory() = default;
@@ -65,8 +67,8 @@ class Trajectory {
   const Eigen::VectorXd& times() const { return times_; }     ///< N, strictly increasing
   const Eigen::MatrixXd& states() const { return states_; }   ///< 2n×N
   const Eigen::MatrixXd& inputs() const { return inputs_; }   ///< m×N
-  const std::vector<std::string>& configNames() const { return configNames_; }
-  const std::vector<std::string>& inputNames() const { return inputNames_; }
+  const std::vector<std::string>& configNames() const { return configNames_; }  ///< n configuration names
+  const std::vector<std::string>& inputNames() const { return inputNames_; }    ///< m input names
 
   /// Throws TrajectoryError unless the configuration and input names equal the model's (same order).
   void checkCompatible(const Model& model) const;
@@ -76,7 +78,7 @@ class Trajectory {
   void computeStateDerivatives(const Model& model, Data& data);
   /// Supplies ẋ at the knots directly (2n×N, finite).
   void setStateDerivatives(Eigen::MatrixXd stateDerivatives);
-  bool hasStateDerivatives() const { return stateDerivatives_.cols() == times_.size() && size() > 0; }
+  bool hasStateDerivatives() const { return stateDerivatives_.cols() == times_.size() && size() > 0; }  ///< evaluate() needs them
   const Eigen::MatrixXd& stateDerivatives() const { return stateDerivatives_; }  ///< 2n×N
 
   /// Supplies u̇ at the knots (m×N, finite): the input becomes the cubic Hermite spline through
@@ -84,6 +86,7 @@ class Trajectory {
   void setInputDerivatives(Eigen::MatrixXd inputDerivatives);
   /// Back to the linear input rule.
   void clearInputDerivatives() { inputDerivatives_.resize(0, 0); }
+  /// Whether the input follows the cubic rule (input derivatives set), else the linear one.
   bool hasInputDerivatives() const { return inputDerivatives_.cols() == times_.size() && size() > 0 && nu() > 0; }
   const Eigen::MatrixXd& inputDerivatives() const { return inputDerivatives_; }  ///< m×N
 
@@ -96,6 +99,7 @@ class Trajectory {
   void evaluate(double t, Eigen::VectorXd& x, Eigen::VectorXd& u, Eigen::VectorXd& xdot) const;
   /// x(t) (2n) and u(t) (m) as new vectors (allocating; evaluate() is the allocation-free form).
   Eigen::VectorXd state(double t) const;
+  /// u(t) (m) as a new vector; see state(double).
   Eigen::VectorXd input(double t) const;
 
   /// Reads the CSV layout above; the number of configurations n is inferred from the header as the

@@ -15,6 +15,7 @@
 
 namespace trellis {
 
+/// How importUrdf turns a robot into a model.
 struct UrdfOptions {
   /// Gravity in the root link's (= world) axes; zero adds none.
   Eigen::Vector3d gravity = Eigen::Vector3d(0.0, 0.0, -9.81);
@@ -23,23 +24,33 @@ struct UrdfOptions {
   bool jointInputs = true;
 };
 
-/// A movable URDF joint as read (its <limit> is kept as metadata; trellis does not enforce it).
+/// A movable URDF joint as read (its `<limit>` is kept as metadata; trellis does not enforce it).
 struct UrdfJoint {
-  std::string name, type;              ///< type as written: revolute, continuous, prismatic, ...
+  ///@{
+  /// The joint's name and its type as written: revolute, continuous, prismatic, planar, floating.
+  std::string name, type;
+  ///@}
   std::vector<std::string> configs;    ///< its configuration variables (one, or 3/6 for planar/floating)
-  bool hasLimits = false;
+  bool hasLimits = false;              ///< whether the joint has a `<limit>` element
+  ///@{
+  /// The `<limit>` attributes as written: lower and upper position [rad or m], effort [N m or N],
+  /// velocity [rad/s or m/s]; 0 when absent.
   double lower = 0.0, upper = 0.0, effort = 0.0, velocity = 0.0;
+  ///@}
 };
 
 /// A URDF robot as builder calls, ready for more elements (constraints, forces) or finalize().
 struct UrdfImport {
-  ModelBuilder builder;
+  ModelBuilder builder;             ///< the frames, masses, damping and joint inputs, not yet finalized
+  ///@{
+  /// The `<robot name>` and the root link (the world).
   std::string robotName, rootLink;
+  ///@}
   std::vector<std::string> frames;  ///< every frame added: the links, "<link>:inertial" frames
                                     ///< and the intermediate frames of planar/floating joints
   std::vector<std::string> configs; ///< every configuration variable, in the order of the file
   std::vector<UrdfJoint> joints;    ///< the movable joints
-  std::vector<VisualGeometry> visuals;
+  std::vector<VisualGeometry> visuals;  ///< the links' `<visual>` geometry, in the order of the file
 };
 
 /// Reads URDF XML text. `source` names the file in messages ("<source>:<line>: joint 'j':

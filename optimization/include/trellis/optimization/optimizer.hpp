@@ -41,14 +41,16 @@ namespace trellis {
 
 /// One Ipopt iteration, as its intermediate callback reports it.
 struct IterationInfo {
-  int iteration = 0;
-  double cost = 0.0;
+  int iteration = 0;                 ///< Ipopt's iteration count (0: the starting point)
+  double cost = 0.0;                 ///< J at the iterate
   double constraintViolation = 0.0;  ///< inf_pr: max |g(z)| (scaled by Ipopt's NLP scaling)
   double dualInfeasibility = 0.0;    ///< inf_du
   double stepSize = 0.0;             ///< alpha_pr
   bool restoration = false;          ///< in the feasibility restoration phase
 };
 
+/// Options of optimizeTrajectory: Ipopt's settings, the derivative mode, and the a-posteriori
+/// consistency check with its mesh refinement.
 struct OptimizerOptions {
   int printLevel = 0;              ///< Ipopt's print_level (0 silent … 12); 5 is its usual log
   int maxIterations = 1000;        ///< max_iter
@@ -56,7 +58,7 @@ struct OptimizerOptions {
   double constraintTolerance = 1e-8;  ///< constr_viol_tol (absolute, on g and the bounds)
   double maxCpuTime = 1e6;         ///< max_cpu_time, seconds
   int limitedMemorySize = 6;       ///< limited_memory_max_history
-  DerivativeMode derivatives = DerivativeMode::kExact;
+  DerivativeMode derivatives = DerivativeMode::kExact;  ///< exact linearizations (or differences, for comparison)
   /// The Lagrangian Hessian; unset: the problem's (OptimalControlProblem::hessian, default exact).
   /// With nonholonomic constraints the exact Hessian is not available and L-BFGS is used (the
   /// result's `hessian` and message say so).
@@ -64,7 +66,7 @@ struct OptimizerOptions {
   /// Refinement rounds start from the previous round's primal and multipliers (carried onto the
   /// refined mesh) with Ipopt's warm_start_init_point and μ_init = warmStartBarrier.
   bool warmStart = true;
-  double warmStartBarrier = 1e-6;
+  double warmStartBarrier = 1e-6;  ///< Ipopt's mu_init in warm-started rounds
   /// The a-posteriori check (file comment): "solved" requires the worst relative defect, and
   /// the slack's relative share, ≤ consistencyTolerance.
   double consistencyTolerance = 1e-3;
@@ -112,15 +114,17 @@ constexpr bool isSuccess(OptimizationCode code) {
 
 /// One solve of the refinement sequence.
 struct RefinementRound {
-  int knots = 0;
-  int iterations = 0;
+  int knots = 0;                ///< N, the mesh's knots in this round
+  int iterations = 0;           ///< Ipopt iterations of this round
   HessianMode hessian = HessianMode::kExact;  ///< the Hessian Ipopt used
-  std::string ipoptStatus;
+  std::string ipoptStatus;      ///< Ipopt's return status name of this round
   double maxDefect = 0.0;       ///< checkConsistency's worst relative defect (NaN when not checked)
   double maxSlackDefect = 0.0;  ///< the slack's worst relative share of a defect
   double solveTime = 0.0;       ///< wall-clock seconds (Ipopt and the check)
 };
 
+/// The optimized trajectory (or the last iterate), the status — solved only when Ipopt converged
+/// and the a-posteriori check against the exact dynamics passed —, and the solve's diagnostics.
 struct OptimizationResult {
   /// code; message (empty on success; else why, with Ipopt's status and the last evaluation
   /// failure, or for inconsistent the state, interval and time of the worst defect); for
@@ -138,22 +142,30 @@ struct OptimizationResult {
   /// The slack's share of the defects relative to the state's scale (consistency.hpp), its worst
   /// interval (−1 without constraints).
   double maxSlackDefect = 0.0;
-  int worstSlackInterval = -1;
+  int worstSlackInterval = -1;  ///< the interval of maxSlackDefect (−1 without constraints)
   ConsistencyResult consistency;  ///< the check of the returned trajectory (empty if not run)
   std::vector<RefinementRound> rounds;  ///< every solve, first to last
   Eigen::VectorXd mesh;         ///< the returned solution's mesh τ (N entries)
   double solveTime = 0.0;      ///< wall-clock seconds of all rounds (Ipopt and checks)
   double solveCpuTime = 0.0;   ///< CPU seconds of the process during them (std::clock)
   double horizon = 0.0;        ///< T of the returned iterate
+  ///@{
+  /// Forward dynamics, exact linearizations and second-order contractions evaluated, all rounds.
   long dynamicsEvaluations = 0, linearizationEvaluations = 0, secondOrderEvaluations = 0;
+  ///@}
   HessianMode hessian = HessianMode::kExact;  ///< the Hessian Ipopt used (last round)
+  ///@{
   /// Ipopt's final multipliers (transcription layout): of g(z) = 0, and of the lower and upper
   /// variable bounds.
   Eigen::VectorXd constraintMultipliers, lowerBoundMultipliers, upperBoundMultipliers;
+  ///@}
   /// The returned iterate at the knots — the solution, or the last iterate when the solve failed
   /// (empty only if that iterate is not finite; the message then says so).
   Trajectory trajectory;
-  Eigen::MatrixXd midpointStates, midpointInputs;  ///< Hermite–Simpson only (2n×(N−1), m×(N−1))
+  ///@{
+  /// Hermite–Simpson only: the states (2n×(N−1)) and inputs (m×(N−1)) at the interval midpoints.
+  Eigen::MatrixXd midpointStates, midpointInputs;
+  ///@}
   Eigen::VectorXd variables;   ///< z (transcription layout)
 
   /// Solved (or solved_acceptable) and consistent: the trajectory is right and complete.

@@ -56,11 +56,14 @@ inline EnumNameTable<HessianMode> enumNames(HessianMode) {
   return table;
 }
 
+/// A trajectory optimization problem: minimize J = ∫ uᵀRu + (x − x_g)ᵀQ(x − x_g) dt +
+/// (x(T) − x_g)ᵀQf(x(T) − x_g) + w_T·T subject to the model's dynamics, boundary states, state and
+/// input bounds, over a fixed or free horizon T, transcribed by collocation on a mesh of N knots.
 struct OptimalControlProblem {
   /// The model; shared so that the problem, its transcription and results can outlive the scene.
   std::shared_ptr<const Model> model;
 
-  CollocationMethod method = CollocationMethod::kHermiteSimpson;
+  CollocationMethod method = CollocationMethod::kHermiteSimpson;  ///< the collocation rule
   int knots = 41;  ///< N ≥ 2 knots t_k = T·τ_k
   /// The mesh τ_0 = 0 < τ_1 < … < τ_{N−1} = 1 (N entries, knot k at t_k = T·τ_k); empty for the
   /// uniform mesh τ_k = k/(N − 1). Mesh refinement (optimizer.hpp) produces non-uniform ones.
@@ -71,18 +74,29 @@ struct OptimalControlProblem {
   /// Horizon T: fixed when minHorizon == maxHorizon (== horizon), otherwise free in
   /// [minHorizon, maxHorizon] with `horizon` as its initial guess.
   double horizon = 1.0;
+  ///@{
+  /// The horizon's bounds [s] (equal: a fixed horizon).
   double minHorizon = 1.0;
   double maxHorizon = 1.0;
-  bool freeHorizon() const { return minHorizon < maxHorizon; }
+  ///@}
+  bool freeHorizon() const { return minHorizon < maxHorizon; }  ///< minHorizon < maxHorizon
   /// Sets a fixed horizon T.
   void setFixedHorizon(double T) { horizon = minHorizon = maxHorizon = T; }
 
-  /// Boundary states (2n each) and which entries are fixed (2n flags each, default all fixed).
+  ///@{
+  /// Boundary states x(0), x(T) (2n each; entries not fixed are initial values only).
   Eigen::VectorXd initialState, finalState;
+  ///@}
+  ///@{
+  /// Which entries of the boundary states are fixed (2n flags each, default all fixed).
   std::vector<bool> initialFixed, finalFixed;
+  ///@}
 
-  /// Bounds (2n, m); ±infinity for none (the defaults set by resize()).
+  ///@{
+  /// Bounds on every knot's state (2n) and input (m); ±infinity for none (the constructor's
+  /// defaults).
   Eigen::VectorXd stateLower, stateUpper, inputLower, inputUpper;
+  ///@}
   /// Bounds on the constraint forces λ_r (nc, the model's constraint rows; M q̈ = … + Aᵀλ),
   /// imposed at every collocation point (knots and Hermite–Simpson midpoints); ±infinity for none
   /// (problem file "constraint_force_bounds": {"<constraint name>": [lower, upper]}).
@@ -90,9 +104,12 @@ struct OptimalControlProblem {
 
   /// Cost weights: R (m×m), Q, Qf (2n×2n), all symmetric positive semidefinite; goal state
   /// (2n); w_T ≥ 0 weighs the horizon (minimum time when the other terms are small).
+  ///@{
+  /// The cost's weight matrices: R (m×m), Q and Qf (2n×2n), symmetric PSD.
   Eigen::MatrixXd R, Q, Qf;
-  Eigen::VectorXd goalState;
-  double timeWeight = 0.0;
+  ///@}
+  Eigen::VectorXd goalState;   ///< x_g (2n), the state Q and Qf pull toward
+  double timeWeight = 0.0;     ///< w_T ≥ 0 [cost per second of horizon]
 
   /// The Hessian the solver uses unless OptimizerOptions::hessian overrides it (problem file
   /// "hessian": "exact" | "lbfgs"; default exact).
@@ -108,7 +125,7 @@ struct OptimalControlProblem {
   explicit OptimalControlProblem(std::shared_ptr<const Model> model);
 
   int nq() const;  ///< n
-  int nx() const { return 2 * nq(); }
+  int nx() const { return 2 * nq(); }  ///< 2n
   int nu() const;  ///< m
 
   /// Names of the state entries: the configuration names, then "d" + each name (the trajectory
@@ -122,7 +139,7 @@ struct OptimalControlProblem {
   /// |h_r(q)| ≤ kBoundaryTolerance, and when every entry is fixed, each row |A_r(q) q̇| ≤ it too;
   /// the message names the boundary, the constraint, its row and the residual.
   void validate() const;
-  static constexpr double kBoundaryTolerance = 1e-8;
+  static constexpr double kBoundaryTolerance = 1e-8;  ///< on fixed boundary states' constraint residuals (units of h)
 };
 
 /// Parses a problem file (JSON text). `source` is the file name used in messages and `baseDir`

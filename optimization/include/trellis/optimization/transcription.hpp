@@ -71,20 +71,26 @@ enum class DerivativeMode {
                       ///< ε^(1/3)·max(1, |v|) (a baseline for the benchmark; same NLP, same pattern)
 };
 
+/// The problem as a nonlinear program (file comment): the variable layout z, the cost J(z), the
+/// defects and path constraints g(z) with their Jacobian's fixed sparsity, and reading a solution
+/// back. Owns its workspace (one per solve, not thread safe); evaluations never throw.
 class Transcription {
  public:
   /// Validates the problem (throws ProblemError) and sizes every buffer.
   explicit Transcription(OptimalControlProblem problem,
                          DerivativeMode derivatives = DerivativeMode::kExact);
   ~Transcription();
+  ///@{
+  /// Movable (the workspace moves with it), not copyable.
   Transcription(Transcription&&) noexcept;
   Transcription& operator=(Transcription&&) noexcept;
+  ///@}
 
-  const OptimalControlProblem& problem() const;
+  const OptimalControlProblem& problem() const;  ///< the validated problem it transcribes
 
   // ---- Sizes and layout ----------------------------------------------------------------------
-  int numVariables() const;
-  int numConstraints() const;
+  int numVariables() const;    ///< entries of z
+  int numConstraints() const;  ///< entries of g(z)
   int numPoints() const;       ///< P: knots (and midpoints for Hermite–Simpson)
   int numKnots() const;        ///< N
   int stateIndex(int point) const;   ///< index in z of x at point p (2n entries follow)
@@ -96,8 +102,11 @@ class Transcription {
   int knotConstraintRow(int knot) const;
 
   /// The declared sparsity pattern of ∂g/∂z (row, column pairs; fixed for the problem).
+  ///@{
+  /// The declared sparsity pattern of ∂g/∂z: row and column of each nonzero (fixed for the problem).
   const std::vector<int>& jacobianRows() const;
   const std::vector<int>& jacobianCols() const;
+  ///@}
 
   /// Bounds on z (fixed boundary entries have equal bounds; no bound is ±infinity).
   void variableBounds(Eigen::VectorXd& lower, Eigen::VectorXd& upper) const;
@@ -113,11 +122,11 @@ class Transcription {
 
   // ---- Evaluation: z has numVariables() entries. Each returns false when the dynamics cannot
   // be evaluated at some point (lastError() names the point and the time); never throws. ------
-  bool evalCost(const double* z, double& cost);
+  bool evalCost(const double* z, double& cost);                ///< J(z) (file comment's quadrature)
   bool evalCostGradient(const double* z, double* gradient);    ///< numVariables()
   bool evalConstraints(const double* z, double* g);            ///< numConstraints()
   bool evalJacobian(const double* z, double* values);          ///< in jacobianRows/Cols order
-  const std::string& lastError() const;
+  const std::string& lastError() const;  ///< what the last failing evaluation could not compute, where
 
   // ---- Lagrangian Hessian: σ ∇²J + Σ_c μ_c ∇²g_c, exact (the core's second derivatives of the
   // dynamics, computeSecondOrderContraction, one per point per evaluation). Lower triangle
@@ -134,15 +143,17 @@ class Transcription {
   /// Number of core evaluations so far (computeDynamics and computeLinearization calls, per
   /// point), a measure of the caching.
   long dynamicsEvaluations() const;
+  /// Number of computeLinearization calls so far (see dynamicsEvaluations).
   long linearizationEvaluations() const;
   long secondOrderEvaluations() const;  ///< computeSecondOrderContraction calls
 
   // ---- Reading a solution --------------------------------------------------------------------
-  double horizon(const double* z) const;
+  double horizon(const double* z) const;  ///< T at z (the fixed horizon, or z's horizon entry)
   /// The knots as a Trajectory (times, states 2n×N, inputs m×N, the model's names).
   Trajectory trajectory(const double* z) const;
   /// Hermite–Simpson midpoints: states 2n×(N−1) and inputs m×(N−1); empty for trapezoidal.
   Eigen::MatrixXd midpointStates(const double* z) const;
+  /// The Hermite–Simpson midpoint inputs, m×(N−1); empty for trapezoidal (see midpointStates).
   Eigen::MatrixXd midpointInputs(const double* z) const;
   /// max |γ|, |μ| over the intervals (0 without constraints).
   double maxSlack(const double* z) const;

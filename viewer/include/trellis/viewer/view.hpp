@@ -44,9 +44,11 @@ class ViewError : public std::runtime_error {
 struct ViewTrajectory {
   std::string name;         ///< shown in the page's legend (e.g. "reference", "closed loop 3")
   Trajectory trajectory;    ///< names must equal the model's (checkCompatible)
-  bool ghost = false;
+  bool ghost = false;       ///< drawn translucent, bodies and capsules only (no lines, no arrows)
 };
 
+/// How renderView samples, stores and draws (defaults: 60 samples per second, ghosts in float32,
+/// force arrows on).
 struct ViewOptions {
   std::string title;               ///< page title; default: the scene's name
   double displayRate = 60.0;       ///< samples per second besides the knots; > 0, finite
@@ -57,11 +59,22 @@ struct ViewOptions {
   /// the entries of ROS_PACKAGE_PATH, then each ancestor directory of meshBaseDirectory named PKG).
   std::vector<std::string> packagePath;
   /// three.js directory (holding three.min.js); empty: $TRELLIS_THREE_DIR, else the directory
-  /// found when trellis was configured (Debian: /usr/share/javascript/three).
+  /// found when trellis was configured (Debian: /usr/share/javascript/three), else the copy
+  /// installed with trellis (PREFIX/share/trellis/three, with its LICENSE).
   std::string threeDirectory;
-  /// Ghost trajectories are stored in float32 (half the size; positions rounded by ~6e-8
-  /// relative) unless this is set; solid trajectories and the state are always float64.
+  /// Ghost trajectories are stored in float32 (half the size) unless this is set; solid
+  /// trajectories and the state are always float64. A ghost sampled at the same times as the first
+  /// solid trajectory is stored as its float32 difference from that one (rounding ~6e-8 of the
+  /// deviation, ~1e-10 m for a closed loop beside its reference; its quaternions signed like the
+  /// base's, q or −q, the same rotation), any other ghost as float32 coordinates (rounding ~6e-8
+  /// relative). ViewReport::ghostRounding gives the largest rounding (the page: each ghost's).
   bool exactGhosts = false;
+  /// Draw the constraint forces of the solid trajectories as arrows (a model with constraints):
+  /// λ(q, q̇, u) from computeDynamics at every sample, split into forces at the constraint points
+  /// by computeConstraintPointForces: the force each row exerts on its first body (on its second
+  /// when the first is the world), one arrow per body point (the x, y, z rows of a point
+  /// constraint add up to one arrow); the opposite force on the other body is not drawn.
+  bool constraintForces = true;
   /// Upper limit of samples × bodies over all trajectories (memory and file size guard).
   long maxPoseSamples = 20'000'000;
 };
@@ -71,6 +84,9 @@ struct ViewReport {
   std::vector<std::string> warnings;  ///< e.g. an unsupported mesh format drawn as a stand-in box
   long samples = 0;                   ///< pose samples over all trajectories (or 1 for a state)
   std::size_t bytes = 0;              ///< size of the page
+  /// Largest change of a stored ghost number by the float32 encoding (positions in m, quaternion
+  /// entries unitless); 0 without ghosts or with ViewOptions::exactGhosts.
+  double ghostRounding = 0.0;
 };
 
 /// The HTML page for `scene` at the configuration `q` (n; the state shown when there is no
