@@ -41,7 +41,7 @@ struct ProjectionOptions {
   void validate(const Model& model) const;
 };
 
-enum class ProjectionStatus {
+enum class ProjectionCode {
   kOk,            ///< |h(q*)|∞ ≤ tolerance, the step test passed, and (velocities) each row
                   ///< |(A q̇*)_r| ≤ 1e-9 Σ_j |A_rj| (|q̇*_j| + |q̇0_j|) (checked: kNotConverged if not)
   kNotConverged,  ///< maxIterations reached (or the constraints cannot be met, e.g. out of reach):
@@ -50,17 +50,17 @@ enum class ProjectionStatus {
 };
 
 /// Names: ok, not_converged, non_finite.
-inline EnumNameTable<ProjectionStatus> enumNames(ProjectionStatus) {
-  static constexpr EnumName<ProjectionStatus> table[] = {
-      {ProjectionStatus::kOk, "ok"},
-      {ProjectionStatus::kNotConverged, "not_converged"},
-      {ProjectionStatus::kNonFinite, "non_finite"}};
+inline EnumNameTable<ProjectionCode> enumNames(ProjectionCode) {
+  static constexpr EnumName<ProjectionCode> table[] = {
+      {ProjectionCode::kOk, "ok"},
+      {ProjectionCode::kNotConverged, "not_converged"},
+      {ProjectionCode::kNonFinite, "non_finite"}};
   return table;
 }
 
 struct ProjectionResult {
-  ProjectionStatus status = ProjectionStatus::kOk;
-  std::string message;               ///< empty when ok
+  /// code, message (empty when ok; names what failed and the values); t and index unused.
+  Status<ProjectionCode> status;
   Eigen::VectorXd q, dq;             ///< the projected state (n each)
   int iterations = 0;                ///< restoration (Newton) steps taken in all
   double positionResidualBefore = 0; ///< |h(q0)|∞ over the holonomic rows
@@ -69,7 +69,7 @@ struct ProjectionResult {
   double velocityResidual = 0;       ///< |A(q*) q̇*|∞
   double lastStep = 0;               ///< ‖Δq‖∞ of the last accepted descent step
   bool massWeighted = true;          ///< false: M was not positive definite, Euclidean metric used
-  bool ok() const { return status == ProjectionStatus::kOk; }
+  bool ok() const { return status.ok(); }
   /// One line: "<status>[: message] (iterations, residuals before and after)".
   std::string describe() const;
   /// {"status", "ok", "message", "t": null, "index": null, "iterations", "h_before", "h_after",
