@@ -59,7 +59,7 @@ void HandManifoldRiccati(benchmark::State& state) {
   for (auto _ : state) {
     sol = trellis::solveManifoldRiccati(h.scene.model, h.trajectory, h.weights, h.riccati, h.transport);
     if (!sol.ok()) {
-      state.SkipWithError(sol.message().c_str());
+      state.SkipWithError(sol.status.message.c_str());
       return;
     }
   }
@@ -105,8 +105,8 @@ void HandGramian(benchmark::State& state) {
   for (auto _ : state) {
     r = trellis::computeControllabilityGramian(h.scene.model, h.trajectory, h.trajectory.startTime(),
                                                h.trajectory.endTime(), o);
-    if (!r.ok) {
-      state.SkipWithError(r.message.c_str());
+    if (!r.ok()) {
+      state.SkipWithError(r.status.message.c_str());
       return;
     }
   }
@@ -145,8 +145,8 @@ void ChainGramian(benchmark::State& state) {
   for (auto _ : state) {
     r = trellis::computeControllabilityGramian(c.bm.model, c.trajectory, 0.0, 2.0,
                                                trellis::GramianOptions{});
-    if (!r.ok) {
-      state.SkipWithError(r.message.c_str());
+    if (!r.ok()) {
+      state.SkipWithError(r.status.message.c_str());
       return;
     }
   }
@@ -167,7 +167,7 @@ void ChainRiccati(benchmark::State& state) {
   for (auto _ : state) {
     s = trellis::solveRiccati(c.bm.model, c.trajectory, w, o);
     if (!s.ok()) {
-      state.SkipWithError(s.message.c_str());
+      state.SkipWithError(s.status.message.c_str());
       return;
     }
   }

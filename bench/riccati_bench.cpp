@@ -57,7 +57,7 @@ const std::vector<MatrixXd>& reference(int n) {
   o.atol = 1e-15;
   o.trackEigenvalues = false;
   const auto sol = trellis::solveRiccati(0.0, kHorizon, 2 * n, n, blended(n), weights(2 * n, n), o);
-  if (!sol.ok()) throw std::runtime_error("riccati_bench: reference failed: " + sol.message);
+  if (!sol.ok()) throw std::runtime_error("riccati_bench: reference failed: " + sol.status.message);
   std::vector<MatrixXd> S;
   for (int i = 0; i <= kSamples; ++i) S.push_back(sol.S(kHorizon * i / kSamples));
   return cache.emplace(n, std::move(S)).first->second;

@@ -49,6 +49,7 @@ inline trellis::LinearizationCallback blendedChain(int n) {
     const double s = 0.5 * (1.0 - std::cos(3.14159265358979323846 * t / kRiccatiHorizon));
     A = (1.0 - s) * sys.Aa + s * sys.Ab;
     B = (1.0 - s) * sys.Ba + s * sys.Bb;
+    return trellis::ReferenceStatus{};
   };
 }
 

@@ -33,7 +33,7 @@ int main(int argc, char** argv) {
     }
     std::printf("status %s  steps %ld  rhs %ld  newton %ld  lyapunov solves %ld  setups %ld  "
                 "schur %ld  error-test failures %ld  convergence failures %ld  linearizations %ld\n",
-                trellis::toString(sol.status), sol.steps, sol.rhsEvaluations, sol.newtonIterations,
+                sol.status.name(), sol.steps, sol.rhsEvaluations, sol.newtonIterations,
                 sol.preconditionerSolves, sol.linearSolverSetups, sol.schurFactorizations,
                 sol.errorTestFailures, sol.convergenceFailures, sol.linearizations);
     std::map<int, int> orders;

@@ -98,7 +98,7 @@ int main(int argc, char** argv) try {
       sol = trellis::solveTvlqr(model, trajectory, weights, o);
       best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     }
-    if (!sol.ok) throw std::runtime_error("solveTvlqr: " + sol.message);
+    if (!sol.ok()) throw std::runtime_error("solveTvlqr: " + sol.status.describe());
     return sol;
   };
 
@@ -134,7 +134,7 @@ int main(int argc, char** argv) try {
       const trellis::SimulationResult r = trellis::simulateClosedLoop(model, trajectory, g, x0, sim);
       const char* label = which == 0 ? "continuous gains sampled" : "ZOH gains";
       if (!r.ok()) {
-        std::printf("  closed loop at %g Hz, %s: FAILED (%s)\n", rate, label, r.message.c_str());
+        std::printf("  closed loop at %g Hz, %s: FAILED (%s)\n", rate, label, r.status.message.c_str());
         std::printf("json: {\"closed_loop\": \"%s\", \"rate_hz\": %g, \"ok\": false}\n", label, rate);
         continue;
       }

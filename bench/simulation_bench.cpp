@@ -41,7 +41,7 @@ struct HandLoop {
     const trellis::ManifoldRiccatiSolution lqr = trellis::solveManifoldRiccati(
         model, reference, hand::feedbackWeights(model), hand::feedbackRiccatiOptions(),
         hand::feedbackTransport());
-    if (!lqr.ok()) throw std::runtime_error("manifold Riccati: " + lqr.message());
+    if (!lqr.ok()) throw std::runtime_error("manifold Riccati: " + lqr.status.message);
     gains = hand::feedbackGains(lqr, reference);
     options = hand::closedLoopOptions(model.nu());
     starts = hand::perturbedStarts(lqr.basis.basis(reference.startTime()),
@@ -57,7 +57,7 @@ HandLoop& hand() {
 void setCounters(benchmark::State& state, const std::vector<trellis::SimulationResult>& results) {
   double steps = 0, restarts = 0, projections = 0, jacobians = 0, quotient = 0, error = 0;
   for (const trellis::SimulationResult& r : results) {
-    if (!r.ok()) state.SkipWithError(r.message.c_str());
+    if (!r.ok()) state.SkipWithError(r.status.message.c_str());
     steps += r.steps;
     restarts += r.restarts;
     projections += r.projections;

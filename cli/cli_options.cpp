@@ -231,15 +231,6 @@ Trajectory checkReference(const Model& model, const std::string& scenePath, cons
   }
 }
 
-void checkSemidefinite(const std::string& command, const std::string& what, double minEigenvalue,
-                       double maxEigenvalue) {
-  if (!isSemidefiniteToRoundoff(minEigenvalue, maxEigenvalue)) {
-    throw std::runtime_error(command + ": " + what + " is indefinite beyond round-off: smallest eigenvalue " +
-                             formatNumber(minEigenvalue) + ", largest " + formatNumber(maxEigenvalue) +
-                             " (the integration did not resolve the Riccati equation; tighten --rtol/--atol)");
-  }
-}
-
 void checkOutputIsNotInput(const std::string& command, const std::string& outPath,
                            const std::vector<std::pair<std::string, std::string>>& inputs) {
   if (isStreamPath(outPath)) return;

@@ -145,13 +145,6 @@ Trajectory checkReference(const Model& model, const std::string& scenePath, cons
 /// digits; an optimized or integrated one satisfies its constraints to its solver's tolerance).
 inline constexpr double kReferenceConstraintTolerance = 1e-6;
 
-/// Throws std::runtime_error "COMMAND: WHAT is indefinite ..." when the smallest eigenvalue of a
-/// Riccati solution S over its steps is negative beyond round-off: below −1e-6·max|eigenvalue|
-/// (S is a sum of positive semidefinite terms; a clearly negative eigenvalue means the integrator
-/// did not resolve it). `minEigenvalue` = `maxEigenvalue` = 0 means "not tracked" (no check).
-void checkSemidefinite(const std::string& command, const std::string& what, double minEigenvalue,
-                       double maxEigenvalue);
-
 /// "a, b, c" for messages.
 std::string joinNames(const std::vector<std::string>& names);
 

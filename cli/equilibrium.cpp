@@ -19,11 +19,12 @@ Without --hold: searches a static equilibrium, a q with q' = 0 and q''(q, 0, u) 
 holonomic constraints h(q) = 0, under fixed inputs u, by Gauss-Newton on F(q) = [q''; h] with
 the exact Jacobian [dq''/dq; dh/dq] of the linearization and a backtracking line search. The
 start is q of the scene's stored state (or --state); u is the state's u with --inputs applied.
-Output keys: status ("ok"), iterations, qdd_residual (max |q''|), h_residual (max |h|),
+Output keys (the library's report, then the names and the state): status ("ok"), ok, message,
+t, index (null), iterations, qdd_residual (max |q''|), h_residual (max |h|), jacobian_rank,
 isolated (false: a continuum of equilibria passes through q, e.g. a free coordinate),
 max_real_eigenvalue (largest real part of the eigenvalues of the linearization on the
 constraint tangent space: < 0 asymptotically stable, > 0 unstable, ~0 marginal — an undamped
-stable equilibrium has eigenvalues +- i w), configs, q, inputs, u, lambda, state (a state object
+stable equilibrium has eigenvalues +- i w), q, u, lambda, configs, inputs, state (a state object
 --state reads back).
 
 With --hold: the inputs that hold the pose q (of the state) still, i.e. inverse dynamics with
@@ -31,8 +32,8 @@ q' = 0, q'' = 0: B_u u + A^T lambda = b(q) (the generalized forces of gravity, s
 constant wrenches at rest, with the sign of M q'' + b = Q_u + A^T lambda), least squares of
 minimum norm.
 Output keys: status ("ok", or "unreachable" with --allow-residual when no inputs can hold the
-pose), residual (max |B_u u + A^T lambda - r|, generalized forces), unique, inputs, u, lambda,
-state.
+pose), ok, message, t, index, residual (max |B_u u + A^T lambda - r|, generalized forces),
+constraint_residual, rank, unique, bound_iterations, u, lambda, bound_excess, inputs, state.
 
 options:
   --state FILE           the start (or the pose to hold); see `trellis linearize --help`
@@ -91,9 +92,9 @@ int runEquilibrium(std::span<const std::string> args, std::ostream& out) {
       io.tolerance = options.numberInRange("--tolerance", *v, 1e-16, 0.1,
                                            "relative to the forces compared: above, any answer would pass");
     const InverseDynamicsResult r = computeHoldingInputs(model, data, state.q, io);
-    const bool accepted = r.ok() || (r.status == InverseDynamicsStatus::kUnreachable && options.flag("--allow-residual"));
+    const bool accepted = r.ok() || (r.status.code == InverseDynamicsCode::kUnreachable && options.flag("--allow-residual"));
     if (!accepted) {
-      throw std::runtime_error(loaded.path + ": the pose cannot be held (" + toString(r.status) + "): " + r.message);
+      throw std::runtime_error(loaded.path + ": the pose cannot be held (" + r.status.name() + "): " + r.status.message);
     }
     if (r.ok()) {
       // The pose must lie on the constraints, as `gains --hold` requires: inverse dynamics at an
@@ -104,12 +105,9 @@ int runEquilibrium(std::span<const std::string> args, std::ostream& out) {
                      Trajectory(model.configNames(), model.inputNames(), Eigen::Vector2d(0.0, 1.0),
                                 x.replicate(1, 2), r.u.replicate(1, 2)));
     }
-    result["status"] = toString(r.status);
-    result["residual"] = r.residualNorm;
-    result["unique"] = r.unique;
+    // The library's report (InverseDynamicsResult::json), then the names and the state object.
+    result = OutputJson::parse(r.json());
     result["inputs"] = nameList(model.inputNames());
-    result["u"] = toJson(r.u);
-    result["lambda"] = toJson(r.lambda);
     result["state"] = stateObject(model, state.q, Eigen::VectorXd::Zero(model.nq()), r.u);
   } else {
     if (options.flag("--allow-residual")) throw UsageError("equilibrium: --allow-residual needs --hold");
@@ -125,20 +123,12 @@ int runEquilibrium(std::span<const std::string> args, std::ostream& out) {
     const Eigen::VectorXd u = applyInputs(model, options, state.u);
     const EquilibriumResult r = findEquilibrium(model, data, state.q, u, eo);
     if (!r.ok()) {
-      throw std::runtime_error(loaded.path + ": no equilibrium found (" + toString(r.status) + "): " + r.message);
+      throw std::runtime_error(loaded.path + ": no equilibrium found (" + r.status.name() + "): " + r.status.message);
     }
-    result["status"] = toString(r.status);
-    result["iterations"] = r.iterations;
-    result["qdd_residual"] = r.accelerationResidual;
-    result["h_residual"] = r.constraintResidual;
-    result["relative_residual"] = r.relativeResidual;
-    result["isolated"] = r.isolated;
-    result["max_real_eigenvalue"] = r.maxRealEigenvalue;
+    // The library's report (EquilibriumResult::json), then the names and the state object.
+    result = OutputJson::parse(r.json());
     result["configs"] = nameList(model.configNames());
-    result["q"] = toJson(r.q);
     result["inputs"] = nameList(model.inputNames());
-    result["u"] = toJson(r.u);
-    result["lambda"] = toJson(r.lambda);
     result["state"] = stateObject(model, r.q, Eigen::VectorXd::Zero(model.nq()), r.u);
   }
   writeJson(out, result, options.flag("--compact"));

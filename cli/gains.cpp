@@ -3,6 +3,7 @@
 // trellis::solveTvlqr: continuous, or sampled with --rate).
 #include "cli_options.hpp"
 #include "command.hpp"
+#include "json_output.hpp"
 #include "model_questions.hpp"
 #include "weights.hpp"
 
@@ -123,8 +124,8 @@ Trajectory heldPose(const LoadedScene& loaded, const std::optional<std::string>&
   Data data(model);
   const InverseDynamicsResult hold = computeHoldingInputs(model, data, state.q);
   if (!hold.ok()) {
-    throw std::runtime_error(loaded.path + ": gains --hold: the pose cannot be held (" + toString(hold.status) +
-                             "): " + hold.message);
+    throw std::runtime_error(loaded.path + ": gains --hold: the pose cannot be held (" + hold.status.name() +
+                             "): " + hold.status.message);
   }
   constexpr int kKnots = 101;
   const Eigen::VectorXd times = Eigen::VectorXd::LinSpaced(kKnots, 0.0, span);
@@ -168,9 +169,9 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   RiccatiOptions& riccati = tvlqr.riccati;
   if (auto v = options.value("--method")) {
     try {
-      riccati.method = parseRiccatiMethod(*v);
+      riccati.method = parseEnum<RiccatiMethod>(*v, "--method");
     } catch (const std::invalid_argument& e) {
-      throw UsageError(std::string("gains: --method: ") + e.what());
+      throw UsageError(std::string("gains: ") + e.what());
     }
   }
   if (auto v = options.value("--rtol")) riccati.rtol = options.relativeTolerance("--rtol", *v);
@@ -225,8 +226,7 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
 
   // The solve (on the tangent space of the constraint manifold for a constrained scene).
   const TvlqrSolution solution = solveTvlqr(model, trajectory, weights, tvlqr);
-  if (!solution.ok) throw std::runtime_error("gains: " + solution.message);
-  checkSemidefinite("gains", model.nc() > 0 ? "Sr" : "S", solution.minEigenvalueS, solution.maxEigenvalueS);
+  if (!solution.ok()) throw std::runtime_error("gains: " + solution.status.describe());
   solution.gains.writeCsvFile(outPath);
 
   // The summary, after the file is written.
@@ -241,26 +241,31 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   const GramianReport gramian = computeControllabilityGramian(model, trajectory, trajectory.startTime(),
                                                               trajectory.endTime(), gramianOptions);
   if (json) {
-    std::string body = solution.json();
-    body.pop_back();  // the closing brace: append the file and the controllability checks
-    out << body << ", \"out\": " << jsonString(outPath) << ", \"controllable_at_t0\": "
-        << (pointwise.controllable() ? "true" : "false") << ", \"rank_at_t0\": " << pointwise.rank
-        << ", \"gramian_ok\": " << (gramian.ok ? "true" : "false")
-        << ", \"gramian_resolved\": " << (gramian.controllable() ? "true" : "false")
-        << ", \"gramian_min_eigenvalue\": " << jsonNumber(gramian.ok ? gramian.minEigenvalue : NAN)
-        << ", \"gramian_max_eigenvalue\": " << jsonNumber(gramian.ok ? gramian.maxEigenvalue : NAN) << "}\n";
+    // The library's report, then the file and the controllability checks (their own reports).
+    OutputJson body = OutputJson::parse(solution.json());
+    body["out"] = outPath;
+    body["controllable_at_t0"] = pointwise.controllable();
+    body["rank_at_t0"] = pointwise.rank;
+    body["gramian_ok"] = gramian.ok();
+    body["gramian_resolved"] = gramian.controllable();
+    const OutputJson gramianReport = OutputJson::parse(gramian.json());
+    body["gramian_min_eigenvalue"] = gramianReport["min_eigenvalue"];
+    body["gramian_max_eigenvalue"] = gramianReport["max_eigenvalue"];
+    body["controllability_at_t0"] = OutputJson::parse(pointwise.json());
+    body["gramian"] = gramianReport;
+    writeJson(out, body, true);
     return 0;
   }
   out << "controllability at t = " << formatNumber(trajectory.startTime()) << ": rank " << pointwise.rank
       << " of " << pointwise.dimension << (pointwise.controllable() ? " (controllable)" : " (NOT controllable)")
       << ", smallest singular value " << formatNumber(pointwise.smallestSingularValue, 3) << "\n";
-  if (gramian.ok) {
+  if (gramian.ok()) {
     out << "gramian on [" << formatNumber(trajectory.startTime()) << ", "
         << formatNumber(trajectory.endTime()) << "]: min eigenvalue " << formatNumber(gramian.minEigenvalue, 3)
         << ", max eigenvalue " << formatNumber(gramian.maxEigenvalue, 3)
         << gramianVerdict(gramian) << "\n";
   } else {
-    out << "gramian: not available (" << gramian.message << ")\n";
+    out << "gramian: not available (" << gramian.status.describe() << ")\n";
   }
   return 0;
 }

@@ -97,15 +97,15 @@ int runInverseDynamics(std::span<const std::string> args, std::ostream& out) {
   Data data(model);
   for (Eigen::Index k = 0; k < times.size(); ++k) {
     const InverseDynamicsResult r = computeInverseDynamics(model, data, q.col(k), dq.col(k), ddq.col(k), io);
-    const bool accepted = r.ok() || (r.status == InverseDynamicsStatus::kUnreachable && options.flag("--allow-residual"));
+    const bool accepted = r.ok() || (r.status.code == InverseDynamicsCode::kUnreachable && options.flag("--allow-residual"));
     if (!accepted) {
       throw std::runtime_error(source + ": knot " + std::to_string(k) + " (t = " + num(times(k)) + "): " +
-                               toString(r.status) + ": " + r.message);
+                               r.status.name() + ": " + r.status.message);
     }
     out << num(times(k));
     for (Eigen::Index i = 0; i < r.u.size(); ++i) out << ',' << num(r.u(i));
     for (Eigen::Index i = 0; i < r.lambda.size(); ++i) out << ',' << num(r.lambda(i));
-    out << ',' << num(r.residualNorm) << ',' << num(r.constraintResidual) << ',' << toString(r.status) << '\n';
+    out << ',' << num(r.residualNorm) << ',' << num(r.constraintResidual) << ',' << r.status.name() << '\n';
   }
   return 0;
 }

@@ -24,13 +24,15 @@ Coordinates listed in --fix keep their value and velocity (the others move). Wit
 constraints the state is printed unchanged. Where M is not positive definite the Euclidean
 metric is used ("mass_weighted": false).
 
-Output: one JSON object with the keys
-  status                 "ok" (always, on exit 0)
+Output: one JSON object, the library's report and then the names and the state, with the keys
+  status, ok             "ok", true (always, on exit 0)
+  message, t, index      "", null, null
   iterations             Newton steps onto h = 0, in all
   h_before, h_after      max |h(q)| over the holonomic rows, before and after
-  Adq_before, Adq_after  max |A q'| over all rows, before and after
+  velocity_before, velocity_after   max |A q'| over all rows, before and after
+  last_step              max |dq| of the last accepted descent step
   mass_weighted          whether the metric was M
-  configs, q, dq         the projected state as lists
+  q, dq, configs         the projected state as lists
   state                  {"q": {...}, "dq": {...}, "u": {...}}: the projected state as --state reads
                          it (u unchanged)
 
@@ -66,19 +68,11 @@ int runProject(std::span<const std::string> args, std::ostream& out) {
   Data data(model);
   const ProjectionResult r = projectState(model, data, state.q, state.dq, po);
   if (!r.ok()) {
-    throw std::runtime_error(loaded.path + ": the projection failed (" + toString(r.status) + "): " + r.message);
+    throw std::runtime_error(loaded.path + ": the projection failed (" + r.status.name() + "): " + r.status.message);
   }
-  OutputJson result = OutputJson::object();
-  result["status"] = toString(r.status);
-  result["iterations"] = r.iterations;
-  result["h_before"] = r.positionResidualBefore;
-  result["h_after"] = r.positionResidual;
-  result["Adq_before"] = r.velocityResidualBefore;
-  result["Adq_after"] = r.velocityResidual;
-  result["mass_weighted"] = r.massWeighted;
+  // The library's report (ProjectionResult::json), then the names and the state object.
+  OutputJson result = OutputJson::parse(r.json());
   result["configs"] = nameList(model.configNames());
-  result["q"] = toJson(r.q);
-  result["dq"] = toJson(r.dq);
   result["state"] = stateObject(model, r.q, r.dq, state.u);
   writeJson(out, result, options.flag("--compact"));
   return 0;

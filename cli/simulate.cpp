@@ -166,9 +166,9 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
   if (auto v = options.value("--max-steps")) simulation.maxSteps = options.integer<long>("--max-steps", *v, 1);
   if (auto v = options.value("--method")) {
     try {
-      simulation.method = parseIntegrationMethod(*v);
+      simulation.method = parseEnum<IntegrationMethod>(*v, "--method");
     } catch (const std::invalid_argument& e) {
-      throw UsageError(std::string("simulate: --method: ") + e.what());
+      throw UsageError(std::string("simulate: ") + e.what());
     }
   }
   if (options.flag("--no-project")) simulation.constraints = ConstraintHandling::kNone;
@@ -188,41 +188,12 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
   if (simulation.outputStep > 0.0) options.gridPoints("--output-step", simulation.outputStep, span, kMaxOutputRows, "output rows");
   if (simulation.sampleRate > 0.0) options.gridPoints("--rate", 1.0 / simulation.sampleRate, span, kMaxFeedbackSamples, "feedback samples");
   const GainSchedule gains = GainSchedule::readCsvFile(gainsPath);
-  gains.checkNames(model.inputNames(), GainSchedule::stateNames(model.configNames()),
-                   gainsPath + " (for the scene " + scenePath + ")");
-  // Discrete gains are for one rate only; continuous gains at a rate are an approximation.
-  if (gains.isSampled()) {
-    const double rate = gains.sampleRate();
-    if (simulation.sampleRate == 0.0) {
-      throw std::runtime_error(gainsPath + ": zero-order-hold gains for a controller sampling at " +
-                               formatNumber(rate, 17) + " Hz cannot be applied continuously: add --rate " +
-                               formatNumber(rate, 17));
-    }
-    if (std::abs(simulation.sampleRate - rate) > 1e-12 * rate) {
-      throw std::runtime_error(gainsPath + ": zero-order-hold gains for " + formatNumber(rate, 17) +
-                               " Hz cannot be applied at --rate " + formatNumber(simulation.sampleRate, 17) +
-                               " (compute them for that rate: trellis gains --rate " +
-                               formatNumber(simulation.sampleRate, 17) + ")");
-    }
-    if (std::abs(gains.startTime() - reference.startTime()) >
-        1e-9 / rate) {
-      throw std::runtime_error(gainsPath + ": the sampled gains start at t = " + formatNumber(gains.startTime(), 17) +
-                               ", but the reference starts at t = " + formatNumber(reference.startTime(), 17) +
-                               " (the samples would not line up)");
-    }
-  } else if (simulation.sampleRate > 0.0) {
-    std::cerr << "simulate: warning: " << gainsPath << " holds continuous gains K(t); at --rate "
-              << formatNumber(simulation.sampleRate) << " they are only sampled (not designed for a "
-              << "sampled controller; trellis gains --rate " << formatNumber(simulation.sampleRate)
-              << " computes gains for it)\n";
-  }
-  // The same relative slack as GainSchedule::evaluate.
-  const double slack = 1e-12 * std::max({1.0, std::abs(reference.startTime()), std::abs(reference.endTime())});
-  if (gains.startTime() > reference.startTime() + slack || gains.endTime() < reference.endTime() - slack) {
-    throw std::runtime_error(gainsPath + ": the gains cover [" + formatNumber(gains.startTime(), 17) + ", " +
-                             formatNumber(gains.endTime(), 17) + "], but the reference " + trajectoryPath +
-                             " spans [" + formatNumber(reference.startTime(), 17) + ", " +
-                             formatNumber(reference.endTime(), 17) + "]");
+  // The library's applicability check (core/gain_schedule.hpp): names, rate, alignment, span.
+  const std::string note =
+      checkGainScheduleApplies(gains, model, reference, simulation.sampleRate, gainsPath + " (for the scene " + scenePath + ")");
+  if (!note.empty()) {
+    std::cerr << "simulate: warning: " << note << "; trellis gains --rate " << formatNumber(simulation.sampleRate)
+              << " computes gains for it\n";
   }
 
   if (options.has("--umin") || options.has("--umax")) {
@@ -253,8 +224,8 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
   const SimulationResult result = simulateClosedLoop(model, reference, gains, x0, simulation);
   if (result.trajectory.size() > 0) result.trajectory.writeCsvFile(outPath);
   if (!result.ok()) {
-    throw std::runtime_error("simulate: the closed loop failed (" + std::string(toString(result.status)) +
-                             ") at t = " + formatNumber(result.failureTime) + ": " + result.message +
+    throw std::runtime_error("simulate: the closed loop failed (" + std::string(result.status.name()) +
+                             ") at t = " + formatNumber(result.status.t) + ": " + result.status.message +
                              (result.trajectory.size() > 0 ? " (the trajectory up to t = " +
                                                                  formatNumber(result.trajectory.endTime()) +
                                                                  " is in " + outPath + ")"
@@ -264,7 +235,7 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
   // The summary, after the file is written.
   if (options.flag("--json")) {
     // The library's report, and what only the command knows, with the JSON library.
-    nlohmann::ordered_json report = nlohmann::ordered_json::parse(simulationJson(result));
+    nlohmann::ordered_json report = nlohmann::ordered_json::parse(result.json());
     const auto number = [](double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(); };
     report["out"] = outPath;
     report["sample_rate_hz"] = number(simulation.sampleRate);

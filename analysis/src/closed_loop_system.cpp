@@ -64,7 +64,7 @@ ClosedLoopSystem::ClosedLoopSystem(const Model& model, const InputLaw& law,
   failState.resize(2 * n_);
 }
 
-void ClosedLoopSystem::fail(SimulationStatus s, double t, const Eigen::VectorXd& state,
+void ClosedLoopSystem::fail(SimulationCode s, double t, const Eigen::VectorXd& state,
                             std::string message) {
   // Keeps the LAST failure: after a recoverable failure CVODES retries with ever smaller steps,
   // so the last failing point is the closest to where the integration stuck.
@@ -83,7 +83,7 @@ void ClosedLoopSystem::resetCallState() {
 }
 
 int ClosedLoopSystem::failureReturn() {
-  if (failStatus == SimulationStatus::kPolicyFailure ||
+  if (failStatus == SimulationCode::kPolicyFailure ||
       ++failuresThisCall_ >= kMaxRecoverableFailures) {
     aborted_ = true;
   }
@@ -118,7 +118,7 @@ bool ClosedLoopSystem::stateFrom(double t, ConstVectorMap y) {
     law_.reference->evaluate(t, xr_, ur_, xrdot_);
   } catch (const std::exception& e) {
     x_ = y;
-    fail(SimulationStatus::kPolicyFailure, t, x_, std::string("the reference threw: ") + e.what());
+    fail(SimulationCode::kPolicyFailure, t, x_, std::string("the reference threw: ") + e.what());
     return false;
   }
   x_ = xr_ + y;
@@ -146,20 +146,20 @@ bool ClosedLoopSystem::input(double t, const Eigen::VectorXd& x, Eigen::VectorXd
         break;
     }
   } catch (const std::exception& e) {
-    fail(SimulationStatus::kPolicyFailure, t, x, std::string("the policy threw: ") + e.what());
+    fail(SimulationCode::kPolicyFailure, t, x, std::string("the policy threw: ") + e.what());
     return false;
   } catch (...) {
-    fail(SimulationStatus::kPolicyFailure, t, x, "the policy threw an unknown exception");
+    fail(SimulationCode::kPolicyFailure, t, x, "the policy threw an unknown exception");
     return false;
   }
   if (out.size() != m_) {
-    fail(SimulationStatus::kPolicyFailure, t, x,
+    fail(SimulationCode::kPolicyFailure, t, x,
          "the policy returned u of size " + std::to_string(out.size()) + ", expected " +
              std::to_string(m_));
     return false;
   }
   if (!out.allFinite()) {
-    fail(SimulationStatus::kNonFinite, t, x,
+    fail(SimulationCode::kNonFinite, t, x,
          "the policy returned a non-finite input u = " + formatVector(out));
     return false;
   }
@@ -189,7 +189,7 @@ int ClosedLoopSystem::rhs(double t, ConstVectorMap y, VectorMap ydot) {
   if (aborted_) return -1;
   if (!stateFrom(t, y)) return failureReturn();
   if (!x_.allFinite()) {
-    fail(SimulationStatus::kNonFinite, t, x_, "the state became non-finite");
+    fail(SimulationCode::kNonFinite, t, x_, "the state became non-finite");
     return failureReturn();
   }
   if (sampled_) {
@@ -202,8 +202,8 @@ int ClosedLoopSystem::rhs(double t, ConstVectorMap y, VectorMap ydot) {
   computeDynamics(model_, data_, q_, dq_, u_);
   const DynamicsStatus& st = data_.status;
   if (!st.ok()) {
-    fail(st.code == DynamicsStatus::Code::kNonFinite ? SimulationStatus::kNonFinite
-                                                     : SimulationStatus::kDynamicsFailure,
+    fail(st.code == DynamicsStatus::Code::kNonFinite ? SimulationCode::kNonFinite
+                                                     : SimulationCode::kDynamicsFailure,
          t, x_, "computeDynamics failed: " + st.message);
     return failureReturn();
   }
@@ -226,8 +226,8 @@ int ClosedLoopSystem::jacobian(double t, ConstVectorMap y, ConstVectorMap /*fy*/
   dq_ = x_.tail(n_);
   const DynamicsStatus st = computeLinearization(model_, data_, q_, dq_, u_);
   if (!st.ok()) {
-    fail(st.code == DynamicsStatus::Code::kNonFinite ? SimulationStatus::kNonFinite
-                                                     : SimulationStatus::kDynamicsFailure,
+    fail(st.code == DynamicsStatus::Code::kNonFinite ? SimulationCode::kNonFinite
+                                                     : SimulationCode::kDynamicsFailure,
          t, x_, "computeLinearization failed: " + st.message);
     return failureReturn();
   }

@@ -64,13 +64,13 @@ class ClosedLoopSystem final : public OdeSystem {
 
   // The last failure recorded (valid when failed).
   bool failed = false;
-  SimulationStatus failStatus = SimulationStatus::kOk;
+  SimulationCode failStatus = SimulationCode::kOk;
   double failTime = 0.0;
   Eigen::VectorXd failState;
   std::string failMessage;
 
  private:
-  void fail(SimulationStatus s, double t, const Eigen::VectorXd& state, std::string message);
+  void fail(SimulationCode s, double t, const Eigen::VectorXd& state, std::string message);
   int failureReturn();
   /// u = sat(π(t, x)) and active_(i) = 1 where u_i is not clipped. referenceFresh: xr_, ur_ hold
   /// the reference at t already.

@@ -46,7 +46,7 @@ ConstraintProjection ConstraintDrift::project(Eigen::VectorXd& x) {
   // The residuals of projectState cover the holonomic rows for h and all rows for A q̇: the
   // simulator's drift over the same rows, measured again at the result.
   p.driftAfter = drift(x);
-  if (r.status == ProjectionStatus::kNonFinite) p.driftAfter = std::numeric_limits<double>::infinity();
+  if (r.status.code == ProjectionCode::kNonFinite) p.driftAfter = std::numeric_limits<double>::infinity();
   return p;
 }
 

@@ -53,13 +53,10 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
   std::unique_ptr<ConstraintDrift> monitor;
   if (constrained) monitor = std::make_unique<ConstraintDrift>(model, options.projectionIterations);
 
-  auto setFailure = [&](SimulationStatus s, double t, const Eigen::VectorXd& state,
+  auto setFailure = [&](SimulationCode s, double t, const Eigen::VectorXd& state,
                         const std::string& what) {
-    result.status = s;
-    result.failureTime = t;
+    result.status.set(s, "simulation stopped at t = " + formatTime(t) + ", x = " + formatVector(state) + ": " + what, t);
     result.failureState = state;
-    result.message =
-        "simulation stopped at t = " + formatTime(t) + ", x = " + formatVector(state) + ": " + what;
   };
 
   Eigen::VectorXd x = x0, xr(nx), ur(m), u(m), y(nx);
@@ -83,7 +80,7 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
       system.resetCallState();
       while (driver.time() < te) {
         if (steps >= options.maxSteps) {
-          setFailure(SimulationStatus::kIntegratorFailure, driver.time(),
+          setFailure(SimulationCode::kIntegratorFailure, driver.time(),
                      integratorState(),
                      "more than maxSteps = " + std::to_string(options.maxSteps) + " internal steps");
           failed = true;
@@ -99,7 +96,7 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
               what = "more than maxSteps = " + std::to_string(options.maxSteps) +
                      " internal steps; " + what;
             if (system.failed) what += " (last right-hand-side failure: " + system.failMessage + ")";
-            setFailure(SimulationStatus::kIntegratorFailure, st.t, integratorState(),
+            setFailure(SimulationCode::kIntegratorFailure, st.t, integratorState(),
                        what);
           }
           failed = true;
@@ -113,12 +110,12 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
       } else if (driver.interpolate(te, 0, y)) {
         system.toState(te, y, x);
       } else {
-        setFailure(SimulationStatus::kIntegratorFailure, te, integratorState(),
+        setFailure(SimulationCode::kIntegratorFailure, te, integratorState(),
                    "the dense output is not available at t = " + formatTime(te));
         break;
       }
       if (!x.allFinite()) {
-        setFailure(SimulationStatus::kNonFinite, te, x, "the state became non-finite");
+        setFailure(SimulationCode::kNonFinite, te, x, "the state became non-finite");
         break;
       }
     }
@@ -134,12 +131,12 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
       ++result.projections;
       projected = true;
       if (!x.allFinite()) {
-        setFailure(SimulationStatus::kNonFinite, te, x,
+        setFailure(SimulationCode::kNonFinite, te, x,
                    "the constraint projection produced a non-finite state");
         break;
       }
       if (!(p.driftAfter <= driftTolerance)) {
-        setFailure(SimulationStatus::kConstraintDrift, te, x,
+        setFailure(SimulationCode::kConstraintDrift, te, x,
                    "the constraint drift " + formatTime(p.driftBefore) + " is still " +
                        formatTime(p.driftAfter) + " after projection (" +
                        std::to_string(p.iterations) + " Newton steps), above the tolerance " +

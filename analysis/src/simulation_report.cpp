@@ -11,32 +11,23 @@
 
 namespace trellis {
 
-namespace {
-
-constexpr detail::EnumName<SimulationStatus> kStatusNames[] = {
-    {SimulationStatus::kOk, "ok"},
-    {SimulationStatus::kIntegratorFailure, "integrator failure"},
-    {SimulationStatus::kDynamicsFailure, "dynamics failure"},
-    {SimulationStatus::kNonFinite, "non-finite"},
-    {SimulationStatus::kPolicyFailure, "policy failure"},
-    {SimulationStatus::kConstraintDrift, "constraint drift"},
-};
-constexpr detail::EnumName<IntegrationMethod> kMethodNames[] = {
-    {IntegrationMethod::kAdams, "adams"},
-    {IntegrationMethod::kBDF, "bdf"},
-};
-
-}  // namespace
-
-const char* toString(SimulationStatus status) { return detail::nameOf(kStatusNames, status); }
-
-const char* toString(IntegrationMethod method) { return detail::nameOf(kMethodNames, method); }
-
 IntegrationMethod parseIntegrationMethod(const std::string& text) {
-  return detail::parseName(kMethodNames, text);
+  return parseEnum<IntegrationMethod>(text, "integration method");
 }
 
-std::string simulationJson(const SimulationResult& r) {
+std::string SimulationResult::describe() const {
+  const Eigen::VectorXd& e = trackingError;
+  std::string line = status.describe() + " (" + std::to_string(trajectory.size()) + " rows";
+  if (e.size() > 0) {
+    line += ", tracking error final " + formatStatusNumber(e(e.size() - 1)) + ", max " +
+            formatStatusNumber(e.maxCoeff());
+  }
+  line += ", max drift " + formatStatusNumber(maxConstraintDrift) + ", " + std::to_string(steps) + " steps)";
+  return line;
+}
+
+std::string SimulationResult::json() const {
+  const SimulationResult& r = *this;
   using detail::ReportJson;
   using detail::toJson;
   const Trajectory& tr = r.trajectory;
@@ -45,10 +36,7 @@ std::string simulationJson(const SimulationResult& r) {
   Eigen::Index worst = 0;
   if (e.size() > 0) e.maxCoeff(&worst);
   const ReportJson null(nullptr);
-  ReportJson j;
-  j["ok"] = r.ok();
-  j["status"] = toString(r.status);
-  j["message"] = r.message;
+  ReportJson j = detail::statusJson(r.status);
   j["rows"] = tr.size();
   j["t0"] = have ? toJson(tr.startTime()) : null;
   j["t1"] = have ? toJson(tr.endTime()) : null;

@@ -1,6 +1,8 @@
 // algebraic_riccati_common.cpp — the parts CARE and DARE share (see algebraic_riccati_common.hpp).
 #include "algebraic_riccati_common.hpp"
 
+#include "trellis/core/detail/report_json.hpp"
+
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
@@ -15,14 +17,27 @@
 
 namespace trellis {
 
-const char* toString(LqrStatus status) {
-  switch (status) {
-    case LqrStatus::kOk: return "ok";
-    case LqrStatus::kNotStabilizable: return "not stabilizable";
-    case LqrStatus::kNoStabilizingSolution: return "no stabilizing solution";
-    case LqrStatus::kNoConvergence: return "no convergence";
-  }
-  return "unknown";
+std::string LqrResult::describe() const {
+  return status.describe() + " (residual " + formatStatusNumber(residual) + ", " +
+         std::to_string(iterations) + " iterations, " + std::to_string(refinementSteps) +
+         " Newton steps)";
+}
+
+std::string LqrResult::json() const {
+  detail::ReportJson j = detail::statusJson(status);
+  j["nx"] = S.rows();
+  j["nu"] = K.rows();
+  j["residual"] = detail::toJson(residual);
+  j["iterations"] = iterations;
+  j["refinement_steps"] = refinementSteps;
+  const bool have = closedLoopEigenvalues.size() > 0;
+  j["max_real_closed_loop"] =
+      have ? detail::toJson(closedLoopEigenvalues.real().maxCoeff()) : detail::ReportJson(nullptr);
+  j["max_abs_closed_loop"] =
+      have ? detail::toJson(closedLoopEigenvalues.cwiseAbs().maxCoeff()) : detail::ReportJson(nullptr);
+  j["S"] = detail::toJson(S);
+  j["K"] = detail::toJson(K);
+  return j.dump();
 }
 
 namespace detail::are {
@@ -264,8 +279,8 @@ void diagnoseFailure(LqrResult& res, const Prepared& p, bool discrete, const Car
                      const std::string& fn, const std::string& why) {
   const auto st = stabilizabilityImpl(p.A, p.B, discrete, options.stabilizabilityTolerance);
   if (!st.stabilizable) {
-    res.status = LqrStatus::kNotStabilizable;
-    res.message = fn + ": " + st.message + " [" + why + "]";
+    res.status.code = LqrCode::kNotStabilizable;
+    res.status.message = fn + ": " + st.message + " [" + why + "]";
     return;
   }
   const Index n = p.A.rows();
@@ -312,7 +327,7 @@ void diagnoseFailure(LqrResult& res, const Prepared& p, bool discrete, const Car
   std::ostringstream msg;
   msg << fn << ": ";
   if (gap <= kBoundaryTolerance) {
-    res.status = LqrStatus::kNoStabilizingSolution;
+    res.status.code = LqrCode::kNoStabilizingSolution;
     msg << "no stabilizing solution: the " << (discrete ? "symplectic pencil" : "Hamiltonian")
         << " has the eigenvalue " << formatComplex(nearest)
         << (discrete ? " on the unit circle (||lambda| - 1|/max(|lambda|, 1) = "
@@ -321,7 +336,7 @@ void diagnoseFailure(LqrResult& res, const Prepared& p, bool discrete, const Car
         << "): a mode of A there is unobservable in Q (not detectable), or the cost is not "
            "definite enough [" << why << "]";
   } else if (gap <= relUnc) {
-    res.status = LqrStatus::kNoConvergence;
+    res.status.code = LqrCode::kNoConvergence;
     msg << "ill conditioned at working precision: the "
         << (discrete ? "symplectic pencil" : "Hamiltonian") << " eigenvalue nearest "
         << (discrete ? "the unit circle " : "the imaginary axis ") << formatComplex(nearest)
@@ -331,12 +346,12 @@ void diagnoseFailure(LqrResult& res, const Prepared& p, bool discrete, const Car
            "not mixed across scales may help (diagonal scalings are already undone) [" << why
         << "]";
   } else {
-    res.status = LqrStatus::kNoConvergence;
+    res.status.code = LqrCode::kNoConvergence;
     msg << why << " ((A, B) is stabilizable: least margin " << st.margin << "; eigenvalue nearest "
         << (discrete ? "the unit circle " : "the imaginary axis ") << formatComplex(nearest)
         << ", relative distance " << gap << ", rounding uncertainty " << relUnc << ")";
   }
-  res.message = msg.str();
+  res.status.message = msg.str();
 }
 
 /// K = E L⁻ᵀ Kv (whitened-input gain back to u), in extended precision.
@@ -374,11 +389,11 @@ void finish(LqrResult& res, const Prepared& p, const MatrixXd& A, const MatrixXd
         << (discrete ? "spectral radius of Ad - Bd K = " : "max Re eig(A - BK) = ") << worst;
     diagnoseFailure(res, p, discrete, options, fn, why.str());
   } else if (!(res.residual <= options.residualTolerance)) {
-    res.status = LqrStatus::kNoConvergence;
+    res.status.code = LqrCode::kNoConvergence;
     std::ostringstream m;
     m << fn << ": scale-invariant residual " << res.residual << " > " << options.residualTolerance
       << " (closed loop stable)";
-    res.message = m.str();
+    res.status.message = m.str();
   }
 }
 

@@ -1,6 +1,7 @@
 // controllability.cpp — rank and singular values of the (reduced) controllability matrix.
 #include "trellis/control/controllability.hpp"
 
+#include "trellis/core/detail/report_json.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/core/data.hpp"
 #include "trellis/core/linearization.hpp"
@@ -14,6 +15,40 @@
 #include <string>
 
 namespace trellis {
+
+std::string ControllabilityReport::describe() const {
+  return status.describe() + " (rank " + std::to_string(rank) + " of " + std::to_string(dimension) +
+         ", singular values " + formatStatusNumber(smallestSingularValue) + " .. " +
+         formatStatusNumber(largestSingularValue) + ")";
+}
+
+std::string ControllabilityReport::json() const {
+  detail::ReportJson j = detail::statusJson(status);
+  j["dimension"] = dimension;
+  j["rank"] = rank;
+  j["controllable"] = controllable();
+  j["smallest_singular_value"] = detail::toJson(smallestSingularValue);
+  j["largest_singular_value"] = detail::toJson(largestSingularValue);
+  j["scale"] = detail::toJson(scale);
+  j["singular_values"] = detail::toJson(singularValues);
+  return j.dump();
+}
+
+std::string GramianReport::describe() const {
+  return status.describe() + " (dimension " + std::to_string(dimension) + ", eigenvalues " +
+         formatStatusNumber(minEigenvalue) + " .. " + formatStatusNumber(maxEigenvalue) + ", " +
+         std::to_string(steps) + " steps)";
+}
+
+std::string GramianReport::json() const {
+  detail::ReportJson j = detail::statusJson(status);
+  j["dimension"] = dimension;
+  j["min_eigenvalue"] = ok() ? detail::toJson(minEigenvalue) : detail::ReportJson(nullptr);
+  j["max_eigenvalue"] = ok() ? detail::toJson(maxEigenvalue) : detail::ReportJson(nullptr);
+  j["steps"] = steps;
+  j["linearizations"] = linearizations;
+  return j.dump();
+}
 
 ControllabilityReport computeControllability(const Eigen::MatrixXd& A, const Eigen::MatrixXd& B,
                                              double relativeTolerance) {
@@ -48,9 +83,19 @@ ControllabilityReport computeControllability(const Eigen::MatrixXd& A, const Eig
 ControllabilityReport computeControllabilityAt(const Model& model, Data& data,
                                                const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
                                                const Eigen::VectorXd& u, double relativeTolerance) {
+  if (q.size() != model.nq() || dq.size() != model.nq() || u.size() != model.nu()) {
+    throw std::invalid_argument("computeControllabilityAt: q, dq must have " + std::to_string(model.nq()) +
+                                " entries and u " + std::to_string(model.nu()) + ", got " +
+                                std::to_string(q.size()) + ", " + std::to_string(dq.size()) + ", " +
+                                std::to_string(u.size()));
+  }
   const DynamicsStatus st = computeLinearization(model, data, q, dq, u);
   if (!st.ok()) {
-    throw std::runtime_error("computeControllabilityAt: linearization failed: " + st.message);
+    ControllabilityReport r;
+    r.dimension = 2 * model.nq();
+    r.status.set(ControllabilityCode::kLinearizationFailed,
+                 std::string("the linearization failed (") + st.name() + "): " + st.message);
+    return r;
   }
   computeConstraintTangentBasis(model, data);
   return computeControllability(data.reducedA, data.reducedB, relativeTolerance);
@@ -68,16 +113,13 @@ std::vector<ControllabilityReport> controllabilityAtKnots(const Model& model,
     const Eigen::VectorXd q = trajectory.states().col(k).head(n);
     const Eigen::VectorXd dq = trajectory.states().col(k).tail(n);
     const Eigen::VectorXd u = trajectory.inputs().col(k);
-    try {
-      reports.push_back(computeControllabilityAt(model, data, q, dq, u, relativeTolerance));
-    } catch (const std::runtime_error& e) {  // the dynamics failed at this knot
-      ControllabilityReport r;
-      r.ok = false;
+    ControllabilityReport r = computeControllabilityAt(model, data, q, dq, u, relativeTolerance);
+    if (!r.ok()) {
       std::ostringstream m;
-      m << "knot " << k + 1 << " (t = " << trajectory.times()(k) << "): " << e.what();
-      r.message = m.str();
-      reports.push_back(std::move(r));
+      m << "knot " << k + 1 << " (t = " << trajectory.times()(k) << "): " << r.status.message;
+      r.status.set(r.status.code, m.str(), trajectory.times()(k), k);
     }
+    reports.push_back(std::move(r));
   }
   return reports;
 }

@@ -136,8 +136,8 @@ GramianReport computeControllabilityGramian(const Model& model, const Trajectory
   const Eigen::Index d = basis.dimension();
   report.W.setZero(d, d);
   if (basis.validUntil() < t1) {
-    report.ok = false;
-    report.message = "Gramian: " + basis.message();
+    report.status.set(ControllabilityCode::kTransportFailure, "Gramian: " + basis.message(),
+                      basis.validUntil());
     return report;
   }
   GramianSystem system(model, basis);
@@ -155,8 +155,7 @@ GramianReport computeControllabilityGramian(const Model& model, const Trajectory
   report.linearizations = system.lin.evaluations();
   report.differenceQuotientEvaluations = stats.linearRhsEvaluations;
   if (!st.ok()) {
-    report.ok = false;
-    report.message = st.message;
+    report.status.set(ControllabilityCode::kIntegratorFailure, st.message, st.t);
     return report;
   }
   system.unpack(driver.state().data(), report.W);
@@ -164,7 +163,7 @@ GramianReport computeControllabilityGramian(const Model& model, const Trajectory
       Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(report.W, Eigen::EigenvaluesOnly).eigenvalues();
   report.minEigenvalue = ev(0);
   report.maxEigenvalue = ev(d - 1);
-  report.ok = true;
+  report.status = {};
   return report;
 }
 

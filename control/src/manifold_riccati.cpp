@@ -3,6 +3,7 @@
 #include "trellis/control/manifold_lqr.hpp"
 
 #include "reduced_problem.hpp"
+#include "trellis/core/detail/report_json.hpp"
 #include "trellis/core/trajectory.hpp"
 
 #include <memory>
@@ -11,9 +12,20 @@
 
 namespace trellis {
 
-const std::string& ManifoldRiccatiSolution::message() const {
-  if (!basis.ok()) return basis.message();
-  return reduced.message;
+std::string ManifoldRiccatiSolution::describe() const {
+  return status.describe() + " (tangent dimension " + std::to_string(dimension()) + " of " +
+         std::to_string(nx()) + "; reduced Riccati: " + reduced.describe() + ")";
+}
+
+std::string ManifoldRiccatiSolution::json() const {
+  detail::ReportJson j = detail::statusJson(status);
+  j["nx"] = nx();
+  j["tangent_dimension"] = dimension();
+  j["transport_steps"] = basis.steps();
+  j["max_basis_correction"] = detail::toJson(basis.maxCorrection());
+  j["linearizations"] = linearizations;
+  j["riccati"] = detail::ReportJson::parse(reduced.json());
+  return j.dump();
 }
 
 Eigen::MatrixXd ManifoldRiccatiSolution::K(double t) const {
@@ -38,26 +50,34 @@ ManifoldRiccatiSolution solveManifoldRiccati(const Model& model, const Trajector
 
   ManifoldRiccatiSolution sol;
   sol.basis = transportTangentBasis(model, reference, transport);
-  if (!sol.basis.ok()) return sol;
+  if (!sol.basis.ok()) {
+    sol.status.set(ManifoldRiccatiCode::kTransportFailure, sol.basis.message(), sol.basis.validUntil());
+    return sol;
+  }
 
   // The reduced problem's callbacks (and with them the model) live only for the solve:
   // solveRiccati's result keeps none of them (reduced_problem.hpp).
   const detail::ReducedProblem problem = detail::makeReducedProblem(model, sol.basis, weights);
   const int d = sol.basis.dimension();
   LqrWeights reducedWeights = problem.weights;
-  try {
-    reducedWeights.Qf = problem.reducedTerminal(weights.Qf, reference.endTime());
-  } catch (const std::exception& e) {
-    // The dynamics failed at tf: report it as a failed solve (nothing else can run).
-    sol.reduced.status = RiccatiStatus::kCallbackFailure;
-    sol.reduced.failureTime = reference.endTime();
-    sol.reduced.message = std::string("manifold Riccati: basis at tf failed: ") + e.what();
+  const ReferenceStatus terminal = problem.reducedTerminal(weights.Qf, reference.endTime(), reducedWeights.Qf);
+  if (!terminal.ok()) {
+    // The dynamics failed at tf: nothing else can run.
+    sol.status.set(ManifoldRiccatiCode::kTerminalFailure,
+                   "manifold Riccati: the reduced linearization at tf failed: " + terminal.message,
+                   reference.endTime());
     return sol;
   }
 
   sol.reduced = solveRiccati(reference.startTime(), reference.endTime(), d, nu, problem.linearization,
                              reducedWeights, options);
   sol.linearizations = problem.evaluator->evaluations();
+  if (sol.reduced.ok()) {
+    sol.status = {};
+  } else {
+    sol.status.set(ManifoldRiccatiCode::kRiccatiFailure, sol.reduced.status.describe(),
+                   sol.reduced.status.t);
+  }
   return sol;
 }
 

@@ -6,13 +6,14 @@
 
 namespace trellis::detail {
 
-Eigen::MatrixXd ReducedProblem::reducedTerminal(const Eigen::MatrixXd& Qf, double t) const {
-  // Callers report a throw as a failed solve (the callback contract of solveRiccati).
+ReferenceStatus ReducedProblem::reducedTerminal(const Eigen::MatrixXd& Qf, double t,
+                                                Eigen::MatrixXd& Qfr) const {
   const ReferenceStatus st = evaluator->evaluate(t);
-  if (!st.ok()) throw std::runtime_error(st.message);
+  if (!st.ok()) return st;
   const Eigen::MatrixXd& T = evaluator->T();
   const Eigen::MatrixXd Qr = T.transpose() * Qf * T;
-  return 0.5 * (Qr + Qr.transpose());
+  Qfr = 0.5 * (Qr + Qr.transpose());
+  return st;
 }
 
 ReducedProblem makeReducedProblem(const Model& model, const TangentBasisTrajectory& basis,
@@ -21,10 +22,12 @@ ReducedProblem makeReducedProblem(const Model& model, const TangentBasisTrajecto
   p.evaluator = std::make_shared<ReducedLinearization>(model, basis);
   const std::shared_ptr<ReducedLinearization> lin = p.evaluator;
   p.linearization = [lin](double t, Eigen::MatrixXd& A, Eigen::MatrixXd& B) {
-    const ReferenceStatus st = lin->evaluate(t);
-    if (!st.ok()) throw std::runtime_error(st.message);  // kCallbackFailure, the message kept
-    A = lin->Ar();
-    B = lin->Br();
+    const ReferenceStatus st = lin->evaluate(t);  // a failure: the solver's kCallbackFailure
+    if (st.ok()) {
+      A = lin->Ar();
+      B = lin->Br();
+    }
+    return st;
   };
   p.weights.R = weights.R;
   p.weights.Rfun = weights.Rfun;
@@ -34,8 +37,10 @@ ReducedProblem makeReducedProblem(const Model& model, const TangentBasisTrajecto
   };
   auto scratch = std::make_shared<Scratch>();
   p.weights.Qfun = [lin, scratch, Qconst = weights.Q, Qfull = weights.Qfun, nx](double t, Eigen::MatrixXd& Qr) {
-    const ReferenceStatus st = lin->evaluate(t);  // cached on t: no extra dynamics
-    if (!st.ok()) throw std::runtime_error(st.message);
+    // The solvers ask for Q(t) only after the linearization at the same t succeeded: cached on
+    // t, no extra dynamics, and a failure here is a broken solver contract, not a numerical one.
+    const ReferenceStatus st = lin->evaluate(t);
+    if (!st.ok()) throw std::logic_error("reduced Q(t) requested where the linearization failed: " + st.message);
     const Eigen::MatrixXd& T = lin->T();
     if (Qfull) {
       scratch->Q.setZero(nx, nx);

@@ -17,8 +17,9 @@ struct ReducedProblem {
   LinearizationCallback linearization;  ///< (Ar, Br) at t
   LqrWeights weights;                   ///< Qfun = TᵀQT (exactly symmetric), R / Rfun as given; no Qf
   std::shared_ptr<ReducedLinearization> evaluator;  ///< the callbacks' evaluator (T(t), counts)
-  /// Tᵀ Qf T at t (symmetrized), from the evaluator. Throws what the basis throws.
-  Eigen::MatrixXd reducedTerminal(const Eigen::MatrixXd& Qf, double t) const;
+  /// Qfr = Tᵀ Qf T at t (symmetrized), from the evaluator; a failure of the reduced linearization
+  /// at t is the returned status (Qfr then untouched).
+  ReferenceStatus reducedTerminal(const Eigen::MatrixXd& Qf, double t, Eigen::MatrixXd& Qfr) const;
 };
 
 /// `weights` in the full state (Q, Qfun nx×nx); the model must outlive the returned callbacks.

@@ -201,13 +201,13 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
     return true;
   };
   auto gainFailure = [&](double t) {
-    sol.status = RiccatiStatus::kCallbackFailure;
-    sol.failureTime = t;
-    sol.message = "Riccati solve stopped: " + system.failMessage;
+    sol.status.code = RiccatiCode::kCallbackFailure;
+    sol.status.t = t;
+    sol.status.message = "Riccati solve stopped: " + system.failMessage;
   };
   if (!storeGain(T)) {
     gainFailure(T);
-    sol.message = "Riccati solve: " + system.failMessage;
+    sol.status.message = "Riccati solve: " + system.failMessage;
     return sol;
   }
 
@@ -217,28 +217,28 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
   while (tau < tauEnd) {
     // The step budget is over the whole horizon (both drivers of a switched solve).
     if (++taken > options.maxSteps) {
-      sol.status = RiccatiStatus::kIntegratorFailure;
-      sol.failureTime = T - tau;
+      sol.status.code = RiccatiCode::kIntegratorFailure;
+      sol.status.t = T - tau;
       sol.failureNorm = lastNorm;
       std::ostringstream m;
-      m << "Riccati solve stopped at t = " << sol.failureTime << " (max |S_ij| = " << lastNorm
+      m << "Riccati solve stopped at t = " << sol.status.t << " (max |S_ij| = " << lastNorm
         << "): more than maxSteps = " << options.maxSteps << " steps (too much work)";
-      sol.message = m.str();
+      sol.status.message = m.str();
       break;
     }
     const detail::OdeStatus st = driver->step(tauEnd);
     if (!st.ok()) {
       // A failed callback names its own time (a trial point inside the step that failed);
       // otherwise the integrator's current time, the last point it reached.
-      sol.failureTime = system.failed ? system.failTime : T - st.t;
+      sol.status.t = system.failed ? system.failTime : T - st.t;
       sol.failureNorm = lastNorm;
-      sol.status = system.failed ? system.failStatus : RiccatiStatus::kIntegratorFailure;
+      sol.status.code = system.failed ? system.failStatus : RiccatiCode::kIntegratorFailure;
       std::ostringstream m;
-      m << "Riccati solve stopped at t = " << sol.failureTime << " (max |S_ij| = " << lastNorm
+      m << "Riccati solve stopped at t = " << sol.status.t << " (max |S_ij| = " << lastNorm
         << " at the last accepted step): ";
       if (system.failed) m << system.failMessage << "; ";
       m << st.message;
-      sol.message = m.str();
+      sol.status.message = m.str();
       break;
     }
     tau = st.t;
@@ -253,13 +253,13 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
     const double* y = driver->state().data();
     const double norm = normOf(y);
     if (!std::isfinite(norm) || !D.allFinite()) {
-      sol.status = RiccatiStatus::kNonFinite;
-      sol.failureTime = T - tau;
+      sol.status.code = RiccatiCode::kNonFinite;
+      sol.status.t = T - tau;
       sol.failureNorm = lastNorm;
       std::ostringstream m;
-      m << "S became non-finite at t = " << sol.failureTime << " (max |S_ij| = " << lastNorm
+      m << "S became non-finite at t = " << sol.status.t << " (max |S_ij| = " << lastNorm
         << " at the previous step)";
-      sol.message = m.str();
+      sol.status.message = m.str();
       break;
     }
     const double tauPrev = sol.steps_.back();
@@ -277,13 +277,13 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
     store(tau, std::move(D));
     inspect(y, T - tau);
     if (norm > options.maxNorm) {
-      sol.status = RiccatiStatus::kBlowUp;
-      sol.failureTime = T - tau;
+      sol.status.code = RiccatiCode::kBlowUp;
+      sol.status.t = T - tau;
       sol.failureNorm = norm;
       std::ostringstream m;
-      m << "S blew up at t = " << sol.failureTime << ": max |S_ij| = " << norm
+      m << "S blew up at t = " << sol.status.t << ": max |S_ij| = " << norm
         << " > maxNorm = " << options.maxNorm;
-      sol.message = m.str();
+      sol.status.message = m.str();
       break;
     }
     lastNorm = norm;
@@ -332,15 +332,15 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
   sol.linearizations = system.linearizations();
   if (!options.trackEigenvalues) sol.minEigenvalue = sol.maxEigenvalue = 0.0;
   if (sol.ok() && indefinite) {
-    sol.status = RiccatiStatus::kIndefinite;
-    sol.failureTime = worstTime;
+    sol.status.code = RiccatiCode::kIndefinite;
+    sol.status.t = worstTime;
     sol.indefiniteRatio = worstRatio;
     std::ostringstream m;
     m << "S is indefinite at t = " << worstTime << ": smallest/largest eigenvalue = "
       << worstRatio << " < -" << psdEps << " (the slack psdSlack*nx*rtol = " << options.psdSlack
       << "*" << nx << "*" << options.rtol
       << "); the tolerances are too loose for this problem or Q(t) is indefinite";
-    sol.message = m.str();
+    sol.status.message = m.str();
   }
   std::reverse(sol.gainTimes_.begin(), sol.gainTimes_.end());
   std::reverse(sol.gainNodes_.begin(), sol.gainNodes_.end());

@@ -13,38 +13,12 @@
 
 namespace trellis {
 
-namespace {
-constexpr detail::EnumName<RiccatiStatus> kStatuses[] = {
-    {RiccatiStatus::kOk, "ok"},
-    {RiccatiStatus::kIntegratorFailure, "integrator failure"},
-    {RiccatiStatus::kNonFinite, "non-finite"},
-    {RiccatiStatus::kBlowUp, "blow-up"},
-    {RiccatiStatus::kCallbackFailure, "callback failure"},
-    {RiccatiStatus::kIndefinite, "S indefinite"},
-};
-constexpr detail::EnumName<RiccatiMethod> kMethods[] = {
-    {RiccatiMethod::kBDF, "bdf"},
-    {RiccatiMethod::kAdams, "adams"},
-    {RiccatiMethod::kFactored, "factored"},
-};
-constexpr detail::EnumName<RiccatiLinearSolver> kLinearSolvers[] = {
-    {RiccatiLinearSolver::kAuto, "auto"},
-    {RiccatiLinearSolver::kDense, "dense"},
-    {RiccatiLinearSolver::kKrylov, "krylov"},
-    {RiccatiLinearSolver::kLyapunov, "lyapunov"},
-};
-}  // namespace
-
-const char* toString(RiccatiStatus status) { return detail::nameOf(kStatuses, status); }
-
-const char* toString(RiccatiMethod method) { return detail::nameOf(kMethods, method); }
-
-RiccatiMethod parseRiccatiMethod(const std::string& text) { return detail::parseName(kMethods, text); }
-
-const char* toString(RiccatiLinearSolver solver) { return detail::nameOf(kLinearSolvers, solver); }
+RiccatiMethod parseRiccatiMethod(const std::string& text) {
+  return parseEnum<RiccatiMethod>(text, "Riccati method");
+}
 
 RiccatiLinearSolver parseRiccatiLinearSolver(const std::string& text) {
-  return detail::parseName(kLinearSolvers, text);
+  return parseEnum<RiccatiLinearSolver>(text, "Riccati linear solver");
 }
 
 void RiccatiOptions::validate() const {

@@ -1,6 +1,7 @@
 // riccati_solution.cpp — S(t) and K(t) from the stored steps of a Riccati solve.
 #include "riccati_packing.hpp"
 #include "trellis/control/riccati.hpp"
+#include "trellis/core/detail/report_json.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -8,6 +9,33 @@
 #include <stdexcept>
 
 namespace trellis {
+
+std::string RiccatiSolution::describe() const {
+  return status.describe() + " (" + std::to_string(steps) + " steps, " +
+         std::to_string(rhsEvaluations) + " right-hand sides, S eigenvalues in [" +
+         formatStatusNumber(minEigenvalue) + ", " + formatStatusNumber(maxEigenvalue) + "])";
+}
+
+std::string RiccatiSolution::json() const {
+  detail::ReportJson j = detail::statusJson(status);
+  j["nx"] = nx_;
+  j["nu"] = nu_;
+  j["t0"] = detail::toJson(t0_);
+  j["t1"] = detail::toJson(tf_);
+  j["valid_from"] = detail::toJson(validFrom());
+  j["steps"] = steps;
+  j["rhs_evaluations"] = rhsEvaluations;
+  j["jacobian_evaluations"] = jacobianEvaluations;
+  j["linear_iterations"] = linearIterations;
+  j["newton_iterations"] = newtonIterations;
+  j["linearizations"] = linearizations;
+  j["failure_norm"] = detail::toJson(failureNorm);
+  j["indefinite_ratio"] = detail::toJson(indefiniteRatio);
+  j["switched_to_plain_at"] = detail::toJson(switchedToPlainAt);
+  j["min_eigenvalue_S"] = detail::toJson(minEigenvalue);
+  j["max_eigenvalue_S"] = detail::toJson(maxEigenvalue);
+  return j.dump();
+}
 
 double RiccatiSolution::validFrom() const {
   return steps_.empty() ? tf_ : tf_ - steps_.back();

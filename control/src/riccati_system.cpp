@@ -25,7 +25,7 @@ RiccatiSystem::RiccatiSystem(int nx, int nu, double T, const LinearizationCallba
   }
 }
 
-void RiccatiSystem::fail(RiccatiStatus status, double t, const std::string& message) {
+void RiccatiSystem::fail(RiccatiCode status, double t, const std::string& message) {
   if (!failed) {
     failed = true;
     failTime = t;
@@ -45,16 +45,22 @@ bool RiccatiSystem::checkSize(const M& X, Eigen::Index r, Eigen::Index c, const 
   } else {
     m << name << "(t) has a non-finite entry at t = " << t;
   }
-  fail(RiccatiStatus::kCallbackFailure, t, m.str());
+  fail(RiccatiCode::kCallbackFailure, t, m.str());
   return false;
 }
 
 bool RiccatiSystem::coefficientsAt(double t) {
   if (cacheValid_ && t == cachedT_) return true;
   cacheValid_ = false;
+  // A user's callback may throw: caught here, at the integrator's C boundary (the library's own
+  // callbacks return their failure as the status).
   try {
-    lin_(t, A_, B_);
+    const ReferenceStatus st = lin_(t, A_, B_);
     ++linearizations_;
+    if (!st.ok()) {
+      fail(RiccatiCode::kCallbackFailure, t, st.message);
+      return false;
+    }
     if (!checkSize(A_, nx_, nx_, "A", t) || !checkSize(B_, nx_, nu_, "B", t)) return false;
     if (w_.Qfun) {
       w_.Qfun(t, Q_);
@@ -68,18 +74,18 @@ bool RiccatiSystem::coefficientsAt(double t) {
     if (Rllt_.info() != Eigen::Success) {
       std::ostringstream m;
       m << "R(t) is not positive definite at t = " << t;
-      fail(RiccatiStatus::kCallbackFailure, t, m.str());
+      fail(RiccatiCode::kCallbackFailure, t, m.str());
       return false;
     }
   } catch (const std::exception& e) {
     std::ostringstream m;
     m << "callback threw at t = " << t << ": " << e.what();
-    fail(RiccatiStatus::kCallbackFailure, t, m.str());
+    fail(RiccatiCode::kCallbackFailure, t, m.str());
     return false;
   } catch (...) {
     std::ostringstream m;
     m << "callback threw an unknown exception at t = " << t;
-    fail(RiccatiStatus::kCallbackFailure, t, m.str());
+    fail(RiccatiCode::kCallbackFailure, t, m.str());
     return false;
   }
   // Mechanical structure (x = [q; v], q̇ = v, inputs act on v̇): A = [0 I; Aq Av], B = [0; Bv]
@@ -117,7 +123,7 @@ bool RiccatiSystem::evaluate(double tau, const double* y) {
   if (!S_.allFinite()) {
     std::ostringstream m;
     m << "S became non-finite at t = " << t;
-    fail(RiccatiStatus::kNonFinite, t, m.str());
+    fail(RiccatiCode::kNonFinite, t, m.str());
     return false;
   }
   if (mechanical_) {  // K = G_v S_v (the v columns of G, the v rows of S)

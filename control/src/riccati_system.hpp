@@ -60,13 +60,13 @@ class RiccatiSystem final : public OdeSystem {
 
   bool failed = false;
   double failTime = 0.0;
-  RiccatiStatus failStatus = RiccatiStatus::kCallbackFailure;
+  RiccatiCode failStatus = RiccatiCode::kCallbackFailure;
   std::string failMessage;
 
  private:
   bool evaluate(double tau, const double* y);  // coefficients, S (from y) and K = G S
   void closedLoop();                           // A_cl = A − B K
-  void fail(RiccatiStatus status, double t, const std::string& message);
+  void fail(RiccatiCode status, double t, const std::string& message);
   template <class M>
   bool checkSize(const M& X, Eigen::Index r, Eigen::Index c, const char* name, double t);
 

@@ -18,11 +18,13 @@ LinearizationCallback makeTrajectoryLinearization(const Model& model, const Traj
   checks.caller = "makeTrajectoryLinearization";
   auto reference = std::make_shared<ReferenceEvaluator>(model, trajectory, checks);
   return [reference](double t, Eigen::MatrixXd& A, Eigen::MatrixXd& B) {
-    // The Riccati solver's callback contract: a failure is thrown and reported as kCallbackFailure.
+    // The Riccati solver's callback contract: a failure is the returned status (kCallbackFailure).
     const ReferenceStatus status = reference->linearize(t);
-    if (!status.ok()) throw std::runtime_error(status.message);
-    A = reference->A();
-    B = reference->B();
+    if (status.ok()) {
+      A = reference->A();
+      B = reference->B();
+    }
+    return status;
   };
 }
 

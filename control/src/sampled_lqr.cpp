@@ -4,6 +4,7 @@
 #include "trellis/control/sampled_lqr.hpp"
 
 #include "trellis/analysis/detail/ode_driver.hpp"
+#include "trellis/core/detail/report_json.hpp"
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
@@ -86,9 +87,15 @@ class Discretizer final : public detail::LinearOdeSystem {
   bool evaluate(double t) {
     if (cacheValid && t == cachedT) return true;
     cacheValid = false;
+    // A user's callback may throw: caught here, at the integrator's C boundary (the library's
+    // own callbacks return their failure as the status).
     try {
-      lin(t, A, B);
+      const ReferenceStatus st = lin(t, A, B);
       ++linearizations;
+      if (!st.ok()) {
+        fail(t, st.message);
+        return false;
+      }
       if (A.rows() != nx || A.cols() != nx || B.rows() != nx || B.cols() != nu) {
         std::ostringstream m;
         m << "linearization callback returned A " << A.rows() << "x" << A.cols() << ", B " << B.rows()
@@ -171,6 +178,30 @@ class Discretizer final : public detail::LinearOdeSystem {
 
 }  // namespace
 
+std::string SampledDiscretization::describe() const {
+  return status.describe() + " (" + std::to_string(intervals.size()) + " intervals, " +
+         std::to_string(steps) + " steps, " + std::to_string(linearizations) + " linearizations)";
+}
+
+std::string SampledDiscretization::json() const {
+  detail::ReportJson j = detail::statusJson(status);
+  j["intervals"] = intervals.size();
+  j["steps"] = steps;
+  j["rhs_evaluations"] = rhsEvaluations;
+  j["linearizations"] = linearizations;
+  return j.dump();
+}
+
+std::string SampledRiccatiRecursion::describe() const {
+  return status.describe() + " (" + std::to_string(K.size()) + " steps)";
+}
+
+std::string SampledRiccatiRecursion::json() const {
+  detail::ReportJson j = detail::statusJson(status);
+  j["steps"] = K.size();
+  return j.dump();
+}
+
 SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx, int nu,
                                             const LinearizationCallback& linearization,
                                             const LqrWeights& weights,
@@ -223,14 +254,14 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
     driver.setQuadratureTolerances(options.rtol, options.atol * (b - a) * costScale);
     const detail::OdeStatus st = driver.advanceTo(b);
     if (!st.ok()) {
-      out.ok = false;
-      out.failureTime = s.failed ? s.failTime : st.t;
+      const double at = s.failed ? s.failTime : st.t;
       std::ostringstream m;
       m << "sampled-data discretization stopped in interval " << k << " [" << a << ", " << b
-        << "] at t = " << out.failureTime << ": ";
+        << "] at t = " << at << ": ";
       if (s.failed) m << s.failMessage << "; ";
       m << st.message;
-      out.message = m.str();
+      out.status.set(s.failed ? SampledCode::kCallbackFailure : SampledCode::kIntegratorFailure,
+                     m.str(), at, static_cast<long>(k));
       break;
     }
     driver.quadrature(wq);
@@ -246,10 +277,10 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
     iv.N = Ws.topRightCorner(nx, nu);
     iv.R = Ws.bottomRightCorner(nu, nu);
     if (!iv.Phi.allFinite() || !iv.Gamma.allFinite() || !Ws.allFinite()) {
-      out.ok = false;
-      out.failureTime = b;
-      out.message = "sampled-data discretization: non-finite Phi, Gamma or cost in interval " +
-                    std::to_string(k) + " ending at t = " + std::to_string(b);
+      out.status.set(SampledCode::kNonFinite,
+                     "sampled-data discretization: non-finite Phi, Gamma or cost in interval " +
+                         std::to_string(k) + " ending at t = " + std::to_string(b),
+                     b, static_cast<long>(k));
       break;
     }
     out.intervals.push_back(std::move(iv));
@@ -290,11 +321,10 @@ SampledRiccatiRecursion solveSampledRiccatiRecursion(const std::vector<SampledIn
     H.noalias() += iv.Gamma.transpose() * SPhi;
     llt.compute(0.5 * (G + G.transpose()));
     if (llt.info() != Eigen::Success) {
-      rec.ok = false;
       std::ostringstream m;
       m << "sampled Riccati recursion: R_k + Gamma_k^T S_{k+1} Gamma_k is not positive definite at step " << k
         << " (t = " << iv.t0 << ")";
-      rec.message = m.str();
+      rec.status.set(SampledCode::kNotPositiveDefinite, m.str(), iv.t0, static_cast<long>(k));
       return rec;
     }
     rec.K[k] = llt.solve(H);
@@ -303,10 +333,9 @@ SampledRiccatiRecursion solveSampledRiccatiRecursion(const std::vector<SampledIn
     Sk.noalias() -= H.transpose() * rec.K[k];
     rec.S[k] = 0.5 * (Sk + Sk.transpose());
     if (!rec.S[k].allFinite() || !rec.K[k].allFinite()) {
-      rec.ok = false;
       std::ostringstream m;
       m << "sampled Riccati recursion: S or K became non-finite at step " << k << " (t = " << iv.t0 << ")";
-      rec.message = m.str();
+      rec.status.set(SampledCode::kNonFinite, m.str(), iv.t0, static_cast<long>(k));
       return rec;
     }
   }

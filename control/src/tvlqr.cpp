@@ -4,6 +4,8 @@
 
 #include "reduced_problem.hpp"
 
+#include "trellis/core/detail/report_json.hpp"
+
 #include "trellis/core/reference.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/core/model.hpp"
@@ -36,35 +38,6 @@ void TvlqrOptions::validate() const {
   transport.validate();
 }
 
-std::string jsonString(const std::string& text) {
-  std::string out = "\"";
-  for (const char c : text) {
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\t': out += "\\t"; break;
-      case '\r': out += "\\r"; break;
-      default:
-        if (static_cast<unsigned char>(c) < 0x20) {
-          char buf[8];
-          std::snprintf(buf, sizeof buf, "\\u%04x", static_cast<unsigned>(static_cast<unsigned char>(c)));
-          out += buf;
-        } else {
-          out += c;
-        }
-    }
-  }
-  return out + "\"";
-}
-
-std::string jsonNumber(double value) {
-  if (!std::isfinite(value)) return "null";
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.17g", value);
-  return buf;
-}
-
 namespace {
 
 std::string fmt(double v, int digits = 6) {
@@ -92,8 +65,8 @@ Eigen::VectorXd outputGrid(const Trajectory& reference, double step) {
 
 std::string TvlqrSolution::summary() const {
   std::ostringstream o;
-  if (!ok) {
-    o << "tvlqr: FAILED: " << message << "\n";
+  if (!ok()) {
+    o << "tvlqr: FAILED: " << status.describe() << "\n";
     return o.str();
   }
   const int rows = gains.size();
@@ -118,21 +91,35 @@ std::string TvlqrSolution::summary() const {
   return o.str();
 }
 
+std::string TvlqrSolution::describe() const {
+  std::string line = status.describe() + " (" + (sampleRate > 0.0 ? "sampled at " + fmt(sampleRate) + " Hz" : std::string("continuous"));
+  line += constrained ? ", on the constraint manifold" : ", full state";
+  line += ", " + std::to_string(gains.size()) + " rows of K, " + std::to_string(steps) + " steps, " + fmt(seconds, 3) + " s)";
+  return line;
+}
+
 std::string TvlqrSolution::json() const {
-  std::ostringstream o;
   const bool have = gains.size() > 0;
-  o << "{\"ok\": " << (ok ? "true" : "false") << ", \"message\": " << jsonString(message)
-    << ", \"mode\": " << jsonString(sampleRate > 0.0 ? "sampled" : "continuous")
-    << ", \"sample_rate_hz\": " << jsonNumber(sampleRate) << ", \"constrained\": " << (constrained ? "true" : "false")
-    << ", \"nx\": " << nx << ", \"nu\": " << nu << ", \"tangent_dimension\": " << dimension
-    << ", \"rows\": " << gains.size() << ", \"t0\": " << (have ? jsonNumber(gains.startTime()) : "null")
-    << ", \"t1\": " << (have ? jsonNumber(gains.endTime()) : "null") << ", \"seconds\": " << jsonNumber(seconds)
-    << ", \"steps\": " << steps << ", \"rhs_evaluations\": " << rhsEvaluations
-    << ", \"linearizations\": " << linearizations << ", \"transport_steps\": " << transportSteps
-    << ", \"max_basis_correction\": " << jsonNumber(maxBasisCorrection)
-    << ", \"min_eigenvalue_S\": " << jsonNumber(minEigenvalueS)
-    << ", \"max_eigenvalue_S\": " << jsonNumber(maxEigenvalueS) << ", \"method\": " << jsonString(method) << "}";
-  return o.str();
+  detail::ReportJson j = detail::statusJson(status);
+  j["mode"] = sampleRate > 0.0 ? "sampled" : "continuous";
+  j["sample_rate_hz"] = detail::toJson(sampleRate);
+  j["constrained"] = constrained;
+  j["nx"] = nx;
+  j["nu"] = nu;
+  j["tangent_dimension"] = dimension;
+  j["rows"] = gains.size();
+  j["t0"] = have ? detail::toJson(gains.startTime()) : detail::ReportJson(nullptr);
+  j["t1"] = have ? detail::toJson(gains.endTime()) : detail::ReportJson(nullptr);
+  j["seconds"] = detail::toJson(seconds);
+  j["steps"] = steps;
+  j["rhs_evaluations"] = rhsEvaluations;
+  j["linearizations"] = linearizations;
+  j["transport_steps"] = transportSteps;
+  j["max_basis_correction"] = detail::toJson(maxBasisCorrection);
+  j["min_eigenvalue_S"] = detail::toJson(minEigenvalueS);
+  j["max_eigenvalue_S"] = detail::toJson(maxEigenvalueS);
+  j["method"] = method;
+  return j.dump();
 }
 
 TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrWeights& weights,
@@ -160,8 +147,18 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
     sol.gains = GainSchedule(std::move(times), std::move(K));
     sol.gains.setColumnNames(model.inputNames(), stateNames);
     sol.gains.setSampleRate(options.sampleRate);
-    sol.ok = true;
     sol.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    // S is a sum of positive semidefinite terms: a clearly negative eigenvalue means the
+    // integration did not resolve the Riccati equation (not a result to hand out as ok).
+    if (!isSemidefiniteToRoundoff(sol.minEigenvalueS, sol.maxEigenvalueS)) {
+      std::ostringstream m;
+      m << (sol.constrained ? "Sr" : "S") << " is indefinite beyond round-off: smallest eigenvalue "
+        << fmt(sol.minEigenvalueS, 17) << ", largest " << fmt(sol.maxEigenvalueS, 17)
+        << " (the integration did not resolve the Riccati equation; tighten rtol/atol)";
+      sol.status.set(TvlqrCode::kIndefinite, m.str());
+      return;
+    }
+    sol.status = {};
   };
 
   if (options.sampleRate == 0.0) {
@@ -178,14 +175,18 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
       sol.dimension = onManifold->dimension();
       riccati = &onManifold->reduced;
       if (!onManifold->ok()) {
-        sol.message = "the Riccati solve failed: " + onManifold->message();
+        sol.status.set(onManifold->status.code == ManifoldRiccatiCode::kTransportFailure
+                           ? TvlqrCode::kTransportFailure
+                           : TvlqrCode::kRiccatiFailure,
+                       "the Riccati solve failed: " + onManifold->status.describe(), onManifold->status.t);
         return sol;
       }
     } else {
       fullState = solveRiccati(model, reference, weights, options.riccati);
       riccati = &*fullState;
       if (!fullState->ok()) {
-        sol.message = "the Riccati solve failed: " + fullState->message;
+        sol.status.set(TvlqrCode::kRiccatiFailure, "the Riccati solve failed: " + fullState->status.describe(),
+                       fullState->status.t);
         return sol;
       }
     }
@@ -193,21 +194,17 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
     sol.rhsEvaluations = riccati->rhsEvaluations;
     sol.minEigenvalueS = riccati->minEigenvalue;
     sol.maxEigenvalueS = riccati->maxEigenvalue;
-    try {
-      for (Eigen::Index k = 0; k < times.size(); ++k) {
-        const double t = times(k);
-        K.push_back(sol.constrained ? onManifold->K(t) : fullState->K(t));
-        sol.S.push_back(sol.constrained ? onManifold->S(t) : fullState->S(t));
-        if (!K.back().allFinite() || !sol.S.back().allFinite()) {
-          sol.message = "the gain K(t) or S(t) is not finite at t = " + fmt(t, 17);
-          sol.S.clear();
-          return sol;
-        }
+    // The grid lies inside [t0, T], where an ok solution has S and K: no query can fail.
+    for (Eigen::Index k = 0; k < times.size(); ++k) {
+      const double t = times(k);
+      K.push_back(sol.constrained ? onManifold->K(t) : fullState->K(t));
+      sol.S.push_back(sol.constrained ? onManifold->S(t) : fullState->S(t));
+      if (!K.back().allFinite() || !sol.S.back().allFinite()) {
+        sol.status.set(TvlqrCode::kNonFinite, "the gain K(t) or S(t) is not finite at t = " + fmt(t, 17), t,
+                       static_cast<long>(k));
+        sol.S.clear();
+        return sol;
       }
-    } catch (const std::exception& e) {
-      sol.message = std::string("evaluating the gains failed: ") + e.what();
-      sol.S.clear();
-      return sol;
     }
     if (sol.constrained) sol.maxBasisCorrection = onManifold->basis.maxCorrection();
     finish(times, std::move(K));
@@ -219,7 +216,8 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
   const TangentBasisTrajectory basis = transportTangentBasis(model, reference, options.transport);
   sol.transportSteps = basis.steps();
   if (!basis.ok()) {
-    sol.message = "the tangent basis transport failed: " + basis.message();
+    sol.status.set(TvlqrCode::kTransportFailure, "the tangent basis transport failed: " + basis.message(),
+                   basis.validUntil());
     return sol;
   }
   const int d = basis.dimension();
@@ -230,21 +228,17 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
   sol.steps = disc.steps;
   sol.rhsEvaluations = disc.rhsEvaluations;
   sol.linearizations = disc.linearizations;
-  if (!disc.ok) {
-    sol.message = disc.message;
+  if (!disc.ok()) {
+    sol.status.set(TvlqrCode::kDiscretizationFailure, disc.status.describe(), disc.status.t, disc.status.index);
     return sol;
   }
+  // The sample times lie inside the basis's range (the transport covered the horizon).
   std::vector<Eigen::MatrixXd> Tk;
-  try {
-    for (Eigen::Index k = 0; k < times.size(); ++k) Tk.push_back(basis.basis(times(k)));
-  } catch (const std::exception& e) {
-    sol.message = std::string("the tangent basis failed: ") + e.what();
-    return sol;
-  }
+  for (Eigen::Index k = 0; k < times.size(); ++k) Tk.push_back(basis.basis(times(k)));
   const Eigen::MatrixXd Qfr = Tk.back().transpose() * weights.Qf * Tk.back();
   const SampledRiccatiRecursion rec = solveSampledRiccatiRecursion(disc.intervals, 0.5 * (Qfr + Qfr.transpose()));
-  if (!rec.ok) {
-    sol.message = rec.message;
+  if (!rec.ok()) {
+    sol.status.set(TvlqrCode::kRecursionFailure, rec.status.describe(), rec.status.t, rec.status.index);
     return sol;
   }
   const std::size_t N = disc.intervals.size();

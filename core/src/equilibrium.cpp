@@ -16,17 +16,15 @@
 namespace trellis {
 
 std::string EquilibriumResult::describe() const {
-  Status<EquilibriumStatus> s;
-  s.set(status, message);
+  const Status<EquilibriumCode>& s = status;
   return s.describe() + " (" + std::to_string(iterations) + " iterations, |qdd| " +
          formatStatusNumber(accelerationResidual) + ", |h| " + formatStatusNumber(constraintResidual) +
-         ", rank " + std::to_string(jacobianRank) + (isolated ? "" : ", not isolated") +
+         ", relative " + formatStatusNumber(relativeResidual) + ", rank " + std::to_string(jacobianRank) + (isolated ? "" : ", not isolated") +
          ", max Re(eig) " + formatStatusNumber(maxRealEigenvalue) + ")";
 }
 
 std::string EquilibriumResult::json() const {
-  Status<EquilibriumStatus> s;
-  s.set(status, message);
+  const Status<EquilibriumCode>& s = status;
   detail::ReportJson j = detail::statusJson(s);
   j["iterations"] = iterations;
   j["qdd_residual"] = detail::toJson(accelerationResidual);
@@ -99,8 +97,8 @@ EquilibriumResult findEquilibrium(const Model& model, Data& data, const Eigen::V
     return r.relativeResidual <= options.tolerance;
   };
   const auto dynamicsFailure = [&](const char* where) {
-    r.status = EquilibriumStatus::kDynamicsFailure;
-    r.message = std::string("the dynamics cannot be solved ") + where + ": " +
+    r.status.code = EquilibriumCode::kDynamicsFailure;
+    r.status.message = std::string("the dynamics cannot be solved ") + where + ": " +
                 (dyn.message.empty() ? "status " + std::to_string(static_cast<int>(dyn.code)) : dyn.message);
   };
 
@@ -114,12 +112,12 @@ EquilibriumResult findEquilibrium(const Model& model, Data& data, const Eigen::V
     r.jacobianRank = static_cast<int>(cod.rank());
     if (converged()) break;
     if (k == options.maxIterations) {
-      r.status = EquilibriumStatus::kNotConverged;
+      r.status.code = EquilibriumCode::kNotConverged;
       std::ostringstream m;
       m << "no equilibrium within " << k << " Newton iterations: |q''|inf = " << r.accelerationResidual
         << ", |h|inf = " << r.constraintResidual << ", relative residual " << r.relativeResidual
         << " > tolerance " << options.tolerance << " (rank of dF/dq " << r.jacobianRank << " of " << n << ")";
-      r.message = m.str();
+      r.status.message = m.str();
       break;
     }
     const Eigen::VectorXd step = -cod.solve(F);
@@ -137,13 +135,13 @@ EquilibriumResult findEquilibrium(const Model& model, Data& data, const Eigen::V
     if (!accepted) {
       evaluate(qk, true);
       converged();
-      r.status = EquilibriumStatus::kNotConverged;
+      r.status.code = EquilibriumCode::kNotConverged;
       std::ostringstream m;
       m << "the Newton step does not reduce |F| at iteration " << k + 1
         << " (a minimum of |q''|^2 + |h|^2 that is not an equilibrium?): |q''|inf = "
         << r.accelerationResidual << ", |h|inf = " << r.constraintResidual << ", relative residual "
         << r.relativeResidual;
-      r.message = m.str();
+      r.status.message = m.str();
       break;
     }
     r.iterations = k + 1;

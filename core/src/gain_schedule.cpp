@@ -1,6 +1,8 @@
 // gain_schedule.cpp — validation, interpolation and CSV I/O of a tabulated gain K(t).
 #include "trellis/core/gain_schedule.hpp"
 
+#include "trellis/core/model.hpp"
+#include "trellis/core/status.hpp"
 #include "trellis/core/trajectory.hpp"
 
 #include "numeric_csv.hpp"
@@ -395,6 +397,49 @@ void GainSchedule::writeCsvFile(const std::string& path) const {
   std::ostringstream out;
   writeCsv(out);
   writeFileAtomically(path, out.str());  // complete or absent; FileError names path and OS error
+}
+
+std::string checkGainScheduleApplies(const GainSchedule& gains, const Model& model,
+                                     const Trajectory& reference, double sampleRate,
+                                     const std::string& source) {
+  const auto num = [](double v) { return formatStatusNumber(v); };
+  gains.checkNames(model.inputNames(), GainSchedule::stateNames(model.configNames()), source);
+  if (gains.size() == 0) throw TrajectoryError(source + ": the gain schedule is empty");
+  if (reference.size() == 0) throw TrajectoryError(source + ": the reference is empty");
+  if (!(sampleRate >= 0.0) || !std::isfinite(sampleRate)) {
+    throw std::invalid_argument("checkGainScheduleApplies: sampleRate = " + num(sampleRate) +
+                                " must be >= 0 and finite");
+  }
+  std::string note;
+  // Discrete gains are for one rate only; continuous gains at a rate are an approximation.
+  if (gains.isSampled()) {
+    const double rate = gains.sampleRate();
+    if (sampleRate == 0.0) {
+      throw TrajectoryError(source + ": zero-order-hold gains for a controller sampling at " + num(rate) +
+                            " Hz cannot be applied continuously: sample at " + num(rate) + " Hz");
+    }
+    if (std::abs(sampleRate - rate) > 1e-12 * rate) {
+      throw TrajectoryError(source + ": zero-order-hold gains for " + num(rate) + " Hz cannot be applied at " +
+                            num(sampleRate) + " Hz (compute them for that rate)");
+    }
+    if (std::abs(gains.startTime() - reference.startTime()) > 1e-9 / rate) {
+      throw TrajectoryError(source + ": the sampled gains start at t = " + num(gains.startTime()) +
+                            ", but the reference starts at t = " + num(reference.startTime()) +
+                            " (the samples would not line up)");
+    }
+  } else if (sampleRate > 0.0) {
+    note = source + " holds continuous gains K(t); at " + num(sampleRate) +
+           " Hz they are only sampled (not designed for a sampled controller)";
+  }
+  // The same relative slack as GainSchedule::evaluate.
+  const double slack =
+      1e-12 * std::max({1.0, std::abs(reference.startTime()), std::abs(reference.endTime())});
+  if (gains.startTime() > reference.startTime() + slack || gains.endTime() < reference.endTime() - slack) {
+    throw TrajectoryError(source + ": the gains cover [" + num(gains.startTime()) + ", " + num(gains.endTime()) +
+                          "], but the reference spans [" + num(reference.startTime()) + ", " +
+                          num(reference.endTime()) + "]");
+  }
+  return note;
 }
 
 }  // namespace trellis

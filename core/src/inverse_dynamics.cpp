@@ -17,16 +17,14 @@
 namespace trellis {
 
 std::string InverseDynamicsResult::describe() const {
-  Status<InverseDynamicsStatus> s;
-  s.set(status, message);
+  const Status<InverseDynamicsCode>& s = status;
   return s.describe() + " (residual " + formatStatusNumber(residualNorm) + ", constraint residual " +
          formatStatusNumber(constraintResidual) + ", rank " + std::to_string(rank) +
          (unique ? "" : ", not unique") + ")";
 }
 
 std::string InverseDynamicsResult::json() const {
-  Status<InverseDynamicsStatus> s;
-  s.set(status, message);
+  const Status<InverseDynamicsCode>& s = status;
   detail::ReportJson j = detail::statusJson(s);
   j["residual"] = detail::toJson(residualNorm);
   j["constraint_residual"] = detail::toJson(constraintResidual);
@@ -74,8 +72,8 @@ InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, con
   r.lambda = Eigen::VectorXd::Zero(nc);
   r.residual = Eigen::VectorXd::Zero(n);
   if (!q.allFinite() || !dq.allFinite() || !qdd.allFinite()) {
-    r.status = InverseDynamicsStatus::kNonFinite;
-    r.message = "q, dq or qdd is not finite";
+    r.status.code = InverseDynamicsCode::kNonFinite;
+    r.status.message = "q, dq or qdd is not finite";
     return r;
   }
   // M, b = ID(q, q̇, 0) − Q(q, q̇, 0), A and Ȧ q̇ from the forward dynamics' passes at u = 0 (its
@@ -95,8 +93,8 @@ InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, con
   Eigen::MatrixXd G(n, m + nc);
   G << data.inputMatrix, data.constraintJacobian.transpose();
   if (!rhs.allFinite() || !G.allFinite()) {
-    r.status = InverseDynamicsStatus::kNonFinite;
-    r.message = "M q̈ + b or the input and constraint Jacobians are not finite at this state";
+    r.status.code = InverseDynamicsCode::kNonFinite;
+    r.status.message = "M q̈ + b or the input and constraint Jacobians are not finite at this state";
     return r;
   }
   const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(G);
@@ -193,14 +191,14 @@ InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, con
   }
   std::ostringstream msg;
   if (!z.allFinite()) {
-    r.status = InverseDynamicsStatus::kNonFinite;
+    r.status.code = InverseDynamicsCode::kNonFinite;
     msg << "the least-squares solution is not finite";
   } else if (constraintExceeds) {
-    r.status = InverseDynamicsStatus::kInadmissibleAcceleration;
+    r.status.code = InverseDynamicsCode::kInadmissibleAcceleration;
     msg << "q̈ violates the constraint " << model.constraints()[worstConstraint].name
         << ": A q̈ + Ȧ q̇ = " << r.constraintResidual;
   } else if (boundInput >= 0 && residualExceeds) {
-    r.status = InverseDynamicsStatus::kInputBounds;
+    r.status.code = InverseDynamicsCode::kInputBounds;
     const bool upper = zUnbounded[boundInput] > options.upperBound[boundInput];
     msg << "the inputs that produce this q̈ violate the " << (upper ? "upper" : "lower") << " bound "
         << (upper ? options.upperBound[boundInput] : options.lowerBound[boundInput]) << " of input '"
@@ -208,11 +206,11 @@ InverseDynamicsResult computeInverseDynamics(const Model& model, Data& data, con
         << "; within the bounds the least-squares residual is " << r.residualNorm << ", largest on "
         << model.configNames()[worst];
   } else if (residualExceeds) {
-    r.status = InverseDynamicsStatus::kUnreachable;
+    r.status.code = InverseDynamicsCode::kUnreachable;
     msg << "no inputs produce this q̈ (rank of [B_u A^T] = " << r.rank << " < n = " << n
         << "): least-squares residual " << r.residualNorm << ", largest on " << model.configNames()[worst];
   }
-  r.message = msg.str();
+  r.status.message = msg.str();
   return r;
 }
 

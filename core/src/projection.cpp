@@ -61,8 +61,7 @@ std::string format(double x) {
 }  // namespace
 
 std::string ProjectionResult::describe() const {
-  Status<ProjectionStatus> s;
-  s.set(status, message);
+  const Status<ProjectionCode>& s = status;
   return s.describe() + " (" + std::to_string(iterations) + " iterations, |h| " +
          formatStatusNumber(positionResidualBefore) + " -> " + formatStatusNumber(positionResidual) +
          ", |A dq| " + formatStatusNumber(velocityResidualBefore) + " -> " +
@@ -70,8 +69,7 @@ std::string ProjectionResult::describe() const {
 }
 
 std::string ProjectionResult::json() const {
-  Status<ProjectionStatus> s;
-  s.set(status, message);
+  const Status<ProjectionCode>& s = status;
   detail::ReportJson j = detail::statusJson(s);
   j["iterations"] = iterations;
   j["h_before"] = detail::toJson(positionResidualBefore);
@@ -132,9 +130,9 @@ ProjectionResult projectState(const Model& model, Data& data, const Eigen::Vecto
     }
     return h.allFinite() && Ah.allFinite();
   };
-  const auto fail = [&r](ProjectionStatus status, std::string message) {
-    r.status = status;
-    r.message = std::move(message);
+  const auto fail = [&r](ProjectionCode status, std::string message) {
+    r.status.code = status;
+    r.status.message = std::move(message);
   };
 
   // ---- velocities before (A at q0, all rows) ------------------------------------------------
@@ -148,14 +146,14 @@ ProjectionResult projectState(const Model& model, Data& data, const Eigen::Vecto
   r.massWeighted = metric.massWeighted;
   if (nh > 0) {
     if (!evaluate(r.q)) {
-      fail(ProjectionStatus::kNonFinite, "h(q) or its Jacobian is not finite at the given q");
+      fail(ProjectionCode::kNonFinite, "h(q) or its Jacobian is not finite at the given q");
       r.positionResidualBefore = r.positionResidual = std::numeric_limits<double>::infinity();
       return r;
     }
     r.positionResidualBefore = h.cwiseAbs().maxCoeff();
     if (nf == 0 && r.positionResidualBefore > options.tolerance) {
       r.positionResidual = r.positionResidualBefore;
-      fail(ProjectionStatus::kNotConverged, "every coordinate is fixed, so none can move onto h(q) = 0: |h|inf = " +
+      fail(ProjectionCode::kNotConverged, "every coordinate is fixed, so none can move onto h(q) = 0: |h|inf = " +
                                                 format(r.positionResidual));
       computeConstraints(model, data, r.q, r.dq);
       r.velocityResidual = (data.constraintJacobian * r.dq).cwiseAbs().maxCoeff();
@@ -189,7 +187,7 @@ ProjectionResult projectState(const Model& model, Data& data, const Eigen::Vecto
     const auto scale = [&] { return options.stepTolerance * (1.0 + r.q.cwiseAbs().maxCoeff()); };
     if (!restore(r.q)) {
       r.positionResidual = h.cwiseAbs().maxCoeff();
-      fail(nonFinite ? ProjectionStatus::kNonFinite : ProjectionStatus::kNotConverged,
+      fail(nonFinite ? ProjectionCode::kNonFinite : ProjectionCode::kNotConverged,
            nonFinite ? std::string("a Gauss-Newton step produced a non-finite q, h(q) or Jacobian")
                      : "Gauss-Newton did not reach |h| <= " + format(options.tolerance) + " in " +
                            std::to_string(options.maxIterations) + " iterations: |h|inf = " +
@@ -226,7 +224,7 @@ ProjectionResult projectState(const Model& model, Data& data, const Eigen::Vecto
       }
       r.positionResidual = h.cwiseAbs().maxCoeff();
       if (!converged) {
-        fail(ProjectionStatus::kNotConverged,
+        fail(ProjectionCode::kNotConverged,
              "on the manifold (|h|inf = " + format(r.positionResidual) + ") but the closest point was not reached in " +
                  std::to_string(options.maxIterations) + " descent steps (last step " + format(r.lastStep) + ")");
       }
@@ -236,7 +234,7 @@ ProjectionResult projectState(const Model& model, Data& data, const Eigen::Vecto
   }
 
   // ---- velocities: least-kinetic-energy correction onto A(q*) q̇ = 0 -------------------------
-  if (options.velocities && r.status != ProjectionStatus::kNonFinite) {
+  if (options.velocities && r.status.code != ProjectionCode::kNonFinite) {
     computeMassMatrix(model, data, r.q);
     metric.compute(data.M, free);
     r.massWeighted = r.massWeighted && metric.massWeighted;
@@ -247,20 +245,20 @@ ProjectionResult projectState(const Model& model, Data& data, const Eigen::Vecto
     for (Eigen::Index j = 0; j < nf; ++j) r.dq(free[j]) -= delta(j);
     if (!r.dq.allFinite()) {
       r.dq = dq0;
-      fail(ProjectionStatus::kNonFinite, "the velocity projection produced a non-finite q̇");
+      fail(ProjectionCode::kNonFinite, "the velocity projection produced a non-finite q̇");
     }
   }
   computeConstraints(model, data, r.q, r.dq);
   const Eigen::VectorXd velocityRows = data.constraintJacobian * r.dq;
   r.velocityResidual = velocityRows.cwiseAbs().maxCoeff();
-  if (options.velocities && r.status == ProjectionStatus::kOk) {
+  if (options.velocities && r.status.code == ProjectionCode::kOk) {
     // kOk promises A q̇* = 0 to rounding: row by row against the terms Σ_j |A_rj| (|q̇*_j| + |q̇0_j|)
     // (relative, so the verdict does not depend on units). It fails when the free coordinates
     // cannot cancel a row (--fix holds the ones that could).
     const Eigen::VectorXd rowScale = data.constraintJacobian.cwiseAbs() * (r.dq.cwiseAbs() + dq0.cwiseAbs());
     for (int c = 0; c < model.nc(); ++c) {
       if (std::abs(velocityRows(c)) > kVelocityTolerance * rowScale(c)) {
-        fail(ProjectionStatus::kNotConverged,
+        fail(ProjectionCode::kNotConverged,
              "the velocity constraint '" + model.constraints()[c].name + "' is still violated after the projection: " +
                  "A q' = " + format(velocityRows(c)) + " (the free coordinates cannot cancel it; " +
                  std::to_string(options.fixed.size()) + " of " + std::to_string(n) + " coordinates are fixed)");

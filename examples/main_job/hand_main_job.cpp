@@ -244,7 +244,7 @@ int main(int argc, char** argv) try {
   const trellis::TangentTransportOptions transport = trellis::hand::feedbackTransport();
   const trellis::GramianReport gramian = trellis::computeControllabilityGramian(
       model, trajectory, trajectory.startTime(), trajectory.endTime(), transport);
-  if (!gramian.ok) throw std::runtime_error("controllability Gramian: " + gramian.message);
+  if (!gramian.ok()) throw std::runtime_error("controllability Gramian: " + gramian.status.describe());
   const bool pointwise = minRank == dimension;
   progress.end(format("tangent dimension %.0f, min rank over knots %.0f, min σ %.2e", dimension, minRank, minSigma) +
                format("; Gramian λ_min %.3e, λ_max %.3e", gramian.minEigenvalue, gramian.maxEigenvalue));
@@ -258,7 +258,7 @@ int main(int argc, char** argv) try {
   const trellis::LqrWeights weights = trellis::hand::feedbackWeights(model);
   const trellis::ManifoldRiccatiSolution lqr = trellis::solveManifoldRiccati(
       model, trajectory, weights, trellis::hand::feedbackRiccatiOptions(), transport);
-  if (!lqr.ok()) throw std::runtime_error("manifold Riccati solve failed: " + lqr.message());
+  if (!lqr.ok()) throw std::runtime_error("manifold Riccati solve failed: " + lqr.status.describe());
   // K at the knots and the Riccati steps (its end-time boundary layer), cubic rule (hand_feedback.hpp).
   trellis::GainSchedule gains = trellis::hand::feedbackGains(lqr, trajectory);
   gains.setColumnNames(model.inputNames(), trellis::GainSchedule::stateNames(model.configNames()));
@@ -314,7 +314,7 @@ int main(int argc, char** argv) try {
       run.initial = result.trackingError(0);
       run.final = result.trackingError(result.trackingError.size() - 1);
     }
-    if (!result.ok()) std::printf("      run %d: %s\n", r, result.message.c_str());
+    if (!result.ok()) std::printf("      run %d: %s\n", r, result.status.describe().c_str());
     if (r < 5) result.trajectory.writeCsvFile(options.out + "/closed_loop_" + std::to_string(r) + ".csv");
     steps += result.steps;
     restarts += result.restarts;

@@ -38,43 +38,44 @@ def main():
     reference.compute_state_derivatives(model)
     reference.write_csv(str(out / "reference.csv"))
 
-    solution = tm.tvlqr(model, reference, Q=np.array([10.0, 10.0, 1.0, 1.0]), R=0.1, Qf=100.0)
+    solution = tm.solve_tvlqr(model, reference, Q=np.array([10.0, 10.0, 1.0, 1.0]), R=0.1, Qf=100.0,
+                              options=tm.TvlqrOptions(output_step=0.01))
     if not solution.ok:
-        sys.exit(f"TV-LQR failed: {solution.message}")
-    times = np.append(np.arange(reference.start_time, reference.end_time, 0.01), reference.end_time)
-    gains = solution.gain_schedule(times)
+        sys.exit(f"TV-LQR failed: {solution.describe()}")
+    gains = solution.gains
+    times = gains.times
     gains.write_csv(str(out / "gains.csv"))
     K0 = gains.evaluate(0.0)
     print(f"gains: {len(gains)} times, K(0) = {np.array2string(K0[0], precision=4)}, "
           f"max |K| = {np.abs(gains.gains).max():.4g}; Riccati {solution.steps} steps")
 
     rng = np.random.default_rng(1)
-    x_start = reference.states[:, 0]
+    x_start = reference.states[0]
     starts = np.array([x_start + 0.05 * rng.standard_normal(model.nx) for _ in range(3)])
     options = tm.SimulationOptions(output_step=0.01)
     closed = tm.simulate_closed_loop_many(model, reference, gains, starts, options=options)
     open_loop = tm.simulate_open_loop(model, reference, starts[0], options=options)
     for k, run in enumerate(closed):
-        status = "ok" if run.ok else run.message
+        status = run.status.describe()
         print(f"closed loop {k + 1}: |x - x_ref| {run.tracking_error[0]:.3g} -> "
               f"{run.tracking_error[-1]:.3g} ({status})")
     final_open = open_loop.tracking_error[-1] if len(open_loop.tracking_error) else float("nan")
     print(f"open loop: |x - x_ref| {open_loop.tracking_error[0]:.3g} -> {final_open:.3g}"
-          f" ({'ok' if open_loop.ok else open_loop.message})")
+          f" ({open_loop.status.describe()})")
 
     fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
     names = model.state_names
     X, U = reference.sample(times)
     for ax, i in zip(axes.flat[:2], (0, 1)):
-        ax.plot(times, X[i], "k", lw=2, label="reference")
+        ax.plot(times, X[:, i], "k", lw=2, label="reference")
         for k, run in enumerate(closed):
-            ax.plot(run.trajectory.times, run.trajectory.states[i], lw=1, label=f"closed loop {k + 1}")
-        ax.plot(open_loop.trajectory.times, open_loop.trajectory.states[i], "r--", lw=1, label="open loop")
+            ax.plot(run.trajectory.times, run.trajectory.states[:, i], lw=1, label=f"closed loop {k + 1}")
+        ax.plot(open_loop.trajectory.times, open_loop.trajectory.states[:, i], "r--", lw=1, label="open loop")
         ax.set_ylabel(names[i])
     axes[0, 0].legend(fontsize=8)
-    axes[1, 0].plot(times, U[0], "k", lw=2)
+    axes[1, 0].plot(times, U[:, 0], "k", lw=2)
     for run in closed:
-        axes[1, 0].plot(run.trajectory.times, run.trajectory.inputs[0], lw=1)
+        axes[1, 0].plot(run.trajectory.times, run.trajectory.inputs[:, 0], lw=1)
     axes[1, 0].set_ylabel(model.input_names[0])
     for j in range(model.nx):
         axes[1, 1].plot(gains.times, gains.gains[:, 0, j], label=f"K[{names[j]}]")

@@ -45,28 +45,29 @@ def main():
           f"max |h| {motion.constraint_residual.max():.1e} ({time.perf_counter() - start:.2f} s)")
 
     data = tm.Data(model)
-    x0 = reference.states[:, 0]
-    report = tm.compute_controllability_at(model, data, x0[:n], x0[n:], reference.inputs[:, 0])
+    x0 = reference.states[0]
+    report = tm.compute_controllability_at(model, data, x0[:n], x0[n:], reference.inputs[0])
     print(f"controllability at t = 0: rank {report.rank} of {report.dimension} on the manifold")
 
     Q = np.eye(2 * n)
     Q[:n, :n] *= 100.0  # angles matter more than rates
     start = time.perf_counter()
-    solution = tm.solve_manifold_riccati(
+    solution = tm.solve_tvlqr(
         model, reference, Q=Q, R=1.0,
-        options=tm.RiccatiOptions(rtol=1e-6, atol=1e-8),
-        transport=tm.TangentTransportOptions(method=tm.TangentTransport.PROJECTED, substeps=2))
+        options=tm.TvlqrOptions(
+            riccati=tm.RiccatiOptions(rtol=1e-6, atol=1e-8),
+            transport=tm.TangentTransportOptions(method=tm.TangentTransport.PROJECTED, substeps=2)))
     if not solution.ok:
-        sys.exit(f"TV-LQR failed: {solution.message}")
-    gains = solution.gain_schedule(reference.times)
+        sys.exit(f"TV-LQR failed: {solution.describe()}")
+    gains = solution.gains
     gains.write_csv(str(out / "gains.csv"))
     norms = np.linalg.norm(gains.gains, axis=(1, 2))
-    print(f"gains: {len(gains)} x ({gains.nu} x {gains.nx}), {solution.reduced.steps} Riccati steps on "
+    print(f"gains: {len(gains)} x ({gains.nu} x {gains.nx}), {solution.steps} Riccati steps on "
           f"{solution.dimension} reduced states, max |K|_F {norms.max():.4g} "
           f"({time.perf_counter() - start:.2f} s)")
 
     rng = np.random.default_rng(1)
-    T0 = solution.basis.basis(reference.start_time)
+    T0 = tm.linearize(model, x0[:n], x0[n:], reference.inputs[0], tangent=True).tangent_basis
     z = rng.standard_normal(T0.shape[1])
     x_start = x0 + T0 @ (0.05 * z / np.linalg.norm(z))
     options = tm.SimulationOptions(method=tm.IntegrationMethod.BDF, rtol=1e-7, atol=1e-9,
@@ -75,7 +76,7 @@ def main():
     run = tm.simulate_closed_loop(model, reference, gains, x_start, options=options)
     print(f"closed loop: |x - x_ref| {run.tracking_error[0]:.3g} -> {run.tracking_error[-1]:.3g}, "
           f"max drift {run.max_constraint_drift:.1e}, saturated {100 * run.saturated_fraction:.0f} % "
-          f"({'ok' if run.ok else run.message}; {time.perf_counter() - start:.2f} s)")
+          f"({run.status.describe()}; {time.perf_counter() - start:.2f} s)")
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     axes[0].plot(gains.times, norms)

@@ -6,5 +6,5 @@ lin = tm.linearize(scene.model, scene.q, scene.dq, scene.u)    # exact A (4, 4),
 print("states:", scene.model.state_names)
 print("open loop eigenvalues:", np.sort_complex(np.linalg.eigvals(lin.A)))
 lqr = tm.solve_care(lin.A, lin.B, np.eye(4), np.eye(1))        # balancing gain K (1, 4)
-assert lqr.ok, lqr.message
+assert lqr.ok, lqr.describe()
 print("K =", lqr.K, "\nclosed loop:", np.sort_complex(lqr.closed_loop_eigenvalues))

@@ -201,25 +201,21 @@ void bindCore(py::module_& m) {
            "Validates cross references and returns the immutable Model (the builder stays usable).");
 
   // ---- Data and results ----------------------------------------------------------------------
-  py::enum_<DynamicsStatus::Code>(m, "DynamicsStatusCode")
-      .value("OK", DynamicsStatus::Code::kOk)
-      .value("REDUNDANT_CONSTRAINTS", DynamicsStatus::Code::kRedundantConstraints)
-      .value("SINGULAR_MASS_MATRIX", DynamicsStatus::Code::kSingularMassMatrix)
-      .value("SINGULAR_CONSTRAINTS", DynamicsStatus::Code::kSingularConstraints)
-      .value("NON_FINITE", DynamicsStatus::Code::kNonFinite);
-
   py::class_<DynamicsStatus>(m, "DynamicsStatus",
-      "Outcome of a KKT solve [M A^T; A 0]: `ok` (OK or REDUNDANT_CONSTRAINTS) means qdd and the "
-      "linearization are valid; otherwise `message` says why.")
-      .def_readonly("code", &DynamicsStatus::code)
+      "Outcome of a KKT solve [M A^T; A 0] (the Status shape of every result): code (str: ok, "
+      "redundant_constraints, singular_mass_matrix, singular_constraints, non_finite), message, t, "
+      "index, ok (qdd and the linearization are valid and determined), constraint_rank, "
+      "constraint_conditioning; describe() and json() are the library's reports.")
+      .def_property_readonly("code", [](const DynamicsStatus& s) { return std::string(s.name()); })
+      .def_readonly("message", &DynamicsStatus::message)
+      .def_readonly("t", &DynamicsStatus::t)
+      .def_readonly("index", &DynamicsStatus::index)
       .def_readonly("constraint_rank", &DynamicsStatus::constraintRank)
       .def_readonly("constraint_conditioning", &DynamicsStatus::constraintConditioning)
-      .def_readonly("message", &DynamicsStatus::message)
       .def_property_readonly("ok", &DynamicsStatus::ok)
-      .def("__repr__", [](const DynamicsStatus& s) {
-        return std::string("<DynamicsStatus ") + (s.ok() ? "ok" : "FAILED") +
-               (s.message.empty() ? "" : ": " + s.message) + ">";
-      });
+      .def("describe", &DynamicsStatus::describe)
+      .def("json", &DynamicsStatus::json)
+      .def("__repr__", [](const DynamicsStatus& s) { return "<DynamicsStatus " + s.describe() + ">"; });
 
   py::class_<Energy>(m, "Energy")
       .def_readonly("kinetic", &Energy::kinetic)

@@ -22,8 +22,10 @@ void bindHand(py::module_& parent) {
       .def_readwrite("amplitudes", &ReferenceMotionOptions::amplitudes);
   py::class_<ReferenceMotion>(m, "ReferenceMotion")
       .def_readonly("trajectory", &ReferenceMotion::trajectory)
-      .def_property_readonly("accelerations", [](const ReferenceMotion& r) { return toArray(r.accelerations); })
-      .def_property_readonly("lambda_", [](const ReferenceMotion& r) { return toArray(r.lambda); })
+      .def_property_readonly("accelerations", [](const ReferenceMotion& r) { return toArray(Eigen::MatrixXd(r.accelerations.transpose())); },
+                             "(N, n), time first")
+      .def_property_readonly("lambda_", [](const ReferenceMotion& r) { return toArray(Eigen::MatrixXd(r.lambda.transpose())); },
+                             "(N, nc), time first")
       .def_property_readonly("constraint_residual",
                              [](const ReferenceMotion& r) { return toArray(r.constraintResidual); })
       .def_property_readonly("forward_dynamics_error",

@@ -181,9 +181,11 @@ void bindOptimization(py::module_& m) {
       .def_readonly("second_order_evaluations", &OptimizationResult::secondOrderEvaluations)
       .def_readonly("trajectory", &OptimizationResult::trajectory)
       .def_property_readonly("midpoint_states",
-                             [](const OptimizationResult& r) { return toArray(r.midpointStates); })
+                             [](const OptimizationResult& r) { return toArray(Eigen::MatrixXd(r.midpointStates.transpose())); },
+                             "(N - 1, nx), time first")
       .def_property_readonly("midpoint_inputs",
-                             [](const OptimizationResult& r) { return toArray(r.midpointInputs); })
+                             [](const OptimizationResult& r) { return toArray(Eigen::MatrixXd(r.midpointInputs.transpose())); },
+                             "(N - 1, nu), time first")
       .def_property_readonly("variables",
                              [](const OptimizationResult& r) { return toArray(r.variables); })
       .def_property_readonly("constraint_multipliers",

@@ -1,36 +1,62 @@
-// python/src/bind_tvlqr.cpp — the unified, plain-data TV-LQR (solveTvlqr: continuous or sampled
-// with zero-order hold, constrained or not), when the control library has it
-// (trellis/control/tvlqr.hpp, branch i10-sampled). Without that header this file binds nothing
-// and trellis_mech.HAS_SOLVE_TVLQR is False; the older solve_riccati / solve_manifold_riccati
-// (bind_control.cpp) stay available either way.
+// python/src/bind_tvlqr.cpp — control/tvlqr.hpp, the one TV-LQR entry (solveTvlqr: continuous or
+// sampled with zero-order hold, on the constraint manifold when the model has constraints), with
+// the options it takes from riccati.hpp, sampled_lqr.hpp and manifold_lqr.hpp, and the tangent
+// basis of manifold_lqr.hpp (transport_tangent_basis). The result is plain data: the gain
+// schedule, S (N, nx, nx) at its times (time first), the status and diagnostics.
 #include "common.hpp"
-
-#include <cmath>
-#include <stdexcept>
-#include <string>
-
-#if __has_include("trellis/control/tvlqr.hpp")
 #include "control_common.hpp"
 #include "options.hpp"
 
-#include "trellis/core/trajectory.hpp"
+#include "trellis/control/manifold_lqr.hpp"
 #include "trellis/control/tvlqr.hpp"
 #include "trellis/core/model.hpp"
+#include "trellis/core/trajectory.hpp"
+
+#include <cmath>
+#include <optional>
+#include <stdexcept>
+#include <string>
 
 namespace trellis::python {
 
 void bindTvlqr(py::module_& m) {
-  m.attr("HAS_SOLVE_TVLQR") = true;
+  py::enum_<RiccatiMethod>(m, "RiccatiMethod")
+      .value("BDF", RiccatiMethod::kBDF)
+      .value("ADAMS", RiccatiMethod::kAdams)
+      .value("FACTORED", RiccatiMethod::kFactored);
+  py::enum_<RiccatiLinearSolver>(m, "RiccatiLinearSolver")
+      .value("AUTO", RiccatiLinearSolver::kAuto)
+      .value("DENSE", RiccatiLinearSolver::kDense)
+      .value("KRYLOV", RiccatiLinearSolver::kKrylov)
+      .value("LYAPUNOV", RiccatiLinearSolver::kLyapunov);
+  py::enum_<TangentTransport>(m, "TangentTransport")
+      .value("INTEGRATED", TangentTransport::kIntegrated)
+      .value("PROJECTED", TangentTransport::kProjected);
 
-  // The gain schedule's sample rate and column names (added with solveTvlqr).
-  auto schedule = py::reinterpret_borrow<py::class_<GainSchedule>>(m.attr("GainSchedule"));
-  schedule
-      .def_property("sample_rate", &GainSchedule::sampleRate, &GainSchedule::setSampleRate,
-                    "0: continuous gains; f > 0: zero-order-hold gains for a controller sampling at f Hz")
-      .def_property_readonly("is_sampled", &GainSchedule::isSampled)
-      .def_property_readonly("column_names", &GainSchedule::columnNames, "K_<input>_<state>, row-major")
-      .def("set_column_names", &GainSchedule::setColumnNames, py::arg("input_names"),
-           py::arg("state_names"));
+  py::class_<RiccatiOptions>(m, "RiccatiOptions", "Options of the Riccati integration (keywords).")
+      .def(py::init(&makeFromKwargs<RiccatiOptions>))
+      .def_readwrite("rtol", &RiccatiOptions::rtol)
+      .def_readwrite("atol", &RiccatiOptions::atol)
+      .def_readwrite("method", &RiccatiOptions::method)
+      .def_readwrite("max_steps", &RiccatiOptions::maxSteps)
+      .def_readwrite("max_norm", &RiccatiOptions::maxNorm)
+      .def_readwrite("initial_step", &RiccatiOptions::initialStep)
+      .def_readwrite("max_step", &RiccatiOptions::maxStep)
+      .def_readwrite("linear_solver", &RiccatiOptions::linearSolver)
+      .def_readwrite("exact_jacobian", &RiccatiOptions::exactJacobian)
+      .def_readwrite("track_eigenvalues", &RiccatiOptions::trackEigenvalues)
+      .def_readwrite("krylov_preconditioner", &RiccatiOptions::krylovPreconditioner)
+      .def_readwrite("factored_qf_shift", &RiccatiOptions::factoredQfShift)
+      .def("validate", &RiccatiOptions::validate);
+
+  py::class_<TangentTransportOptions>(m, "TangentTransportOptions",
+      "How the tangent basis T(t) is carried along the reference (keywords).")
+      .def(py::init(&makeFromKwargs<TangentTransportOptions>))
+      .def_readwrite("method", &TangentTransportOptions::method)
+      .def_readwrite("substeps", &TangentTransportOptions::substeps)
+      .def_readwrite("rtol", &TangentTransportOptions::rtol)
+      .def_readwrite("atol", &TangentTransportOptions::atol)
+      .def_readwrite("max_steps", &TangentTransportOptions::maxSteps);
 
   py::class_<SampledDiscretizationOptions>(m, "SampledDiscretizationOptions",
       "CVODES tolerances of the exact interval discretization (keywords: rtol, atol, max_steps).")
@@ -51,11 +77,17 @@ void bindTvlqr(py::module_& m) {
       .def_readwrite("transport", &TvlqrOptions::transport)
       .def("validate", &TvlqrOptions::validate);
 
+  bindStatus<TvlqrCode>(m, "TvlqrStatus",
+      "Status of solve_tvlqr (code: ok, transport_failure, riccati_failure, discretization_failure, "
+      "recursion_failure, non_finite, indefinite, not_solved); the message carries the inner "
+      "solver's report.");
+
   py::class_<TvlqrSolution>(m, "TvlqrSolution",
-      "Plain data (owns its arrays; no reference to the model): ok, message, gains (GainSchedule, "
-      "K (nu, nx) at its times), S (N, nx, nx) at the same times, and diagnostics.")
-      .def_readonly("ok", &TvlqrSolution::ok)
-      .def_readonly("message", &TvlqrSolution::message)
+      "Plain data (owns its arrays; no reference to the model): status (TvlqrStatus), ok, gains "
+      "(GainSchedule, K (nu, nx) at its times), S (N, nx, nx) at the same times, and diagnostics; "
+      "describe(), summary() and json() are the library's reports.")
+      .def_readonly("status", &TvlqrSolution::status)
+      .def_property_readonly("ok", &TvlqrSolution::ok)
       .def_readonly("sample_rate", &TvlqrSolution::sampleRate)
       .def_readonly("constrained", &TvlqrSolution::constrained)
       .def_readonly("nx", &TvlqrSolution::nx)
@@ -73,12 +105,12 @@ void bindTvlqr(py::module_& m) {
       .def_readonly("min_eigenvalue_S", &TvlqrSolution::minEigenvalueS)
       .def_readonly("max_eigenvalue_S", &TvlqrSolution::maxEigenvalueS)
       .def_readonly("method", &TvlqrSolution::method)
+      .def("K", [](const TvlqrSolution& s, double t) { return toArray(s.gains.evaluate(t)); }, py::arg("t"),
+           "K(t) (nu, nx) from the gain schedule (its interpolation rule)")
+      .def("describe", &TvlqrSolution::describe)
       .def("summary", &TvlqrSolution::summary)
       .def("json", &TvlqrSolution::json)
-      .def("__repr__", [](const TvlqrSolution& s) {
-        return std::string("<TvlqrSolution ") + (s.ok ? "ok" : "FAILED: " + s.message) + ", " +
-               s.method + ">";
-      });
+      .def("__repr__", [](const TvlqrSolution& s) { return "<TvlqrSolution " + s.describe() + ">"; });
 
   m.def("solve_tvlqr",
         [](const Model& model, const Trajectory& reference, const py::object& Q, const py::object& R,
@@ -99,24 +131,47 @@ void bindTvlqr(py::module_& m) {
           };
           if (o.sampleRate > 0.0) bound("sample_rate", 1.0 / o.sampleRate, "samples");
           if (o.outputStep > 0.0) bound("output_step", o.outputStep, "output rows");
-          py::gil_scoped_release release;
-          return solveTvlqr(model, reference, w, o);
+          return withoutGil([&] { return solveTvlqr(model, reference, w, o); });
         },
         py::arg("model"), py::arg("reference"), py::kw_only(), py::arg("Q"), py::arg("R"),
         py::arg("Qf") = py::none(), py::arg("options") = py::none(),
-        "TV-LQR along the reference (state derivatives needed), continuous (Riccati ODE) or "
-        "sampled at options.sample_rate with zero-order hold, on the constraint manifold when the "
-        "model has constraints: minimizes int dx^T Q dx + du^T R du dt + dx(T)^T Qf dx(T). Weights: "
-        "a number (times I), a diagonal or a matrix; Qf defaults to Q. Returns plain data; "
-        "numerical failure is ok = False with a message. Releases the GIL.");
+        "TV-LQR along the reference, continuous (Riccati ODE) or sampled at options.sample_rate "
+        "with zero-order hold, on the constraint manifold when the model has constraints: "
+        "minimizes int dx^T Q dx + du^T R du dt + dx(T)^T Qf dx(T). Weights: a number (times I), a "
+        "diagonal or a matrix (a complex array is a TypeError naming it); Qf defaults to Q. "
+        "Returns plain data; numerical failure is the status. Releases the GIL.");
+
+  py::class_<TangentBasisTrajectory>(m, "TangentBasisTrajectory",
+      "T(t) (nx, d): an orthonormal basis of the constraint manifold's tangent space, transported "
+      "along the reference (plain data). ok / message / valid_until report a transport that "
+      "stopped early.")
+      .def_property_readonly("dimension", &TangentBasisTrajectory::dimension)
+      .def_property_readonly("nx", &TangentBasisTrajectory::nx)
+      .def_property_readonly("ok", &TangentBasisTrajectory::ok)
+      .def_property_readonly("message", &TangentBasisTrajectory::message)
+      .def_property_readonly("valid_until", &TangentBasisTrajectory::validUntil)
+      .def_property_readonly("steps", &TangentBasisTrajectory::steps)
+      .def_property_readonly("max_correction", &TangentBasisTrajectory::maxCorrection)
+      .def("basis", [](const TangentBasisTrajectory& b, double t) { return toArray(b.basis(t)); },
+           py::arg("t"), "T(t) (nx, d)")
+      .def("reduced_linearization",
+           [](const TangentBasisTrajectory& b, const Model& model, double t) {
+             Eigen::MatrixXd T, Ar, Br;
+             b.reducedLinearization(model, t, T, Ar, Br);
+             return py::make_tuple(toArray(T), toArray(Ar), toArray(Br));
+           },
+           py::arg("model"), py::arg("t"),
+           "(T (nx, d), Ar = T^T A T (d, d), Br = T^T B (d, nu)) at t, with T corrected onto the "
+           "exact tangent space of the model at x_ref(t)");
+  m.def("transport_tangent_basis",
+        [](const Model& model, const Trajectory& reference,
+           const std::optional<TangentTransportOptions>& options) {
+          return withoutGil([&] {
+            return transportTangentBasis(model, reference, options.value_or(TangentTransportOptions{}));
+          });
+        },
+        py::arg("model"), py::arg("reference"), py::kw_only(), py::arg("options") = py::none(),
+        "T(t) along the reference (which needs state derivatives).");
 }
 
 }  // namespace trellis::python
-
-#else
-
-namespace trellis::python {
-void bindTvlqr(py::module_& m) { m.attr("HAS_SOLVE_TVLQR") = false; }
-}  // namespace trellis::python
-
-#endif

@@ -15,6 +15,7 @@
 
 #include "trellis/core/data.hpp"
 #include "trellis/core/model.hpp"
+#include "trellis/core/status.hpp"
 
 #include <Eigen/Core>
 
@@ -31,13 +32,50 @@ using ModelPtr = std::shared_ptr<Model>;
 using VectorRef = Eigen::Ref<const Eigen::VectorXd>;
 using StridedMap = Eigen::Map<Eigen::MatrixXd, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
 
-/// Throws ValueError when `src` is a NumPy array of complex numbers: converting it to float64 would
-/// keep the real part and drop the rest with only a warning.
-inline void refuseComplex(py::handle src, const char* expected = "a real (float64) array") {
+/// Throws TypeError when `src` is a NumPy array of complex numbers: converting it to float64 would
+/// keep the real part and drop the rest with only a warning. `argument` names it when known.
+inline void refuseComplex(py::handle src, const char* argument = nullptr,
+                          const char* expected = "a real (float64) array") {
   if (py::isinstance<py::array>(src) && py::reinterpret_borrow<py::array>(src).dtype().kind() == 'c') {
-    throw py::value_error(std::string("got a complex array where ") + expected +
-                          " is expected; pass .real (or .imag) explicitly if that is what you mean");
+    const std::string dtype = py::str(py::reinterpret_borrow<py::array>(src).dtype());
+    throw py::type_error((argument ? std::string(argument) + ": got" : std::string("got")) +
+                         " a complex array (" + dtype + ") where " + expected +
+                         " is expected; pass .real (or .imag) explicitly if that is what you mean");
   }
+}
+
+/// A compile-time argument name (C++20 class-type template parameter): RealMatrix<"A">.
+template <std::size_t N>
+struct ArgName {
+  char text[N];
+  constexpr ArgName(const char (&s)[N]) {  // NOLINT(google-explicit-constructor): "A" → name
+    for (std::size_t i = 0; i < N; ++i) text[i] = s[i];
+  }
+};
+
+/// A real matrix argument that knows its name: read as pybind11 reads an Eigen::MatrixXd (any
+/// array-like convertible to float64, copied), except that a complex array is a TypeError naming
+/// the argument (refuseComplex). Use `.value` (or the implicit conversion).
+template <ArgName Name>
+struct RealMatrix {
+  Eigen::MatrixXd value;
+  operator const Eigen::MatrixXd&() const { return value; }  // NOLINT(google-explicit-constructor)
+};
+
+/// The Status of a result as a Python class `name`: code (the C++ enum's name, a str such as
+/// "blow_up" — enum_names.hpp), message, t (float; NaN: no time), index (int; -1: none), ok, and
+/// describe() (the one line of Status::describe).
+template <class Code>
+py::class_<Status<Code>> bindStatus(py::module_& m, const char* name, const char* doc) {
+  return py::class_<Status<Code>>(m, name, doc)
+      .def_property_readonly("code", [](const Status<Code>& s) { return std::string(s.name()); },
+                             "the code's name (str): 'ok', or what failed")
+      .def_readonly("message", &Status<Code>::message, "empty when ok; what failed, with the values")
+      .def_readonly("t", &Status<Code>::t, "when it happened (NaN: not applicable)")
+      .def_readonly("index", &Status<Code>::index, "where: knot, step, interval or row (-1: none)")
+      .def_property_readonly("ok", &Status<Code>::ok)
+      .def("describe", &Status<Code>::describe)
+      .def("__repr__", [name](const Status<Code>& s) { return "<" + std::string(name) + " " + s.describe() + ">"; });
 }
 
 /// The Python `Data`: the core workspace, the model it was sized for (kept alive), input buffers
@@ -114,9 +152,12 @@ StridedMap outputMap(py::array& out, Eigen::Index rows, Eigen::Index cols, const
 
 /// Registers the exception types and the C++ → Python translation (module.cpp).
 void bindErrors(py::module_& m);
-void bindCore(py::module_& m);
-void bindControl(py::module_& m);
-void bindTvlqr(py::module_& m);  // bind_tvlqr.cpp: solveTvlqr when the control library has it
+void bindCore(py::module_& m);            // bind_core.cpp
+void bindTrajectory(py::module_& m);      // bind_trajectory.cpp
+void bindLqr(py::module_& m);             // bind_lqr.cpp
+void bindControllability(py::module_& m); // bind_controllability.cpp
+void bindTvlqr(py::module_& m);           // bind_tvlqr.cpp
+void bindSimulation(py::module_& m);      // bind_simulation.cpp
 void bindOptimization(py::module_& m);
 void bindHand(py::module_& m);
 void bindSecondOrder(py::module_& m);  // bind_second_order.cpp
@@ -153,6 +194,24 @@ struct type_caster<Eigen::Ref<const Eigen::VectorXd>> {
  private:
   type_caster<InnerRef> inner_;
   std::unique_ptr<Ref> ref_;
+};
+
+/// RealMatrix<"name">: the Eigen::MatrixXd caster after the complex check (naming the argument).
+template <trellis::python::ArgName Name>
+struct type_caster<trellis::python::RealMatrix<Name>> {
+  using Value = trellis::python::RealMatrix<Name>;
+  PYBIND11_TYPE_CASTER(Value, type_caster<Eigen::MatrixXd>::name);
+
+  bool load(handle src, bool convert) {
+    trellis::python::refuseComplex(src, Name.text, "a real (float64) matrix");
+    type_caster<Eigen::MatrixXd> inner;
+    if (!inner.load(src, convert)) return false;
+    value.value = std::move(static_cast<Eigen::MatrixXd&>(inner));
+    return true;
+  }
+  static handle cast(const Value& v, return_value_policy policy, handle parent) {
+    return type_caster<Eigen::MatrixXd>::cast(v.value, policy, parent);
+  }
 };
 
 }  // namespace pybind11::detail

@@ -1,13 +1,29 @@
 // python/src/module.cpp — the extension module _trellis_mech (imported by trellis_mech/__init__.py),
 // the shared conversion helpers, and the translation of C++ exceptions.
 //
+// Layout: one binding file per public header group, not per header and not per library. A group
+// is the headers a Python user reaches for together and whose types refer to each other: the core
+// model, workspace and algorithms (bind_core.cpp), the second-order derivatives
+// (bind_second_order.cpp), trajectories and gain schedules (bind_trajectory.cpp), the
+// time-invariant LQR tools (algebraic Riccati, Lyapunov, zero-order hold, discrete recursion:
+// bind_lqr.cpp), controllability (bind_controllability.cpp), the one TV-LQR entry with its
+// options (tvlqr.hpp and the option structs of riccati.hpp, sampled_lqr.hpp, manifold_lqr.hpp:
+// bind_tvlqr.cpp), simulation (bind_simulation.cpp), optimization, the viewer and the hand
+// example. Per header would split one user-facing call from its options (solve_tvlqr needs four
+// option headers); per library would put the unrelated CARE and the simulator in one 700-line
+// file, as before.
+//
+// Arrays: one axis rule, time first — an array of samples is (N, ...), row k at t_k (the package
+// docstring states it). Results: every result type exposes `status` (the C++ Status: code as the
+// enum's name, message, t, index), `ok`, and the library's describe() / json() reports.
+//
 // Exceptions: bad input becomes ValueError — plain std::invalid_argument / std::out_of_range /
 // std::logic_error, and the descriptive trellis types ModelError, TrajectoryError, ProblemError,
 // which are ValueError subclasses here. A trellis::FileError (a file that cannot be read or written)
 // becomes OSError with the errno its message names, so that Python picks the subclass
 // (FileNotFoundError, PermissionError, IsADirectoryError, …). A std::runtime_error the C++ throws
 // for a numerical failure
-// (e.g. computeControllabilityAt when the dynamics fail, solveLyapunov when singular) becomes
+// (what remains: e.g. a zero-order hold whose exponential overflows) becomes
 // trellis_mech.NumericalError (a RuntimeError). Failures the C++ reports as a status stay a status.
 #include "common.hpp"
 
@@ -179,8 +195,11 @@ PYBIND11_MODULE(_trellis_mech, m) {
   tp::bindErrors(m);
   tp::bindCore(m);
   tp::bindSecondOrder(m);
-  tp::bindControl(m);
+  tp::bindTrajectory(m);
+  tp::bindLqr(m);
+  tp::bindControllability(m);
   tp::bindTvlqr(m);
+  tp::bindSimulation(m);
   tp::bindOptimization(m);
   tp::bindView(m);
 #ifdef TRELLIS_PYTHON_HAND

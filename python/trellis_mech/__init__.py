@@ -7,25 +7,39 @@ Conventions (the C++ ones, in snake_case):
 
 * a ``Model`` is immutable (``load_scene``, ``parse_scene``, ``ModelBuilder.finalize``); a ``Data``
   is its preallocated workspace, reused across calls, one per thread;
-* state ``x = [q; dq]`` (``nx = 2 nq``), input ``u`` (``nu``); a ``Trajectory`` stores states as
-  ``(nx, N)`` (column k at time ``t_k``) and inputs as ``(nu, N)``; a ``GainSchedule`` stores
-  gains as ``(N, nu, nx)``;
+* state ``x = [q; dq]`` (``nx = 2 nq``), input ``u`` (``nu``);
+* one rule for array axes, everywhere: **time first** — an array of samples is shaped ``(N, ...)``,
+  row ``k`` at time ``t_k``: ``Trajectory.states`` ``(N, nx)``, ``inputs`` ``(N, nu)``,
+  ``state_derivatives`` ``(N, nx)``, ``Trajectory.sample(times)`` ``((K, nx), (K, nu))``,
+  ``GainSchedule.gains`` ``(N, nu, nx)``, ``TvlqrSolution.S`` ``(N, nx, nx)``,
+  ``solve_discrete_riccati_recursion`` ``(N+1, nx, nx), (N, nu, nx)``, the midpoints of an
+  optimization ``(N-1, nx)``; a batch of starts ``simulate_closed_loop_many(x0s)`` is ``(K, nx)``
+  (one row per run). A single matrix keeps its mathematical shape (``A`` ``(nx, nx)``, ``K``
+  ``(nu, nx)``, a tangent basis ``T`` ``(nx, d)``);
 * array arguments accept anything convertible to float64: a contiguous float64 array is read in
   place, anything else (other dtype, Fortran/C order mismatch, a non-contiguous slice, a list) is
-  copied first; a complex array given as a vector (q, dq, u, x0, ...) raises ValueError instead
-  of being cut to its real part. Results are fresh C-order float64 arrays that own their memory. The ``out``-style
-  keywords (``compute_linearization(..., A=, B=)``, ``compute_dynamics(..., qdd=, lambda_=)``)
-  write into the caller's float64 array of the exact shape, in any memory order (strided
-  writes), and raise ValueError for a wrong dtype, shape or a read-only array;
+  copied first; a complex array where a real one is expected raises ``TypeError`` instead of being
+  cut to its real part (matrices and weights name the argument: ``"A: got a complex array ..."``).
+  Results are fresh C-order float64 arrays that own their memory. The ``out``-style keywords
+  (``compute_linearization(..., A=, B=)``, ``compute_dynamics(..., qdd=, lambda_=)``) write into the
+  caller's float64 array of the exact shape, in any memory order (strided writes), and raise
+  ValueError for a wrong dtype, shape or a read-only array;
+* one status vocabulary: every result of numerical work has ``status`` — the C++ ``Status``:
+  ``code`` (the enum's name as a str, e.g. ``"ok"``, ``"blow_up"``), ``message``, ``t`` (NaN: no
+  time), ``index`` (-1: none), ``ok``, ``describe()`` — and ``ok``, ``describe()`` (one line) and
+  ``json()`` (one JSON object, as the command line prints it) on the result itself
+  (``DynamicsStatus``, ``LqrResult``, ``MatrixEquationSolution``, ``ControllabilityReport``,
+  ``GramianReport``, ``TvlqrSolution``, ``SimulationResult``);
 * bad input raises ``ValueError`` (``ModelError``, ``TrajectoryError`` and ``ProblemError`` are
   ValueError subclasses) with the C++ message naming the element, field and value; a numerical
-  failure the C++ reports as a status stays a status (``DynamicsStatus``, ``LqrResult.status``,
-  ``RiccatiSolution.status``, ``SimulationResult.status``, ``OptimizationResult.status``); where the
-  C++ throws for a numerical failure, ``NumericalError`` (a RuntimeError) is raised; a file that
-  cannot be read or written raises ``OSError`` of the matching kind (``FileNotFoundError`` for a
-  missing file or directory, ``PermissionError``, ``IsADirectoryError``), with the path in the
+  failure is a status, never an exception (``NumericalError``, a RuntimeError, remains for the few
+  functions that return bare arrays, e.g. a zero-order hold whose exponential overflows); a file
+  that cannot be read or written raises ``OSError`` of the matching kind (``FileNotFoundError`` for
+  a missing file or directory, ``PermissionError``, ``IsADirectoryError``), with the path in the
   message; Ctrl-C inside a Python callback (a simulation policy, ``on_iteration``) stops the
   computation and raises ``KeyboardInterrupt``;
+* TV-LQR has one entry, ``solve_tvlqr`` (continuous or sampled, on the constraint manifold when
+  the model has constraints), the same solve as ``trellis gains``;
 * long computations (linearization, Riccati, simulation, optimization) release the GIL.
 """
 
@@ -36,8 +50,7 @@ import numpy as np
 
 from ._trellis_mech import *  # noqa: F401,F403
 from ._trellis_mech import (Data, DynamicsStatus, compute_constraint_tangent_basis,
-                            compute_dynamics, compute_linearization, solve_manifold_riccati,
-                            solve_riccati)
+                            compute_dynamics, compute_linearization)
 
 from ._version import __version__  # written by CMake from project(trellis VERSION ...)
 
@@ -90,16 +103,3 @@ def linearize(model, q, dq, u=None, *, data=None, tangent=False):
         result.reduced_B = data.reduced_B
     return result
 
-
-def tvlqr(model, reference, *, Q, R, Qf=None, options=None, transport=None):
-    """Continuous TV-LQR along ``reference`` (a Trajectory with state derivatives): on the
-    constraint manifold when the model has constraints (``solve_manifold_riccati``, as
-    ``trellis gains`` does), otherwise full state (``solve_riccati``). Weights: a number (times
-    I), a diagonal or a matrix; Qf defaults to Q. Returns the solution (``.ok``, ``.message``,
-    ``.K(t)``, ``.gain_schedule(times)``); it keeps the model alive."""
-    if model.nc > 0:
-        return solve_manifold_riccati(model, reference, Q=Q, R=R, Qf=Qf, options=options,
-                                      transport=transport)
-    if transport is not None:
-        raise ValueError("transport: only used for a model with constraints")
-    return solve_riccati(model, reference, Q=Q, R=R, Qf=Qf, options=options)

@@ -69,6 +69,8 @@ class ConstraintHandling:
 
 class ConstraintProjection:
     @property
+    def converged(self) -> bool: ...
+    @property
     def drift_after(self) -> float: ...
     @property
     def drift_before(self) -> float: ...
@@ -80,12 +82,12 @@ class ControllabilityReport:
     def __repr__(self: ControllabilityReport) -> str: ...
     @property
     def controllable(self) -> bool: ...
+    def describe(self: ControllabilityReport) -> str: ...
     @property
     def dimension(self) -> int: ...
+    def json(self: ControllabilityReport) -> str: ...
     @property
     def largest_singular_value(self) -> float: ...
-    @property
-    def message(self) -> str: ...
     @property
     def ok(self) -> bool: ...
     @property
@@ -96,6 +98,27 @@ class ControllabilityReport:
     def singular_values(self) -> numpy.typing.NDArray[numpy.float64]: ...
     @property
     def smallest_singular_value(self) -> float: ...
+    @property
+    def status(self) -> ControllabilityStatus: ...
+
+class ControllabilityStatus:
+    """Status of a controllability report (code: ok, linearization_failed, transport_failure, integrator_failure, not_computed)."""
+    def __repr__(self: ControllabilityStatus) -> str: ...
+    @property
+    def code(self) -> str:
+        """the code's name (str): 'ok', or what failed"""
+    def describe(self: ControllabilityStatus) -> str: ...
+    @property
+    def index(self) -> int:
+        """where: knot, step, interval or row (-1: none)"""
+    @property
+    def message(self) -> str:
+        """empty when ok; what failed, with the values"""
+    @property
+    def ok(self) -> bool: ...
+    @property
+    def t(self) -> float:
+        """when it happened (NaN: not applicable)"""
 
 class Data:
     """The preallocated workspace of a model: every compute_* function writes its results here and reuses its buffers (one Data per thread; a Data in use by another thread raises). The properties return copies (fresh arrays) of the latest results."""
@@ -181,45 +204,24 @@ class DerivativeMode:
     def __ne__(self, other: object) -> bool: ...
 
 class DynamicsStatus:
-    """Outcome of a KKT solve [M A^T; A 0]: `ok` (OK or REDUNDANT_CONSTRAINTS) means qdd and the linearization are valid; otherwise `message` says why."""
+    """Outcome of a KKT solve [M A^T; A 0] (the Status shape of every result): code (str: ok, redundant_constraints, singular_mass_matrix, singular_constraints, non_finite), message, t, index, ok (qdd and the linearization are valid and determined), constraint_rank, constraint_conditioning; describe() and json() are the library's reports."""
     def __repr__(self: DynamicsStatus) -> str: ...
     @property
-    def code(self) -> DynamicsStatusCode: ...
+    def code(self) -> str: ...
     @property
     def constraint_conditioning(self) -> float: ...
     @property
     def constraint_rank(self) -> int: ...
+    def describe(self: DynamicsStatus) -> str: ...
+    @property
+    def index(self) -> int: ...
+    def json(self: DynamicsStatus) -> str: ...
     @property
     def message(self) -> str: ...
     @property
     def ok(self) -> bool: ...
-
-class DynamicsStatusCode:
-    """Members:
-
-      OK
-
-      REDUNDANT_CONSTRAINTS
-
-      SINGULAR_MASS_MATRIX
-
-      SINGULAR_CONSTRAINTS
-
-      NON_FINITE
-    """
-    NON_FINITE: ClassVar[DynamicsStatusCode]
-    OK: ClassVar[DynamicsStatusCode]
-    REDUNDANT_CONSTRAINTS: ClassVar[DynamicsStatusCode]
-    SINGULAR_CONSTRAINTS: ClassVar[DynamicsStatusCode]
-    SINGULAR_MASS_MATRIX: ClassVar[DynamicsStatusCode]
     @property
-    def value(self) -> int: ...
-    @property
-    def name(self) -> str: ...
-    def __init__(self, value: int) -> None: ...
-    def __int__(self) -> int: ...
-    def __eq__(self, other: object) -> bool: ...
-    def __ne__(self, other: object) -> bool: ...
+    def t(self) -> float: ...
 
 class Energy:
     @property
@@ -230,8 +232,8 @@ class Energy:
     def total(self) -> float: ...
 
 class GainSchedule:
-    """Feedback gains K(t) (nu, nx) at ascending times, linear in between; u = u_ref - K (x - x_ref). As arrays: times (N,), gains (N, nu, nx). CSV: t, K_i_j (row-major)."""
-    def __init__(self: GainSchedule, times: numpy.typing.NDArray[numpy.float64], gains: numpy.typing.NDArray[numpy.float64]) -> None:
+    """Feedback gains K(t) (nu, nx) at ascending times, linear in between; u = u_ref - K (x - x_ref). As arrays: times (N,), gains (N, nu, nx). CSV: t, K_<input>_<state> (row-major)."""
+    def __init__(self: GainSchedule, times: numpy.typing.NDArray[numpy.float64], gains: object) -> None:
         """times (N,) strictly increasing; gains (N, nu, nx). Raises TrajectoryError."""
     def __len__(self: GainSchedule) -> int: ...
     def __repr__(self: GainSchedule) -> str: ...
@@ -241,7 +243,7 @@ class GainSchedule:
     @property
     def end_time(self) -> float: ...
     def evaluate(self: GainSchedule, t: float) -> numpy.typing.NDArray[numpy.float64]:
-        """K(t) (nu, nx) by linear interpolation"""
+        """K(t) (nu, nx) by the schedule's interpolation rule"""
     @property
     def gains(self) -> numpy.typing.NDArray[numpy.float64]:
         """(N, nu, nx)"""
@@ -265,44 +267,30 @@ class GainSchedule:
     @property
     def start_time(self) -> float: ...
     @property
-    def times(self) -> numpy.typing.NDArray[numpy.float64]: ...
+    def times(self) -> numpy.typing.NDArray[numpy.float64]:
+        """(N,)"""
     def write_csv(self: GainSchedule, path: str) -> None: ...
 
 class GramianReport:
     """Reduced reachability Gramian W (d, d) over [t0, t1] on the transported tangent basis."""
     @property
     def W(self) -> numpy.typing.NDArray[numpy.float64]: ...
+    def __repr__(self: GramianReport) -> str: ...
     def controllable(self: GramianReport, relative_tolerance: float = 1e-10) -> bool: ...
+    def describe(self: GramianReport) -> str: ...
     @property
     def dimension(self) -> int: ...
+    def json(self: GramianReport) -> str: ...
     @property
     def max_eigenvalue(self) -> float: ...
-    @property
-    def message(self) -> str: ...
     @property
     def min_eigenvalue(self) -> float: ...
     @property
     def ok(self) -> bool: ...
-
-class HessianMode:
-    """The Lagrangian Hessian Ipopt uses: EXACT (the transcription's exact second derivatives) or LBFGS (limited-memory quasi-Newton).
-
-    Members:
-
-      EXACT
-
-      LBFGS
-    """
-    EXACT: ClassVar[HessianMode]
-    LBFGS: ClassVar[HessianMode]
     @property
-    def value(self) -> int: ...
+    def status(self) -> ControllabilityStatus: ...
     @property
-    def name(self) -> str: ...
-    def __init__(self, value: int) -> None: ...
-    def __int__(self) -> int: ...
-    def __eq__(self, other: object) -> bool: ...
-    def __ne__(self, other: object) -> bool: ...
+    def steps(self) -> int: ...
 
 class IntegrationMethod:
     """Members:
@@ -338,7 +326,7 @@ class IterationInfo:
     def step_size(self) -> float: ...
 
 class LqrResult:
-    """S (nx, nx), K (nu, nx), status (LqrStatus) and message, residual, iterations, closed_loop_eigenvalues (complex, of A - BK or Ad - Bd K)."""
+    """S (nx, nx), K (nu, nx), status (LqrStatus), residual, iterations, closed_loop_eigenvalues (complex, of A - BK or Ad - Bd K); describe() and json() are the library's reports."""
     @property
     def K(self) -> numpy.typing.NDArray[numpy.float64]: ...
     @property
@@ -346,60 +334,37 @@ class LqrResult:
     def __repr__(self: LqrResult) -> str: ...
     @property
     def closed_loop_eigenvalues(self) -> object: ...
+    def describe(self: LqrResult) -> str: ...
     @property
     def iterations(self) -> int: ...
-    @property
-    def message(self) -> str: ...
+    def json(self: LqrResult) -> str: ...
     @property
     def ok(self) -> bool: ...
+    @property
+    def refinement_steps(self) -> int: ...
     @property
     def residual(self) -> float: ...
     @property
     def status(self) -> LqrStatus: ...
 
 class LqrStatus:
-    """Members:
-
-      OK
-
-      NOT_STABILIZABLE
-
-      NO_STABILIZING_SOLUTION
-
-      NO_CONVERGENCE
-    """
-    NOT_STABILIZABLE: ClassVar[LqrStatus]
-    NO_CONVERGENCE: ClassVar[LqrStatus]
-    NO_STABILIZING_SOLUTION: ClassVar[LqrStatus]
-    OK: ClassVar[LqrStatus]
+    """Status of solve_care / solve_dare (code: ok, not_stabilizable, no_stabilizing_solution, no_convergence)."""
+    def __repr__(self: LqrStatus) -> str: ...
     @property
-    def value(self) -> int: ...
+    def code(self) -> str:
+        """the code's name (str): 'ok', or what failed"""
+    def describe(self: LqrStatus) -> str: ...
     @property
-    def name(self) -> str: ...
-    def __init__(self, value: int) -> None: ...
-    def __int__(self) -> int: ...
-    def __eq__(self, other: object) -> bool: ...
-    def __ne__(self, other: object) -> bool: ...
-
-class ManifoldRiccatiSolution:
-    """TV-LQR on the constraint manifold: `reduced` (RiccatiSolution on z, d states) and `basis` (T(t)); K(t) = Kr(t) T(t)^T (nu, nx), S(t) = T Sr T^T. Keeps its model alive."""
-    def K(self: ManifoldRiccatiSolution, t: float) -> numpy.typing.NDArray[numpy.float64]: ...
-    def S(self: ManifoldRiccatiSolution, t: float) -> numpy.typing.NDArray[numpy.float64]: ...
-    def __repr__(self: ManifoldRiccatiSolution) -> str: ...
+    def index(self) -> int:
+        """where: knot, step, interval or row (-1: none)"""
     @property
-    def basis(self) -> TangentBasisTrajectory: ...
-    @property
-    def dimension(self) -> int: ...
-    def gain_schedule(self: ManifoldRiccatiSolution, times: numpy.typing.NDArray[numpy.float64]) -> GainSchedule:
-        """K sampled at the times, as a GainSchedule."""
-    @property
-    def message(self) -> str: ...
-    @property
-    def nx(self) -> int: ...
+    def message(self) -> str:
+        """empty when ok; what failed, with the values"""
     @property
     def ok(self) -> bool: ...
     @property
-    def reduced(self) -> RiccatiSolution: ...
+    def t(self) -> float:
+        """when it happened (NaN: not applicable)"""
 
 class Mass:
     """A point mass m at a frame's origin with rotational inertia (3x3, frame axes, about that point)."""
@@ -407,6 +372,37 @@ class Mass:
     def inertia(self) -> numpy.typing.NDArray[numpy.float64]: ...
     @property
     def m(self) -> float: ...
+
+class MatrixEquationSolution:
+    """X (n, n) of a Lyapunov equation and its status (MatrixEquationStatus); X is empty when not ok."""
+    @property
+    def X(self) -> numpy.typing.NDArray[numpy.float64]: ...
+    def __repr__(self: MatrixEquationSolution) -> str: ...
+    def describe(self: MatrixEquationSolution) -> str: ...
+    def json(self: MatrixEquationSolution) -> str: ...
+    @property
+    def ok(self) -> bool: ...
+    @property
+    def status(self) -> MatrixEquationStatus: ...
+
+class MatrixEquationStatus:
+    """Status of solve_lyapunov (code: ok, singular, non_finite)."""
+    def __repr__(self: MatrixEquationStatus) -> str: ...
+    @property
+    def code(self) -> str:
+        """the code's name (str): 'ok', or what failed"""
+    def describe(self: MatrixEquationStatus) -> str: ...
+    @property
+    def index(self) -> int:
+        """where: knot, step, interval or row (-1: none)"""
+    @property
+    def message(self) -> str:
+        """empty when ok; what failed, with the values"""
+    @property
+    def ok(self) -> bool: ...
+    @property
+    def t(self) -> float:
+        """when it happened (NaN: not applicable)"""
 
 class Model:
     """The validated, immutable description of a mechanical system (a tree of frames with masses, forces, potentials and constraints). Made by load_scene / parse_scene or ModelBuilder.finalize(); it cannot be changed. State x = [q; dq] (nx = 2 nq), inputs u (nu)."""
@@ -521,27 +517,12 @@ class OptimalControlProblem:
     @final_state.setter
     def final_state(self, value: numpy.typing.NDArray[numpy.float64]) -> None: ...
     @property
-    def force_lower(self) -> numpy.typing.NDArray[numpy.float64]:
-        """(nc,) bounds on the constraint forces at every collocation point, -inf for none"""
-    @force_lower.setter
-    def force_lower(self, value: numpy.typing.NDArray[numpy.float64]) -> None: ...
-    @property
-    def force_upper(self) -> numpy.typing.NDArray[numpy.float64]:
-        """(nc,), +inf for none"""
-    @force_upper.setter
-    def force_upper(self, value: numpy.typing.NDArray[numpy.float64]) -> None: ...
-    @property
     def free_horizon(self) -> bool: ...
     @property
     def goal_state(self) -> numpy.typing.NDArray[numpy.float64]:
         """(nx,)"""
     @goal_state.setter
     def goal_state(self, value: numpy.typing.NDArray[numpy.float64]) -> None: ...
-    @property
-    def hessian(self) -> HessianMode:
-        """HessianMode unless OptimizerOptions.hessian overrides it (file key "hessian")"""
-    @hessian.setter
-    def hessian(self, value: HessianMode) -> None: ...
     @property
     def horizon(self) -> float:
         """T (the initial guess when free)"""
@@ -617,16 +598,54 @@ class OptimalControlProblem:
     def validate(self: OptimalControlProblem) -> None:
         """Raises ProblemError naming the first bad field."""
 
-class OptimizationCode:
-    """The code of an OptimizationResult's status (SOLVED and SOLVED_ACCEPTABLE are success).
+class OptimizationResult:
+    """status (OptimizationStatus), ipopt_status, message, iterations, cost, constraint_violation, bound_violation, max_slack, solve_time, solve_cpu_time, horizon, evaluation counts, the trajectory (knots), Hermite-Simpson midpoints and the NLP variables."""
+    def __repr__(self: OptimizationResult) -> str: ...
+    @property
+    def bound_violation(self) -> float: ...
+    @property
+    def constraint_violation(self) -> float: ...
+    @property
+    def cost(self) -> float: ...
+    @property
+    def dynamics_evaluations(self) -> int: ...
+    @property
+    def horizon(self) -> float: ...
+    @property
+    def ipopt_status(self) -> str: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def linearization_evaluations(self) -> int: ...
+    @property
+    def max_slack(self) -> float: ...
+    @property
+    def message(self) -> str: ...
+    @property
+    def midpoint_inputs(self) -> numpy.typing.NDArray[numpy.float64]:
+        """(N - 1, nu), time first"""
+    @property
+    def midpoint_states(self) -> numpy.typing.NDArray[numpy.float64]:
+        """(N - 1, nx), time first"""
+    @property
+    def solve_cpu_time(self) -> float: ...
+    @property
+    def solve_time(self) -> float: ...
+    @property
+    def status(self) -> OptimizationStatus: ...
+    @property
+    def success(self) -> bool: ...
+    @property
+    def trajectory(self) -> Trajectory: ...
+    @property
+    def variables(self) -> numpy.typing.NDArray[numpy.float64]: ...
 
-    Members:
+class OptimizationStatus:
+    """Members:
 
       SOLVED
 
       SOLVED_ACCEPTABLE
-
-      INCONSISTENT
 
       INFEASIBLE
 
@@ -636,13 +655,12 @@ class OptimizationCode:
 
       FAILED
     """
-    FAILED: ClassVar[OptimizationCode]
-    INCONSISTENT: ClassVar[OptimizationCode]
-    INFEASIBLE: ClassVar[OptimizationCode]
-    ITERATION_LIMIT: ClassVar[OptimizationCode]
-    SOLVED: ClassVar[OptimizationCode]
-    SOLVED_ACCEPTABLE: ClassVar[OptimizationCode]
-    STOPPED: ClassVar[OptimizationCode]
+    FAILED: ClassVar[OptimizationStatus]
+    INFEASIBLE: ClassVar[OptimizationStatus]
+    ITERATION_LIMIT: ClassVar[OptimizationStatus]
+    SOLVED: ClassVar[OptimizationStatus]
+    SOLVED_ACCEPTABLE: ClassVar[OptimizationStatus]
+    STOPPED: ClassVar[OptimizationStatus]
     @property
     def value(self) -> int: ...
     @property
@@ -652,70 +670,9 @@ class OptimizationCode:
     def __eq__(self, other: object) -> bool: ...
     def __ne__(self, other: object) -> bool: ...
 
-class OptimizationResult:
-    """status (OptimizationCode), ok, message, t, index (the status: t and index name the worst interval when inconsistent), ipopt_status, iterations (all rounds), rounds, hessian, cost, constraint_violation, bound_violation, max_slack, solve_time, solve_cpu_time, horizon, evaluation counts, the trajectory (knots), Hermite-Simpson midpoints, the NLP variables and multipliers; describe() and json() are the library's reports."""
-    def __repr__(self: OptimizationResult) -> str: ...
-    @property
-    def bound_violation(self) -> float: ...
-    @property
-    def constraint_multipliers(self) -> numpy.typing.NDArray[numpy.float64]: ...
-    @property
-    def constraint_violation(self) -> float: ...
-    @property
-    def cost(self) -> float: ...
-    def describe(self: OptimizationResult) -> str: ...
-    @property
-    def dynamics_evaluations(self) -> int: ...
-    @property
-    def hessian(self) -> HessianMode: ...
-    @property
-    def hessian_note(self) -> str: ...
-    @property
-    def horizon(self) -> float: ...
-    @property
-    def index(self) -> int: ...
-    @property
-    def ipopt_status(self) -> str: ...
-    @property
-    def iterations(self) -> int: ...
-    def json(self: OptimizationResult) -> str: ...
-    @property
-    def linearization_evaluations(self) -> int: ...
-    @property
-    def max_slack(self) -> float: ...
-    @property
-    def message(self) -> str: ...
-    @property
-    def midpoint_inputs(self) -> numpy.typing.NDArray[numpy.float64]: ...
-    @property
-    def midpoint_states(self) -> numpy.typing.NDArray[numpy.float64]: ...
-    @property
-    def ok(self) -> bool: ...
-    @property
-    def rounds(self) -> list:
-        """one dict per solve (knots, iterations, ipopt_status, defect, slack_defect, hessian, solve_time)"""
-    @property
-    def second_order_evaluations(self) -> int: ...
-    @property
-    def solve_cpu_time(self) -> float: ...
-    @property
-    def solve_time(self) -> float: ...
-    @property
-    def status(self) -> OptimizationCode: ...
-    @property
-    def t(self) -> float: ...
-    @property
-    def trajectory(self) -> Trajectory: ...
-    @property
-    def variables(self) -> numpy.typing.NDArray[numpy.float64]: ...
-
 class OptimizerOptions:
-    """Ipopt options (keywords): print_level, max_iterations, tolerance, constraint_tolerance, max_cpu_time, limited_memory_size, derivatives (DerivativeMode), hessian (HessianMode or None: the problem's), warm_start (refinement rounds start from the carried primal and multipliers), warm_start_barrier (Ipopt's mu_init then), consistency_tolerance, max_refinements, max_knots, max_split, on_iteration (a callable taking an IterationInfo and returning False to stop; an exception in it stops the solve)."""
+    """Ipopt options (keywords): print_level, max_iterations, tolerance, constraint_tolerance, max_cpu_time, limited_memory_size, derivatives (DerivativeMode), on_iteration (a callable taking an IterationInfo and returning False to stop; an exception in it stops the solve)."""
     def __init__(self: OptimizerOptions, **kwargs) -> None: ...
-    @property
-    def consistency_tolerance(self) -> float: ...
-    @consistency_tolerance.setter
-    def consistency_tolerance(self, value: float) -> None: ...
     @property
     def constraint_tolerance(self) -> float: ...
     @constraint_tolerance.setter
@@ -724,10 +681,6 @@ class OptimizerOptions:
     def derivatives(self) -> DerivativeMode: ...
     @derivatives.setter
     def derivatives(self, value: DerivativeMode) -> None: ...
-    @property
-    def hessian(self) -> Optional[HessianMode]: ...
-    @hessian.setter
-    def hessian(self, value: Optional[HessianMode]) -> None: ...
     @property
     def limited_memory_size(self) -> int: ...
     @limited_memory_size.setter
@@ -741,18 +694,6 @@ class OptimizerOptions:
     @max_iterations.setter
     def max_iterations(self, value: int) -> None: ...
     @property
-    def max_knots(self) -> int: ...
-    @max_knots.setter
-    def max_knots(self, value: int) -> None: ...
-    @property
-    def max_refinements(self) -> int: ...
-    @max_refinements.setter
-    def max_refinements(self, value: int) -> None: ...
-    @property
-    def max_split(self) -> int: ...
-    @max_split.setter
-    def max_split(self, value: int) -> None: ...
-    @property
     def on_iteration(self) -> Callable[[IterationInfo], bool]: ...
     @on_iteration.setter
     def on_iteration(self, value: Callable[[IterationInfo], bool]) -> None: ...
@@ -765,14 +706,6 @@ class OptimizerOptions:
     @tolerance.setter
     def tolerance(self, value: float) -> None: ...
     def validate(self: OptimizerOptions) -> None: ...
-    @property
-    def warm_start(self) -> bool: ...
-    @warm_start.setter
-    def warm_start(self, value: bool) -> None: ...
-    @property
-    def warm_start_barrier(self) -> float: ...
-    @warm_start_barrier.setter
-    def warm_start_barrier(self, value: float) -> None: ...
 
 class ProblemError(ValueError):
     """Invalid optimal control problem (object or problem file); the message names the field and the value."""
@@ -874,80 +807,6 @@ class RiccatiOptions:
     @track_eigenvalues.setter
     def track_eigenvalues(self, value: bool) -> None: ...
     def validate(self: RiccatiOptions) -> None: ...
-
-class RiccatiSolution:
-    """The TV-LQR solution: S(t) (nx, nx) from -dS/dt = A^T S + S A - S B R^-1 B^T S + Q, S(T) = Qf, and K(t) = R^-1 B(t)^T S(t) (nu, nx). Keeps its model alive. K and S are not thread safe (they share one workspace)."""
-    def K(self: RiccatiSolution, t: float) -> numpy.typing.NDArray[numpy.float64]: ...
-    def S(self: RiccatiSolution, t: float) -> numpy.typing.NDArray[numpy.float64]: ...
-    def __repr__(self: RiccatiSolution) -> str: ...
-    @property
-    def end_time(self) -> float: ...
-    @property
-    def failure_norm(self) -> float: ...
-    @property
-    def failure_time(self) -> float: ...
-    def gain_schedule(self: RiccatiSolution, times: numpy.typing.NDArray[numpy.float64]) -> GainSchedule:
-        """K sampled at the times, as a GainSchedule."""
-    @property
-    def jacobian_evaluations(self) -> int: ...
-    @property
-    def linear_iterations(self) -> int: ...
-    @property
-    def max_eigenvalue(self) -> float: ...
-    @property
-    def message(self) -> str: ...
-    @property
-    def min_eigenvalue(self) -> float: ...
-    @property
-    def nu(self) -> int: ...
-    @property
-    def nx(self) -> int: ...
-    @property
-    def ok(self) -> bool: ...
-    @property
-    def preconditioner_solves(self) -> int: ...
-    @property
-    def rhs_evaluations(self) -> int: ...
-    @property
-    def start_time(self) -> float: ...
-    @property
-    def status(self) -> RiccatiStatus: ...
-    @property
-    def step_times(self) -> List[float]: ...
-    @property
-    def steps(self) -> int: ...
-    @property
-    def valid_from(self) -> float: ...
-
-class RiccatiStatus:
-    """Members:
-
-      OK
-
-      INTEGRATOR_FAILURE
-
-      NON_FINITE
-
-      BLOW_UP
-
-      CALLBACK_FAILURE
-
-      INDEFINITE
-    """
-    BLOW_UP: ClassVar[RiccatiStatus]
-    CALLBACK_FAILURE: ClassVar[RiccatiStatus]
-    INDEFINITE: ClassVar[RiccatiStatus]
-    INTEGRATOR_FAILURE: ClassVar[RiccatiStatus]
-    NON_FINITE: ClassVar[RiccatiStatus]
-    OK: ClassVar[RiccatiStatus]
-    @property
-    def value(self) -> int: ...
-    @property
-    def name(self) -> str: ...
-    def __init__(self, value: int) -> None: ...
-    def __int__(self) -> int: ...
-    def __eq__(self, other: object) -> bool: ...
-    def __ne__(self, other: object) -> bool: ...
 
 class SampledDiscretizationOptions:
     """CVODES tolerances of the exact interval discretization (keywords: rtol, atol, max_steps)."""
@@ -1063,19 +922,17 @@ class SimulationResult:
     def constraint_drift(self) -> numpy.typing.NDArray[numpy.float64]: ...
     @property
     def control_samples(self) -> int: ...
+    def describe(self: SimulationResult) -> str: ...
     @property
     def failure_state(self) -> numpy.typing.NDArray[numpy.float64]: ...
     @property
-    def failure_time(self) -> float: ...
-    @property
     def jacobian_evaluations(self) -> int: ...
+    def json(self: SimulationResult) -> str: ...
     @property
     def linear_rhs_evaluations(self) -> int:
         """right-hand sides spent on difference-quotient Jacobians (0 with exact ones)"""
     @property
     def max_constraint_drift(self) -> float: ...
-    @property
-    def message(self) -> str: ...
     @property
     def ok(self) -> bool: ...
     @property
@@ -1099,37 +956,26 @@ class SimulationResult:
     def trajectory(self) -> Trajectory: ...
 
 class SimulationStatus:
-    """Members:
-
-      OK
-
-      INTEGRATOR_FAILURE
-
-      DYNAMICS_FAILURE
-
-      NON_FINITE
-
-      POLICY_FAILURE
-
-      CONSTRAINT_DRIFT
-    """
-    CONSTRAINT_DRIFT: ClassVar[SimulationStatus]
-    DYNAMICS_FAILURE: ClassVar[SimulationStatus]
-    INTEGRATOR_FAILURE: ClassVar[SimulationStatus]
-    NON_FINITE: ClassVar[SimulationStatus]
-    OK: ClassVar[SimulationStatus]
-    POLICY_FAILURE: ClassVar[SimulationStatus]
+    """Status of a simulation (code: ok, integrator_failure, dynamics_failure, non_finite, policy_failure, constraint_drift); t: the time of the failure."""
+    def __repr__(self: SimulationStatus) -> str: ...
     @property
-    def value(self) -> int: ...
+    def code(self) -> str:
+        """the code's name (str): 'ok', or what failed"""
+    def describe(self: SimulationStatus) -> str: ...
     @property
-    def name(self) -> str: ...
-    def __init__(self, value: int) -> None: ...
-    def __int__(self) -> int: ...
-    def __eq__(self, other: object) -> bool: ...
-    def __ne__(self, other: object) -> bool: ...
+    def index(self) -> int:
+        """where: knot, step, interval or row (-1: none)"""
+    @property
+    def message(self) -> str:
+        """empty when ok; what failed, with the values"""
+    @property
+    def ok(self) -> bool: ...
+    @property
+    def t(self) -> float:
+        """when it happened (NaN: not applicable)"""
 
 class TangentBasisTrajectory:
-    """T(t) (nx, d): an orthonormal basis of the constraint manifold's tangent space, transported along the reference. Keeps its model alive."""
+    """T(t) (nx, d): an orthonormal basis of the constraint manifold's tangent space, transported along the reference (plain data). ok / message / valid_until report a transport that stopped early."""
     def basis(self: TangentBasisTrajectory, t: float) -> numpy.typing.NDArray[numpy.float64]:
         """T(t) (nx, d)"""
     @property
@@ -1192,9 +1038,9 @@ class TangentTransportOptions:
     def substeps(self, value: int) -> None: ...
 
 class Trajectory:
-    """A nominal trajectory: knot times (N,), states x = [q; dq] (nx, N) — column k is the state at t_k, the layout of scipy's solve_ivp — and inputs u (nu, N). Between knots the state is a cubic Hermite spline (knot derivatives [dq; qdd] from the dynamics) and the input is piecewise linear, or the cubic Hermite spline through (u_k, du_k) when input derivatives are set. CSV layout: t, <configs>, d<configs>, <inputs>[, rate_<inputs>]."""
-    def __init__(self: Trajectory, config_names: List[str], input_names: List[str], times: numpy.typing.NDArray[numpy.float64], states: numpy.typing.NDArray[numpy.float64], inputs: numpy.typing.NDArray[numpy.float64]) -> None:
-        """times (N,) strictly increasing; states (2n, N); inputs (m, N). Raises TrajectoryError."""
+    """A nominal trajectory: knot times (N,), states x = [q; dq] (N, nx) — row k is the state at t_k — and inputs u (N, nu). Between knots the state is a cubic Hermite spline (knot derivatives [dq; qdd] from the dynamics) and the input is piecewise linear, or the cubic Hermite spline through (u_k, du_k) when input derivatives are set. CSV layout: t, <configs>, d<configs>, <inputs>[, rate_<inputs>]."""
+    def __init__(self: Trajectory, config_names: List[str], input_names: List[str], times: numpy.typing.NDArray[numpy.float64], states: object, inputs: object = None) -> None:
+        """times (N,) strictly increasing; states (N, nx); inputs (N, nu) (default zeros). Raises TrajectoryError."""
     def __len__(self: Trajectory) -> int: ...
     def __repr__(self: Trajectory) -> str: ...
     def check_compatible(self: Trajectory, model: Model) -> None:
@@ -1210,20 +1056,20 @@ class Trajectory:
     def evaluate(self: Trajectory, t: float) -> tuple:
         """(x (nx,), u (nu,)) at time t; needs state derivatives."""
     @staticmethod
-    def for_model(model: Model, times: numpy.typing.NDArray[numpy.float64], states: numpy.typing.NDArray[numpy.float64], inputs: Optional[numpy.typing.NDArray[numpy.float64]] = None) -> Trajectory:
-        """A trajectory with the model's names; inputs default to zeros (nu, N)."""
+    def for_model(model: Model, times: numpy.typing.NDArray[numpy.float64], states: object, inputs: object = None) -> Trajectory:
+        """A trajectory with the model's names: states (N, nx), inputs (N, nu) (default zeros)."""
     @property
     def has_input_derivatives(self) -> bool: ...
     @property
     def has_state_derivatives(self) -> bool: ...
     @property
     def input_derivatives(self) -> object:
-        """(nu, N) or None"""
+        """(N, nu) or None"""
     @property
     def input_names(self) -> List[str]: ...
     @property
     def inputs(self) -> numpy.typing.NDArray[numpy.float64]:
-        """(nu, N)"""
+        """(N, nu)"""
     @property
     def nq(self) -> int: ...
     @property
@@ -1234,19 +1080,19 @@ class Trajectory:
     def read_csv(path: str) -> Trajectory:
         """Reads the CSV layout; raises TrajectoryError naming row and column."""
     def sample(self: Trajectory, times: numpy.typing.NDArray[numpy.float64]) -> tuple:
-        """(X (nx, K), U (nu, K)) at K times."""
-    def set_input_derivatives(self: Trajectory, input_derivatives: numpy.typing.NDArray[numpy.float64]) -> None:
-        """(nu, N): the input becomes the cubic Hermite spline through (u_k, du_k)."""
-    def set_state_derivatives(self: Trajectory, state_derivatives: numpy.typing.NDArray[numpy.float64]) -> None:
-        """(nx, N)"""
+        """(X (K, nx), U (K, nu)) at K times."""
+    def set_input_derivatives(self: Trajectory, input_derivatives: object) -> None:
+        """(N, nu): the input becomes the cubic Hermite spline through (u_k, du_k)."""
+    def set_state_derivatives(self: Trajectory, state_derivatives: object) -> None:
+        """(N, nx)"""
     @property
     def start_time(self) -> float: ...
     @property
     def state_derivatives(self) -> object:
-        """(nx, N) or None"""
+        """(N, nx) or None"""
     @property
     def states(self) -> numpy.typing.NDArray[numpy.float64]:
-        """(nx, N)"""
+        """(N, nx)"""
     @property
     def times(self) -> numpy.typing.NDArray[numpy.float64]:
         """(N,)"""
@@ -1331,13 +1177,16 @@ class TvlqrOptions:
     def validate(self: TvlqrOptions) -> None: ...
 
 class TvlqrSolution:
-    """Plain data (owns its arrays; no reference to the model): ok, message, gains (GainSchedule, K (nu, nx) at its times), S (N, nx, nx) at the same times, and diagnostics."""
+    """Plain data (owns its arrays; no reference to the model): status (TvlqrStatus), ok, gains (GainSchedule, K (nu, nx) at its times), S (N, nx, nx) at the same times, and diagnostics; describe(), summary() and json() are the library's reports."""
+    def K(self: TvlqrSolution, t: float) -> numpy.typing.NDArray[numpy.float64]:
+        """K(t) (nu, nx) from the gain schedule (its interpolation rule)"""
     @property
     def S(self) -> numpy.typing.NDArray[numpy.float64]:
         """(N, nx, nx) at gains.times"""
     def __repr__(self: TvlqrSolution) -> str: ...
     @property
     def constrained(self) -> bool: ...
+    def describe(self: TvlqrSolution) -> str: ...
     @property
     def dimension(self) -> int: ...
     @property
@@ -1349,8 +1198,6 @@ class TvlqrSolution:
     def max_basis_correction(self) -> float: ...
     @property
     def max_eigenvalue_S(self) -> float: ...
-    @property
-    def message(self) -> str: ...
     @property
     def method(self) -> str: ...
     @property
@@ -1368,32 +1215,36 @@ class TvlqrSolution:
     @property
     def seconds(self) -> float: ...
     @property
+    def status(self) -> TvlqrStatus: ...
+    @property
     def steps(self) -> int: ...
     def summary(self: TvlqrSolution) -> str: ...
     @property
     def transport_steps(self) -> int: ...
 
-class ViewPage:
-    """The page view() wrote: os.PathLike (its path); shown inline in a Jupyter notebook (_repr_html_: the page in an iframe)."""
-    def __fspath__(self: ViewPage) -> str: ...
-    def __repr__(self: ViewPage) -> str: ...
-    def __str__(self: ViewPage) -> str: ...
-    def _repr_html_(self: ViewPage, height: int = 520) -> str:
-        """The page in an iframe (srcdoc), as Jupyter shows the object: the page is self-contained, so it needs neither a server nor the file."""
+class TvlqrStatus:
+    """Status of solve_tvlqr (code: ok, transport_failure, riccati_failure, discretization_failure, recursion_failure, non_finite, indefinite, not_solved); the message carries the inner solver's report."""
+    def __repr__(self: TvlqrStatus) -> str: ...
     @property
-    def html(self) -> str:
-        """the page's text (what the file holds)"""
+    def code(self) -> str:
+        """the code's name (str): 'ok', or what failed"""
+    def describe(self: TvlqrStatus) -> str: ...
     @property
-    def path(self) -> str:
-        """the file written"""
+    def index(self) -> int:
+        """where: knot, step, interval or row (-1: none)"""
     @property
-    def samples(self) -> int:
-        """pose samples over all trajectories (1 for a state)"""
+    def message(self) -> str:
+        """empty when ok; what failed, with the values"""
     @property
-    def warnings(self) -> List[str]:
-        """e.g. a mesh drawn as a stand-in (also given to warnings.warn)"""
+    def ok(self) -> bool: ...
+    @property
+    def t(self) -> float:
+        """when it happened (NaN: not applicable)"""
 
 def _time_linearization_loop(model: Model, data: Data, q: numpy.typing.NDArray[numpy.float64], dq: numpy.typing.NDArray[numpy.float64], u: numpy.typing.NDArray[numpy.float64], repeats: int) -> float: ...
+
+def check_gain_schedule_applies(gains: GainSchedule, model: Model, reference: Trajectory, sample_rate: float = 0.0, source: str = 'gains') -> str:
+    """The library's applicability check before a closed-loop simulation (as `trellis simulate` does): raises TrajectoryError when the gains' columns do not match the model, sampled gains are applied continuously or at another rate, their samples do not line up with the reference's start, or they do not cover its span; returns a note (str, empty when none) when continuous gains are sampled at sample_rate."""
 
 def compute_constraint_tangent_basis(model: Model, data: Data) -> int:
     """Orthonormal basis T (nx, d) of the tangent space of {h(q) = 0, A(q) dq = 0} at the state of the last compute_linearization (data.tangent_basis), and data.reduced_A = T^T A T (d, d), data.reduced_B = T^T B (d, nu). Returns d = nx - rank(dPhi/dx); T = I without constraints."""
@@ -1405,10 +1256,10 @@ def compute_controllability(A: numpy.typing.NDArray[numpy.float64], B: numpy.typ
     """Controllability of (A (d, d), B (d, nu))."""
 
 def compute_controllability_at(model: Model, data: Data, q: numpy.typing.NDArray[numpy.float64], dq: numpy.typing.NDArray[numpy.float64], u: numpy.typing.NDArray[numpy.float64], relative_tolerance: float = 1e-10) -> ControllabilityReport:
-    """Linearization at x = [q; dq], u, reduced to the constraint tangent space, then its controllability. Raises NumericalError if the dynamics fail there."""
+    """Linearization at x = [q; dq], u, reduced to the constraint tangent space, then its controllability. If the dynamics fail there, the status is 'linearization_failed'."""
 
-def compute_controllability_gramian(model: Model, reference: Trajectory, t0: Optional[float] = None, t1: Optional[float] = None, *, transport: Optional[TangentTransportOptions] = None) -> GramianReport:
-    """Reduced reachability Gramian W(t0, t1) = int Phi_r(t1, s) Br Br^T Phi_r^T ds (d, d) along the reference (default: its whole span); numerical failure is in ok / message."""
+def compute_controllability_gramian(model: Model, reference: Trajectory, t0: Optional[float] = None, t1: Optional[float] = None, *, transport: Any = None) -> GramianReport:
+    """Reduced reachability Gramian W(t0, t1) = int Phi_r(t1, s) Br Br^T Phi_r^T ds (d, d) along the reference (default: its whole span); numerical failure is the status."""
 
 def compute_dynamics(model: Model, data: Data, q: numpy.typing.NDArray[numpy.float64], dq: numpy.typing.NDArray[numpy.float64], u: numpy.typing.NDArray[numpy.float64], *, qdd: Optional[numpy.typing.NDArray[Any]] = None, lambda_: Optional[numpy.typing.NDArray[Any]] = None) -> DynamicsStatus:
     """Forward dynamics: solves [M A^T; A 0] [qdd; -lambda] = [Q - b; -dA/dt dq]. Results in data (qdd (nq,), lambda_ (nc,), M, bias, constraint terms) and, when given, written into the float64 arrays `qdd` (nq,) and `lambda_` (nc,) of any memory order. Returns the DynamicsStatus: a numerical failure is a status, not an exception.
@@ -1441,7 +1292,7 @@ def compute_second_order(model: Model, data: Data, q: numpy.typing.NDArray[numpy
     """Exact second derivatives of qdd(q, dq, u) of the constrained system (lambda eliminated) and of lambda. Returns a dict: 'status' (DynamicsStatus; the arrays are valid when it is ok or redundant_constraints), the six blocks output index first — 'd2qdd_dqdq' (n, n, n) [i, j, k] = d2 qdd_i / dq_j dq_k, 'd2qdd_dqddq' (n, n, n) dq_j ddq_k, 'd2qdd_ddqddq' (n, n, n), 'd2qdd_dudq' (n, m, n) du_j dq_k, 'd2qdd_duddq' (n, m, n), 'd2qdd_dudu' (n, m, m) (zero: qdd is affine in u) — and the whole Hessians over z = [q; dq; u]: 'd2qdd_dz2' (n, N, N), 'd2lambda_dz2' (nc, N, N), N = 2n + m. data holds the linearization at the state afterwards."""
 
 def controllability_at_knots(model: Model, trajectory: Trajectory, relative_tolerance: float = 1e-10) -> List[ControllabilityReport]:
-    """compute_controllability_at every knot (a failing knot: ok False and a message)."""
+    """compute_controllability_at every knot (a failing knot: its status names the knot, t and index)."""
 
 def discretize_zero_order_hold(A: numpy.typing.NDArray[numpy.float64], B: numpy.typing.NDArray[numpy.float64], h: float) -> tuple:
     """(Ad, Bd): Ad = e^(A h), Bd = int_0^h e^(A s) ds B (exact zero-order hold). Raises NumericalError when the exponential overflows (a step too large for A)."""
@@ -1468,7 +1319,7 @@ def second_order_contraction(model: Model, q: numpy.typing.NDArray[numpy.float64
     """The contraction of the exact second derivatives at the state (q, dq, u) as a function h(w, rho=None) -> (N, N) array, N = 2 nq + nu (see SecondOrderContraction)."""
 
 def simulate(model: Model, x0: numpy.typing.NDArray[numpy.float64], t0: float, t1: float, policy: Callable[..., Any], *, options: Optional[SimulationOptions] = None, reference: Trajectory = None) -> SimulationResult:
-    """xdot = [dq; qdd(q, dq, sat(u))] from x(t0) = x0 (nx,) to t1 with u = policy(t, x) (a Python callable returning (nu,)); an exception in the policy is status POLICY_FAILURE."""
+    """xdot = [dq; qdd(q, dq, sat(u))] from x(t0) = x0 (nx,) to t1 with u = policy(t, x) (a Python callable returning (nu,)); an exception in the policy is the status 'policy_failure'."""
 
 def simulate_closed_loop(model: Model, reference: Trajectory, gains: GainSchedule, x0: numpy.typing.NDArray[numpy.float64], *, options: Optional[SimulationOptions] = None) -> SimulationResult:
     """u = u_ref(t) - K(t) (x - x_ref(t)) over the reference's span from x0 (nx,)."""
@@ -1480,7 +1331,7 @@ def simulate_open_loop(model: Model, reference: Trajectory, x0: numpy.typing.NDA
     """u = u_ref(t) over the reference's span."""
 
 def solve_care(A: numpy.typing.NDArray[numpy.float64], B: numpy.typing.NDArray[numpy.float64], Q: numpy.typing.NDArray[numpy.float64], R: numpy.typing.NDArray[numpy.float64], *, options: Optional[CareOptions] = None) -> LqrResult:
-    """Continuous algebraic Riccati equation A^T S + S A - S B R^-1 B^T S + Q = 0 (A (nx, nx), B (nx, nu), Q (nx, nx) PSD, R (nu, nu) PD); K = R^-1 B^T S. Bad sizes or weights raise ValueError; numerical failure and non-stabilizability are the result's status."""
+    """Continuous algebraic Riccati equation A^T S + S A - S B R^-1 B^T S + Q = 0 (A (nx, nx), B (nx, nu), Q (nx, nx), R (nu, nu) PD); K = R^-1 B^T S. Bad sizes or weights raise ValueError; numerical failure and non-stabilizability are the result's status."""
 
 def solve_dare(Ad: numpy.typing.NDArray[numpy.float64], Bd: numpy.typing.NDArray[numpy.float64], Q: numpy.typing.NDArray[numpy.float64], R: numpy.typing.NDArray[numpy.float64], *, options: Optional[CareOptions] = None) -> LqrResult:
     """Discrete algebraic Riccati equation S = Ad^T S Ad - Ad^T S Bd (R + Bd^T S Bd)^-1 Bd^T S Ad + Q; K = (R + Bd^T S Bd)^-1 Bd^T S Ad."""
@@ -1488,23 +1339,17 @@ def solve_dare(Ad: numpy.typing.NDArray[numpy.float64], Bd: numpy.typing.NDArray
 def solve_discrete_riccati_recursion(Ad: numpy.typing.NDArray[numpy.float64], Bd: numpy.typing.NDArray[numpy.float64], Q: numpy.typing.NDArray[numpy.float64], R: numpy.typing.NDArray[numpy.float64], Qf: numpy.typing.NDArray[numpy.float64], N: int) -> tuple:
     """Finite-horizon discrete LQR over N steps: (S (N+1, nx, nx), K (N, nu, nx)) with S_N = Qf, K_k = (R + Bd^T S_{k+1} Bd)^-1 Bd^T S_{k+1} Ad, S_k = Q + Ad^T S_{k+1} (Ad - Bd K_k)."""
 
-def solve_lyapunov(F: numpy.typing.NDArray[numpy.float64], C: numpy.typing.NDArray[numpy.float64]) -> numpy.typing.NDArray[numpy.float64]:
-    """X with F^T X + X F + C = 0 (Bartels-Stewart); raises NumericalError when singular."""
-
-def solve_manifold_riccati(model: Model, reference: Trajectory, *, Q: object, R: object, Qf: object = None, options: Optional[RiccatiOptions] = None, transport: Optional[TangentTransportOptions] = None) -> ManifoldRiccatiSolution:
-    """TV-LQR on the constraint manifold: full-state weights reduced with T(t), Riccati on z = T^T dx (d states); K(t) = Kr T^T. Numerical failure is in ok / message."""
-
-def solve_riccati(model: Model, reference: Trajectory, *, Q: object, R: object, Qf: object = None, options: Optional[RiccatiOptions] = None) -> RiccatiSolution:
-    """Full-state TV-LQR along the reference (state derivatives needed): minimizes J = int dx^T Q dx + du^T R du dt + dx(T)^T Qf dx(T) for dxdot = A(t) dx + B(t) du. Weights: a number (times I), a diagonal (1-D) or a matrix; Qf defaults to Q. For a model with constraints use solve_manifold_riccati. Numerical failure is the status."""
+def solve_lyapunov(F: numpy.typing.NDArray[numpy.float64], C: numpy.typing.NDArray[numpy.float64]) -> MatrixEquationSolution:
+    """X with F^T X + X F + C = 0 (Bartels-Stewart); a singular equation is the status (code 'singular'), not an exception."""
 
 def solve_tvlqr(model: Model, reference: Trajectory, *, Q: object, R: object, Qf: object = None, options: Optional[TvlqrOptions] = None) -> TvlqrSolution:
-    """TV-LQR along the reference (state derivatives needed), continuous (Riccati ODE) or sampled at options.sample_rate with zero-order hold, on the constraint manifold when the model has constraints: minimizes int dx^T Q dx + du^T R du dt + dx(T)^T Qf dx(T). Weights: a number (times I), a diagonal or a matrix; Qf defaults to Q. Returns plain data; numerical failure is ok = False with a message. Releases the GIL."""
+    """TV-LQR along the reference, continuous (Riccati ODE) or sampled at options.sample_rate with zero-order hold, on the constraint manifold when the model has constraints: minimizes int dx^T Q dx + du^T R du dt + dx(T)^T Qf dx(T). Weights: a number (times I), a diagonal or a matrix (a complex array is a TypeError naming it); Qf defaults to Q. Returns plain data; numerical failure is the status. Releases the GIL."""
 
 def transport_tangent_basis(model: Model, reference: Trajectory, *, options: Optional[TangentTransportOptions] = None) -> TangentBasisTrajectory:
     """T(t) along the reference (which needs state derivatives)."""
 
-def view(model: object, *args, path: object = None, q: object = None, names: List[str] = ..., rate: float = 60.0, title: str = '', package_path: List[str] = ..., all_solid: bool = False, forces: bool = True, show: bool = False) -> ViewPage:
-    """view(model, *trajectories, path=None, q=None, names=[], rate=60.0, title="", package_path=[], all_solid=False, forces=True, show=False)
+def view(model: object, *args, path: object = None, q: object = None, names: List[str] = ..., rate: float = 60.0, title: str = '', package_path: List[str] = ..., all_solid: bool = False, show: object = None) -> object:
+    """view(model, *trajectories, path=None, q=None, names=[], rate=60.0, title="", package_path=[], all_solid=False, show=None)
 
     Writes a self-contained HTML page (three.js included) that shows the model in 3D in a browser,
     with a time slider, play/pause, speed and looping when trajectories are given: the first drawn
@@ -1513,14 +1358,11 @@ def view(model: object, *args, path: object = None, q: object = None, names: Lis
     second. `model`: a scene or URDF file path (keeps URDF visual geometry, meshes relative to the
     file), a Scene (shown at its stored q) or a Model (at q = 0); `path`: the page to write, as a
     keyword or as the last positional argument (str or os.PathLike); `q` overrides the configuration
-    shown without trajectories. The file is written atomically. Returns a ViewPage: os.PathLike (the
-    path), and shown inline by Jupyter when it is a cell's value (its _repr_html_ embeds the page in an
-    iframe); show=True displays it at once through IPython.display. With constraints, the solid
-    trajectories' constraint forces are drawn as arrows (forces=False: none). Raises ValueError (a trajectory that does not
+    shown without trajectories. The file is written atomically. In a Jupyter notebook (or show=True)
+    the page is also displayed inline. Returns `path`. Raises ValueError (a trajectory that does not
     match the model, a bad visual, an unreadable mesh, three.js missing) and warns (warnings.warn)
     when a mesh is drawn as a stand-in.
     """
-HAS_SOLVE_TVLQR: bool
 
 
 # ---- begin: submodule hand (only in builds with TRELLIS_BUILD_EXAMPLES) ----
@@ -1529,13 +1371,15 @@ class hand:
 
     class ReferenceMotion:
         @property
-        def accelerations(self) -> numpy.typing.NDArray[numpy.float64]: ...
+        def accelerations(self) -> numpy.typing.NDArray[numpy.float64]:
+            """(N, n), time first"""
         @property
         def constraint_residual(self) -> numpy.typing.NDArray[numpy.float64]: ...
         @property
         def forward_dynamics_error(self) -> numpy.typing.NDArray[numpy.float64]: ...
         @property
-        def lambda_(self) -> numpy.typing.NDArray[numpy.float64]: ...
+        def lambda_(self) -> numpy.typing.NDArray[numpy.float64]:
+            """(N, nc), time first"""
         @property
         def message(self) -> str: ...
         @property

@@ -27,7 +27,7 @@ using trellis::GainSchedule;
 using trellis::Model;
 using trellis::SimulationOptions;
 using trellis::SimulationResult;
-using trellis::SimulationStatus;
+using trellis::SimulationCode;
 using trellis::Trajectory;
 
 namespace {
@@ -433,19 +433,19 @@ TEST_CASE("simulation: failures carry the time and the state", "[simulation]") {
     opt.outputStep = 0.5;
     const SimulationResult r =
         trellis::simulateClosedLoop(cp.model, cp.reference, cp.gains, x0, opt);
-    CHECK(r.status == SimulationStatus::kIntegratorFailure);
+    CHECK(r.status.code == SimulationCode::kIntegratorFailure);
     CHECK_FALSE(r.ok());
-    CHECK(r.failureTime > 0.0);
-    CHECK(r.failureTime < T);
+    CHECK(r.status.t > 0.0);
+    CHECK(r.status.t < T);
     REQUIRE(r.failureState.size() == 4);
     CHECK(r.failureState.allFinite());
     CHECK(r.steps <= 20);
-    CHECK_THAT(r.message, Catch::Contains("t = ") && Catch::Contains("x = [") &&
+    CHECK_THAT(r.status.message, Catch::Contains("t = ") && Catch::Contains("x = [") &&
                               Catch::Contains("maxSteps = 20"));
     // The trajectory holds the outputs reached before the failure.
     CHECK(r.trajectory.size() >= 1);
-    CHECK(r.trajectory.endTime() <= r.failureTime);
-    CHECK(std::string(trellis::toString(r.status)) == "integrator failure");
+    CHECK(r.trajectory.endTime() <= r.status.t);
+    CHECK(std::string(r.status.name()) == "integrator_failure");
   }
   SECTION("a joint that moves no mass: dynamics failure at the start") {
     trellis::ModelBuilder b("massless");
@@ -457,10 +457,10 @@ TEST_CASE("simulation: failures carry the time and the state", "[simulation]") {
     opt.outputStep = 0.1;
     const VectorXd start = (VectorXd(4) << 0.0, 0.3, 1.0, 0.0).finished();
     const SimulationResult r = trellis::simulate(model, start, 0.0, 1.0, zeroInput, opt);
-    CHECK(r.status == SimulationStatus::kDynamicsFailure);
-    CHECK(r.failureTime == Approx(0.0).margin(1e-12));
+    CHECK(r.status.code == SimulationCode::kDynamicsFailure);
+    CHECK(r.status.t == Approx(0.0).margin(1e-12));
     CHECK(r.failureState == start);
-    CHECK_THAT(r.message,
+    CHECK_THAT(r.status.message,
                Catch::Contains("computeDynamics failed") && Catch::Contains("x = [0, 0.3, 1, 0]"));
   }
   SECTION("a policy that returns NaN after t = 0.75: non-finite, at that time") {
@@ -470,10 +470,10 @@ TEST_CASE("simulation: failures carry the time and the state", "[simulation]") {
     SimulationOptions opt;
     opt.outputStep = 0.1;
     const SimulationResult r = trellis::simulate(cp.model, x0, 0.0, T, nanAfter, opt);
-    CHECK(r.status == SimulationStatus::kNonFinite);
-    CHECK(r.failureTime > 0.75);
-    CHECK(r.failureTime < 0.8);
-    CHECK_THAT(r.message, Catch::Contains("non-finite input"));
+    CHECK(r.status.code == SimulationCode::kNonFinite);
+    CHECK(r.status.t > 0.75);
+    CHECK(r.status.t < 0.8);
+    CHECK_THAT(r.status.message, Catch::Contains("non-finite input"));
     CHECK(r.trajectory.endTime() == Approx(0.7));
   }
   SECTION("a policy that throws: policy failure with its message") {
@@ -484,10 +484,10 @@ TEST_CASE("simulation: failures carry the time and the state", "[simulation]") {
     SimulationOptions opt;
     opt.outputStep = 0.1;
     const SimulationResult r = trellis::simulate(cp.model, x0, 0.0, T, throwing, opt);
-    CHECK(r.status == SimulationStatus::kPolicyFailure);
-    CHECK(r.failureTime > 0.35);
-    CHECK(r.failureTime < 0.4);
-    CHECK_THAT(r.message, Catch::Contains("actuator offline"));
+    CHECK(r.status.code == SimulationCode::kPolicyFailure);
+    CHECK(r.status.t > 0.35);
+    CHECK(r.status.t < 0.4);
+    CHECK_THAT(r.status.message, Catch::Contains("actuator offline"));
   }
 }
 

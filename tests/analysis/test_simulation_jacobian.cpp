@@ -173,8 +173,8 @@ TEST_CASE("simulation: exact and difference-quotient Jacobians give the same clo
                      const VectorXd& x0, const SimulationOptions& a, const SimulationOptions& b) {
     const SimulationResult ra = trellis::simulateClosedLoop(model, reference, gains, x0, a);
     const SimulationResult rb = trellis::simulateClosedLoop(model, reference, gains, x0, b);
-    INFO("exact: " << trellis::simulationJson(ra));
-    INFO("difference quotient: " << trellis::simulationJson(rb));
+    INFO("exact: " << ra.json());
+    INFO("difference quotient: " << rb.json());
     REQUIRE(ra.ok());
     REQUIRE(rb.ok());
     // The Newton matrix only changes the iteration, not the solution: both runs are within their
@@ -229,7 +229,7 @@ TEST_CASE("simulation: restarts only where the right-hand side jumps", "[simulat
     const SimulationResult r =
         trellis::simulateClosedLoop(loop.model, loop.reference, loop.gains, loop.start, opt);
     REQUIRE(r.ok());
-    INFO(trellis::simulationJson(r));
+    INFO(r.json());
     // The start is on the manifold; every projection (the drift grew past the tolerance)
     // restarts the integration, nothing else does — not the 399 interior knots.
     REQUIRE(r.constraintDrift(0) < 1e-12);
@@ -249,7 +249,7 @@ TEST_CASE("simulation: restarts only where the right-hand side jumps", "[simulat
     opt.constraints = trellis::ConstraintHandling::kNone;
     const SimulationResult r =
         trellis::simulateClosedLoop(loop.model, loop.reference, loop.gains, loop.start, opt);
-    INFO(trellis::simulationJson(r));
+    INFO(r.json());
     REQUIRE(r.ok());
     CHECK(r.projections == 0);
     CHECK(r.restarts == 19);  // samples at 0.05, …, 0.95 (the one at 0 is the start)
@@ -262,11 +262,11 @@ TEST_CASE("simulation: drift above the tolerance after projection is a status", 
   opt.driftTolerance = 1e-30;  // below rounding: no projection can meet it
   const SimulationResult r =
       trellis::simulateClosedLoop(loop.model, loop.reference, loop.gains, loop.start, opt);
-  CHECK(r.status == trellis::SimulationStatus::kConstraintDrift);
-  CHECK(r.failureTime == 0.0);
-  CHECK_THAT(r.message, Catch::Contains("t = 0") && Catch::Contains("after projection") &&
+  CHECK(r.status.code == trellis::SimulationCode::kConstraintDrift);
+  CHECK(r.status.t == 0.0);
+  CHECK_THAT(r.status.message, Catch::Contains("t = 0") && Catch::Contains("after projection") &&
                             Catch::Contains("tolerance 1e-30"));
-  CHECK(std::string(trellis::toString(r.status)) == "constraint drift");
+  CHECK(std::string(r.status.name()) == "constraint_drift");
 }
 
 TEST_CASE("simulation: a batch equals the same runs one by one, on any number of threads",

@@ -62,14 +62,14 @@ trellis_cli_test(kinematics.error.unknown_frame ARGS kinematics --frames bob,nos
 # --state) sees the same.
 trellis_mq_test(project.paper_then_linearize
   ARGS1 project "${_paper}"
-  CHECKS1 "-DJSON=h_before:GREATER:3e-3&&h_after:LESS:1e-12&&Adq_after:LESS:1e-12" -DSAVE_JSON=state -DSTDERR_EMPTY=ON
+  CHECKS1 "-DJSON=h_before:GREATER:3e-3&&h_after:LESS:1e-12&&velocity_after:LESS:1e-12" -DSAVE_JSON=state -DSTDERR_EMPTY=ON
   ARGS2 linearize --state @WORK@/state.json "${_paper}"
   CHECKS2 "-DJSON=h/0:LESS:1e-12&&h/0:GREATER:-1e-12&&hdot/0:LESS:1e-12&&hdot/0:GREATER:-1e-12")
 trellis_mq_test(project.fixed_coordinate ARGS1 project --fix theta1 "${_paper}"
   CHECKS1 "-DJSON=q/0:GREATER:0.52459999999&&q/0:LESS:0.52460000001&&h_after:LESS:1e-12")
 # The skate's velocity violates its knife edge slightly: only q' changes (no holonomic rows).
 trellis_mq_test(project.knife_edge_velocity ARGS1 project "${_data}/skate.json"
-  CHECKS1 "-DJSON=Adq_before:GREATER:1e-4&&Adq_after:LESS:1e-14&&iterations:LESS:0.5&&q/2:GREATER:0.39999999999&&q/2:LESS:0.40000000001")
+  CHECKS1 "-DJSON=velocity_before:GREATER:1e-4&&velocity_after:LESS:1e-14&&iterations:LESS:0.5&&q/2:GREATER:0.39999999999&&q/2:LESS:0.40000000001")
 trellis_cli_test(project.error.unknown_fixed ARGS project --fix theta3 "${_paper}"
   CHECKS -DEXPECT_EXIT=2 ${_error_checks} "-DSTDERR_REGEX=unknown configuration variable 'theta3'")
 

@@ -128,7 +128,7 @@ trellis_cli_test(simulate.error.gains_wrong_size
 trellis_cli_test(simulate.error.gains_too_short
   ARGS simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}"
        --gains "${_data}/cart_pole_short_gains.csv" --out /dev/null
-  CHECKS ${_e1} "-DSTDERR_REGEX=cart_pole_short_gains.csv: the gains cover \\[0, 1\\], but the reference .* spans \\[0, 3\\]")
+  CHECKS ${_e1} "-DSTDERR_REGEX=cart_pole_short_gains.csv \\(for the scene .*\\): the gains cover \\[0, 1\\], but the reference spans \\[0, 3\\]")
 trellis_cli_test(simulate.error.trajectory_mismatch
   ARGS simulate "${_cart_pole}" --trajectory "${_paper_swing}"
        --gains "${_data}/cart_pole_zero_gains.csv" --out /dev/null
@@ -140,4 +140,4 @@ trellis_cli_files_test(simulate.error.integrator_failure
   ARGS2 ${_simulate_cart} --perturb theta=0.1 --max-steps 30 --out @WORK@/closed.csv
   CHECKS2 -DEXIT=1 -DSTDOUT_EMPTY=ON -DSTDERR_ONE_LINE=ON -DFILE=@WORK@/closed.csv
           "-DFILE_HEADER=t,x,theta,dx,dtheta,push"
-          "-DSTDERR_REGEX=simulate: the closed loop failed \\(integrator failure\\) at t = .*maxSteps = 30.*the trajectory up to t = .* is in .*closed.csv")
+          "-DSTDERR_REGEX=simulate: the closed loop failed \\(integrator_failure\\) at t = .*maxSteps = 30.*the trajectory up to t = .* is in .*closed.csv")

@@ -26,7 +26,7 @@
 
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
-using trellis::LqrStatus;
+using trellis::LqrCode;
 
 namespace {
 
@@ -144,7 +144,7 @@ TEST_CASE("DARE: the badly scaled case of issue 10 and its scalings", "[lqr][are
     const MatrixXd Q = diag({1.0, q2});
     const MatrixXd exact = diag({1.0 / (1.0 - 0.81), scalarDare(2.0, 1.0, q2, 1.0)});
     const auto res = trellis::solveDare(Ad, Bd, Q, R);
-    INFO("q2 = " << q2 << ": " << res.message);
+    INFO("q2 = " << q2 << ": " << res.status.message);
     REQUIRE(res.ok());
     // Each entry is a well-conditioned scalar equation (condition ≈ 1/(1 − 0.81) for s11), so a
     // backward-stable solver is accurate to a few ulps per entry: 1e-13 leaves a margin of ~100.
@@ -160,7 +160,7 @@ TEST_CASE("DARE: the badly scaled case of issue 10 and its scalings", "[lqr][are
     const auto t = transform(Ad, Bd, Q, R, MatrixXd::Zero(2, 1), S, Eigen::Vector2d(1e-4, 1e5),
                              (MatrixXd(2, 2) << c, -s, s, c).finished(), diag({1e3}));
     const auto res = trellis::solveDare(t.A, t.B, t.Q, t.R);
-    INFO(res.message);
+    INFO(res.status.message);
     REQUIRE(res.ok());
     // T mixes entries of sizes 1 and 1e13: the transformed data carry rounding errors of
     // eps·|Tᵀ||S||T|, with a condition of ~1e2 from the mixing: 1e-12.
@@ -176,7 +176,7 @@ TEST_CASE("DARE: DAREX closed forms and scalable decoupled families", "[lqr][are
     B << 1, -1;
     Q << 9, 6, 6, 4;
     const auto res = trellis::solveDare(A, B, Q, MatrixXd::Identity(1, 1));
-    INFO(res.message);
+    INFO(res.status.message);
     REQUIRE(res.ok());
     CHECK(scaledError((1 + std::sqrt(5.0)) / 2 * Q, res.S) < 1e-13);
   }
@@ -190,7 +190,7 @@ TEST_CASE("DARE: DAREX closed forms and scalable decoupled families", "[lqr][are
     const VectorXd &a = modes.a, &b = modes.b, &q = modes.q, &r = modes.r, &s = modes.s;
     const Transformed& t = modes.t;
     const auto res = trellis::solveDare(t.A, t.B, t.Q, t.R);
-    INFO(res.message);
+    INFO(res.status.message);
     REQUIRE(res.ok());
     // The coupled problem carries rounding errors of eps·|Tᵀ||S||T| in its data and a condition
     // up to ~1/(1 − |a|²) ≈ 1e9 in the slow modes: an accuracy of 1e-6 relative is what the data
@@ -208,7 +208,7 @@ TEST_CASE("CARE: the cases of issue 10 and their scalings", "[lqr][are][care]") 
   const MatrixXd B = (MatrixXd(2, 1) << 0, 1).finished(), R = MatrixXd::Identity(1, 1);
   SECTION("A = diag(-5e-4, -1e6) Hurwitz: no false 'not stabilizable'; S11 = 1000") {
     const auto res = trellis::solveCare(diag({-5e-4, -1e6}), B, MatrixXd::Identity(2, 2), R);
-    INFO(res.message);
+    INFO(res.status.message);
     REQUIRE(res.ok());
     const MatrixXd exact = diag({1000.0, scalarCare(-1e6, 1.0, 1.0, 1.0)});
     CHECK(scaledError(exact, res.S) < 1e-13);
@@ -217,7 +217,7 @@ TEST_CASE("CARE: the cases of issue 10 and their scalings", "[lqr][are][care]") 
   SECTION("A = diag(-0.1, 1), Q = diag(1, 1e13): no false 'Hamiltonian singular'") {
     for (double q2 : {1.0, 1e8, 1e13, 1e20}) {
       const auto res = trellis::solveCare(diag({-0.1, 1.0}), B, diag({1.0, q2}), R);
-      INFO("q2 = " << q2 << ": " << res.message);
+      INFO("q2 = " << q2 << ": " << res.status.message);
       REQUIRE(res.ok());
       const MatrixXd exact = diag({5.0, 1.0 + std::sqrt(1.0 + q2)});
       CHECK(scaledError(exact, res.S) < 1e-13);
@@ -236,7 +236,7 @@ TEST_CASE("CARE: the cases of issue 10 and their scalings", "[lqr][are][care]") 
                                Eigen::Vector2d(sc, 1.0 / sc),
                                (MatrixXd(2, 2) << c, -s, s, c).finished(), diag({1e-3}));
       const auto res = trellis::solveCare(t.A, t.B, t.Q, t.R);
-      INFO("scale " << sc << ": " << res.message);
+      INFO("scale " << sc << ": " << res.status.message);
       REQUIRE(res.ok());
       CHECK(scaledError(t.S, res.S, t.Sscale) < 1e-8);
     }
@@ -268,7 +268,7 @@ TEST_CASE("CARE: CAREX closed forms", "[lqr][are][care]") {
       const MatrixXd exact = (MatrixXd(2, 2) << x11, x12, x12, (1 - e * e * x12 * x12) / 4).finished();
       const auto res = trellis::solveCare(diag({1, -2}), B, MatrixXd::Ones(2, 2),
                                           MatrixXd::Identity(1, 1));
-      INFO("eps = " << e << ": " << res.message);
+      INFO("eps = " << e << ": " << res.status.message);
       REQUIRE(res.ok());
       CHECK(scaledError(exact, res.S) < 1e-12);
     }
@@ -283,7 +283,7 @@ TEST_CASE("CARE: CAREX closed forms", "[lqr][are][care]") {
     V << 1, 0, -1, 1;
     const auto ref = trellis::solveCare(A, B * V, Q, diag({R(0, 0) - 1.0, 1.0}));
     const auto res = trellis::solveCare(A, B, Q, R);
-    INFO(res.message);
+    INFO(res.status.message);
     REQUIRE(ref.ok());
     REQUIRE(res.ok());
     // G = B R⁻¹ Bᵀ is formed with a long-double Cholesky: relative error ≈ cond(R)·1.1e-19 ≈ 4e-13
@@ -318,7 +318,7 @@ TEST_CASE("Riccati: cross term N and indefinite Q with a stabilizing solution", 
     const auto t = transform(a.asDiagonal(), b.asDiagonal(), q.asDiagonal(), r.asDiagonal(),
                              nn.asDiagonal(), s.asDiagonal(), tscale, O, V);
     const auto res = trellis::solveCare(t.A, t.B, t.Q, t.R, t.N);
-    INFO(res.message);
+    INFO(res.status.message);
     REQUIRE(res.ok());
     CHECK(scaledError(t.S, res.S, t.Sscale) < 1e-11);
     // K = R⁻¹(BᵀS + Nᵀ) closes a Hurwitz loop.
@@ -340,7 +340,7 @@ TEST_CASE("Riccati: cross term N and indefinite Q with a stabilizing solution", 
     const auto t = transform(ad.asDiagonal(), bd.asDiagonal(), qd.asDiagonal(), rd.asDiagonal(),
                              nd.asDiagonal(), s.asDiagonal(), tscale, O, V);
     const auto res = trellis::solveDare(t.A, t.B, t.Q, t.R, t.N);
-    INFO(res.message);
+    INFO(res.status.message);
     REQUIRE(res.ok());
     CHECK(scaledError(t.S, res.S, t.Sscale) < 1e-11);
     CHECK(res.closedLoopEigenvalues.cwiseAbs().maxCoeff() < 1.0);
@@ -360,42 +360,42 @@ TEST_CASE("Riccati: true refusals say why", "[lqr][are]") {
   SECTION("CARE: unstabilizable mode, at any scale") {
     for (double lam : {1.0, 1e-6, 1e6}) {
       const auto res = trellis::solveCare(diag({lam, -1e6}), B, MatrixXd::Identity(2, 2), R);
-      INFO(res.message);
-      CHECK(res.status == LqrStatus::kNotStabilizable);
+      INFO(res.status.message);
+      CHECK(res.status.code == LqrCode::kNotStabilizable);
       std::ostringstream want;
       want << "eigenvalue " << lam << "+0i of A (Re = " << lam << " >= 0) is uncontrollable";
-      CHECK_THAT(res.message, Catch::Matchers::Contains(want.str()));
+      CHECK_THAT(res.status.message, Catch::Matchers::Contains(want.str()));
     }
   }
   SECTION("CARE: undetectable mode on the imaginary axis") {
     const MatrixXd A = (MatrixXd(2, 2) << 0, 1, -1, 0).finished();
     const auto res = trellis::solveCare(A, B, MatrixXd::Zero(2, 2), R);
-    INFO(res.message);
-    CHECK(res.status == LqrStatus::kNoStabilizingSolution);
-    CHECK_THAT(res.message, Catch::Matchers::Contains("Hamiltonian has the eigenvalue") &&
+    INFO(res.status.message);
+    CHECK(res.status.code == LqrCode::kNoStabilizingSolution);
+    CHECK_THAT(res.status.message, Catch::Matchers::Contains("Hamiltonian has the eigenvalue") &&
                                 Catch::Matchers::Contains("on the imaginary axis"));
   }
   SECTION("CARE: an integrator unobserved by Q, uncontrolled direction stable") {
     // A = diag(0, −1), B = [1; 0], Q = diag(0, 1): the Hamiltonian has 0 as a double eigenvalue.
     const auto res = trellis::solveCare(diag({0, -1}), (MatrixXd(2, 1) << 1, 0).finished(),
                                         diag({0, 1}), R);
-    INFO(res.message);
-    CHECK(res.status == LqrStatus::kNoStabilizingSolution);
-    CHECK_THAT(res.message, Catch::Matchers::Contains("on the imaginary axis"));
+    INFO(res.status.message);
+    CHECK(res.status.code == LqrCode::kNoStabilizingSolution);
+    CHECK_THAT(res.status.message, Catch::Matchers::Contains("on the imaginary axis"));
   }
   SECTION("DARE: unstabilizable mode") {
     const auto res = trellis::solveDare(diag({1.5, 0.5}), B, MatrixXd::Identity(2, 2), R);
-    INFO(res.message);
-    CHECK(res.status == LqrStatus::kNotStabilizable);
-    CHECK_THAT(res.message, Catch::Matchers::Contains("eigenvalue 1.5+0i of A (|lambda| = 1.5 >= 1)"));
+    INFO(res.status.message);
+    CHECK(res.status.code == LqrCode::kNotStabilizable);
+    CHECK_THAT(res.status.message, Catch::Matchers::Contains("eigenvalue 1.5+0i of A (|lambda| = 1.5 >= 1)"));
   }
   SECTION("DARE: undetectable mode on the unit circle") {
     const double c = std::cos(0.4), s = std::sin(0.4);
     const MatrixXd A = (MatrixXd(2, 2) << c, -s, s, c).finished();
     const auto res = trellis::solveDare(A, B, MatrixXd::Zero(2, 2), R);
-    INFO(res.message);
-    CHECK(res.status == LqrStatus::kNoStabilizingSolution);
-    CHECK_THAT(res.message, Catch::Matchers::Contains("on the unit circle"));
+    INFO(res.status.message);
+    CHECK(res.status.code == LqrCode::kNoStabilizingSolution);
+    CHECK_THAT(res.status.message, Catch::Matchers::Contains("on the unit circle"));
   }
   SECTION("checkStabilizability directly") {
     const auto bad = trellis::checkStabilizability(diag({2.0, -1.0}), B, false);
@@ -567,11 +567,11 @@ TEST_CASE("Riccati: similarity-scaled family, n = 2..10, scalings 1e±3 .. 1e±8
                                     : trellis::solveCare(t.A, t.B, t.Q, t.R);
           ++total;
           INFO((discrete ? "DARE" : "CARE") << " n = " << n << " m = " << m << " e = " << e
-                                            << " seed " << seed << ": " << res.message);
+                                            << " seed " << seed << ": " << res.status.message);
           if (!res.ok()) {
             ++refused;
-            CHECK(!res.message.empty());
-            refusals << (discrete ? "DARE" : "CARE") << " n=" << n << " e=" << e << ": " << res.message << "\n";
+            CHECK(!res.status.message.empty());
+            refusals << (discrete ? "DARE" : "CARE") << " n=" << n << " e=" << e << ": " << res.status.message << "\n";
             continue;
           }
           ++okCount;
@@ -603,20 +603,20 @@ TEST_CASE("DARE: 30 coupled modes at ±2 and ±3 decades are never ok with a wro
     const ThirtyModes modes = thirtyModes(dec);
     const Transformed& t = modes.t;
     const auto res = trellis::solveDare(t.A, t.B, t.Q, t.R);
-    INFO("±" << dec << " decades: " << res.message);
+    INFO("±" << dec << " decades: " << res.status.message);
     if (res.ok()) {
       CHECK(scaledError(t.S, res.S, t.Sscale) < 1e-6);
       CHECK(res.closedLoopEigenvalues.cwiseAbs().maxCoeff() < 1.0);
     } else {
       // The refusal names the closed loop it found, and either a (nearly) uncontrollable mode or
       // that (A, B) is stabilizable (so the failure is the method's, not the problem's).
-      CHECK_THAT(res.message, Catch::Matchers::Contains("does not stabilize: spectral radius of Ad - Bd K = "));
-      CHECK_THAT(res.message, Catch::Matchers::Contains("(A, B) is stabilizable") ||
+      CHECK_THAT(res.status.message, Catch::Matchers::Contains("does not stabilize: spectral radius of Ad - Bd K = "));
+      CHECK_THAT(res.status.message, Catch::Matchers::Contains("(A, B) is stabilizable") ||
                                   Catch::Matchers::Contains("is uncontrollable"));
       // Every b_i ≠ 0: the pair is stabilizable, so an "uncontrollable" verdict must say that it
       // is a tolerance call on a nearly uncontrollable mode (margin above rounding).
-      if (res.status == LqrStatus::kNotStabilizable) {
-        CHECK_THAT(res.message, Catch::Matchers::Contains("nearly, not exactly, uncontrollable"));
+      if (res.status.code == LqrCode::kNotStabilizable) {
+        CHECK_THAT(res.status.message, Catch::Matchers::Contains("nearly, not exactly, uncontrollable"));
       }
     }
   }

@@ -38,7 +38,7 @@ TEST_CASE("The hand's closed-loop error falls below 1e-7 once the perturbation h
   const trellis::ManifoldRiccatiSolution lqr = trellis::solveManifoldRiccati(
       model, reference, trellis::hand::feedbackWeights(model),
       trellis::hand::feedbackRiccatiOptions(), trellis::hand::feedbackTransport());
-  INFO(lqr.message());
+  INFO(lqr.status.message);
   REQUIRE(lqr.ok());
   const trellis::GainSchedule gains = trellis::hand::feedbackGains(lqr, reference);
   CHECK(gains.interpolation() == trellis::GainInterpolation::kCubic);
@@ -46,7 +46,7 @@ TEST_CASE("The hand's closed-loop error falls below 1e-7 once the perturbation h
       lqr.basis.basis(reference.startTime()), reference.states().col(0), 1, 1, 0.05)[0];
   const trellis::SimulationResult r = trellis::simulateClosedLoop(
       model, reference, gains, x0, trellis::hand::closedLoopOptions(model.nu()));
-  INFO(r.message);
+  INFO(r.status.message);
   REQUIRE(r.ok());
   CHECK(r.restarts <= r.projections);  // no restart at the knots or the gain rows
 

@@ -275,7 +275,7 @@ TEST_CASE("The hand's tensions with their rates reproduce the motion between kno
   const Eigen::VectorXd x0 = ref.trajectory.states().col(0);
   auto deviation = [&](const trellis::Trajectory& reference) {
     const trellis::SimulationResult r = trellis::simulateOpenLoop(model, reference, x0, options);
-    INFO(r.message);
+    INFO(r.status.message);
     REQUIRE(r.ok());
     REQUIRE(r.trajectory.size() == reference.size());
     return (r.trajectory.states() - reference.states()).cwiseAbs().maxCoeff();

@@ -11,7 +11,7 @@
 #include <random>
 
 using Eigen::MatrixXd;
-using trellis::LqrStatus;
+using trellis::LqrCode;
 
 namespace {
 
@@ -35,7 +35,7 @@ TEST_CASE("CARE: closed forms and residuals", "[lqr][care]") {
       MatrixXd S(2, 2);
       S << s12 * s22 / r, s12, s12, s22;
       const auto res = trellis::solveCare(A, B, MatrixXd::Identity(2, 2), MatrixXd::Constant(1, 1, r));
-      INFO("r = " << r << ": " << res.message);
+      INFO("r = " << r << ": " << res.status.message);
       REQUIRE(res.ok());
       CONTROL_CHECK_CLOSE(S, res.S, 1e-12, 0.0);
       CHECK(res.residual < 1e-14);
@@ -55,7 +55,7 @@ TEST_CASE("CARE: closed forms and residuals", "[lqr][care]") {
       const MatrixXd L = randomMatrix(rng, 12, 12);
       const MatrixXd Q = L * L.transpose() / 12.0;
       const auto res = trellis::solveCare(A, B, Q, MatrixXd::Identity(3, 3));
-      INFO(res.message);
+      INFO(res.status.message);
       REQUIRE(res.ok());
       CHECK(res.residual < 1e-12);
       CHECK(res.closedLoopEigenvalues.real().maxCoeff() < 0.0);
@@ -71,8 +71,8 @@ TEST_CASE("CARE: failures are reported", "[lqr][care]") {
     A << 1, 0, 0, -1;
     B << 0, 1;
     const auto res = trellis::solveCare(A, B, MatrixXd::Identity(2, 2), MatrixXd::Identity(1, 1));
-    CHECK(res.status == LqrStatus::kNotStabilizable);
-    CHECK_THAT(res.message, Catch::Matchers::Contains("not stabilizable") &&
+    CHECK(res.status.code == LqrCode::kNotStabilizable);
+    CHECK_THAT(res.status.message, Catch::Matchers::Contains("not stabilizable") &&
                                 Catch::Matchers::Contains("eigenvalue 1"));
   }
   SECTION("stable but uncontrollable is fine") {
@@ -88,8 +88,8 @@ TEST_CASE("CARE: failures are reported", "[lqr][care]") {
     A << 0, 1, -1, 0;
     B << 0, 1;
     const auto res = trellis::solveCare(A, B, MatrixXd::Zero(2, 2), MatrixXd::Identity(1, 1));
-    CHECK(res.status == LqrStatus::kNoStabilizingSolution);
-    CHECK(!res.message.empty());
+    CHECK(res.status.code == LqrCode::kNoStabilizingSolution);
+    CHECK(!res.status.message.empty());
   }
   SECTION("bad weights throw") {
     MatrixXd A = MatrixXd::Zero(2, 2), B = MatrixXd::Ones(2, 1);
@@ -166,7 +166,7 @@ TEST_CASE("discrete recursion converges to the DARE", "[lqr][discrete]") {
   const auto d = trellis::discretizeZeroOrderHold(A, B, 0.01);
   const MatrixXd Q = MatrixXd::Identity(2, 2), R = MatrixXd::Identity(1, 1);
   const auto dare = trellis::solveDare(d.Ad, d.Bd, Q, R);
-  INFO(dare.message);
+  INFO(dare.status.message);
   REQUIRE(dare.ok());
   CHECK(dare.residual < 1e-12);
   CHECK(dare.closedLoopEigenvalues.cwiseAbs().maxCoeff() < 1.0);
@@ -190,7 +190,7 @@ TEST_CASE("discrete recursion converges to the DARE", "[lqr][discrete]") {
     Au << 1.5, 0, 0, 0.5;
     Bu << 0, 1;
     const auto res = trellis::solveDare(Au, Bu, Q, R);
-    CHECK(res.status == LqrStatus::kNotStabilizable);
-    CHECK_THAT(res.message, Catch::Matchers::Contains("(|lambda| = 1.5 >= 1)"));
+    CHECK(res.status.code == LqrCode::kNotStabilizable);
+    CHECK_THAT(res.status.message, Catch::Matchers::Contains("(|lambda| = 1.5 >= 1)"));
   }
 }

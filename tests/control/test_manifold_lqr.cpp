@@ -211,7 +211,7 @@ TEST_CASE("transported tangent basis on the paper pendulum", "[manifold]") {
         model, ref, {MatrixXd::Identity(4, 4), MatrixXd::Identity(1, 1), MatrixXd::Identity(4, 4), {}, {}},
         {}, few);
     CHECK(!lqr.ok());
-    CHECK_THAT(lqr.message(), Catch::Contains("maxSteps"));
+    CHECK_THAT(lqr.status.message, Catch::Contains("maxSteps"));
   }
 }
 
@@ -325,7 +325,7 @@ TEST_CASE("two tied carts: the reduced problem is a double integrator of mass 2"
   SECTION("the Gramian in (x, v) coordinates is b² [[T³/3, T²/2], [T²/2, T]], b = 1/2") {
     const double t1 = 3.0;
     const auto gr = trellis::computeControllabilityGramian(model, ref, 0.0, t1);
-    REQUIRE(gr.ok);
+    REQUIRE(gr.ok());
     REQUIRE(gr.dimension == 2);
     // z = Tᵀ E (x, v): W_xv = (TᵀE)⁻¹ W (TᵀE)⁻ᵀ.
     const MatrixXd M = sol.basis.basis(t1).transpose() * E;
@@ -367,7 +367,7 @@ TEST_CASE("manifold LQR on the paper pendulum: gains and closed loop", "[manifol
   const trellis::Trajectory ref = makeReference(model, pc.x0, pc.u, 0.0, tf, 301, 10);
   const MatrixXd Q = MatrixXd::Identity(4, 4), R = MatrixXd::Identity(1, 1);
   const auto sol = trellis::solveManifoldRiccati(model, ref, {Q, R, 5 * Q, {}, {}});
-  INFO(sol.message());
+  INFO(sol.status.message);
   REQUIRE(sol.ok());
   REQUIRE(sol.dimension() == 2);
 
@@ -423,7 +423,7 @@ TEST_CASE("reachability Gramian", "[manifold][controllability]") {
         makeReference(model, x0, [](double) { return VectorXd::Zero(1); }, 0.0, 3.0, 31, 2);
     const double T = 2.0;
     const auto gr = trellis::computeControllabilityGramian(model, ref, 0.5, 0.5 + T);
-    REQUIRE(gr.ok);
+    REQUIRE(gr.ok());
     MatrixXd expected(2, 2);
     expected << T * T * T / 3, T * T / 2, T * T / 2, T;
     CONTROL_CHECK_CLOSE(expected, gr.W, 1e-8, 1.0);  // rtol 1e-10, entries of order 1
@@ -437,7 +437,7 @@ TEST_CASE("reachability Gramian", "[manifold][controllability]") {
     const auto ref =
         makeReference(model, x0, [](double) { return VectorXd::Zero(1); }, 0.0, 3.0, 31, 2);
     const auto gr = trellis::computeControllabilityGramian(model, ref, 0.0, 2.0);
-    REQUIRE(gr.ok);
+    REQUIRE(gr.ok());
     CHECK(gr.dimension == 4);
     CHECK(std::abs(gr.minEigenvalue) < 1e-12 * gr.maxEigenvalue);
     CHECK(!gr.controllable());
@@ -448,8 +448,8 @@ TEST_CASE("reachability Gramian", "[manifold][controllability]") {
     const auto ref = makeReference(model, pc.x0, pc.u, 0.0, 1.5, 151, 10);
     const double t0 = 0.2, t1 = 1.2;
     const auto gr = trellis::computeControllabilityGramian(model, ref, t0, t1);
-    INFO(gr.message);
-    REQUIRE(gr.ok);
+    INFO(gr.status.message);
+    REQUIRE(gr.ok());
     CHECK(gr.dimension == 2);
     CHECK(gr.controllable(1e-8));
     CHECK(gr.minEigenvalue > 0.0);
@@ -491,7 +491,7 @@ TEST_CASE("controllability at every knot", "[manifold][controllability]") {
   const auto reports = trellis::controllabilityAtKnots(model, ref);
   REQUIRE(reports.size() == 21);
   for (const auto& r : reports) {
-    CHECK(r.ok);
+    CHECK(r.ok());
     CHECK(r.dimension == 2);
     CHECK(r.controllable());
   }
@@ -548,7 +548,7 @@ TEST_CASE("the transport and the Gramian use exact Jacobian products only", "[ma
   CHECK(basis.steps() > 10);
   CHECK(basis.differenceQuotientEvaluations() == 0);
   const auto gr = trellis::computeControllabilityGramian(model, ref, 0.0, 1.0);
-  REQUIRE(gr.ok);
+  REQUIRE(gr.ok());
   CHECK(gr.steps > 10);
   CHECK(gr.linearizations > 0);
   CHECK(gr.differenceQuotientEvaluations == 0);
@@ -564,7 +564,7 @@ TEST_CASE("Gramian at the summary's tolerance against the closed form", "[manifo
   const auto ref = makeReference(model, x0, [](double) { return VectorXd::Zero(1); }, 0.0, 3.0, 31, 2);
   const double T = 3.0;
   const auto gr = trellis::computeControllabilityGramian(model, ref, 0.0, T, trellis::GramianOptions{});
-  REQUIRE(gr.ok);
+  REQUIRE(gr.ok());
   MatrixXd expected(2, 2);
   expected << T * T * T / 3, T * T / 2, T * T / 2, T;
   CONTROL_CHECK_CLOSE(expected, gr.W, 1e-4, expected.norm());

@@ -14,7 +14,7 @@ using Eigen::MatrixXd;
 using trellis::LqrWeights;
 using trellis::RiccatiMethod;
 using trellis::RiccatiOptions;
-using trellis::RiccatiStatus;
+using trellis::RiccatiCode;
 
 namespace {
 
@@ -22,6 +22,7 @@ trellis::LinearizationCallback constantSystem(const MatrixXd& A, const MatrixXd&
   return [A, B](double, MatrixXd& a, MatrixXd& b) {
     a = A;
     b = B;
+    return trellis::ReferenceStatus{};
   };
 }
 
@@ -96,6 +97,7 @@ trellis::LinearizationCallback manufacturedSystem() {
   return [](double t, MatrixXd& A, MatrixXd& B) {
     A = manufacturedA(t);
     B = manufacturedB(t);
+    return trellis::ReferenceStatus{};
   };
 }
 
@@ -287,11 +289,12 @@ TEST_CASE("numerical trouble is a status, never an exception or a NaN", "[riccat
       if (t < 0.5) throw std::runtime_error("no linearization here");
       a = A;
       b = B;
+      return trellis::ReferenceStatus{};
     };
     const auto sol = trellis::solveRiccati(0, 1, 2, 1, lin, w);
-    CHECK(sol.status == RiccatiStatus::kCallbackFailure);
-    CHECK_THAT(sol.message, Catch::Matchers::Contains("no linearization here"));
-    CHECK(sol.failureTime <= 0.5 + 1e-12);
+    CHECK(sol.status.code == RiccatiCode::kCallbackFailure);
+    CHECK_THAT(sol.status.message, Catch::Matchers::Contains("no linearization here"));
+    CHECK(sol.status.t <= 0.5 + 1e-12);
     CHECK(sol.validFrom() >= 0.5 - 1e-12);
     CHECK(sol.S(sol.validFrom()).allFinite());
     CHECK_THROWS_AS(sol.S(0.0), std::out_of_range);
@@ -301,31 +304,51 @@ TEST_CASE("numerical trouble is a status, never an exception or a NaN", "[riccat
       a = A;
       b = B;
       if (t < 0.25) a(0, 0) = std::nan("");
+      return trellis::ReferenceStatus{};
     };
     const auto sol = trellis::solveRiccati(0, 1, 2, 1, lin, w);
-    CHECK(sol.status == RiccatiStatus::kCallbackFailure);
-    CHECK_THAT(sol.message, Catch::Matchers::Contains("non-finite"));
+    CHECK(sol.status.code == RiccatiCode::kCallbackFailure);
+    CHECK_THAT(sol.status.message, Catch::Matchers::Contains("non-finite"));
+  }
+  SECTION("callback returns a failed status: kCallbackFailure with its message, nothing thrown") {
+    auto lin = [&](double t, MatrixXd& a, MatrixXd& b) {
+      trellis::ReferenceStatus st;
+      if (t < 0.5) {
+        st.set(trellis::ReferenceCode::kLinearizationFailed, "the dynamics failed here", t);
+        return st;
+      }
+      a = A;
+      b = B;
+      return st;
+    };
+    const auto sol = trellis::solveRiccati(0, 1, 2, 1, lin, w);
+    CHECK(sol.status.code == RiccatiCode::kCallbackFailure);
+    CHECK(std::string(sol.status.name()) == "callback_failure");
+    CHECK_THAT(sol.status.message, Catch::Matchers::Contains("the dynamics failed here"));
+    CHECK(sol.status.t <= 0.5 + 1e-12);
+    CHECK_THAT(sol.describe(), Catch::Matchers::StartsWith("callback_failure at t = "));
+    CHECK_THAT(sol.json(), Catch::Matchers::Contains("\"status\":\"callback_failure\""));
   }
   SECTION("uncontrollable unstable direction blows up with the time and the norm") {
     MatrixXd Au(2, 2), Bu(2, 1);
     Au << 1, 0, 0, -1;  // x₁ unstable and not reachable from u
     Bu << 0, 1;
     const auto sol = trellis::solveRiccati(0, 100, 2, 1, constantSystem(Au, Bu), w);
-    REQUIRE(sol.status == RiccatiStatus::kBlowUp);
-    INFO(sol.message);
+    REQUIRE(sol.status.code == RiccatiCode::kBlowUp);
+    INFO(sol.status.message);
     // S₁₁ = (e^{2(T−t)} − 1)/2 crosses 1e15 at T − t ≈ 17.6.
-    CHECK(sol.failureTime == Approx(100 - 0.5 * std::log(2e15 + 1)).margin(0.5));
+    CHECK(sol.status.t == Approx(100 - 0.5 * std::log(2e15 + 1)).margin(0.5));
     CHECK(sol.failureNorm > 1e15);
-    CHECK_THAT(sol.message, Catch::Matchers::Contains("blew up at t ="));
+    CHECK_THAT(sol.status.message, Catch::Matchers::Contains("blew up at t ="));
     CHECK(sol.S(sol.validFrom()).allFinite());
   }
   SECTION("too few steps") {
     RiccatiOptions o;
     o.maxSteps = 5;
     const auto sol = trellis::solveRiccati(0, 40, 2, 1, constantSystem(A, B), w, o);
-    CHECK(sol.status == RiccatiStatus::kIntegratorFailure);
-    CHECK_THAT(sol.message, Catch::Matchers::Contains("maxSteps = 5"));
-    CHECK(std::isfinite(sol.failureTime));
+    CHECK(sol.status.code == RiccatiCode::kIntegratorFailure);
+    CHECK_THAT(sol.status.message, Catch::Matchers::Contains("maxSteps = 5"));
+    CHECK(std::isfinite(sol.status.t));
     CHECK(std::isfinite(sol.failureNorm));
   }
 }
@@ -356,7 +379,7 @@ TEST_CASE("hard cases are accurate", "[riccati][hard]") {
     if (sk.ok()) {
       CONTROL_CHECK_CLOSE(care.S, sk.S(0.0), 1e-6, 0.0);
     } else {
-      CHECK(!sk.message.empty());
+      CHECK(!sk.status.message.empty());
     }
     // Adams with functional iteration is not meant for this: accurate or a clear status.
     RiccatiOptions ad = o;
@@ -366,8 +389,8 @@ TEST_CASE("hard cases are accurate", "[riccati][hard]") {
     if (sa.ok()) {
       CONTROL_CHECK_CLOSE(care.S, sa.S(0.0), 1e-6, 0.0);
     } else {
-      CHECK(sa.status == RiccatiStatus::kIntegratorFailure);
-      CHECK(!sa.message.empty());
+      CHECK(sa.status.code == RiccatiCode::kIntegratorFailure);
+      CHECK(!sa.status.message.empty());
       CHECK(sa.S(sa.validFrom()).allFinite());
     }
   }

@@ -39,6 +39,7 @@ struct SingularCase {
     return [A = A, B = B](double, MatrixXd& a, MatrixXd& b) {
       a = A;
       b = B;
+      return trellis::ReferenceStatus{};
     };
   }
 };
@@ -62,7 +63,7 @@ TEST_CASE("riccati: factored form with S tending to a singular matrix switches t
   factored.method = trellis::RiccatiMethod::kFactored;
   const auto sol = trellis::solveRiccati(0.0, T, 3, 1, c.lin(), c.w, factored);
   INFO("plain " << ref.steps << " steps, factored " << sol.steps << " steps, switched at t = "
-                << sol.switchedToPlainAt << "; " << sol.message);
+                << sol.switchedToPlainAt << "; " << sol.status.message);
   REQUIRE(sol.ok());
   CHECK(std::isfinite(sol.switchedToPlainAt));
   CHECK(sol.steps < 3 * ref.steps);
@@ -78,6 +79,6 @@ TEST_CASE("riccati: factored form with S tending to a singular matrix switches t
   factored.factoredSwitchCondition = 0.0;
   factored.maxSteps = 30 * ref.steps;
   const auto noSwitch = trellis::solveRiccati(0.0, T, 3, 1, c.lin(), c.w, factored);
-  INFO("without switch: " << noSwitch.steps << " steps, " << noSwitch.message);
+  INFO("without switch: " << noSwitch.steps << " steps, " << noSwitch.status.message);
   CHECK((!noSwitch.ok() || noSwitch.steps > 10 * ref.steps));
 }

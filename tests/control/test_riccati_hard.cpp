@@ -21,7 +21,7 @@ using trellis::RiccatiLinearSolver;
 using trellis::RiccatiMethod;
 using trellis::RiccatiOptions;
 using trellis::RiccatiSolution;
-using trellis::RiccatiStatus;
+using trellis::RiccatiCode;
 
 namespace {
 
@@ -59,6 +59,7 @@ trellis::LinearizationCallback constantSystem(const MatrixXd& A, const MatrixXd&
   return [A, B](double, MatrixXd& a, MatrixXd& b) {
     a = A;
     b = B;
+    return trellis::ReferenceStatus{};
   };
 }
 
@@ -90,11 +91,11 @@ double worstPsdViolation(const RiccatiSolution& sol) {
 
 // A failed solve must say what, where and how big; S is still usable on [validFrom, T].
 void checkCleanFailure(const RiccatiSolution& sol, double t0, double T) {
-  INFO(sol.message);
-  CHECK(!sol.message.empty());
-  CHECK(std::isfinite(sol.failureTime));
-  CHECK(sol.failureTime >= t0);
-  CHECK(sol.failureTime <= T);
+  INFO(sol.status.message);
+  CHECK(!sol.status.message.empty());
+  CHECK(std::isfinite(sol.status.t));
+  CHECK(sol.status.t >= t0);
+  CHECK(sol.status.t <= T);
   CHECK(std::isfinite(sol.failureNorm));
   CHECK(sol.S(sol.validFrom()).allFinite());
 }
@@ -106,7 +107,7 @@ bool nonStiffGaveUp(const Config& c, const RiccatiSolution& sol, double t0, doub
   const bool nonStiff = c.method == RiccatiMethod::kAdams ||
                         (c.linearSolver == RiccatiLinearSolver::kKrylov && !c.preconditioner);
   if (!nonStiff || sol.ok()) return false;
-  CHECK(sol.status == RiccatiStatus::kIntegratorFailure);
+  CHECK(sol.status.code == RiccatiCode::kIntegratorFailure);
   checkCleanFailure(sol, t0, T);
   return true;
 }
@@ -144,7 +145,7 @@ TEST_CASE("hard: stiff mode, a lightly damped spring at 1e4 rad/s", "[riccati][h
     o.maxSteps = 20000;  // Adams (non-stiff) cannot do this: a bounded, reported failure
     const auto sol = trellis::solveRiccati(0.0, T, 4, 1, constantSystem(A, B), w, o);
     if (nonStiffGaveUp(c, sol, 0.0, T)) continue;
-    INFO(sol.message);
+    INFO(sol.status.message);
     REQUIRE(sol.ok());
     INFO("steps " << sol.steps);
     // 1e-7 over the whole matrix and 1e-5 on the fast block alone (its entries are 1e-5 of the
@@ -176,7 +177,7 @@ TEST_CASE("hard: 100 s horizon on an open-loop unstable system converges to the 
     INFO(c.name);
     const auto sol = trellis::solveRiccati(0.0, T, 4, 2, constantSystem(A, B), w,
                                            optionsFor(c, 1e-11, 1e-12));
-    INFO(sol.message);
+    INFO(sol.status.message);
     REQUIRE(sol.ok());
     // rtol 1e-11: the converged S is an attracting fixed point, so the error stays at the local
     // error level; 1e-8 leaves a factor ~1e3 for the dense output and the error constant.
@@ -215,7 +216,7 @@ TEST_CASE("hard: cheap control R = 1e-6 I", "[riccati][hard]") {
     o.maxSteps = 20000;
     const auto sol = trellis::solveRiccati(0.0, 5.0, 4, 2, constantSystem(A, B), w, o);
     if (nonStiffGaveUp(c, sol, 0.0, 5.0)) continue;
-    INFO(sol.message);
+    INFO(sol.status.message);
     REQUIRE(sol.ok());
     INFO("steps " << sol.steps);
     // Entries span 1e-3 … 1: entry-wise relative error (floor 1e-12) at 1e-7.
@@ -248,7 +249,7 @@ TEST_CASE("hard: Qf = 0", "[riccati][hard]") {
       o.factoredQfShift = 1e-12;  // effect on S(0): 1e-12·e^{-2·1.6·20}, nil
     }
     const auto sol = trellis::solveRiccati(0.0, T, 4, 2, constantSystem(A, B), w, o);
-    INFO(sol.message);
+    INFO(sol.status.message);
     REQUIRE(sol.ok());
     INFO("steps " << sol.steps);
     CHECK(relativeError(care.S, sol.S(0.0)) < 1e-8);  // converged (closed-loop |Re λ| ≥ 1.6)
@@ -278,8 +279,8 @@ TEST_CASE("hard: rank-deficient B gives the solution of the equivalent full-rank
   w2.R = MatrixXd::Identity(2, 2);
   w1.R = MatrixXd::Identity(1, 1);
   w2.Qf = w1.Qf = MatrixXd::Identity(4, 4);
-  auto lin2 = [&](double t, MatrixXd& A, MatrixXd& B) { A = Aof(t); B = B2; };
-  auto lin1 = [&](double t, MatrixXd& A, MatrixXd& B) { A = Aof(t); B = B1; };
+  auto lin2 = [&](double t, MatrixXd& A, MatrixXd& B) { A = Aof(t); B = B2; return trellis::ReferenceStatus{}; };
+  auto lin1 = [&](double t, MatrixXd& A, MatrixXd& B) { A = Aof(t); B = B1; return trellis::ReferenceStatus{}; };
   RiccatiOptions ref;
   ref.rtol = 1e-12;
   ref.atol = 1e-14;
@@ -288,7 +289,7 @@ TEST_CASE("hard: rank-deficient B gives the solution of the equivalent full-rank
   for (const Config& c : configs()) {
     INFO(c.name);
     const auto sol = trellis::solveRiccati(0.0, 5.0, 4, 2, lin2, w2, optionsFor(c, 1e-10, 1e-12));
-    INFO(sol.message);
+    INFO(sol.status.message);
     REQUIRE(sol.ok());
     for (double t : {0.0, 2.5, 4.9}) {
       INFO("t = " << t);
@@ -323,7 +324,7 @@ TEST_CASE("hard: uncontrollable stable direction converges, uncontrollable unsta
     INFO(c.name);
     const auto sol =
         trellis::solveRiccati(0.0, T, 2, 1, constantSystem(A, B), w, optionsFor(c, 1e-11, 1e-13));
-    INFO(sol.message);
+    INFO(sol.status.message);
     REQUIRE(sol.ok());
     for (double t : {0.0, 2.0, 4.5, 4.99}) {
       INFO("t = " << t);  // rtol 1e-11: 1e-8 leaves a factor 1e3 for the accumulated error
@@ -344,18 +345,18 @@ TEST_CASE("hard: uncontrollable stable direction converges, uncontrollable unsta
     RiccatiOptions o = optionsFor(c, 1e-10, 1e-12);
     o.maxNorm = maxNorm;
     const auto sol = trellis::solveRiccati(0.0, T2, 2, 1, constantSystem(A, B), w, o);
-    REQUIRE(sol.status == RiccatiStatus::kBlowUp);
+    REQUIRE(sol.status.code == RiccatiCode::kBlowUp);
     checkCleanFailure(sol, 0.0, T2);
-    CHECK_THAT(sol.message, Catch::Matchers::Contains("blew up at t =") &&
+    CHECK_THAT(sol.status.message, Catch::Matchers::Contains("blew up at t =") &&
                                 Catch::Matchers::Contains("maxNorm = 1e+08"));
     // Stopped at the first step past the crossing: within one step (< 1 in τ) of it.
-    const double tauFail = T2 - sol.failureTime;
+    const double tauFail = T2 - sol.status.t;
     CHECK(tauFail >= tauCross - 1e-9);
     CHECK(tauFail < tauCross + 1.0);
     // The reported norm is max|S_ij| = s₁₁ at the reported time (closed form, rtol-accurate).
     CHECK(sol.failureNorm > maxNorm);
     CHECK(sol.failureNorm == Approx(1.5 * std::exp(2 * tauFail) - 0.5).epsilon(1e-7));
-    CHECK(sol.validFrom() == Approx(sol.failureTime));
+    CHECK(sol.validFrom() == Approx(sol.status.t));
     CHECK(worstPsdViolation(sol) >= -psdTolerance(c));
   }
 }

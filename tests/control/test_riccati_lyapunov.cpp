@@ -18,7 +18,7 @@ using trellis::LqrWeights;
 using trellis::RiccatiLinearSolver;
 using trellis::RiccatiMethod;
 using trellis::RiccatiOptions;
-using trellis::RiccatiStatus;
+using trellis::RiccatiCode;
 
 namespace {
 
@@ -55,6 +55,7 @@ struct TimeVarying {
     return [this](double t, MatrixXd& A, MatrixXd& B) {
       A = A0 + std::sin(2.0 * t) * A1;
       B = B0 + t * B1;
+      return trellis::ReferenceStatus{};
     };
   }
 };
@@ -172,6 +173,7 @@ TEST_CASE("kLyapunov on a time-invariant system converges to the CARE solution",
       [&](double, MatrixXd& a, MatrixXd& b) {
         a = A;
         b = B;
+        return trellis::ReferenceStatus{};
       },
       w, o);
   REQUIRE(sol.ok());
@@ -199,13 +201,14 @@ TEST_CASE("kLyapunov: names, the factored form, and failures name the time", "[r
       [](double, MatrixXd& a, MatrixXd& b) {
         a = 30.0 * MatrixXd::Identity(12, 12);
         b.setZero();
+        return trellis::ReferenceStatus{};
       },
       unitWeights(12, 1), withSolver(RiccatiLinearSolver::kLyapunov, 1e-6));
   REQUIRE_FALSE(blow.ok());
-  CHECK(blow.status == RiccatiStatus::kBlowUp);
-  CHECK(blow.failureTime > 0.0);
-  CHECK(blow.failureTime < 2.0);
-  CHECK_THAT(blow.message, Catch::Contains("S blew up at t = "));
+  CHECK(blow.status.code == RiccatiCode::kBlowUp);
+  CHECK(blow.status.t > 0.0);
+  CHECK(blow.status.t < 2.0);
+  CHECK_THAT(blow.status.message, Catch::Contains("S blew up at t = "));
 
   // A callback failing inside the horizon: kCallbackFailure at its time.
   const auto cb = trellis::solveRiccati(
@@ -213,13 +216,14 @@ TEST_CASE("kLyapunov: names, the factored form, and failures name the time", "[r
       [&sys](double t, MatrixXd& a, MatrixXd& b) {
         sys.callback()(t, a, b);
         if (t < 0.5) a(3, 4) = std::nan("");
+        return trellis::ReferenceStatus{};
       },
       unitWeights(12, 3), withSolver(RiccatiLinearSolver::kLyapunov, 1e-6));
   REQUIRE_FALSE(cb.ok());
-  CHECK(cb.status == RiccatiStatus::kCallbackFailure);
-  CHECK(cb.failureTime < 0.5);
-  CHECK(cb.failureTime > 0.4);
-  CHECK_THAT(cb.message, Catch::Contains("non-finite"));
+  CHECK(cb.status.code == RiccatiCode::kCallbackFailure);
+  CHECK(cb.status.t < 0.5);
+  CHECK(cb.status.t > 0.4);
+  CHECK_THAT(cb.status.message, Catch::Contains("non-finite"));
 }
 
 TEST_CASE("mechanical structure A = [0 I; Aq Av] gives the solution of the unstructured form",
@@ -237,6 +241,7 @@ TEST_CASE("mechanical structure A = [0 I; Aq Av] gives the solution of the unstr
     A.bottomRightCorner(h, h) = Av0;
     B.setZero();
     B.bottomRows(h) = Bv0;
+    return trellis::ReferenceStatus{};
   };
   MatrixXd P = MatrixXd::Zero(nx, nx);
   P.topRightCorner(h, h).setIdentity();
@@ -246,6 +251,7 @@ TEST_CASE("mechanical structure A = [0 I; Aq Av] gives the solution of the unstr
     structured(t, a, b);
     A = P * a * P.transpose();
     B = P * b;
+    return trellis::ReferenceStatus{};
   };
   LqrWeights w = unitWeights(nx, nu);
   w.Q.diagonal().head(h).setConstant(3.0);  // not permutation-invariant

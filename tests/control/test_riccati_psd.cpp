@@ -17,6 +17,7 @@ trellis::LinearizationCallback zeroA() {
   return [](double, MatrixXd& A, MatrixXd& B) {
     A.setZero(2, 2);
     B.setIdentity(2, 2);
+    return trellis::ReferenceStatus{};
   };
 }
 
@@ -43,18 +44,18 @@ TEST_CASE("an indefinite Q(t) between the checked times makes S indefinite: stat
     o.atol = 1e-10;
     o.maxStep = 0.02;  // S = I is an equilibrium before the window: do not step over it
     const auto sol = trellis::solveRiccati(0.0, 1.0, 2, 2, zeroA(), weights(true), o);
-    INFO(toString(method) << ": " << sol.message);
-    REQUIRE(sol.status == trellis::RiccatiStatus::kIndefinite);
+    INFO(toString(method) << ": " << sol.status.message);
+    REQUIRE(sol.status.code == trellis::RiccatiCode::kIndefinite);
     CHECK(!sol.ok());
     // S_22 = 1 until the window (τ = 1 − t < 0.6), falls to ≈ −3.6 across it (dS/dτ = −20 − S²),
     // then keeps falling (dS/dτ = 1 − S² < 0 below −1) to ≈ −11 at t = 0, while S_11 = 1: the
     // worst ratio is at t0, below the window.
-    CHECK(sol.failureTime < 0.4);
+    CHECK(sol.status.t < 0.4);
     CHECK(sol.indefiniteRatio < -o.psdSlack * 2 * o.rtol);
-    CHECK_THAT(sol.message, Catch::Matchers::Contains("indefinite at t ="));
+    CHECK_THAT(sol.status.message, Catch::Matchers::Contains("indefinite at t ="));
     // S itself is still available over the whole horizon.
     CHECK(sol.validFrom() == 0.0);
-    const MatrixXd S = sol.S(sol.failureTime);
+    const MatrixXd S = sol.S(sol.status.t);
     const Eigen::Vector2d lambda = Eigen::SelfAdjointEigenSolver<MatrixXd>(S).eigenvalues();
     CHECK(lambda(0) / lambda(1) == Approx(sol.indefiniteRatio).margin(1e-6));
   }
@@ -67,10 +68,10 @@ TEST_CASE("ordinary solves pass the S >= 0 check; switching it off keeps the old
   o.atol = 1e-10;
   o.maxStep = 0.02;
   const auto good = trellis::solveRiccati(0.0, 1.0, 2, 2, zeroA(), weights(false), o);
-  INFO(good.message);
+  INFO(good.status.message);
   CHECK(good.ok());
   o.checkPositiveSemidefinite = false;
   const auto unchecked = trellis::solveRiccati(0.0, 1.0, 2, 2, zeroA(), weights(true), o);
-  INFO(unchecked.message);
+  INFO(unchecked.status.message);
   CHECK(unchecked.ok());
 }

@@ -31,11 +31,12 @@ using trellis::Trajectory;
 namespace {
 
 // A time-varying test system with fast-changing A(t), B(t) (nx = 2, m = 1).
-void tvSystem(double t, MatrixXd& A, MatrixXd& B) {
+trellis::ReferenceStatus tvSystem(double t, MatrixXd& A, MatrixXd& B) {
   A.resize(2, 2);
   B.resize(2, 1);
   A << 0.0, 1.0, -(1.0 + 3.0 * std::sin(4.0 * t)), -0.2 + t;
   B << 0.1 * t, 1.0 + 0.5 * std::cos(3.0 * t);
+  return {};
 }
 
 /// Independent reference: classical RK4 with `steps` fixed steps on Y = [Φ Γ] and the cost W.
@@ -120,7 +121,7 @@ TEST_CASE("sampled LQR: exact discretization of a time-varying system vs RK4 and
   const double h = 0.1;
   const VectorXd times = (VectorXd(3) << 0.3, 0.3 + h, 0.3 + 2 * h).finished();
   const auto disc = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w);
-  REQUIRE(disc.ok);
+  REQUIRE(disc.ok());
   REQUIRE(disc.intervals.size() == 2);
   double exactErr = 0.0, frozenErr = 0.0;
   for (const SampledInterval& iv : disc.intervals) {
@@ -180,7 +181,7 @@ TEST_CASE("sampled LQR: the recursion with cross term minimizes the stacked cost
   const MatrixXd L = rnd(nx, nx);
   const MatrixXd Qf = L * L.transpose();
   const auto rec = trellis::solveSampledRiccatiRecursion(ivs, Qf);
-  REQUIRE(rec.ok);
+  REQUIRE(rec.ok());
   REQUIRE(rec.S.size() == std::size_t(N + 1));
   REQUIRE(rec.K.size() == std::size_t(N));
 
@@ -238,9 +239,10 @@ TEST_CASE("sampled LQR: a long horizon on a time-invariant system converges to t
   const trellis::LinearizationCallback lin = [&](double, MatrixXd& Am, MatrixXd& Bm) {
     Am = A;
     Bm = B;
+    return trellis::ReferenceStatus{};
   };
   const auto disc = trellis::discretizeSampledData((VectorXd(2) << 0.0, h).finished(), 4, 1, lin, w);
-  REQUIRE(disc.ok);
+  REQUIRE(disc.ok());
   const SampledInterval iv = disc.intervals[0];
   // Time invariant: Φ, Γ are the matrix-exponential ZOH.
   const auto zoh = trellis::discretizeZeroOrderHold(A, B, h);
@@ -253,7 +255,7 @@ TEST_CASE("sampled LQR: a long horizon on a time-invariant system converges to t
 
   const std::vector<SampledInterval> ivs(3000, iv);  // 60 s
   const auto rec = trellis::solveSampledRiccatiRecursion(ivs, w.Qf);
-  REQUIRE(rec.ok);
+  REQUIRE(rec.ok());
   // The DARE with cross term equals the plain DARE of (Φ − ΓR⁻¹Nᵀ, Γ, Q − NR⁻¹Nᵀ, R), with
   // K = K̃ + R⁻¹Nᵀ.
   const MatrixXd RiNt = iv.R.llt().solve(iv.N.transpose());
@@ -289,7 +291,7 @@ TEST_CASE("sampled LQR: gains approach the continuous gains as the rate grows, a
     trellis::TvlqrOptions opt;
     opt.sampleRate = rate;
     const trellis::TvlqrSolution sol = trellis::solveTvlqr(model, ref, w, opt);
-    REQUIRE(sol.ok);
+    REQUIRE(sol.ok());
     REQUIRE(sol.gains.isSampled());
     double err = 0.0, scale = 0.0;
     for (int k = 0; k + 1 < sol.gains.size(); ++k) {
@@ -318,7 +320,7 @@ TEST_CASE("sampled LQR: the cart-pole held upright by a 50 Hz controller with in
   trellis::TvlqrOptions opt;
   opt.sampleRate = 50.0;
   const trellis::TvlqrSolution sol = trellis::solveTvlqr(model, ref, cartPoleWeights(), opt);
-  REQUIRE(sol.ok);
+  REQUIRE(sol.ok());
   CHECK(sol.gains.size() == 401);  // 0, 0.02, …, 7.98 and T
   CHECK(sol.gains.sampleRate() == 50.0);
   CHECK(sol.S.size() == 401);
@@ -355,7 +357,7 @@ TEST_CASE("sampled LQR: on a constrained scene, on the tangent space", "[sampled
   trellis::TvlqrOptions opt;
   opt.sampleRate = 100.0;
   const trellis::TvlqrSolution sol = trellis::solveTvlqr(model, ref, w, opt);
-  REQUIRE(sol.ok);
+  REQUIRE(sol.ok());
   CHECK(sol.constrained);
   CHECK(sol.dimension == 2);
   // The gain ignores the direction that leaves the manifold (x1 − x2 ≠ 0), and S is singular there.
@@ -372,7 +374,7 @@ TEST_CASE("sampled LQR: on a constrained scene, on the tangent space", "[sampled
   opt.riccati.rtol = 1e-11;
   opt.riccati.atol = 1e-12;
   const trellis::TvlqrSolution cont = trellis::solveTvlqr(model, ref, w, opt);
-  REQUIRE(cont.ok);
+  REQUIRE(cont.ok());
   const MatrixXd K0c = cont.gains.gains()[0];
   const MatrixXd K0d = sol.gains.gains()[0];
   INFO("continuous K0 " << K0c << ", sampled K0 " << K0d);
@@ -428,7 +430,7 @@ TEST_CASE("gain schedule: named columns, sample rate, checks against the scene",
   trellis::TvlqrOptions opt;
   opt.sampleRate = 20.0;
   const trellis::TvlqrSolution sol = trellis::solveTvlqr(model, ref, cartPoleWeights(), opt);
-  REQUIRE(sol.ok);
+  REQUIRE(sol.ok());
   std::stringstream csv;
   sol.gains.writeCsv(csv);
   const std::string text = csv.str();
@@ -462,7 +464,7 @@ TEST_CASE("gain schedule: named columns, sample rate, checks against the scene",
                     Catch::Contains("need the '# trellis gain schedule: m=.. nx=..' line"));
   // The summary and JSON say what the gains are.
   CHECK(sol.summary().find("zero-order-hold gains for a controller sampling at 20 Hz") != std::string::npos);
-  CHECK(sol.json().find("\"mode\": \"sampled\", \"sample_rate_hz\": 20") != std::string::npos);
+  CHECK(sol.json().find("\"mode\":\"sampled\",\"sample_rate_hz\":20.0") != std::string::npos);
 }
 
 namespace {
@@ -475,7 +477,7 @@ trellis::TvlqrSolution tvlqrWithOwnModel(double rate, std::vector<MatrixXd>& ali
   trellis::TvlqrOptions opt;
   opt.sampleRate = rate;
   trellis::TvlqrSolution sol = trellis::solveTvlqr(model, ref, cartPoleWeights(), opt);
-  REQUIRE(sol.ok);
+  REQUIRE(sol.ok());
   // Independently of the solution's storage: continuous K = R⁻¹ Bᵀ S from a fresh linearization
   // (R = 1); sampled K_k = (R_k + ΓᵀS_{k+1}Γ)⁻¹(ΓᵀS_{k+1}Φ + N_kᵀ) is checked at one step.
   alive.clear();
@@ -500,7 +502,7 @@ TEST_CASE("solveTvlqr: a solution outlives its model, continuous and sampled (ru
       const trellis::TvlqrSolution returned = tvlqrWithOwnModel(rate, alive);
       copy = returned;  // copy, then the original dies too
     }
-    REQUIRE(copy.ok);
+    REQUIRE(copy.ok());
     CHECK(copy.gains.isSampled() == (rate > 0.0));
     REQUIRE(copy.S.size() == std::size_t(copy.gains.size()));
     std::size_t i = 0;
@@ -512,6 +514,37 @@ TEST_CASE("solveTvlqr: a solution outlives its model, continuous and sampled (ru
       CHECK(copy.S[k].allFinite());
     }
     CHECK(!copy.summary().empty());
-    CHECK(copy.json().find("\"ok\": true") != std::string::npos);
+    CHECK(copy.json().find("\"ok\":true") != std::string::npos);
   }
+}
+
+TEST_CASE("solveTvlqr: numerical failure is the status, with describe() and json() reports",
+          "[tvlqr][status]") {
+  const trellis::TvlqrSolution unsolved;
+  CHECK_FALSE(unsolved.ok());
+  CHECK(std::string(unsolved.status.name()) == "not_solved");
+
+  const Model model = trellis::ctest::makeCartPole();
+  const Trajectory ref = swingReference(model, 1.5);
+  const LqrWeights w = cartPoleWeights();
+  trellis::TvlqrOptions opt;
+  opt.riccati.maxSteps = 3;  // far too few: the continuous solve stops
+  trellis::TvlqrSolution sol;
+  REQUIRE_NOTHROW(sol = trellis::solveTvlqr(model, ref, w, opt));
+  CHECK_FALSE(sol.ok());
+  CHECK(sol.status.code == trellis::TvlqrCode::kRiccatiFailure);
+  CHECK_THAT(sol.status.message, Catch::Contains("integrator_failure") && Catch::Contains("maxSteps = 3"));
+  CHECK(std::isfinite(sol.status.t));
+  CHECK(sol.gains.size() == 0);
+  CHECK_THAT(sol.describe(), Catch::StartsWith("riccati_failure at t = "));
+  CHECK_THAT(sol.json(), Catch::StartsWith("{\"status\":\"riccati_failure\",\"ok\":false,\"message\":"));
+  CHECK_THAT(sol.json(), Catch::Contains("\"rows\":0") && Catch::Contains("\"t0\":null"));
+
+  opt = {};
+  opt.sampleRate = 100.0;
+  const trellis::TvlqrSolution good = trellis::solveTvlqr(model, ref, w, opt);
+  REQUIRE(good.ok());
+  CHECK_THAT(good.describe(), Catch::StartsWith("ok (sampled at 100 Hz, full state, "));
+  CHECK_THAT(good.json(), Catch::StartsWith("{\"status\":\"ok\",\"ok\":true,\"message\":\"\",\"t\":null,"
+                                           "\"index\":null,\"mode\":\"sampled\""));
 }

@@ -25,11 +25,11 @@ TEST_CASE("names: Riccati and integration methods round-trip; bad names list the
   }
   CHECK_THROWS_WITH(trellis::parseIntegrationMethod("BDF"),
                     Catch::Contains("'BDF' is not one of adams, bdf"));
-  // LqrStatus names are distinct and non-empty (they appear in messages and JSON).
-  const std::string names[] = {trellis::toString(trellis::LqrStatus::kOk),
-                               trellis::toString(trellis::LqrStatus::kNotStabilizable),
-                               trellis::toString(trellis::LqrStatus::kNoStabilizingSolution),
-                               trellis::toString(trellis::LqrStatus::kNoConvergence)};
+  // LqrCode names are distinct and non-empty (they appear in messages and JSON).
+  const std::string names[] = {trellis::toString(trellis::LqrCode::kOk),
+                               trellis::toString(trellis::LqrCode::kNotStabilizable),
+                               trellis::toString(trellis::LqrCode::kNoStabilizingSolution),
+                               trellis::toString(trellis::LqrCode::kNoConvergence)};
   CHECK(names[0] == "ok");
   for (int i = 0; i < 4; ++i)
     for (int j = i + 1; j < 4; ++j) CHECK(names[i] != names[j]);

@@ -39,10 +39,10 @@ TEST_CASE("Holding inputs: a bound the unbounded answer violates is reported", "
   opt.lowerBound = Eigen::VectorXd::Constant(1, -std::abs(need) / 2);
   opt.upperBound = Eigen::VectorXd::Constant(1, std::abs(need) / 2);
   const InverseDynamicsResult r = computeHoldingInputs(model, data, q, opt);
-  INFO(r.message);
+  INFO(r.status.message);
   CHECK_FALSE(r.ok());
-  CHECK(r.status == InverseDynamicsStatus::kInputBounds);
-  CHECK_THAT(r.message, Contains("input 'tau0'") && Contains(need > 0 ? "upper bound" : "lower bound"));
+  CHECK(r.status.code == InverseDynamicsCode::kInputBounds);
+  CHECK_THAT(r.status.message, Contains("input 'tau0'") && Contains(need > 0 ? "upper bound" : "lower bound"));
   // u sits at the violated bound, the excess is what the unbounded answer needed beyond it.
   CHECK(std::abs(r.u[0] - (need > 0 ? opt.upperBound[0] : opt.lowerBound[0])) == 0.0);
   CHECK(std::abs(r.boundExcess[0] - std::abs(need) / 2) <= 1e-12);
@@ -81,7 +81,7 @@ TEST_CASE("Holding inputs: redundant actuators share the load within their bound
   opt.lowerBound = Eigen::Vector2d(-std::abs(need) / 4, -inf);
   opt.upperBound = Eigen::Vector2d(std::abs(need) / 4, inf);
   const InverseDynamicsResult r = computeHoldingInputs(model, data, q, opt);
-  INFO(r.message);
+  INFO(r.status.message);
   CHECK(r.ok());
   CHECK(r.boundIterations >= 1);
   CHECK(std::abs(r.u[0]) == std::abs(need) / 4);

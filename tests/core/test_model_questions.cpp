@@ -105,7 +105,7 @@ TEST_CASE("Inverse dynamics returns inputs whose forward dynamics reproduce q''"
       REQUIRE(computeDynamics(model, data, x.q, x.dq, x.u).ok());
       const Eigen::VectorXd qdd = data.qdd, lambda = data.lambda;
       const InverseDynamicsResult r = computeInverseDynamics(model, data, x.q, x.dq, qdd);
-      INFO(r.message);
+      INFO(r.status.message);
       REQUIRE(r.ok());
       CHECK(r.unique);
       CHECK((r.u - x.u).cwiseAbs().maxCoeff() < 1e-9 * (1.0 + x.u.cwiseAbs().maxCoeff()));
@@ -120,7 +120,7 @@ TEST_CASE("Inverse dynamics returns inputs whose forward dynamics reproduce q''"
       REQUIRE(computeDynamics(model, data, x.q, x.dq, x.u).ok());
       const Eigen::VectorXd qdd = data.qdd;
       const InverseDynamicsResult r = computeInverseDynamics(model, data, x.q, x.dq, qdd);
-      INFO(r.message);
+      INFO(r.status.message);
       REQUIRE(r.ok());
       REQUIRE(computeDynamics(model, data, x.q, x.dq, r.u).ok());
       // q̈ is O(10); the KKT solve and the least squares each lose a few digits to conditioning.
@@ -138,7 +138,7 @@ TEST_CASE("Inverse dynamics returns inputs whose forward dynamics reproduce q''"
 
     const Eigen::VectorXd qdd = test::uniformVector(rng, 2, -3.0, 3.0);
     const InverseDynamicsResult r = computeInverseDynamics(model, data, x.q, x.dq, qdd);
-    CHECK(r.status == InverseDynamicsStatus::kUnreachable);
+    CHECK(r.status.code == InverseDynamicsCode::kUnreachable);
     CHECK(r.residualNorm > 1e-3);
     // Independent: the residual of M q̈ + b − B u over u is least squares iff it is orthogonal
     // to B's column; and it is the residual the result reports.
@@ -157,7 +157,7 @@ TEST_CASE("Inverse dynamics returns inputs whose forward dynamics reproduce q''"
     const test::State x = test::randomConsistentState(model, rng);
     const InverseDynamicsResult r =
         computeInverseDynamics(model, data, x.q, x.dq, Eigen::VectorXd::Constant(2, 1.0));
-    CHECK(r.status == InverseDynamicsStatus::kInadmissibleAcceleration);
+    CHECK(r.status.code == InverseDynamicsCode::kInadmissibleAcceleration);
     CHECK(r.constraintResidual > 1e-3);
   }
   SECTION("the torque that holds a pendulum at angle theta is m g l sin(theta)") {
@@ -181,7 +181,7 @@ TEST_CASE("The projection lands on the constraints at the mass-weighted closest 
     Data data(model);
     const Eigen::Vector2d q0(1.3, 0.4), dq0(0.3, -0.8);
     const ProjectionResult p = projectState(model, data, q0, dq0);
-    INFO(p.message);
+    INFO(p.status.message);
     REQUIRE(p.ok());
     CHECK(p.massWeighted);
     CHECK(p.positionResidual <= 1e-12);
@@ -228,7 +228,7 @@ TEST_CASE("The projection lands on the constraints at the mass-weighted closest 
       ProjectionOptions o;
       o.stepTolerance = 1e-8;
       const ProjectionResult p = projectState(model, data, x.q, x.dq, o);
-      INFO(p.message);
+      INFO(p.status.message);
       REQUIRE(p.ok());
       CHECK(p.positionResidualBefore > 1e-4);
       computeConstraints(model, data, p.q, p.dq);
@@ -259,9 +259,9 @@ TEST_CASE("The projection lands on the constraints at the mass-weighted closest 
     const Model model = std::move(b).finalize();
     Data data(model);
     const ProjectionResult p = projectState(model, data, Eigen::VectorXd::Constant(1, 0.3), Eigen::VectorXd::Zero(1));
-    CHECK(p.status == ProjectionStatus::kNotConverged);
+    CHECK(p.status.code == ProjectionCode::kNotConverged);
     CHECK(p.positionResidual > 1.0);
-    CHECK_THAT(p.message, Contains("|h|inf"));
+    CHECK_THAT(p.status.message, Contains("|h|inf"));
   }
   SECTION("without constraints the state is unchanged") {
     const Model model = pendulum(1.0, 1.0);
@@ -281,7 +281,7 @@ TEST_CASE("Static equilibria match closed forms and have q'' = 0", "[equilibrium
     const Model model = pendulum(m, l, 0.2);
     Data data(model);
     const EquilibriumResult r = findEquilibrium(model, data, Eigen::VectorXd::Constant(1, 0.1), Eigen::VectorXd::Constant(1, u));
-    INFO(r.message);
+    INFO(r.status.message);
     REQUIRE(r.ok());
     CHECK(r.q(0) == Approx(std::asin(u / (m * kG * l))).margin(1e-10));
     REQUIRE(computeDynamics(model, data, r.q, Eigen::VectorXd::Zero(1), r.u).ok());
@@ -301,7 +301,7 @@ TEST_CASE("Static equilibria match closed forms and have q'' = 0", "[equilibrium
     const Model model = std::move(b).finalize();
     Data data(model);
     const EquilibriumResult r = findEquilibrium(model, data, Eigen::VectorXd::Zero(1), Eigen::VectorXd::Zero(0));
-    INFO(r.message);
+    INFO(r.status.message);
     REQUIRE(r.ok());
     CHECK(r.q(0) == Approx(std::atan(k * ax / (m * kG - k * ay))).margin(1e-10));
     CHECK(r.maxRealEigenvalue == Approx(0.0).margin(1e-8));  // undamped: ± i ω
@@ -311,7 +311,7 @@ TEST_CASE("Static equilibria match closed forms and have q'' = 0", "[equilibrium
     const Model model = pointOnCircle(0.0, m, r, true);
     Data data(model);
     const EquilibriumResult e = findEquilibrium(model, data, Eigen::Vector2d(0.1, -0.8), Eigen::VectorXd::Constant(1, u));
-    INFO(e.message);
+    INFO(e.status.message);
     REQUIRE(e.ok());
     const double phi = std::atan(u / (m * kG));
     CHECK(e.q(0) == Approx(r * std::sin(phi)).margin(1e-10));
@@ -368,7 +368,7 @@ TEST_CASE("Static equilibria match closed forms and have q'' = 0", "[equilibrium
     const Model model = pendulum(1.0, 1.0);
     Data data(model);
     const EquilibriumResult r = findEquilibrium(model, data, Eigen::VectorXd::Constant(1, 0.2), Eigen::VectorXd::Constant(1, 20.0));
-    CHECK(r.status == EquilibriumStatus::kNotConverged);
+    CHECK(r.status.code == EquilibriumCode::kNotConverged);
     CHECK(r.accelerationResidual > 1.0);
   }
 }

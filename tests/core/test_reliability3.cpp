@@ -45,8 +45,8 @@ TEST_CASE("inverse dynamics judges residuals against the terms compared: the ver
     const Eigen::VectorXd tilted = Eigen::Vector2d(0.0, 0.3), upright = Eigen::Vector2d(0.0, 0.0);
     // The pole tilted: no cart force holds it (a fixed floor of 1 N·m held the mg/mm one).
     const InverseDynamicsResult r = computeHoldingInputs(model, data, tilted);
-    CHECK(r.status == InverseDynamicsStatus::kUnreachable);
-    CHECK_THAT(r.message, Contains("no inputs produce this"));
+    CHECK(r.status.code == InverseDynamicsCode::kUnreachable);
+    CHECK_THAT(r.status.message, Contains("no inputs produce this"));
     // Upright: held with u = 0 exactly.
     const InverseDynamicsResult h = computeHoldingInputs(model, data, upright);
     CHECK(h.ok());
@@ -91,15 +91,15 @@ TEST_CASE("projection checks the velocity row it corrects and survives every coo
   ProjectionOptions fixX;
   fixX.fixed = {0};
   const ProjectionResult r = projectState(model, data, q, dq, fixX);
-  CHECK(r.status == ProjectionStatus::kNotConverged);
-  CHECK_THAT(r.message, Contains("is still violated after the projection"));
+  CHECK(r.status.code == ProjectionCode::kNotConverged);
+  CHECK_THAT(r.status.message, Contains("is still violated after the projection"));
   // Every coordinate fixed: on the manifold, the velocity row fails; off it, the position fails.
   ProjectionOptions all;
   all.fixed = {0, 1};
-  CHECK(projectState(model, data, q, dq, all).status == ProjectionStatus::kNotConverged);
+  CHECK(projectState(model, data, q, dq, all).status.code == ProjectionCode::kNotConverged);
   const ProjectionResult off = projectState(model, data, Eigen::Vector2d(1.2, 0.0), dq, all);
-  CHECK(off.status == ProjectionStatus::kNotConverged);
-  CHECK_THAT(off.message, Contains("every coordinate is fixed"));
+  CHECK(off.status.code == ProjectionCode::kNotConverged);
+  CHECK_THAT(off.status.message, Contains("every coordinate is fixed"));
   // With velocities off, a position-only projection with x fixed is fine on the manifold.
   ProjectionOptions positions;
   positions.fixed = {0};

@@ -35,9 +35,9 @@ void checkRoundTrip(const std::vector<std::string>& expected) {
 
 TEST_CASE("Core enums: one name table each, parsed and printed alike", "[status][names]") {
   checkRoundTrip<DynamicsCode>({"ok", "redundant_constraints", "singular_mass_matrix", "singular_constraints", "non_finite"});
-  checkRoundTrip<EquilibriumStatus>({"ok", "not_converged", "dynamics_failure"});
-  checkRoundTrip<InverseDynamicsStatus>({"ok", "unreachable", "inadmissible_acceleration", "input_bounds", "non_finite"});
-  checkRoundTrip<ProjectionStatus>({"ok", "not_converged", "non_finite"});
+  checkRoundTrip<EquilibriumCode>({"ok", "not_converged", "dynamics_failure"});
+  checkRoundTrip<InverseDynamicsCode>({"ok", "unreachable", "inadmissible_acceleration", "input_bounds", "non_finite"});
+  checkRoundTrip<ProjectionCode>({"ok", "not_converged", "non_finite"});
   checkRoundTrip<TransformType>({"tx", "ty", "tz", "rx", "ry", "rz", "const_se3", "r_axis", "t_axis"});
   checkRoundTrip<ConstraintType>({"distance", "point", "point_on_plane", "knife_edge"});
   checkRoundTrip<GainInterpolation>({"linear", "cubic"});
@@ -86,9 +86,9 @@ TEST_CASE("Core results: describe() is one line, json() an object with the statu
     const EquilibriumResult r = findEquilibrium(model, data, q, u);
     const nlohmann::json j = nlohmann::json::parse(r.json());
     statusKeys(j, r.ok());
-    CHECK(j["status"] == toString(r.status));
+    CHECK(j["status"] == r.status.name());
     CHECK(j["iterations"].get<int>() == r.iterations);
-    CHECK(r.describe().rfind(toString(r.status), 0) == 0);
+    CHECK(r.describe().rfind(r.status.name(), 0) == 0);
   }
   SECTION("InverseDynamicsResult") {
     const ProjectionResult p = projectState(model, data, q, zero);

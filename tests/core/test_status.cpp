@@ -65,6 +65,11 @@ TEST_CASE("status: success, describe and the JSON report") {
     s.set(Outcome::kTooSlow, "", 0.1 + 0.2);
     CHECK(s.describe() == "too_slow at t = 0.30000000000000004");
     CHECK(trellis::formatStatusNumber(1e-300) == "1e-300");
+    // Whole numbers keep their positional form below 1e16 ("50 Hz", not "5e+01 Hz").
+    CHECK(trellis::formatStatusNumber(50.0) == "50");
+    CHECK(trellis::formatStatusNumber(-1200.0) == "-1200");
+    CHECK(trellis::formatStatusNumber(1234.5) == "1234.5");
+    CHECK(trellis::formatStatusNumber(2.5e20) == "2.5e+20");
   }
   SECTION("non-finite numbers become null in reports") {
     CHECK(trellis::detail::toJson(std::nan("")).is_null());

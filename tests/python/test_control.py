@@ -3,6 +3,7 @@ and CSV), TV-LQR against `trellis gains`, simulation against `trellis simulate`,
 and the GIL."""
 import errno
 import gc
+import json
 import math
 import re
 import threading
@@ -21,7 +22,9 @@ def scalar_care(a, b, q, r):
 
 def test_care_scalar_closed_form_and_residual(tm):
     res = tm.solve_care([[1.5]], [[2.0]], [[3.0]], [[0.5]])
-    assert res.ok and res.status == tm.LqrStatus.OK
+    assert res.ok and res.status.code == "ok" and res.status.message == ""
+    assert res.describe().startswith("ok (residual ")
+    assert json.loads(res.json())["status"] == "ok"
     s = scalar_care(1.5, 2.0, 3.0, 0.5)
     assert res.S[0, 0] == pytest.approx(s, rel=1e-12)
     assert res.K[0, 0] == pytest.approx(2.0 * s / 0.5, rel=1e-12)
@@ -55,13 +58,14 @@ def test_dare_and_zero_order_hold(tm):
 
 def test_lqr_failures_are_statuses_and_bad_input_raises(tm):
     res = tm.solve_care([[1.0]], [[0.0]], [[1.0]], [[1.0]])  # unstable and uncontrollable
-    assert not res.ok and res.status == tm.LqrStatus.NOT_STABILIZABLE and res.message
+    assert not res.ok and res.status.code == "not_stabilizable" and res.status.message
+    assert res.describe().startswith("not_stabilizable: ")
     with pytest.raises(ValueError, match="R"):
         tm.solve_care([[1.0]], [[1.0]], [[1.0]], [[-1.0]])
     with pytest.raises(ValueError):
         tm.solve_care(np.eye(2), np.ones((3, 1)), np.eye(2), [[1.0]])
-    with pytest.raises(tm.NumericalError):
-        tm.solve_lyapunov(np.zeros((2, 2)), np.eye(2))
+    singular = tm.solve_lyapunov(np.zeros((2, 2)), np.eye(2))  # a status, not an exception
+    assert not singular.ok and singular.status.code == "singular" and singular.status.index >= 0
     with pytest.raises(TypeError, match="unexpected keyword argument 'tolerence'"):
         tm.CareOptions(tolerence=1e-3)
 
@@ -75,14 +79,44 @@ def test_controllability(tm):
     data = tm.Data(scene.model)
     q = np.array([math.pi / 6, math.pi / 3])
     rep = tm.compute_controllability_at(scene.model, data, q, [0.0, 0.0], [0.0])
-    assert rep.dimension == 2  # reduced to the tangent space
+    assert rep.dimension == 2 and rep.ok  # reduced to the tangent space
+    assert json.loads(rep.json())["rank"] == rep.rank
+
+
+def test_complex_matrices_are_refused_naming_the_argument(tm):
+    """Issue 24: a complex matrix where a real one is expected is a TypeError naming the argument
+    (never cut to its real part), for every matrix argument; vectors likewise."""
+    A, B = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])
+    with pytest.raises(TypeError, match=r"^A: got a complex array"):
+        tm.solve_care(A + 0j, B, np.eye(2), [[1.0]])
+    with pytest.raises(TypeError, match=r"^R: got a complex array"):
+        tm.solve_care(A, B, np.eye(2), np.array([[1.0 + 1j]]))
+    with pytest.raises(TypeError, match=r"^Bd: got a complex array"):
+        tm.solve_dare(A, B.astype(complex), np.eye(2), [[1.0]])
+    with pytest.raises(TypeError, match=r"^F: got a complex array"):
+        tm.solve_lyapunov(A.astype(complex), np.eye(2))
+    with pytest.raises(TypeError, match=r"^B: got a complex array"):
+        tm.compute_controllability(A, B * 1j)
+    with pytest.raises(TypeError, match=r"^states: got a complex array"):
+        tm.Trajectory(["a"], [], [0.0, 1.0], np.zeros((2, 2), dtype=complex))
+    with pytest.raises(TypeError, match=r"^gains: got a complex array"):
+        tm.GainSchedule([0.0, 1.0], np.zeros((2, 1, 2), dtype=complex))
+    model = tm.load_scene(str(SCENES / "cart_pole.json")).model
+    ref = reference(tm, model, "cart_pole_upright.csv")
+    with pytest.raises(TypeError, match=r"^Q: got a complex array"):
+        tm.solve_tvlqr(model, ref, Q=np.eye(4, dtype=complex), R=1.0)
+    with pytest.raises(TypeError, match="complex array"):
+        tm.compute_dynamics(model, tm.Data(model), np.zeros(2, dtype=complex), np.zeros(2), np.zeros(1))
+    # The real arrays of the same values work.
+    assert tm.solve_care(A, B, np.eye(2), [[1.0]]).ok
 
 
 def test_trajectory_numpy_and_csv_round_trip(tm, tmp_path):
     model = tm.load_scene(str(SCENES / "cart_pole.json")).model
     times = np.linspace(0.0, 1.0, 11)
-    states = np.vstack([np.sin(times), 0.1 * times, np.cos(times), 0.1 * np.ones_like(times)])
-    inputs = np.asfortranarray(0.5 * times[None, :])
+    # Time first: states (N, nx), inputs (N, nu).
+    states = np.column_stack([np.sin(times), 0.1 * times, np.cos(times), 0.1 * np.ones_like(times)])
+    inputs = np.asfortranarray(0.5 * times[:, None])
     traj = tm.Trajectory.for_model(model, times, states, inputs)
     assert (traj.nx, traj.nu, len(traj)) == (4, 1, 11)
     np.testing.assert_array_equal(traj.states, states)
@@ -95,20 +129,21 @@ def test_trajectory_numpy_and_csv_round_trip(tm, tmp_path):
     np.testing.assert_array_equal(back.times, times)
     traj.compute_state_derivatives(model)
     x, u = traj.evaluate(0.3)
-    np.testing.assert_allclose(x, traj.states[:, 3], rtol=1e-14)
+    np.testing.assert_allclose(x, traj.states[3], rtol=1e-14)
+    assert traj.state_derivatives.shape == (11, 4)
     X, U = traj.sample([0.0, 0.3, 1.0])
-    assert X.shape == (4, 3) and U.shape == (1, 3)
+    assert X.shape == (3, 4) and U.shape == (3, 1)
 
 
 def test_trajectory_errors(tm, tmp_path):
     with pytest.raises(tm.TrajectoryError, match="row") as err:
-        tm.Trajectory(["a"], [], [0.0, 0.0], np.zeros((2, 2)), np.zeros((0, 2)))
+        tm.Trajectory(["a"], [], [0.0, 0.0], np.zeros((2, 2)), np.zeros((2, 0)))
     assert isinstance(err.value, ValueError)
     bad = tmp_path / "bad.csv"
     bad.write_text("t,theta,dtheta,torque\n0,0,0,0\n0.1,x,0,0\n")
     with pytest.raises(tm.TrajectoryError, match=r"bad.csv.*theta"):
         tm.Trajectory.read_csv(str(bad))
-    traj = tm.Trajectory(["a"], [], [0.0, 1.0], np.zeros((2, 2)), np.zeros((0, 2)))
+    traj = tm.Trajectory(["a"], [], [0.0, 1.0], np.zeros((2, 2)), np.zeros((2, 0)))
     with pytest.raises(ValueError):
         traj.evaluate(0.5)  # no state derivatives: std::logic_error → ValueError
 
@@ -116,7 +151,7 @@ def test_trajectory_errors(tm, tmp_path):
 def test_file_errors_are_os_errors(tm, tmp_path):
     """trellis::FileError becomes OSError of the errno's kind (issue 23 part 5), never
     NumericalError; the message keeps the path, and nothing is left behind."""
-    traj = tm.Trajectory(["a"], [], [0.0, 1.0], np.zeros((2, 2)), np.zeros((0, 2)))
+    traj = tm.Trajectory(["a"], [], [0.0, 1.0], np.zeros((2, 2)), np.zeros((2, 0)))
     gains = tm.GainSchedule([0.0, 1.0], np.zeros((2, 1, 2)))
     missing = tmp_path / "no such dir" / "out.csv"
     for obj in (traj, gains):
@@ -171,18 +206,18 @@ def test_tvlqr_matches_cli_gains(tm, cli, tmp_path, scene, trajectory, Q, R):
     expected = tm.GainSchedule.read_csv(str(out))
     model = tm.load_scene(str(SCENES / f"{scene}.json")).model
     ref = reference(tm, model, trajectory)
-    sol = tm.tvlqr(model, ref, Q=np.array(Q, dtype=float) if isinstance(Q, list) else Q, R=R)
-    assert sol.ok, sol.message
-    assert isinstance(sol, tm.ManifoldRiccatiSolution if model.nc else tm.RiccatiSolution)
-    gains = sol.gain_schedule(ref.times)
+    sol = tm.solve_tvlqr(model, ref, Q=np.array(Q, dtype=float) if isinstance(Q, list) else Q, R=R)
+    assert sol.ok, sol.status.describe()
+    assert sol.constrained == (model.nc > 0)
+    gains = sol.gains
     # The same C++ solve on the same input; the CSV keeps 17 digits.
     np.testing.assert_allclose(gains.gains, expected.gains, rtol=1e-13,
                                atol=1e-13 * np.abs(expected.gains).max())
 
     # The CLI's controllability lines: rank at the first knot, Gramian eigenvalues (3 digits).
     data = tm.Data(model)
-    x0 = ref.states[:, 0]
-    rank = tm.compute_controllability_at(model, data, x0[:model.nq], x0[model.nq:], ref.inputs[:, 0])
+    x0 = ref.states[0]
+    rank = tm.compute_controllability_at(model, data, x0[:model.nq], x0[model.nq:], ref.inputs[0])
     assert f"rank {rank.rank} of {rank.dimension}" in summary
     gramian = tm.compute_controllability_gramian(model, ref)
     m = re.search(r"gramian on \[[^]]*\]: min eigenvalue (\S+), max eigenvalue (\S+)", summary)
@@ -195,10 +230,10 @@ def test_tvlqr_long_horizon_converges_to_care(tm):
     """Pendulum held upright (constant reference, u = 0 at θ = π): K(0) → the CARE gain."""
     model = tm.load_scene(str(SCENES / "pendulum.json")).model
     times = np.linspace(0.0, 20.0, 21)
-    states = np.vstack([np.full_like(times, math.pi), np.zeros_like(times)])
+    states = np.column_stack([np.full_like(times, math.pi), np.zeros_like(times)])
     ref = tm.Trajectory.for_model(model, times, states)
     ref.compute_state_derivatives(model)
-    sol = tm.solve_riccati(model, ref, Q=np.diag([10.0, 1.0]), R=[[0.5]])
+    sol = tm.solve_tvlqr(model, ref, Q=np.diag([10.0, 1.0]), R=[[0.5]])
     lin = tm.linearize(model, [math.pi], [0.0], [0.0])
     care = tm.solve_care(lin.A, lin.B, np.diag([10.0, 1.0]), [[0.5]])
     np.testing.assert_allclose(sol.K(0.0), care.K, rtol=1e-6)
@@ -213,31 +248,31 @@ def test_riccati_linear_solvers_agree(tm):
     for name in ("DENSE", "LYAPUNOV"):
         opts = tm.RiccatiOptions(rtol=1e-10, atol=1e-12,
                                  linear_solver=getattr(tm.RiccatiLinearSolver, name))
-        sols[name] = tm.solve_riccati(model, ref, Q=1.0, R=1.0, options=opts)
+        sols[name] = tm.solve_tvlqr(model, ref, Q=1.0, R=1.0, options=tm.TvlqrOptions(riccati=opts))
     lyap = sols["LYAPUNOV"]
-    assert lyap.linear_iterations == 0 and lyap.preconditioner_solves > 0
-    np.testing.assert_allclose(lyap.S(0.0), sols["DENSE"].S(0.0), rtol=1e-7, atol=1e-9)
+    assert lyap.ok and sols["DENSE"].ok
+    np.testing.assert_allclose(lyap.S[0], sols["DENSE"].S[0], rtol=1e-7, atol=1e-9)
 
 
 def test_solution_outlives_its_model(tm):
     def solve():
         model = tm.load_scene(str(SCENES / "cart_pole.json")).model
         ref = reference(tm, model, "cart_pole_upright.csv")
-        return tm.solve_riccati(model, ref, Q=1.0, R=1.0), model.nq
+        return tm.solve_tvlqr(model, ref, Q=1.0, R=1.0), model.nq
     sol, nq = solve()
-    gc.collect()  # nothing else refers to the model: the solution keeps it alive
+    gc.collect()  # plain data: nothing refers to the model any more
     K = sol.K(1.0)
     assert K.shape == (1, 2 * nq) and np.isfinite(K).all()
 
     def solve_manifold():
         model = tm.load_scene(str(SCENES / "paper_pendulum.json")).model
-        return tm.tvlqr(model, reference(tm, model, "paper_pendulum_swing.csv"), Q=1.0, R=1.0)
+        return tm.solve_tvlqr(model, reference(tm, model, "paper_pendulum_swing.csv"), Q=1.0, R=1.0)
     msol = solve_manifold()
     gc.collect()
-    reduced = msol.reduced
+    gains = msol.gains
     del msol
     gc.collect()
-    assert np.isfinite(reduced.K(0.5)).all()  # the member keeps its parent (and the model) alive
+    assert np.isfinite(gains.evaluate(0.5)).all()
 
 
 def test_simulation_matches_cli(tm, cli, tmp_path):
@@ -251,9 +286,11 @@ def test_simulation_matches_cli(tm, cli, tmp_path):
     model = tm.load_scene(str(scene)).model
     ref = reference(tm, model, "cart_pole_upright.csv")
     gains = tm.GainSchedule.read_csv(str(gains_path))
-    x0 = ref.states[:, 0] + np.array([0.0, 0.1, 0.0, 0.0])
+    x0 = ref.states[0] + np.array([0.0, 0.1, 0.0, 0.0])
+    assert tm.check_gain_schedule_applies(gains, model, ref) == ""
     result = tm.simulate_closed_loop(model, ref, gains, x0)
-    assert result.ok, result.message
+    assert result.ok, result.status.describe()
+    assert json.loads(result.json())["status"] == "ok"
     np.testing.assert_allclose(result.trajectory.states, expected.states, rtol=0, atol=1e-13)
     assert result.tracking_error[-1] < 0.005  # stabilized (the CLI test's bound)
 
@@ -272,15 +309,15 @@ def test_python_policy_and_its_errors(tm):
     # A constant torque u = g sin(θ*) holds θ* = 0.3 at rest.
     hold = 9.81 * math.sin(0.3)
     res = tm.simulate(model, [0.3, 0.0], 0.0, 1.0, lambda t, x: np.array([hold]), options=opts)
-    assert res.ok and np.abs(res.trajectory.states[0] - 0.3).max() < 1e-8
+    assert res.ok and np.abs(res.trajectory.states[:, 0] - 0.3).max() < 1e-8
 
     def bad(t, x):
         if t > 0.5:
             raise ArithmeticError("policy exploded at the half")
         return [0.0]
     res = tm.simulate(model, [0.1, 0.0], 0.0, 1.0, bad, options=opts)
-    assert res.status == tm.SimulationStatus.POLICY_FAILURE
-    assert "policy exploded at the half" in res.message
+    assert res.status.code == "policy_failure" and 0.5 < res.status.t <= 1.0
+    assert "policy exploded at the half" in res.status.message
     with pytest.raises(ValueError, match="rtol"):
         tm.simulate(model, [0.1, 0.0], 0.0, 1.0, bad, options=tm.SimulationOptions(rtol=-1.0))
 
@@ -290,9 +327,9 @@ def test_long_solves_release_the_gil(tm):
     were held), and two threads finish the work of two simulations; times are printed, not asserted."""
     model = tm.load_scene(str(SCENES / "cart_pole.json")).model
     ref = reference(tm, model, "cart_pole_upright.csv")
-    sol = tm.solve_riccati(model, ref, Q=np.array([10.0, 10, 1, 1]), R=0.1)
-    gains = sol.gain_schedule(ref.times)
-    x0 = ref.states[:, 0] + np.array([0.0, 0.1, 0.0, 0.0])
+    sol = tm.solve_tvlqr(model, ref, Q=np.array([10.0, 10, 1, 1]), R=0.1)
+    gains = sol.gains
+    x0 = ref.states[0] + np.array([0.0, 0.1, 0.0, 0.0])
     opts = tm.SimulationOptions(rtol=1e-11, atol=1e-13)
 
     def run():
@@ -357,13 +394,6 @@ def test_data_refuses_concurrent_use(tm):
     assert all("one Data per thread" in e for e in errors)
 
 
-def _has_solve_tvlqr():
-    import trellis_mech
-    return getattr(trellis_mech, "HAS_SOLVE_TVLQR", False)
-
-
-@pytest.mark.skipif(not _has_solve_tvlqr(), reason="solveTvlqr is not in this control library "
-                    "(it arrives with the sampled-data TV-LQR, branch i10-sampled)")
 @pytest.mark.parametrize("rate", [0.0, 10.0])
 def test_solve_tvlqr_matches_cli(tm, cli, tmp_path, rate):
     scene = SCENES / "cart_pole.json"
@@ -380,7 +410,7 @@ def test_solve_tvlqr_matches_cli(tm, cli, tmp_path, rate):
                               options=tm.TvlqrOptions(sample_rate=rate))
     sol = solve()
     gc.collect()  # plain data: nothing refers to the model any more
-    assert sol.ok, sol.message
+    assert sol.ok, sol.status.describe()
     assert sol.gains.sample_rate == rate and sol.S.shape == (len(sol.gains), 4, 4)
     np.testing.assert_allclose(sol.gains.times, expected.times, rtol=1e-15)
     np.testing.assert_allclose(sol.gains.gains, expected.gains, rtol=1e-13,

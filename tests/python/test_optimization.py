@@ -50,15 +50,15 @@ def test_problem_built_in_python(tm):
     result = tm.optimize_trajectory(p, options=tm.OptimizerOptions(tolerance=1e-9))
     assert result.ok, result.message
     traj = result.trajectory
-    assert traj.states.shape == (2, 21) and traj.inputs.shape == (1, 21)
-    np.testing.assert_allclose(traj.states[:, 0], [0.0, 0.0], atol=1e-12)
-    np.testing.assert_allclose(traj.states[:, -1], [1.0, 0.0], atol=1e-8)
+    assert traj.states.shape == (21, 2) and traj.inputs.shape == (21, 1)  # time first
+    np.testing.assert_allclose(traj.states[0], [0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(traj.states[-1], [1.0, 0.0], atol=1e-8)
     # The dynamics were enforced: the nonlinear plant driven open loop by the optimized input
     # ends near the goal (Hermite–Simpson: O(h⁴) error, h = 0.1).
     traj.compute_state_derivatives(p.model)
-    sim = tm.simulate_open_loop(p.model, traj, traj.states[:, 0])
+    sim = tm.simulate_open_loop(p.model, traj, traj.states[0])
     assert sim.ok
-    np.testing.assert_allclose(sim.trajectory.states[:, -1], [1.0, 0.0], atol=0.01)
+    np.testing.assert_allclose(sim.trajectory.states[-1], [1.0, 0.0], atol=0.01)
     assert result.solve_time > 0 and result.dynamics_evaluations > 0
 
 
@@ -100,7 +100,7 @@ def test_on_iteration_callback_and_statuses(tm):
 
     result = tm.optimize_trajectory(pendulum_problem(tm), options=tm.OptimizerOptions(max_iterations=2))
     assert result.status == tm.OptimizationCode.ITERATION_LIMIT
-    assert result.trajectory.states.shape == (2, 21)  # the last iterate is still returned
+    assert result.trajectory.states.shape == (21, 2)  # the last iterate is still returned
 
 
 def test_optimize_releases_the_gil(tm):

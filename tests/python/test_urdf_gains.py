@@ -35,7 +35,7 @@ def test_hold_gains_converge_to_care(tm, cli, tmp_path, urdf):
     # The pose is held: the inputs cancel gravity (q'' = 0 to rounding).
     assert np.abs(data.qdd).max() < 1e-9
     care = tm.solve_care(data.A, data.B, 10 * np.eye(4), np.eye(2))
-    assert care.status == tm.LqrStatus.OK, care.message
+    assert care.status.code == "ok", care.describe()
     gains = tm.GainSchedule.read_csv(str(out))
     assert gains.times[0] == 0.0 and gains.times[-1] == 8.0
     np.testing.assert_allclose(gains.gains[0], care.K, rtol=0, atol=1e-6 * np.abs(care.K).max())

@@ -43,7 +43,7 @@ def test_view_holds_the_library_kinematics_at_the_knots(tmp_path):
     for k in (1, 40):
         t = swing.times[k]
         (s,) = np.nonzero(times == t)[0]
-        q = swing.states[: model.nq, k]
+        q = swing.states[k, : model.nq]
         tm.compute_kinematics(model, d, q, np.zeros(model.nq))
         # The body's joint frame (pivot) rotated onto the bob's placement (0, -1, 0).
         w, x, y, z = poses[s, 0, 3:]

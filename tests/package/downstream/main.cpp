@@ -45,7 +45,7 @@ int main() {
   const trellis::LqrResult lqr = trellis::solveCare(Ad, Bd, Eigen::MatrixXd::Identity(2, 2),
                                                     Eigen::MatrixXd::Identity(1, 1));
   if (!lqr.ok() || std::abs(lqr.K(0, 0) - 1.0) > 1e-9 || std::abs(lqr.K(0, 1) - std::sqrt(3.0)) > 1e-9) {
-    std::cerr << "solveCare: " << lqr.message << " K = " << lqr.K << "\n";
+    std::cerr << "solveCare: " << lqr.status.describe() << " K = " << lqr.K << "\n";
     return 1;
   }
   // trellis::viewer through the installed package, with the installed three.js and its licence.

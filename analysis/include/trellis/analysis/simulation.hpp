@@ -56,6 +56,7 @@
 #pragma once
 
 #include "trellis/core/gain_schedule.hpp"
+#include "trellis/core/status.hpp"
 #include "trellis/core/trajectory.hpp"
 
 #include <Eigen/Core>
@@ -81,9 +82,14 @@ enum class IntegrationMethod {
            ///< comment): stiff systems (stiff springs, very high gains, the hand)
 };
 
-/// "adams", "bdf".
-const char* toString(IntegrationMethod method);
-/// The inverse of toString; throws std::invalid_argument "'TEXT' is not one of adams, bdf".
+/// Names: adams, bdf (toString).
+inline EnumNameTable<IntegrationMethod> enumNames(IntegrationMethod) {
+  static constexpr EnumName<IntegrationMethod> table[] = {{IntegrationMethod::kAdams, "adams"},
+                                                          {IntegrationMethod::kBDF, "bdf"}};
+  return table;
+}
+/// parseEnum<IntegrationMethod>(text, "integration method"): throws std::invalid_argument
+/// "integration method 'TEXT' is not one of adams, bdf".
 IntegrationMethod parseIntegrationMethod(const std::string& text);
 
 /// Options of simulate / simulateBatch: integrator tolerances and method, sampled or continuous
@@ -125,7 +131,7 @@ struct SimulationOptions {
 /// A failing right-hand side (dynamics, policy returning NaN) is first reported to CVODES as
 /// recoverable, so a bad trial point only shortens the step; after 10 failures in one segment, or
 /// on a policy exception, the simulation stops with the last failure's time, state and message.
-enum class SimulationStatus {
+enum class SimulationCode {
   kOk,
   kIntegratorFailure,  ///< CVODES failed (too much work / maxSteps, error test, convergence)
   kDynamicsFailure,    ///< computeDynamics returned a status that is not ok (singular M or
@@ -135,20 +141,25 @@ enum class SimulationStatus {
   kConstraintDrift,    ///< the drift stayed above driftTolerance after a projection
 };
 
-const char* toString(SimulationStatus status);
-
-struct SimulationResult;
-/// One JSON object summarizing a simulation: status, message, rows, t0, t1, tracking error
-/// (initial, final, max, time of max), constraint drift, saturation, integrator work.
-std::string simulationJson(const SimulationResult& result);
+/// Names: ok, integrator_failure, dynamics_failure, non_finite, policy_failure, constraint_drift.
+inline EnumNameTable<SimulationCode> enumNames(SimulationCode) {
+  static constexpr EnumName<SimulationCode> table[] = {
+      {SimulationCode::kOk, "ok"},
+      {SimulationCode::kIntegratorFailure, "integrator_failure"},
+      {SimulationCode::kDynamicsFailure, "dynamics_failure"},
+      {SimulationCode::kNonFinite, "non_finite"},
+      {SimulationCode::kPolicyFailure, "policy_failure"},
+      {SimulationCode::kConstraintDrift, "constraint_drift"}};
+  return table;
+}
 
 /// The closed loop x(t), u(t) at the output times, the tracking error and constraint drift there,
 /// the integrator's work, and the status (with the time and state of a failure).
 struct SimulationResult {
-  SimulationStatus status = SimulationStatus::kOk;  ///< kOk: integrated over [t0, t1]
-  std::string message;           ///< empty when ok; names the time and the state of the failure
-  double failureTime = 0.0;      ///< t of the failure (not ok only)
-  Eigen::VectorXd failureState;  ///< x = [q; q̇] at failureTime (2n; not ok only)
+  /// code; message (empty when ok; names the time and the state of the failure); t: the time of
+  /// the failure (NaN when ok); index unused.
+  Status<SimulationCode> status;
+  Eigen::VectorXd failureState;  ///< x = [q; q̇] at status.t (2n; not ok only)
   /// Closed-loop x and the applied (saturated) u at the output times (names from the model), up to
   /// the last output time reached before a failure. States are recorded after projection; the
   /// state derivatives [q̇; q̈(q, q̇, u)] at the recorded points are set (so the result can serve as
@@ -174,7 +185,12 @@ struct SimulationResult {
   long jacobianEvaluations = 0;    ///< Newton-matrix Jacobians formed (exact or difference quotient)
   long restarts = 0;               ///< restarts after t0: samples, breakpoints, projections
   long projections = 0;            ///< projections that were applied
-  bool ok() const { return status == SimulationStatus::kOk; }  ///< status == kOk
+  bool ok() const { return status.ok(); }
+  /// One line: the status, rows, final and max tracking error, drift, steps.
+  std::string describe() const;
+  /// One JSON object: status, ok, message, t, index, rows, t0, t1, tracking error (initial,
+  /// final, max, time of max), constraint drift, saturation, integrator work.
+  std::string json() const;
 };
 
 /// u = policy(t, x): x is 2n, u arrives sized m and must be overwritten. It may throw (reported as

@@ -32,7 +32,8 @@
 // early when modes of very different scales mix), then Newton (Hewer) steps. Stabilizability is diagnosed only when the solve fails (a successful
 // solve proves it), in O(n³): one complex Schur form of A and a left eigenvector per unstable mode.
 #pragma once
-#pragma once
+
+#include "trellis/core/status.hpp"
 
 #include <Eigen/Core>
 
@@ -40,7 +41,7 @@
 
 namespace trellis {
 
-enum class LqrStatus {
+enum class LqrCode {
   kOk,
   kNotStabilizable,         ///< an eigenvalue of A with Re ≥ 0 (|λ| ≥ 1) is uncontrollable
   kNoStabilizingSolution,   ///< Hamiltonian eigenvalue on the imaginary axis (pencil: unit circle)
@@ -48,7 +49,15 @@ enum class LqrStatus {
                             ///< closed loop without an identified cause
 };
 
-const char* toString(LqrStatus status);
+/// Names: ok, not_stabilizable, no_stabilizing_solution, no_convergence.
+inline EnumNameTable<LqrCode> enumNames(LqrCode) {
+  static constexpr EnumName<LqrCode> table[] = {
+      {LqrCode::kOk, "ok"},
+      {LqrCode::kNotStabilizable, "not_stabilizable"},
+      {LqrCode::kNoStabilizingSolution, "no_stabilizing_solution"},
+      {LqrCode::kNoConvergence, "no_convergence"}};
+  return table;
+}
 
 /// Options of solveCare and solveDare (the name is historical: both take them).
 struct CareOptions {
@@ -64,8 +73,9 @@ struct CareOptions {
 /// The stabilizing solution S of the CARE / DARE (file comment), the gain K, and the checks that
 /// make it ok: a stable closed loop and a scale-invariant residual below tolerance.
 struct LqrResult {
-  LqrStatus status = LqrStatus::kOk;  ///< kOk, or why no stabilizing solution was returned
-  std::string message;            ///< empty when ok
+  /// code, message (empty when ok: the eigenvalue and its margin, or the residual reached);
+  /// t and index unused.
+  Status<LqrCode> status;
   Eigen::MatrixXd S;              ///< nx×nx symmetric (PSD when Q − N R⁻¹ Nᵀ is PSD)
   Eigen::MatrixXd K;              ///< m×nx
   double residual = 0.0;          ///< scale-invariant relative residual (see above)
@@ -73,7 +83,12 @@ struct LqrResult {
   int refinementSteps = 0;        ///< Newton steps kept
   Eigen::VectorXcd closedLoopEigenvalues;  ///< of A − BK (Ad − Bd K)
   Eigen::VectorXd stateScaling;   ///< the balancing D (x = D z), powers of 2
-  bool ok() const { return status == LqrStatus::kOk; }  ///< status == kOk
+  bool ok() const { return status.ok(); }
+  /// One line: the status, then the residual, iterations and Newton steps.
+  std::string describe() const;
+  /// {"status", "ok", "message", "t", "index", "nx", "nu", "residual", "iterations",
+  /// "refinement_steps", "max_real_closed_loop", "max_abs_closed_loop", "S", "K"}.
+  std::string json() const;
 };
 
 }  // namespace trellis

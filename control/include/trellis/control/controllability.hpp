@@ -28,6 +28,26 @@ class Model;
 class Data;
 class Trajectory;
 
+/// Outcome codes of the controllability queries (status.t: the time, status.index: the knot).
+enum class ControllabilityCode {
+  kOk,
+  kLinearizationFailed,  ///< the dynamics failed at the point (singular M or constraints)
+  kTransportFailure,     ///< Gramian: the tangent basis does not reach t1
+  kIntegratorFailure,    ///< Gramian: CVODES stopped on the Lyapunov equation
+  kNotComputed,          ///< a default-constructed Gramian report
+};
+
+/// Names: ok, linearization_failed, transport_failure, integrator_failure, not_computed.
+inline EnumNameTable<ControllabilityCode> enumNames(ControllabilityCode) {
+  static constexpr EnumName<ControllabilityCode> table[] = {
+      {ControllabilityCode::kOk, "ok"},
+      {ControllabilityCode::kLinearizationFailed, "linearization_failed"},
+      {ControllabilityCode::kTransportFailure, "transport_failure"},
+      {ControllabilityCode::kIntegratorFailure, "integrator_failure"},
+      {ControllabilityCode::kNotComputed, "not_computed"}};
+  return table;
+}
+
 /// The rank of the Krylov matrix C = [B, ÂB, …, Â^{d−1}B] of a (reduced) linearization, Â = A/α,
 /// α = max(1, ‖A‖_F) (file comment), with its singular values.
 struct ControllabilityReport {
@@ -37,9 +57,16 @@ struct ControllabilityReport {
   double largestSingularValue = 0.0;  ///< σ_1 of C
   double scale = 1.0;                 ///< α used for Â = A/α
   Eigen::VectorXd singularValues;     ///< of C, descending
-  bool ok = true;                     ///< false when the linearization failed (controllabilityAtKnots)
-  std::string message;                ///< empty when ok; names the knot, time and cause
-  bool controllable() const { return ok && rank == dimension; }  ///< ok and rank C = d
+  /// kLinearizationFailed when the dynamics failed at the point; the message names the cause
+  /// (and, along a trajectory, t and index name the knot).
+  Status<ControllabilityCode> status;
+  bool ok() const { return status.ok(); }
+  bool controllable() const { return ok() && rank == dimension; }
+  /// One line: the status, then rank of dimension and the extreme singular values.
+  std::string describe() const;
+  /// {"status", "ok", "message", "t", "index", "dimension", "rank", "controllable",
+  /// "smallest_singular_value", "largest_singular_value", "scale", "singular_values"}.
+  std::string json() const;
 };
 
 /// Throws std::invalid_argument on inconsistent sizes.
@@ -47,14 +74,15 @@ ControllabilityReport computeControllability(const Eigen::MatrixXd& A, const Eig
                                              double relativeTolerance = 1e-10);
 
 /// computeLinearization at x = [q; q̇], u, reduction to the constraint tangent space, then the
-/// report above. Throws std::runtime_error if the dynamics fail at that point.
+/// report above. Throws std::invalid_argument for sizes; if the dynamics fail at that point the
+/// report's status is kLinearizationFailed (rank 0).
 ControllabilityReport computeControllabilityAt(const Model& model, Data& data,
                                                const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
                                                const Eigen::VectorXd& u,
                                                double relativeTolerance = 1e-10);
 
 /// computeControllabilityAt at every knot (x_k, u_k) of the trajectory (which must match the model).
-/// A knot where the dynamics fail gets ok = false and a message naming the knot and its time.
+/// A knot where the dynamics fail gets kLinearizationFailed, with t and index naming the knot.
 std::vector<ControllabilityReport> controllabilityAtKnots(const Model& model,
                                                           const Trajectory& trajectory,
                                                           double relativeTolerance = 1e-10);
@@ -67,16 +95,22 @@ struct GramianReport {
   /// The smallest and largest eigenvalue of W.
   double minEigenvalue = 0.0, maxEigenvalue = 0.0;
   ///@}
-  bool ok = false;                    ///< false on numerical failure (see message)
-  std::string message;                ///< empty when ok; otherwise the time and the cause
+  /// Not ok on numerical failure: the message gives the time and the cause.
+  Status<ControllabilityCode> status{ControllabilityCode::kNotComputed, "not computed"};
   int dimension = 0;                  ///< d
   long steps = 0;                     ///< CVODES steps of the Lyapunov equation
   long linearizations = 0;            ///< dynamics evaluations for it (one per distinct t)
   long differenceQuotientEvaluations = 0;  ///< 0: only the exact Lyapunov products were used
   /// ok and λ_min(W) > relTol · λ_max(W).
+  bool ok() const { return status.ok(); }
   bool controllable(double relTol = 1e-10) const {
-    return ok && dimension > 0 && minEigenvalue > relTol * maxEigenvalue;
+    return ok() && dimension > 0 && minEigenvalue > relTol * maxEigenvalue;
   }
+  /// One line: the status, then λ_min, λ_max and the steps.
+  std::string describe() const;
+  /// {"status", "ok", "message", "t", "index", "dimension", "min_eigenvalue", "max_eigenvalue",
+  /// "steps", "linearizations"}.
+  std::string json() const;
 };
 
 /// How the Gramian is integrated. The defaults serve a summary that prints λ_min and λ_max to

@@ -1,7 +1,7 @@
 // trellis/control/lqr.hpp — linear-quadratic regulation of linear systems, one equation per header:
 //   care.hpp                        continuous algebraic Riccati equation (CARE)
 //   dare.hpp                        discrete algebraic Riccati equation (DARE)
-//   algebraic_riccati.hpp           what both share: LqrStatus, CareOptions, LqrResult, the method
+//   algebraic_riccati.hpp           what both share: LqrCode, CareOptions, LqrResult, the method
 //   lyapunov.hpp, stein.hpp         Lyapunov and Stein equations (matrix_equation.hpp: their result)
 //   stabilizability.hpp             the PBH stabilizability test
 //   zero_order_hold.hpp             exact ZOH discretization

@@ -219,15 +219,40 @@ class ReducedLinearization {
 /// The manifold TV-LQR: plain data (the reduced solution and the basis own everything they need;
 /// nothing refers to the model, the weights' callbacks or the trajectory passed in). Copyable,
 /// thread safe for queries.
+/// Which part of the manifold TV-LQR failed.
+enum class ManifoldRiccatiCode {
+  kOk,
+  kTransportFailure,  ///< the tangent basis transport failed (`reduced` is empty: the Riccati
+                      ///< solve needs T on the whole horizon); t: where it stopped
+  kTerminalFailure,   ///< the reduced linearization failed at tf (no terminal weight Tᵀ Qf T)
+  kRiccatiFailure,    ///< the reduced Riccati solve failed (reduced.status says how)
+  kNotSolved,         ///< default-constructed: no solve ran
+};
+
+/// Names: ok, transport_failure, terminal_failure, riccati_failure, not_solved.
+inline EnumNameTable<ManifoldRiccatiCode> enumNames(ManifoldRiccatiCode) {
+  static constexpr EnumName<ManifoldRiccatiCode> table[] = {
+      {ManifoldRiccatiCode::kOk, "ok"},
+      {ManifoldRiccatiCode::kTransportFailure, "transport_failure"},
+      {ManifoldRiccatiCode::kTerminalFailure, "terminal_failure"},
+      {ManifoldRiccatiCode::kRiccatiFailure, "riccati_failure"},
+      {ManifoldRiccatiCode::kNotSolved, "not_solved"}};
+  return table;
+}
+
 struct ManifoldRiccatiSolution {
   RiccatiSolution reduced;          ///< on z (d states): Sr(t), Kr(t)
   TangentBasisTrajectory basis;     ///< T(t)
   long linearizations = 0;          ///< dynamics evaluations during the Riccati solve
-  /// False when the transport failed (then `reduced` is empty: the Riccati solve needs T on the
-  /// whole horizon) or the reduced Riccati solve failed.
-  bool ok() const { return basis.ok() && reduced.ok(); }
-  /// Empty when ok; otherwise the transport's or the Riccati solve's message (with the time).
-  const std::string& message() const;
+  /// code; message (empty when ok; the transport's or the Riccati solve's message, with the
+  /// time); t: where it failed; index unused.
+  Status<ManifoldRiccatiCode> status{ManifoldRiccatiCode::kNotSolved, "no solve ran"};
+  bool ok() const { return status.ok(); }
+  /// One line: the status, the tangent dimension and the reduced solve's work.
+  std::string describe() const;
+  /// {"status", "ok", "message", "t", "index", "nx", "tangent_dimension", "transport_steps",
+  /// "max_basis_correction", "linearizations", "riccati": RiccatiSolution::json()}.
+  std::string json() const;
   int nx() const { return basis.nx(); }                ///< 2n (full state)
   int dimension() const { return basis.dimension(); }  ///< d (tangent space)
   /// K(t) = Kr(t) T(t)ᵀ (m×2n), T(t) the held basis (Hermite + polar, see above): exact at the

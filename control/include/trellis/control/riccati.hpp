@@ -58,6 +58,8 @@
 #pragma once
 
 #include "trellis/analysis/dense_output.hpp"
+#include "trellis/core/reference.hpp"
+#include "trellis/core/status.hpp"
 
 #include <Eigen/Core>
 
@@ -72,9 +74,13 @@ namespace trellis {
 class Model;
 class Trajectory;
 
-/// Writes A(t) (nx×nx) and B(t) (nx×m) for the requested time. The matrices arrive sized;
-/// throwing is allowed (the solver catches it and reports kCallbackFailure with the message).
-using LinearizationCallback = std::function<void(double t, Eigen::MatrixXd& A, Eigen::MatrixXd& B)>;
+/// Writes A(t) (nx×nx) and B(t) (nx×m) for the requested time (the matrices arrive sized) and
+/// returns the outcome: a status that is not ok (e.g. the dynamics failed at x(t)) stops the solve
+/// with kCallbackFailure and its message. The library's own callbacks report failure only this
+/// way; an exception from a user's callback is caught at the integrator's C boundary and
+/// reported the same way (nothing throws through CVODES).
+using LinearizationCallback =
+    std::function<ReferenceStatus(double t, Eigen::MatrixXd& A, Eigen::MatrixXd& B)>;
 /// Writes a weight matrix W(t) (arrives sized).
 using WeightCallback = std::function<void(double t, Eigen::MatrixXd& W)>;
 
@@ -97,9 +103,15 @@ struct LqrWeights {
 /// S = UᵀU with BDF (see the top of this header), so S is symmetric PSD by construction.
 enum class RiccatiMethod { kBDF, kAdams, kFactored };
 
-/// "bdf", "adams", "factored" (the names the CLI and the benchmarks use).
-const char* toString(RiccatiMethod method);
-/// The inverse of toString; throws std::invalid_argument "'TEXT' is not one of bdf, adams, factored".
+/// Names: bdf, adams, factored (the names the CLI, Python and the benchmarks use; toString).
+inline EnumNameTable<RiccatiMethod> enumNames(RiccatiMethod) {
+  static constexpr EnumName<RiccatiMethod> table[] = {{RiccatiMethod::kBDF, "bdf"},
+                                                      {RiccatiMethod::kAdams, "adams"},
+                                                      {RiccatiMethod::kFactored, "factored"}};
+  return table;
+}
+/// parseEnum<RiccatiMethod>(text, "Riccati method"): throws std::invalid_argument
+/// "Riccati method 'TEXT' is not one of bdf, adams, factored".
 RiccatiMethod parseRiccatiMethod(const std::string& text);
 
 /// Linear solver inside BDF's Newton iterations. kDense factors the exact N×N Jacobian
@@ -115,9 +127,16 @@ RiccatiMethod parseRiccatiMethod(const std::string& text);
 /// only its preconditioner there).
 enum class RiccatiLinearSolver { kAuto, kDense, kKrylov, kLyapunov };
 
-/// "auto", "dense", "krylov", "lyapunov".
-const char* toString(RiccatiLinearSolver solver);
-/// The inverse of toString; throws std::invalid_argument "'TEXT' is not one of auto, …".
+/// Names: auto, dense, krylov, lyapunov.
+inline EnumNameTable<RiccatiLinearSolver> enumNames(RiccatiLinearSolver) {
+  static constexpr EnumName<RiccatiLinearSolver> table[] = {
+      {RiccatiLinearSolver::kAuto, "auto"},
+      {RiccatiLinearSolver::kDense, "dense"},
+      {RiccatiLinearSolver::kKrylov, "krylov"},
+      {RiccatiLinearSolver::kLyapunov, "lyapunov"}};
+  return table;
+}
+/// parseEnum<RiccatiLinearSolver>(text, "Riccati linear solver").
 RiccatiLinearSolver parseRiccatiLinearSolver(const std::string& text);
 
 /// Options of solveRiccati: integrator, tolerances, limits, linear solver.
@@ -156,7 +175,7 @@ struct RiccatiOptions {
   void validate() const;
 };
 
-enum class RiccatiStatus {
+enum class RiccatiCode {
   kOk,
   kIntegratorFailure,  ///< CVODES returned an error (too much work, convergence, error test)
   kNonFinite,          ///< S became NaN/Inf
@@ -164,18 +183,28 @@ enum class RiccatiStatus {
   kCallbackFailure,    ///< A/B/Q/R callback threw, returned a wrong size or non-finite values,
                        ///< or R(t) was not positive definite
   kIndefinite,         ///< S lost positive semidefiniteness beyond the tolerance-scaled slack
-                       ///< (RiccatiOptions::checkPositiveSemidefinite): failureTime is the
+                       ///< (RiccatiOptions::checkPositiveSemidefinite): status.t is the
                        ///< worst step, indefiniteRatio = λmin/λmax there; S covers the horizon
 };
 
-const char* toString(RiccatiStatus status);
+/// Names: ok, integrator_failure, non_finite, blow_up, callback_failure, indefinite.
+inline EnumNameTable<RiccatiCode> enumNames(RiccatiCode) {
+  static constexpr EnumName<RiccatiCode> table[] = {
+      {RiccatiCode::kOk, "ok"},
+      {RiccatiCode::kIntegratorFailure, "integrator_failure"},
+      {RiccatiCode::kNonFinite, "non_finite"},
+      {RiccatiCode::kBlowUp, "blow_up"},
+      {RiccatiCode::kCallbackFailure, "callback_failure"},
+      {RiccatiCode::kIndefinite, "indefinite"}};
+  return table;
+}
 
 /// The solve's outcome and S(t) on [validFrom(), T] (the whole horizon when ok()).
 class RiccatiSolution {
  public:
-  RiccatiStatus status = RiccatiStatus::kOk;  ///< kOk: S on the whole horizon; else why it stopped
-  std::string message;              ///< empty when ok; otherwise what failed, at which t and ‖S‖
-  double failureTime = 0.0;         ///< t where the failure happened (not ok only)
+  /// code; message (empty when ok; otherwise what failed, at which t and ‖S‖); t: where the
+  /// failure happened (kIndefinite: the worst step; NaN when ok); index unused.
+  Status<RiccatiCode> status;
   double failureNorm = 0.0;         ///< max |S_ij| at the last accepted step before the failure
   long steps = 0;                   ///< CVODES internal steps
   long rhsEvaluations = 0;          ///< right-hand sides of the Riccati ODE evaluated by CVODES
@@ -189,12 +218,19 @@ class RiccatiSolution {
   long convergenceFailures = 0;     ///< steps retried because the nonlinear iteration failed
   double switchedToPlainAt = std::numeric_limits<double>::quiet_NaN();  ///< kFactored: the time t
                                     ///< where the solve switched to the plain form (NaN: never)
-  double indefiniteRatio = 0.0;     ///< kIndefinite: λmin(S)/λmax(S) at failureTime (< −ε)
+  double indefiniteRatio = 0.0;     ///< kIndefinite: λmin(S)/λmax(S) at status.t (< −ε)
   long linearizations = 0;          ///< calls of the linearization callback (solve and gains)
   double minEigenvalue = 0.0;       ///< of S over the stored steps (if tracked)
   double maxEigenvalue = 0.0;       ///< of S over the stored steps (if tracked)
 
-  bool ok() const { return status == RiccatiStatus::kOk; }  ///< status == kOk
+  bool ok() const { return status.ok(); }
+  /// One line: the status, then the steps, right-hand sides and S's eigenvalue range.
+  std::string describe() const;
+  /// {"status", "ok", "message", "t", "index", "nx", "nu", "t0", "t1", "valid_from", "steps",
+  /// "rhs_evaluations", "jacobian_evaluations", "linear_iterations", "newton_iterations",
+  /// "linearizations", "failure_norm", "indefinite_ratio", "switched_to_plain_at",
+  /// "min_eigenvalue_S", "max_eigenvalue_S"}.
+  std::string json() const;
   int nx() const { return nx_; }            ///< states (S is nx×nx)
   int nu() const { return nu_; }            ///< inputs (K is m×nx)
   double startTime() const { return t0_; }  ///< t0 of the horizon [s]

@@ -28,6 +28,7 @@
 #pragma once
 
 #include "trellis/control/riccati.hpp"
+#include "trellis/core/status.hpp"
 
 #include <Eigen/Core>
 
@@ -49,6 +50,27 @@ struct SampledInterval {
   Eigen::MatrixXd R;      ///< m×m, symmetric PD
 };
 
+/// Outcome codes of the sampled-data discretization and recursion (status.index: the interval or
+/// step k, status.t: the time).
+enum class SampledCode {
+  kOk,
+  kCallbackFailure,      ///< the linearization or a weight callback failed (or returned a bad size)
+  kIntegratorFailure,    ///< CVODES stopped inside an interval
+  kNonFinite,            ///< Φ, Γ, the cost, S or K became NaN/Inf
+  kNotPositiveDefinite,  ///< R_k + Γ_kᵀ S_{k+1} Γ_k is not positive definite
+};
+
+/// Names: ok, callback_failure, integrator_failure, non_finite, not_positive_definite.
+inline EnumNameTable<SampledCode> enumNames(SampledCode) {
+  static constexpr EnumName<SampledCode> table[] = {
+      {SampledCode::kOk, "ok"},
+      {SampledCode::kCallbackFailure, "callback_failure"},
+      {SampledCode::kIntegratorFailure, "integrator_failure"},
+      {SampledCode::kNonFinite, "non_finite"},
+      {SampledCode::kNotPositiveDefinite, "not_positive_definite"}};
+  return table;
+}
+
 /// Options of discretizeSampledData (the integration of Φ, Γ and the cost over each interval).
 struct SampledDiscretizationOptions {
   double rtol = 1e-10;     ///< CVODES relative tolerance on Φ, Γ and the cost (> 0)
@@ -61,12 +83,16 @@ struct SampledDiscretizationOptions {
 /// The exact discretization over the sample intervals, and how it went.
 struct SampledDiscretization {
   std::vector<SampledInterval> intervals;  ///< those completed (all of them when ok)
-  bool ok = true;            ///< every interval integrated
-  std::string message;       ///< empty when ok; the time and the cause otherwise
-  double failureTime = 0.0;  ///< t of the failure (not ok only) [s]
+  /// code; message (empty when ok; the time and the cause); t: where it failed; index: the interval.
+  Status<SampledCode> status;
   long steps = 0;            ///< CVODES internal steps over all intervals
   long rhsEvaluations = 0;   ///< right-hand sides evaluated by CVODES
   long linearizations = 0;   ///< calls of the linearization callback
+  bool ok() const { return status.ok(); }
+  std::string describe() const;  ///< one line: the status, intervals, steps
+  /// {"status", "ok", "message", "t", "index", "intervals", "steps", "rhs_evaluations",
+  /// "linearizations"}.
+  std::string json() const;
 };
 
 /// The exact discretization of δẋ = A(t)δx + B(t)δu on the intervals [times_k, times_{k+1}]
@@ -80,15 +106,18 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
                                             const SampledDiscretizationOptions& options = {});
 
 /// Backward recursion with cross term (file comment) over the intervals, S_N = Qf. S has N+1
-/// entries, K N. ok = false (message naming the step and its time) when G_k is not positive
+/// entries, K N. Not ok (message naming the step and its time) when G_k is not positive
 /// definite or S_k is not finite.
 struct SampledRiccatiRecursion {
   ///@{
   /// S_0 … S_N (nx×nx, symmetric) and K_0 … K_{N−1} (m×nx): u_k = −K_k x_k held over interval k.
   std::vector<Eigen::MatrixXd> S, K;
   ///@}
-  bool ok = true;        ///< every step's G_k positive definite and S_k finite
-  std::string message;   ///< empty when ok; names the step and its time
+  /// code (kNotPositiveDefinite, kNonFinite); message; t and index: the step k and its time.
+  Status<SampledCode> status;
+  bool ok() const { return status.ok(); }
+  std::string describe() const;  ///< one line: the status and the number of steps
+  std::string json() const;      ///< {"status", "ok", "message", "t", "index", "steps"}
 };
 SampledRiccatiRecursion solveSampledRiccatiRecursion(const std::vector<SampledInterval>& intervals,
                                                      const Eigen::MatrixXd& Qf);

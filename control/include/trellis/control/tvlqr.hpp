@@ -2,7 +2,7 @@
 // constrained or not, continuous or sampled (zero-order hold at a rate).
 //
 //   TvlqrSolution sol = solveTvlqr(model, reference, weights, options);
-//   if (!sol.ok) … sol.message;  sol.gains (K, m×2n, at sol.gains.times());  sol.S[k] (2n×2n)
+//   if (!sol.ok()) … sol.status.describe();  sol.gains (K, m×2n, at sol.gains.times());  sol.S[k] (2n×2n)
 //
 // Continuous (options.sampleRate = 0): the Riccati ODE (riccati.hpp) — on the tangent space of the
 // constraint manifold for a scene with constraints (manifold_lqr.hpp) — and K(t) tabulated at the
@@ -45,11 +45,40 @@ struct TvlqrOptions {
   void validate() const;
 };
 
+/// Where a TV-LQR solve failed (status.message carries the inner solver's own report).
+enum class TvlqrCode {
+  kOk,
+  kTransportFailure,       ///< the tangent basis transport failed (constrained scenes)
+  kRiccatiFailure,         ///< the continuous Riccati solve failed (RiccatiSolution's status)
+  kDiscretizationFailure,  ///< the sampled-data discretization failed
+  kRecursionFailure,       ///< the sampled Riccati recursion failed
+  kNonFinite,              ///< a tabulated K(t) or S(t) is not finite
+  kIndefinite,             ///< S (Sr) has an eigenvalue below −1e-6·max|λ| (isSemidefiniteToRoundoff):
+                           ///< the integration did not resolve the Riccati equation; gains are set
+  kNotSolved,              ///< a default-constructed solution (no solve ran)
+};
+
+/// Names: ok, transport_failure, riccati_failure, discretization_failure, recursion_failure,
+/// non_finite, indefinite, not_solved.
+inline EnumNameTable<TvlqrCode> enumNames(TvlqrCode) {
+  static constexpr EnumName<TvlqrCode> table[] = {
+      {TvlqrCode::kOk, "ok"},
+      {TvlqrCode::kTransportFailure, "transport_failure"},
+      {TvlqrCode::kRiccatiFailure, "riccati_failure"},
+      {TvlqrCode::kDiscretizationFailure, "discretization_failure"},
+      {TvlqrCode::kRecursionFailure, "recursion_failure"},
+      {TvlqrCode::kNonFinite, "non_finite"},
+      {TvlqrCode::kIndefinite, "indefinite"},
+      {TvlqrCode::kNotSolved, "not_solved"}};
+  return table;
+}
+
 /// The TV-LQR gains K(t) along a trajectory (on the constraint manifold's tangent space when the
 /// scene has constraints), the cost-to-go S at the gains' times, and the solve's diagnostics.
 struct TvlqrSolution {
-  bool ok = false;                ///< the gains cover the whole trajectory
-  std::string message;            ///< empty when ok; what failed, where, when
+  /// code; message (empty when ok; what failed, where, when); t: the failure's time when known;
+  /// index unused. A default-constructed solution is kNotSolved.
+  Status<TvlqrCode> status{TvlqrCode::kNotSolved, "no solve ran"};
   double sampleRate = 0.0;        ///< as requested (0 = continuous)
   bool constrained = false;       ///< solved on the tangent space of the constraint manifold
   ///@{
@@ -74,10 +103,13 @@ struct TvlqrSolution {
   ///@}
   std::string method;             ///< "bdf", "adams", "factored" or "sampled-zoh"
 
+  bool ok() const { return status.ok(); }
   /// A few lines for people (what was solved, work, S's spectrum).
   std::string summary() const;
-  /// The same as one JSON object (keys: ok, message, mode, sample_rate_hz, constrained, nx, nu,
-  /// tangent_dimension, rows, t0, t1, seconds, steps, rhs_evaluations, linearizations,
+  /// One line: the status, the mode, the rows of K and the work.
+  std::string describe() const;
+  /// One JSON object (keys: status, ok, message, t, index, mode, sample_rate_hz, constrained, nx,
+  /// nu, tangent_dimension, rows, t0, t1, seconds, steps, rhs_evaluations, linearizations,
   /// transport_steps, max_basis_correction, min_eigenvalue_S, max_eigenvalue_S, method).
   std::string json() const;
 };
@@ -85,7 +117,7 @@ struct TvlqrSolution {
 /// Throws std::invalid_argument / TrajectoryError for bad input (sizes, weights, options, a
 /// reference not matching the model, or whose knot dynamics fail: a reference without state
 /// derivatives gets them from computeDynamics, ReferenceEvaluator); numerical failure is in
-/// the result (ok = false, message), never thrown.
+/// the result's status, never thrown.
 TvlqrSolution solveTvlqr(const Model& model, const Trajectory& reference, const LqrWeights& weights,
                          const TvlqrOptions& options = {});
 
@@ -94,10 +126,5 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& reference, const 
 /// not resolve the Riccati equation. True when λmin ≥ −relativeSlack·max(|λmin|, |λmax|) and both
 /// are finite (λmin = λmax = 0, "not tracked", passes).
 bool isSemidefiniteToRoundoff(double minEigenvalue, double maxEigenvalue, double relativeSlack = 1e-6);
-
-/// Escapes a string for JSON ("…", with \", \\, \n and control characters escaped).
-std::string jsonString(const std::string& text);
-/// A number for JSON: %.17g, or null when not finite.
-std::string jsonNumber(double value);
 
 }  // namespace trellis

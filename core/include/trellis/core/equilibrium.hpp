@@ -31,7 +31,7 @@ struct EquilibriumOptions {
   int maxIterations = 50;    ///< Newton iterations (≥ 1)
 };
 
-enum class EquilibriumStatus {
+enum class EquilibriumCode {
   kOk,               ///< relativeResidual ≤ tolerance at q
   kNotConverged,     ///< iteration limit, or the line search found no decrease of ‖F‖ (a local
                      ///< minimum of ‖F‖ that is not an equilibrium): q is the best iterate
@@ -39,19 +39,19 @@ enum class EquilibriumStatus {
 };
 
 /// Names: ok, not_converged, dynamics_failure.
-inline EnumNameTable<EquilibriumStatus> enumNames(EquilibriumStatus) {
-  static constexpr EnumName<EquilibriumStatus> table[] = {
-      {EquilibriumStatus::kOk, "ok"},
-      {EquilibriumStatus::kNotConverged, "not_converged"},
-      {EquilibriumStatus::kDynamicsFailure, "dynamics_failure"}};
+inline EnumNameTable<EquilibriumCode> enumNames(EquilibriumCode) {
+  static constexpr EnumName<EquilibriumCode> table[] = {
+      {EquilibriumCode::kOk, "ok"},
+      {EquilibriumCode::kNotConverged, "not_converged"},
+      {EquilibriumCode::kDynamicsFailure, "dynamics_failure"}};
   return table;
 }
 
 /// What findEquilibrium found: the equilibrium or the best iterate, the status saying which, and
 /// the residuals, rank and stability at q.
 struct EquilibriumResult {
-  EquilibriumStatus status = EquilibriumStatus::kOk;  ///< kOk only when both residuals are within tolerance
-  std::string message;                 ///< empty when ok
+  /// code, message (empty when ok; names what failed and the values); t and index unused.
+  Status<EquilibriumCode> status;
   Eigen::VectorXd q;                   ///< n: the equilibrium (the best iterate if not ok)
   Eigen::VectorXd u;                   ///< m: the inputs used
   Eigen::VectorXd lambda;              ///< nc: constraint forces holding it
@@ -66,7 +66,7 @@ struct EquilibriumResult {
   /// (data.reducedA) at (q, 0, u): < 0 asymptotically stable, > 0 unstable, ≈ 0 marginal (e.g. an
   /// undamped stable equilibrium, whose eigenvalues are ± i ω).
   double maxRealEigenvalue = 0.0;
-  bool ok() const { return status == EquilibriumStatus::kOk; }  ///< status == kOk
+  bool ok() const { return status.ok(); }
   /// One line: "<status>[: message] (iterations, residuals, rank, stability)".
   std::string describe() const;
   /// {"status", "ok", "message", "t": null, "index": null, "iterations", "qdd_residual",

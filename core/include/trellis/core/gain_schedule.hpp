@@ -135,4 +135,19 @@ class GainSchedule {
   std::vector<Eigen::MatrixXd> gains_, slopes_;
 };
 
+class Model;
+class Trajectory;
+
+/// Whether `gains` can drive u = u_ref − K δx along `reference` for `model` with feedback at
+/// `sampleRate` Hz (0: continuous feedback) — the one check the CLI and Python apply before a
+/// closed-loop simulation. Throws TrajectoryError, the message starting with `source`, when:
+/// the columns do not match the model (checkNames); sampled gains are applied continuously or at
+/// another rate (within 1e-12 relative); sampled gains do not start at the reference's start
+/// (within 1e-9 of a period: the samples would not line up); the gains do not cover the
+/// reference's span (1e-12 relative slack, as evaluate). Returns a note for a person when the
+/// gains apply but were not designed for this use (continuous gains sampled at a rate), else "".
+std::string checkGainScheduleApplies(const GainSchedule& gains, const Model& model,
+                                     const Trajectory& reference, double sampleRate,
+                                     const std::string& source);
+
 }  // namespace trellis

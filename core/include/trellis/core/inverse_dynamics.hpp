@@ -36,7 +36,7 @@ struct InverseDynamicsOptions {
   ///@}
 };
 
-enum class InverseDynamicsStatus {
+enum class InverseDynamicsCode {
   kOk,                      ///< u, λ reproduce q̈ exactly (to tolerance)
   kUnreachable,             ///< no u, λ give this q̈ (under-actuated): least squares, see residual
   kInadmissibleAcceleration,///< q̈ violates A q̈ + Ȧ q̇ = 0; u, λ are still the least squares
@@ -47,21 +47,21 @@ enum class InverseDynamicsStatus {
 };
 
 /// Names: ok, unreachable, inadmissible_acceleration, input_bounds, non_finite.
-inline EnumNameTable<InverseDynamicsStatus> enumNames(InverseDynamicsStatus) {
-  static constexpr EnumName<InverseDynamicsStatus> table[] = {
-      {InverseDynamicsStatus::kOk, "ok"},
-      {InverseDynamicsStatus::kUnreachable, "unreachable"},
-      {InverseDynamicsStatus::kInadmissibleAcceleration, "inadmissible_acceleration"},
-      {InverseDynamicsStatus::kInputBounds, "input_bounds"},
-      {InverseDynamicsStatus::kNonFinite, "non_finite"}};
+inline EnumNameTable<InverseDynamicsCode> enumNames(InverseDynamicsCode) {
+  static constexpr EnumName<InverseDynamicsCode> table[] = {
+      {InverseDynamicsCode::kOk, "ok"},
+      {InverseDynamicsCode::kUnreachable, "unreachable"},
+      {InverseDynamicsCode::kInadmissibleAcceleration, "inadmissible_acceleration"},
+      {InverseDynamicsCode::kInputBounds, "input_bounds"},
+      {InverseDynamicsCode::kNonFinite, "non_finite"}};
   return table;
 }
 
 /// The inputs u and constraint forces λ that give the accelerations asked for, M q̈ = Q(q, q̇, u) + Aᵀλ
 /// (least squares over [B_u Aᵀ] when that is not possible exactly), and how well they do.
 struct InverseDynamicsResult {
-  InverseDynamicsStatus status = InverseDynamicsStatus::kOk;  ///< kOk: reproduced to tolerance
-  std::string message;              ///< empty when ok; names the worst coordinate or constraint
+  /// code, message (empty when ok; names what failed and the values); t and index unused.
+  Status<InverseDynamicsCode> status;
   Eigen::VectorXd u;                ///< m inputs
   Eigen::VectorXd lambda;           ///< nc constraint forces (M q̈ = … + Aᵀ λ)
   Eigen::VectorXd residual;         ///< n: G z − r (generalized forces; 0 when reachable)
@@ -72,7 +72,7 @@ struct InverseDynamicsResult {
   /// With bounds: by how much the unbounded answer exceeds each input's interval (m; 0 inside).
   Eigen::VectorXd boundExcess;
   int boundIterations = 0;          ///< active-set iterations (0: the unbounded answer was feasible)
-  bool ok() const { return status == InverseDynamicsStatus::kOk; }  ///< status == kOk
+  bool ok() const { return status.ok(); }
   /// One line: "<status>[: message] (residuals, rank)".
   std::string describe() const;
   /// {"status", "ok", "message", "t": null, "index": null, "residual", "constraint_residual",

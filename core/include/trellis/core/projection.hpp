@@ -42,7 +42,7 @@ struct ProjectionOptions {
   void validate(const Model& model) const;
 };
 
-enum class ProjectionStatus {
+enum class ProjectionCode {
   kOk,            ///< |h(q*)|∞ ≤ tolerance, the step test passed, and (velocities) each row
                   ///< |(A q̇*)_r| ≤ 1e-9 Σ_j |A_rj| (|q̇*_j| + |q̇0_j|) (checked: kNotConverged if not)
   kNotConverged,  ///< maxIterations reached (or the constraints cannot be met, e.g. out of reach):
@@ -51,19 +51,19 @@ enum class ProjectionStatus {
 };
 
 /// Names: ok, not_converged, non_finite.
-inline EnumNameTable<ProjectionStatus> enumNames(ProjectionStatus) {
-  static constexpr EnumName<ProjectionStatus> table[] = {
-      {ProjectionStatus::kOk, "ok"},
-      {ProjectionStatus::kNotConverged, "not_converged"},
-      {ProjectionStatus::kNonFinite, "non_finite"}};
+inline EnumNameTable<ProjectionCode> enumNames(ProjectionCode) {
+  static constexpr EnumName<ProjectionCode> table[] = {
+      {ProjectionCode::kOk, "ok"},
+      {ProjectionCode::kNotConverged, "not_converged"},
+      {ProjectionCode::kNonFinite, "non_finite"}};
   return table;
 }
 
 /// The projected state (q*, q̇*): the mass-weighted closest point on h = 0 and A q̇ = 0, with the
 /// status and the residuals before and after.
 struct ProjectionResult {
-  ProjectionStatus status = ProjectionStatus::kOk;  ///< kOk: on the manifold, to the options' tolerances
-  std::string message;               ///< empty when ok
+  /// code, message (empty when ok; names what failed and the values); t and index unused.
+  Status<ProjectionCode> status;
   ///@{
   /// The projected state (n each; the last iterate when not ok).
   Eigen::VectorXd q, dq;
@@ -75,7 +75,7 @@ struct ProjectionResult {
   double velocityResidual = 0;       ///< |A(q*) q̇*|∞
   double lastStep = 0;               ///< ‖Δq‖∞ of the last accepted descent step
   bool massWeighted = true;          ///< false: M was not positive definite, Euclidean metric used
-  bool ok() const { return status == ProjectionStatus::kOk; }  ///< status == kOk
+  bool ok() const { return status.ok(); }
   /// One line: "<status>[: message] (iterations, residuals before and after)".
   std::string describe() const;
   /// {"status", "ok", "message", "t": null, "index": null, "iterations", "h_before", "h_after",
