@@ -185,7 +185,7 @@ struct SimulationResult {
   long jacobianEvaluations = 0;    ///< Newton-matrix Jacobians formed (exact or difference quotient)
   long restarts = 0;               ///< restarts after t0: samples, breakpoints, projections
   long projections = 0;            ///< projections that were applied
-  bool ok() const { return status.ok(); }
+  bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   /// One line: the status, rows, final and max tracking error, drift, steps.
   std::string describe() const;
   /// One JSON object: status, ok, message, t, index, rows, t0, t1, tracking error (initial,

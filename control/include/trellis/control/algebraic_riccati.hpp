@@ -83,7 +83,7 @@ struct LqrResult {
   int refinementSteps = 0;        ///< Newton steps kept
   Eigen::VectorXcd closedLoopEigenvalues;  ///< of A − BK (Ad − Bd K)
   Eigen::VectorXd stateScaling;   ///< the balancing D (x = D z), powers of 2
-  bool ok() const { return status.ok(); }
+  bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   /// One line: the status, then the residual, iterations and Newton steps.
   std::string describe() const;
   /// {"status", "ok", "message", "t", "index", "nx", "nu", "residual", "iterations",

@@ -60,8 +60,8 @@ struct ControllabilityReport {
   /// kLinearizationFailed when the dynamics failed at the point; the message names the cause
   /// (and, along a trajectory, t and index name the knot).
   Status<ControllabilityCode> status;
-  bool ok() const { return status.ok(); }
-  bool controllable() const { return ok() && rank == dimension; }
+  bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
+  bool controllable() const { return ok() && rank == dimension; }  ///< ok and rank C = d
   /// One line: the status, then rank of dimension and the extreme singular values.
   std::string describe() const;
   /// {"status", "ok", "message", "t", "index", "dimension", "rank", "controllable",
@@ -101,8 +101,8 @@ struct GramianReport {
   long steps = 0;                     ///< CVODES steps of the Lyapunov equation
   long linearizations = 0;            ///< dynamics evaluations for it (one per distinct t)
   long differenceQuotientEvaluations = 0;  ///< 0: only the exact Lyapunov products were used
+  bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   /// ok and λ_min(W) > relTol · λ_max(W).
-  bool ok() const { return status.ok(); }
   bool controllable(double relTol = 1e-10) const {
     return ok() && dimension > 0 && minEigenvalue > relTol * maxEigenvalue;
   }

@@ -240,6 +240,8 @@ inline EnumNameTable<ManifoldRiccatiCode> enumNames(ManifoldRiccatiCode) {
   return table;
 }
 
+/// The Riccati solution on the constraint manifold: the reduced solve on the tangent coordinates z
+/// (d states) with the tangent basis T(t) that maps them to the full state, and one status for both.
 struct ManifoldRiccatiSolution {
   RiccatiSolution reduced;          ///< on z (d states): Sr(t), Kr(t)
   TangentBasisTrajectory basis;     ///< T(t)
@@ -247,7 +249,7 @@ struct ManifoldRiccatiSolution {
   /// code; message (empty when ok; the transport's or the Riccati solve's message, with the
   /// time); t: where it failed; index unused.
   Status<ManifoldRiccatiCode> status{ManifoldRiccatiCode::kNotSolved, "no solve ran"};
-  bool ok() const { return status.ok(); }
+  bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   /// One line: the status, the tangent dimension and the reduced solve's work.
   std::string describe() const;
   /// {"status", "ok", "message", "t", "index", "nx", "tangent_dimension", "transport_steps",

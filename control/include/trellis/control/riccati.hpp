@@ -223,7 +223,7 @@ class RiccatiSolution {
   double minEigenvalue = 0.0;       ///< of S over the stored steps (if tracked)
   double maxEigenvalue = 0.0;       ///< of S over the stored steps (if tracked)
 
-  bool ok() const { return status.ok(); }
+  bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   /// One line: the status, then the steps, right-hand sides and S's eigenvalue range.
   std::string describe() const;
   /// {"status", "ok", "message", "t", "index", "nx", "nu", "t0", "t1", "valid_from", "steps",

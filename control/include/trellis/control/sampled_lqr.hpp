@@ -88,7 +88,7 @@ struct SampledDiscretization {
   long steps = 0;            ///< CVODES internal steps over all intervals
   long rhsEvaluations = 0;   ///< right-hand sides evaluated by CVODES
   long linearizations = 0;   ///< calls of the linearization callback
-  bool ok() const { return status.ok(); }
+  bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   std::string describe() const;  ///< one line: the status, intervals, steps
   /// {"status", "ok", "message", "t", "index", "intervals", "steps", "rhs_evaluations",
   /// "linearizations"}.
@@ -115,7 +115,7 @@ struct SampledRiccatiRecursion {
   ///@}
   /// code (kNotPositiveDefinite, kNonFinite); message; t and index: the step k and its time.
   Status<SampledCode> status;
-  bool ok() const { return status.ok(); }
+  bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   std::string describe() const;  ///< one line: the status and the number of steps
   std::string json() const;      ///< {"status", "ok", "message", "t", "index", "steps"}
 };

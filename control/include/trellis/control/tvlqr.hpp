@@ -103,7 +103,7 @@ struct TvlqrSolution {
   ///@}
   std::string method;             ///< "bdf", "adams", "factored" or "sampled-zoh"
 
-  bool ok() const { return status.ok(); }
+  bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   /// A few lines for people (what was solved, work, S's spectrum).
   std::string summary() const;
   /// One line: the status, the mode, the rows of K and the work.

@@ -66,7 +66,7 @@ struct EquilibriumResult {
   /// (data.reducedA) at (q, 0, u): < 0 asymptotically stable, > 0 unstable, ≈ 0 marginal (e.g. an
   /// undamped stable equilibrium, whose eigenvalues are ± i ω).
   double maxRealEigenvalue = 0.0;
-  bool ok() const { return status.ok(); }
+  bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   /// One line: "<status>[: message] (iterations, residuals, rank, stability)".
   std::string describe() const;
   /// {"status", "ok", "message", "t": null, "index": null, "iterations", "qdd_residual",

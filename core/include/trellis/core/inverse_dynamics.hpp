@@ -72,7 +72,7 @@ struct InverseDynamicsResult {
   /// With bounds: by how much the unbounded answer exceeds each input's interval (m; 0 inside).
   Eigen::VectorXd boundExcess;
   int boundIterations = 0;          ///< active-set iterations (0: the unbounded answer was feasible)
-  bool ok() const { return status.ok(); }
+  bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   /// One line: "<status>[: message] (residuals, rank)".
   std::string describe() const;
   /// {"status", "ok", "message", "t": null, "index": null, "residual", "constraint_residual",

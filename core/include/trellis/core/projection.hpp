@@ -75,7 +75,7 @@ struct ProjectionResult {
   double velocityResidual = 0;       ///< |A(q*) q̇*|∞
   double lastStep = 0;               ///< ‖Δq‖∞ of the last accepted descent step
   bool massWeighted = true;          ///< false: M was not positive definite, Euclidean metric used
-  bool ok() const { return status.ok(); }
+  bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   /// One line: "<status>[: message] (iterations, residuals before and after)".
   std::string describe() const;
   /// {"status", "ok", "message", "t": null, "index": null, "iterations", "h_before", "h_after",

@@ -99,8 +99,10 @@ struct OptimalControlProblem {
   ///@}
   /// Bounds on the constraint forces λ_r (nc, the model's constraint rows; M q̈ = … + Aᵀλ),
   /// imposed at every collocation point (knots and Hermite–Simpson midpoints); ±infinity for none
-  /// (problem file "constraint_force_bounds": {"<constraint name>": [lower, upper]}).
+  /// (problem file "constraint_force_bounds": {"<constraint row>": [lower, upper]}).
+  ///@{
   Eigen::VectorXd forceLower, forceUpper;
+  ///@}
 
   /// Cost weights: R (m×m), Q, Qf (2n×2n), all symmetric positive semidefinite; goal state
   /// (2n); w_T ≥ 0 weighs the horizon (minimum time when the other terms are small).

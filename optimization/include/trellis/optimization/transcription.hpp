@@ -115,8 +115,10 @@ class Transcription {
   void constraintBounds(Eigen::VectorXd& lower, Eigen::VectorXd& upper) const;
   /// Constraint-force rows per point (the constraint rows with a finite bound; 0 without) and the
   /// first of point p's (−1 without).
+  ///@{
   int forceRowsPerPoint() const;
   int forceRow(int point) const;
+  ///@}
   /// The initial guess z₀ (problem.initialGuess, else linear interpolation), inside the bounds.
   Eigen::VectorXd initialGuess() const;
 
@@ -134,9 +136,12 @@ class Transcription {
   /// False with nonholonomic (knife-edge) rows, whose ∂²(A(q) v)/∂q² the core does not give;
   /// hessianUnavailableReason() says so and evalHessian returns false.
   bool hessianAvailable() const;
-  const std::string& hessianUnavailableReason() const;
+  const std::string& hessianUnavailableReason() const;  ///< empty when hessianAvailable()
+  ///@{
+  /// The Hessian's pattern: row and column of each stored entry (lower triangle, row ≥ column).
   const std::vector<int>& hessianRows() const;
   const std::vector<int>& hessianCols() const;
+  ///@}
   /// objectiveFactor σ, multipliers μ (numConstraints()); values in hessianRows/Cols order.
   bool evalHessian(const double* z, double objectiveFactor, const double* multipliers, double* values);
 
