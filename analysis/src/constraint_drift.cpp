@@ -2,6 +2,7 @@
 // the public projectOntoConstraints.
 #include "constraint_drift.hpp"
 
+#include "trellis/core/detail/report_json.hpp"
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/model.hpp"
 
@@ -40,7 +41,7 @@ ConstraintProjection ConstraintDrift::project(Eigen::VectorXd& x) {
   dq_ = x.tail(n_);
   const ProjectionResult r = projectState(model_, data_, q_, dq_, options_);
   p.iterations = r.iterations;
-  p.converged = r.ok();
+  p.status = r.status;
   x.head(n_) = r.q;
   x.tail(n_) = r.dq;
   // The residuals of projectState cover the holonomic rows for h and all rows for A q̇: the
@@ -53,6 +54,19 @@ ConstraintProjection ConstraintDrift::project(Eigen::VectorXd& x) {
 }  // namespace trellis::detail
 
 namespace trellis {
+
+std::string ConstraintProjection::describe() const {
+  return status.describe() + " (drift " + formatStatusNumber(driftBefore) + " -> " +
+         formatStatusNumber(driftAfter) + ", " + std::to_string(iterations) + " iterations)";
+}
+
+std::string ConstraintProjection::json() const {
+  detail::ReportJson j = detail::statusJson(status);
+  j["drift_before"] = detail::toJson(driftBefore);
+  j["drift_after"] = detail::toJson(driftAfter);
+  j["iterations"] = iterations;
+  return j.dump();
+}
 
 ConstraintProjection projectOntoConstraints(const Model& model, Eigen::VectorXd& x,
                                             int maxIterations) {

@@ -165,11 +165,18 @@ void bindSimulation(py::module_& m) {
         py::arg("model"), py::arg("reference"), py::arg("x0"), py::kw_only(),
         py::arg("options") = py::none(), "u = u_ref(t) over the reference's span.");
 
-  py::class_<ConstraintProjection>(m, "ConstraintProjection")
+  bindStatus<ProjectionCode>(m, "ProjectionStatus",
+      "Status of a constraint projection (code: ok, not_converged, non_finite).");
+  py::class_<ConstraintProjection>(m, "ConstraintProjection",
+      "drift_before, drift_after (max(|h|, |A dq|)), iterations, and the projection's status.")
+      .def_readonly("status", &ConstraintProjection::status)
+      .def_property_readonly("ok", &ConstraintProjection::ok)
       .def_readonly("drift_before", &ConstraintProjection::driftBefore)
       .def_readonly("drift_after", &ConstraintProjection::driftAfter)
       .def_readonly("iterations", &ConstraintProjection::iterations)
-      .def_readonly("converged", &ConstraintProjection::converged);
+      .def("describe", &ConstraintProjection::describe)
+      .def("json", &ConstraintProjection::json)
+      .def("__repr__", [](const ConstraintProjection& p) { return "<ConstraintProjection " + p.describe() + ">"; });
   m.def("project_onto_constraints",
         [](const Model& model, const VectorRef& x, int maxIterations) {
           Eigen::VectorXd y = x;

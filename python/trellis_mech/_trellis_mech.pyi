@@ -68,14 +68,20 @@ class ConstraintHandling:
     def __ne__(self, other: object) -> bool: ...
 
 class ConstraintProjection:
-    @property
-    def converged(self) -> bool: ...
+    """drift_before, drift_after (max(|h|, |A dq|)), iterations, and the projection's status."""
+    def __repr__(self: ConstraintProjection) -> str: ...
+    def describe(self: ConstraintProjection) -> str: ...
     @property
     def drift_after(self) -> float: ...
     @property
     def drift_before(self) -> float: ...
     @property
     def iterations(self) -> int: ...
+    def json(self: ConstraintProjection) -> str: ...
+    @property
+    def ok(self) -> bool: ...
+    @property
+    def status(self) -> ProjectionStatus: ...
 
 class ControllabilityReport:
     """Rank of the scaled Krylov matrix [B, (A/a) B, ..., (A/a)^(d-1) B] against d."""
@@ -709,6 +715,25 @@ class OptimizerOptions:
 
 class ProblemError(ValueError):
     """Invalid optimal control problem (object or problem file); the message names the field and the value."""
+
+class ProjectionStatus:
+    """Status of a constraint projection (code: ok, not_converged, non_finite)."""
+    def __repr__(self: ProjectionStatus) -> str: ...
+    @property
+    def code(self) -> str:
+        """the code's name (str): 'ok', or what failed"""
+    def describe(self: ProjectionStatus) -> str: ...
+    @property
+    def index(self) -> int:
+        """where: knot, step, interval or row (-1: none)"""
+    @property
+    def message(self) -> str:
+        """empty when ok; what failed, with the values"""
+    @property
+    def ok(self) -> bool: ...
+    @property
+    def t(self) -> float:
+        """when it happened (NaN: not applicable)"""
 
 class RiccatiLinearSolver:
     """Members:

@@ -229,6 +229,9 @@ TEST_CASE("simulation: constrained paper pendulum keeps its constraint and its e
   CHECK(proj.driftBefore == Approx(3.47e-3).epsilon(0.01));
   CHECK(proj.driftAfter < 1e-12);  // Gauss–Newton converges quadratically to rounding
   CHECK(proj.iterations >= 1);
+  CHECK(proj.ok());
+  CHECK_THAT(proj.describe(), Catch::StartsWith("ok (drift "));
+  CHECK_THAT(proj.json(), Catch::StartsWith("{\"status\":\"ok\",\"ok\":true,"));
 
   SECTION("the velocity correction is M-orthogonal: M δq̇ is parallel to A(q)ᵀ") {
     // Isolate the velocity step: q already projected, q̇ the paper's (A q̇ ≠ 0 at this q).

@@ -415,3 +415,12 @@ def test_solve_tvlqr_matches_cli(tm, cli, tmp_path, rate):
     np.testing.assert_allclose(sol.gains.times, expected.times, rtol=1e-15)
     np.testing.assert_allclose(sol.gains.gains, expected.gains, rtol=1e-13,
                                atol=1e-13 * np.abs(expected.gains).max())
+
+
+def test_project_onto_constraints_reports_a_status(tm):
+    scene = tm.load_scene(str(SCENES / "paper_pendulum.json"))
+    x = np.concatenate([scene.q, scene.dq])  # the paper's printed state: off its constraint
+    y, p = tm.project_onto_constraints(scene.model, x)
+    assert p.ok and p.status.code == "ok" and p.drift_after < 1e-12 < p.drift_before
+    assert json.loads(p.json())["iterations"] == p.iterations
+    assert p.describe().startswith("ok (drift ")

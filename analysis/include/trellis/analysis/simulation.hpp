@@ -56,6 +56,7 @@
 #pragma once
 
 #include "trellis/core/gain_schedule.hpp"
+#include "trellis/core/projection.hpp"
 #include "trellis/core/status.hpp"
 #include "trellis/core/trajectory.hpp"
 
@@ -232,7 +233,14 @@ struct ConstraintProjection {
   double driftBefore = 0.0;  ///< max(|h(q)|∞, |A q̇|∞) before
   double driftAfter = 0.0;   ///< the same after
   int iterations = 0;        ///< Newton iterations on the positions
-  bool converged = true;     ///< core's projectState reached its tolerance (|h| ≤ 1e-12)
+  /// core's projectState status (ProjectionCode: ok when |h| reached its tolerance, 1e-12;
+  /// not_converged, non_finite otherwise, with its message); ok without constraints.
+  Status<ProjectionCode> status;
+  bool ok() const { return status.ok(); }
+  /// One line: the status, then the drift before → after and the iterations.
+  std::string describe() const;
+  /// {"status", "ok", "message", "t", "index", "drift_before", "drift_after", "iterations"}.
+  std::string json() const;
 };
 
 /// Projects x = [q; q̇] (2n) in place onto h(q) = 0, A(q) q̇ = 0 exactly as kProject does (core's
