@@ -298,6 +298,26 @@ class GramianReport:
     @property
     def steps(self) -> int: ...
 
+class HessianMode:
+    """The Lagrangian Hessian Ipopt uses: EXACT (the transcription's exact second derivatives) or LBFGS (limited-memory quasi-Newton).
+
+    Members:
+
+      EXACT
+
+      LBFGS
+    """
+    EXACT: ClassVar[HessianMode]
+    LBFGS: ClassVar[HessianMode]
+    @property
+    def value(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    def __init__(self, value: int) -> None: ...
+    def __int__(self) -> int: ...
+    def __eq__(self, other: object) -> bool: ...
+    def __ne__(self, other: object) -> bool: ...
+
 class IntegrationMethod:
     """Members:
 
@@ -523,12 +543,27 @@ class OptimalControlProblem:
     @final_state.setter
     def final_state(self, value: numpy.typing.NDArray[numpy.float64]) -> None: ...
     @property
+    def force_lower(self) -> numpy.typing.NDArray[numpy.float64]:
+        """(nc,) bounds on the constraint forces at every collocation point, -inf for none"""
+    @force_lower.setter
+    def force_lower(self, value: numpy.typing.NDArray[numpy.float64]) -> None: ...
+    @property
+    def force_upper(self) -> numpy.typing.NDArray[numpy.float64]:
+        """(nc,), +inf for none"""
+    @force_upper.setter
+    def force_upper(self, value: numpy.typing.NDArray[numpy.float64]) -> None: ...
+    @property
     def free_horizon(self) -> bool: ...
     @property
     def goal_state(self) -> numpy.typing.NDArray[numpy.float64]:
         """(nx,)"""
     @goal_state.setter
     def goal_state(self, value: numpy.typing.NDArray[numpy.float64]) -> None: ...
+    @property
+    def hessian(self) -> HessianMode:
+        """HessianMode unless OptimizerOptions.hessian overrides it (file key "hessian")"""
+    @hessian.setter
+    def hessian(self, value: HessianMode) -> None: ...
     @property
     def horizon(self) -> float:
         """T (the initial guess when free)"""
@@ -604,23 +639,68 @@ class OptimalControlProblem:
     def validate(self: OptimalControlProblem) -> None:
         """Raises ProblemError naming the first bad field."""
 
+class OptimizationCode:
+    """The code of an OptimizationResult's status (SOLVED and SOLVED_ACCEPTABLE are success).
+
+    Members:
+
+      SOLVED
+
+      SOLVED_ACCEPTABLE
+
+      INCONSISTENT
+
+      INFEASIBLE
+
+      ITERATION_LIMIT
+
+      STOPPED
+
+      FAILED
+    """
+    FAILED: ClassVar[OptimizationCode]
+    INCONSISTENT: ClassVar[OptimizationCode]
+    INFEASIBLE: ClassVar[OptimizationCode]
+    ITERATION_LIMIT: ClassVar[OptimizationCode]
+    SOLVED: ClassVar[OptimizationCode]
+    SOLVED_ACCEPTABLE: ClassVar[OptimizationCode]
+    STOPPED: ClassVar[OptimizationCode]
+    @property
+    def value(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    def __init__(self, value: int) -> None: ...
+    def __int__(self) -> int: ...
+    def __eq__(self, other: object) -> bool: ...
+    def __ne__(self, other: object) -> bool: ...
+
 class OptimizationResult:
-    """status (OptimizationStatus), ipopt_status, message, iterations, cost, constraint_violation, bound_violation, max_slack, solve_time, solve_cpu_time, horizon, evaluation counts, the trajectory (knots), Hermite-Simpson midpoints and the NLP variables."""
+    """status (OptimizationCode), ok, message, t, index (the status: t and index name the worst interval when inconsistent), ipopt_status, iterations (all rounds), rounds, hessian, cost, constraint_violation, bound_violation, max_slack, solve_time, solve_cpu_time, horizon, evaluation counts, the trajectory (knots), Hermite-Simpson midpoints, the NLP variables and multipliers; describe() and json() are the library's reports."""
     def __repr__(self: OptimizationResult) -> str: ...
     @property
     def bound_violation(self) -> float: ...
     @property
+    def constraint_multipliers(self) -> numpy.typing.NDArray[numpy.float64]: ...
+    @property
     def constraint_violation(self) -> float: ...
     @property
     def cost(self) -> float: ...
+    def describe(self: OptimizationResult) -> str: ...
     @property
     def dynamics_evaluations(self) -> int: ...
     @property
+    def hessian(self) -> HessianMode: ...
+    @property
+    def hessian_note(self) -> str: ...
+    @property
     def horizon(self) -> float: ...
+    @property
+    def index(self) -> int: ...
     @property
     def ipopt_status(self) -> str: ...
     @property
     def iterations(self) -> int: ...
+    def json(self: OptimizationResult) -> str: ...
     @property
     def linearization_evaluations(self) -> int: ...
     @property
@@ -634,51 +714,32 @@ class OptimizationResult:
     def midpoint_states(self) -> numpy.typing.NDArray[numpy.float64]:
         """(N - 1, nx), time first"""
     @property
+    def ok(self) -> bool: ...
+    @property
+    def rounds(self) -> list:
+        """one dict per solve (knots, iterations, ipopt_status, defect, slack_defect, hessian, solve_time)"""
+    @property
+    def second_order_evaluations(self) -> int: ...
+    @property
     def solve_cpu_time(self) -> float: ...
     @property
     def solve_time(self) -> float: ...
     @property
-    def status(self) -> OptimizationStatus: ...
+    def status(self) -> OptimizationCode: ...
     @property
-    def success(self) -> bool: ...
+    def t(self) -> float: ...
     @property
     def trajectory(self) -> Trajectory: ...
     @property
     def variables(self) -> numpy.typing.NDArray[numpy.float64]: ...
 
-class OptimizationStatus:
-    """Members:
-
-      SOLVED
-
-      SOLVED_ACCEPTABLE
-
-      INFEASIBLE
-
-      ITERATION_LIMIT
-
-      STOPPED
-
-      FAILED
-    """
-    FAILED: ClassVar[OptimizationStatus]
-    INFEASIBLE: ClassVar[OptimizationStatus]
-    ITERATION_LIMIT: ClassVar[OptimizationStatus]
-    SOLVED: ClassVar[OptimizationStatus]
-    SOLVED_ACCEPTABLE: ClassVar[OptimizationStatus]
-    STOPPED: ClassVar[OptimizationStatus]
-    @property
-    def value(self) -> int: ...
-    @property
-    def name(self) -> str: ...
-    def __init__(self, value: int) -> None: ...
-    def __int__(self) -> int: ...
-    def __eq__(self, other: object) -> bool: ...
-    def __ne__(self, other: object) -> bool: ...
-
 class OptimizerOptions:
-    """Ipopt options (keywords): print_level, max_iterations, tolerance, constraint_tolerance, max_cpu_time, limited_memory_size, derivatives (DerivativeMode), on_iteration (a callable taking an IterationInfo and returning False to stop; an exception in it stops the solve)."""
+    """Ipopt options (keywords): print_level, max_iterations, tolerance, constraint_tolerance, max_cpu_time, limited_memory_size, derivatives (DerivativeMode), hessian (HessianMode or None: the problem's), warm_start (refinement rounds start from the carried primal and multipliers), warm_start_barrier (Ipopt's mu_init then), consistency_tolerance, max_refinements, max_knots, max_split, on_iteration (a callable taking an IterationInfo and returning False to stop; an exception in it stops the solve)."""
     def __init__(self: OptimizerOptions, **kwargs) -> None: ...
+    @property
+    def consistency_tolerance(self) -> float: ...
+    @consistency_tolerance.setter
+    def consistency_tolerance(self, value: float) -> None: ...
     @property
     def constraint_tolerance(self) -> float: ...
     @constraint_tolerance.setter
@@ -687,6 +748,10 @@ class OptimizerOptions:
     def derivatives(self) -> DerivativeMode: ...
     @derivatives.setter
     def derivatives(self, value: DerivativeMode) -> None: ...
+    @property
+    def hessian(self) -> Optional[HessianMode]: ...
+    @hessian.setter
+    def hessian(self, value: Optional[HessianMode]) -> None: ...
     @property
     def limited_memory_size(self) -> int: ...
     @limited_memory_size.setter
@@ -700,6 +765,18 @@ class OptimizerOptions:
     @max_iterations.setter
     def max_iterations(self, value: int) -> None: ...
     @property
+    def max_knots(self) -> int: ...
+    @max_knots.setter
+    def max_knots(self, value: int) -> None: ...
+    @property
+    def max_refinements(self) -> int: ...
+    @max_refinements.setter
+    def max_refinements(self, value: int) -> None: ...
+    @property
+    def max_split(self) -> int: ...
+    @max_split.setter
+    def max_split(self, value: int) -> None: ...
+    @property
     def on_iteration(self) -> Callable[[IterationInfo], bool]: ...
     @on_iteration.setter
     def on_iteration(self, value: Callable[[IterationInfo], bool]) -> None: ...
@@ -712,6 +789,14 @@ class OptimizerOptions:
     @tolerance.setter
     def tolerance(self, value: float) -> None: ...
     def validate(self: OptimizerOptions) -> None: ...
+    @property
+    def warm_start(self) -> bool: ...
+    @warm_start.setter
+    def warm_start(self, value: bool) -> None: ...
+    @property
+    def warm_start_barrier(self) -> float: ...
+    @warm_start_barrier.setter
+    def warm_start_barrier(self, value: float) -> None: ...
 
 class ProblemError(ValueError):
     """Invalid optimal control problem (object or problem file); the message names the field and the value."""
@@ -1266,6 +1351,26 @@ class TvlqrStatus:
     def t(self) -> float:
         """when it happened (NaN: not applicable)"""
 
+class ViewPage:
+    """The page view() wrote: os.PathLike (its path); shown inline in a Jupyter notebook (_repr_html_: the page in an iframe)."""
+    def __fspath__(self: ViewPage) -> str: ...
+    def __repr__(self: ViewPage) -> str: ...
+    def __str__(self: ViewPage) -> str: ...
+    def _repr_html_(self: ViewPage, height: int = 520) -> str:
+        """The page in an iframe (srcdoc), as Jupyter shows the object: the page is self-contained, so it needs neither a server nor the file."""
+    @property
+    def html(self) -> str:
+        """the page's text (what the file holds)"""
+    @property
+    def path(self) -> str:
+        """the file written"""
+    @property
+    def samples(self) -> int:
+        """pose samples over all trajectories (1 for a state)"""
+    @property
+    def warnings(self) -> List[str]:
+        """e.g. a mesh drawn as a stand-in (also given to warnings.warn)"""
+
 def _time_linearization_loop(model: Model, data: Data, q: numpy.typing.NDArray[numpy.float64], dq: numpy.typing.NDArray[numpy.float64], u: numpy.typing.NDArray[numpy.float64], repeats: int) -> float: ...
 
 def check_gain_schedule_applies(gains: GainSchedule, model: Model, reference: Trajectory, sample_rate: float = 0.0, source: str = 'gains') -> str:
@@ -1373,8 +1478,8 @@ def solve_tvlqr(model: Model, reference: Trajectory, *, Q: object, R: object, Qf
 def transport_tangent_basis(model: Model, reference: Trajectory, *, options: Optional[TangentTransportOptions] = None) -> TangentBasisTrajectory:
     """T(t) along the reference (which needs state derivatives)."""
 
-def view(model: object, *args, path: object = None, q: object = None, names: List[str] = ..., rate: float = 60.0, title: str = '', package_path: List[str] = ..., all_solid: bool = False, show: object = None) -> object:
-    """view(model, *trajectories, path=None, q=None, names=[], rate=60.0, title="", package_path=[], all_solid=False, show=None)
+def view(model: object, *args, path: object = None, q: object = None, names: List[str] = ..., rate: float = 60.0, title: str = '', package_path: List[str] = ..., all_solid: bool = False, forces: bool = True, show: bool = False) -> ViewPage:
+    """view(model, *trajectories, path=None, q=None, names=[], rate=60.0, title="", package_path=[], all_solid=False, forces=True, show=False)
 
     Writes a self-contained HTML page (three.js included) that shows the model in 3D in a browser,
     with a time slider, play/pause, speed and looping when trajectories are given: the first drawn
@@ -1383,8 +1488,10 @@ def view(model: object, *args, path: object = None, q: object = None, names: Lis
     second. `model`: a scene or URDF file path (keeps URDF visual geometry, meshes relative to the
     file), a Scene (shown at its stored q) or a Model (at q = 0); `path`: the page to write, as a
     keyword or as the last positional argument (str or os.PathLike); `q` overrides the configuration
-    shown without trajectories. The file is written atomically. In a Jupyter notebook (or show=True)
-    the page is also displayed inline. Returns `path`. Raises ValueError (a trajectory that does not
+    shown without trajectories. The file is written atomically. Returns a ViewPage: os.PathLike (the
+    path), and shown inline by Jupyter when it is a cell's value (its _repr_html_ embeds the page in an
+    iframe); show=True displays it at once through IPython.display. With constraints, the solid
+    trajectories' constraint forces are drawn as arrows (forces=False: none). Raises ValueError (a trajectory that does not
     match the model, a bad visual, an unreadable mesh, three.js missing) and warns (warnings.warn)
     when a mesh is drawn as a stand-in.
     """

@@ -236,7 +236,7 @@ struct ConstraintProjection {
   /// core's projectState status (ProjectionCode: ok when |h| reached its tolerance, 1e-12;
   /// not_converged, non_finite otherwise, with its message); ok without constraints.
   Status<ProjectionCode> status;
-  bool ok() const { return status.ok(); }
+  bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   /// One line: the status, then the drift before → after and the iterations.
   std::string describe() const;
   /// {"status", "ok", "message", "t", "index", "drift_before", "drift_after", "iterations"}.
