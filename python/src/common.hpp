@@ -166,6 +166,40 @@ void bindSecondOrder(py::module_& m);  // bind_second_order.cpp
 
 namespace pybind11::detail {
 
+/// By-value real vectors and matrices (Eigen::VectorXd, Eigen::MatrixXd: times, bounds, options'
+/// and problems' fields) read as pybind11 reads them — any array-like converted to float64, copied —
+/// except that a complex array is refused (refuseComplex) instead of cast to its real part with
+/// only a NumPy warning. Loading goes through pybind11's caster of the unaligned type of the same
+/// shape (a distinct type, so pybind11's own caster serves it); returning goes through its caster of
+/// a Map of the value: a reference to it (reference, reference_internal: the array of a member, kept
+/// alive by its owner, read-only as before) or a copy (every other policy).
+template <class Plain>
+struct RealPlainCaster {
+  using Unaligned = Eigen::Matrix<double, Plain::RowsAtCompileTime, Plain::ColsAtCompileTime,
+                                  Eigen::DontAlign | Eigen::ColMajor>;
+  using ConstMap = Eigen::Map<const Plain>;
+  PYBIND11_TYPE_CASTER(Plain, type_caster<Unaligned>::name);
+
+  bool load(handle src, bool convert) {
+    trellis::python::refuseComplex(src);
+    type_caster<Unaligned> inner;
+    if (!inner.load(src, convert)) return false;
+    const Unaligned& read = inner;
+    value = read;
+    return true;
+  }
+  static handle cast(const Plain& src, return_value_policy policy, handle parent) {
+    const ConstMap map(src.data(), src.rows(), src.cols());
+    const bool byReference =
+        policy == return_value_policy::reference || policy == return_value_policy::reference_internal;
+    return type_caster<ConstMap>::cast(map, byReference ? policy : return_value_policy::copy, parent);
+  }
+};
+template <>
+struct type_caster<Eigen::VectorXd> : RealPlainCaster<Eigen::VectorXd> {};
+template <>
+struct type_caster<Eigen::MatrixXd> : RealPlainCaster<Eigen::MatrixXd> {};
+
 /// Vector arguments (q, dq, u, ...) as pybind11's own Eigen::Ref caster reads them — a contiguous
 /// float64 array in place, anything else converted — except that a complex array is refused
 /// (refuseComplex) instead of cast to its real part. The inner caster reads into a Ref of an

@@ -107,6 +107,17 @@ def test_complex_matrices_are_refused_naming_the_argument(tm):
         tm.solve_tvlqr(model, ref, Q=np.eye(4, dtype=complex), R=1.0)
     with pytest.raises(TypeError, match="complex array"):
         tm.compute_dynamics(model, tm.Data(model), np.zeros(2, dtype=complex), np.zeros(2), np.zeros(1))
+    # Vectors and matrices taken by value (times, bounds, a problem's fields) too: refused, never
+    # cut to their real part.
+    with pytest.raises(TypeError, match="complex array"):
+        tm.Trajectory(["a"], [], np.array([0.0, 1.0], dtype=complex), np.zeros((2, 2)))
+    problem = tm.OptimalControlProblem(model)
+    with pytest.raises(TypeError, match="complex array"):
+        problem.input_lower = np.array([-1.0 + 0j])
+    with pytest.raises(TypeError, match="complex array"):
+        problem.R = np.eye(1, dtype=complex)
+    problem.input_lower = np.array([-1.0])
+    assert problem.input_lower.tolist() == [-1.0]
     # The real arrays of the same values work.
     assert tm.solve_care(A, B, np.eye(2), [[1.0]]).ok
 
