@@ -40,8 +40,8 @@ void bindControllability(py::module_& m) {
         py::arg("A"), py::arg("B"), py::arg("relative_tolerance") = 1e-10,
         "Controllability of (A (d, d), B (d, nu)).");
   m.def("compute_controllability_at",
-        [](const Model& model, PyData& d, const VectorRef& q, const VectorRef& dq,
-           const VectorRef& u, double tol) {
+        [](const Model& model, PyData& d, const RealVector<"q">& q, const RealVector<"dq">& dq,
+           const RealVector<"u">& u, double tol) {
           checkSameModel(model, d);
           DataGuard guard(d);
           loadVector(q, d.q, "q", "model.nq");

@@ -271,7 +271,7 @@ void bindCore(py::module_& m) {
 
   // ---- Algorithms ----------------------------------------------------------------------------
   m.def("compute_kinematics",
-        [](const Model& model, D& d, const VectorRef& q, const VectorRef& dq) {
+        [](const Model& model, D& d, const RealVector<"q">& q, const RealVector<"dq">& dq) {
           checkSameModel(model, d);
           DataGuard guard(d);
           loadState(d, q, dq);
@@ -280,7 +280,7 @@ void bindCore(py::module_& m) {
         py::arg("model"), py::arg("data"), py::arg("q"), py::arg("dq"),
         "World pose and body velocity of every frame: data.frame_poses, data.frame_velocities.");
   m.def("compute_mass_matrix",
-        [](const Model& model, D& d, const VectorRef& q) {
+        [](const Model& model, D& d, const RealVector<"q">& q) {
           checkSameModel(model, d);
           DataGuard guard(d);
           loadVector(q, d.q, "q", "model.nq");
@@ -290,7 +290,7 @@ void bindCore(py::module_& m) {
         py::arg("model"), py::arg("data"), py::arg("q"),
         "M(q) (nq, nq), symmetric positive semidefinite (also in data.M).");
   m.def("compute_constraints",
-        [](const Model& model, D& d, const VectorRef& q, const VectorRef& dq) {
+        [](const Model& model, D& d, const RealVector<"q">& q, const RealVector<"dq">& dq) {
           checkSameModel(model, d);
           DataGuard guard(d);
           loadState(d, q, dq);
@@ -300,7 +300,7 @@ void bindCore(py::module_& m) {
         "data.constraint_value h(q) (nc,), data.constraint_jacobian A(q) (nc, nq), "
         "data.constraint_drift dA/dt dq (nc,).");
   m.def("compute_input_matrix",
-        [](const Model& model, D& d, const VectorRef& q) {
+        [](const Model& model, D& d, const RealVector<"q">& q) {
           checkSameModel(model, d);
           DataGuard guard(d);
           loadVector(q, d.q, "q", "model.nq");
@@ -310,7 +310,7 @@ void bindCore(py::module_& m) {
         py::arg("model"), py::arg("data"), py::arg("q"), "dQ/du (nq, nu) at q.");
 
   m.def("compute_dynamics",
-        [](const Model& model, D& d, const VectorRef& q, const VectorRef& dq, const VectorRef& u,
+        [](const Model& model, D& d, const RealVector<"q">& q, const RealVector<"dq">& dq, const RealVector<"u">& u,
            std::optional<py::array> qddOut, std::optional<py::array> lambdaOut) {
           checkSameModel(model, d);
           DataGuard guard(d);
@@ -336,7 +336,7 @@ void bindCore(py::module_& m) {
          kStateArgs).c_str());
 
   m.def("compute_linearization",
-        [](const Model& model, D& d, const VectorRef& q, const VectorRef& dq, const VectorRef& u,
+        [](const Model& model, D& d, const RealVector<"q">& q, const RealVector<"dq">& dq, const RealVector<"u">& u,
            std::optional<py::array> aOut, std::optional<py::array> bOut) {
           checkSameModel(model, d);
           DataGuard guard(d);
@@ -377,7 +377,7 @@ void bindCore(py::module_& m) {
         "constraints.");
 
   m.def("compute_energy",
-        [](const Model& model, D& d, const VectorRef& q, const VectorRef& dq) {
+        [](const Model& model, D& d, const RealVector<"q">& q, const RealVector<"dq">& dq) {
           checkSameModel(model, d);
           DataGuard guard(d);
           loadState(d, q, dq);
@@ -386,7 +386,7 @@ void bindCore(py::module_& m) {
         py::arg("model"), py::arg("data"), py::arg("q"), py::arg("dq"),
         "Kinetic energy 1/2 dq^T M dq and potential energy (gravity, springs).");
   m.def("compute_non_conservative_power",
-        [](const Model& model, D& d, const VectorRef& q, const VectorRef& dq, const VectorRef& u) {
+        [](const Model& model, D& d, const RealVector<"q">& q, const RealVector<"dq">& dq, const RealVector<"u">& u) {
           checkSameModel(model, d);
           DataGuard guard(d);
           loadState(d, q, dq, u);
@@ -398,7 +398,7 @@ void bindCore(py::module_& m) {
   // For python/bench_overhead.py: the C++ time of the same call, in this process — `repeats`
   // calls of computeLinearization in a C++ loop (GIL released), seconds per call.
   m.def("_time_linearization_loop",
-        [](const Model& model, D& d, const VectorRef& q, const VectorRef& dq, const VectorRef& u,
+        [](const Model& model, D& d, const RealVector<"q">& q, const RealVector<"dq">& dq, const RealVector<"u">& u,
            int repeats) {
           checkSameModel(model, d);
           DataGuard guard(d);

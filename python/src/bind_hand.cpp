@@ -33,8 +33,8 @@ void bindHand(py::module_& parent) {
       .def_readonly("ok", &ReferenceMotion::ok)
       .def_readonly("message", &ReferenceMotion::message);
   m.def("make_reference_motion",
-        [](const Model& model, const VectorRef& q0, const std::optional<ReferenceMotionOptions>& o) {
-          const Eigen::VectorXd q = q0;
+        [](const Model& model, const RealVector<"q0">& q0, const std::optional<ReferenceMotionOptions>& o) {
+          const Eigen::VectorXd q = q0.ref;
           py::gil_scoped_release release;
           return hand::makeReferenceMotion(model, q, o.value_or(ReferenceMotionOptions{}));
         },

@@ -18,15 +18,6 @@ namespace {
 
 using Problem = OptimalControlProblem;
 
-/// A vector field of the problem as a property that copies in and out (a NumPy view of the C++
-/// buffer could dangle when the field is reassigned with another size).
-template <class Class, class T>
-void vectorProperty(Class& cls, const char* name, T Problem::*member, const char* doc) {
-  cls.def_property(
-      name, [member](const Problem& p) { return toArray(p.*member); },
-      [member](Problem& p, const T& value) { p.*member = value; }, doc);
-}
-
 }  // namespace
 
 void bindOptimization(py::module_& m) {
@@ -81,19 +72,19 @@ void bindOptimization(py::module_& m) {
       .def_property_readonly("nu", &Problem::nu)
       .def_property_readonly("state_names", &Problem::stateNames)
       .def("validate", &Problem::validate, "Raises ProblemError naming the first bad field.");
-  vectorProperty(problem, "initial_state", &Problem::initialState, "(nx,)");
-  vectorProperty(problem, "final_state", &Problem::finalState, "(nx,)");
-  vectorProperty(problem, "state_lower", &Problem::stateLower, "(nx,), -inf for none");
-  vectorProperty(problem, "state_upper", &Problem::stateUpper, "(nx,), +inf for none");
-  vectorProperty(problem, "input_lower", &Problem::inputLower, "(nu,)");
-  vectorProperty(problem, "input_upper", &Problem::inputUpper, "(nu,)");
-  vectorProperty(problem, "goal_state", &Problem::goalState, "(nx,)");
-  vectorProperty(problem, "force_lower", &Problem::forceLower,
+  realArrayProperty(problem, "initial_state", &Problem::initialState, "(nx,)");
+  realArrayProperty(problem, "final_state", &Problem::finalState, "(nx,)");
+  realArrayProperty(problem, "state_lower", &Problem::stateLower, "(nx,), -inf for none");
+  realArrayProperty(problem, "state_upper", &Problem::stateUpper, "(nx,), +inf for none");
+  realArrayProperty(problem, "input_lower", &Problem::inputLower, "(nu,)");
+  realArrayProperty(problem, "input_upper", &Problem::inputUpper, "(nu,)");
+  realArrayProperty(problem, "goal_state", &Problem::goalState, "(nx,)");
+  realArrayProperty(problem, "force_lower", &Problem::forceLower,
                  "(nc,) bounds on the constraint forces at every collocation point, -inf for none");
-  vectorProperty(problem, "force_upper", &Problem::forceUpper, "(nc,), +inf for none");
-  vectorProperty(problem, "R", &Problem::R, "(nu, nu) symmetric PSD");
-  vectorProperty(problem, "Q", &Problem::Q, "(nx, nx) symmetric PSD");
-  vectorProperty(problem, "Qf", &Problem::Qf, "(nx, nx) symmetric PSD");
+  realArrayProperty(problem, "force_upper", &Problem::forceUpper, "(nc,), +inf for none");
+  realArrayProperty(problem, "R", &Problem::R, "(nu, nu) symmetric PSD");
+  realArrayProperty(problem, "Q", &Problem::Q, "(nx, nx) symmetric PSD");
+  realArrayProperty(problem, "Qf", &Problem::Qf, "(nx, nx) symmetric PSD");
 
   m.def("load_problem", &loadProblem, py::arg("path"),
         "Reads a problem file (JSON, optimization/README.md); paths inside are relative to it. "

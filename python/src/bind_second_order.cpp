@@ -33,7 +33,7 @@ struct Contraction {
 void bindSecondOrder(py::module_& m) {
   m.def(
       "compute_second_order",
-      [](const ModelPtr& model, PyData& d, const VectorRef& q, const VectorRef& dq, const VectorRef& u) {
+      [](const ModelPtr& model, PyData& d, const RealVector<"q">& q, const RealVector<"dq">& dq, const RealVector<"u">& u) {
         checkSameModel(*model, d);
         DataGuard guard(d);
         loadVector(q, d.q, "q", "nq");
@@ -78,13 +78,13 @@ void bindSecondOrder(py::module_& m) {
       "pair). Make one with second_order_contraction(model, q, dq, u).")
       .def(
           "__call__",
-          [](Contraction& c, const VectorRef& w, std::optional<VectorRef> rho) {
+          [](Contraction& c, const RealVector<"w">& w, std::optional<RealVector<"rho">> rho) {
             const Eigen::Index n = c.model->nq(), N = 2 * n + c.model->nu();
             checkSize(w.size(), n, "w", "nq");
-            Eigen::VectorXd wv = w, rv;
+            Eigen::VectorXd wv = w.ref, rv;
             if (rho) {
               checkSize(rho->size(), c.model->nc(), "rho", "nc");
-              rv = *rho;
+              rv = rho->ref;
             }
             Eigen::MatrixXd H(N, N);
             {
@@ -100,7 +100,7 @@ void bindSecondOrder(py::module_& m) {
 
   m.def(
       "second_order_contraction",
-      [](const ModelPtr& model, const VectorRef& q, const VectorRef& dq, const VectorRef& u) {
+      [](const ModelPtr& model, const RealVector<"q">& q, const RealVector<"dq">& dq, const RealVector<"u">& u) {
         return std::make_shared<Contraction>(model, q, dq, u);
       },
       py::arg("model"), py::arg("q"), py::arg("dq"), py::arg("u"),

@@ -54,19 +54,18 @@ void bindSimulation(py::module_& m) {
       "Status of a simulation (code: ok, integrator_failure, dynamics_failure, non_finite, "
       "policy_failure, constraint_drift); t: the time of the failure.");
 
-  py::class_<SimulationOptions>(m, "SimulationOptions",
+  py::class_<SimulationOptions> simulationOptions(m, "SimulationOptions",
       "Options of the CVODES simulation (keywords): rtol, atol, max_steps, sample_rate (0: "
       "continuous feedback; f > 0: sampled at f Hz with zero-order hold), input_lower / "
       "input_upper (nu,) box, output_step, constraints (ConstraintHandling), method, max_step, "
       "breakpoints, projection_iterations, drift_tolerance (0: 10 (atol + rtol); projection above "
-      "it), exact_jacobian (BDF: exact A - B S K, else difference quotients).")
+      "it), exact_jacobian (BDF: exact A - B S K, else difference quotients).");
+  simulationOptions
       .def(py::init(&makeFromKwargs<SimulationOptions>))
       .def_readwrite("rtol", &SimulationOptions::rtol)
       .def_readwrite("atol", &SimulationOptions::atol)
       .def_readwrite("max_steps", &SimulationOptions::maxSteps)
       .def_readwrite("sample_rate", &SimulationOptions::sampleRate)
-      .def_readwrite("input_lower", &SimulationOptions::inputLower)
-      .def_readwrite("input_upper", &SimulationOptions::inputUpper)
       .def_readwrite("output_step", &SimulationOptions::outputStep)
       .def_readwrite("constraints", &SimulationOptions::constraints)
       .def_readwrite("method", &SimulationOptions::method)
@@ -76,6 +75,10 @@ void bindSimulation(py::module_& m) {
       .def_readwrite("drift_tolerance", &SimulationOptions::driftTolerance)
       .def_readwrite("exact_jacobian", &SimulationOptions::exactJacobian)
       .def("validate", &SimulationOptions::validate);
+  realArrayProperty(simulationOptions, "input_lower", &SimulationOptions::inputLower,
+                    "(nu,) lower bounds on the applied input (empty: none); copied in and out");
+  realArrayProperty(simulationOptions, "input_upper", &SimulationOptions::inputUpper,
+                    "(nu,) upper bounds (empty: none)");
 
   py::class_<SimulationResult>(m, "SimulationResult",
       "The simulated trajectory (x, applied u at the output times) with status and diagnostics.")
@@ -105,9 +108,9 @@ void bindSimulation(py::module_& m) {
       .def("__repr__", [](const SimulationResult& r) { return "<SimulationResult " + r.describe() + ">"; });
 
   m.def("simulate",
-        [](const Model& model, const VectorRef& x0, double t0, double t1, const py::function& policy,
+        [](const Model& model, const RealVector<"x0">& x0, double t0, double t1, const py::function& policy,
            const std::optional<SimulationOptions>& options, const Trajectory* reference) {
-          const Eigen::VectorXd x = x0;
+          const Eigen::VectorXd x = x0.ref;
           std::atomic<bool> interrupted{false};
           const Policy p = pythonPolicy(policy, model.nu(), &interrupted);
           auto result = withoutGil([&] {
@@ -126,8 +129,8 @@ void bindSimulation(py::module_& m) {
         "Python callable returning (nu,)); an exception in the policy is the status 'policy_failure'.");
   m.def("simulate_closed_loop",
         [](const Model& model, const Trajectory& reference, const GainSchedule& gains,
-           const VectorRef& x0, const std::optional<SimulationOptions>& options) {
-          const Eigen::VectorXd x = x0;
+           const RealVector<"x0">& x0, const std::optional<SimulationOptions>& options) {
+          const Eigen::VectorXd x = x0.ref;
           return withoutGil([&] {
             return simulateClosedLoop(model, reference, gains, x, options.value_or(SimulationOptions{}));
           });
@@ -155,9 +158,9 @@ void bindSimulation(py::module_& m) {
         "simulate_closed_loop from each row of x0s (K, nx), on `threads` threads (0: one per "
         "core) without the GIL; returns K SimulationResults in order.");
   m.def("simulate_open_loop",
-        [](const Model& model, const Trajectory& reference, const VectorRef& x0,
+        [](const Model& model, const Trajectory& reference, const RealVector<"x0">& x0,
            const std::optional<SimulationOptions>& options) {
-          const Eigen::VectorXd x = x0;
+          const Eigen::VectorXd x = x0.ref;
           return withoutGil([&] {
             return simulateOpenLoop(model, reference, x, options.value_or(SimulationOptions{}));
           });
@@ -178,8 +181,8 @@ void bindSimulation(py::module_& m) {
       .def("json", &ConstraintProjection::json)
       .def("__repr__", [](const ConstraintProjection& p) { return "<ConstraintProjection " + p.describe() + ">"; });
   m.def("project_onto_constraints",
-        [](const Model& model, const VectorRef& x, int maxIterations) {
-          Eigen::VectorXd y = x;
+        [](const Model& model, const RealVector<"x">& x, int maxIterations) {
+          Eigen::VectorXd y = x.ref;
           const ConstraintProjection p = projectOntoConstraints(model, y, maxIterations);
           return py::make_tuple(toArray(y), p);
         },

@@ -36,13 +36,13 @@ Eigen::MatrixXd timeFirst(const py::object& a, const char* name, Eigen::Index co
 /// The C++ (rows, N) → a fresh (N, rows) array.
 py::array_t<double> timeFirstArray(const Eigen::MatrixXd& m) { return toArray(Eigen::MatrixXd(m.transpose())); }
 
-Trajectory makeTrajectory(std::vector<std::string> configs, std::vector<std::string> inputs, Eigen::VectorXd times,
-                          const py::object& states, const py::object& us) {
+Trajectory makeTrajectory(std::vector<std::string> configs, std::vector<std::string> inputs,
+                          const RealVector<"times">& times, const py::object& states, const py::object& us) {
   const Eigen::Index nx = 2 * static_cast<Eigen::Index>(configs.size());
   const Eigen::Index nu = static_cast<Eigen::Index>(inputs.size());
   Eigen::MatrixXd X = timeFirst(states, "states", nx, "nx = 2 nq");
   Eigen::MatrixXd U = us.is_none() ? Eigen::MatrixXd::Zero(nu, times.size()) : timeFirst(us, "inputs", nu, "nu");
-  return Trajectory(std::move(configs), std::move(inputs), std::move(times), std::move(X), std::move(U));
+  return Trajectory(std::move(configs), std::move(inputs), Eigen::VectorXd(times.ref), std::move(X), std::move(U));
 }
 
 }  // namespace
@@ -59,8 +59,9 @@ void bindTrajectory(py::module_& m) {
            "times (N,) strictly increasing; states (N, nx); inputs (N, nu) (default zeros). Raises "
            "TrajectoryError.")
       .def_static("for_model",
-                  [](const Model& model, Eigen::VectorXd times, const py::object& states, const py::object& inputs) {
-                    return makeTrajectory(model.configNames(), model.inputNames(), std::move(times), states, inputs);
+                  [](const Model& model, const RealVector<"times">& times, const py::object& states,
+                     const py::object& inputs) {
+                    return makeTrajectory(model.configNames(), model.inputNames(), times, states, inputs);
                   },
                   py::arg("model"), py::arg("times"), py::arg("states"), py::arg("inputs") = py::none(),
                   "A trajectory with the model's names: states (N, nx), inputs (N, nu) (default zeros).")
@@ -112,7 +113,8 @@ void bindTrajectory(py::module_& m) {
            },
            py::arg("t"), "(x (nx,), u (nu,)) at time t; needs state derivatives.")
       .def("sample",
-           [](const Trajectory& tr, const Eigen::VectorXd& times) {
+           [](const Trajectory& tr, const RealVector<"times">& timesArg) {
+             const VectorRef& times = timesArg;
              Eigen::MatrixXd X(times.size(), tr.nx()), U(times.size(), tr.nu());
              Eigen::VectorXd x(tr.nx()), u(tr.nu());
              for (Eigen::Index k = 0; k < times.size(); ++k) {
@@ -131,22 +133,22 @@ void bindTrajectory(py::module_& m) {
   py::class_<GainSchedule>(m, "GainSchedule",
       "Feedback gains K(t) (nu, nx) at ascending times, linear in between; u = u_ref - K (x - x_ref). "
       "As arrays: times (N,), gains (N, nu, nx). CSV: t, K_<input>_<state> (row-major).")
-      .def(py::init([](Eigen::VectorXd times, const py::object& gains) {
-             return GainSchedule(std::move(times), gainsFromArray(gains));
+      .def(py::init([](const RealVector<"times">& times, const py::object& gains) {
+             return GainSchedule(Eigen::VectorXd(times.ref), gainsFromArray(gains));
            }),
            py::arg("times"), py::arg("gains"),
            "times (N,) strictly increasing; gains (N, nu, nx). Raises TrajectoryError.")
       .def_static("read_csv", &GainSchedule::readCsvFile, py::arg("path"))
       .def("write_csv", &GainSchedule::writeCsvFile, py::arg("path"))
       .def_static("sample",
-                  [](const py::function& gain, const Eigen::VectorXd& times) {
+                  [](const py::function& gain, const RealVector<"times">& times) {
                     return GainSchedule::sample(
                         [&](double t) {
                           const py::object K = gain(t);
                           refuseComplex(K, "gain(t)", "a real (nu, nx) matrix");
                           return K.cast<Eigen::MatrixXd>();
                         },
-                        times);
+                        Eigen::VectorXd(times.ref));
                   },
                   py::arg("gain"), py::arg("times"),
                   "Samples a Python function K(t) -> (nu, nx) at the times.")

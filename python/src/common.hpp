@@ -62,6 +62,17 @@ struct RealMatrix {
   operator const Eigen::MatrixXd&() const { return value; }  // NOLINT(google-explicit-constructor)
 };
 
+/// A real vector argument that knows its name: read as the Eigen::Ref<const VectorXd> caster reads
+/// it (a contiguous float64 array in place, anything else converted), except that a complex array
+/// is a TypeError naming the argument (refuseComplex). `.ref` (or the implicit conversion) is the
+/// vector. (A wrapper, not a Ref subclass: pybind11's own Eigen casters would claim a subclass.)
+template <ArgName Name>
+struct RealVector {
+  Eigen::Ref<const Eigen::VectorXd> ref;
+  operator const Eigen::Ref<const Eigen::VectorXd>&() const { return ref; }  // NOLINT(google-explicit-constructor)
+  Eigen::Index size() const { return ref.size(); }
+};
+
 /// The Status of a result as a Python class `name`: code (the C++ enum's name, a str such as
 /// "blow_up" — enum_names.hpp), message, t (float; NaN: no time), index (int; -1: none), ok, and
 /// describe() (the one line of Status::describe).
@@ -141,6 +152,22 @@ py::array_t<double> toArray(const Eigen::MatrixBase<Derived>& m) {
   }
 }
 py::object toArrayComplex(const Eigen::VectorXcd& v);  // complex128 (a copy)
+
+/// A vector or matrix field of an options or problem struct as a property that copies in and out
+/// (a NumPy view of the C++ buffer could dangle when the field is reassigned with another size);
+/// assigning a complex array is a TypeError naming the field (never cut to its real part).
+template <class Owner, class T, class PyClass>
+void realArrayProperty(PyClass& cls, const char* name, T Owner::*member, const char* doc) {
+  cls.def_property(
+      name, [member](const Owner& o) { return toArray(o.*member); },
+      [member, name](Owner& o, const py::object& value) {
+        refuseComplex(value, name, T::ColsAtCompileTime == 1 ? "a real (float64) vector"
+                                                             : "a real (float64) matrix");
+        o.*member = value.cast<T>();
+      },
+      doc);
+}
+
 /// N matrices of equal size as one (N, rows, cols) array.
 py::array_t<double> toArray3(const std::vector<Eigen::MatrixXd>& ms, Eigen::Index rows,
                              Eigen::Index cols);
@@ -228,6 +255,32 @@ struct type_caster<Eigen::Ref<const Eigen::VectorXd>> {
  private:
   type_caster<InnerRef> inner_;
   std::unique_ptr<Ref> ref_;
+};
+
+/// RealVector<"name">: the Ref<const VectorXd> caster after the complex check (naming the argument).
+template <trellis::python::ArgName Name>
+struct type_caster<trellis::python::RealVector<Name>> {
+  using Value = trellis::python::RealVector<Name>;
+  using InnerRef = Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::DontAlign>>;
+
+  bool load(handle src, bool convert) {
+    trellis::python::refuseComplex(src, Name.text, "a real (float64) vector");
+    if (!inner_.load(src, convert)) return false;
+    const InnerRef& mapped = inner_;
+    ref_ = std::make_unique<Value>(Value{Eigen::Ref<const Eigen::VectorXd>(mapped)});
+    return true;
+  }
+  static constexpr auto name = type_caster<InnerRef>::name;
+  // NOLINTNEXTLINE(google-explicit-constructor)
+  operator Value*() { return ref_.get(); }
+  // NOLINTNEXTLINE(google-explicit-constructor)
+  operator Value&() { return *ref_; }
+  template <typename T>
+  using cast_op_type = pybind11::detail::cast_op_type<T>;
+
+ private:
+  type_caster<InnerRef> inner_;
+  std::unique_ptr<Value> ref_;
 };
 
 /// RealMatrix<"name">: the Eigen::MatrixXd caster after the complex check (naming the argument).

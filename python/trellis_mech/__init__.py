@@ -19,7 +19,8 @@ Conventions (the C++ ones, in snake_case):
 * array arguments accept anything convertible to float64: a contiguous float64 array is read in
   place, anything else (other dtype, Fortran/C order mismatch, a non-contiguous slice, a list) is
   copied first; a complex array where a real one is expected raises ``TypeError`` instead of being
-  cut to its real part (matrices and weights name the argument: ``"A: got a complex array ..."``).
+  cut to its real part, naming the argument or field (``"A: got a complex array ..."``,
+  ``"q: ..."``, ``"times: ..."``, ``"input_lower: ..."``).
   Results are fresh C-order float64 arrays that own their memory. The ``out``-style keywords
   (``compute_linearization(..., A=, B=)``, ``compute_dynamics(..., qdd=, lambda_=)``) write into the
   caller's float64 array of the exact shape, in any memory order (strided writes), and raise

@@ -105,19 +105,36 @@ def test_complex_matrices_are_refused_naming_the_argument(tm):
     ref = reference(tm, model, "cart_pole_upright.csv")
     with pytest.raises(TypeError, match=r"^Q: got a complex array"):
         tm.solve_tvlqr(model, ref, Q=np.eye(4, dtype=complex), R=1.0)
-    with pytest.raises(TypeError, match="complex array"):
-        tm.compute_dynamics(model, tm.Data(model), np.zeros(2, dtype=complex), np.zeros(2), np.zeros(1))
-    # Vectors and matrices taken by value (times, bounds, a problem's fields) too: refused, never
-    # cut to their real part.
-    with pytest.raises(TypeError, match="complex array"):
+    # Vectors name the argument too: each of q, dq, u in its own position.
+    data, z2, z1 = tm.Data(model), np.zeros(2), np.zeros(1)
+    for name, args in (("q", (z2 + 0j, z2, z1)), ("dq", (z2, z2 + 0j, z1)), ("u", (z2, z2, z1 + 0j))):
+        with pytest.raises(TypeError, match=rf"^{name}: got a complex array \(complex128\)"):
+            tm.compute_dynamics(model, data, *args)
+        with pytest.raises(TypeError, match=rf"^{name}: got a complex array"):
+            tm.compute_linearization(model, data, *args)
+    with pytest.raises(TypeError, match=r"^x0: got a complex array"):
+        tm.simulate_open_loop(model, ref, np.zeros(4, dtype=complex))
+    with pytest.raises(TypeError, match=r"^w: got a complex array"):
+        tm.second_order_contraction(model, z2, z2, z1)(np.ones(2, dtype=complex))
+    # Vectors and matrices taken by value (times, bounds, a problem's fields) too: refused naming
+    # the argument or field, never cut to their real part.
+    with pytest.raises(TypeError, match=r"^times: got a complex array"):
         tm.Trajectory(["a"], [], np.array([0.0, 1.0], dtype=complex), np.zeros((2, 2)))
+    with pytest.raises(TypeError, match=r"^times: got a complex array"):
+        tm.GainSchedule(np.array([0.0, 1.0], dtype=complex), np.zeros((2, 1, 2)))
+    with pytest.raises(TypeError, match=r"^times: got a complex array"):
+        ref.sample(np.array([0.0, 0.5], dtype=complex))
     problem = tm.OptimalControlProblem(model)
-    with pytest.raises(TypeError, match="complex array"):
+    with pytest.raises(TypeError, match=r"^input_lower: got a complex array"):
         problem.input_lower = np.array([-1.0 + 0j])
-    with pytest.raises(TypeError, match="complex array"):
+    with pytest.raises(TypeError, match=r"^R: got a complex array .* a real \(float64\) matrix"):
         problem.R = np.eye(1, dtype=complex)
     problem.input_lower = np.array([-1.0])
     assert problem.input_lower.tolist() == [-1.0]
+    with pytest.raises(TypeError, match=r"^input_upper: got a complex array"):
+        tm.SimulationOptions(input_upper=np.array([1.0 + 0j]))
+    options = tm.SimulationOptions(input_lower=[-2.0], input_upper=np.array([2.0]))
+    assert options.input_lower.tolist() == [-2.0] and options.input_upper.tolist() == [2.0]
     # The real arrays of the same values work.
     assert tm.solve_care(A, B, np.eye(2), [[1.0]]).ok
 
