@@ -79,7 +79,7 @@ void HandTransport(benchmark::State& state) {
   for (auto _ : state) {
     b = trellis::transportTangentBasis(h.scene.model, h.trajectory, o);
     if (!b.ok()) {
-      state.SkipWithError(b.message().c_str());
+      state.SkipWithError(b.describe().c_str());
       return;
     }
   }

@@ -136,8 +136,8 @@ GramianReport computeControllabilityGramian(const Model& model, const Trajectory
   const Eigen::Index d = basis.dimension();
   report.W.setZero(d, d);
   if (basis.validUntil() < t1) {
-    report.status.set(ControllabilityCode::kTransportFailure, "Gramian: " + basis.message(),
-                      basis.validUntil());
+    report.status.set(ControllabilityCode::kTransportFailure, "Gramian: " + basis.status().message,
+                      basis.status().t);
     return report;
   }
   GramianSystem system(model, basis);

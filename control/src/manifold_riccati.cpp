@@ -51,7 +51,8 @@ ManifoldRiccatiSolution solveManifoldRiccati(const Model& model, const Trajector
   ManifoldRiccatiSolution sol;
   sol.basis = transportTangentBasis(model, reference, transport);
   if (!sol.basis.ok()) {
-    sol.status.set(ManifoldRiccatiCode::kTransportFailure, sol.basis.message(), sol.basis.validUntil());
+    sol.status.set(ManifoldRiccatiCode::kTransportFailure, sol.basis.status().message,
+                   sol.basis.status().t);
     return sol;
   }
 

@@ -2,6 +2,7 @@
 // nodes, then the polar factor) and ReducedLinearization, its model-bound evaluation for solvers.
 #include "trellis/core/reference.hpp"
 #include "trellis/control/manifold_lqr.hpp"
+#include "trellis/core/detail/report_json.hpp"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
@@ -30,8 +31,33 @@ const Trajectory& TangentBasisTrajectory::reference() const {
   return *trajectory_;
 }
 
+std::string TangentBasisTrajectory::describe() const {
+  if (!ok()) return status_.describe();
+  std::ostringstream m;
+  m << "ok: T(t) " << nx_ << "x" << d_ << " on [" << t0_ << ", " << tf_ << "], " << steps_
+    << " steps, largest correction " << maxCorrection_;
+  return m.str();
+}
+
+std::string TangentBasisTrajectory::json() const {
+  detail::ReportJson j = detail::statusJson(status_);
+  j["dimension"] = d_;
+  j["nx"] = nx_;
+  j["start_time"] = detail::toJson(t0_);
+  j["end_time"] = detail::toJson(tf_);
+  j["valid_until"] = hasBasis() ? detail::toJson(validUntil_) : detail::ReportJson(nullptr);
+  j["steps"] = steps_;
+  j["difference_quotient_evaluations"] = linearRhsEvaluations_;
+  j["max_correction"] = detail::toJson(maxCorrection_);
+  return j.dump();
+}
+
 void TangentBasisTrajectory::checkRange(double t, const char* what) const {
   if (nx_ == 0) throw std::out_of_range("TangentBasisTrajectory: empty (not transported)");
+  if (!hasBasis()) {
+    throw std::out_of_range(std::string("TangentBasisTrajectory::") + what +
+                            ": no basis anywhere (" + status_.describe() + ")");
+  }
   const double slack = 1e-12 * std::max({1.0, std::abs(t0_), std::abs(tf_)});
   if (!(t >= t0_ - slack && t <= validUntil_ + slack)) {
     std::ostringstream m;

@@ -136,6 +136,7 @@ TangentBasisTrajectory transportTangentBasis(const Model& model, const Trajector
   out.t0_ = reference.startTime();
   out.tf_ = reference.endTime();
   out.validUntil_ = out.tf_;
+  out.status_ = {};
 
   if (model.nc() == 0) {  // T = I: Ṫ = (I − I) A I = 0
     out.identity_ = true;
@@ -143,10 +144,15 @@ TangentBasisTrajectory transportTangentBasis(const Model& model, const Trajector
     return out;
   }
 
-  // T(t0): the core's basis at x(t0).
-  // A reference whose dynamics fail at t0 has no basis to transport: refused like bad input.
+  // T(t0): the core's basis at x(t0). Where the dynamics fail already there, there is no basis
+  // anywhere: a status (hasBasis() false), like a failure later on.
   const ReferenceStatus first = start.linearizeWithTangentBasis(out.t0_);
-  if (!first.ok()) throw std::runtime_error(first.message);
+  if (!first.ok()) {
+    out.validUntil_ = out.t0_;
+    out.status_.set(TransportCode::kDynamicsFailure,
+                    "tangent basis transport: no basis at t0: " + first.message, out.t0_);
+    return out;
+  }
   const Eigen::Index d = start.tangentBasis().cols();
   if (d == 0) {
     throw std::invalid_argument(
@@ -188,10 +194,14 @@ TangentBasisTrajectory transportTangentBasis(const Model& model, const Trajector
     for (std::size_t i = 1; i < grid.size(); ++i) {
       const double t = grid[i];
       const ReferenceStatus st = start.linearizeWithTangentBasis(t, d);
-      std::string why = st.message;
+      if (!st.ok()) {
+        out.status_.set(TransportCode::kDynamicsFailure, "tangent basis transport: " + st.message, t);
+        break;
+      }
+      std::string why;
       Ttilde = T;
-      if (!st.ok() || !correctOnto(start.tangentBasis(), Ttilde, t, svd, T, why)) {
-        out.message_ = "tangent basis transport: " + why;
+      if (!correctOnto(start.tangentBasis(), Ttilde, t, svd, T, why)) {
+        out.status_.set(TransportCode::kTurnedTooFast, "tangent basis transport: " + why, t);
         break;
       }
       out.stored_.append(t, Eigen::Map<const Eigen::VectorXd>(Ttilde.data(), N));
@@ -210,17 +220,18 @@ TangentBasisTrajectory transportTangentBasis(const Model& model, const Trajector
   out.stored_.append(out.t0_, Eigen::Map<const Eigen::VectorXd>(T.data(), N));
   addNode(grid[0], T, start, T);
   Eigen::VectorXd dky(N);
-  for (std::size_t i = 1; i < grid.size() && out.message_.empty(); ++i) {
+  for (std::size_t i = 1; i < grid.size() && out.status_.ok(); ++i) {
     const double tn = grid[i];
     while (driver.time() < tn) {
       const detail::OdeStatus st = driver.step(tn);
       if (!st.ok()) {
-        out.message_ = st.message;
-        if (st.flag == -1) out.message_ += " (more than maxSteps = " + std::to_string(o.maxSteps) + " steps)";
+        std::string why = st.message;
+        if (st.flag == -1) why += " (more than maxSteps = " + std::to_string(o.maxSteps) + " steps)";
+        out.status_.set(TransportCode::kIntegratorFailure, std::move(why), st.t);
         break;
       }
       if (!driver.state().allFinite()) {
-        out.message_ = "tangent basis transport became non-finite at t = " + std::to_string(st.t);
+        out.status_.set(TransportCode::kNonFinite, "tangent basis transport became non-finite", st.t);
         break;
       }
       const int q = driver.stats().lastOrder;
@@ -228,12 +239,16 @@ TangentBasisTrajectory transportTangentBasis(const Model& model, const Trajector
       for (int k = 0; k <= q; ++k) driver.interpolate(st.t, k, dky), D.col(k) = dky;
       out.stored_.append(st.t, std::move(D));
     }
-    if (!out.message_.empty()) break;
+    if (!out.status_.ok()) break;
     Ttilde = Eigen::Map<const Eigen::MatrixXd>(driver.state().data(), nx, d);
     const ReferenceStatus st = system.prepare(tn);
-    std::string why = st.message;
-    if (!st.ok() || !correctOnto(system.point.tangentBasis(), Ttilde, tn, svd, T, why)) {
-      out.message_ = "tangent basis transport: " + why;
+    if (!st.ok()) {
+      out.status_.set(TransportCode::kDynamicsFailure, "tangent basis transport: " + st.message, tn);
+      break;
+    }
+    std::string why;
+    if (!correctOnto(system.point.tangentBasis(), Ttilde, tn, svd, T, why)) {
+      out.status_.set(TransportCode::kTurnedTooFast, "tangent basis transport: " + why, tn);
       break;
     }
     addNode(tn, T, system.point, Ttilde);

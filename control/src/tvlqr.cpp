@@ -216,8 +216,8 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
   const TangentBasisTrajectory basis = transportTangentBasis(model, reference, options.transport);
   sol.transportSteps = basis.steps();
   if (!basis.ok()) {
-    sol.status.set(TvlqrCode::kTransportFailure, "the tangent basis transport failed: " + basis.message(),
-                   basis.validUntil());
+    sol.status.set(TvlqrCode::kTransportFailure, "the tangent basis transport failed: " + basis.status().message,
+                   basis.status().t);
     return sol;
   }
   const int d = basis.dimension();

@@ -1,5 +1,6 @@
 // numdiff.cpp — finite differences of the dynamics (numdiff.hpp: schemes, steps, error model).
 #include "trellis/core/numdiff.hpp"
+#include "trellis/core/detail/report_json.hpp"
 
 #include "trellis/core/dynamics.hpp"
 #include "trellis/core/linearization.hpp"
@@ -135,7 +136,7 @@ LinearizationCheck checkLinearization(const Model& model, const Eigen::VectorXd&
   Data data(model);
   const DynamicsStatus exact = computeLinearization(model, data, q, dq, u);
   if (!exact.ok()) {
-    out.message = "computeLinearization failed: " + exact.message;
+    out.status.set(LinearizationCheckCode::kExactFailed, "computeLinearization: " + exact.describe());
     return out;
   }
   out.exactJ.resize(n, 2 * n + m);
@@ -143,10 +144,9 @@ LinearizationCheck checkLinearization(const Model& model, const Eigen::VectorXd&
   NumDiffWorkspace ws(model);
   const DynamicsStatus fd = differenceDynamics(model, data, q, dq, u, options, ws, out.differenceJ);
   if (!fd.ok()) {
-    out.message = "finite differences failed: " + fd.message;
+    out.status.set(LinearizationCheckCode::kDifferenceFailed, "finite differences: " + fd.describe());
     return out;
   }
-  out.evaluated = true;
   for (int j = 0; j < 2 * n + m; ++j) {
     const double scale = std::max(1.0, out.differenceJ.col(j).cwiseAbs().maxCoeff());
     for (int i = 0; i < n; ++i) {
@@ -165,12 +165,28 @@ LinearizationCheck checkLinearization(const Model& model, const Eigen::VectorXd&
                                       : model.inputNames()[out.column - 2 * n];
   out.exact = out.exactJ(out.row, out.column);
   out.difference = out.differenceJ(out.row, out.column);
+  return out;
+}
+
+std::string LinearizationCheck::describe() const {
+  if (!ok()) return status.describe();
   std::ostringstream s;
   s.precision(6);
-  s << "worst entry d(" << out.rowName << ")/d(" << out.columnName << "): exact " << out.exact
-    << ", finite difference " << out.difference << ", column-relative error " << out.maxError;
-  out.message = s.str();
-  return out;
+  s << "ok: worst entry d(" << rowName << ")/d(" << columnName << "): exact " << exact
+    << ", finite difference " << difference << ", column-relative error " << maxError;
+  return s.str();
+}
+
+std::string LinearizationCheck::json() const {
+  detail::ReportJson j = detail::statusJson(status);
+  j["max_error"] = detail::toJson(maxError);
+  j["row"] = row;
+  j["column"] = column;
+  j["row_name"] = rowName;
+  j["column_name"] = columnName;
+  j["exact"] = detail::toJson(exact);
+  j["difference"] = detail::toJson(difference);
+  return j.dump();
 }
 
 }  // namespace trellis

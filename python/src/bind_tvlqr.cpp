@@ -141,14 +141,20 @@ void bindTvlqr(py::module_& m) {
         "diagonal or a matrix (a complex array is a TypeError naming it); Qf defaults to Q. "
         "Returns plain data; numerical failure is the status. Releases the GIL.");
 
+  bindStatus<TransportCode>(m, "TransportStatus",
+      "Status of transport_tangent_basis (code: ok, dynamics_failure, integrator_failure, "
+      "non_finite, turned_too_fast, not_transported; t: where it stopped).");
   py::class_<TangentBasisTrajectory>(m, "TangentBasisTrajectory",
       "T(t) (nx, d): an orthonormal basis of the constraint manifold's tangent space, transported "
-      "along the reference (plain data). ok / message / valid_until report a transport that "
-      "stopped early.")
+      "along the reference (plain data). status / valid_until report a transport that stopped "
+      "early (has_basis is False when it failed at t0 already).")
       .def_property_readonly("dimension", &TangentBasisTrajectory::dimension)
       .def_property_readonly("nx", &TangentBasisTrajectory::nx)
+      .def_property_readonly("status", &TangentBasisTrajectory::status)
       .def_property_readonly("ok", &TangentBasisTrajectory::ok)
-      .def_property_readonly("message", &TangentBasisTrajectory::message)
+      .def("describe", &TangentBasisTrajectory::describe)
+      .def("json", &TangentBasisTrajectory::json)
+      .def_property_readonly("has_basis", &TangentBasisTrajectory::hasBasis)
       .def_property_readonly("valid_until", &TangentBasisTrajectory::validUntil)
       .def_property_readonly("steps", &TangentBasisTrajectory::steps)
       .def_property_readonly("max_correction", &TangentBasisTrajectory::maxCorrection)

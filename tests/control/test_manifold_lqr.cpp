@@ -195,6 +195,38 @@ TEST_CASE("transported tangent basis on the paper pendulum", "[manifold]") {
     }
   }
 
+  SECTION("dynamics that fail at t0: a status with no basis anywhere, never an exception") {
+    // Two carts tied by a point constraint, one carrying a spinner that moves no mass: M is
+    // singular at every state, so there is no tangent basis even at t0.
+    trellis::ModelBuilder b("carts_with_massless_spinner");
+    b.addFrame("cart1", "world", trellis::Transform::tx("x1"), trellis::Mass{1.0, Eigen::Matrix3d::Zero()});
+    b.addFrame("cart2", "world", trellis::Transform::tx("x2"), trellis::Mass{1.0, Eigen::Matrix3d::Zero()});
+    b.addFrame("spinner", "cart2", trellis::Transform::rz("phi"));
+    b.addPointConstraint("cart1", "cart2", 0);
+    b.addConfigForce("x1", "push");
+    const trellis::Model bad = std::move(b).finalize();
+    trellis::Trajectory still(bad.configNames(), bad.inputNames(), (VectorXd(2) << 0.0, 1.0).finished(),
+                              MatrixXd::Zero(6, 2), MatrixXd::Zero(1, 2));
+    still.setStateDerivatives(MatrixXd::Zero(6, 2));
+    trellis::TangentBasisTrajectory none;
+    REQUIRE_NOTHROW(none = trellis::transportTangentBasis(bad, still));
+    CHECK_FALSE(none.ok());
+    CHECK_FALSE(none.hasBasis());
+    CHECK(none.status().code == trellis::TransportCode::kDynamicsFailure);
+    CHECK(none.status().t == 0.0);
+    CHECK_THAT(none.status().message, Catch::Contains("no basis at t0") &&
+                                          Catch::Contains("moves no mass"));
+    CHECK_THROWS_AS(none.basis(0.0), std::out_of_range);
+    CHECK_THAT(none.json(), Catch::Contains("\"valid_until\":null"));
+    // The solvers report it as their status (no exception either).
+    const auto lqr = trellis::solveManifoldRiccati(
+        bad, still, {MatrixXd::Identity(6, 6), MatrixXd::Identity(1, 1), MatrixXd::Identity(6, 6), {}, {}});
+    CHECK(lqr.status.code == trellis::ManifoldRiccatiCode::kTransportFailure);
+    CHECK(lqr.status.t == 0.0);
+    // Default-constructed: not transported.
+    CHECK(trellis::TangentBasisTrajectory{}.status().code == trellis::TransportCode::kNotTransported);
+  }
+
   SECTION("bad options and failure status") {
     trellis::TangentTransportOptions bad;
     bad.rtol = -1;
@@ -204,7 +236,12 @@ TEST_CASE("transported tangent basis on the paper pendulum", "[manifold]") {
     few.maxSteps = 3;
     const auto partial = trellis::transportTangentBasis(model, ref, few);
     CHECK(!partial.ok());
-    CHECK_THAT(partial.message(), Catch::Contains("t = ") && Catch::Contains("maxSteps"));
+    CHECK(partial.status().code == trellis::TransportCode::kIntegratorFailure);
+    CHECK_THAT(partial.status().message, Catch::Contains("t = ") && Catch::Contains("maxSteps"));
+    CHECK(partial.status().t <= 2.0);
+    CHECK(partial.hasBasis());
+    CHECK_THAT(partial.describe(), Catch::StartsWith("integrator_failure at t = "));
+    CHECK_THAT(partial.json(), Catch::Contains("\"status\":\"integrator_failure\""));
     CHECK(partial.validUntil() < 2.0);
     CHECK_THROWS_AS(partial.basis(2.0), std::out_of_range);
     const auto lqr = trellis::solveManifoldRiccati(

@@ -49,19 +49,21 @@ TEST_CASE("numdiff: differences of the dynamics agree with the exact linearizati
     std::mt19937 rng(4242);
     const State s = randomState(model, rng);
     const LinearizationCheck central = checkLinearization(model, s.q, s.dq, s.u);
-    INFO(central.message);
-    REQUIRE(central.evaluated);
+    INFO(central.describe());
+    REQUIRE(central.ok());
     CHECK(central.maxError < 1e-7);
     CHECK(central.exactJ.rows() == model.nq());
     CHECK(central.exactJ.cols() == 2 * model.nq() + model.nu());
     CHECK(central.rowName.rfind("dd", 0) == 0);
     CHECK(central.exact == central.exactJ(central.row, central.column));
-    CHECK_THAT(central.message, Catch::Contains("worst entry d(" + central.rowName + ")/d(" +
-                                                central.columnName + ")"));
+    CHECK_THAT(central.describe(), Catch::StartsWith("ok: worst entry d(" + central.rowName + ")/d(" +
+                                                     central.columnName + ")"));
+    CHECK_THAT(central.json(), Catch::Contains("\"status\":\"ok\"") &&
+                                   Catch::Contains("\"row_name\":\"" + central.rowName + "\""));
     NumDiffOptions forward;
     forward.scheme = DifferenceScheme::kForward;
     const LinearizationCheck f = checkLinearization(model, s.q, s.dq, s.u, forward);
-    REQUIRE(f.evaluated);
+    REQUIRE(f.ok());
     CHECK(f.maxError < 1e-5);
     CHECK(f.maxError > central.maxError);  // the first-order scheme is the less accurate one
     // The allocation-free entry point gives the same matrix as the check.
@@ -73,4 +75,21 @@ TEST_CASE("numdiff: differences of the dynamics agree with the exact linearizati
   };
   SECTION("paper pendulum (closed chain)") { check(paperPendulum().model); }
   SECTION("planar skate (knife edge)") { check(planarSkate(0.3).model); }
+}
+
+TEST_CASE("numdiff: a check whose dynamics fail is a status naming the path", "[numdiff][status]") {
+  // A joint that moves no mass: M is singular at every state.
+  ModelBuilder b("massless");
+  b.addFrame("cart", "world", Transform::tx("x"), Mass{1.0, Eigen::Matrix3d::Zero()});
+  b.addFrame("spinner", "cart", Transform::rz("phi"));
+  b.addConfigForce("x", "push");
+  const Model model = std::move(b).finalize();
+  const Eigen::VectorXd z = Eigen::VectorXd::Zero(2), u = Eigen::VectorXd::Zero(1);
+  LinearizationCheck c;
+  REQUIRE_NOTHROW(c = checkLinearization(model, z, z, u));
+  CHECK_FALSE(c.ok());
+  CHECK(c.status.code == LinearizationCheckCode::kExactFailed);
+  CHECK(c.row == -1);
+  CHECK_THAT(c.describe(), Catch::StartsWith("exact_failed: computeLinearization: singular_mass_matrix"));
+  CHECK_THAT(c.json(), Catch::Contains("\"status\":\"exact_failed\"") && Catch::Contains("\"ok\":false"));
 }

@@ -103,6 +103,28 @@ struct TangentTransportOptions {
   void validate() const;
 };
 
+/// Outcome codes of transportTangentBasis (status.t: where the transport stopped).
+enum class TransportCode {
+  kOk,
+  kDynamicsFailure,    ///< the dynamics or the tangent basis failed at x_ref(t) (t0 included)
+  kIntegratorFailure,  ///< CVODES stopped (error test, convergence, more than maxSteps steps)
+  kNonFinite,          ///< the transported basis became NaN/Inf
+  kTurnedTooFast,      ///< the tangent space turned by more than the transport can follow
+  kNotTransported,     ///< default-constructed: no transport ran
+};
+
+/// Names: ok, dynamics_failure, integrator_failure, non_finite, turned_too_fast, not_transported.
+inline EnumNameTable<TransportCode> enumNames(TransportCode) {
+  static constexpr EnumName<TransportCode> table[] = {
+      {TransportCode::kOk, "ok"},
+      {TransportCode::kDynamicsFailure, "dynamics_failure"},
+      {TransportCode::kIntegratorFailure, "integrator_failure"},
+      {TransportCode::kNonFinite, "non_finite"},
+      {TransportCode::kTurnedTooFast, "turned_too_fast"},
+      {TransportCode::kNotTransported, "not_transported"}};
+  return table;
+}
+
 /// T(t) along a reference trajectory: plain data (see "A plain-data result" above), safe to copy,
 /// to share between threads (every query is const and uses no shared workspace) and to keep after
 /// the model is gone.
@@ -113,11 +135,17 @@ class TangentBasisTrajectory {
   double startTime() const { return t0_; }  ///< t_0 of the reference [s]
   double endTime() const { return tf_; }    ///< t_{N−1} of the reference [s]
 
-  /// True when the transport covered the whole trajectory (false for a default-constructed object).
-  /// Otherwise message() names the time and the cause (dynamics failure at x(t), CVODES error), and
-  /// T is available on [t0, validUntil()].
-  bool ok() const { return nx_ > 0 && message_.empty(); }
-  const std::string& message() const { return message_; }  ///< empty when ok(); else time and cause
+  /// status().ok(): the transport covered the whole trajectory. Otherwise status() names the
+  /// cause, its time (t) and message, and T is available on [t0, validUntil()] — nowhere when the
+  /// dynamics already fail at t0 (hasBasis() is false then).
+  bool ok() const { return status_.ok(); }
+  const Status<TransportCode>& status() const { return status_; }  ///< code, message, t
+  /// One line: "ok: …" or the failure with its time (Status::describe).
+  std::string describe() const;
+  /// One JSON object: status fields, d, nx, the valid range, steps and the largest correction.
+  std::string json() const;
+  /// True when T(t) is available somewhere (on [startTime(), validUntil()]).
+  bool hasBasis() const { return nx_ > 0 && (identity_ || !nodeTimes_.empty()); }
   double validUntil() const { return validUntil_; }         ///< T is available on [startTime(), validUntil()]
   long steps() const { return steps_; }  ///< CVODES internal steps (kProjected: transport steps)
   /// Right-hand sides spent on difference-quotient Jacobian products (0: the exact ones were used).
@@ -166,7 +194,7 @@ class TangentBasisTrajectory {
   std::vector<Eigen::MatrixXd> nodeT_, nodeDT_;  // corrected T and Ṫ at the nodes
   std::vector<Eigen::MatrixXd> nodeAr_, nodeBr_;  // TᵀAT, TᵀB at the nodes
   bool nodeLinearization_ = false;                // solvers interpolate nodeAr_/nodeBr_ (kNodes)
-  std::string message_;
+  Status<TransportCode> status_{TransportCode::kNotTransported, "no transport ran"};
   long steps_ = 0, linearRhsEvaluations_ = 0;
   double maxCorrection_ = 0.0;
 };

@@ -18,6 +18,7 @@
 #pragma once
 
 #include "trellis/core/data.hpp"
+#include "trellis/core/status.hpp"
 
 #include <Eigen/Core>
 
@@ -76,11 +77,28 @@ using DifferenceFunction = std::function<void(const Eigen::VectorXd&, Eigen::Vec
 Eigen::MatrixXd differenceJacobian(const DifferenceFunction& f, const Eigen::VectorXd& x,
                                    const NumDiffOptions& options = {});
 
+/// Outcome codes of checkLinearization (status.message says which path failed and why).
+enum class LinearizationCheckCode {
+  kOk,                ///< both paths evaluated; maxError and the worst entry are set
+  kExactFailed,       ///< computeLinearization returned a status that is not ok
+  kDifferenceFailed,  ///< the dynamics failed at a perturbed state of the differences
+};
+
+/// Names: ok, exact_failed, difference_failed.
+inline EnumNameTable<LinearizationCheckCode> enumNames(LinearizationCheckCode) {
+  static constexpr EnumName<LinearizationCheckCode> table[] = {
+      {LinearizationCheckCode::kOk, "ok"},
+      {LinearizationCheckCode::kExactFailed, "exact_failed"},
+      {LinearizationCheckCode::kDifferenceFailed, "difference_failed"}};
+  return table;
+}
+
 /// Exact A, B (computeLinearization) against differenceDynamics at one state. The error of
 /// column j is max_i |J_ij − D_ij| / max(1, max_i |D_ij|) (relative to the column's scale, so a
-/// light body's columns are not hidden by a heavy one's); the worst entry is named.
+/// light body's columns are not hidden by a heavy one's); the worst entry is named. A measurement,
+/// not a verdict: the caller compares maxError with its own tolerance.
 struct LinearizationCheck {
-  bool evaluated = false;  ///< both paths evaluated (else `message` says which failed)
+  Status<LinearizationCheckCode> status;  ///< ok: both paths evaluated (else which one failed)
   double maxError = 0.0;   ///< worst column-relative error
   ///@{
   /// The worst entry in J (row i: q̈_i; column j of [q; q̇; u]); −1 when not evaluated.
@@ -98,7 +116,13 @@ struct LinearizationCheck {
   /// Both Jacobians, n × (2n + m).
   Eigen::MatrixXd exactJ, differenceJ;
   ///@}
-  std::string message;     ///< one line: the worst entry, both values, the error
+
+  bool ok() const { return status.ok(); }  ///< status.ok(): both paths evaluated
+  /// One line: the worst entry, both values and the error ("ok: worst entry d(ddx)/d(theta): …"),
+  /// or the failure.
+  std::string describe() const;
+  /// One JSON object: status fields, max_error, the worst entry (row, column, names, both values).
+  std::string json() const;
 };
 LinearizationCheck checkLinearization(const Model& model, const Eigen::VectorXd& q,
                                       const Eigen::VectorXd& dq, const Eigen::VectorXd& u,
