@@ -182,10 +182,10 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
       << "derivatives: " << derivativesName << '\n'
       << "hessian: " << toString(result.hessian) << '\n'
       << "consistency_defect: "
-      << (result.consistency.integrated ? formatNumber(result.consistency.maxDefect, 3)
+      << (result.consistency.checked() ? formatNumber(result.consistency.maxDefect, 3)
                                         : std::string("not checked (the solve or the integration failed first)"))
       << '\n';
-  if (result.consistency.worstInterval >= 0 && result.consistency.integrated) {
+  if (result.consistency.worstInterval >= 0 && result.consistency.checked()) {
     out << "consistency_where: " << result.consistency.worstStateName << " on interval "
         << result.consistency.worstInterval << " at t = " << formatNumber(result.consistency.worstTime, 6)
         << '\n';

@@ -4,6 +4,7 @@
 #include "trellis/analysis/consistency.hpp"
 
 #include "trellis/analysis/detail/ode_driver.hpp"
+#include "trellis/core/detail/report_json.hpp"
 
 #include "trellis/core/data.hpp"
 #include "trellis/core/dynamics.hpp"
@@ -91,17 +92,29 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
   const int n = model.nq(), nx = 2 * n, N = input.size();
   if (N < 2) throw TrajectoryError("checkConsistency: the trajectory needs at least 2 knots");
 
-  // The readers' reference: knot derivatives from the core (Hermite spline), the file's input
-  // rule. (Names and knot count are checked above, so a refusal here is the dynamics at a knot.)
-  std::optional<ReferenceEvaluator> reference;
-  try {
-    ReferenceOptions checks;
-    checks.stateDerivatives = ReferenceOptions::StateDerivatives::kFromDynamics;
-    reference.emplace(model, input, checks);
-  } catch (const TrajectoryError& e) {
-    result.message = std::string("not checked: ") + e.what();
-    return result;
+  // The readers' reference: knot derivatives ẋ_k = [q̇_k; q̈_k] from the core (the Hermite
+  // spline's slopes), the file's input rule. A knot where the dynamics fail is the verdict.
+  Trajectory withDerivatives = input;
+  {
+    Data data(model);
+    Eigen::MatrixXd Xdot(nx, N);
+    for (int k = 0; k < N; ++k) {
+      const auto x = input.states().col(k);
+      const DynamicsStatus st = computeDynamics(model, data, x.head(n), x.tail(n), input.inputs().col(k));
+      if (!st.ok()) {
+        result.status.set(ConsistencyCode::kDynamicsFailure,
+                          "not checked: the dynamics fail at knot " + std::to_string(k) + ": " + st.describe(),
+                          input.times()(k), k);
+        return result;
+      }
+      Xdot.col(k) << x.tail(n), data.qdd;
+    }
+    withDerivatives.setStateDerivatives(std::move(Xdot));
   }
+  ReferenceOptions checks;
+  checks.stateDerivatives = ReferenceOptions::StateDerivatives::kKeepSupplied;
+  std::optional<ReferenceEvaluator> reference;
+  reference.emplace(model, std::move(withDerivatives), checks);
   const Trajectory& trajectory = reference->trajectory();
 
   // Scales s_i (file comment).
@@ -123,8 +136,8 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
 
   result.intervalDefects = Eigen::VectorXd::Zero(N - 1);
   Eigen::VectorXd e(nx), y(nx);
-  result.integrated = true;
-  for (int k = 0; k + 1 < N && result.integrated; ++k) {
+  bool integrated = true;
+  for (int k = 0; k + 1 < N && integrated; ++k) {
     const double ta = trajectory.times()(k), tb = trajectory.times()(k + 1), tm = 0.5 * (ta + tb);
     driver.start(ta, X.col(k));
     double interval = 0.0;
@@ -134,12 +147,12 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
       detail::OdeStatus st;
       while (driver.time() < target && st.ok()) st = driver.step(tb);
       if (!st.ok()) {
-        result.integrated = false;
-        result.worstInterval = k;
-        result.worstTime = st.t;
-        result.message = "not checked: the integration of interval " + std::to_string(k) + " [" +
-                         formatNumber(ta) + ", " + formatNumber(tb) + "] failed at t = " +
-                         formatNumber(st.t) + ": " + st.message;
+        integrated = false;
+        result.status.set(ConsistencyCode::kIntegratorFailure,
+                          "not checked: the integration of interval " + std::to_string(k) + " [" +
+                              formatNumber(ta) + ", " + formatNumber(tb) + "] failed at t = " +
+                              formatNumber(st.t) + ": " + st.message,
+                          st.t, k);
         break;
       }
       if (stage == 0) {
@@ -164,25 +177,44 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
         result.worstState = i;
       }
     }
-    if (result.integrated) result.intervalDefects(k) = interval;
+    if (integrated) result.intervalDefects(k) = interval;
   }
   const detail::OdeStats stats = driver.stats();
   result.steps = stats.steps;
   result.rhsEvaluations = stats.rhsEvaluations;
-  if (!result.integrated) return result;
+  if (!integrated) return result;
   const int i = result.worstState;
   result.worstStateName = i < n ? trajectory.configNames()[i] : "d" + trajectory.configNames()[i - n];
-  result.consistent = result.maxDefect <= options.tolerance;
+  const bool consistent = result.maxDefect <= options.tolerance;
   std::ostringstream m;
-  m << (result.consistent ? "consistent" : "inconsistent") << ": worst defect "
+  m << (consistent ? "consistent" : "inconsistent") << ": worst defect "
     << formatNumber(result.maxDefect) << " of the state's range (tolerance "
     << formatNumber(options.tolerance) << ") in '" << result.worstStateName << "' on interval "
     << result.worstInterval << " [" << formatNumber(trajectory.times()(result.worstInterval)) << ", "
     << formatNumber(trajectory.times()(result.worstInterval + 1)) << "], "
     << (result.worstAtMidpoint ? "at its midpoint t = " : "at its end t = ")
     << formatNumber(result.worstTime);
-  result.message = m.str();
+  if (consistent) {
+    result.status.set(ConsistencyCode::kOk, m.str());
+  } else {
+    result.status.set(ConsistencyCode::kInconsistent, m.str(), result.worstTime, result.worstInterval);
+  }
   return result;
+}
+
+std::string ConsistencyResult::describe() const { return status.describe(); }
+
+std::string ConsistencyResult::json() const {
+  detail::ReportJson j = detail::statusJson(status);
+  j["tolerance"] = detail::toJson(tolerance);
+  j["max_defect"] = checked() ? detail::toJson(maxDefect) : detail::ReportJson(nullptr);
+  j["worst_interval"] = checked() ? detail::ReportJson(worstInterval) : detail::ReportJson(nullptr);
+  j["worst_time"] = checked() ? detail::toJson(worstTime) : detail::ReportJson(nullptr);
+  j["worst_at_midpoint"] = worstAtMidpoint;
+  j["worst_state"] = worstStateName;
+  j["steps"] = steps;
+  j["rhs_evaluations"] = rhsEvaluations;
+  return j.dump();
 }
 
 }  // namespace trellis

@@ -591,8 +591,8 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
       const Eigen::VectorXd slackShare = measureSlack(problem, options, result);
       info.maxDefect = result.consistency.maxDefect;
       info.maxSlackDefect = result.maxSlackDefect;
-      consistent = result.consistency.consistent && result.maxSlackDefect <= options.consistencyTolerance;
-      if (result.consistency.integrated) errors = result.consistency.intervalDefects.cwiseMax(slackShare);
+      consistent = result.consistency.ok() && result.maxSlackDefect <= options.consistencyTolerance;
+      if (result.consistency.checked()) errors = result.consistency.intervalDefects.cwiseMax(slackShare);
     }
     info.solveTime = std::chrono::duration<double>(std::chrono::steady_clock::now() - roundStart).count();
     rounds.push_back(info);
@@ -606,17 +606,17 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
       std::ostringstream m;
       m << "Ipopt: " << result.ipoptStatus << ", " << problem.knots << " knots after " << round
         << " refinement round(s): ";
-      if (result.consistency.integrated && !result.consistency.consistent && result.consistency.worstInterval >= 0) {
+      if (result.consistency.status.code == ConsistencyCode::kInconsistent && result.consistency.worstInterval >= 0) {
         result.status.index = result.consistency.worstInterval;
         result.status.t = result.trajectory.times()(result.consistency.worstInterval);
       } else if (result.worstSlackInterval >= 0) {
         result.status.index = result.worstSlackInterval;
         result.status.t = result.trajectory.times()(result.worstSlackInterval);
       }
-      if (!result.consistency.integrated) {
-        m << "the consistency check could not run: " << result.consistency.message;
-      } else if (!result.consistency.consistent) {
-        m << result.consistency.message;
+      if (!result.consistency.checked()) {
+        m << "the consistency check could not run: " << result.consistency.status.message;
+      } else if (!result.consistency.ok()) {
+        m << result.consistency.status.message;
       } else {
         m << "the closed-chain slack carries " << fmt(result.maxSlackDefect)
           << " of the state's range (tolerance " << fmt(options.consistencyTolerance)
@@ -650,7 +650,7 @@ std::string OptimizationResult::describe() const {
   s << status.describe() << " (Ipopt: " << ipoptStatus << ", " << iterations << " iterations in "
     << rounds.size() << " round(s), " << trajectory.size() << " knots, cost " << formatStatusNumber(cost)
     << ", constraint violation " << fmt(constraintViolation) << ", consistency defect "
-    << (consistency.integrated ? fmt(consistency.maxDefect) : std::string("not checked"));
+    << (consistency.checked() ? fmt(consistency.maxDefect) : std::string("not checked"));
   if (worstSlackInterval >= 0) s << ", slack share " << fmt(maxSlackDefect);
   s << ", " << toString(hessian) << " Hessian, " << fmt(solveTime) << " s)";
   if (!hessianNote.empty()) s << "; " << hessianNote;
@@ -672,9 +672,9 @@ std::string OptimizationResult::json() const {
   if (!hessianNote.empty()) j["hessian_note"] = hessianNote;
   // null when the check did not run (Ipopt failed first, or an interval could not be
   // integrated): a 0 would claim a consistency nobody measured.
-  j["consistency_defect"] = consistency.integrated ? toJson(consistency.maxDefect) : detail::ReportJson(nullptr);
-  j["consistency_checked"] = consistency.integrated;
-  if (consistency.integrated && consistency.worstInterval >= 0) {
+  j["consistency_defect"] = consistency.checked() ? toJson(consistency.maxDefect) : detail::ReportJson(nullptr);
+  j["consistency_checked"] = consistency.checked();
+  if (consistency.checked() && consistency.worstInterval >= 0) {
     j["consistency_where"] = {{"state", consistency.worstStateName},
                               {"interval", consistency.worstInterval},
                               {"time", toJson(consistency.worstTime)}};

@@ -1087,21 +1087,25 @@ class SimulationStatus:
         """when it happened (NaN: not applicable)"""
 
 class TangentBasisTrajectory:
-    """T(t) (nx, d): an orthonormal basis of the constraint manifold's tangent space, transported along the reference (plain data). ok / message / valid_until report a transport that stopped early."""
+    """T(t) (nx, d): an orthonormal basis of the constraint manifold's tangent space, transported along the reference (plain data). status / valid_until report a transport that stopped early (has_basis is False when it failed at t0 already)."""
     def basis(self: TangentBasisTrajectory, t: float) -> numpy.typing.NDArray[numpy.float64]:
         """T(t) (nx, d)"""
+    def describe(self: TangentBasisTrajectory) -> str: ...
     @property
     def dimension(self) -> int: ...
     @property
-    def max_correction(self) -> float: ...
+    def has_basis(self) -> bool: ...
+    def json(self: TangentBasisTrajectory) -> str: ...
     @property
-    def message(self) -> str: ...
+    def max_correction(self) -> float: ...
     @property
     def nx(self) -> int: ...
     @property
     def ok(self) -> bool: ...
     def reduced_linearization(self: TangentBasisTrajectory, model: Model, t: float) -> tuple:
         """(T (nx, d), Ar = T^T A T (d, d), Br = T^T B (d, nu)) at t, with T corrected onto the exact tangent space of the model at x_ref(t)"""
+    @property
+    def status(self) -> TransportStatus: ...
     @property
     def steps(self) -> int: ...
     @property
@@ -1262,6 +1266,25 @@ class Transform:
     def tz(value: float) -> Transform: ...
     @property
     def value(self) -> float: ...
+
+class TransportStatus:
+    """Status of transport_tangent_basis (code: ok, dynamics_failure, integrator_failure, non_finite, turned_too_fast, not_transported; t: where it stopped)."""
+    def __repr__(self: TransportStatus) -> str: ...
+    @property
+    def code(self) -> str:
+        """the code's name (str): 'ok', or what failed"""
+    def describe(self: TransportStatus) -> str: ...
+    @property
+    def index(self) -> int:
+        """where: knot, step, interval or row (-1: none)"""
+    @property
+    def message(self) -> str:
+        """empty when ok; what failed, with the values"""
+    @property
+    def ok(self) -> bool: ...
+    @property
+    def t(self) -> float:
+        """when it happened (NaN: not applicable)"""
 
 class TvlqrOptions:
     """Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati (RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions)."""

@@ -100,9 +100,9 @@ TEST_CASE("consistency: minimum-energy transfer of a double integrator matches i
   }
   CHECK(r.cost == Approx(12 * d * d / (T * T * T)).epsilon(1e-6));
   CHECK(r.rounds.size() == 1);
-  CHECK(r.consistency.integrated);
+  CHECK(r.consistency.checked());
   CHECK(r.consistency.maxDefect < 1e-6);
-  CHECK(recheck(p, r, 1e-6).consistent);
+  CHECK(recheck(p, r, 1e-6).ok());
   // The midpoint inputs are the knot averages (the rule the CSV readers apply).
   for (int k = 0; k + 1 < r.trajectory.size(); ++k) {
     CHECK(r.midpointInputs(0, k) ==
@@ -152,7 +152,7 @@ TEST_CASE("consistency: mesh refinement reaches the tolerance", "[consistency][r
     CHECK(r.rounds.back().knots == r.trajectory.size());
     CHECK(r.rounds.front().maxDefect > 1e-4);
     CHECK(r.rounds.back().maxDefect <= 1e-4);
-    CHECK(recheck(p, r, 1e-4).consistent);
+    CHECK(recheck(p, r, 1e-4).ok());
     CHECK(r.mesh.size() == r.trajectory.size());
     // The mesh is non-uniform: refinement added knots where the defect was large only.
     const VectorXd h = r.mesh.tail(r.mesh.size() - 1) - r.mesh.head(r.mesh.size() - 1);
@@ -216,7 +216,7 @@ TEST_CASE("consistency: a five-bar crossing its parallel singularity is refined 
   CHECK(r.rounds.size() >= 1);
   if (r.status.code == OptimizationCode::kSolved || r.status.code == OptimizationCode::kSolvedAcceptable) {
     CHECK(r.maxSlackDefect <= o.consistencyTolerance);
-    CHECK(recheck(p, r, o.consistencyTolerance).consistent);
+    CHECK(recheck(p, r, o.consistencyTolerance).ok());
   } else if (r.status.code == OptimizationCode::kInconsistent) {
     CHECK_THAT(r.describe(), Catch::Contains("interval"));
   } else {
@@ -258,7 +258,7 @@ TEST_CASE("consistency: a knife edge in the optimizer keeps A q' = 0", "[consist
   CHECK(worst < 1e-8);
   CHECK(r.trajectory.states()(0, p.knots - 1) == Approx(1.0).margin(1e-9));
   CHECK(r.trajectory.states()(1, p.knots - 1) == Approx(0.5).margin(1e-9));
-  CHECK(recheck(p, r, 1e-3).consistent);
+  CHECK(recheck(p, r, 1e-3).ok());
   // The skate turned (a straight push cannot reach y = 0.5).
   CHECK(r.trajectory.states().row(2).cwiseAbs().maxCoeff() > 0.1);
   // A knife edge has no exact Hessian (transcription.hpp): L-BFGS, and the result says why.
@@ -286,9 +286,9 @@ TEST_CASE("consistency: checkConsistency on a hand-made trajectory file names a 
   }
   const trellis::Trajectory exact(model->configNames(), model->inputNames(), times, X, U);
   const trellis::ConsistencyResult good = trellis::checkConsistency(*model, exact);
-  INFO(good.message);
-  CHECK(good.integrated);
-  CHECK(good.consistent);
+  INFO(good.describe());
+  CHECK(good.checked());
+  CHECK(good.ok());
   CHECK(good.maxDefect < 1e-8);
   CHECK(good.intervalDefects.size() == N - 1);
 
@@ -296,15 +296,47 @@ TEST_CASE("consistency: checkConsistency on a hand-made trajectory file names a 
   Xbad(1, 6) += 0.01;
   const trellis::Trajectory corrupted(model->configNames(), model->inputNames(), times, Xbad, U);
   const trellis::ConsistencyResult bad = trellis::checkConsistency(*model, corrupted);
-  INFO(bad.message);
-  CHECK(bad.integrated);
-  CHECK_FALSE(bad.consistent);
+  INFO(bad.describe());
+  CHECK(bad.checked());
+  CHECK_FALSE(bad.ok());
   CHECK((bad.worstInterval == 5 || bad.worstInterval == 6));
   CHECK(bad.worstStateName == "dx");
   CHECK(bad.maxDefect == Approx(0.01 / 0.75).epsilon(1e-3));
-  CHECK_THAT(bad.message, Catch::Contains("inconsistent") && Catch::Contains("'dx'") &&
-                              Catch::Contains("interval " + std::to_string(bad.worstInterval)));
+  CHECK(bad.status.code == trellis::ConsistencyCode::kInconsistent);
+  CHECK(bad.status.index == bad.worstInterval);
+  CHECK(bad.status.t == bad.worstTime);
+  CHECK_THAT(bad.status.message, Catch::Contains("inconsistent") && Catch::Contains("'dx'") &&
+                                     Catch::Contains("interval " + std::to_string(bad.worstInterval)));
+  CHECK_THAT(bad.json(), Catch::Contains("\"status\":\"inconsistent\"") && Catch::Contains("\"worst_state\":\"dx\""));
+  CHECK(good.status.code == trellis::ConsistencyCode::kOk);
+  CHECK(trellis::ConsistencyResult{}.status.code == trellis::ConsistencyCode::kNotChecked);
   // Intervals away from the corrupted knot stay clean.
   CHECK(bad.intervalDefects(0) < 1e-8);
   CHECK(bad.intervalDefects(9) < 1e-8);
+}
+
+TEST_CASE("consistency: dynamics that fail at a knot are the verdict, not an exception",
+          "[consistency][status]") {
+  // A joint that moves no mass: M is singular at every state, so no knot has a q''.
+  trellis::ModelBuilder b("massless");
+  b.addFrame("cart", "world", trellis::Transform::tx("x"), trellis::Mass{1.0, Eigen::Matrix3d::Zero()});
+  b.addFrame("spinner", "cart", trellis::Transform::rz("phi"));
+  b.addConfigForce("x", "push");
+  const trellis::Model model = std::move(b).finalize();
+  const trellis::Trajectory still(model.configNames(), model.inputNames(),
+                                  (Eigen::VectorXd(3) << 0.0, 0.5, 1.0).finished(), MatrixXd::Zero(4, 3),
+                                  MatrixXd::Zero(1, 3));
+  trellis::ConsistencyResult r;
+  REQUIRE_NOTHROW(r = trellis::checkConsistency(model, still));
+  CHECK_FALSE(r.ok());
+  CHECK_FALSE(r.checked());
+  CHECK(r.status.code == trellis::ConsistencyCode::kDynamicsFailure);
+  CHECK(r.status.index == 0);
+  CHECK(r.status.t == 0.0);
+  CHECK_THAT(r.describe(), Catch::StartsWith("dynamics_failure at t = 0 (index 0): not checked: the dynamics fail at knot 0"));
+  CHECK_THAT(r.json(), Catch::Contains("\"max_defect\":null"));
+  // Names that do not match stay bad input.
+  const trellis::Trajectory other({"y", "phi"}, model.inputNames(), (Eigen::VectorXd(2) << 0.0, 1.0).finished(),
+                                  MatrixXd::Zero(4, 2), MatrixXd::Zero(1, 2));
+  CHECK_THROWS_AS(trellis::checkConsistency(model, other), trellis::TrajectoryError);
 }

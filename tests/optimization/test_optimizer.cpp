@@ -109,7 +109,7 @@ void checkSolved(const OptimalControlProblem& p, const OptimizationResult& r) {
   CHECK(r.rounds.front().knots == p.knots);
   CHECK(r.trajectory.size() == r.rounds.back().knots);
   CHECK(r.trajectory.endTime() == Approx(r.horizon).epsilon(1e-14));
-  CHECK(r.consistency.consistent);
+  CHECK(r.consistency.ok());
 }
 
 }  // namespace

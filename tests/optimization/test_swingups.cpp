@@ -32,8 +32,8 @@ void checkSolved(const OptimalControlProblem& p, const OptimizationResult& r) {
   REQUIRE(r.ok());
   CHECK(r.status.code == OptimizationCode::kSolved);
   CHECK(r.hessian == HessianMode::kExact);
-  REQUIRE(r.consistency.integrated);
-  CHECK(r.consistency.consistent);
+  REQUIRE(r.consistency.checked());
+  CHECK(r.consistency.ok());
   CHECK(r.consistency.maxDefect <= 1e-3);
   const int last = r.trajectory.size() - 1;
   CHECK((r.trajectory.states().col(0) - p.initialState).cwiseAbs().maxCoeff() < 1e-9);

@@ -15,6 +15,7 @@
 // The interval's defect is max_i over both points; the trajectory's is the worst interval.
 #pragma once
 
+#include "trellis/core/status.hpp"
 #include "trellis/core/trajectory.hpp"
 
 #include <Eigen/Core>
@@ -37,13 +38,34 @@ struct ConsistencyOptions {
   void validate() const;
 };
 
+/// Outcome codes of checkConsistency (status.index: the interval or knot, status.t: the time).
+enum class ConsistencyCode {
+  kOk,                ///< consistent: every interval integrated and maxDefect ≤ tolerance
+  kInconsistent,      ///< integrated, but maxDefect > tolerance (index, t: the worst interval, point)
+  kDynamicsFailure,   ///< the dynamics fail at a knot (index: the knot): nothing was integrated
+  kIntegratorFailure, ///< CVODES stopped inside an interval (index: the interval, t: where)
+  kNotChecked,        ///< default-constructed: no check ran
+};
+
+/// Names: ok, inconsistent, dynamics_failure, integrator_failure, not_checked.
+inline EnumNameTable<ConsistencyCode> enumNames(ConsistencyCode) {
+  static constexpr EnumName<ConsistencyCode> table[] = {
+      {ConsistencyCode::kOk, "ok"},
+      {ConsistencyCode::kInconsistent, "inconsistent"},
+      {ConsistencyCode::kDynamicsFailure, "dynamics_failure"},
+      {ConsistencyCode::kIntegratorFailure, "integrator_failure"},
+      {ConsistencyCode::kNotChecked, "not_checked"}};
+  return table;
+}
+
 /// The verdict of checkConsistency: how far the exact dynamics, integrated from each knot over its
 /// interval, land from the trajectory's own state (relative defects; the file comment defines them).
 struct ConsistencyResult {
-  bool integrated = false;   ///< every interval was integrated (else `message` says where it failed)
-  bool consistent = false;   ///< integrated and maxDefect ≤ options.tolerance
+  /// ok: consistent; inconsistent: the worst interval and point; otherwise why it was not checked.
+  /// The message is one line for a person: the verdict and where.
+  Status<ConsistencyCode> status{ConsistencyCode::kNotChecked, "not checked"};
   double tolerance = 0.0;    ///< the tolerance used
-  double maxDefect = 0.0;    ///< worst relative defect (see the file comment)
+  double maxDefect = 0.0;    ///< worst relative defect (see the file comment); set when checked()
   int worstInterval = -1;    ///< interval k of the worst defect
   double worstTime = 0.0;    ///< where it was measured: t_{k+1} or the interval's midpoint
   bool worstAtMidpoint = false;  ///< whether worstTime is the interval's midpoint (else its end)
@@ -55,13 +77,24 @@ struct ConsistencyResult {
   /// CVODES totals over all intervals: internal steps and right-hand-side evaluations.
   long steps = 0, rhsEvaluations = 0;
   ///@}
-  std::string message;       ///< one line for a person: the verdict and where
+
+  bool ok() const { return status.ok(); }  ///< status.ok(): consistent
+  /// Every interval was integrated, so maxDefect and intervalDefects are measured (ok or
+  /// inconsistent).
+  bool checked() const {
+    return status.code == ConsistencyCode::kOk || status.code == ConsistencyCode::kInconsistent;
+  }
+  /// One line: Status::describe (the verdict, with the interval and time).
+  std::string describe() const;
+  /// One JSON object: status fields, tolerance, max_defect (null unless checked), the worst
+  /// interval, time, state, and the integrator's totals.
+  std::string json() const;
 };
 
 /// Checks `trajectory` against the exact dynamics of `model` (names and sizes must match:
 /// throws TrajectoryError otherwise, std::invalid_argument for bad options). A failure of the
-/// dynamics or of CVODES inside an interval is reported in the result (integrated = false, the
-/// interval and time in the message), never thrown.
+/// dynamics at a knot or of CVODES inside an interval is the result's status (the knot or the
+/// interval, and the time), never thrown.
 ConsistencyResult checkConsistency(const Model& model, const Trajectory& trajectory,
                                    const ConsistencyOptions& options = {});
 
