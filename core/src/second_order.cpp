@@ -299,6 +299,36 @@ void jacobiEigen(Eigen::MatrixXd& A, Eigen::MatrixXd& V) {
   }
 }
 
+/// The tangent and second-order reverse sweeps of one block of kTapeLanes directions
+/// (adjoint_tape.hpp), compiled for the baseline and, chosen at run time when the CPU has them,
+/// for AVX2 and FMA (the same source; FMA contraction changes results at rounding level only).
+void sweepLanesGeneric(const Tape& tape, int inputs, const double* xbar, double* xdot, double* xdotbar) {
+  tangentSweepLanesBody<2>(tape, inputs, xdot);
+  secondOrderReverseSweepLanesBody<2>(tape, inputs, xbar, xdot, xdotbar);
+}
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+__attribute__((target("avx2,fma"))) void sweepLanesAvx2(const Tape& tape, int inputs, const double* xbar, double* xdot,
+                                                        double* xdotbar) {
+  tangentSweepLanesBody<4>(tape, inputs, xdot);
+  secondOrderReverseSweepLanesBody<4>(tape, inputs, xbar, xdot, xdotbar);
+}
+bool cpuHasAvx2Fma() {
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+}
+const bool kSweepAvx2 = cpuHasAvx2Fma();
+void sweepLanes(const Tape& tape, int inputs, const double* xbar, double* xdot, double* xdotbar) {
+  if (kSweepAvx2)
+    sweepLanesAvx2(tape, inputs, xbar, xdot, xdotbar);
+  else
+    sweepLanesGeneric(tape, inputs, xbar, xdot, xdotbar);
+}
+#else
+void sweepLanes(const Tape& tape, int inputs, const double* xbar, double* xdot, double* xdotbar) {
+  sweepLanesGeneric(tape, inputs, xbar, xdot, xdotbar);
+}
+#endif
+
 struct SecondOrderImpl {
   int n, m, nc, N;
   std::vector<JointConstants> joints;
@@ -324,7 +354,10 @@ struct SecondOrderImpl {
   Tape tape;
   ResidualPass<TapeVar> recorded;
   int inputs = 0;
-  Eigen::VectorXd xbar, xdot, xdotbar;  ///< per node: adjoint, tangent, tangent of the adjoint
+  static constexpr int kLanes = kTapeLanes;  ///< directions per pair of sweeps
+  Eigen::VectorXd xbar;                ///< per node: the adjoint
+  Eigen::VectorXd xdot, xdotbar;       ///< per node and lane (node-major): tangent, tangent of the adjoint
+  Eigen::MatrixXd laneY;               ///< (n + nc)×kLanes: x̄̇ at the y inputs of one block
   Eigen::MatrixXd rows;                ///< N×2n: ∇²φ e_a for the q and q̇ directions a
 
   SecondOrderImpl(const Model& model)
@@ -378,8 +411,9 @@ struct SecondOrderImpl {
     record(model);
     tape.nodes.resize(static_cast<size_t>(tape.size));
     xbar = Eigen::VectorXd::Zero(tape.size);
-    xdot = Eigen::VectorXd::Zero(tape.size);
-    xdotbar = Eigen::VectorXd::Zero(tape.size);
+    xdot = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kLanes);
+    xdotbar = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kLanes);
+    laneY = Eigen::MatrixXd::Zero(n + nc, kLanes);
     rows = Eigen::MatrixXd::Zero(N, 2 * n);
   }
 
@@ -599,8 +633,10 @@ DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, Sec
   // wᵀ δq̈ + ρᵀ δλ = −μᵀ G[a, b] = −∂²φ/∂z_a∂z_b with φ(z') = μᵀ F(z', y + Y (z' − z)): the
   // Hessian of one scalar, by forward-over-reverse on the recorded residual pass. One reverse
   // sweep gives φ's adjoints; per q or q̇ direction a, a tangent sweep (z' = z + s e_a, y + s Y e_a)
-  // and a second reverse sweep give ∇²φ e_a = x̄̇_z + Yᵀ x̄̇_y. The u directions follow by symmetry,
-  // and the (u, u) block is 0 (F is linear in u, K does not depend on u).
+  // and a second reverse sweep give ∇²φ e_a = x̄̇_z + Yᵀ x̄̇_y, kLanes directions per pair of sweeps.
+  // The u directions follow by symmetry, and the (u, u) block is 0 (F is linear in u, K does not
+  // depend on u).
+  constexpr int L = detail::kTapeLanes;
   s.record(model);
   const int inputs = s.inputs, size = s.tape.size;
   s.xbar.head(size).setZero();
@@ -608,17 +644,24 @@ DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, Sec
   for (int k = 0; k < nc; ++k) s.xbar[s.recorded.c[k].idx] += s.muC[k];
   s.xbar[0] = 0.0;  // a constant output (index 0) has no adjoint
   detail::reverseSweep(s.tape, s.xbar.data());
-  s.xdot.head(inputs + 1).setZero();
-  for (int a = 0; a < 2 * n; ++a) {
-    s.xdot[1 + a] = 1.0;
-    s.xdot.segment(1 + N, n + nc) = s.Y.col(a);
-    detail::tangentSweep(s.tape, inputs, s.xdot.data());
-    s.xdotbar.head(size).setZero();
-    detail::secondOrderReverseSweep(s.tape, inputs, s.xbar.data(), s.xdot.data(), s.xdotbar.data());
-    auto row = s.rows.col(a);
-    row = s.xdotbar.segment(1, N);
-    row.noalias() += s.Y.transpose() * s.xdotbar.segment(1 + N, n + nc);
-    s.xdot[1 + a] = 0.0;
+  double* xdot = s.xdot.data();
+  double* xdotbar = s.xdotbar.data();
+  for (int a0 = 0; a0 < 2 * n; a0 += L) {
+    const int lanes = std::min(L, 2 * n - a0);
+    // Seeds: lane l is the direction a0 + l (unused lanes stay zero).
+    std::fill(xdot, xdot + static_cast<size_t>(inputs + 1) * L, 0.0);
+    for (int l = 0; l < lanes; ++l) {
+      xdot[static_cast<size_t>(1 + a0 + l) * L + l] = 1.0;
+      for (int i = 0; i < n + nc; ++i) xdot[static_cast<size_t>(1 + N + i) * L + l] = s.Y(i, a0 + l);
+    }
+    detail::sweepLanes(s.tape, inputs, s.xbar.data(), xdot, xdotbar);
+    for (int l = 0; l < lanes; ++l) {
+      auto row = s.rows.col(a0 + l);
+      for (int b = 0; b < N; ++b) row[b] = xdotbar[static_cast<size_t>(1 + b) * L + l];
+      for (int i = 0; i < n + nc; ++i) s.laneY(i, l) = xdotbar[static_cast<size_t>(1 + N + i) * L + l];
+      row.noalias() += s.Y.transpose() * s.laneY.col(l);
+    }
+    std::fill(xdotbar, xdotbar + static_cast<size_t>(inputs + 1) * L, 0.0);  // the sweep cleared the rest
   }
   // H = −∇²φ; the (q, q̇) block symmetrized (its two halves agree to rounding).
   H.topLeftCorner(2 * n, 2 * n) = -0.5 * (s.rows.topRows(2 * n) + s.rows.topRows(2 * n).transpose());
