@@ -120,15 +120,20 @@ inline void reverseSweep(const Tape& tape, double* xbar) {
   }
 }
 
-// ---- kTapeLanes directions at once ---------------------------------------------------------------
-// ẋ and x̄̇ hold kTapeLanes entries per node, node-major (x[k L + l] for direction l), so that each
-// node's partials are read once for L directions. The L entries are processed in chunks of W, each
-// one vector value of the GCC/Clang vector extension: W = 2 fills an SSE2 register, W = 4 an AVX
-// one (wider vectors than the machine's registers are lowered through the stack). A chunk is
-// accessed through a type that assumes neither alignment nor the absence of aliasing (x̄̇_i and
-// x̄̇_j may be the same row, as in x · x).
+// ---- L directions at once ------------------------------------------------------------------------
+// ẋ and x̄̇ hold L entries per node, node-major (x[k L + l] for direction l), so that each node's
+// partials are read once for L directions. The L entries are processed in chunks of W, each one
+// vector value of the GCC/Clang vector extension: W = 2 fills an SSE2 register, W = 4 an AVX one
+// (wider vectors than the machine's registers are lowered through the stack). A chunk is accessed
+// through a type that assumes neither alignment nor the absence of aliasing (x̄̇_i and x̄̇_j may be
+// the same row, as in x · x).
 
-inline constexpr int kTapeLanes = 8;
+inline constexpr int kTapeLanesMax = 16;  ///< the widest block (L = 4, 8 or 16)
+
+/// Whether the sweeps of the contraction run the AVX2+FMA build (second_order.cpp: chosen at run
+/// time when the CPU has both); tests force the baseline build to check both.
+bool secondOrderSweepsUseAvx2();
+void secondOrderSweepsForceGeneric(bool force);
 
 template <int W>
 struct TapeChunk {
@@ -137,25 +142,25 @@ struct TapeChunk {
 
 #define TRELLIS_TAPE_INLINE inline __attribute__((always_inline))
 
-/// Chunk c (W lanes) of row k of a node-major lane array.
-template <int W>
+/// Chunk c (W lanes) of row k of a node-major array of L lanes.
+template <int W, int L>
 TRELLIS_TAPE_INLINE typename TapeChunk<W>::type& lanesAt(double* x, int k, int c) {
-  return *reinterpret_cast<typename TapeChunk<W>::type*>(x + static_cast<size_t>(k) * kTapeLanes + c * W);
+  return *reinterpret_cast<typename TapeChunk<W>::type*>(x + static_cast<size_t>(k) * L + c * W);
 }
-template <int W>
+template <int W, int L>
 TRELLIS_TAPE_INLINE const typename TapeChunk<W>::type& lanesAt(const double* x, int k, int c) {
-  return *reinterpret_cast<const typename TapeChunk<W>::type*>(x + static_cast<size_t>(k) * kTapeLanes + c * W);
+  return *reinterpret_cast<const typename TapeChunk<W>::type*>(x + static_cast<size_t>(k) * L + c * W);
 }
 
 /// ẋ (rows 1 … inputs seeded, row 0 zero) ← the tangents of every node after the inputs.
-template <int W>
+template <int W, int L>
 TRELLIS_TAPE_INLINE void tangentSweepLanesBody(const Tape& tape, int inputs, double* xdot) {
   const TapeNode* nodes = tape.nodes.data();
   for (int k = inputs + 1; k < tape.size; ++k) {
     const TapeNode& nd = nodes[k];
     // A unary node names row 0 (zero) with dj = 0: no branch.
-    for (int c = 0; c < kTapeLanes / W; ++c)
-      lanesAt<W>(xdot, k, c) = nd.di * lanesAt<W>(xdot, nd.i, c) + nd.dj * lanesAt<W>(xdot, nd.j, c);
+    for (int c = 0; c < L / W; ++c)
+      lanesAt<W, L>(xdot, k, c) = nd.di * lanesAt<W, L>(xdot, nd.i, c) + nd.dj * lanesAt<W, L>(xdot, nd.j, c);
   }
 }
 
@@ -165,7 +170,7 @@ TRELLIS_TAPE_INLINE void tangentSweepLanesBody(const Tape& tape, int inputs, dou
 /// only ∂²/∂x_i∂x_j, a unary only ∂²/∂x_i²). Each row above `inputs` is zeroed once read, so it is
 /// zero again on return: only rows 0 … inputs need clearing before the next block. Row i is
 /// updated before row j is read, so i == j (x ± x, x · x) adds both contributions.
-template <int W>
+template <int W, int L>
 TRELLIS_TAPE_INLINE void secondOrderReverseSweepLanesBody(const Tape& tape, int inputs, const double* xbar,
                                                           const double* xdot, double* xdotbar) {
   using V = typename TapeChunk<W>::type;
@@ -174,36 +179,36 @@ TRELLIS_TAPE_INLINE void secondOrderReverseSweepLanesBody(const Tape& tape, int 
     const TapeNode& nd = nodes[k];
     switch (nd.kind) {
       case TapeKind::kAffine1:
-        for (int c = 0; c < kTapeLanes / W; ++c) {
-          const V db = lanesAt<W>(xdotbar, k, c);
-          lanesAt<W>(xdotbar, k, c) = V{};
-          lanesAt<W>(xdotbar, nd.i, c) += nd.di * db;
+        for (int c = 0; c < L / W; ++c) {
+          const V db = lanesAt<W, L>(xdotbar, k, c);
+          lanesAt<W, L>(xdotbar, k, c) = V{};
+          lanesAt<W, L>(xdotbar, nd.i, c) += nd.di * db;
         }
         break;
       case TapeKind::kAffine2:
-        for (int c = 0; c < kTapeLanes / W; ++c) {
-          const V db = lanesAt<W>(xdotbar, k, c);
-          lanesAt<W>(xdotbar, k, c) = V{};
-          lanesAt<W>(xdotbar, nd.i, c) += nd.di * db;
-          lanesAt<W>(xdotbar, nd.j, c) += nd.dj * db;
+        for (int c = 0; c < L / W; ++c) {
+          const V db = lanesAt<W, L>(xdotbar, k, c);
+          lanesAt<W, L>(xdotbar, k, c) = V{};
+          lanesAt<W, L>(xdotbar, nd.i, c) += nd.di * db;
+          lanesAt<W, L>(xdotbar, nd.j, c) += nd.dj * db;
         }
         break;
       case TapeKind::kProduct: {
         const double s = xbar[k] * nd.d2;
-        for (int c = 0; c < kTapeLanes / W; ++c) {
-          const V db = lanesAt<W>(xdotbar, k, c);
-          lanesAt<W>(xdotbar, k, c) = V{};
-          lanesAt<W>(xdotbar, nd.i, c) += nd.di * db + s * lanesAt<W>(xdot, nd.j, c);
-          lanesAt<W>(xdotbar, nd.j, c) += nd.dj * db + s * lanesAt<W>(xdot, nd.i, c);
+        for (int c = 0; c < L / W; ++c) {
+          const V db = lanesAt<W, L>(xdotbar, k, c);
+          lanesAt<W, L>(xdotbar, k, c) = V{};
+          lanesAt<W, L>(xdotbar, nd.i, c) += nd.di * db + s * lanesAt<W, L>(xdot, nd.j, c);
+          lanesAt<W, L>(xdotbar, nd.j, c) += nd.dj * db + s * lanesAt<W, L>(xdot, nd.i, c);
         }
         break;
       }
       case TapeKind::kNonlinear1: {
         const double s = xbar[k] * nd.d2;
-        for (int c = 0; c < kTapeLanes / W; ++c) {
-          const V db = lanesAt<W>(xdotbar, k, c);
-          lanesAt<W>(xdotbar, k, c) = V{};
-          lanesAt<W>(xdotbar, nd.i, c) += nd.di * db + s * lanesAt<W>(xdot, nd.i, c);
+        for (int c = 0; c < L / W; ++c) {
+          const V db = lanesAt<W, L>(xdotbar, k, c);
+          lanesAt<W, L>(xdotbar, k, c) = V{};
+          lanesAt<W, L>(xdotbar, nd.i, c) += nd.di * db + s * lanesAt<W, L>(xdot, nd.i, c);
         }
         break;
       }

@@ -299,35 +299,55 @@ void jacobiEigen(Eigen::MatrixXd& A, Eigen::MatrixXd& V) {
   }
 }
 
-/// The tangent and second-order reverse sweeps of one block of kTapeLanes directions
+namespace {
+
+/// The tangent and second-order reverse sweeps of one block of L = 4, 8 or 16 directions
 /// (adjoint_tape.hpp), compiled for the baseline and, chosen at run time when the CPU has them,
 /// for AVX2 and FMA (the same source; FMA contraction changes results at rounding level only).
-void sweepLanesGeneric(const Tape& tape, int inputs, const double* xbar, double* xdot, double* xdotbar) {
-  tangentSweepLanesBody<2>(tape, inputs, xdot);
-  secondOrderReverseSweepLanesBody<2>(tape, inputs, xbar, xdot, xdotbar);
+template <int W, int L>
+TRELLIS_TAPE_INLINE void sweepLanesBody(const Tape& tape, int inputs, const double* xbar, double* xdot, double* xdotbar) {
+  tangentSweepLanesBody<W, L>(tape, inputs, xdot);
+  secondOrderReverseSweepLanesBody<W, L>(tape, inputs, xbar, xdot, xdotbar);
+}
+void sweepLanesGeneric(int lanes, const Tape& tape, int inputs, const double* xbar, double* xdot, double* xdotbar) {
+  if (lanes == 4)
+    sweepLanesBody<2, 4>(tape, inputs, xbar, xdot, xdotbar);
+  else if (lanes == 8)
+    sweepLanesBody<2, 8>(tape, inputs, xbar, xdot, xdotbar);
+  else
+    sweepLanesBody<2, 16>(tape, inputs, xbar, xdot, xdotbar);
 }
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-__attribute__((target("avx2,fma"))) void sweepLanesAvx2(const Tape& tape, int inputs, const double* xbar, double* xdot,
-                                                        double* xdotbar) {
-  tangentSweepLanesBody<4>(tape, inputs, xdot);
-  secondOrderReverseSweepLanesBody<4>(tape, inputs, xbar, xdot, xdotbar);
+__attribute__((target("avx2,fma"))) void sweepLanesAvx2(int lanes, const Tape& tape, int inputs, const double* xbar,
+                                                        double* xdot, double* xdotbar) {
+  if (lanes == 4)
+    sweepLanesBody<4, 4>(tape, inputs, xbar, xdot, xdotbar);
+  else if (lanes == 8)
+    sweepLanesBody<4, 8>(tape, inputs, xbar, xdot, xdotbar);
+  else
+    sweepLanesBody<4, 16>(tape, inputs, xbar, xdot, xdotbar);
 }
 bool cpuHasAvx2Fma() {
   __builtin_cpu_init();
   return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
 }
 const bool kSweepAvx2 = cpuHasAvx2Fma();
-void sweepLanes(const Tape& tape, int inputs, const double* xbar, double* xdot, double* xdotbar) {
-  if (kSweepAvx2)
-    sweepLanesAvx2(tape, inputs, xbar, xdot, xdotbar);
-  else
-    sweepLanesGeneric(tape, inputs, xbar, xdot, xdotbar);
-}
 #else
-void sweepLanes(const Tape& tape, int inputs, const double* xbar, double* xdot, double* xdotbar) {
-  sweepLanesGeneric(tape, inputs, xbar, xdot, xdotbar);
-}
+constexpr bool kSweepAvx2 = false;
 #endif
+bool sweepForceGeneric = false;
+
+void sweepLanes(int lanes, const Tape& tape, int inputs, const double* xbar, double* xdot, double* xdotbar) {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  if (kSweepAvx2 && !sweepForceGeneric) return sweepLanesAvx2(lanes, tape, inputs, xbar, xdot, xdotbar);
+#endif
+  sweepLanesGeneric(lanes, tape, inputs, xbar, xdot, xdotbar);
+}
+
+}  // namespace
+
+bool secondOrderSweepsUseAvx2() { return kSweepAvx2 && !sweepForceGeneric; }
+void secondOrderSweepsForceGeneric(bool force) { sweepForceGeneric = force; }
 
 struct SecondOrderImpl {
   int n, m, nc, N;
@@ -354,10 +374,9 @@ struct SecondOrderImpl {
   Tape tape;
   ResidualPass<TapeVar> recorded;
   int inputs = 0;
-  static constexpr int kLanes = kTapeLanes;  ///< directions per pair of sweeps
   Eigen::VectorXd xbar;                ///< per node: the adjoint
   Eigen::VectorXd xdot, xdotbar;       ///< per node and lane (node-major): tangent, tangent of the adjoint
-  Eigen::MatrixXd laneY;               ///< (n + nc)×kLanes: x̄̇ at the y inputs of one block
+  Eigen::MatrixXd laneY;               ///< (n + nc)×kTapeLanesMax: x̄̇ at the y inputs of one block
   Eigen::MatrixXd rows;                ///< N×2n: ∇²φ e_a for the q and q̇ directions a
 
   SecondOrderImpl(const Model& model)
@@ -411,9 +430,9 @@ struct SecondOrderImpl {
     record(model);
     tape.nodes.resize(static_cast<size_t>(tape.size));
     xbar = Eigen::VectorXd::Zero(tape.size);
-    xdot = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kLanes);
-    xdotbar = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kLanes);
-    laneY = Eigen::MatrixXd::Zero(n + nc, kLanes);
+    xdot = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kTapeLanesMax);
+    xdotbar = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kTapeLanesMax);
+    laneY = Eigen::MatrixXd::Zero(n + nc, kTapeLanesMax);
     rows = Eigen::MatrixXd::Zero(N, 2 * n);
   }
 
@@ -633,10 +652,10 @@ DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, Sec
   // wᵀ δq̈ + ρᵀ δλ = −μᵀ G[a, b] = −∂²φ/∂z_a∂z_b with φ(z') = μᵀ F(z', y + Y (z' − z)): the
   // Hessian of one scalar, by forward-over-reverse on the recorded residual pass. One reverse
   // sweep gives φ's adjoints; per q or q̇ direction a, a tangent sweep (z' = z + s e_a, y + s Y e_a)
-  // and a second reverse sweep give ∇²φ e_a = x̄̇_z + Yᵀ x̄̇_y, kLanes directions per pair of sweeps.
+  // and a second reverse sweep give ∇²φ e_a = x̄̇_z + Yᵀ x̄̇_y, up to 16 directions per pair of
+  // sweeps (blocks of L = 16, the last one of 4, 8 or 16).
   // The u directions follow by symmetry, and the (u, u) block is 0 (F is linear in u, K does not
   // depend on u).
-  constexpr int L = detail::kTapeLanes;
   s.record(model);
   const int inputs = s.inputs, size = s.tape.size;
   s.xbar.head(size).setZero();
@@ -646,15 +665,16 @@ DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, Sec
   detail::reverseSweep(s.tape, s.xbar.data());
   double* xdot = s.xdot.data();
   double* xdotbar = s.xdotbar.data();
-  for (int a0 = 0; a0 < 2 * n; a0 += L) {
-    const int lanes = std::min(L, 2 * n - a0);
+  for (int a0 = 0, L = 0; a0 < 2 * n; a0 += L) {
+    const int lanes = std::min(detail::kTapeLanesMax, 2 * n - a0);
+    L = lanes <= 4 ? 4 : (lanes <= 8 ? 8 : 16);
     // Seeds: lane l is the direction a0 + l (unused lanes stay zero).
     std::fill(xdot, xdot + static_cast<size_t>(inputs + 1) * L, 0.0);
     for (int l = 0; l < lanes; ++l) {
       xdot[static_cast<size_t>(1 + a0 + l) * L + l] = 1.0;
       for (int i = 0; i < n + nc; ++i) xdot[static_cast<size_t>(1 + N + i) * L + l] = s.Y(i, a0 + l);
     }
-    detail::sweepLanes(s.tape, inputs, s.xbar.data(), xdot, xdotbar);
+    detail::sweepLanes(L, s.tape, inputs, s.xbar.data(), xdot, xdotbar);
     for (int l = 0; l < lanes; ++l) {
       auto row = s.rows.col(a0 + l);
       for (int b = 0; b < N; ++b) row[b] = xdotbar[static_cast<size_t>(1 + b) * L + l];
