@@ -19,6 +19,8 @@
 
 namespace trellis::detail {
 
+#define TRELLIS_TAPE_INLINE inline __attribute__((always_inline))
+
 /// What the second-order sweep of a node needs: an affine node (all second partials zero) passes
 /// the adjoint tangent on; a product (x_i · x_j scaled: ∂²g/∂x_i∂x_j the only second partial) and a
 /// nonlinear unary g(x_i) (∂²g/∂x_i² the only one) add x̄_k times it. These are all the operations
@@ -35,7 +37,7 @@ struct TapeNode {
 struct Tape {
   std::vector<TapeNode> nodes = std::vector<TapeNode>(1);
   int size = 1;  ///< nodes in use (node 0 included)
-  int push(const TapeNode& node) {
+  TRELLIS_TAPE_INLINE int push(const TapeNode& node) {
     if (size == static_cast<int>(nodes.size())) nodes.resize(2 * nodes.size());  // only before sizing
     nodes[static_cast<size_t>(size)] = node;
     return size++;
@@ -54,11 +56,11 @@ struct TapeVar {
   TapeVar(double value, int index) : v(value), idx(index) {}
 };
 
-inline TapeVar recordUnary(const TapeVar& x, double g, double g1, double g2) {
+TRELLIS_TAPE_INLINE TapeVar recordUnary(const TapeVar& x, double g, double g1, double g2) {
   if (x.idx == 0) return TapeVar(g);
   return TapeVar(g, activeTape->push({x.idx, 0, g1, 0.0, g2, g2 == 0.0 ? TapeKind::kAffine1 : TapeKind::kNonlinear1}));
 }
-inline TapeVar recordBinary(const TapeVar& a, const TapeVar& b, double g, double da, double db, double dab) {
+TRELLIS_TAPE_INLINE TapeVar recordBinary(const TapeVar& a, const TapeVar& b, double g, double da, double db, double dab) {
   if (a.idx == 0 && b.idx == 0) return TapeVar(g);
   return TapeVar(g, activeTape->push({a.idx, b.idx, da, db, dab, dab == 0.0 ? TapeKind::kAffine2 : TapeKind::kProduct}));
 }
@@ -67,28 +69,28 @@ inline TapeVar recordBinary(const TapeVar& a, const TapeVar& b, double g, double
 // exact identities x + 0 = x, x · 1 = x, x · 0 = 0 record none (the many zero entries of constant
 // placements, zero vectors and axis columns would otherwise each cost a node). Which operands are
 // constant, and their values, come from the model only, so the node count is the same at every state.
-inline TapeVar operator+(const TapeVar& a, double b) { return b == 0.0 ? a : recordUnary(a, a.v + b, 1.0, 0.0); }
+TRELLIS_TAPE_INLINE TapeVar operator+(const TapeVar& a, double b) { return b == 0.0 ? a : recordUnary(a, a.v + b, 1.0, 0.0); }
 inline TapeVar operator+(double b, const TapeVar& a) { return a + b; }
-inline TapeVar operator-(const TapeVar& a, double b) { return b == 0.0 ? a : recordUnary(a, a.v - b, 1.0, 0.0); }
+TRELLIS_TAPE_INLINE TapeVar operator-(const TapeVar& a, double b) { return b == 0.0 ? a : recordUnary(a, a.v - b, 1.0, 0.0); }
 inline TapeVar operator-(double b, const TapeVar& a) { return recordUnary(a, b - a.v, -1.0, 0.0); }
-inline TapeVar operator*(const TapeVar& a, double b) {
+TRELLIS_TAPE_INLINE TapeVar operator*(const TapeVar& a, double b) {
   if (b == 0.0) return TapeVar(0.0);
   if (b == 1.0) return a;
   return recordUnary(a, a.v * b, b, 0.0);
 }
 inline TapeVar operator*(double b, const TapeVar& a) { return a * b; }
 inline TapeVar operator-(const TapeVar& a) { return recordUnary(a, -a.v, -1.0, 0.0); }
-inline TapeVar operator+(const TapeVar& a, const TapeVar& b) {
+TRELLIS_TAPE_INLINE TapeVar operator+(const TapeVar& a, const TapeVar& b) {
   if (a.idx == 0) return b + a.v;
   if (b.idx == 0) return a + b.v;
   return recordBinary(a, b, a.v + b.v, 1.0, 1.0, 0.0);
 }
-inline TapeVar operator-(const TapeVar& a, const TapeVar& b) {
+TRELLIS_TAPE_INLINE TapeVar operator-(const TapeVar& a, const TapeVar& b) {
   if (a.idx == 0) return a.v - b;
   if (b.idx == 0) return a - b.v;
   return recordBinary(a, b, a.v - b.v, 1.0, -1.0, 0.0);
 }
-inline TapeVar operator*(const TapeVar& a, const TapeVar& b) {
+TRELLIS_TAPE_INLINE TapeVar operator*(const TapeVar& a, const TapeVar& b) {
   if (a.idx == 0) return b * a.v;
   if (b.idx == 0) return a * b.v;
   return recordBinary(a, b, a.v * b.v, b.v, a.v, 1.0);
@@ -140,7 +142,6 @@ struct TapeChunk {
   typedef double type __attribute__((vector_size(sizeof(double) * W), aligned(alignof(double)), may_alias));
 };
 
-#define TRELLIS_TAPE_INLINE inline __attribute__((always_inline))
 
 /// Chunk c (W lanes) of row k of a node-major array of L lanes.
 template <int W, int L>

@@ -374,6 +374,7 @@ struct SecondOrderImpl {
   Tape tape;
   ResidualPass<TapeVar> recorded;
   int inputs = 0;
+  int recordedNodes = 0;               ///< the tape's size, the same at every state (buffers sized to it)
   Eigen::VectorXd xbar;                ///< per node: the adjoint
   Eigen::VectorXd xdot, xdotbar;       ///< per node and lane (node-major): tangent, tangent of the adjoint
   Eigen::MatrixXd laneY;               ///< (n + nc)×kTapeLanesMax: x̄̇ at the y inputs of one block
@@ -429,6 +430,7 @@ struct SecondOrderImpl {
     recorded.resize(n, m, nc);
     record(model);
     tape.nodes.resize(static_cast<size_t>(tape.size));
+    recordedNodes = tape.size;
     xbar = Eigen::VectorXd::Zero(tape.size);
     xdot = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kTapeLanesMax);
     xdotbar = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kTapeLanesMax);
@@ -657,6 +659,10 @@ DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, Sec
   // The u directions follow by symmetry, and the (u, u) block is 0 (F is linear in u, K does not
   // depend on u).
   s.record(model);
+  if (s.tape.size != s.recordedNodes)  // a folding rule that depended on the state would overrun the buffers
+    throw std::logic_error("computeSecondOrderContraction: internal error: the recording has " +
+                           std::to_string(s.tape.size) + " nodes at this state, " + std::to_string(s.recordedNodes) +
+                           " when the workspace was sized");
   const int inputs = s.inputs, size = s.tape.size;
   s.xbar.head(size).setZero();
   for (int i = 0; i < n; ++i) s.xbar[s.recorded.r[i].idx] += s.muR[i];
