@@ -301,31 +301,51 @@ void jacobiEigen(Eigen::MatrixXd& A, Eigen::MatrixXd& V) {
 
 namespace {
 
-/// The tangent and second-order reverse sweeps of one block of L = 4, 8 or 16 directions
-/// (adjoint_tape.hpp), compiled for the baseline and, chosen at run time when the CPU has them,
-/// for AVX2 and FMA (the same source; FMA contraction changes results at rounding level only).
+/// One block of L = 4, 8 or 16 directions: the tangent and second-order reverse sweeps
+/// (adjoint_tape.hpp), then the block's rows of ∇²φ, out(b, l) = x̄̇_z(b, l) + Σ_i Y(i, b) x̄̇_y(i, l)
+/// (N rows of L lanes; Y is (ny = n + nc)×N, by columns). Compiled for the baseline and, chosen at
+/// run time when the CPU has them, for AVX2 and FMA (the same source; FMA contraction changes
+/// results at rounding level only).
+struct BlockArgs {
+  const Tape* tape;
+  int inputs, N, ny;
+  const double* xbar;
+  const double* Y;
+  double *xdot, *xdotbar, *out;
+};
 template <int W, int L>
-TRELLIS_TAPE_INLINE void sweepLanesBody(const Tape& tape, int inputs, const double* xbar, double* xdot, double* xdotbar) {
-  tangentSweepLanesBody<W, L>(tape, inputs, xdot);
-  secondOrderReverseSweepLanesBody<W, L>(tape, inputs, xbar, xdot, xdotbar);
+TRELLIS_TAPE_INLINE void sweepBlockBody(const BlockArgs& b) {
+  using V = typename TapeChunk<W>::type;
+  tangentSweepLanesBody<W, L>(*b.tape, b.inputs, b.xdot);
+  secondOrderReverseSweepLanesBody<W, L>(*b.tape, b.inputs, b.xbar, b.xdot, b.xdotbar);
+  const double* xdotbar = b.xdotbar;
+  for (int col = 0; col < b.N; ++col) {
+    V acc[L / W];
+    for (int c = 0; c < L / W; ++c) acc[c] = lanesAt<W, L>(xdotbar, 1 + col, c);
+    const double* y = b.Y + static_cast<size_t>(col) * b.ny;
+    for (int i = 0; i < b.ny; ++i) {
+      const double yi = y[i];
+      for (int c = 0; c < L / W; ++c) acc[c] += yi * lanesAt<W, L>(xdotbar, 1 + b.N + i, c);
+    }
+    for (int c = 0; c < L / W; ++c) lanesAt<W, L>(b.out, col, c) = acc[c];
+  }
 }
-void sweepLanesGeneric(int lanes, const Tape& tape, int inputs, const double* xbar, double* xdot, double* xdotbar) {
+void sweepBlockGeneric(int lanes, const BlockArgs& b) {
   if (lanes == 4)
-    sweepLanesBody<2, 4>(tape, inputs, xbar, xdot, xdotbar);
+    sweepBlockBody<2, 4>(b);
   else if (lanes == 8)
-    sweepLanesBody<2, 8>(tape, inputs, xbar, xdot, xdotbar);
+    sweepBlockBody<2, 8>(b);
   else
-    sweepLanesBody<2, 16>(tape, inputs, xbar, xdot, xdotbar);
+    sweepBlockBody<2, 16>(b);
 }
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-__attribute__((target("avx2,fma"))) void sweepLanesAvx2(int lanes, const Tape& tape, int inputs, const double* xbar,
-                                                        double* xdot, double* xdotbar) {
+__attribute__((target("avx2,fma"))) void sweepBlockAvx2(int lanes, const BlockArgs& b) {
   if (lanes == 4)
-    sweepLanesBody<4, 4>(tape, inputs, xbar, xdot, xdotbar);
+    sweepBlockBody<4, 4>(b);
   else if (lanes == 8)
-    sweepLanesBody<4, 8>(tape, inputs, xbar, xdot, xdotbar);
+    sweepBlockBody<4, 8>(b);
   else
-    sweepLanesBody<4, 16>(tape, inputs, xbar, xdot, xdotbar);
+    sweepBlockBody<4, 16>(b);
 }
 bool cpuHasAvx2Fma() {
   __builtin_cpu_init();
@@ -337,11 +357,11 @@ constexpr bool kSweepAvx2 = false;
 #endif
 bool sweepForceGeneric = false;
 
-void sweepLanes(int lanes, const Tape& tape, int inputs, const double* xbar, double* xdot, double* xdotbar) {
+void sweepBlock(int lanes, const BlockArgs& b) {
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-  if (kSweepAvx2 && !sweepForceGeneric) return sweepLanesAvx2(lanes, tape, inputs, xbar, xdot, xdotbar);
+  if (kSweepAvx2 && !sweepForceGeneric) return sweepBlockAvx2(lanes, b);
 #endif
-  sweepLanesGeneric(lanes, tape, inputs, xbar, xdot, xdotbar);
+  sweepBlockGeneric(lanes, b);
 }
 
 }  // namespace
@@ -377,7 +397,7 @@ struct SecondOrderImpl {
   int recordedNodes = 0;               ///< the tape's size, the same at every state (buffers sized to it)
   Eigen::VectorXd xbar;                ///< per node: the adjoint
   Eigen::VectorXd xdot, xdotbar;       ///< per node and lane (node-major): tangent, tangent of the adjoint
-  Eigen::MatrixXd laneY;               ///< (n + nc)×kTapeLanesMax: x̄̇ at the y inputs of one block
+  Eigen::VectorXd laneRows;            ///< N rows × kTapeLanesMax lanes: one block's rows of ∇²φ
   Eigen::MatrixXd rows;                ///< N×2n: ∇²φ e_a for the q and q̇ directions a
 
   SecondOrderImpl(const Model& model)
@@ -434,7 +454,7 @@ struct SecondOrderImpl {
     xbar = Eigen::VectorXd::Zero(tape.size);
     xdot = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kTapeLanesMax);
     xdotbar = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kTapeLanesMax);
-    laneY = Eigen::MatrixXd::Zero(n + nc, kTapeLanesMax);
+    laneRows = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(N) * kTapeLanesMax);
     rows = Eigen::MatrixXd::Zero(N, 2 * n);
   }
 
@@ -680,13 +700,9 @@ DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, Sec
       xdot[static_cast<size_t>(1 + a0 + l) * L + l] = 1.0;
       for (int i = 0; i < n + nc; ++i) xdot[static_cast<size_t>(1 + N + i) * L + l] = s.Y(i, a0 + l);
     }
-    detail::sweepLanes(L, s.tape, inputs, s.xbar.data(), xdot, xdotbar);
-    for (int l = 0; l < lanes; ++l) {
-      auto row = s.rows.col(a0 + l);
-      for (int b = 0; b < N; ++b) row[b] = xdotbar[static_cast<size_t>(1 + b) * L + l];
-      for (int i = 0; i < n + nc; ++i) s.laneY(i, l) = xdotbar[static_cast<size_t>(1 + N + i) * L + l];
-      row.noalias() += s.Y.transpose() * s.laneY.col(l);
-    }
+    detail::sweepBlock(L, {&s.tape, inputs, N, n + nc, s.xbar.data(), s.Y.data(), xdot, xdotbar, s.laneRows.data()});
+    for (int l = 0; l < lanes; ++l)
+      for (int b = 0; b < N; ++b) s.rows(b, a0 + l) = s.laneRows[static_cast<Eigen::Index>(b) * L + l];
     std::fill(xdotbar, xdotbar + static_cast<size_t>(inputs + 1) * L, 0.0);  // the sweep cleared the rest
   }
   // H = −∇²φ; the (q, q̇) block symmetrized (its two halves agree to rounding).
