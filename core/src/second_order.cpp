@@ -108,18 +108,25 @@ struct ResidualPass {
     addWrench(jb, forceAt(pb, -force));
   }
 
-  /// [m x_v + x_ω × h; h × x_v + I x_ω] with the joint body's inertia in world axes about the
-  /// origin: h = m p + R h_l, I ω = R I_l Rᵀ ω + (m |p|² + 2 p·h_s) ω − m p (p·ω) − p (h_s·ω) − h_s (p·ω)
-  /// (the matrix of kinematics.cpp applied without forming it).
-  Vec6<T> applyInertia(const JointConstants& jc, int i, const Vec6<T>& x) const {
+  /// The inertial wrench of joint i's body, I (a − g) + v ×* I v at the world origin, evaluated in
+  /// the body's axes about its origin, where the inertia is constant (h = m c, I about the origin:
+  /// f = [m x_v + x_ω × h; h × x_v + I x_ω]): the twists go in as x_b = (Rᵀ (x_v + x_ω × p), Rᵀ x_ω),
+  /// the wrench comes back as [R f; R n + p × R f]. (The same quantity as the world-axes form with
+  /// I_world = R I Rᵀ + parallel-axis terms, in fewer operations: two rotations per twist instead
+  /// of the world inertia applied twice.)
+  Vec6<T> inertialWrench(const JointConstants& jc, int i, const Vec6<T>& acc, const Vec6<T>& vel) const {
+    const Mat3<T>& Ri = R[i];
     const Vec3<T>& pi = p[i];
-    const Vec3<T> hs = R[i] * jc.firstMoment;
-    const Vec3<T> h = jc.mass * pi + hs;
-    const Vec3<T>& w = x.a;
-    const T pw = dot(pi, w), hw = dot(hs, w);
-    const Vec3<T> Iw = R[i] * (jc.inertia * transposeTimes(R[i], w)) + (jc.mass * dot(pi, pi) + 2.0 * dot(pi, hs)) * w -
-                       (jc.mass * pw) * pi - hw * pi - pw * hs;
-    return {jc.mass * x.l + cross(w, h), cross(h, x.l) + Iw};
+    auto toBody = [&](const Vec6<T>& x) {
+      return Vec6<T>{transposeTimes(Ri, x.l + cross(x.a, pi)), transposeTimes(Ri, x.a)};
+    };
+    auto inertia = [&](const Vec6<T>& x) {
+      return Vec6<T>{jc.mass * x.l + cross(x.a, jc.firstMoment), cross(jc.firstMoment, x.l) + jc.inertia * x.a};
+    };
+    const Vec6<T> vb = toBody(vel);
+    const Vec6<T> fb = inertia(toBody(acc)) + crossForce(vb, inertia(vb));
+    const Vec3<T> force = Ri * fb.l;
+    return {force, Ri * fb.a + cross(pi, force)};
   }
 
   void evaluate(const Model& model, const std::vector<JointConstants>& jcs, const Vec3<double>& gravity) {
@@ -220,7 +227,7 @@ struct ResidualPass {
     for (int i = 0; i < n; ++i) {
       Vec6<T> ag = a[i];
       ag.l = ag.l - gravity;
-      f[i] += applyInertia(jcs[i], i, ag) + crossForce(v[i], applyInertia(jcs[i], i, v[i]));
+      f[i] += inertialWrench(jcs[i], i, ag, v[i]);
     }
     for (int i = n - 1; i >= 0; --i) {
       r[i] = dot(S[i], f[i]);
