@@ -25,13 +25,14 @@
 //    sweeps is chosen at run time when the CPU has it, the baseline build otherwise), and the
 //    second-order sweep adds, per node, only the second partial its kind has (none for sums and
 //    scalings, ∂²/∂x_i∂x_j for a product, g'' for sin, cos, sqrt, 1/x).
-//    Cost: O(n · pass) like the 2n separate sweeps it replaces, about 2 + 2n/16 passes over a
-//    recording of ~400 nodes per joint of a 3D chain, plus the linearization it needs for Y.
-//    Callgrind, instructions per call against one exact linearization (bench/README.md): planar
-//    10-chain 6×, 3D 40-chain 17×, hand-like tree (n = 20) 19×, hand scene 10× (the baseline
-//    SSE2 build: 9×, 39×, 38×, 21×). Issue 30's target of 4× is not reached: the linearization's
-//    own tangents are closed-form, O(1) per joint pair with composite subtree sums, where the
-//    recording sweeps every node for every block of directions.
+//    Cost: O(n · pass) like the 2n separate sweeps it replaces: the recording, one reverse sweep
+//    and 2 sweeps per block of 16 directions, each over every node of the recording (some 330
+//    per joint of a 3D chain), plus the linearization it needs for Y. Callgrind, instructions
+//    per call against one exact linearization (bench/README.md): planar 10-chain 6×, 3D 40-chain
+//    14×, hand-like tree (n = 20) 16×, hand scene 10× (the baseline SSE2 build: 9×, 33×, 32×,
+//    19×). Issue 30's target of 4× is not reached: the linearization's own tangents are
+//    closed-form, O(1) per joint pair with composite subtree sums, where the recording sweeps
+//    every node for every block of directions.
 // Every input enters F linearly (configuration forces, body wrench entries, tendon tensions) and K
 // does not depend on u, so G[e_uj, e_uk] = 0 and ∂²q̈/∂u∂u = 0 exactly: those pairs (and, in the
 // contraction, the u directions, which follow by symmetry) are not evaluated.
