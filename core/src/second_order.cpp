@@ -310,7 +310,8 @@ namespace {
 
 /// One block of L = 4, 8 or 16 directions: the tangent and second-order reverse sweeps
 /// (adjoint_tape.hpp), then the block's rows of ∇²φ, out(b, l) = x̄̇_z(b, l) + Σ_i Y(i, b) x̄̇_y(i, l)
-/// (N rows of L lanes; Y is (ny = n + nc)×N, by columns). Compiled for the baseline and, chosen at
+/// (N rows of L lanes; Y is (ny = n + nc)×N, by columns), clearing the input rows of x̄̇ as they
+/// are used (the sweep cleared the others: x̄̇ is zero again for the next block). Compiled for the baseline and, chosen at
 /// run time when the CPU has them, for AVX2 and FMA (the same source; FMA contraction changes
 /// results at rounding level only).
 struct BlockArgs {
@@ -336,6 +337,8 @@ TRELLIS_TAPE_INLINE void sweepBlockBody(const BlockArgs& b) {
     }
     for (int c = 0; c < L / W; ++c) lanesAt<W, L>(b.out, col, c) = acc[c];
   }
+  for (int row = 0; row <= b.N + b.ny; ++row)  // (row 0, the constant sink, is never written)
+    for (int c = 0; c < L / W; ++c) lanesAt<W, L>(b.xdotbar, row, c) = V{};
 }
 void sweepBlockGeneric(int lanes, const BlockArgs& b) {
   if (lanes == 4)
@@ -404,6 +407,7 @@ struct SecondOrderImpl {
   int recordedNodes = 0;               ///< the tape's size, the same at every state (buffers sized to it)
   Eigen::VectorXd xbar;                ///< per node: the adjoint
   Eigen::VectorXd xdot, xdotbar;       ///< per node and lane (node-major): tangent, tangent of the adjoint
+  int lastStride = 0;                  ///< lanes of the last block swept (its layout of xdot)
   Eigen::VectorXd laneRows;            ///< N rows × kTapeLanesMax lanes: one block's rows of ∇²φ
   Eigen::MatrixXd rows;                ///< N×2n: ∇²φ e_a for the q and q̇ directions a
 
@@ -701,16 +705,22 @@ DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, Sec
   for (int a0 = 0, L = 0; a0 < 2 * n; a0 += L) {
     const int lanes = std::min(detail::kTapeLanesMax, 2 * n - a0);
     L = lanes <= 4 ? 4 : (lanes <= 8 ? 8 : 16);
-    // Seeds: lane l is the direction a0 + l (unused lanes stay zero).
-    std::fill(xdot, xdot + static_cast<size_t>(inputs + 1) * L, 0.0);
-    for (int l = 0; l < lanes; ++l) {
-      xdot[static_cast<size_t>(1 + a0 + l) * L + l] = 1.0;
-      for (int i = 0; i < n + nc; ++i) xdot[static_cast<size_t>(1 + N + i) * L + l] = s.Y(i, a0 + l);
-    }
+    // Seeds: lane l is the direction a0 + l (unused lanes and all other input rows zero: the
+    // seeds of the previous block are reset below; after a block of another stride, the input
+    // rows of this one may hold its tangents).
+    if (s.lastStride != L) std::fill(xdot, xdot + static_cast<size_t>(inputs + 1) * L, 0.0);
+    s.lastStride = L;
+    auto seed = [&](bool set) {
+      for (int l = 0; l < lanes; ++l) {
+        xdot[static_cast<size_t>(1 + a0 + l) * L + l] = set ? 1.0 : 0.0;
+        for (int i = 0; i < n + nc; ++i) xdot[static_cast<size_t>(1 + N + i) * L + l] = set ? s.Y(i, a0 + l) : 0.0;
+      }
+    };
+    seed(true);
     detail::sweepBlock(L, {&s.tape, inputs, N, n + nc, s.xbar.data(), s.Y.data(), xdot, xdotbar, s.laneRows.data()});
     for (int l = 0; l < lanes; ++l)
       for (int b = 0; b < N; ++b) s.rows(b, a0 + l) = s.laneRows[static_cast<Eigen::Index>(b) * L + l];
-    std::fill(xdotbar, xdotbar + static_cast<size_t>(inputs + 1) * L, 0.0);  // the sweep cleared the rest
+    seed(false);
   }
   // H = −∇²φ; the (q, q̇) block symmetrized (its two halves agree to rounding).
   H.topLeftCorner(2 * n, 2 * n) = -0.5 * (s.rows.topRows(2 * n) + s.rows.topRows(2 * n).transpose());
