@@ -127,8 +127,8 @@ inline void reverseSweep(const Tape& tape, double* xbar) {
 // partials are read once for L directions. The L entries are processed in chunks of W, each one
 // vector value of the GCC/Clang vector extension: W = 2 fills an SSE2 register, W = 4 an AVX one
 // (wider vectors than the machine's registers are lowered through the stack). A chunk is accessed
-// through a type that assumes neither alignment nor the absence of aliasing (x̄̇_i and x̄̇_j may be
-// the same row, as in x · x).
+// through a type that assumes neither alignment (the rows are 8-byte aligned) nor the absence of
+// aliasing (x̄̇_i and x̄̇_j may be the same row, as in x · x).
 
 inline constexpr int kTapeLanesMax = 16;  ///< the widest block (L = 4, 8 or 16)
 
@@ -139,18 +139,30 @@ void secondOrderSweepsForceGeneric(bool force);
 
 template <int W>
 struct TapeChunk {
-  typedef double type __attribute__((vector_size(sizeof(double) * W), aligned(alignof(double)), may_alias));
+  typedef double type __attribute__((vector_size(sizeof(double) * W)));
+  /// The access type, aligned as a double and allowed to alias any double. GCC honours an
+  /// under-aligned vector typedef (and emits its best code for it); Clang does not (it would emit
+  /// aligned moves, which fault on these 8-byte aligned rows), so there a packed struct does it.
+#if defined(__clang__)
+  struct __attribute__((packed, may_alias)) Access {
+    type v;
+  };
+#else
+  typedef double unaligned __attribute__((vector_size(sizeof(double) * W), aligned(alignof(double)), may_alias));
+  struct Access {
+    unaligned v;
+  };
+#endif
 };
 
-
-/// Chunk c (W lanes) of row k of a node-major array of L lanes.
+/// Chunk c (W lanes) of row k of a node-major array of L lanes, read and written as `.v`.
 template <int W, int L>
-TRELLIS_TAPE_INLINE typename TapeChunk<W>::type& lanesAt(double* x, int k, int c) {
-  return *reinterpret_cast<typename TapeChunk<W>::type*>(x + static_cast<size_t>(k) * L + c * W);
+TRELLIS_TAPE_INLINE typename TapeChunk<W>::Access& lanesAt(double* x, int k, int c) {
+  return *reinterpret_cast<typename TapeChunk<W>::Access*>(x + static_cast<size_t>(k) * L + c * W);
 }
 template <int W, int L>
-TRELLIS_TAPE_INLINE const typename TapeChunk<W>::type& lanesAt(const double* x, int k, int c) {
-  return *reinterpret_cast<const typename TapeChunk<W>::type*>(x + static_cast<size_t>(k) * L + c * W);
+TRELLIS_TAPE_INLINE const typename TapeChunk<W>::Access& lanesAt(const double* x, int k, int c) {
+  return *reinterpret_cast<const typename TapeChunk<W>::Access*>(x + static_cast<size_t>(k) * L + c * W);
 }
 
 /// ẋ (rows 1 … inputs seeded, row 0 zero) ← the tangents of every node after the inputs.
@@ -161,7 +173,7 @@ TRELLIS_TAPE_INLINE void tangentSweepLanesBody(const Tape& tape, int inputs, dou
     const TapeNode& nd = nodes[k];
     // A unary node names row 0 (zero) with dj = 0: no branch.
     for (int c = 0; c < L / W; ++c)
-      lanesAt<W, L>(xdot, k, c) = nd.di * lanesAt<W, L>(xdot, nd.i, c) + nd.dj * lanesAt<W, L>(xdot, nd.j, c);
+      lanesAt<W, L>(xdot, k, c).v = nd.di * lanesAt<W, L>(xdot, nd.i, c).v + nd.dj * lanesAt<W, L>(xdot, nd.j, c).v;
   }
 }
 
@@ -181,35 +193,35 @@ TRELLIS_TAPE_INLINE void secondOrderReverseSweepLanesBody(const Tape& tape, int 
     switch (nd.kind) {
       case TapeKind::kAffine1:
         for (int c = 0; c < L / W; ++c) {
-          const V db = lanesAt<W, L>(xdotbar, k, c);
-          lanesAt<W, L>(xdotbar, k, c) = V{};
-          lanesAt<W, L>(xdotbar, nd.i, c) += nd.di * db;
+          const V db = lanesAt<W, L>(xdotbar, k, c).v;
+          lanesAt<W, L>(xdotbar, k, c).v = V{};
+          lanesAt<W, L>(xdotbar, nd.i, c).v += nd.di * db;
         }
         break;
       case TapeKind::kAffine2:
         for (int c = 0; c < L / W; ++c) {
-          const V db = lanesAt<W, L>(xdotbar, k, c);
-          lanesAt<W, L>(xdotbar, k, c) = V{};
-          lanesAt<W, L>(xdotbar, nd.i, c) += nd.di * db;
-          lanesAt<W, L>(xdotbar, nd.j, c) += nd.dj * db;
+          const V db = lanesAt<W, L>(xdotbar, k, c).v;
+          lanesAt<W, L>(xdotbar, k, c).v = V{};
+          lanesAt<W, L>(xdotbar, nd.i, c).v += nd.di * db;
+          lanesAt<W, L>(xdotbar, nd.j, c).v += nd.dj * db;
         }
         break;
       case TapeKind::kProduct: {
         const double s = xbar[k] * nd.d2;
         for (int c = 0; c < L / W; ++c) {
-          const V db = lanesAt<W, L>(xdotbar, k, c);
-          lanesAt<W, L>(xdotbar, k, c) = V{};
-          lanesAt<W, L>(xdotbar, nd.i, c) += nd.di * db + s * lanesAt<W, L>(xdot, nd.j, c);
-          lanesAt<W, L>(xdotbar, nd.j, c) += nd.dj * db + s * lanesAt<W, L>(xdot, nd.i, c);
+          const V db = lanesAt<W, L>(xdotbar, k, c).v;
+          lanesAt<W, L>(xdotbar, k, c).v = V{};
+          lanesAt<W, L>(xdotbar, nd.i, c).v += nd.di * db + s * lanesAt<W, L>(xdot, nd.j, c).v;
+          lanesAt<W, L>(xdotbar, nd.j, c).v += nd.dj * db + s * lanesAt<W, L>(xdot, nd.i, c).v;
         }
         break;
       }
       case TapeKind::kNonlinear1: {
         const double s = xbar[k] * nd.d2;
         for (int c = 0; c < L / W; ++c) {
-          const V db = lanesAt<W, L>(xdotbar, k, c);
-          lanesAt<W, L>(xdotbar, k, c) = V{};
-          lanesAt<W, L>(xdotbar, nd.i, c) += nd.di * db + s * lanesAt<W, L>(xdot, nd.i, c);
+          const V db = lanesAt<W, L>(xdotbar, k, c).v;
+          lanesAt<W, L>(xdotbar, k, c).v = V{};
+          lanesAt<W, L>(xdotbar, nd.i, c).v += nd.di * db + s * lanesAt<W, L>(xdot, nd.i, c).v;
         }
         break;
       }
