@@ -310,10 +310,10 @@ namespace {
 
 /// One block of L = 4, 8 or 16 directions: the tangent and second-order reverse sweeps
 /// (adjoint_tape.hpp), then the block's rows of ∇²φ, out(b, l) = x̄̇_z(b, l) + Σ_i Y(i, b) x̄̇_y(i, l)
-/// (N rows of L lanes; Y is (ny = n + nc)×N, by columns), clearing the input rows of x̄̇ as they
-/// are used (the sweep cleared the others: x̄̇ is zero again for the next block). Compiled for the baseline and, chosen at
-/// run time when the CPU has them, for AVX2 and FMA (the same source; FMA contraction changes
-/// results at rounding level only).
+/// (N rows of L lanes; Y is (ny = n + nc)×N, by columns), then the input rows of x̄̇ cleared (the
+/// sweep cleared the others: x̄̇ is zero again for the next block). Compiled for the baseline and,
+/// chosen at run time when the CPU has them, for AVX2 and FMA (the same source; FMA contraction
+/// changes results at rounding level only).
 struct BlockArgs {
   const Tape* tape;
   int inputs, N, ny;
