@@ -140,28 +140,31 @@ void secondOrderSweepsForceGeneric(bool force);
 template <int W>
 struct TapeChunk {
   typedef double type __attribute__((vector_size(sizeof(double) * W)));
-  /// The access type, aligned as a double and allowed to alias any double. GCC honours an
-  /// under-aligned vector typedef (and emits its best code for it); Clang does not (it would emit
-  /// aligned moves, which fault on these 8-byte aligned rows), so there a packed struct does it.
+  /// The access type, aligned as a double and exempt from type-based alias analysis (it reads and
+  /// writes arrays of double). GCC honours an under-aligned may_alias vector typedef; Clang does
+  /// not lower the alignment of a vector typedef (it emitted aligned moves, which fault on these
+  /// 8-byte aligned rows), so there a packed may_alias struct holds the vector.
 #if defined(__clang__)
   struct __attribute__((packed, may_alias)) Access {
     type v;
   };
 #else
-  typedef double unaligned __attribute__((vector_size(sizeof(double) * W), aligned(alignof(double)), may_alias));
-  struct Access {
-    unaligned v;
-  };
+  typedef double Access __attribute__((vector_size(sizeof(double) * W), aligned(alignof(double)), may_alias));
 #endif
 };
 
-/// Chunk c (W lanes) of row k of a node-major array of L lanes, read and written as `.v`.
+/// Chunk c (W lanes) of row k of a node-major array of L lanes, as a vector lvalue.
+#if defined(__clang__)
+#define TRELLIS_TAPE_LANES(W, L, x, k, c) (lanesAccess<W, L>(x, k, c).v)
+#else
+#define TRELLIS_TAPE_LANES(W, L, x, k, c) (lanesAccess<W, L>(x, k, c))
+#endif
 template <int W, int L>
-TRELLIS_TAPE_INLINE typename TapeChunk<W>::Access& lanesAt(double* x, int k, int c) {
+TRELLIS_TAPE_INLINE typename TapeChunk<W>::Access& lanesAccess(double* x, int k, int c) {
   return *reinterpret_cast<typename TapeChunk<W>::Access*>(x + static_cast<size_t>(k) * L + c * W);
 }
 template <int W, int L>
-TRELLIS_TAPE_INLINE const typename TapeChunk<W>::Access& lanesAt(const double* x, int k, int c) {
+TRELLIS_TAPE_INLINE const typename TapeChunk<W>::Access& lanesAccess(const double* x, int k, int c) {
   return *reinterpret_cast<const typename TapeChunk<W>::Access*>(x + static_cast<size_t>(k) * L + c * W);
 }
 
@@ -173,7 +176,7 @@ TRELLIS_TAPE_INLINE void tangentSweepLanesBody(const Tape& tape, int inputs, dou
     const TapeNode& nd = nodes[k];
     // A unary node names row 0 (zero) with dj = 0: no branch.
     for (int c = 0; c < L / W; ++c)
-      lanesAt<W, L>(xdot, k, c).v = nd.di * lanesAt<W, L>(xdot, nd.i, c).v + nd.dj * lanesAt<W, L>(xdot, nd.j, c).v;
+      TRELLIS_TAPE_LANES(W, L, xdot, k, c) = nd.di * TRELLIS_TAPE_LANES(W, L, xdot, nd.i, c) + nd.dj * TRELLIS_TAPE_LANES(W, L, xdot, nd.j, c);
   }
 }
 
@@ -193,35 +196,35 @@ TRELLIS_TAPE_INLINE void secondOrderReverseSweepLanesBody(const Tape& tape, int 
     switch (nd.kind) {
       case TapeKind::kAffine1:
         for (int c = 0; c < L / W; ++c) {
-          const V db = lanesAt<W, L>(xdotbar, k, c).v;
-          lanesAt<W, L>(xdotbar, k, c).v = V{};
-          lanesAt<W, L>(xdotbar, nd.i, c).v += nd.di * db;
+          const V db = TRELLIS_TAPE_LANES(W, L, xdotbar, k, c);
+          TRELLIS_TAPE_LANES(W, L, xdotbar, k, c) = V{};
+          TRELLIS_TAPE_LANES(W, L, xdotbar, nd.i, c) += nd.di * db;
         }
         break;
       case TapeKind::kAffine2:
         for (int c = 0; c < L / W; ++c) {
-          const V db = lanesAt<W, L>(xdotbar, k, c).v;
-          lanesAt<W, L>(xdotbar, k, c).v = V{};
-          lanesAt<W, L>(xdotbar, nd.i, c).v += nd.di * db;
-          lanesAt<W, L>(xdotbar, nd.j, c).v += nd.dj * db;
+          const V db = TRELLIS_TAPE_LANES(W, L, xdotbar, k, c);
+          TRELLIS_TAPE_LANES(W, L, xdotbar, k, c) = V{};
+          TRELLIS_TAPE_LANES(W, L, xdotbar, nd.i, c) += nd.di * db;
+          TRELLIS_TAPE_LANES(W, L, xdotbar, nd.j, c) += nd.dj * db;
         }
         break;
       case TapeKind::kProduct: {
         const double s = xbar[k] * nd.d2;
         for (int c = 0; c < L / W; ++c) {
-          const V db = lanesAt<W, L>(xdotbar, k, c).v;
-          lanesAt<W, L>(xdotbar, k, c).v = V{};
-          lanesAt<W, L>(xdotbar, nd.i, c).v += nd.di * db + s * lanesAt<W, L>(xdot, nd.j, c).v;
-          lanesAt<W, L>(xdotbar, nd.j, c).v += nd.dj * db + s * lanesAt<W, L>(xdot, nd.i, c).v;
+          const V db = TRELLIS_TAPE_LANES(W, L, xdotbar, k, c);
+          TRELLIS_TAPE_LANES(W, L, xdotbar, k, c) = V{};
+          TRELLIS_TAPE_LANES(W, L, xdotbar, nd.i, c) += nd.di * db + s * TRELLIS_TAPE_LANES(W, L, xdot, nd.j, c);
+          TRELLIS_TAPE_LANES(W, L, xdotbar, nd.j, c) += nd.dj * db + s * TRELLIS_TAPE_LANES(W, L, xdot, nd.i, c);
         }
         break;
       }
       case TapeKind::kNonlinear1: {
         const double s = xbar[k] * nd.d2;
         for (int c = 0; c < L / W; ++c) {
-          const V db = lanesAt<W, L>(xdotbar, k, c).v;
-          lanesAt<W, L>(xdotbar, k, c).v = V{};
-          lanesAt<W, L>(xdotbar, nd.i, c).v += nd.di * db + s * lanesAt<W, L>(xdot, nd.i, c).v;
+          const V db = TRELLIS_TAPE_LANES(W, L, xdotbar, k, c);
+          TRELLIS_TAPE_LANES(W, L, xdotbar, k, c) = V{};
+          TRELLIS_TAPE_LANES(W, L, xdotbar, nd.i, c) += nd.di * db + s * TRELLIS_TAPE_LANES(W, L, xdot, nd.i, c);
         }
         break;
       }

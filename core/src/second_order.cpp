@@ -329,16 +329,16 @@ TRELLIS_TAPE_INLINE void sweepBlockBody(const BlockArgs& b) {
   const double* xdotbar = b.xdotbar;
   for (int col = 0; col < b.N; ++col) {
     V acc[L / W];
-    for (int c = 0; c < L / W; ++c) acc[c] = lanesAt<W, L>(xdotbar, 1 + col, c).v;
+    for (int c = 0; c < L / W; ++c) acc[c] = TRELLIS_TAPE_LANES(W, L, xdotbar, 1 + col, c);
     const double* y = b.Y + static_cast<size_t>(col) * b.ny;
     for (int i = 0; i < b.ny; ++i) {
       const double yi = y[i];
-      for (int c = 0; c < L / W; ++c) acc[c] += yi * lanesAt<W, L>(xdotbar, 1 + b.N + i, c).v;
+      for (int c = 0; c < L / W; ++c) acc[c] += yi * TRELLIS_TAPE_LANES(W, L, xdotbar, 1 + b.N + i, c);
     }
-    for (int c = 0; c < L / W; ++c) lanesAt<W, L>(b.out, col, c).v = acc[c];
+    for (int c = 0; c < L / W; ++c) TRELLIS_TAPE_LANES(W, L, b.out, col, c) = acc[c];
   }
   for (int row = 0; row <= b.N + b.ny; ++row)  // (row 0, the constant sink, is never written)
-    for (int c = 0; c < L / W; ++c) lanesAt<W, L>(b.xdotbar, row, c).v = V{};
+    for (int c = 0; c < L / W; ++c) TRELLIS_TAPE_LANES(W, L, b.xdotbar, row, c) = V{};
 }
 void sweepBlockGeneric(int lanes, const BlockArgs& b) {
   if (lanes == 4)
