@@ -28,9 +28,9 @@
 //    Cost: O(n · pass) like the 2n separate sweeps it replaces: the recording, one reverse sweep
 //    and 2 sweeps per block of 16 directions, each over every node of the recording (some 330
 //    per joint of a 3D chain), plus the linearization it needs for Y. Callgrind, instructions
-//    per call against one exact linearization (bench/README.md): planar 10-chain 5.7×, 3D
-//    40-chain 13×, hand-like tree (n = 20) 14.5×, hand scene 9× (the baseline SSE2 build: 8×,
-//    27×, 27×, 16×). Issue 30's target of 4× is not reached: the linearization's own tangents are
+//    per call against one exact linearization (bench/README.md): planar 10-chain 6×, 3D 40-chain
+//    14×, hand-like tree (n = 20) 15×, hand scene 10× (the baseline SSE2 build: 9×, 32×, 31×,
+//    19×). Issue 30's target of 4× is not reached: the linearization's own tangents are
 //    closed-form, O(1) per joint pair with composite subtree sums, where the recording sweeps
 //    every node for every block of directions.
 // Every input enters F linearly (configuration forces, body wrench entries, tendon tensions) and K
