@@ -108,18 +108,25 @@ struct ResidualPass {
     addWrench(jb, forceAt(pb, -force));
   }
 
-  /// [m x_v + x_ω × h; h × x_v + I x_ω] with the joint body's inertia in world axes about the
-  /// origin: h = m p + R h_l, I ω = R I_l Rᵀ ω + (m |p|² + 2 p·h_s) ω − m p (p·ω) − p (h_s·ω) − h_s (p·ω)
-  /// (the matrix of kinematics.cpp applied without forming it).
-  Vec6<T> applyInertia(const JointConstants& jc, int i, const Vec6<T>& x) const {
+  /// The inertial wrench of joint i's body, I (a − g) + v ×* I v at the world origin, evaluated in
+  /// the body's axes about its origin, where the inertia is constant (h = m c, I about the origin:
+  /// f = [m x_v + x_ω × h; h × x_v + I x_ω]): the twists go in as x_b = (Rᵀ (x_v + x_ω × p), Rᵀ x_ω),
+  /// the wrench comes back as [R f; R n + p × R f]. (The same quantity as the world-axes form with
+  /// I_world = R I Rᵀ + parallel-axis terms, in fewer operations: two rotations per twist instead
+  /// of the world inertia applied twice.)
+  Vec6<T> inertialWrench(const JointConstants& jc, int i, const Vec6<T>& acc, const Vec6<T>& vel) const {
+    const Mat3<T>& Ri = R[i];
     const Vec3<T>& pi = p[i];
-    const Vec3<T> hs = R[i] * jc.firstMoment;
-    const Vec3<T> h = jc.mass * pi + hs;
-    const Vec3<T>& w = x.a;
-    const T pw = dot(pi, w), hw = dot(hs, w);
-    const Vec3<T> Iw = R[i] * (jc.inertia * transposeTimes(R[i], w)) + (jc.mass * dot(pi, pi) + 2.0 * dot(pi, hs)) * w -
-                       (jc.mass * pw) * pi - hw * pi - pw * hs;
-    return {jc.mass * x.l + cross(w, h), cross(h, x.l) + Iw};
+    auto toBody = [&](const Vec6<T>& x) {
+      return Vec6<T>{transposeTimes(Ri, x.l + cross(x.a, pi)), transposeTimes(Ri, x.a)};
+    };
+    auto inertia = [&](const Vec6<T>& x) {
+      return Vec6<T>{jc.mass * x.l + cross(x.a, jc.firstMoment), cross(jc.firstMoment, x.l) + jc.inertia * x.a};
+    };
+    const Vec6<T> vb = toBody(vel);
+    const Vec6<T> fb = inertia(toBody(acc)) + crossForce(vb, inertia(vb));
+    const Vec3<T> force = Ri * fb.l;
+    return {force, Ri * fb.a + cross(pi, force)};
   }
 
   void evaluate(const Model& model, const std::vector<JointConstants>& jcs, const Vec3<double>& gravity) {
@@ -220,7 +227,7 @@ struct ResidualPass {
     for (int i = 0; i < n; ++i) {
       Vec6<T> ag = a[i];
       ag.l = ag.l - gravity;
-      f[i] += applyInertia(jcs[i], i, ag) + crossForce(v[i], applyInertia(jcs[i], i, v[i]));
+      f[i] += inertialWrench(jcs[i], i, ag, v[i]);
     }
     for (int i = n - 1; i >= 0; --i) {
       r[i] = dot(S[i], f[i]);
@@ -299,6 +306,79 @@ void jacobiEigen(Eigen::MatrixXd& A, Eigen::MatrixXd& V) {
   }
 }
 
+namespace {
+
+/// One block of L = 4, 8 or 16 directions: the tangent and second-order reverse sweeps
+/// (adjoint_tape.hpp), then the block's rows of ∇²φ, out(b, l) = x̄̇_z(b, l) + Σ_i Y(i, b) x̄̇_y(i, l)
+/// (N rows of L lanes; Y is (ny = n + nc)×N, by columns), then the input rows of x̄̇ cleared (the
+/// sweep cleared the others: x̄̇ is zero again for the next block). Compiled for the baseline and,
+/// chosen at run time when the CPU has them, for AVX2 and FMA (the same source; FMA contraction
+/// changes results at rounding level only).
+struct BlockArgs {
+  const Tape* tape;
+  int inputs, N, ny;
+  const double* xbar;
+  const double* Y;
+  double *xdot, *xdotbar, *out;
+};
+template <int W, int L>
+TRELLIS_TAPE_INLINE void sweepBlockBody(const BlockArgs& b) {
+  using V = typename TapeChunk<W>::type;
+  tangentSweepLanesBody<W, L>(*b.tape, b.inputs, b.xdot);
+  secondOrderReverseSweepLanesBody<W, L>(*b.tape, b.inputs, b.xbar, b.xdot, b.xdotbar);
+  const double* xdotbar = b.xdotbar;
+  for (int col = 0; col < b.N; ++col) {
+    V acc[L / W];
+    for (int c = 0; c < L / W; ++c) acc[c] = TRELLIS_TAPE_LANES(W, L, xdotbar, 1 + col, c);
+    const double* y = b.Y + static_cast<size_t>(col) * b.ny;
+    for (int i = 0; i < b.ny; ++i) {
+      const double yi = y[i];
+      for (int c = 0; c < L / W; ++c) acc[c] += yi * TRELLIS_TAPE_LANES(W, L, xdotbar, 1 + b.N + i, c);
+    }
+    for (int c = 0; c < L / W; ++c) TRELLIS_TAPE_LANES(W, L, b.out, col, c) = acc[c];
+  }
+  for (int row = 0; row <= b.N + b.ny; ++row)  // (row 0, the constant sink, is never written)
+    for (int c = 0; c < L / W; ++c) TRELLIS_TAPE_LANES(W, L, b.xdotbar, row, c) = V{};
+}
+void sweepBlockGeneric(int lanes, const BlockArgs& b) {
+  if (lanes == 4)
+    sweepBlockBody<2, 4>(b);
+  else if (lanes == 8)
+    sweepBlockBody<2, 8>(b);
+  else
+    sweepBlockBody<2, 16>(b);
+}
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+__attribute__((target("avx2,fma"))) void sweepBlockAvx2(int lanes, const BlockArgs& b) {
+  if (lanes == 4)
+    sweepBlockBody<4, 4>(b);
+  else if (lanes == 8)
+    sweepBlockBody<4, 8>(b);
+  else
+    sweepBlockBody<4, 16>(b);
+}
+bool cpuHasAvx2Fma() {
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+}
+const bool kSweepAvx2 = cpuHasAvx2Fma();
+#else
+constexpr bool kSweepAvx2 = false;
+#endif
+bool sweepForceGeneric = false;
+
+void sweepBlock(int lanes, const BlockArgs& b) {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  if (kSweepAvx2 && !sweepForceGeneric) return sweepBlockAvx2(lanes, b);
+#endif
+  sweepBlockGeneric(lanes, b);
+}
+
+}  // namespace
+
+bool secondOrderSweepsUseAvx2() { return kSweepAvx2 && !sweepForceGeneric; }
+void secondOrderSweepsForceGeneric(bool force) { sweepForceGeneric = force; }
+
 struct SecondOrderImpl {
   int n, m, nc, N;
   std::vector<JointConstants> joints;
@@ -324,7 +404,11 @@ struct SecondOrderImpl {
   Tape tape;
   ResidualPass<TapeVar> recorded;
   int inputs = 0;
-  Eigen::VectorXd xbar, xdot, xdotbar;  ///< per node: adjoint, tangent, tangent of the adjoint
+  int recordedNodes = 0;               ///< the tape's size, the same at every state (buffers sized to it)
+  Eigen::VectorXd xbar;                ///< per node: the adjoint
+  Eigen::VectorXd xdot, xdotbar;       ///< per node and lane (node-major): tangent, tangent of the adjoint
+  int lastStride = 0;                  ///< lanes of the last block swept (its layout of xdot)
+  Eigen::VectorXd laneRows;            ///< N rows × kTapeLanesMax lanes: one block's rows of ∇²φ
   Eigen::MatrixXd rows;                ///< N×2n: ∇²φ e_a for the q and q̇ directions a
 
   SecondOrderImpl(const Model& model)
@@ -377,9 +461,11 @@ struct SecondOrderImpl {
     recorded.resize(n, m, nc);
     record(model);
     tape.nodes.resize(static_cast<size_t>(tape.size));
+    recordedNodes = tape.size;
     xbar = Eigen::VectorXd::Zero(tape.size);
-    xdot = Eigen::VectorXd::Zero(tape.size);
-    xdotbar = Eigen::VectorXd::Zero(tape.size);
+    xdot = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kTapeLanesMax);
+    xdotbar = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kTapeLanesMax);
+    laneRows = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(N) * kTapeLanesMax);
     rows = Eigen::MatrixXd::Zero(N, 2 * n);
   }
 
@@ -599,26 +685,42 @@ DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, Sec
   // wᵀ δq̈ + ρᵀ δλ = −μᵀ G[a, b] = −∂²φ/∂z_a∂z_b with φ(z') = μᵀ F(z', y + Y (z' − z)): the
   // Hessian of one scalar, by forward-over-reverse on the recorded residual pass. One reverse
   // sweep gives φ's adjoints; per q or q̇ direction a, a tangent sweep (z' = z + s e_a, y + s Y e_a)
-  // and a second reverse sweep give ∇²φ e_a = x̄̇_z + Yᵀ x̄̇_y. The u directions follow by symmetry,
-  // and the (u, u) block is 0 (F is linear in u, K does not depend on u).
+  // and a second reverse sweep give ∇²φ e_a = x̄̇_z + Yᵀ x̄̇_y, up to 16 directions per pair of
+  // sweeps (blocks of L = 16, the last one of 4, 8 or 16).
+  // The u directions follow by symmetry, and the (u, u) block is 0 (F is linear in u, K does not
+  // depend on u).
   s.record(model);
+  if (s.tape.size != s.recordedNodes)  // a folding rule that depended on the state would overrun the buffers
+    throw std::logic_error("computeSecondOrderContraction: internal error: the recording has " +
+                           std::to_string(s.tape.size) + " nodes at this state, " + std::to_string(s.recordedNodes) +
+                           " when the workspace was sized");
   const int inputs = s.inputs, size = s.tape.size;
   s.xbar.head(size).setZero();
   for (int i = 0; i < n; ++i) s.xbar[s.recorded.r[i].idx] += s.muR[i];
   for (int k = 0; k < nc; ++k) s.xbar[s.recorded.c[k].idx] += s.muC[k];
   s.xbar[0] = 0.0;  // a constant output (index 0) has no adjoint
   detail::reverseSweep(s.tape, s.xbar.data());
-  s.xdot.head(inputs + 1).setZero();
-  for (int a = 0; a < 2 * n; ++a) {
-    s.xdot[1 + a] = 1.0;
-    s.xdot.segment(1 + N, n + nc) = s.Y.col(a);
-    detail::tangentSweep(s.tape, inputs, s.xdot.data());
-    s.xdotbar.head(size).setZero();
-    detail::secondOrderReverseSweep(s.tape, inputs, s.xbar.data(), s.xdot.data(), s.xdotbar.data());
-    auto row = s.rows.col(a);
-    row = s.xdotbar.segment(1, N);
-    row.noalias() += s.Y.transpose() * s.xdotbar.segment(1 + N, n + nc);
-    s.xdot[1 + a] = 0.0;
+  double* xdot = s.xdot.data();
+  double* xdotbar = s.xdotbar.data();
+  for (int a0 = 0, L = 0; a0 < 2 * n; a0 += L) {
+    const int lanes = std::min(detail::kTapeLanesMax, 2 * n - a0);
+    L = lanes <= 4 ? 4 : (lanes <= 8 ? 8 : 16);
+    // Seeds: lane l is the direction a0 + l (unused lanes and all other input rows zero: the
+    // seeds of the previous block are reset below; after a block of another stride, the input
+    // rows of this one may hold its tangents).
+    if (s.lastStride != L) std::fill(xdot, xdot + static_cast<size_t>(inputs + 1) * L, 0.0);
+    s.lastStride = L;
+    auto seed = [&](bool set) {
+      for (int l = 0; l < lanes; ++l) {
+        xdot[static_cast<size_t>(1 + a0 + l) * L + l] = set ? 1.0 : 0.0;
+        for (int i = 0; i < n + nc; ++i) xdot[static_cast<size_t>(1 + N + i) * L + l] = set ? s.Y(i, a0 + l) : 0.0;
+      }
+    };
+    seed(true);
+    detail::sweepBlock(L, {&s.tape, inputs, N, n + nc, s.xbar.data(), s.Y.data(), xdot, xdotbar, s.laneRows.data()});
+    for (int l = 0; l < lanes; ++l)
+      for (int b = 0; b < N; ++b) s.rows(b, a0 + l) = s.laneRows[static_cast<Eigen::Index>(b) * L + l];
+    seed(false);
   }
   // H = −∇²φ; the (q, q̇) block symmetrized (its two halves agree to rounding).
   H.topLeftCorner(2 * n, 2 * n) = -0.5 * (s.rows.topRows(2 * n) + s.rows.topRows(2 * n).transpose());

@@ -27,6 +27,8 @@
 #include <trellis/core/second_order.hpp>
 #include <trellis/core/numdiff.hpp>
 
+#include "adjoint_tape.hpp"  // core/src: the sweeps' build switch
+
 #include <cmath>
 #include <string>
 #include <vector>
@@ -272,6 +274,45 @@ TEST_CASE("Second derivatives with redundant constraints equal those without the
     for (int i = 0; i < one.nq(); ++i) expected += w[i] * w1.qddHessian[i];
     computeSecondOrderContraction(two, d2, c2, s.q, s.dq, s.u, w, Eigen::VectorXd(), H);
     TRELLIS_CHECK_MATRIX(expected, H, 1e-9, Scale::kMatrix);
+  }
+}
+
+TEST_CASE("The contraction in blocks of directions, in both builds of its sweeps", "[second_order]") {
+  // The sweeps run the 2n q and q̇ directions in blocks of 16 (the last one of 4, 8 or 16, partly
+  // unused), in the baseline build or, when the CPU has AVX2 and FMA, in that one. Every block
+  // shape (2n = 4, 6, 12, 20 = 16 + 4, 26 = 16 + 10) and both builds against the sum of the
+  // tensors: 1e-10 of the largest entry, as in checkSecondOrderAt.
+  struct ForceGeneric {  // restores the automatic choice even when a check fails
+    explicit ForceGeneric(bool force) { detail::secondOrderSweepsForceGeneric(force); }
+    ~ForceGeneric() { detail::secondOrderSweepsForceGeneric(false); }
+  };
+  std::vector<TestSystem> systems;
+  for (const int links : {2, 3, 10, 13}) systems.push_back(planarChain(links, 0.5, 1.0));
+  systems.push_back(kitchenSink(3, true));
+  for (const bool generic : {false, true}) {
+    const ForceGeneric force(generic);
+    INFO((detail::secondOrderSweepsUseAvx2() ? "AVX2+FMA sweeps" : "baseline sweeps"));
+    if (generic) CHECK_FALSE(detail::secondOrderSweepsUseAvx2());
+    std::mt19937 rng(910);
+    for (const TestSystem& sys : systems) {
+      const Model& model = sys.model;
+      const int n = model.nq(), nc = model.nc(), N = 2 * n + model.nu();
+      INFO("n = " << n << ", nc = " << nc);
+      const State s = randomState(model, rng);
+      Data data(model);
+      SecondOrderWorkspace ws(model);
+      REQUIRE(computeSecondOrderTensors(model, data, ws, s.q, s.dq, s.u).ok());
+      const Eigen::VectorXd w = uniformVector(rng, n, -1.0, 1.0), rho = uniformVector(rng, nc, -1.0, 1.0);
+      Eigen::MatrixXd expected = Eigen::MatrixXd::Zero(N, N), H(N, N);
+      for (int i = 0; i < n; ++i) expected += w[i] * ws.qddHessian[i];
+      for (int r = 0; r < nc; ++r) expected += rho[r] * ws.lambdaHessian[r];
+      REQUIRE(computeSecondOrderContraction(model, data, ws, s.q, s.dq, s.u, w, rho, H).ok());
+      TRELLIS_CHECK_MATRIX(expected, H, 1e-10, Scale::kMatrix);
+      // A second call on the same workspace (the sweeps leave their arrays cleared) agrees.
+      Eigen::MatrixXd again(N, N);
+      REQUIRE(computeSecondOrderContraction(model, data, ws, s.q, s.dq, s.u, w, rho, again).ok());
+      CHECK(again == H);
+    }
   }
 }
 
