@@ -189,6 +189,38 @@ void bindOptimization(py::module_& m);
 void bindHand(py::module_& m);
 void bindSecondOrder(py::module_& m);  // bind_second_order.cpp
 
+/// The loader behind the vector casters (pybind11::detail below): reads a contiguous float64 array
+/// in place (anything else converted, as pybind11's Eigen::Ref caster does) into a Ref of an
+/// unaligned vector type (a distinct type, so pybind11's own caster serves it) that `Value` then
+/// maps without a copy; a complex array is refused first (refuseComplex, naming `argument` when
+/// it has one: argumentName). Value: Eigen::Ref<const VectorXd> or RealVector<"name">.
+inline const char* argumentName(const Eigen::Ref<const Eigen::VectorXd>*) { return nullptr; }
+template <ArgName Name>
+const char* argumentName(const RealVector<Name>*) { return Name.text; }
+template <class Value>
+struct RealVectorRefCaster {
+  using InnerRef = Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::DontAlign>>;
+
+  bool load(py::handle src, bool convert) {
+    refuseComplex(src, argumentName(static_cast<const Value*>(nullptr)), "a real (float64) vector");
+    if (!inner_.load(src, convert)) return false;
+    const InnerRef& mapped = inner_;
+    ref_ = std::make_unique<Value>(Value{Eigen::Ref<const Eigen::VectorXd>(mapped)});
+    return true;
+  }
+  static constexpr auto name = py::detail::type_caster<InnerRef>::name;
+  // NOLINTNEXTLINE(google-explicit-constructor)
+  operator Value*() { return ref_.get(); }
+  // NOLINTNEXTLINE(google-explicit-constructor)
+  operator Value&() { return *ref_; }
+  template <typename T>
+  using cast_op_type = py::detail::cast_op_type<T>;
+
+ private:
+  py::detail::type_caster<InnerRef> inner_;
+  std::unique_ptr<Value> ref_;
+};
+
 }  // namespace trellis::python
 
 namespace pybind11::detail {
@@ -227,61 +259,17 @@ struct type_caster<Eigen::VectorXd> : RealPlainCaster<Eigen::VectorXd> {};
 template <>
 struct type_caster<Eigen::MatrixXd> : RealPlainCaster<Eigen::MatrixXd> {};
 
-/// Vector arguments (q, dq, u, ...) as pybind11's own Eigen::Ref caster reads them — a contiguous
-/// float64 array in place, anything else converted — except that a complex array is refused
-/// (refuseComplex) instead of cast to its real part. The inner caster reads into a Ref of an
-/// unaligned vector type (a distinct type, so pybind11's caster serves it) whose data the
-/// Ref<const VectorXd> then maps without a copy (both contiguous, inner stride 1).
+/// Vector arguments as pybind11's own Eigen::Ref caster reads them (a contiguous float64 array in
+/// place, anything else converted), except that a complex array is refused instead of cast to its
+/// real part (trellis::python::RealVectorRefCaster).
 template <>
-struct type_caster<Eigen::Ref<const Eigen::VectorXd>> {
-  using Ref = Eigen::Ref<const Eigen::VectorXd>;
-  using InnerRef = Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::DontAlign>>;
+struct type_caster<Eigen::Ref<const Eigen::VectorXd>>
+    : trellis::python::RealVectorRefCaster<Eigen::Ref<const Eigen::VectorXd>> {};
 
-  bool load(handle src, bool convert) {
-    trellis::python::refuseComplex(src);
-    if (!inner_.load(src, convert)) return false;
-    const InnerRef& mapped = inner_;
-    ref_ = std::make_unique<Ref>(mapped);
-    return true;
-  }
-  static constexpr auto name = type_caster<InnerRef>::name;
-  // NOLINTNEXTLINE(google-explicit-constructor)
-  operator Ref*() { return ref_.get(); }
-  // NOLINTNEXTLINE(google-explicit-constructor)
-  operator Ref&() { return *ref_; }
-  template <typename T>
-  using cast_op_type = pybind11::detail::cast_op_type<T>;
-
- private:
-  type_caster<InnerRef> inner_;
-  std::unique_ptr<Ref> ref_;
-};
-
-/// RealVector<"name">: the Ref<const VectorXd> caster after the complex check (naming the argument).
+/// RealVector<"name">: the same caster, naming the argument in the complex refusal.
 template <trellis::python::ArgName Name>
-struct type_caster<trellis::python::RealVector<Name>> {
-  using Value = trellis::python::RealVector<Name>;
-  using InnerRef = Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::DontAlign>>;
-
-  bool load(handle src, bool convert) {
-    trellis::python::refuseComplex(src, Name.text, "a real (float64) vector");
-    if (!inner_.load(src, convert)) return false;
-    const InnerRef& mapped = inner_;
-    ref_ = std::make_unique<Value>(Value{Eigen::Ref<const Eigen::VectorXd>(mapped)});
-    return true;
-  }
-  static constexpr auto name = type_caster<InnerRef>::name;
-  // NOLINTNEXTLINE(google-explicit-constructor)
-  operator Value*() { return ref_.get(); }
-  // NOLINTNEXTLINE(google-explicit-constructor)
-  operator Value&() { return *ref_; }
-  template <typename T>
-  using cast_op_type = pybind11::detail::cast_op_type<T>;
-
- private:
-  type_caster<InnerRef> inner_;
-  std::unique_ptr<Value> ref_;
-};
+struct type_caster<trellis::python::RealVector<Name>>
+    : trellis::python::RealVectorRefCaster<trellis::python::RealVector<Name>> {};
 
 /// RealMatrix<"name">: the Eigen::MatrixXd caster after the complex check (naming the argument).
 template <trellis::python::ArgName Name>
