@@ -420,6 +420,153 @@ class MagnusIntegrator {
   Eigen::MatrixXd V_[3], a1_, a2_, a3_, c1_, c2_, x_, y_, om6_, om4_, Z_, P_, E6_, W6_, E4_, W4_, Es_, Ws_;
 };
 
+/// The three-stage Radau IIA collocation (order 5, L-stable, stiffly accurate) of the variational
+/// equation Ẏ = A(t)Y + [0 B(t)], Y = [Φ Γ] (nx×c) from [I 0] at the interval's start, and the cost
+/// W = ∫ YᵀQY + blkdiag(0, R) by the method's own quadrature on its stage values (exact for
+/// polynomials of degree 4). The problem is linear, so each step is one linear solve: with
+/// A_j = A(t + c_j δ), the stages solve
+///   Y_i − δ Σ_j a_ij A_j Y_j = Y_n + δ Σ_j a_ij [0 B_j]     (3nx unknowns per column, one LU),
+/// and Y_{n+1} = Y_3. L-stability is what a stiff A needs (e^{λδ} → 0 is reproduced as R(λδ) → 0;
+/// Magnus' series and explicit schemes need |λ|δ ≲ 1 there). Error estimate: the step against two
+/// half steps (Richardson; the pair is kept), relative to each block's size as in stepError. Steps
+/// are carried across intervals (a one-step method restarts for free) and end on the breakpoints.
+class RadauIntegrator {
+ public:
+  RadauIntegrator(Discretizer& s, double rtol, long maxSteps)
+      : s_(s), nx_(s.nx), nu_(s.nu), c_(s.nx + s.nu), rtol_(rtol), maxSteps_(maxSteps),
+        M_(3 * s.nx, 3 * s.nx), rhs_(3 * s.nx, s.nx + s.nu), lu_(3 * s.nx) {
+    const double r6 = std::sqrt(6.0);
+    const double a[3][3] = {{(88.0 - 7.0 * r6) / 360.0, (296.0 - 169.0 * r6) / 1800.0, (-2.0 + 3.0 * r6) / 225.0},
+                            {(296.0 + 169.0 * r6) / 1800.0, (88.0 + 7.0 * r6) / 360.0, (-2.0 - 3.0 * r6) / 225.0},
+                            {(16.0 - r6) / 36.0, (16.0 + r6) / 36.0, 1.0 / 9.0}};
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) a_[i][j] = a[i][j];
+    nodes_[0] = (4.0 - r6) / 10.0;
+    nodes_[1] = (4.0 + r6) / 10.0;
+    nodes_[2] = 1.0;
+    for (auto& x : A_) x.resize(nx_, nx_);
+    for (auto& x : B_) x.resize(nx_, nu_);
+    for (auto& x : Q_) x.resize(nx_, nx_);
+    for (auto& x : R_) x.resize(nu_, nu_);
+  }
+
+  long steps = 0, rejected = 0;
+  std::string failMessage;
+  double failTime = 0.0;
+
+  bool integrate(double a, double b, const std::vector<double>& breakpoints, Eigen::MatrixXd& Y, Eigen::MatrixXd& W) {
+    Y = Eigen::MatrixXd::Zero(nx_, c_);
+    Y.leftCols(nx_).setIdentity();
+    W = Eigen::MatrixXd::Zero(c_, c_);
+    auto nextBreak = std::upper_bound(breakpoints.begin(), breakpoints.end(), a);
+    double t = a;
+    long taken = 0;
+    if (!(next_ > 0.0)) next_ = b - a;
+    while (t < b) {
+      const double round = 8.0 * std::numeric_limits<double>::epsilon() * std::max({std::abs(t), std::abs(b), b - a});
+      while (nextBreak != breakpoints.end() && *nextBreak <= t + round) ++nextBreak;
+      const double stop = (nextBreak != breakpoints.end() && *nextBreak < b - round) ? *nextBreak : b;
+      double d = std::min(next_, stop - t);
+      if (t + 1.1 * d >= stop) d = stop - t;
+      for (;;) {
+        if (++taken > maxSteps_) {
+          failTime = t;
+          failMessage = "more than maxSteps = " + std::to_string(maxSteps_) + " Radau steps in the interval";
+          return false;
+        }
+        if (!(d > 8.0 * std::numeric_limits<double>::epsilon() * std::max(std::abs(t), b - a))) {
+          failTime = t;
+          failMessage = "the Radau step size fell to " + std::to_string(d) + " s (A(t) not resolved)";
+          return false;
+        }
+        // One step of d, and two of d/2 (kept).
+        Yf_ = Y;
+        Wf_ = W;
+        if (!step(t, d, Yf_, Wf_)) return false;
+        Yh_ = Y;
+        Wh_ = W;
+        if (!step(t, 0.5 * d, Yh_, Wh_) || !step(t + 0.5 * d, 0.5 * d, Yh_, Wh_)) return false;
+        // Richardson: the halves' error ≈ (halves − full)/(2⁵ − 1) for order 5; /15 keeps a margin
+        // for the cost quadrature's stage order.
+        const double err = stepError(Yh_ - Y, Yf_ - Y, Wh_ - W, Wf_ - W) / 15.0;
+        const double factor = std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.2), 0.2, 4.0);
+        if (err <= 1.0 && Yh_.allFinite() && Wh_.allFinite()) {
+          Y.swap(Yh_);
+          W.swap(Wh_);
+          ++steps;
+          const bool atStop = d == stop - t;
+          t = atStop ? stop : t + d;
+          if (!atStop || factor < 1.0) next_ = d * factor;
+          break;
+        }
+        ++rejected;
+        d *= std::isfinite(err) ? factor : 0.2;
+      }
+    }
+    W = 0.5 * (W + W.transpose());
+    return true;
+  }
+
+ private:
+  /// The increments' difference relative to rtol: Y's against max |ΔY| of the step (≥ the size of
+  /// what the step changed) and max |Y| columns' scale, W's against √(ΔW_ii ΔW_jj) (the step's own
+  /// PSD increment, as stepError of the Magnus integrator).
+  double stepError(const Eigen::MatrixXd& dYh, const Eigen::MatrixXd& dYf, const Eigen::MatrixXd& dWh,
+                   const Eigen::MatrixXd& dWf) const {
+    const double yScale = std::max(Yh_.cwiseAbs().maxCoeff(), std::numeric_limits<double>::min());
+    double err = (dYh - dYf).cwiseAbs().maxCoeff() / (rtol_ * yScale);
+    const Eigen::VectorXd dd = Wh_.diagonal().cwiseMax(0.0).cwiseSqrt();
+    const double floor = std::sqrt(std::numeric_limits<double>::epsilon()) * dd.maxCoeff() + std::numeric_limits<double>::min();
+    for (Eigen::Index j = 0; j < c_; ++j) {
+      for (Eigen::Index i = 0; i <= j; ++i) {
+        const double diff = std::abs(dWh(i, j) - dWf(i, j));
+        if (diff > 0.0) err = std::max(err, diff / (rtol_ * std::max(dd(i) * dd(j), floor * floor)));
+      }
+    }
+    return std::isfinite(err) ? err : std::numeric_limits<double>::infinity();
+  }
+
+  bool step(double t, double d, Eigen::MatrixXd& Y, Eigen::MatrixXd& W) {
+    const Eigen::Index n = nx_;
+    for (int j = 0; j < 3; ++j) {
+      if (!s_.evaluate(t + nodes_[j] * d)) return false;
+      A_[j] = s_.A;
+      B_[j] = s_.B;
+      Q_[j] = s_.Q;
+      R_[j] = s_.R;
+    }
+    for (int i = 0; i < 3; ++i) {
+      rhs_.middleRows(i * n, n) = Y;
+      for (int j = 0; j < 3; ++j) {
+        M_.block(i * n, j * n, n, n) = (-d * a_[i][j]) * A_[j];
+        if (i == j) M_.block(i * n, j * n, n, n).diagonal().array() += 1.0;
+        rhs_.block(i * n, n, n, nu_) += (d * a_[i][j]) * B_[j];
+      }
+    }
+    lu_.compute(M_);
+    stages_.noalias() = lu_.solve(rhs_);
+    // W += d Σ b_i (Y_iᵀ Q_i Y_i + blkdiag(0, R_i)), b = the last row of a.
+    for (int i = 0; i < 3; ++i) {
+      const auto Yi = stages_.middleRows(i * n, n);
+      QY_.noalias() = Q_[i] * Yi;
+      W.noalias() += (d * a_[2][i]) * (Yi.transpose() * QY_);
+      W.bottomRightCorner(nu_, nu_) += (d * a_[2][i]) * R_[i];
+    }
+    Y = stages_.bottomRows(n);
+    return true;
+  }
+
+  Discretizer& s_;
+  Eigen::Index nx_, nu_, c_;
+  double rtol_;
+  long maxSteps_;
+  double next_ = 0.0;
+  double a_[3][3] = {}, nodes_[3] = {};
+  Eigen::MatrixXd A_[3], B_[3], Q_[3], R_[3];
+  Eigen::MatrixXd M_, rhs_, stages_, QY_, Yf_, Wf_, Yh_, Wh_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
+};
+
 }  // namespace
 
 std::string SampledDiscretization::describe() const {
@@ -497,6 +644,7 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
   // Made at the first interval that needs the integration (none on a held pose).
   std::optional<detail::OdeDriver> driver;
   std::optional<MagnusIntegrator> magnus;
+  std::optional<RadauIntegrator> radau;
   Eigen::MatrixXd magnusE, magnusW;
 
   // Scale of the cost entries per unit time, for the quadrature's absolute tolerance.
@@ -567,13 +715,24 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
       ++out.constantIntervals;
       continue;
     }
-    if (options.integrator == SampledIntegrator::kMagnus) {
-      if (!magnus) magnus.emplace(s, options.rtol, options.maxSteps);
-      if (!magnus->integrate(a, b, structure.breakpoints, magnusE, magnusW)) {
-        const double at = s.failed ? s.failTime : magnus->failTime;
+    if (options.integrator == SampledIntegrator::kMagnus || options.integrator == SampledIntegrator::kRadau) {
+      bool done = false;
+      const bool byMagnus = options.integrator == SampledIntegrator::kMagnus;
+      if (byMagnus) {
+        if (!magnus) magnus.emplace(s, options.rtol, options.maxSteps);
+        done = magnus->integrate(a, b, structure.breakpoints, magnusE, magnusW);
+      } else {
+        if (!radau) radau.emplace(s, options.rtol, options.maxSteps);
+        done = radau->integrate(a, b, structure.breakpoints, magnusE, magnusW);
+        magnusE.conservativeResize(nx + nu, nx + nu);  // [[Φ, Γ], [0, I]] from Y = [Φ Γ]
+        magnusE.bottomRows(nu).setZero();
+        magnusE.bottomRightCorner(nu, nu).setIdentity();
+      }
+      if (!done) {
+        const double at = s.failed ? s.failTime : (byMagnus ? magnus->failTime : radau->failTime);
         std::ostringstream m;
         m << "sampled-data discretization stopped in interval " << k << " [" << a << ", " << b << "] at t = " << at
-          << ": " << (s.failed ? s.failMessage : magnus->failMessage);
+          << ": " << (s.failed ? s.failMessage : (byMagnus ? magnus->failMessage : radau->failMessage));
         out.status.set(s.failed ? SampledCode::kCallbackFailure : SampledCode::kIntegratorFailure, m.str(), at,
                        static_cast<long>(k));
         break;
@@ -639,6 +798,7 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
     out.rhsEvaluations = stats.rhsEvaluations;
   }
   if (magnus) out.steps += magnus->steps;
+  if (radau) out.steps += radau->steps;
   out.linearizations = s.linearizations;
   return out;
 }

@@ -684,19 +684,24 @@ TEST_CASE("solveTvlqr sampled: a held pose and a reference at rest on part of it
   }
 }
 
-TEST_CASE("sampled LQR: the Magnus integration agrees with CVODES on time-varying and stiff systems",
-          "[sampled][magnus]") {
+TEST_CASE("sampled LQR: the Radau and Magnus integrations agree with CVODES on time-varying and stiff systems",
+          "[sampled][magnus][radau]") {
   trellis::SampledDiscretizationOptions bdf;  // the reference: every interval by CVODES, tight
   bdf.integrator = trellis::SampledIntegrator::kBdf;
   bdf.rtol = 1e-12;
   bdf.atol = 1e-14;
+  const trellis::SampledIntegrator method =
+      GENERATE(trellis::SampledIntegrator::kRadau, trellis::SampledIntegrator::kMagnus);
+  trellis::SampledDiscretizationOptions fast;
+  fast.integrator = method;
+  INFO(trellis::toString(method));
   SECTION("fast-changing 2-state system") {
     LqrWeights w;
     w.Q = (MatrixXd(2, 2) << 3.0, 0.5, 0.5, 1.0).finished();
     w.R = MatrixXd::Constant(1, 1, 0.7);
     w.Qf = w.Q;
     const VectorXd times = trellis::sampleTimes(0.0, 3.0, 10.0);
-    const auto magnus = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w);
+    const auto magnus = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, fast);
     const auto ref = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, bdf);
     REQUIRE(magnus.ok());
     REQUIRE(ref.ok());
@@ -727,7 +732,7 @@ TEST_CASE("sampled LQR: the Magnus integration agrees with CVODES on time-varyin
     w.R = MatrixXd::Identity(2, 2);
     w.Qf = w.Q;
     const VectorXd times = trellis::sampleTimes(0.0, 2.0, 10.0);
-    const auto magnus = trellis::discretizeSampledData(times, 4, 2, lin, w);
+    const auto magnus = trellis::discretizeSampledData(times, 4, 2, lin, w, fast);
     const auto ref = trellis::discretizeSampledData(times, 4, 2, lin, w, bdf);
     REQUIRE(magnus.ok());
     REQUIRE(ref.ok());
@@ -742,6 +747,7 @@ TEST_CASE("sampled LQR: the Magnus integration agrees with CVODES on time-varyin
     const Trajectory ref = swingReference(model, 1.0);
     trellis::TvlqrOptions magnus, cvodes;
     magnus.sampleRate = cvodes.sampleRate = 50.0;
+    magnus.sampled = fast;
     cvodes.sampled = bdf;
     const trellis::TvlqrSolution a = trellis::solveTvlqr(model, ref, cartPoleWeights(), magnus);
     const trellis::TvlqrSolution b = trellis::solveTvlqr(model, ref, cartPoleWeights(), cvodes);
