@@ -15,3 +15,9 @@ if(TARGET trellis_control AND TARGET trellis_hand_reference)
   target_compile_definitions(trellis_bench_sampled PRIVATE
     TRELLIS_EXAMPLE_SCENES_DIR="${PROJECT_SOURCE_DIR}/examples/scenes")
 endif()
+
+# Sampled-data gains against the continuous gains on the 6-link hanging chain (issue 31).
+if(TARGET trellis_control)
+  add_executable(trellis_bench_sampled_gains ${CMAKE_CURRENT_LIST_DIR}/sampled_gains_bench.cpp)
+  target_link_libraries(trellis_bench_sampled_gains PRIVATE trellis::control benchmark::benchmark)
+endif()

@@ -63,7 +63,8 @@ Q and Qf are in the full state [q; q'] (order of the trajectory's columns).
 Sampled controller (--rate HZ): for a controller that samples x at t_k = t0 + k/HZ and holds u
 until the next sample, the gains are computed for that controller, not sampled from K(t): over
 each sample interval the linearization is discretized exactly (transition matrix and input
-integral from the variational equation on the exact A(t), B(t)), the cost J above is integrated
+integral from the variational equation on the exact A(t), B(t); where the reference is at rest,
+as with --hold, by the exact matrix exponential instead), the cost J above is integrated
 over the interval with the input held (which gives per-sample weights with a cross term), and the
 discrete Riccati recursion gives K_k at the sample times. The file's metadata line says
 "sample_rate_hz=HZ": `trellis simulate` applies such gains only with the same --rate.
@@ -133,7 +134,12 @@ Trajectory heldPose(const LoadedScene& loaded, const std::optional<std::string>&
   x.head(model.nq()) = state.q;
   const Trajectory pose(model.configNames(), model.inputNames(), times, x.replicate(1, kKnots),
                         hold.u.replicate(1, kKnots));
-  return checkReference(model, loaded.path, "the held pose", pose);
+  Trajectory checked = checkReference(model, loaded.path, "the held pose", pose);
+  // At rest by definition (the inputs balance the dynamics; the dynamics' q̈ at the knots is that
+  // balance's rounding): ẋ = 0 at every knot makes the reference exactly constant, which the
+  // sampled gains use (one exact exponential instead of an integration per interval).
+  checked.setStateDerivatives(Eigen::MatrixXd::Zero(2 * model.nq(), kKnots));
+  return checked;
 }
 
 int runGains(std::span<const std::string> args, std::ostream& out) {

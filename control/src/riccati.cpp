@@ -82,6 +82,7 @@ detail::OdeOptions integratorOptions(const RiccatiOptions& options, int nx, bool
       options.maxSteps, options.maxStep);
   o.initialStep = options.initialStep;
   o.exactJacobian = options.exactJacobian;
+  o.maxOrder = options.maxOrder;
   usesLyapunov = (o.linearSolver == detail::OdeLinearSolver::Gmres && options.krylovPreconditioner) ||
                  o.linearSolver == detail::OdeLinearSolver::SystemSolve;
   return o;
@@ -344,6 +345,21 @@ RiccatiSolution solveRiccati(double t0, double T, int nx, int nu,
   }
   std::reverse(sol.gainTimes_.begin(), sol.gainTimes_.end());
   std::reverse(sol.gainNodes_.begin(), sol.gainNodes_.end());
+  if ((sol.status.code == RiccatiCode::kBlowUp || sol.status.code == RiccatiCode::kNonFinite) &&
+      options.maxOrder == 0 && options.method != RiccatiMethod::kAdams) {
+    // Growth past maxNorm at BDF order up to 5 may be the integrator's (see RiccatiOptions::
+    // maxOrder): redone at order ≤ 2, where it is not. If that solve fails too, the failure is
+    // S's own and the first solve's report stands (its figures are the more accurate ones).
+    RiccatiOptions low = options;
+    low.maxOrder = 2;
+    RiccatiSolution retry = solveRiccati(t0, T, nx, nu, linearization, weights, low);
+    if (retry.ok()) {
+      retry.lowOrderRetry = true;
+      retry.firstAttempt = sol.status.describe();
+      return retry;
+    }
+    sol.status.message += "; confirmed at BDF order <= 2: " + retry.status.message;
+  }
   return sol;
 }
 

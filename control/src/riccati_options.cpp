@@ -38,6 +38,10 @@ void RiccatiOptions::validate() const {
     bad("factoredQfShift", factoredQfShift, ">= 0 and finite");
   }
   if (!(psdSlack >= 0.0) || std::isnan(psdSlack)) bad("psdSlack", psdSlack, ">= 0");
+  const int orderLimit = method == RiccatiMethod::kAdams ? 12 : 5;
+  if (maxOrder < 0 || maxOrder > orderLimit) {
+    bad("maxOrder", maxOrder, method == RiccatiMethod::kAdams ? "0 (default) or 1..12 for Adams" : "0 (default) or 1..5 for BDF");
+  }
   if (method == RiccatiMethod::kFactored && linearSolver == RiccatiLinearSolver::kLyapunov) {
     throw std::invalid_argument(
         "RiccatiOptions.linearSolver = lyapunov needs the plain form (method bdf): the factored "

@@ -13,7 +13,8 @@ namespace trellis {
 std::string RiccatiSolution::describe() const {
   return status.describe() + " (" + std::to_string(steps) + " steps, " +
          std::to_string(rhsEvaluations) + " right-hand sides, S eigenvalues in [" +
-         formatStatusNumber(minEigenvalue) + ", " + formatStatusNumber(maxEigenvalue) + "])";
+         formatStatusNumber(minEigenvalue) + ", " + formatStatusNumber(maxEigenvalue) + "]" +
+         (lowOrderRetry ? ", redone at BDF order <= 2" : "") + ")";
 }
 
 std::string RiccatiSolution::json() const {
@@ -34,6 +35,7 @@ std::string RiccatiSolution::json() const {
   j["switched_to_plain_at"] = detail::toJson(switchedToPlainAt);
   j["min_eigenvalue_S"] = detail::toJson(minEigenvalue);
   j["max_eigenvalue_S"] = detail::toJson(maxEigenvalue);
+  j["low_order_retry"] = lowOrderRetry;
   return j.dump();
 }
 

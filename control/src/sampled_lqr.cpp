@@ -8,11 +8,13 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
+#include <unsupported/Eigen/MatrixFunctions>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <limits>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -45,6 +47,88 @@ Eigen::VectorXd sampleTimes(double t0, double T, double rate) {
   }
   t.push_back(T);
   return Eigen::Map<Eigen::VectorXd>(t.data(), static_cast<Eigen::Index>(t.size()));
+}
+
+namespace {
+
+/// The block exponential of a constant system over one unit of its own time: for Z (c×c, its last
+/// nu rows zero: the held input) and a symmetric P (c×c),
+///   E = e^{Z},  W = ∫₀¹ e^{Zᵀs} P e^{Zs} ds,
+/// i.e. E = e^{Mh}, W = ∫₀ʰ e^{Mᵀs} Q̃ e^{Ms} ds for Z = Mh, P = Q̃h. Van Loan's exponential of
+/// [[−Zᵀ, P], [0, Z]] holds e^{−Zᵀ}·W in its corner: for a stiff Z (|λ| ≫ 1) e^{−Zᵀ} and e^{Z}
+/// differ by e^{2|λ|}, and W = e^{Zᵀ}·(that corner) loses every digit. So Van Loan is used only on
+/// Z/2^s with ‖Z‖₁/2^s ≤ ½ (where both factors are O(1): W to a few ulps of ‖W‖), and the doubling
+/// formulas, exact for a constant system,
+///   E(2δ) = E(δ)²,  W(2δ) = W(δ) + E(δ)ᵀ W(δ) E(δ),
+/// take it to 1 in s steps: W stays a sum of positive semidefinite terms when P is (no cancellation).
+void blockExponential(const Eigen::MatrixXd& Z, const Eigen::MatrixXd& P, Eigen::Index nu, Eigen::MatrixXd& E,
+                      Eigen::MatrixXd& W) {
+  const Eigen::Index c = Z.rows();
+  const double norm1 = Z.cwiseAbs().colwise().sum().maxCoeff();
+  int s = 0;
+  if (norm1 > 0.5) {
+    int e = 0;
+    std::frexp(norm1 / 0.5, &e);  // norm1/0.5 < 2^e
+    s = e;
+  }
+  const double scale = std::ldexp(1.0, -s);
+  // P enters the corner linearly: scaled to ‖scale·P/pScale‖₁ = ½ like the diagonal blocks, so
+  // that its size (unrelated to Z's) does not raise the exponential's degree or squarings.
+  const double pScale =
+      std::max(2.0 * scale * P.cwiseAbs().colwise().sum().maxCoeff(), std::numeric_limits<double>::min());
+  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(2 * c, 2 * c);
+  C.topLeftCorner(c, c) = -scale * Z.transpose();
+  C.topRightCorner(c, c) = (scale / pScale) * P;
+  C.bottomRightCorner(c, c) = scale * Z;
+  const Eigen::MatrixXd F = C.exp();
+  E = F.bottomRightCorner(c, c);
+  // The held input's rows are exactly [0 I] (u̇ = 0); the exponential returns them to rounding.
+  E.bottomRows(nu).setZero();
+  E.bottomRightCorner(nu, nu).setIdentity();
+  W.noalias() = pScale * (E.transpose() * F.topRightCorner(c, c));
+  W = 0.5 * (W + W.transpose());
+  Eigen::MatrixXd WE(c, c), E2(c, c);
+  for (int i = 0; i < s; ++i) {
+    WE.noalias() = W * E;
+    W.noalias() += E.transpose() * WE;
+    W = 0.5 * (W + W.transpose());
+    E2.noalias() = E * E;
+    E.swap(E2);
+  }
+}
+
+}  // namespace
+
+void discretizeConstantInterval(const Eigen::MatrixXd& A, const Eigen::MatrixXd& B, const Eigen::MatrixXd& Q,
+                                const Eigen::MatrixXd& R, double h, SampledInterval& out) {
+  const Eigen::Index nx = A.rows(), nu = B.cols(), c = nx + nu;
+  if (A.cols() != nx || B.rows() != nx || Q.rows() != nx || Q.cols() != nx || R.rows() != nu || R.cols() != nu ||
+      nx == 0 || nu == 0) {
+    std::ostringstream m;
+    m << "discretizeConstantInterval: need A nx×nx, B nx×m, Q nx×nx, R m×m with nx, m > 0; got A " << A.rows()
+      << "x" << A.cols() << ", B " << B.rows() << "x" << B.cols() << ", Q " << Q.rows() << "x" << Q.cols()
+      << ", R " << R.rows() << "x" << R.cols();
+    throw std::invalid_argument(m.str());
+  }
+  if (!(h > 0.0) || !std::isfinite(h)) {
+    throw std::invalid_argument("discretizeConstantInterval: the length h = " + std::to_string(h) +
+                                " must be finite and > 0");
+  }
+  if (!A.allFinite() || !B.allFinite() || !Q.allFinite() || !R.allFinite()) {
+    throw std::invalid_argument("discretizeConstantInterval: A, B, Q or R has a non-finite entry");
+  }
+  // Z = Mh with M = [[A, B], [0, 0]] (the held input is a state with u̇ = 0), P = Q̃h.
+  Eigen::MatrixXd Z = Eigen::MatrixXd::Zero(c, c), P = Eigen::MatrixXd::Zero(c, c), E, W;
+  Z.topLeftCorner(nx, nx) = h * A;
+  Z.topRightCorner(nx, nu) = h * B;
+  P.topLeftCorner(nx, nx) = (0.5 * h) * (Q + Q.transpose());
+  P.bottomRightCorner(nu, nu) = (0.5 * h) * (R + R.transpose());
+  blockExponential(Z, P, nu, E, W);
+  out.Phi = E.topLeftCorner(nx, nx);
+  out.Gamma = E.topRightCorner(nx, nu);
+  out.Q = W.topLeftCorner(nx, nx);
+  out.N = W.topRightCorner(nx, nu);
+  out.R = W.bottomRightCorner(nu, nu);
 }
 
 namespace {
@@ -176,11 +260,319 @@ class Discretizer final : public detail::LinearOdeSystem {
   }
 };
 
+/// The sixth-order Magnus integrator of the Van Loan system of an interval (sampled_lqr.hpp):
+/// with M(t) = [[A, B], [0, 0]] and Q̃(t) = blkdiag(Q, R), the block-triangular linear system
+///   Ẋ = V(t) X,  V = [[−Mᵀ, Q̃], [0, M]],  X(a) = I
+/// has X = [[Φ_M⁻ᵀ, Φ_M⁻ᵀ W], [0, Φ_M]] with Φ_M = [[Φ, Γ], [0, I]] and W the interval's cost
+/// blocks. Matrices of this form are closed under sums and commutators, so each Magnus step's
+/// generator Ω is again [[−Zᵀ, P], [0, Z]]: its exponential is blockExponential(Z, P) — exact to
+/// rounding however stiff Z is (no step-size limit from ‖A‖ as for an explicit scheme or Van
+/// Loan's raw exponential). Steps compose as E ← E_s E, W ← W + Eᵀ W_s E.
+/// Ω from three Gauss–Legendre nodes (Blanes, Casas & Ros' sixth-order scheme): with V_i at
+/// t + d(½ − √15/10), t + d/2, t + d(½ + √15/10),
+///   α1 = d V_2,  α2 = (√15 d/3)(V_3 − V_1),  α3 = (10d/3)(V_3 − 2V_2 + V_1),
+///   C1 = [α1, α2],  C2 = −(1/60)[α1, 2α3 + C1],
+///   Ω6 = α1 + α3/12 + (1/240)[−20α1 − α3 + C1, α2 + C2]   (local error O(d⁷)),
+///   Ω4 = α1 + α3/12 − C1/12                               (O(d⁵), from the same nodes).
+/// The difference of the two steps' blocks (stepError: relative, unit-invariant) is the error
+/// estimate (of the fourth-order step: conservative for the sixth-order one kept); steps are
+/// adapted to rtol and end on the sample times and on the breakpoints (the reference's knots,
+/// where A(t) may have a kink: a step across one would lose the order).
+class MagnusIntegrator {
+ public:
+  MagnusIntegrator(Discretizer& s, double rtol, long maxSteps)
+      : s_(s), nx_(s.nx), nu_(s.nu), c_(s.nx + s.nu), rtol_(rtol), maxSteps_(maxSteps) {
+    for (auto& v : V_) v = Eigen::MatrixXd::Zero(2 * c_, 2 * c_);
+  }
+
+  long steps = 0, rejected = 0;
+  std::string failMessage;
+  double failTime = 0.0;
+
+  /// E, W over [a, b] (stops: the breakpoints inside). False on a callback failure (s.failed)
+  /// or when the step size collapses or exceeds maxSteps (failMessage).
+  bool integrate(double a, double b, const std::vector<double>& breakpoints, Eigen::MatrixXd& E, Eigen::MatrixXd& W) {
+    E = Eigen::MatrixXd::Identity(c_, c_);
+    W = Eigen::MatrixXd::Zero(c_, c_);
+    auto nextBreak = std::upper_bound(breakpoints.begin(), breakpoints.end(), a);
+    double t = a;
+    long taken = 0;
+    if (!(next_ > 0.0)) next_ = b - a;
+    while (t < b) {
+      // A breakpoint within rounding of t or b (a knot and a sample time that differ in the last
+      // bits) is that point: no sliver step.
+      const double round = 8.0 * std::numeric_limits<double>::epsilon() * std::max({std::abs(t), std::abs(b), b - a});
+      while (nextBreak != breakpoints.end() && *nextBreak <= t + round) ++nextBreak;
+      const double stop = (nextBreak != breakpoints.end() && *nextBreak < b - round) ? *nextBreak : b;
+      double d = std::min(next_, stop - t);
+      if (t + 1.1 * d >= stop) d = stop - t;  // no sliver before the stop
+      for (;;) {
+        if (++taken > maxSteps_) {
+          failTime = t;
+          failMessage = "more than maxSteps = " + std::to_string(maxSteps_) + " Magnus steps in the interval";
+          return false;
+        }
+        if (!(d > 8.0 * std::numeric_limits<double>::epsilon() * std::max(std::abs(t), b - a))) {
+          failTime = t;
+          failMessage = "the Magnus step size fell to " + std::to_string(d) + " s (A(t) not resolved)";
+          return false;
+        }
+        double err = 0.0;
+        if (!step(t, d, err)) return false;
+        const double factor = std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.2), 0.2, 5.0);
+        if (err <= 1.0) {
+          Ws_.noalias() = W6_ * E;
+          W.noalias() += E.transpose() * Ws_;
+          W = 0.5 * (W + W.transpose());
+          Es_.noalias() = E6_ * E;
+          E.swap(Es_);
+          ++steps;
+          const bool atStop = (t + d == stop) || d == stop - t;
+          t = atStop ? stop : t + d;
+          // A step cut short by a stop says nothing about the next one's size.
+          if (!atStop || factor < 1.0) next_ = d * factor;
+          break;
+        }
+        ++rejected;
+        d *= factor;
+      }
+    }
+    return true;
+  }
+
+ private:
+  /// V(t) = [[−Mᵀ, Q̃], [0, M]] into V.
+  bool vanLoanAt(double t, Eigen::MatrixXd& V) {
+    if (!s_.evaluate(t)) return false;
+    const Eigen::Index c = c_;
+    V.topLeftCorner(nx_, nx_) = -s_.A.transpose();
+    V.block(nx_, 0, nu_, nx_) = -s_.B.transpose();
+    V.block(c, c, nx_, nx_) = s_.A;  // bottom-right corner: M
+    V.block(c, c + nx_, nx_, nu_) = s_.B;
+    V.block(0, c, nx_, nx_) = 0.5 * (s_.Q + s_.Q.transpose());  // top-right corner: Q̃
+    V.block(nx_, c + nx_, nu_, nu_) = 0.5 * (s_.R + s_.R.transpose());
+    return true;
+  }
+  void commutator(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, Eigen::MatrixXd& out) {
+    out.noalias() = X * Y;
+    out.noalias() -= Y * X;
+  }
+  /// The step's error in units of rtol: E's entries relative to max |E| (≥ 1: E holds the
+  /// identity of the held input), W's entries relative to √(W_ii W_jj) — the bound on |W_ij| of a
+  /// positive semidefinite matrix, so the measure is the same in any units of the states and
+  /// inputs (floored at ε·max W_ii for a weight that vanishes).
+  double stepError() const {
+    const double eScale = E6_.cwiseAbs().maxCoeff();
+    double err = (E6_ - E4_).cwiseAbs().maxCoeff() / (rtol_ * eScale);
+    const Eigen::VectorXd d = W6_.diagonal().cwiseMax(0.0).cwiseSqrt();
+    const double floor = std::sqrt(std::numeric_limits<double>::epsilon()) * d.maxCoeff() + std::numeric_limits<double>::min();
+    for (Eigen::Index j = 0; j < c_; ++j) {
+      for (Eigen::Index i = 0; i <= j; ++i) {
+        const double diff = std::abs(W6_(i, j) - W4_(i, j));
+        if (diff > 0.0) err = std::max(err, diff / (rtol_ * std::max(d(i) * d(j), floor * floor)));
+      }
+    }
+    return err;
+  }
+  bool step(double t, double d, double& err) {
+    const double r15 = std::sqrt(15.0);
+    const double nodes[3] = {0.5 - r15 / 10.0, 0.5, 0.5 + r15 / 10.0};
+    for (int i = 0; i < 3; ++i) {
+      if (!vanLoanAt(t + nodes[i] * d, V_[i])) return false;
+    }
+    a1_ = d * V_[1];
+    a2_ = (r15 * d / 3.0) * (V_[2] - V_[0]);
+    a3_ = (10.0 * d / 3.0) * (V_[2] - 2.0 * V_[1] + V_[0]);
+    commutator(a1_, a2_, c1_);
+    x_ = 2.0 * a3_ + c1_;
+    commutator(a1_, x_, c2_);
+    c2_ *= -1.0 / 60.0;
+    x_ = -20.0 * a1_ - a3_ + c1_;
+    y_ = a2_ + c2_;
+    commutator(x_, y_, om6_);
+    om6_ *= 1.0 / 240.0;
+    om6_ += a1_ + a3_ / 12.0;
+    om4_ = a1_ + a3_ / 12.0 - c1_ / 12.0;
+    const Eigen::Index c = c_;
+    // Z = the bottom-right corner (its input rows are exactly zero: every term has them zero),
+    // P = the top-right corner (symmetric by the closure; symmetrized against rounding).
+    Z_ = om6_.bottomRightCorner(c, c);
+    P_ = om6_.topRightCorner(c, c);
+    P_ = 0.5 * (P_ + P_.transpose()).eval();
+    blockExponential(Z_, P_, nu_, E6_, W6_);
+    Z_ = om4_.bottomRightCorner(c, c);
+    P_ = om4_.topRightCorner(c, c);
+    P_ = 0.5 * (P_ + P_.transpose()).eval();
+    blockExponential(Z_, P_, nu_, E4_, W4_);
+    if (!E6_.allFinite() || !W6_.allFinite() || !E4_.allFinite() || !W4_.allFinite()) {
+      err = std::numeric_limits<double>::infinity();
+      return true;  // a smaller step
+    }
+    err = stepError();
+    return true;
+  }
+
+  Discretizer& s_;
+  Eigen::Index nx_, nu_, c_;
+  double rtol_;
+  long maxSteps_;
+  double next_ = 0.0;  // the next step's size, carried across intervals (no restart)
+  Eigen::MatrixXd V_[3], a1_, a2_, a3_, c1_, c2_, x_, y_, om6_, om4_, Z_, P_, E6_, W6_, E4_, W4_, Es_, Ws_;
+};
+
+/// The three-stage Radau IIA collocation (order 5, L-stable, stiffly accurate) of the variational
+/// equation Ẏ = A(t)Y + [0 B(t)], Y = [Φ Γ] (nx×c) from [I 0] at the interval's start, and the cost
+/// W = ∫ YᵀQY + blkdiag(0, R) by the method's own quadrature on its stage values (exact for
+/// polynomials of degree 4). The problem is linear, so each step is one linear solve: with
+/// A_j = A(t + c_j δ), the stages solve
+///   Y_i − δ Σ_j a_ij A_j Y_j = Y_n + δ Σ_j a_ij [0 B_j]     (3nx unknowns per column, one LU),
+/// and Y_{n+1} = Y_3. L-stability is what a stiff A needs (e^{λδ} → 0 is reproduced as R(λδ) → 0;
+/// Magnus' series and explicit schemes need |λ|δ ≲ 1 there). Error estimate: the step against two
+/// half steps (Richardson; the pair is kept), relative to each block's size as in stepError. Steps
+/// are carried across intervals (a one-step method restarts for free) and end on the breakpoints.
+class RadauIntegrator {
+ public:
+  RadauIntegrator(Discretizer& s, double rtol, long maxSteps)
+      : s_(s), nx_(s.nx), nu_(s.nu), c_(s.nx + s.nu), rtol_(rtol), maxSteps_(maxSteps),
+        M_(3 * s.nx, 3 * s.nx), rhs_(3 * s.nx, s.nx + s.nu), lu_(3 * s.nx) {
+    const double r6 = std::sqrt(6.0);
+    const double a[3][3] = {{(88.0 - 7.0 * r6) / 360.0, (296.0 - 169.0 * r6) / 1800.0, (-2.0 + 3.0 * r6) / 225.0},
+                            {(296.0 + 169.0 * r6) / 1800.0, (88.0 + 7.0 * r6) / 360.0, (-2.0 - 3.0 * r6) / 225.0},
+                            {(16.0 - r6) / 36.0, (16.0 + r6) / 36.0, 1.0 / 9.0}};
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) a_[i][j] = a[i][j];
+    nodes_[0] = (4.0 - r6) / 10.0;
+    nodes_[1] = (4.0 + r6) / 10.0;
+    nodes_[2] = 1.0;
+    for (auto& x : A_) x.resize(nx_, nx_);
+    for (auto& x : B_) x.resize(nx_, nu_);
+    for (auto& x : Q_) x.resize(nx_, nx_);
+    for (auto& x : R_) x.resize(nu_, nu_);
+  }
+
+  long steps = 0, rejected = 0;
+  std::string failMessage;
+  double failTime = 0.0;
+
+  bool integrate(double a, double b, const std::vector<double>& breakpoints, Eigen::MatrixXd& Y, Eigen::MatrixXd& W) {
+    Y = Eigen::MatrixXd::Zero(nx_, c_);
+    Y.leftCols(nx_).setIdentity();
+    W = Eigen::MatrixXd::Zero(c_, c_);
+    auto nextBreak = std::upper_bound(breakpoints.begin(), breakpoints.end(), a);
+    double t = a;
+    long taken = 0;
+    if (!(next_ > 0.0)) next_ = b - a;
+    while (t < b) {
+      const double round = 8.0 * std::numeric_limits<double>::epsilon() * std::max({std::abs(t), std::abs(b), b - a});
+      while (nextBreak != breakpoints.end() && *nextBreak <= t + round) ++nextBreak;
+      const double stop = (nextBreak != breakpoints.end() && *nextBreak < b - round) ? *nextBreak : b;
+      double d = std::min(next_, stop - t);
+      if (t + 1.1 * d >= stop) d = stop - t;
+      for (;;) {
+        if (++taken > maxSteps_) {
+          failTime = t;
+          failMessage = "more than maxSteps = " + std::to_string(maxSteps_) + " Radau steps in the interval";
+          return false;
+        }
+        if (!(d > 8.0 * std::numeric_limits<double>::epsilon() * std::max(std::abs(t), b - a))) {
+          failTime = t;
+          failMessage = "the Radau step size fell to " + std::to_string(d) + " s (A(t) not resolved)";
+          return false;
+        }
+        // One step of d, and two of d/2 (kept).
+        Yf_ = Y;
+        Wf_ = W;
+        if (!step(t, d, Yf_, Wf_)) return false;
+        Yh_ = Y;
+        Wh_ = W;
+        if (!step(t, 0.5 * d, Yh_, Wh_) || !step(t + 0.5 * d, 0.5 * d, Yh_, Wh_)) return false;
+        // Richardson: the halves' error ≈ (halves − full)/(2⁵ − 1) for order 5; /15 keeps a margin
+        // for the cost quadrature's stage order.
+        const double err = stepError(Yh_ - Y, Yf_ - Y, Wh_ - W, Wf_ - W) / 15.0;
+        const double factor = std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.2), 0.2, 4.0);
+        if (err <= 1.0 && Yh_.allFinite() && Wh_.allFinite()) {
+          Y.swap(Yh_);
+          W.swap(Wh_);
+          ++steps;
+          const bool atStop = d == stop - t;
+          t = atStop ? stop : t + d;
+          if (!atStop || factor < 1.0) next_ = d * factor;
+          break;
+        }
+        ++rejected;
+        d *= std::isfinite(err) ? factor : 0.2;
+      }
+    }
+    W = 0.5 * (W + W.transpose());
+    return true;
+  }
+
+ private:
+  /// The increments' difference relative to rtol: Y's against max |ΔY| of the step (≥ the size of
+  /// what the step changed) and max |Y| columns' scale, W's against √(ΔW_ii ΔW_jj) (the step's own
+  /// PSD increment, as stepError of the Magnus integrator).
+  double stepError(const Eigen::MatrixXd& dYh, const Eigen::MatrixXd& dYf, const Eigen::MatrixXd& dWh,
+                   const Eigen::MatrixXd& dWf) const {
+    const double yScale = std::max(Yh_.cwiseAbs().maxCoeff(), std::numeric_limits<double>::min());
+    double err = (dYh - dYf).cwiseAbs().maxCoeff() / (rtol_ * yScale);
+    const Eigen::VectorXd dd = Wh_.diagonal().cwiseMax(0.0).cwiseSqrt();
+    const double floor = std::sqrt(std::numeric_limits<double>::epsilon()) * dd.maxCoeff() + std::numeric_limits<double>::min();
+    for (Eigen::Index j = 0; j < c_; ++j) {
+      for (Eigen::Index i = 0; i <= j; ++i) {
+        const double diff = std::abs(dWh(i, j) - dWf(i, j));
+        if (diff > 0.0) err = std::max(err, diff / (rtol_ * std::max(dd(i) * dd(j), floor * floor)));
+      }
+    }
+    return std::isfinite(err) ? err : std::numeric_limits<double>::infinity();
+  }
+
+  bool step(double t, double d, Eigen::MatrixXd& Y, Eigen::MatrixXd& W) {
+    const Eigen::Index n = nx_;
+    for (int j = 0; j < 3; ++j) {
+      if (!s_.evaluate(t + nodes_[j] * d)) return false;
+      A_[j] = s_.A;
+      B_[j] = s_.B;
+      Q_[j] = s_.Q;
+      R_[j] = s_.R;
+    }
+    for (int i = 0; i < 3; ++i) {
+      rhs_.middleRows(i * n, n) = Y;
+      for (int j = 0; j < 3; ++j) {
+        M_.block(i * n, j * n, n, n) = (-d * a_[i][j]) * A_[j];
+        if (i == j) M_.block(i * n, j * n, n, n).diagonal().array() += 1.0;
+        rhs_.block(i * n, n, n, nu_) += (d * a_[i][j]) * B_[j];
+      }
+    }
+    lu_.compute(M_);
+    stages_.noalias() = lu_.solve(rhs_);
+    // W += d Σ b_i (Y_iᵀ Q_i Y_i + blkdiag(0, R_i)), b = the last row of a.
+    for (int i = 0; i < 3; ++i) {
+      const auto Yi = stages_.middleRows(i * n, n);
+      QY_.noalias() = Q_[i] * Yi;
+      W.noalias() += (d * a_[2][i]) * (Yi.transpose() * QY_);
+      W.bottomRightCorner(nu_, nu_) += (d * a_[2][i]) * R_[i];
+    }
+    Y = stages_.bottomRows(n);
+    return true;
+  }
+
+  Discretizer& s_;
+  Eigen::Index nx_, nu_, c_;
+  double rtol_;
+  long maxSteps_;
+  double next_ = 0.0;
+  double a_[3][3] = {}, nodes_[3] = {};
+  Eigen::MatrixXd A_[3], B_[3], Q_[3], R_[3];
+  Eigen::MatrixXd M_, rhs_, stages_, QY_, Yf_, Wf_, Yh_, Wh_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
+};
+
 }  // namespace
 
 std::string SampledDiscretization::describe() const {
   return status.describe() + " (" + std::to_string(intervals.size()) + " intervals, " +
-         std::to_string(steps) + " steps, " + std::to_string(linearizations) + " linearizations)";
+         std::to_string(constantIntervals) + " by the exact exponential, " + std::to_string(steps) + " steps, " +
+         std::to_string(linearizations) + " linearizations)";
 }
 
 std::string SampledDiscretization::json() const {
@@ -189,6 +581,8 @@ std::string SampledDiscretization::json() const {
   j["steps"] = steps;
   j["rhs_evaluations"] = rhsEvaluations;
   j["linearizations"] = linearizations;
+  j["constant_intervals"] = constantIntervals;
+  j["exponentials"] = exponentials;
   return j.dump();
 }
 
@@ -205,7 +599,8 @@ std::string SampledRiccatiRecursion::json() const {
 SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx, int nu,
                                             const LinearizationCallback& linearization,
                                             const LqrWeights& weights,
-                                            const SampledDiscretizationOptions& options) {
+                                            const SampledDiscretizationOptions& options,
+                                            const SampledStructure& structure) {
   options.validate();
   if (nx <= 0 || nu <= 0) {
     throw std::invalid_argument("discretizeSampledData: need nx > 0 and m > 0, got nx = " +
@@ -219,6 +614,13 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
     }
   }
   if (!linearization) throw std::invalid_argument("discretizeSampledData: empty linearization callback");
+  for (std::size_t i = 0; i < structure.breakpoints.size(); ++i) {
+    const double t = structure.breakpoints[i];
+    if (!std::isfinite(t) || (i > 0 && !(t > structure.breakpoints[i - 1]))) {
+      throw std::invalid_argument("discretizeSampledData: structure.breakpoints must be finite and increase strictly (entry " +
+                                  std::to_string(i) + " = " + std::to_string(t) + ")");
+    }
+  }
   if (!weights.Qfun) checkWeightMatrix(weights.Q, "Q", nx, false);
   if (!weights.Rfun) checkWeightMatrix(weights.R, "R", nu, true);
 
@@ -239,20 +641,125 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
   o.quadratureErrorControl = true;
   o.quadratureRtol = options.rtol;
   o.quadratureAtol = options.atol;
-  detail::OdeDriver driver(s, N, o);
+  // Made at the first interval that needs the integration (none on a held pose).
+  std::optional<detail::OdeDriver> driver;
+  std::optional<MagnusIntegrator> magnus;
+  std::optional<RadauIntegrator> radau;
+  Eigen::MatrixXd magnusE, magnusW;
 
   // Scale of the cost entries per unit time, for the quadrature's absolute tolerance.
   double costScale = 1.0;
   if (!weights.Qfun) costScale = std::max(costScale, weights.Q.cwiseAbs().maxCoeff());
   if (!weights.Rfun) costScale = std::max(costScale, weights.R.cwiseAbs().maxCoeff());
 
+  // The last constant interval's blocks and what they were computed from.
+  SampledInterval shared;
+  Eigen::MatrixXd sharedA, sharedB, sharedQ, sharedR;
+  double sharedC = std::numeric_limits<double>::quiet_NaN(), sharedH = 0.0;
+  constexpr double kEps = std::numeric_limits<double>::epsilon();
+
   out.intervals.reserve(static_cast<std::size_t>(times.size() - 1));
   for (Eigen::Index k = 0; k + 1 < times.size(); ++k) {
     const double a = times(k), b = times(k + 1);
+    double c = std::numeric_limits<double>::quiet_NaN();
+    if (options.exactConstantIntervals && structure.constantOn) {
+      try {
+        c = structure.constantOn(a, b);
+      } catch (const std::exception& e) {
+        out.status.set(SampledCode::kCallbackFailure,
+                       "sampled-data discretization: the constant-span callback threw for interval " +
+                           std::to_string(k) + " [" + std::to_string(a) + ", " + std::to_string(b) + "]: " + e.what(),
+                       a, static_cast<long>(k));
+        break;
+      }
+    }
+    if (std::isfinite(c)) {
+      // Constant on [a, b]: the exact exponential of its A, B, Q, R (no integration).
+      if (!s.evaluate(c)) {
+        out.status.set(SampledCode::kCallbackFailure,
+                       "sampled-data discretization: interval " + std::to_string(k) + " [" + std::to_string(a) +
+                           ", " + std::to_string(b) + "], constant, evaluated at t = " + std::to_string(c) + ": " +
+                           s.failMessage,
+                       c, static_cast<long>(k));
+        break;
+      }
+      const double h = b - a;
+      // The lengths of the sample intervals t0 + k/f differ by the rounding of the times
+      // themselves (a few ulps of |t|, not of h): lengths that close are one length, as the grid
+      // cannot tell them apart (Φ moves by ‖A‖·ulp(t), e.g. 1e-12 relative for ‖A‖ = 1e3, t = 5).
+      const double grid = 8.0 * kEps * std::max({std::abs(a), std::abs(b), h});
+      const bool same = c == sharedC && std::abs(h - sharedH) <= grid && s.A == sharedA &&
+                        s.B == sharedB && s.Q == sharedQ && s.R == sharedR;
+      if (!same) {
+        discretizeConstantInterval(s.A, s.B, s.Q, s.R, h, shared);
+        ++out.exponentials;
+        sharedA = s.A;
+        sharedB = s.B;
+        sharedQ = s.Q;
+        sharedR = s.R;
+        sharedC = c;
+        sharedH = h;
+        if (!shared.Phi.allFinite() || !shared.Gamma.allFinite() || !shared.Q.allFinite() ||
+            !shared.N.allFinite() || !shared.R.allFinite()) {
+          out.status.set(SampledCode::kNonFinite,
+                         "sampled-data discretization: the exponential of constant interval " + std::to_string(k) +
+                             " [" + std::to_string(a) + ", " + std::to_string(b) + "] is not finite",
+                         a, static_cast<long>(k));
+          break;
+        }
+      }
+      SampledInterval iv = shared;
+      iv.t0 = a;
+      iv.t1 = b;
+      out.intervals.push_back(std::move(iv));
+      ++out.constantIntervals;
+      continue;
+    }
+    if (options.integrator == SampledIntegrator::kMagnus || options.integrator == SampledIntegrator::kRadau) {
+      bool done = false;
+      const bool byMagnus = options.integrator == SampledIntegrator::kMagnus;
+      if (byMagnus) {
+        if (!magnus) magnus.emplace(s, options.rtol, options.maxSteps);
+        done = magnus->integrate(a, b, structure.breakpoints, magnusE, magnusW);
+      } else {
+        if (!radau) radau.emplace(s, options.rtol, options.maxSteps);
+        done = radau->integrate(a, b, structure.breakpoints, magnusE, magnusW);
+        magnusE.conservativeResize(nx + nu, nx + nu);  // [[Φ, Γ], [0, I]] from Y = [Φ Γ]
+        magnusE.bottomRows(nu).setZero();
+        magnusE.bottomRightCorner(nu, nu).setIdentity();
+      }
+      if (!done) {
+        const double at = s.failed ? s.failTime : (byMagnus ? magnus->failTime : radau->failTime);
+        std::ostringstream m;
+        m << "sampled-data discretization stopped in interval " << k << " [" << a << ", " << b << "] at t = " << at
+          << ": " << (s.failed ? s.failMessage : (byMagnus ? magnus->failMessage : radau->failMessage));
+        out.status.set(s.failed ? SampledCode::kCallbackFailure : SampledCode::kIntegratorFailure, m.str(), at,
+                       static_cast<long>(k));
+        break;
+      }
+      SampledInterval iv;
+      iv.t0 = a;
+      iv.t1 = b;
+      iv.Phi = magnusE.topLeftCorner(nx, nx);
+      iv.Gamma = magnusE.topRightCorner(nx, nu);
+      iv.Q = magnusW.topLeftCorner(nx, nx);
+      iv.N = magnusW.topRightCorner(nx, nu);
+      iv.R = magnusW.bottomRightCorner(nu, nu);
+      if (!magnusE.allFinite() || !magnusW.allFinite()) {
+        out.status.set(SampledCode::kNonFinite,
+                       "sampled-data discretization: non-finite Phi, Gamma or cost in interval " + std::to_string(k) +
+                           " ending at t = " + std::to_string(b),
+                       b, static_cast<long>(k));
+        break;
+      }
+      out.intervals.push_back(std::move(iv));
+      continue;
+    }
+    if (!driver) driver.emplace(s, N, o);
     // Every interval starts from Y = [I 0], W = 0 (a restart: Φ, Γ are per interval).
-    driver.start(a, y0);
-    driver.setQuadratureTolerances(options.rtol, options.atol * (b - a) * costScale);
-    const detail::OdeStatus st = driver.advanceTo(b);
+    driver->start(a, y0);
+    driver->setQuadratureTolerances(options.rtol, options.atol * (b - a) * costScale);
+    const detail::OdeStatus st = driver->advanceTo(b);
     if (!st.ok()) {
       const double at = s.failed ? s.failTime : st.t;
       std::ostringstream m;
@@ -264,8 +771,8 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
                      m.str(), at, static_cast<long>(k));
       break;
     }
-    driver.quadrature(wq);
-    Eigen::Map<const Eigen::MatrixXd> Y(driver.state().data(), nx, cols);
+    driver->quadrature(wq);
+    Eigen::Map<const Eigen::MatrixXd> Y(driver->state().data(), nx, cols);
     Eigen::Map<const Eigen::MatrixXd> W(wq.data(), cols, cols);
     SampledInterval iv;
     iv.t0 = a;
@@ -285,9 +792,13 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
     }
     out.intervals.push_back(std::move(iv));
   }
-  const detail::OdeStats stats = driver.stats();
-  out.steps = stats.steps;
-  out.rhsEvaluations = stats.rhsEvaluations;
+  if (driver) {
+    const detail::OdeStats stats = driver->stats();
+    out.steps = stats.steps;
+    out.rhsEvaluations = stats.rhsEvaluations;
+  }
+  if (magnus) out.steps += magnus->steps;
+  if (radau) out.steps += radau->steps;
   out.linearizations = s.linearizations;
   return out;
 }

@@ -23,6 +23,54 @@
 #include <stdexcept>
 
 namespace trellis {
+namespace {
+
+/// Where the reference is exactly constant: the start time of the stretch of knot intervals on which
+/// its interpolant cannot move, for the sampled discretization (ConstantSpanCallback). A knot
+/// interval is constant when its end knots have the same state and input and zero state derivatives
+/// (and zero input derivatives under the cubic input rule): the cubic Hermite spline through
+/// (x, 0), (x, 0) is x, and the linear input through u, u is u. Read off the reference's data,
+/// never from samples of A(t).
+class ConstantStretches {
+ public:
+  explicit ConstantStretches(const Trajectory& r) : times_(r.times()) {
+    const int intervals = r.size() - 1;
+    start_.assign(static_cast<std::size_t>(std::max(intervals, 0)), -1);
+    for (int j = 0; j < intervals; ++j) {
+      const bool atRest = r.stateDerivatives().col(j).isZero(0.0) && r.stateDerivatives().col(j + 1).isZero(0.0) &&
+                          (!r.hasInputDerivatives() || (r.inputDerivatives().col(j).isZero(0.0) &&
+                                                        r.inputDerivatives().col(j + 1).isZero(0.0)));
+      const bool constant = atRest && r.states().col(j) == r.states().col(j + 1) &&
+                            r.inputs().col(j) == r.inputs().col(j + 1);
+      if (constant) start_[static_cast<std::size_t>(j)] = (j > 0 && start_[static_cast<std::size_t>(j - 1)] >= 0)
+                                                            ? start_[static_cast<std::size_t>(j - 1)]
+                                                            : j;
+    }
+  }
+  /// The stretch's start time if [a, b] lies in one constant stretch, else NaN.
+  double operator()(double a, double b) const {
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    if (start_.empty() || a < times_(0) || b > times_(times_.size() - 1)) return nan;
+    // Knot intervals [t_j, t_{j+1}] meeting (a, b): from the one holding a to the one holding b.
+    const double* first = times_.data();
+    const double* last = first + times_.size();
+    const auto ja = std::max<std::ptrdiff_t>(std::upper_bound(first, last, a) - first - 1, 0);
+    const auto jb = std::min<std::ptrdiff_t>(std::lower_bound(first, last, b) - first - 1,
+                                             static_cast<std::ptrdiff_t>(start_.size()) - 1);
+    const int s = start_[static_cast<std::size_t>(std::min(ja, static_cast<std::ptrdiff_t>(start_.size()) - 1))];
+    if (s < 0) return nan;
+    for (auto j = ja; j <= jb; ++j) {
+      if (start_[static_cast<std::size_t>(j)] != s) return nan;
+    }
+    return times_(s);
+  }
+
+ private:
+  Eigen::VectorXd times_;
+  std::vector<int> start_;  // per knot interval: the first knot of its constant stretch, or −1
+};
+
+}  // namespace
 
 void TvlqrOptions::validate() const {
   if (!(sampleRate >= 0.0) || !std::isfinite(sampleRate)) {
@@ -224,7 +272,15 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
   sol.dimension = d;
   const detail::ReducedProblem problem = detail::makeReducedProblem(model, basis, weights);
   const Eigen::VectorXd times = sampleTimes(reference.startTime(), reference.endTime(), options.sampleRate);
-  const SampledDiscretization disc = discretizeSampledData(times, d, nu, problem.linearization, problem.weights, options.sampled);
+  // Exactly constant stretches of the reference (a held pose) are discretized by the exponential;
+  // not on a constrained scene (the transported basis T(t) is integrated, not constant by
+  // construction) nor with time-varying weights.
+  // The knots are where the reference's interpolant (so A(t)) may have a kink.
+  SampledStructure structure;
+  if (!sol.constrained && !weights.Qfun && !weights.Rfun) structure.constantOn = ConstantStretches(reference);
+  structure.breakpoints.assign(reference.times().data(), reference.times().data() + reference.times().size());
+  const SampledDiscretization disc =
+      discretizeSampledData(times, d, nu, problem.linearization, problem.weights, options.sampled, structure);
   sol.steps = disc.steps;
   sol.rhsEvaluations = disc.rhsEvaluations;
   sol.linearizations = disc.linearizations;

@@ -256,8 +256,11 @@ int main(int argc, char** argv) try {
   // a much cheaper input (R = 1e-2 I) drives the closed loop to −1.3e5 s⁻¹ and the backward
   // Riccati integration with it (measured: S exceeded 1e15).
   const trellis::LqrWeights weights = trellis::hand::feedbackWeights(model);
-  const trellis::ManifoldRiccatiSolution lqr = trellis::solveManifoldRiccati(
-      model, trajectory, weights, trellis::hand::feedbackRiccatiOptions(), transport);
+  // S's eigenvalue range is not read here: its tracking (an eigenvalue solve per step) is off.
+  trellis::RiccatiOptions riccatiOptions = trellis::hand::feedbackRiccatiOptions();
+  riccatiOptions.trackEigenvalues = false;
+  const trellis::ManifoldRiccatiSolution lqr =
+      trellis::solveManifoldRiccati(model, trajectory, weights, riccatiOptions, transport);
   if (!lqr.ok()) throw std::runtime_error("manifold Riccati solve failed: " + lqr.status.describe());
   // K at the knots and the Riccati steps (its end-time boundary layer), cubic rule (hand_feedback.hpp).
   trellis::GainSchedule gains = trellis::hand::feedbackGains(lqr, trajectory);

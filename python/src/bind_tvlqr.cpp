@@ -29,6 +29,10 @@ void bindTvlqr(py::module_& m) {
       .value("DENSE", RiccatiLinearSolver::kDense)
       .value("KRYLOV", RiccatiLinearSolver::kKrylov)
       .value("LYAPUNOV", RiccatiLinearSolver::kLyapunov);
+  py::enum_<SampledIntegrator>(m, "SampledIntegrator")
+      .value("MAGNUS", SampledIntegrator::kMagnus)
+      .value("RADAU", SampledIntegrator::kRadau)
+      .value("BDF", SampledIntegrator::kBdf);
   py::enum_<TangentTransport>(m, "TangentTransport")
       .value("INTEGRATED", TangentTransport::kIntegrated)
       .value("PROJECTED", TangentTransport::kProjected);
@@ -40,6 +44,7 @@ void bindTvlqr(py::module_& m) {
       .def_readwrite("method", &RiccatiOptions::method)
       .def_readwrite("max_steps", &RiccatiOptions::maxSteps)
       .def_readwrite("max_norm", &RiccatiOptions::maxNorm)
+      .def_readwrite("max_order", &RiccatiOptions::maxOrder)
       .def_readwrite("initial_step", &RiccatiOptions::initialStep)
       .def_readwrite("max_step", &RiccatiOptions::maxStep)
       .def_readwrite("linear_solver", &RiccatiOptions::linearSolver)
@@ -59,11 +64,17 @@ void bindTvlqr(py::module_& m) {
       .def_readwrite("max_steps", &TangentTransportOptions::maxSteps);
 
   py::class_<SampledDiscretizationOptions>(m, "SampledDiscretizationOptions",
-      "CVODES tolerances of the exact interval discretization (keywords: rtol, atol, max_steps).")
+      "The exact interval discretization (keywords): integrator (SampledIntegrator.RADAU, the "
+      "default; MAGNUS for non-stiff systems; BDF: CVODES per interval), rtol, atol (BDF only), "
+      "max_steps, and "
+      "exact_constant_intervals (default True: intervals where the reference is exactly constant, "
+      "e.g. a held pose, by the exact block exponential instead of the integration).")
       .def(py::init(&makeFromKwargs<SampledDiscretizationOptions>))
+      .def_readwrite("integrator", &SampledDiscretizationOptions::integrator)
       .def_readwrite("rtol", &SampledDiscretizationOptions::rtol)
       .def_readwrite("atol", &SampledDiscretizationOptions::atol)
-      .def_readwrite("max_steps", &SampledDiscretizationOptions::maxSteps);
+      .def_readwrite("max_steps", &SampledDiscretizationOptions::maxSteps)
+      .def_readwrite("exact_constant_intervals", &SampledDiscretizationOptions::exactConstantIntervals);
 
   py::class_<TvlqrOptions>(m, "TvlqrOptions",
       "Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f "

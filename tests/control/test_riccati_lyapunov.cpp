@@ -6,12 +6,16 @@
 #include "riccati_lyapunov.hpp"
 
 #include <trellis/control.hpp>
+#include <trellis/core/data.hpp>
+#include <trellis/core/linearization.hpp>
+#include <trellis/core/scene.hpp>
 
 #include <catch2/catch.hpp>
 
 #include <Eigen/Dense>
 
 #include <cmath>
+#include <string>
 
 using Eigen::MatrixXd;
 using trellis::LqrWeights;
@@ -268,4 +272,57 @@ TEST_CASE("mechanical structure A = [0 I; Aq Av] gives the solution of the unstr
     CONTROL_CHECK_CLOSE(back, s1.S(t), 1e-8, 1.0);
     CONTROL_CHECK_CLOSE((s2.K(t) * P).eval(), s1.K(t), 1e-8, 1.0);
   }
+}
+
+TEST_CASE("lyapunov: no false blow-up at loose tolerances (the 20-link chain held, issue 31)",
+          "[riccati][lyapunov]") {
+  // The damped 20-link chain of bench/chain_scene.py (0.1 kg, 0.1 m links) held hanging: at
+  // rtol 1e-4, atol 1e-6 the error test kept cutting the step at BDF order 5, whose variable-step
+  // form is then not zero-stable: max |S_ij| went 1 → 1e15 within Δτ = 1e-11 and the solve
+  // reported "S blew up" although S stays bounded. It is now redone at order ≤ 2.
+  std::string frames, forces;
+  const int n = 20;
+  for (int i = n; i >= 1; --i) {
+    const std::string id = std::to_string(i);
+    frames = R"({"name": "l)" + id + R"(", "type": "rz", "config": "q)" + id + R"(", "children": [{"name": "m)" + id +
+             R"(", "type": "ty", "value": -0.1, "mass": {"m": 0.1}, "children": [)" + frames + "]}]}";
+    forces += R"({"type": "config_force", "config": "q)" + id + R"(", "input": "u)" + id + R"("}, )";
+  }
+  const trellis::Scene scene = trellis::parseScene(
+      R"({"name": "chain", "frames": [)" + frames + R"(], "potentials": [{"type": "gravity", "g": [0, -9.81, 0]}],
+          "forces": [)" + forces + R"({"type": "damping", "default": 0.1}]})",
+      "20-link chain");
+  trellis::Data data(scene.model);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
+  REQUIRE(trellis::computeLinearization(scene.model, data, zero, zero, zero).ok());
+  const MatrixXd A = data.A, B = data.B;
+  const trellis::LinearizationCallback lin = [&](double, MatrixXd& a, MatrixXd& b) {
+    a = A;
+    b = B;
+    return trellis::ReferenceStatus{};
+  };
+  const LqrWeights w = unitWeights(2 * n, n);
+  RiccatiOptions loose;
+  loose.rtol = 1e-4;
+  loose.atol = 1e-6;
+  const auto sol = trellis::solveRiccati(0.0, 2.0, 2 * n, n, lin, w, loose);
+  INFO(sol.describe());
+  REQUIRE(sol.ok());
+  CHECK(sol.lowOrderRetry);
+  CHECK_THAT(sol.firstAttempt, Catch::Contains("blow_up"));
+  CHECK_THAT(sol.json(), Catch::Contains("\"low_order_retry\":true"));
+  CHECK(sol.maxEigenvalue == Approx(26.76).epsilon(1e-3));
+  // Against the default tolerances: the gains agree to the loose tolerance's accuracy.
+  const auto ref = trellis::solveRiccati(0.0, 2.0, 2 * n, n, lin, w);
+  REQUIRE(ref.ok());
+  CHECK_FALSE(ref.lowOrderRetry);
+  for (double t : {0.0, 1.0, 1.9}) {
+    const MatrixXd K = sol.K(t), Kref = ref.K(t);
+    INFO("t = " << t);
+    CHECK((K - Kref).cwiseAbs().maxCoeff() < 1e-2 * Kref.cwiseAbs().maxCoeff());
+  }
+  // maxOrder out of range names the field.
+  RiccatiOptions bad;
+  bad.maxOrder = 6;
+  CHECK_THROWS_WITH(bad.validate(), Catch::Contains("maxOrder"));
 }

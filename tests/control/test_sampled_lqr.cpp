@@ -548,3 +548,211 @@ TEST_CASE("solveTvlqr: numerical failure is the status, with describe() and json
   CHECK_THAT(good.json(), Catch::StartsWith("{\"status\":\"ok\",\"ok\":true,\"message\":\"\",\"t\":null,"
                                            "\"index\":null,\"mode\":\"sampled\""));
 }
+
+namespace {
+
+/// max |got − expected| over the gains, relative to max |expected|.
+double gainDifference(const std::vector<MatrixXd>& expected, const std::vector<MatrixXd>& got) {
+  REQUIRE(expected.size() == got.size());
+  double scale = 0.0, diff = 0.0;
+  for (std::size_t k = 0; k < expected.size(); ++k) {
+    scale = std::max(scale, expected[k].cwiseAbs().maxCoeff());
+    diff = std::max(diff, (got[k] - expected[k]).cwiseAbs().maxCoeff());
+  }
+  return diff / scale;
+}
+
+/// max over the blocks of |got − expected| relative to the block's own max |entry|.
+double intervalDifference(const SampledInterval& e, const SampledInterval& g) {
+  auto rel = [](const MatrixXd& x, const MatrixXd& y) {
+    return (x - y).cwiseAbs().maxCoeff() / std::max(x.cwiseAbs().maxCoeff(), 1e-300);
+  };
+  return std::max({rel(e.Phi, g.Phi), rel(e.Gamma, g.Gamma), rel(e.Q, g.Q), rel(e.N, g.N), rel(e.R, g.R)});
+}
+
+}  // namespace
+
+TEST_CASE("sampled LQR: constant intervals by the exact block exponential agree with the integration",
+          "[sampled][exponential]") {
+  // Two coupled damped oscillators, one stiff: λ ≈ −7.2 and −1393, so λh ≈ 139 at h = 0.1 — where
+  // Van Loan's single exponential over h has no correct digit left in the cost blocks.
+  MatrixXd A = MatrixXd::Zero(4, 4);
+  A.topRightCorner(2, 2).setIdentity();
+  A.bottomLeftCorner(2, 2) << -1e4, 30.0, 30.0, -10.0;
+  A.bottomRightCorner(2, 2) << -1400.0, 2.0, 2.0, -0.5;
+  MatrixXd B = MatrixXd::Zero(4, 2);
+  B.bottomRows(2) << 1.0, 0.3, 0.0, 1.0;
+  LqrWeights w;
+  w.Q = VectorXd((VectorXd(4) << 10.0, 10.0, 1.0, 1.0).finished()).asDiagonal();
+  w.R = (MatrixXd(2, 2) << 1.0, 0.2, 0.2, 0.5).finished();
+  w.Qf = w.Q;
+  const trellis::LinearizationCallback lin = [&](double, MatrixXd& Am, MatrixXd& Bm) {
+    Am = A;
+    Bm = B;
+    return trellis::ReferenceStatus{};
+  };
+  trellis::SampledDiscretizationOptions tight;  // the integration, as the reference
+  tight.integrator = trellis::SampledIntegrator::kBdf;
+  tight.rtol = 1e-12;
+  tight.atol = 1e-14;
+  for (double h : {0.1, 0.01}) {
+    INFO("h = " << h);
+    SampledInterval exact;
+    trellis::discretizeConstantInterval(A, B, w.Q, w.R, h, exact);
+    const auto integrated = trellis::discretizeSampledData((VectorXd(2) << 0.0, h).finished(), 4, 2, lin, w, tight);
+    REQUIRE(integrated.ok());
+    // rtol 1e-12 on the integration: its blocks carry ~1e-11; the exponential is exact to rounding.
+    CHECK(intervalDifference(integrated.intervals[0], exact) < 1e-9);
+    // The cost blocks are a Gramian: symmetric PSD.
+    MatrixXd W(6, 6);
+    W << exact.Q, exact.N, exact.N.transpose(), exact.R;
+    CHECK(Eigen::SelfAdjointEigenSolver<MatrixXd>(W).eigenvalues()(0) > -1e-12 * W.norm());
+  }
+
+  // The recursion over 20 intervals: the exponential path (every interval declared constant,
+  // sharing one exponential) against the integration of every interval.
+  const VectorXd times = trellis::sampleTimes(0.0, 2.0, 10.0);
+  const trellis::ConstantSpanCallback constant = [](double, double) { return 0.0; };
+  const auto byExp = trellis::discretizeSampledData(times, 4, 2, lin, w, {}, {constant, {}});
+  REQUIRE(byExp.ok());
+  CHECK(byExp.constantIntervals == 20);
+  CHECK(byExp.exponentials == 1);
+  CHECK(byExp.steps == 0);
+  const auto byOde = trellis::discretizeSampledData(times, 4, 2, lin, w, tight);
+  REQUIRE(byOde.ok());
+  CHECK(byOde.constantIntervals == 0);
+  const auto recExp = trellis::solveSampledRiccatiRecursion(byExp.intervals, w.Qf);
+  const auto recOde = trellis::solveSampledRiccatiRecursion(byOde.intervals, w.Qf);
+  REQUIRE(recExp.ok());
+  REQUIRE(recOde.ok());
+  CHECK(gainDifference(recOde.K, recExp.K) < 1e-8);
+  // exactConstantIntervals = false ignores the callback.
+  trellis::SampledDiscretizationOptions off;
+  off.exactConstantIntervals = false;
+  CHECK(trellis::discretizeSampledData(times, 4, 2, lin, w, off, {constant, {}}).constantIntervals == 0);
+  // A callback that throws is the status, naming the interval.
+  const trellis::ConstantSpanCallback throws = [](double, double) -> double { throw std::runtime_error("no"); };
+  const auto failed = trellis::discretizeSampledData(times, 4, 2, lin, w, {}, {throws, {}});
+  CHECK(failed.status.code == trellis::SampledCode::kCallbackFailure);
+  CHECK(failed.status.message.find("interval 0") != std::string::npos);
+  SampledInterval unused;
+  CHECK_THROWS_AS(trellis::discretizeConstantInterval(A, B, w.Q, w.R, 0.0, unused), std::invalid_argument);
+}
+
+TEST_CASE("solveTvlqr sampled: a held pose and a reference at rest on part of its span use the exponential",
+          "[sampled][exponential]") {
+  const Model model = trellis::ctest::makeCartPole();
+  trellis::TvlqrOptions exact, integrated;
+  exact.sampleRate = integrated.sampleRate = 50.0;
+  integrated.sampled.exactConstantIntervals = false;
+  integrated.sampled.integrator = trellis::SampledIntegrator::kBdf;
+  integrated.sampled.rtol = 1e-12;
+  integrated.sampled.atol = 1e-14;
+  SECTION("held upright") {
+    const Trajectory ref = constantReference(model, VectorXd::Zero(4), VectorXd::Zero(1), 2.0);
+    const trellis::TvlqrSolution a = trellis::solveTvlqr(model, ref, cartPoleWeights(), exact);
+    const trellis::TvlqrSolution b = trellis::solveTvlqr(model, ref, cartPoleWeights(), integrated);
+    REQUIRE(a.ok());
+    REQUIRE(b.ok());
+    CHECK(a.steps == 0);  // no interval integrated
+    CHECK(b.steps > 0);
+    CHECK(gainDifference(b.gains.gains(), a.gains.gains()) < 1e-8);
+  }
+  SECTION("at rest for 0.5 s, then moving") {
+    // Knots 0, 0.5 at rest upright (ẋ = 0 there: the upright is an equilibrium), then a motion:
+    // the first 25 intervals are constant, the rest are integrated.
+    MatrixXd X = MatrixXd::Zero(4, 4), U = MatrixXd::Zero(1, 4);
+    X.col(2) << 0.1, 0.05, 0.2, 0.1;
+    X.col(3) << 0.3, 0.1, 0.2, 0.0;
+    U << 0.0, 0.0, 0.5, -0.2;
+    Trajectory ref(model.configNames(), model.inputNames(), (VectorXd(4) << 0.0, 0.5, 1.0, 1.5).finished(), X, U);
+    trellis::Data data(model);
+    ref.computeStateDerivatives(model, data);
+    REQUIRE(ref.stateDerivatives().leftCols(2).isZero(0.0));
+    const trellis::TvlqrSolution a = trellis::solveTvlqr(model, ref, cartPoleWeights(), exact);
+    trellis::TvlqrOptions loose = exact;
+    loose.sampled.exactConstantIntervals = false;
+    const trellis::TvlqrSolution c = trellis::solveTvlqr(model, ref, cartPoleWeights(), loose);
+    const trellis::TvlqrSolution b = trellis::solveTvlqr(model, ref, cartPoleWeights(), integrated);
+    REQUIRE(a.ok());
+    REQUIRE(b.ok());
+    REQUIRE(c.ok());
+    CHECK(a.steps > 0);
+    CHECK(a.steps < c.steps);  // the constant part was not integrated
+    // The moving part is integrated at the default tolerances (rtol 1e-10): its own error.
+    CHECK(gainDifference(b.gains.gains(), a.gains.gains()) < 1e-8);
+  }
+}
+
+TEST_CASE("sampled LQR: the Radau and Magnus integrations agree with CVODES on time-varying and stiff systems",
+          "[sampled][magnus][radau]") {
+  trellis::SampledDiscretizationOptions bdf;  // the reference: every interval by CVODES, tight
+  bdf.integrator = trellis::SampledIntegrator::kBdf;
+  bdf.rtol = 1e-12;
+  bdf.atol = 1e-14;
+  const trellis::SampledIntegrator method =
+      GENERATE(trellis::SampledIntegrator::kRadau, trellis::SampledIntegrator::kMagnus);
+  trellis::SampledDiscretizationOptions fast;
+  fast.integrator = method;
+  INFO(trellis::toString(method));
+  SECTION("fast-changing 2-state system") {
+    LqrWeights w;
+    w.Q = (MatrixXd(2, 2) << 3.0, 0.5, 0.5, 1.0).finished();
+    w.R = MatrixXd::Constant(1, 1, 0.7);
+    w.Qf = w.Q;
+    const VectorXd times = trellis::sampleTimes(0.0, 3.0, 10.0);
+    const auto magnus = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, fast);
+    const auto ref = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, bdf);
+    REQUIRE(magnus.ok());
+    REQUIRE(ref.ok());
+    for (std::size_t k = 0; k < ref.intervals.size(); ++k) {
+      INFO("interval " << k);
+      CHECK(intervalDifference(ref.intervals[k], magnus.intervals[k]) < 1e-9);
+    }
+    const auto a = trellis::solveSampledRiccatiRecursion(magnus.intervals, w.Qf);
+    const auto b = trellis::solveSampledRiccatiRecursion(ref.intervals, w.Qf);
+    REQUIRE(a.ok());
+    REQUIRE(b.ok());
+    CHECK(gainDifference(b.K, a.K) < 1e-8);
+    CHECK(magnus.steps < ref.steps);  // no restart per interval
+  }
+  SECTION("stiff (λh ≈ 140) and time-varying") {
+    // The stiff oscillator pair of the exponential test with a slowly varying coupling and input.
+    const trellis::LinearizationCallback lin = [](double t, MatrixXd& A, MatrixXd& B) {
+      A = MatrixXd::Zero(4, 4);
+      A.topRightCorner(2, 2).setIdentity();
+      A.bottomLeftCorner(2, 2) << -1e4, 30.0 + 20.0 * std::sin(2.0 * t), 30.0 + 20.0 * std::sin(2.0 * t), -10.0;
+      A.bottomRightCorner(2, 2) << -1400.0 * (1.0 + 0.2 * std::cos(t)), 2.0, 2.0, -0.5;
+      B = MatrixXd::Zero(4, 2);
+      B.bottomRows(2) << 1.0, 0.3 * std::cos(3.0 * t), 0.0, 1.0;
+      return trellis::ReferenceStatus{};
+    };
+    LqrWeights w;
+    w.Q = VectorXd((VectorXd(4) << 10.0, 10.0, 1.0, 1.0).finished()).asDiagonal();
+    w.R = MatrixXd::Identity(2, 2);
+    w.Qf = w.Q;
+    const VectorXd times = trellis::sampleTimes(0.0, 2.0, 10.0);
+    const auto magnus = trellis::discretizeSampledData(times, 4, 2, lin, w, fast);
+    const auto ref = trellis::discretizeSampledData(times, 4, 2, lin, w, bdf);
+    REQUIRE(magnus.ok());
+    REQUIRE(ref.ok());
+    const auto a = trellis::solveSampledRiccatiRecursion(magnus.intervals, w.Qf);
+    const auto b = trellis::solveSampledRiccatiRecursion(ref.intervals, w.Qf);
+    REQUIRE(a.ok());
+    REQUIRE(b.ok());
+    CHECK(gainDifference(b.K, a.K) < 1e-8);
+  }
+  SECTION("solveTvlqr along the cart-pole's swing, knots every 10 ms") {
+    const Model model = trellis::ctest::makeCartPole();
+    const Trajectory ref = swingReference(model, 1.0);
+    trellis::TvlqrOptions magnus, cvodes;
+    magnus.sampleRate = cvodes.sampleRate = 50.0;
+    magnus.sampled = fast;
+    cvodes.sampled = bdf;
+    const trellis::TvlqrSolution a = trellis::solveTvlqr(model, ref, cartPoleWeights(), magnus);
+    const trellis::TvlqrSolution b = trellis::solveTvlqr(model, ref, cartPoleWeights(), cvodes);
+    REQUIRE(a.ok());
+    REQUIRE(b.ok());
+    CHECK(gainDifference(b.gains.gains(), a.gains.gains()) < 1e-8);
+  }
+}

@@ -146,6 +146,15 @@ struct RiccatiOptions {
   RiccatiMethod method = RiccatiMethod::kBDF;  ///< plain entries of S by BDF or Adams, or the Cholesky factor
   long maxSteps = 100000;       ///< total internal steps over the horizon (> 0)
   double maxNorm = 1e15;        ///< max |S_ij| above which the solve stops with kBlowUp (> 0)
+  /// Largest BDF order (1…5; Adams 1…12); 0: CVODES's default (5, 12). With the default, a BDF
+  /// solve whose S passes maxNorm or turns non-finite is redone at order ≤ 2 before that is
+  /// reported (RiccatiSolution::lowOrderRetry; when the redone solve fails too, the first report
+  /// stands, its message saying so): variable-step BDF of order 3–5 is not zero-stable when the
+  /// error test keeps cutting the step, and its solution can then grow without bound over steps
+  /// that tend to zero — the integrator's instability, not S's (measured: the 20-link chain held,
+  /// rtol 1e-4, atol 1e-6: max |S_ij| 1 → 1e15 within Δτ = 1e-11 at order 5, while order ≤ 3 finds
+  /// S bounded, λmax = 26.8). BDF 2 is A-stable and zero-stable under the step changes CVODES makes.
+  int maxOrder = 0;
   double initialStep = 0.0;     ///< first step size in τ; 0 lets CVODES choose (≥ 0)
   double maxStep = 0.0;         ///< largest step size; 0 = unlimited (≥ 0)
   RiccatiLinearSolver linearSolver = RiccatiLinearSolver::kAuto;  ///< BDF only
@@ -219,6 +228,10 @@ class RiccatiSolution {
   double switchedToPlainAt = std::numeric_limits<double>::quiet_NaN();  ///< kFactored: the time t
                                     ///< where the solve switched to the plain form (NaN: never)
   double indefiniteRatio = 0.0;     ///< kIndefinite: λmin(S)/λmax(S) at status.t (< −ε)
+  /// The first solve (default maximum order) stopped with kBlowUp or kNonFinite and this ok
+  /// solution is the one redone at BDF order ≤ 2 (RiccatiOptions::maxOrder), with its counters.
+  bool lowOrderRetry = false;
+  std::string firstAttempt;         ///< lowOrderRetry: the first solve's status line
   long linearizations = 0;          ///< calls of the linearization callback (solve and gains)
   double minEigenvalue = 0.0;       ///< of S over the stored steps (if tracked)
   double maxEigenvalue = 0.0;       ///< of S over the stored steps (if tracked)
@@ -229,7 +242,7 @@ class RiccatiSolution {
   /// {"status", "ok", "message", "t", "index", "nx", "nu", "t0", "t1", "valid_from", "steps",
   /// "rhs_evaluations", "jacobian_evaluations", "linear_iterations", "newton_iterations",
   /// "linearizations", "failure_norm", "indefinite_ratio", "switched_to_plain_at",
-  /// "min_eigenvalue_S", "max_eigenvalue_S"}.
+  /// "min_eigenvalue_S", "max_eigenvalue_S", "low_order_retry"}.
   std::string json() const;
   int nx() const { return nx_; }            ///< states (S is nx×nx)
   int nu() const { return nu_; }            ///< inputs (K is m×nx)

@@ -10,11 +10,21 @@
 // interval is the quadratic form
 //   ∫ δxᵀQδx + δuᵀRδu ds = [δx_k; δu_k]ᵀ [[Q_k, N_k], [N_kᵀ, R_k]] [δx_k; δu_k],
 //   [[Q_k, N_k], [N_kᵀ, R_k]] = ∫ [Φ(s,t_k) Γ(s)]ᵀ Q(s) [Φ(s,t_k) Γ(s)] ds + [[0, 0], [0, ∫R ds]].
-// discretizeSampledData integrates Y = [Φ(s, t_k) Γ(s)] from Y(t_k) = [I 0] by the variational
-// equation Ẏ = A(s) Y + [0 B(s)] with CVODES (BDF; GMRES with the exact Jacobian product A·V and
-// the exact block preconditioner (I − γA)⁻¹ per column), on the exact A(s), B(s) at every point
-// the integrator asks for, and the cost matrix as a CVODES quadrature (error-controlled, outside
-// the Newton iteration). Against the usual shortcut — ZOH of a frozen A(t_mid), B(t_mid) — this
+// discretizeSampledData integrates the intervals that are not constant, by default
+// (SampledIntegrator::kRadau), with the three-stage Radau IIA collocation of the variational
+// equation Ẏ = A(s)Y + [0 B(s)], Y = [Φ(s, t_k) Γ(s)], and the method's own quadrature of the
+// cost on its stages: one linear solve per step (the problem is linear), L-stable (a stiff A does
+// not limit the step), the error by step doubling, steps carried from one interval to the next (a
+// one-step method restarts for free) and ending on the reference's knots. SampledIntegrator::
+// kMagnus integrates the Van Loan system Ẋ = V(s)X, V = [[−Mᵀ, Q̃], [0, M]] (M = [[A, B], [0, 0]],
+// Q̃ = blkdiag(Q, R)), whose solution holds [[Φ_k, Γ_k], [0, I]] and the cost blocks, by a
+// sixth-order Magnus scheme — each step's exponential by the block scaling and squaring below,
+// but the series itself needs |λ|δ ≲ 1: for non-stiff problems only. SampledIntegrator::kBdf integrates
+// Y = [Φ(s, t_k) Γ(s)] from Y(t_k) = [I 0] by the variational equation Ẏ = A(s) Y + [0 B(s)] with
+// CVODES (BDF; GMRES with the exact Jacobian product A·V and the exact block preconditioner
+// (I − γA)⁻¹ per column; restarted per interval), on the exact A(s), B(s) at every point the
+// integrator asks for, and the cost matrix as a CVODES quadrature (error-controlled, outside the
+// Newton iteration). Against the usual shortcut — ZOH of a frozen A(t_mid), B(t_mid) — this
 // removes the O(h³) local error per interval from Ȧ, Ḃ (O(h²) after N ~ 1/h intervals), which for
 // a fast-changing reference is the whole difference between the gains (tests/control/
 // test_sampled_lqr.cpp measures it).
@@ -25,6 +35,14 @@
 // minimizes Σ_k [δx_k; δu_k]ᵀ[[Q_k, N_k], [N_kᵀ, R_k]][δx_k; δu_k] + δx_Nᵀ Qf δx_N with δu_k = −K_k δx_k
 // — i.e. exactly the continuous cost of the sampled-data closed loop of the linearization.
 // As h → 0, K_k → K(t_k) of the continuous Riccati equation, with an O(h) difference.
+//
+// Intervals on which A, B, Q, R are exactly constant (a held pose; a reference whose knots repeat
+// at rest — the caller says so through a ConstantSpanCallback, nothing is guessed from samples)
+// are not integrated: with M = [[A, B], [0, 0]] and Q̃ = blkdiag(Q, R) their blocks are
+//   e^{Mh} = [[Φ_k, Γ_k], [0, I]],  [[Q_k, N_k], [N_kᵀ, R_k]] = ∫₀ʰ e^{Mᵀs} Q̃ e^{Ms} ds,
+// computed by a block scaling and squaring (sampled_lqr.cpp: Van Loan's exponential on h/2^s with
+// ‖M‖h/2^s ≤ ½, then the doubling formulas), exact to rounding also for a stiff A (|λ|h ≫ 1), and
+// computed once for all intervals of the same length in one constant stretch.
 #pragma once
 
 #include "trellis/control/riccati.hpp"
@@ -32,6 +50,7 @@
 
 #include <Eigen/Core>
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -71,13 +90,52 @@ inline EnumNameTable<SampledCode> enumNames(SampledCode) {
   return table;
 }
 
+/// How the intervals that are not constant are integrated (file comment).
+enum class SampledIntegrator {
+  /// Sixth-order Magnus on the Van Loan system, error-controlled, no restart: for non-stiff A(t)
+  /// only (its series needs |λ|δ ≲ 1: ~60000 steps and 10 s on the 6-link chain's 2 s swing).
+  kMagnus,
+  /// Three-stage Radau IIA (order 5, L-stable) on the variational equation and its quadrature
+  /// of the cost, step doubling for the error, no restart (the default).
+  kRadau,
+  kBdf,     ///< CVODES BDF on the variational equation and a cost quadrature, per interval
+};
+
+/// Names: magnus, radau, bdf.
+inline EnumNameTable<SampledIntegrator> enumNames(SampledIntegrator) {
+  static constexpr EnumName<SampledIntegrator> table[] = {{SampledIntegrator::kMagnus, "magnus"},
+                                                          {SampledIntegrator::kRadau, "radau"},
+                                                          {SampledIntegrator::kBdf, "bdf"}};
+  return table;
+}
+
 /// Options of discretizeSampledData (the integration of Φ, Γ and the cost over each interval).
 struct SampledDiscretizationOptions {
-  double rtol = 1e-10;     ///< CVODES relative tolerance on Φ, Γ and the cost (> 0)
-  double atol = 1e-12;     ///< absolute tolerance on the entries of Φ, Γ (> 0); the cost's is
+  SampledIntegrator integrator = SampledIntegrator::kRadau;  ///< for the intervals not constant
+  double rtol = 1e-10;     ///< relative tolerance on Φ, Γ and the cost (> 0): CVODES's, or the
+                           ///< Magnus steps' local error relative to each block's size
+  double atol = 1e-12;     ///< kBdf: absolute tolerance on the entries of Φ, Γ (> 0); the cost's is
                            ///< atol·h·max(1, max|Q|, max|R|)
   long maxSteps = 100000;  ///< internal steps per interval (> 0)
+  /// Intervals the ConstantSpanCallback declares constant get the exact block exponential (file
+  /// comment); false integrates every interval (the reference path of the tests).
+  bool exactConstantIntervals = true;
   void validate() const;   ///< throws std::invalid_argument naming the field
+};
+
+/// For a sample interval [a, b]: a time c at which A, B, Q and R take the values they keep on all
+/// of [a, b] when they are exactly constant there by construction (a held pose, knots repeating at
+/// rest), or NaN when they are not (or it is not known). Return the same c (e.g. the start of the
+/// constant stretch) for every interval of one stretch: intervals with the same c, the same
+/// length and the same A, B, Q, R share one exponential.
+using ConstantSpanCallback = std::function<double(double a, double b)>;
+
+/// What the caller knows of A(t), B(t), Q(t), R(t) beyond the callbacks (both optional).
+struct SampledStructure {
+  ConstantSpanCallback constantOn;  ///< the exactly constant intervals (ConstantSpanCallback)
+  /// Ascending times where they may have a kink (e.g. the reference's knots: the linear input
+  /// rule makes A(t) only continuous there). The Magnus steps end on them.
+  std::vector<double> breakpoints;
 };
 
 /// The exact discretization over the sample intervals, and how it went.
@@ -85,13 +143,15 @@ struct SampledDiscretization {
   std::vector<SampledInterval> intervals;  ///< those completed (all of them when ok)
   /// code; message (empty when ok; the time and the cause); t: where it failed; index: the interval.
   Status<SampledCode> status;
-  long steps = 0;            ///< CVODES internal steps over all intervals
+  long steps = 0;            ///< integrator steps over all intervals (CVODES's or Magnus's)
   long rhsEvaluations = 0;   ///< right-hand sides evaluated by CVODES
   long linearizations = 0;   ///< calls of the linearization callback
+  long constantIntervals = 0;  ///< intervals discretized by the exact exponential (no integration)
+  long exponentials = 0;       ///< block exponentials computed for them (shared where equal)
   bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   std::string describe() const;  ///< one line: the status, intervals, steps
   /// {"status", "ok", "message", "t", "index", "intervals", "steps", "rhs_evaluations",
-  /// "linearizations"}.
+  /// "linearizations", "constant_intervals", "exponentials"}.
   std::string json() const;
 };
 
@@ -99,11 +159,20 @@ struct SampledDiscretization {
 /// (times strictly increasing, ≥ 2 entries) and the sampled-data cost of Q (constant or
 /// weights.Qfun) and R (constant or weights.Rfun); weights.Qf is not used. Throws
 /// std::invalid_argument for bad sizes/options; a failing callback or CVODES error is reported in
-/// the result (with the time), never thrown.
+/// the result (with the time), never thrown. structure (optional): which intervals are exactly
+/// constant (not integrated unless options say so) and where A(t) may have kinks.
 SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx, int nu,
                                             const LinearizationCallback& linearization,
                                             const LqrWeights& weights,
-                                            const SampledDiscretizationOptions& options = {});
+                                            const SampledDiscretizationOptions& options = {},
+                                            const SampledStructure& structure = {});
+
+/// The exact blocks of one interval of length h on which A (nx×nx), B (nx×m), Q (nx×nx, PSD) and
+/// R (m×m, PD) are constant (file comment): Φ, Γ, Q_k, N_k, R_k into `out` (t0, t1 untouched).
+/// Throws std::invalid_argument for bad sizes, non-finite entries or h ≤ 0.
+void discretizeConstantInterval(const Eigen::MatrixXd& A, const Eigen::MatrixXd& B,
+                                const Eigen::MatrixXd& Q, const Eigen::MatrixXd& R, double h,
+                                SampledInterval& out);
 
 /// Backward recursion with cross term (file comment) over the intervals, S_N = Qf. S has N+1
 /// entries, K N. Not ok (message naming the step and its time) when G_k is not positive
