@@ -39,6 +39,10 @@ void OptimizerOptions::validate() const {
     bad("warmStartBarrier must be > 0 and finite");
   }
   if (maxSplit < 2) bad("maxSplit = " + std::to_string(maxSplit) + " must be >= 2");
+  if (refinementBand < 0) bad("refinementBand = " + std::to_string(refinementBand) + " must be >= 0");
+  if (!(unresolvedDefect > 0.0)) {
+    bad("unresolvedDefect must be > 0 (infinity: never refine everywhere)");
+  }
 }
 
 namespace {
@@ -513,18 +517,12 @@ Eigen::VectorXd measureSlack(const OptimalControlProblem& problem, const Optimiz
 /// the knot limit would be exceeded.
 bool refine(OptimalControlProblem& problem, const OptimizationResult& r, const Eigen::VectorXd& errors,
             const OptimizerOptions& options) {
-  const double tol = options.consistencyTolerance;
-  const double order = problem.method == CollocationMethod::kHermiteSimpson ? 5.0 : 3.0;
   const Eigen::VectorXd& tau = r.mesh;
+  const std::vector<int> parts = refinementSplits(errors, problem.method, options);
   std::vector<double> mesh{0.0};
   for (int k = 0; k + 1 < tau.size(); ++k) {
-    int parts = 1;
-    if (errors(k) > tol) {
-      parts = static_cast<int>(std::ceil(std::pow(errors(k) / (0.5 * tol), 1.0 / order)));
-      parts = std::clamp(parts, 2, options.maxSplit);
-    }
-    for (int j = 1; j <= parts; ++j) {
-      mesh.push_back(j == parts ? tau(k + 1) : tau(k) + (tau(k + 1) - tau(k)) * j / parts);
+    for (int j = 1; j <= parts[k]; ++j) {
+      mesh.push_back(j == parts[k] ? tau(k + 1) : tau(k) + (tau(k + 1) - tau(k)) * j / parts[k]);
     }
   }
   const int N = static_cast<int>(mesh.size());
@@ -550,6 +548,42 @@ bool refine(OptimalControlProblem& problem, const OptimizationResult& r, const E
 }
 
 }  // namespace
+
+std::vector<int> refinementSplits(const Eigen::VectorXd& intervalDefects, CollocationMethod method,
+                                  const OptimizerOptions& options) {
+  options.validate();
+  const int n = static_cast<int>(intervalDefects.size());
+  for (int k = 0; k < n; ++k) {
+    if (!(intervalDefects(k) >= 0.0)) {  // NaN or negative: no defect to size a split by
+      throw std::invalid_argument("refinementSplits: intervalDefects(" + std::to_string(k) + ") = " +
+                                  fmt(intervalDefects(k)) + " must be >= 0");
+    }
+  }
+  const double tol = options.consistencyTolerance;
+  const double order = method == CollocationMethod::kHermiteSimpson ? 5.0 : 3.0;  // p + 1
+  std::vector<int> parts(n, 1);
+  // 1. By the defect's order: ε ∝ h^(p+1), so M parts bring ε to ε / M^(p+1) ≤ tol/2.
+  for (int k = 0; k < n; ++k) {
+    if (intervalDefects(k) > tol) {
+      const int m = static_cast<int>(std::ceil(std::pow(intervalDefects(k) / (0.5 * tol), 1.0 / order)));
+      parts[k] = std::clamp(m, 2, options.maxSplit);
+    }
+  }
+  // 2. Unresolved: a defect that is a sizeable share of the state's range says the motion is not
+  // resolved at all (the order model does not hold, and the re-optimized motion is free to go
+  // anywhere): every interval is halved.
+  const bool unresolved = n > 0 && intervalDefects.maxCoeff() > options.unresolvedDefect;
+  // 3. The safety band: the re-optimized motion moves its fast phase into the neighbours of the
+  // intervals that were split, so those are halved too.
+  std::vector<int> out = parts;
+  for (int k = 0; k < n; ++k) {
+    if (unresolved) out[k] = std::max(out[k], 2);
+    if (parts[k] < 2) continue;
+    const int from = std::max(0, k - options.refinementBand), to = std::min(n - 1, k + options.refinementBand);
+    for (int j = from; j <= to; ++j) out[j] = std::max(out[j], 2);
+  }
+  return out;
+}
 
 OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
                                       const OptimizerOptions& options) {
