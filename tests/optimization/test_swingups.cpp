@@ -76,6 +76,23 @@ TEST_CASE("swingups: the turntable arm under torque bounds alone solves with the
   for (std::size_t k = 1; k < r.rounds.size(); ++k) CHECK(r.rounds[k].knots > r.rounds[k - 1].knots);
 }
 
+TEST_CASE("swingups: the turntable arm from another starting mesh, and without the band",
+          "[optimizer][swingup][hessian][refinement]") {
+  // From 51 knots the order-based cuts alone chase the whip for 6 rounds and end "inconsistent"
+  // (an honest refusal naming where); with the band (the default) it is solved.
+  OptimalControlProblem p = trellis::loadProblem(problemPath("swingups/turntable_arm_swingup"));
+  p.knots = 51;
+  checkSolved(p, trellis::optimizeTrajectory(p));
+  trellis::OptimizerOptions noBand;
+  noBand.refinementBand = 0;
+  const OptimizationResult r = trellis::optimizeTrajectory(p, noBand);
+  INFO(r.describe());
+  CHECK(r.status.code == OptimizationCode::kInconsistent);
+  CHECK(r.rounds.size() == 7);
+  CHECK(r.status.index >= 0);
+  CHECK_THAT(r.status.message, Catch::Contains("refinement limit 6"));
+}
+
 TEST_CASE("swingups: the refinement rule", "[optimizer][refinement]") {
   using trellis::CollocationMethod;
   using trellis::refinementSplits;
