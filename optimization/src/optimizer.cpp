@@ -40,6 +40,9 @@ void OptimizerOptions::validate() const {
   }
   if (maxSplit < 2) bad("maxSplit = " + std::to_string(maxSplit) + " must be >= 2");
   if (refinementBand < 0) bad("refinementBand = " + std::to_string(refinementBand) + " must be >= 0");
+  if (!(refinementGrading == 0.0 || (refinementGrading > 1.0 && std::isfinite(refinementGrading)))) {
+    bad("refinementGrading = " + std::to_string(refinementGrading) + " must be 0 (off) or > 1 and finite");
+  }
   if (!(unresolvedDefect > 0.0)) {
     bad("unresolvedDefect must be > 0 (infinity: never refine everywhere)");
   }
@@ -518,7 +521,7 @@ Eigen::VectorXd measureSlack(const OptimalControlProblem& problem, const Optimiz
 bool refine(OptimalControlProblem& problem, const OptimizationResult& r, const Eigen::VectorXd& errors,
             const OptimizerOptions& options) {
   const Eigen::VectorXd& tau = r.mesh;
-  const std::vector<int> parts = refinementSplits(errors, problem.method, options);
+  const std::vector<int> parts = refinementSplits(tau, errors, problem.method, options);
   std::vector<double> mesh{0.0};
   for (int k = 0; k + 1 < tau.size(); ++k) {
     for (int j = 1; j <= parts[k]; ++j) {
@@ -549,10 +552,21 @@ bool refine(OptimalControlProblem& problem, const OptimizationResult& r, const E
 
 }  // namespace
 
-std::vector<int> refinementSplits(const Eigen::VectorXd& intervalDefects, CollocationMethod method,
-                                  const OptimizerOptions& options) {
+std::vector<int> refinementSplits(const Eigen::VectorXd& mesh, const Eigen::VectorXd& intervalDefects,
+                                  CollocationMethod method, const OptimizerOptions& options) {
   options.validate();
   const int n = static_cast<int>(intervalDefects.size());
+  if (mesh.size() != n + 1) {
+    throw std::invalid_argument("refinementSplits: mesh has " + std::to_string(mesh.size()) +
+                                " points for " + std::to_string(n) + " interval defects (expected " +
+                                std::to_string(n + 1) + ")");
+  }
+  for (int k = 0; k < n; ++k) {
+    if (!(mesh(k + 1) > mesh(k))) {
+      throw std::invalid_argument("refinementSplits: mesh(" + std::to_string(k + 1) + ") = " + fmt(mesh(k + 1)) +
+                                  " must be > mesh(" + std::to_string(k) + ") = " + fmt(mesh(k)));
+    }
+  }
   for (int k = 0; k < n; ++k) {
     if (!(intervalDefects(k) >= 0.0)) {  // NaN or negative: no defect to size a split by
       throw std::invalid_argument("refinementSplits: intervalDefects(" + std::to_string(k) + ") = " +
@@ -581,6 +595,23 @@ std::vector<int> refinementSplits(const Eigen::VectorXd& intervalDefects, Colloc
     if (parts[k] < 2) continue;
     const int from = std::max(0, k - options.refinementBand), to = std::min(n - 1, k + options.refinementBand);
     for (int j = from; j <= to; ++j) out[j] = std::max(out[j], 2);
+  }
+  // 4. Grading (opt-in): neighbouring new widths differ by at most the factor ρ (a forward and a
+  // backward sweep, each interval still at most maxSplit parts), so no coarse interval sits next
+  // to a fine one for a moving fast phase to settle in.
+  if (options.refinementGrading > 0.0) {
+    const double rho = options.refinementGrading;
+    auto width = [&](int j) { return (mesh(j + 1) - mesh(j)) / out[j]; };
+    for (int pass = 0; pass < 2; ++pass) {
+      for (int step = 0; step + 1 < n; ++step) {
+        const int j = pass == 0 ? step + 1 : n - 2 - step, i = pass == 0 ? j - 1 : j + 1;
+        const double limit = rho * width(i);
+        if (width(j) > limit * (1.0 + 1e-12)) {
+          const int m = static_cast<int>(std::ceil((mesh(j + 1) - mesh(j)) / limit - 1e-9));
+          out[j] = std::max(out[j], std::min(options.maxSplit, m));
+        }
+      }
+    }
   }
   return out;
 }

@@ -95,7 +95,10 @@ TEST_CASE("swingups: the turntable arm from another starting mesh, and without t
 
 TEST_CASE("swingups: the refinement rule", "[optimizer][refinement]") {
   using trellis::CollocationMethod;
-  using trellis::refinementSplits;
+  // The rule on a uniform mesh of e.size() intervals.
+  const auto refinementSplits = [](const VectorXd& e, CollocationMethod method, const trellis::OptimizerOptions& o) {
+    return trellis::refinementSplits(VectorXd::LinSpaced(e.size() + 1, 0.0, 1.0), e, method, o);
+  };
   trellis::OptimizerOptions o;  // tolerance 1e-3, maxSplit 4, band 3, unresolved above 0.05
   const auto hs = CollocationMethod::kHermiteSimpson;
   SECTION("by the defect's order, capped by maxSplit") {
@@ -127,7 +130,32 @@ TEST_CASE("swingups: the refinement rule", "[optimizer][refinement]") {
     e(4) = 0.05;  // at the threshold: only the band
     CHECK(refinementSplits(e, hs, o) == std::vector<int>{1, 2, 2, 2, 3, 2, 2, 2, 1, 1});
   }
+  SECTION("grading (opt-in): neighbouring new widths within the factor, at most maxSplit per round") {
+    // Widths 1, 1, 1, 4, 4, 4 (times 1/15); the third interval cut in 2 -> new width 0.5.
+    VectorXd mesh(7);
+    mesh << 0, 1, 2, 3, 7, 11, 15;
+    mesh /= 15.0;
+    VectorXd e = VectorXd::Zero(6);
+    e(2) = 0.01;
+    o.refinementBand = 0;
+    CHECK(trellis::refinementSplits(mesh, e, hs, o) == std::vector<int>{1, 1, 2, 1, 1, 1});
+    o.refinementGrading = 2.0;
+    // Backward from 0.5: 1 <= 1 fine; forward: 4 > 2*0.5 -> 4 parts (width 1), then 4 > 2 -> 2 parts.
+    CHECK(trellis::refinementSplits(mesh, e, hs, o) == std::vector<int>{1, 1, 2, 4, 2, 1});
+    // 1.5: forward 4 / 0.75 -> 6, capped at maxSplit 4 (width 1); 4 / 1.5 -> 3 (1.33); 4 / 2 -> 2;
+    // backward 1 > 0.75 -> 2 twice.
+    o.refinementGrading = 1.5;
+    CHECK(trellis::refinementSplits(mesh, e, hs, o) == std::vector<int>{2, 2, 2, 4, 3, 2});
+    o.refinementGrading = 1.0;
+    CHECK_THROWS_WITH(trellis::refinementSplits(mesh, e, hs, o), Catch::Contains("refinementGrading"));
+  }
   SECTION("bad input is named") {
+    CHECK_THROWS_WITH(trellis::refinementSplits(VectorXd::LinSpaced(3, 0.0, 1.0), VectorXd::Zero(3), hs, o),
+                      Catch::Contains("mesh has 3 points for 3 interval defects"));
+    VectorXd backwards(3);
+    backwards << 0.0, 0.6, 0.5;
+    CHECK_THROWS_WITH(trellis::refinementSplits(backwards, VectorXd::Zero(2), hs, o),
+                      Catch::Contains("mesh(2) = 0.5 must be > mesh(1) = 0.6"));
     VectorXd e = VectorXd::Zero(3);
     e(1) = -1.0;
     CHECK_THROWS_WITH(refinementSplits(e, hs, o), Catch::Contains("intervalDefects(1) = -1 must be >= 0"));
