@@ -83,6 +83,10 @@ def test_problem_errors(tm, tmp_path):
     options = tm.OptimizerOptions(refinement_band=0, unresolved_defect=0.2)
     assert (options.refinement_band, options.unresolved_defect) == (0, 0.2)
     assert tm.OptimizerOptions().refinement_band == 3
+    assert tm.OptimizerOptions(refinement_grading=1.5).refinement_grading == 1.5
+    assert tm.OptimizerOptions().refinement_grading == 0.0
+    with pytest.raises(ValueError, match="refinementGrading"):
+        tm.optimize_trajectory(pendulum_problem(tm), options=tm.OptimizerOptions(refinement_grading=1.0))
     with pytest.raises(ValueError, match="refinementBand = -1"):
         tm.optimize_trajectory(pendulum_problem(tm), options=tm.OptimizerOptions(refinement_band=-1))
 
