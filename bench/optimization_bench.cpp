@@ -28,7 +28,9 @@
 // force bounded). Counters: iterations (all rounds),
 // rounds, knots (final), success (1 = solved and consistent), inconsistent (1 when the refinement
 // limit was reached first), iteration_limit (1 when a round hit Ipopt's limit), cost, defect,
-// cpu_ms; the label lists the iterations per round.
+// cpu_ms; the label lists the iterations per round. The `swingupStart` family runs the
+// turntable arm (41–81 knots) and the 4-link chain (31–61) from other starting meshes with the
+// default refinement rule and with the order-based cuts alone (rule = 0).
 //
 // Run: build/bench/trellis_bench_optimization --benchmark_out=opt.json --benchmark_out_format=json
 #include <trellis/optimization.hpp>
@@ -36,6 +38,7 @@
 #include <benchmark/benchmark.h>
 
 #include <iterator>
+#include <limits>
 #include <string>
 
 namespace {
@@ -136,6 +139,46 @@ void swingup(benchmark::State& state) {
   state.counters["cpu_ms"] = 1e3 * cpu / static_cast<double>(state.iterations());
 }
 
+/// The refinement rule's robustness to the starting mesh (issue 30): the turntable arm and the
+/// 4-link chain from other knot counts, exact Hessian, with the default rule (band = 3) and with
+/// the order-based cuts alone (band = 0, no unresolved-motion rule).
+void swingupStart(benchmark::State& state) {
+  const std::string name = state.range(0) == 0 ? "swingups/turntable_arm_swingup" : "swingups/chain4_swingup";
+  trellis::OptimalControlProblem problem = trellis::loadProblem(
+      std::string(TRELLIS_SOURCE_DIR) + "/examples/problems/" + name + ".json");
+  problem.knots = static_cast<int>(state.range(1));
+  trellis::OptimizerOptions options;
+  if (state.range(2) == 0) {
+    options.refinementBand = 0;
+    options.unresolvedDefect = std::numeric_limits<double>::infinity();
+  }
+  trellis::OptimizationResult result;
+  double cpu = 0.0;
+  for (auto _ : state) {
+    result = trellis::optimizeTrajectory(problem, options);
+    cpu += result.solveCpuTime;
+  }
+  std::string perRound;
+  for (const trellis::RefinementRound& r : result.rounds) {
+    perRound += (perRound.empty() ? "" : "/") + std::to_string(r.iterations);
+  }
+  state.SetLabel(name + (state.range(2) == 0 ? " cuts only" : " default rule") + " rounds " + perRound);
+  state.counters["iterations"] = result.iterations;
+  state.counters["rounds"] = static_cast<double>(result.rounds.size());
+  state.counters["knots"] = result.trajectory.size();
+  state.counters["success"] = result.ok() ? 1.0 : 0.0;
+  state.counters["inconsistent"] = result.status.code == trellis::OptimizationCode::kInconsistent ? 1.0 : 0.0;
+  state.counters["defect"] = result.consistency.maxDefect;
+  state.counters["cpu_ms"] = 1e3 * cpu / static_cast<double>(state.iterations());
+}
+
+void swingupStartArguments(benchmark::internal::Benchmark* b) {
+  for (int knots : {41, 51, 61, 71, 81})
+    for (int rule = 0; rule < 2; ++rule) b->Args({0, knots, rule});
+  for (int knots : {31, 41, 51, 61})
+    for (int rule = 0; rule < 2; ++rule) b->Args({1, knots, rule});
+}
+
 void swingupArguments(benchmark::internal::Benchmark* b) {
   for (int problem = 0; problem < static_cast<int>(std::size(kSwingups)); ++problem)
     for (int hessian = 0; hessian < 2; ++hessian) b->Args({problem, hessian});
@@ -160,6 +203,8 @@ BENCHMARK(refine)->Apply(refineArguments)->ArgNames({"problem", "trap", "tol_exp
     ->Unit(benchmark::kMillisecond)->Iterations(1)->UseRealTime();
 BENCHMARK(swingup)->Apply(swingupArguments)->ArgNames({"problem", "hessian"})
     ->Unit(benchmark::kMillisecond)->Iterations(3)->UseRealTime();
+BENCHMARK(swingupStart)->Apply(swingupStartArguments)->ArgNames({"problem", "knots", "rule"})
+    ->Unit(benchmark::kMillisecond)->Iterations(1)->UseRealTime();
 
 }  // namespace
 

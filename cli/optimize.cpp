@@ -24,8 +24,9 @@ dynamics are integrated (CVODES, rtol 1e-10) over every interval from every knot
 as every trellis tool reads the CSV (linear between knots), and the worst miss of the next knot
 or of the Hermite reference at the interval's midpoint, relative to each state's range, must be
 below --consistency-tol (closed chains: the slack's share too). Otherwise the mesh is refined
-where the defect is large (warm start) and the problem solved again, up to --max-refinements
-rounds.
+where the defect is large (intervals above the tolerance cut by the defect's order, their 3
+neighbours on each side halved, every interval halved while the worst defect exceeds 5 % of a
+state's range; warm start) and the problem solved again, up to --max-refinements rounds.
 
 While solving, one progress line per Ipopt iteration goes to standard error:
   iter  cost  constraint-violation  dual-infeasibility  step

@@ -110,7 +110,7 @@ else
   declare -A filter=(
     [linearization_sweep]='.'
     [riccati]='^BM_Riccati/n:(2|10)/|^BM_Riccati/n:20/method:(0|2|3|4)/|^BM_Riccati/n:40/method:(0|2|3|4)/tol:(3|4|5|6|7|8)$'
-    [optimization]='^(solve|refine)/'  # the swingup family (minutes) runs by hand: bench/optimization_bench.cpp
+    [optimization]='^(solve|refine)/'  # the swingup and swingupStart families (minutes) run by hand: bench/optimization_bench.cpp
   )
   declare -A reps=([linearization_sweep]=5 [riccati]=2 [optimization]=3)
   declare -A mintime=([linearization_sweep]=0.03 [riccati]=0.01 [optimization]=0.001)

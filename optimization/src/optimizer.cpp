@@ -39,6 +39,13 @@ void OptimizerOptions::validate() const {
     bad("warmStartBarrier must be > 0 and finite");
   }
   if (maxSplit < 2) bad("maxSplit = " + std::to_string(maxSplit) + " must be >= 2");
+  if (refinementBand < 0) bad("refinementBand = " + std::to_string(refinementBand) + " must be >= 0");
+  if (!(refinementGrading == 0.0 || (refinementGrading > 1.0 && std::isfinite(refinementGrading)))) {
+    bad("refinementGrading = " + std::to_string(refinementGrading) + " must be 0 (off) or > 1 and finite");
+  }
+  if (!(unresolvedDefect > 0.0)) {
+    bad("unresolvedDefect must be > 0 (infinity: never refine everywhere)");
+  }
 }
 
 namespace {
@@ -513,18 +520,12 @@ Eigen::VectorXd measureSlack(const OptimalControlProblem& problem, const Optimiz
 /// the knot limit would be exceeded.
 bool refine(OptimalControlProblem& problem, const OptimizationResult& r, const Eigen::VectorXd& errors,
             const OptimizerOptions& options) {
-  const double tol = options.consistencyTolerance;
-  const double order = problem.method == CollocationMethod::kHermiteSimpson ? 5.0 : 3.0;
   const Eigen::VectorXd& tau = r.mesh;
+  const std::vector<int> parts = refinementSplits(tau, errors, problem.method, options);
   std::vector<double> mesh{0.0};
   for (int k = 0; k + 1 < tau.size(); ++k) {
-    int parts = 1;
-    if (errors(k) > tol) {
-      parts = static_cast<int>(std::ceil(std::pow(errors(k) / (0.5 * tol), 1.0 / order)));
-      parts = std::clamp(parts, 2, options.maxSplit);
-    }
-    for (int j = 1; j <= parts; ++j) {
-      mesh.push_back(j == parts ? tau(k + 1) : tau(k) + (tau(k + 1) - tau(k)) * j / parts);
+    for (int j = 1; j <= parts[k]; ++j) {
+      mesh.push_back(j == parts[k] ? tau(k + 1) : tau(k) + (tau(k + 1) - tau(k)) * j / parts[k]);
     }
   }
   const int N = static_cast<int>(mesh.size());
@@ -550,6 +551,70 @@ bool refine(OptimalControlProblem& problem, const OptimizationResult& r, const E
 }
 
 }  // namespace
+
+std::vector<int> refinementSplits(const Eigen::VectorXd& mesh, const Eigen::VectorXd& intervalDefects,
+                                  CollocationMethod method, const OptimizerOptions& options) {
+  options.validate();
+  const int n = static_cast<int>(intervalDefects.size());
+  if (mesh.size() != n + 1) {
+    throw std::invalid_argument("refinementSplits: mesh has " + std::to_string(mesh.size()) +
+                                " points for " + std::to_string(n) + " interval defects (expected " +
+                                std::to_string(n + 1) + ")");
+  }
+  for (int k = 0; k < n; ++k) {
+    if (!(mesh(k + 1) > mesh(k))) {
+      throw std::invalid_argument("refinementSplits: mesh(" + std::to_string(k + 1) + ") = " + fmt(mesh(k + 1)) +
+                                  " must be > mesh(" + std::to_string(k) + ") = " + fmt(mesh(k)));
+    }
+  }
+  for (int k = 0; k < n; ++k) {
+    if (!(intervalDefects(k) >= 0.0)) {  // NaN or negative: no defect to size a split by
+      throw std::invalid_argument("refinementSplits: intervalDefects(" + std::to_string(k) + ") = " +
+                                  fmt(intervalDefects(k)) + " must be >= 0");
+    }
+  }
+  const double tol = options.consistencyTolerance;
+  const double order = method == CollocationMethod::kHermiteSimpson ? 5.0 : 3.0;  // p + 1
+  std::vector<int> parts(n, 1);
+  // 1. By the defect's order: ε ∝ h^(p+1), so M parts bring ε to ε / M^(p+1) ≤ tol/2.
+  for (int k = 0; k < n; ++k) {
+    if (intervalDefects(k) > tol) {
+      const int m = static_cast<int>(std::ceil(std::pow(intervalDefects(k) / (0.5 * tol), 1.0 / order)));
+      parts[k] = std::clamp(m, 2, options.maxSplit);
+    }
+  }
+  // 2. Unresolved: a defect that is a sizeable share of the state's range says the motion is not
+  // resolved at all (the order model does not hold, and the re-optimized motion is free to go
+  // anywhere): every interval is halved.
+  const bool unresolved = n > 0 && intervalDefects.maxCoeff() > options.unresolvedDefect;
+  // 3. The safety band: the re-optimized motion moves its fast phase into the neighbours of the
+  // intervals that were split, so those are halved too.
+  std::vector<int> out = parts;
+  for (int k = 0; k < n; ++k) {
+    if (unresolved) out[k] = std::max(out[k], 2);
+    if (parts[k] < 2) continue;
+    const int from = std::max(0, k - options.refinementBand), to = std::min(n - 1, k + options.refinementBand);
+    for (int j = from; j <= to; ++j) out[j] = std::max(out[j], 2);
+  }
+  // 4. Grading (opt-in): neighbouring new widths differ by at most the factor ρ (a forward and a
+  // backward sweep, each interval still at most maxSplit parts), so no coarse interval sits next
+  // to a fine one for a moving fast phase to settle in.
+  if (options.refinementGrading > 0.0) {
+    const double rho = options.refinementGrading;
+    auto width = [&](int j) { return (mesh(j + 1) - mesh(j)) / out[j]; };
+    for (int pass = 0; pass < 2; ++pass) {
+      for (int step = 0; step + 1 < n; ++step) {
+        const int j = pass == 0 ? step + 1 : n - 2 - step, i = pass == 0 ? j - 1 : j + 1;
+        const double limit = rho * width(i);
+        if (width(j) > limit * (1.0 + 1e-12)) {
+          const int m = static_cast<int>(std::ceil((mesh(j + 1) - mesh(j)) / limit - 1e-9));
+          out[j] = std::max(out[j], std::min(options.maxSplit, m));
+        }
+      }
+    }
+  }
+  return out;
+}
 
 OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
                                       const OptimizerOptions& options) {

@@ -105,7 +105,9 @@ void bindOptimization(py::module_& m) {
       "max_cpu_time, limited_memory_size, derivatives (DerivativeMode), hessian (HessianMode or None: "
       "the problem's), warm_start (refinement rounds start from the carried primal and multipliers), "
       "warm_start_barrier (Ipopt's mu_init then), consistency_tolerance, max_refinements, max_knots, "
-      "max_split, on_iteration (a callable taking an IterationInfo and returning False to stop; an "
+      "max_split, refinement_band (neighbours of a cut interval halved too), unresolved_defect (a "
+      "worst defect above it halves every interval), refinement_grading (0: off; else neighbouring new "
+      "widths within this factor), on_iteration (a callable taking an IterationInfo and returning False to stop; an "
       "exception in it stops the solve).")
       .def(py::init(&makeFromKwargs<OptimizerOptions>))
       .def_readwrite("print_level", &OptimizerOptions::printLevel)
@@ -122,6 +124,9 @@ void bindOptimization(py::module_& m) {
       .def_readwrite("max_refinements", &OptimizerOptions::maxRefinements)
       .def_readwrite("max_knots", &OptimizerOptions::maxKnots)
       .def_readwrite("max_split", &OptimizerOptions::maxSplit)
+      .def_readwrite("refinement_band", &OptimizerOptions::refinementBand)
+      .def_readwrite("unresolved_defect", &OptimizerOptions::unresolvedDefect)
+      .def_readwrite("refinement_grading", &OptimizerOptions::refinementGrading)
       .def_readwrite("on_iteration", &OptimizerOptions::onIteration)
       .def("validate", &OptimizerOptions::validate);
 

@@ -1,6 +1,7 @@
 // Tests for the optimizer on the exact Hessian (issue 30): the swing-up problems of
 // examples/problems/swingups that solve in a few seconds are solved and pass the a-posteriori
-// consistency check; refinement rounds warm-started from the carried multipliers reach the same
+// consistency check with the default refinement (issue 30's turntable arm; the rule itself on
+// given defects); refinement rounds warm-started from the carried multipliers reach the same
 // solution as cold ones; the problem file's "hessian" key. (The larger swing-ups are benchmarks:
 // bench/optimization_bench.cpp, family swingup.)
 #include <trellis/core.hpp>
@@ -60,27 +61,113 @@ TEST_CASE("swingups: the turntable arm with joint speed limits solves and is con
   for (const auto& round : r.rounds) CHECK(round.ipoptStatus == "Solve_Succeeded");
 }
 
-TEST_CASE("swingups: the turntable arm under torque bounds alone solves with more refinement rounds",
-          "[optimizer][swingup][hessian]") {
-  // Without speed limits the minimum-effort motion is a whip (the elbow near 16 rad/s) that the
-  // 61-knot mesh resolves only after several rounds, each of which moves the fast phase: the
-  // default 6 rounds end "inconsistent" (an honest refusal, never an iteration limit); with 12
-  // the problem is solved and consistent.
+TEST_CASE("swingups: the turntable arm under torque bounds alone solves with the default refinement",
+          "[optimizer][swingup][hessian][refinement]") {
+  // Issue 30's problem. Without speed limits the minimum-effort motion is a whip (the elbow near
+  // 16 rad/s) that 61 knots do not resolve, and every round moves the fast phase into the
+  // neighbours of the intervals it cut; with the safety band (refinementBand) the default 6
+  // rounds suffice (without it they ended "inconsistent", the defect not monotone).
   const OptimalControlProblem p = trellis::loadProblem(problemPath("swingups/turntable_arm_swingup"));
-  SECTION("default refinement: inconsistent or solved, never an Ipopt failure") {
-    const OptimizationResult r = trellis::optimizeTrajectory(p);
-    INFO(r.describe());
-    CHECK((r.ok() || r.status.code == OptimizationCode::kInconsistent));
-    for (const auto& round : r.rounds) CHECK(round.ipoptStatus == "Solve_Succeeded");
-    if (!r.ok()) {
-      CHECK(r.status.index >= 0);  // where: the worst interval
-      CHECK_THAT(r.status.message, Catch::Contains("refinement limit 6"));
-    }
+  const OptimizationResult r = trellis::optimizeTrajectory(p);
+  checkSolved(p, r);
+  CHECK(r.rounds.size() <= 7);
+  for (const auto& round : r.rounds) CHECK(round.ipoptStatus == "Solve_Succeeded");
+  // Intervals are never merged: the knots grow every round.
+  for (std::size_t k = 1; k < r.rounds.size(); ++k) CHECK(r.rounds[k].knots > r.rounds[k - 1].knots);
+}
+
+TEST_CASE("swingups: the turntable arm from another starting mesh, and without the band",
+          "[optimizer][swingup][hessian][refinement]") {
+  // From 51 knots the order-based cuts alone chase the whip for 6 rounds and end "inconsistent"
+  // (an honest refusal naming where); with the band (the default) it is solved.
+  OptimalControlProblem p = trellis::loadProblem(problemPath("swingups/turntable_arm_swingup"));
+  p.knots = 51;
+  checkSolved(p, trellis::optimizeTrajectory(p));
+  trellis::OptimizerOptions noBand;
+  noBand.refinementBand = 0;
+  const OptimizationResult r = trellis::optimizeTrajectory(p, noBand);
+  INFO(r.describe());
+  CHECK(r.status.code == OptimizationCode::kInconsistent);
+  CHECK(r.rounds.size() == 7);
+  CHECK(r.status.index >= 0);
+  CHECK_THAT(r.status.message, Catch::Contains("refinement limit 6"));
+}
+
+TEST_CASE("swingups: the refinement rule", "[optimizer][refinement]") {
+  using trellis::CollocationMethod;
+  // The rule on a uniform mesh of e.size() intervals.
+  const auto refinementSplits = [](const VectorXd& e, CollocationMethod method, const trellis::OptimizerOptions& o) {
+    return trellis::refinementSplits(VectorXd::LinSpaced(e.size() + 1, 0.0, 1.0), e, method, o);
+  };
+  trellis::OptimizerOptions o;  // tolerance 1e-3, maxSplit 4, band 3, unresolved above 0.05
+  const auto hs = CollocationMethod::kHermiteSimpson;
+  SECTION("by the defect's order, capped by maxSplit") {
+    o.refinementBand = 0;
+    VectorXd e = VectorXd::Zero(6);
+    e << 1e-3, 1.01e-3, 15e-3, 17e-3, 0.04, 0.01;
+    // Hermite-Simpson: ceil((e / 5e-4)^(1/5)): at the tolerance kept; 30x -> 1.97 -> 2;
+    // 34x -> 2.02 -> 3; 80x -> 2.4 -> 3; 20x -> 2; never fewer than 2 once above.
+    CHECK(refinementSplits(e, hs, o) == std::vector<int>{1, 2, 2, 3, 3, 2});
+    // Trapezoidal (order 3): ceil((e / 5e-4)^(1/3)) = 2, 4 (3.1), 4 (3.2), 5 (4.3) -> 4 (maxSplit), 3.
+    CHECK(refinementSplits(e, CollocationMethod::kTrapezoidal, o) == std::vector<int>{1, 2, 4, 4, 4, 3});
+    o.maxSplit = 8;
+    CHECK(refinementSplits(e, CollocationMethod::kTrapezoidal, o) == std::vector<int>{1, 2, 4, 4, 5, 3});
   }
-  SECTION("12 refinement rounds: solved") {
-    trellis::OptimizerOptions options;
-    options.maxRefinements = 12;
-    checkSolved(p, trellis::optimizeTrajectory(p, options));
+  SECTION("the safety band halves the neighbours of a cut interval, within the mesh") {
+    VectorXd e = VectorXd::Constant(12, 1e-4);
+    e(1) = 0.01;   // cut in 2 (20x: 1.82 -> 2)
+    e(9) = 0.04;   // cut in 3
+    o.refinementBand = 2;
+    CHECK(refinementSplits(e, hs, o) == std::vector<int>{2, 2, 2, 2, 1, 1, 1, 2, 2, 3, 2, 2});
+    o.refinementBand = 0;
+    CHECK(refinementSplits(e, hs, o) == std::vector<int>{1, 2, 1, 1, 1, 1, 1, 1, 1, 3, 1, 1});
+  }
+  SECTION("an unresolved motion halves every interval") {
+    VectorXd e = VectorXd::Constant(10, 1e-5);
+    e(4) = 0.06;  // 6 % of the state's range
+    const std::vector<int> all = refinementSplits(e, hs, o);
+    CHECK(all == std::vector<int>{2, 2, 2, 2, 3, 2, 2, 2, 2, 2});
+    e(4) = 0.05;  // at the threshold: only the band
+    CHECK(refinementSplits(e, hs, o) == std::vector<int>{1, 2, 2, 2, 3, 2, 2, 2, 1, 1});
+  }
+  SECTION("grading (opt-in): neighbouring new widths within the factor, at most maxSplit per round") {
+    // Widths 1, 1, 1, 4, 4, 4 (times 1/15); the third interval cut in 2 -> new width 0.5.
+    VectorXd mesh(7);
+    mesh << 0, 1, 2, 3, 7, 11, 15;
+    mesh /= 15.0;
+    VectorXd e = VectorXd::Zero(6);
+    e(2) = 0.01;
+    o.refinementBand = 0;
+    CHECK(trellis::refinementSplits(mesh, e, hs, o) == std::vector<int>{1, 1, 2, 1, 1, 1});
+    o.refinementGrading = 2.0;
+    // Backward from 0.5: 1 <= 1 fine; forward: 4 > 2*0.5 -> 4 parts (width 1), then 4 > 2 -> 2 parts.
+    CHECK(trellis::refinementSplits(mesh, e, hs, o) == std::vector<int>{1, 1, 2, 4, 2, 1});
+    // 1.5: forward 4 / 0.75 -> 6, capped at maxSplit 4 (width 1); 4 / 1.5 -> 3 (1.33); 4 / 2 -> 2;
+    // backward 1 > 0.75 -> 2 twice.
+    o.refinementGrading = 1.5;
+    CHECK(trellis::refinementSplits(mesh, e, hs, o) == std::vector<int>{2, 2, 2, 4, 3, 2});
+    o.refinementGrading = 1.0;
+    CHECK_THROWS_WITH(trellis::refinementSplits(mesh, e, hs, o), Catch::Contains("refinementGrading"));
+  }
+  SECTION("bad input is named") {
+    CHECK_THROWS_WITH(trellis::refinementSplits(VectorXd::LinSpaced(3, 0.0, 1.0), VectorXd::Zero(3), hs, o),
+                      Catch::Contains("mesh has 3 points for 3 interval defects"));
+    VectorXd backwards(3);
+    backwards << 0.0, 0.6, 0.5;
+    CHECK_THROWS_WITH(trellis::refinementSplits(backwards, VectorXd::Zero(2), hs, o),
+                      Catch::Contains("mesh(2) = 0.5 must be > mesh(1) = 0.6"));
+    VectorXd e = VectorXd::Zero(3);
+    e(1) = -1.0;
+    CHECK_THROWS_WITH(refinementSplits(e, hs, o), Catch::Contains("intervalDefects(1) = -1 must be >= 0"));
+    e(1) = std::nan("");
+    CHECK_THROWS_WITH(refinementSplits(e, hs, o), Catch::Contains("intervalDefects(1)"));
+    e(1) = 0.0;
+    o.refinementBand = -1;
+    CHECK_THROWS_WITH(refinementSplits(e, hs, o), Catch::Contains("refinementBand = -1 must be >= 0"));
+    o.refinementBand = 3;
+    o.unresolvedDefect = 0.0;
+    CHECK_THROWS_WITH(refinementSplits(e, hs, o), Catch::Contains("unresolvedDefect"));
+    CHECK(refinementSplits(VectorXd(0), hs, trellis::OptimizerOptions{}).empty());
   }
 }
 

@@ -80,6 +80,15 @@ def test_problem_errors(tm, tmp_path):
         tm.load_problem(str(bad))
     with pytest.raises(ValueError, match="maxIterations"):
         tm.optimize_trajectory(pendulum_problem(tm), options=tm.OptimizerOptions(max_iterations=-1))
+    options = tm.OptimizerOptions(refinement_band=0, unresolved_defect=0.2)
+    assert (options.refinement_band, options.unresolved_defect) == (0, 0.2)
+    assert tm.OptimizerOptions().refinement_band == 3
+    assert tm.OptimizerOptions(refinement_grading=1.5).refinement_grading == 1.5
+    assert tm.OptimizerOptions().refinement_grading == 0.0
+    with pytest.raises(ValueError, match="refinementGrading"):
+        tm.optimize_trajectory(pendulum_problem(tm), options=tm.OptimizerOptions(refinement_grading=1.0))
+    with pytest.raises(ValueError, match="refinementBand = -1"):
+        tm.optimize_trajectory(pendulum_problem(tm), options=tm.OptimizerOptions(refinement_band=-1))
 
 
 def test_on_iteration_callback_and_statuses(tm):

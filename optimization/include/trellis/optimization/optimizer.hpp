@@ -14,14 +14,22 @@
 // the refinement limit is reached first, the status is `inconsistent` and the message says where.
 //
 // Mesh refinement (the explicit-simulation error estimate of Haman & Rao 2024; the subdivision
-// rule of Betts' SOS and GPOPS-II's h-method): interval k with relative defect ε_k > tol is cut
-// into M_k = clamp(⌈(ε_k / (tol/2))^(1/(p+1))⌉, 2, maxSplit) equal parts, where p + 1 is the
-// local order of the defect (5 for Hermite–Simpson, 3 for trapezoidal): with ε ∝ h^(p+1), that
-// brings the interval to half the tolerance. The new problem is warm-started from the previous
-// solution (states from its Hermite spline, inputs exactly, since the input is piecewise linear
-// and the new knots subdivide the old intervals) and, with `warmStart`, from its multipliers
-// carried onto the new mesh (Ipopt's warm_start_init_point; optimizer.cpp: carryOver). Rounds stop at the tolerance, at
-// maxRefinements, or when the knots would exceed maxKnots.
+// rule of Betts' SOS and GPOPS-II's h-method; refinementSplits): interval k with relative defect
+// ε_k > tol is cut into M_k = clamp(⌈(ε_k / (tol/2))^(1/(p+1))⌉, 2, maxSplit) equal parts, where
+// p + 1 is the local order of the defect (5 for Hermite–Simpson, 3 for trapezoidal): with
+// ε ∝ h^(p+1), that brings the interval to half the tolerance. Two rules make that converge on
+// swing-ups whose minimum-effort motion is a fast "whip" (issue 30): the `refinementBand`
+// intervals on each side of a cut interval are halved too, since the re-optimized motion moves
+// its fast phase into the neighbours of the intervals that were cut (without the band it moved
+// one step further every round, and the worst defect was not monotone); and when the worst
+// defect exceeds `unresolvedDefect` (a share of the state's range, 5 %) the motion is resolved
+// nowhere and every interval is halved. With `refinementGrading` ρ > 0 (opt-in) neighbouring new
+// widths then differ by at most ρ. Intervals are never merged. The new problem is
+// warm-started from the previous solution (states from its Hermite spline, inputs exactly, since
+// the input is piecewise linear and the new knots subdivide the old intervals) and, with
+// `warmStart`, from its multipliers carried onto the new mesh (Ipopt's warm_start_init_point;
+// optimizer.cpp: carryOver). Rounds stop at the tolerance, at maxRefinements, or when the knots
+// would exceed maxKnots.
 #pragma once
 
 #include "trellis/analysis/consistency.hpp"
@@ -73,6 +81,16 @@ struct OptimizerOptions {
   int maxRefinements = 6;   ///< rounds of mesh refinement after the first solve (0: check only)
   int maxKnots = 2001;      ///< refinement stops before exceeding this
   int maxSplit = 4;         ///< at most this many parts per interval and round
+  /// Intervals on each side of an interval that is cut which are halved too (the safety band;
+  /// file comment). 0: only the intervals above the tolerance are cut.
+  int refinementBand = 3;
+  /// A worst relative defect above this (a share of the state's range) halves every interval.
+  double unresolvedDefect = 0.05;
+  /// Opt-in grading (0: off): neighbouring new widths differ by at most this factor (> 1), so a
+  /// moving fast phase finds no coarse interval next to a fine one. Measured with 1.5 (issue 30,
+  /// docs/performance.md): solves the 4-link chain from 51 and 61 knots where the band alone does
+  /// not, but from the file's 41 knots ends at the iteration limit — hence not the default.
+  double refinementGrading = 0.0;
   /// Called after every iteration (on the solver's thread); return false to stop the solve
   /// (status "User_Requested_Stop").
   std::function<bool(const IterationInfo&)> onIteration;
@@ -180,6 +198,14 @@ struct OptimizationResult {
   /// "rounds" ([{knots, iterations, defect, hessian}]), "solve_time_ms", "solve_cpu_time_ms"}.
   std::string json() const;
 };
+
+/// The refinement rule (file comment): the number of equal parts (1: kept) each interval of
+/// `mesh` (N increasing points, e.g. the fractions of T) is cut into, given its relative defect
+/// (N − 1: the consistency check's intervalDefects, or the slack's share where larger). Throws
+/// std::invalid_argument for bad options, a mesh that does not match or is not increasing, or a
+/// negative or NaN defect.
+std::vector<int> refinementSplits(const Eigen::VectorXd& mesh, const Eigen::VectorXd& intervalDefects,
+                                  CollocationMethod method, const OptimizerOptions& options = {});
 
 /// Transcribes, solves, checks and refines (file comment). Throws ProblemError / std::invalid_argument for a bad problem or bad
 /// options; a numerical failure is the result's status, never an exception.
