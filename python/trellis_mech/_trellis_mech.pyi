@@ -909,6 +909,10 @@ class RiccatiOptions:
     @max_norm.setter
     def max_norm(self, value: float) -> None: ...
     @property
+    def max_order(self) -> int: ...
+    @max_order.setter
+    def max_order(self, value: int) -> None: ...
+    @property
     def max_step(self) -> float: ...
     @max_step.setter
     def max_step(self, value: float) -> None: ...
@@ -931,7 +935,7 @@ class RiccatiOptions:
     def validate(self: RiccatiOptions) -> None: ...
 
 class SampledDiscretizationOptions:
-    """The exact interval discretization (keywords): integrator (SampledIntegrator.MAGNUS, the default, or BDF: CVODES per interval), rtol, atol (BDF only), max_steps, and exact_constant_intervals (default True: intervals where the reference is exactly constant, e.g. a held pose, by the exact block exponential instead of the integration)."""
+    """The exact interval discretization (keywords): integrator (SampledIntegrator.RADAU, the default; MAGNUS for non-stiff systems; BDF: CVODES per interval), rtol, atol (BDF only), max_steps, and exact_constant_intervals (default True: intervals where the reference is exactly constant, e.g. a held pose, by the exact block exponential instead of the integration)."""
     def __init__(self: SampledDiscretizationOptions, **kwargs) -> None: ...
     @property
     def atol(self) -> float: ...
@@ -959,10 +963,13 @@ class SampledIntegrator:
 
       MAGNUS
 
+      RADAU
+
       BDF
     """
     BDF: ClassVar[SampledIntegrator]
     MAGNUS: ClassVar[SampledIntegrator]
+    RADAU: ClassVar[SampledIntegrator]
     @property
     def value(self) -> int: ...
     @property
