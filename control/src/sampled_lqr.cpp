@@ -260,6 +260,64 @@ class Discretizer final : public detail::LinearOdeSystem {
   }
 };
 
+/// The adaptive step control both integrators share: steps from a to b that end on every
+/// breakpoint inside (a knot: A(t) may have a kink there) and on b, at most maxSteps of them, none
+/// below rounding. tryStep(t, d, factor) attempts a step of d from t and returns kAccepted (it
+/// kept the step), kRejected (error test failed) or kFailed (failMessage set), with `factor` the
+/// next step's scale. `next` carries the step size across intervals; a step cut short by a stop
+/// says nothing about the next one's size, so it keeps `next` unless it shrinks.
+enum class StepOutcome { kAccepted, kRejected, kFailed };
+struct StepControl {
+  long maxSteps = 0;
+  const char* method = "";
+  double next = 0.0;
+  long steps = 0, rejected = 0;
+  std::string failMessage;
+  double failTime = 0.0;
+
+  template <class TryStep>
+  bool run(double a, double b, const std::vector<double>& breakpoints, TryStep&& tryStep) {
+    auto nextBreak = std::upper_bound(breakpoints.begin(), breakpoints.end(), a);
+    double t = a;
+    long taken = 0;
+    if (!(next > 0.0)) next = b - a;
+    while (t < b) {
+      // A breakpoint within rounding of t or b (a knot and a sample time that differ in the last
+      // bits) is that point: no sliver step.
+      const double round = 8.0 * std::numeric_limits<double>::epsilon() * std::max({std::abs(t), std::abs(b), b - a});
+      while (nextBreak != breakpoints.end() && *nextBreak <= t + round) ++nextBreak;
+      const double stop = (nextBreak != breakpoints.end() && *nextBreak < b - round) ? *nextBreak : b;
+      double d = std::min(next, stop - t);
+      if (t + 1.1 * d >= stop) d = stop - t;  // no sliver before the stop
+      for (;;) {
+        if (++taken > maxSteps) {
+          failTime = t;
+          failMessage = "more than maxSteps = " + std::to_string(maxSteps) + " " + method + " steps in the interval";
+          return false;
+        }
+        if (!(d > 8.0 * std::numeric_limits<double>::epsilon() * std::max(std::abs(t), b - a))) {
+          failTime = t;
+          failMessage = std::string("the ") + method + " step size fell to " + std::to_string(d) + " s (A(t) not resolved)";
+          return false;
+        }
+        double factor = 1.0;
+        const StepOutcome outcome = tryStep(t, d, factor);
+        if (outcome == StepOutcome::kFailed) return false;
+        if (outcome == StepOutcome::kAccepted) {
+          ++steps;
+          const bool atStop = (t + d == stop) || d == stop - t;
+          t = atStop ? stop : t + d;
+          if (!atStop || factor < 1.0) next = d * factor;
+          break;
+        }
+        ++rejected;
+        d *= factor;
+      }
+    }
+    return true;
+  }
+};
+
 /// The sixth-order Magnus integrator of the Van Loan system of an interval (sampled_lqr.hpp):
 /// with M(t) = [[A, B], [0, 0]] and Q̃(t) = blkdiag(Q, R), the block-triangular linear system
 ///   Ẋ = V(t) X,  V = [[−Mᵀ, Q̃], [0, M]],  X(a) = I
@@ -281,63 +339,31 @@ class Discretizer final : public detail::LinearOdeSystem {
 class MagnusIntegrator {
  public:
   MagnusIntegrator(Discretizer& s, double rtol, long maxSteps)
-      : s_(s), nx_(s.nx), nu_(s.nu), c_(s.nx + s.nu), rtol_(rtol), maxSteps_(maxSteps) {
+      : s_(s), nx_(s.nx), nu_(s.nu), c_(s.nx + s.nu), rtol_(rtol) {
+    control.maxSteps = maxSteps;
+    control.method = "Magnus";
     for (auto& v : V_) v = Eigen::MatrixXd::Zero(2 * c_, 2 * c_);
   }
 
-  long steps = 0, rejected = 0;
-  std::string failMessage;
-  double failTime = 0.0;
+  StepControl control;  ///< the step sizes, the counts and the failure's message and time
 
   /// E, W over [a, b] (stops: the breakpoints inside). False on a callback failure (s.failed)
-  /// or when the step size collapses or exceeds maxSteps (failMessage).
+  /// or when the step size collapses or exceeds maxSteps (control.failMessage).
   bool integrate(double a, double b, const std::vector<double>& breakpoints, Eigen::MatrixXd& E, Eigen::MatrixXd& W) {
     E = Eigen::MatrixXd::Identity(c_, c_);
     W = Eigen::MatrixXd::Zero(c_, c_);
-    auto nextBreak = std::upper_bound(breakpoints.begin(), breakpoints.end(), a);
-    double t = a;
-    long taken = 0;
-    if (!(next_ > 0.0)) next_ = b - a;
-    while (t < b) {
-      // A breakpoint within rounding of t or b (a knot and a sample time that differ in the last
-      // bits) is that point: no sliver step.
-      const double round = 8.0 * std::numeric_limits<double>::epsilon() * std::max({std::abs(t), std::abs(b), b - a});
-      while (nextBreak != breakpoints.end() && *nextBreak <= t + round) ++nextBreak;
-      const double stop = (nextBreak != breakpoints.end() && *nextBreak < b - round) ? *nextBreak : b;
-      double d = std::min(next_, stop - t);
-      if (t + 1.1 * d >= stop) d = stop - t;  // no sliver before the stop
-      for (;;) {
-        if (++taken > maxSteps_) {
-          failTime = t;
-          failMessage = "more than maxSteps = " + std::to_string(maxSteps_) + " Magnus steps in the interval";
-          return false;
-        }
-        if (!(d > 8.0 * std::numeric_limits<double>::epsilon() * std::max(std::abs(t), b - a))) {
-          failTime = t;
-          failMessage = "the Magnus step size fell to " + std::to_string(d) + " s (A(t) not resolved)";
-          return false;
-        }
-        double err = 0.0;
-        if (!step(t, d, err)) return false;
-        const double factor = std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.2), 0.2, 5.0);
-        if (err <= 1.0) {
-          Ws_.noalias() = W6_ * E;
-          W.noalias() += E.transpose() * Ws_;
-          W = 0.5 * (W + W.transpose());
-          Es_.noalias() = E6_ * E;
-          E.swap(Es_);
-          ++steps;
-          const bool atStop = (t + d == stop) || d == stop - t;
-          t = atStop ? stop : t + d;
-          // A step cut short by a stop says nothing about the next one's size.
-          if (!atStop || factor < 1.0) next_ = d * factor;
-          break;
-        }
-        ++rejected;
-        d *= factor;
-      }
-    }
-    return true;
+    return control.run(a, b, breakpoints, [&](double t, double d, double& factor) {
+      double err = 0.0;
+      if (!step(t, d, err)) return StepOutcome::kFailed;
+      factor = std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.2), 0.2, 5.0);
+      if (!(err <= 1.0)) return StepOutcome::kRejected;
+      Ws_.noalias() = W6_ * E;
+      W.noalias() += E.transpose() * Ws_;
+      W = 0.5 * (W + W.transpose());
+      Es_.noalias() = E6_ * E;
+      E.swap(Es_);
+      return StepOutcome::kAccepted;
+    });
   }
 
  private:
@@ -415,8 +441,6 @@ class MagnusIntegrator {
   Discretizer& s_;
   Eigen::Index nx_, nu_, c_;
   double rtol_;
-  long maxSteps_;
-  double next_ = 0.0;  // the next step's size, carried across intervals (no restart)
   Eigen::MatrixXd V_[3], a1_, a2_, a3_, c1_, c2_, x_, y_, om6_, om4_, Z_, P_, E6_, W6_, E4_, W4_, Es_, Ws_;
 };
 
@@ -433,8 +457,10 @@ class MagnusIntegrator {
 class RadauIntegrator {
  public:
   RadauIntegrator(Discretizer& s, double rtol, long maxSteps)
-      : s_(s), nx_(s.nx), nu_(s.nu), c_(s.nx + s.nu), rtol_(rtol), maxSteps_(maxSteps),
+      : s_(s), nx_(s.nx), nu_(s.nu), c_(s.nx + s.nu), rtol_(rtol),
         M_(3 * s.nx, 3 * s.nx), rhs_(3 * s.nx, s.nx + s.nu), lu_(3 * s.nx) {
+    control.maxSteps = maxSteps;
+    control.method = "Radau";
     const double r6 = std::sqrt(6.0);
     const double a[3][3] = {{(88.0 - 7.0 * r6) / 360.0, (296.0 - 169.0 * r6) / 1800.0, (-2.0 + 3.0 * r6) / 225.0},
                             {(296.0 + 169.0 * r6) / 1800.0, (88.0 + 7.0 * r6) / 360.0, (-2.0 - 3.0 * r6) / 225.0},
@@ -450,61 +476,32 @@ class RadauIntegrator {
     for (auto& x : R_) x.resize(nu_, nu_);
   }
 
-  long steps = 0, rejected = 0;
-  std::string failMessage;
-  double failTime = 0.0;
+  StepControl control;  ///< the step sizes, the counts and the failure's message and time
 
+  /// Y = [Φ Γ], W over [a, b] (stops: the breakpoints inside); false as MagnusIntegrator's.
   bool integrate(double a, double b, const std::vector<double>& breakpoints, Eigen::MatrixXd& Y, Eigen::MatrixXd& W) {
     Y = Eigen::MatrixXd::Zero(nx_, c_);
     Y.leftCols(nx_).setIdentity();
     W = Eigen::MatrixXd::Zero(c_, c_);
-    auto nextBreak = std::upper_bound(breakpoints.begin(), breakpoints.end(), a);
-    double t = a;
-    long taken = 0;
-    if (!(next_ > 0.0)) next_ = b - a;
-    while (t < b) {
-      const double round = 8.0 * std::numeric_limits<double>::epsilon() * std::max({std::abs(t), std::abs(b), b - a});
-      while (nextBreak != breakpoints.end() && *nextBreak <= t + round) ++nextBreak;
-      const double stop = (nextBreak != breakpoints.end() && *nextBreak < b - round) ? *nextBreak : b;
-      double d = std::min(next_, stop - t);
-      if (t + 1.1 * d >= stop) d = stop - t;
-      for (;;) {
-        if (++taken > maxSteps_) {
-          failTime = t;
-          failMessage = "more than maxSteps = " + std::to_string(maxSteps_) + " Radau steps in the interval";
-          return false;
-        }
-        if (!(d > 8.0 * std::numeric_limits<double>::epsilon() * std::max(std::abs(t), b - a))) {
-          failTime = t;
-          failMessage = "the Radau step size fell to " + std::to_string(d) + " s (A(t) not resolved)";
-          return false;
-        }
-        // One step of d, and two of d/2 (kept).
-        Yf_ = Y;
-        Wf_ = W;
-        if (!step(t, d, Yf_, Wf_)) return false;
-        Yh_ = Y;
-        Wh_ = W;
-        if (!step(t, 0.5 * d, Yh_, Wh_) || !step(t + 0.5 * d, 0.5 * d, Yh_, Wh_)) return false;
-        // Richardson: the halves' error ≈ (halves − full)/(2⁵ − 1) for order 5; /15 keeps a margin
-        // for the cost quadrature's stage order.
-        const double err = stepError(Yh_ - Y, Yf_ - Y, Wh_ - W, Wf_ - W) / 15.0;
-        const double factor = std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.2), 0.2, 4.0);
-        if (err <= 1.0 && Yh_.allFinite() && Wh_.allFinite()) {
-          Y.swap(Yh_);
-          W.swap(Wh_);
-          ++steps;
-          const bool atStop = d == stop - t;
-          t = atStop ? stop : t + d;
-          if (!atStop || factor < 1.0) next_ = d * factor;
-          break;
-        }
-        ++rejected;
-        d *= std::isfinite(err) ? factor : 0.2;
-      }
-    }
+    const bool ok = control.run(a, b, breakpoints, [&](double t, double d, double& factor) {
+      // One step of d, and two of d/2 (kept).
+      Yf_ = Y;
+      Wf_ = W;
+      if (!step(t, d, Yf_, Wf_)) return StepOutcome::kFailed;
+      Yh_ = Y;
+      Wh_ = W;
+      if (!step(t, 0.5 * d, Yh_, Wh_) || !step(t + 0.5 * d, 0.5 * d, Yh_, Wh_)) return StepOutcome::kFailed;
+      // Richardson: the halves' error ≈ (halves − full)/(2⁵ − 1) for order 5; /15 keeps a margin
+      // for the cost quadrature's stage order.
+      const double err = stepError(Yh_ - Y, Yf_ - Y, Wh_ - W, Wf_ - W) / 15.0;
+      factor = std::isfinite(err) ? std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.2), 0.2, 4.0) : 0.2;
+      if (!(err <= 1.0 && Yh_.allFinite() && Wh_.allFinite())) return StepOutcome::kRejected;
+      Y.swap(Yh_);
+      W.swap(Wh_);
+      return StepOutcome::kAccepted;
+    });
     W = 0.5 * (W + W.transpose());
-    return true;
+    return ok;
   }
 
  private:
@@ -559,8 +556,6 @@ class RadauIntegrator {
   Discretizer& s_;
   Eigen::Index nx_, nu_, c_;
   double rtol_;
-  long maxSteps_;
-  double next_ = 0.0;
   double a_[3][3] = {}, nodes_[3] = {};
   Eigen::MatrixXd A_[3], B_[3], Q_[3], R_[3];
   Eigen::MatrixXd M_, rhs_, stages_, QY_, Yf_, Wf_, Yh_, Wh_;
@@ -729,10 +724,10 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
         magnusE.bottomRightCorner(nu, nu).setIdentity();
       }
       if (!done) {
-        const double at = s.failed ? s.failTime : (byMagnus ? magnus->failTime : radau->failTime);
+        const double at = s.failed ? s.failTime : (byMagnus ? magnus->control.failTime : radau->control.failTime);
         std::ostringstream m;
         m << "sampled-data discretization stopped in interval " << k << " [" << a << ", " << b << "] at t = " << at
-          << ": " << (s.failed ? s.failMessage : (byMagnus ? magnus->failMessage : radau->failMessage));
+          << ": " << (s.failed ? s.failMessage : (byMagnus ? magnus->control.failMessage : radau->control.failMessage));
         out.status.set(s.failed ? SampledCode::kCallbackFailure : SampledCode::kIntegratorFailure, m.str(), at,
                        static_cast<long>(k));
         break;
@@ -797,8 +792,8 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
     out.steps = stats.steps;
     out.rhsEvaluations = stats.rhsEvaluations;
   }
-  if (magnus) out.steps += magnus->steps;
-  if (radau) out.steps += radau->steps;
+  if (magnus) out.steps += magnus->control.steps;
+  if (radau) out.steps += radau->control.steps;
   out.linearizations = s.linearizations;
   return out;
 }
