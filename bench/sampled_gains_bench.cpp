@@ -24,6 +24,7 @@
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <utility>
 #include <vector>
@@ -88,8 +89,10 @@ const Problem& problem() {
 const trellis::Trajectory& reference(int which) { return which == 0 ? problem().hold : problem().swing; }
 
 trellis::TvlqrSolution solve(int which, double rate, bool exact = true, bool tight = false,
-                             trellis::SampledIntegrator integrator = trellis::SampledIntegrator::kMagnus) {
+                             trellis::SampledIntegrator integrator = trellis::SampledIntegrator::kMagnus,
+                             double rtol = 0.0) {
   trellis::TvlqrOptions o;
+  if (rtol > 0.0) o.sampled.rtol = rtol;
   o.sampleRate = rate;
   o.sampled.integrator = integrator;
   o.sampled.exactConstantIntervals = exact;
@@ -122,9 +125,11 @@ void BM_Sampled(benchmark::State& state) {
   const int which = static_cast<int>(state.range(0));
   const double rate = static_cast<double>(state.range(1));
   const auto integrator = static_cast<trellis::SampledIntegrator>(state.range(2));
+  // rtol: 10^−range(3), or the default for 0.
+  const double rtol = state.range(3) > 0 ? std::pow(10.0, -static_cast<double>(state.range(3))) : 0.0;
   trellis::TvlqrSolution last;
   for (auto _ : state) {
-    last = solve(which, rate, true, false, integrator);
+    last = solve(which, rate, true, false, integrator, rtol);
     benchmark::DoNotOptimize(last);
   }
   state.SetLabel(which == 0 ? "hold" : "swing");
@@ -144,14 +149,15 @@ void BM_Sampled(benchmark::State& state) {
 
 BENCHMARK(BM_Continuous)->ArgNames({"problem"})->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Sampled)
-    ->ArgNames({"problem", "rate", "integrator"})
-    ->Args({0, 10, 0})
-    ->Args({0, 100, 0})
-    ->Args({0, 1000, 0})
-    ->Args({1, 10, 1})
-    ->Args({1, 100, 1})
-    ->Args({1, 10, 2})
-    ->Args({1, 100, 2})
+    ->ArgNames({"problem", "rate", "integrator", "rtol"})
+    ->Args({0, 10, 0, 0})
+    ->Args({0, 100, 0, 0})
+    ->Args({0, 1000, 0, 0})
+    ->Args({1, 10, 1, 0})
+    ->Args({1, 100, 1, 0})
+    ->Args({1, 10, 2, 0})
+    ->Args({1, 100, 2, 0})
+    ->ArgsProduct({{1}, {10, 100}, {1}, {4, 5, 6, 7, 8, 9, 10}})
     ->Unit(benchmark::kMillisecond);
 
 BENCHMARK_MAIN();

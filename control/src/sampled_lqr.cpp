@@ -483,50 +483,68 @@ class RadauIntegrator {
     Y = Eigen::MatrixXd::Zero(nx_, c_);
     Y.leftCols(nx_).setIdentity();
     W = Eigen::MatrixXd::Zero(c_, c_);
+    // Every interval restarts from [I 0]: its fast modes are back in full, and the step they allow
+    // at the start is the previous interval's first step, not the long one carried from its end
+    // (which would be rejected twice per interval).
+    if (firstStep_ > 0.0) control.next = firstStep_;
+    bool first = true;
+    // W's error scale: at least half the interval's predicted cost diagonal (the previous
+    // interval's W_ii per unit time × this length), not only the partial sum so far, which starts
+    // at zero in every interval — the recursion uses the interval's total.
+    if (wRate_.size() != c_) wRate_ = Eigen::VectorXd::Zero(c_);
+    wPred_ = (0.5 * (b - a)) * wRate_;
     const bool ok = control.run(a, b, breakpoints, [&](double t, double d, double& factor) {
-      // One step of d, and two of d/2 (kept).
-      Yf_ = Y;
-      Wf_ = W;
-      if (!step(t, d, Yf_, Wf_)) return StepOutcome::kFailed;
+      // One step of d, and two of d/2 (kept). The halves first: the second ends on t + d, the
+      // full step's last node, whose A, B, Q, R it leaves in A_[2].. (8 linearizations, not 9).
       Yh_ = Y;
       Wh_ = W;
-      if (!step(t, 0.5 * d, Yh_, Wh_) || !step(t + 0.5 * d, 0.5 * d, Yh_, Wh_)) return StepOutcome::kFailed;
+      if (!step(t, 0.5 * d, t + 0.5 * d, false, Yh_, Wh_) || !step(t + 0.5 * d, 0.5 * d, t + d, false, Yh_, Wh_)) {
+        return StepOutcome::kFailed;
+      }
+      Yf_ = Y;
+      Wf_ = W;
+      if (!step(t, d, t + d, true, Yf_, Wf_)) return StepOutcome::kFailed;
       // Richardson: the halves' error ≈ (halves − full)/(2⁵ − 1) for order 5; /15 keeps a margin
       // for the cost quadrature's stage order.
-      const double err = stepError(Yh_ - Y, Yf_ - Y, Wh_ - W, Wf_ - W) / 15.0;
+      const double err = stepError(Yh_ - Yf_, Wh_ - Wf_) / 15.0;
       factor = std::isfinite(err) ? std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.2), 0.2, 4.0) : 0.2;
       if (!(err <= 1.0 && Yh_.allFinite() && Wh_.allFinite())) return StepOutcome::kRejected;
       Y.swap(Yh_);
       W.swap(Wh_);
+      if (first) firstStep_ = d;
+      first = false;
       return StepOutcome::kAccepted;
     });
     W = 0.5 * (W + W.transpose());
+    if (ok) wRate_ = W.diagonal().cwiseMax(0.0) / (b - a);
     return ok;
   }
 
  private:
-  /// The increments' difference relative to rtol: Y's against max |ΔY| of the step (≥ the size of
-  /// what the step changed) and max |Y| columns' scale, W's against √(ΔW_ii ΔW_jj) (the step's own
-  /// PSD increment, as stepError of the Magnus integrator).
-  double stepError(const Eigen::MatrixXd& dYh, const Eigen::MatrixXd& dYf, const Eigen::MatrixXd& dWh,
-                   const Eigen::MatrixXd& dWf) const {
+  /// The halves' and the full step's difference (eY, eW) relative to rtol: Y's against max |Y|,
+  /// W's against √(D_ii D_jj), D_ii = max(W_ii so far, half the interval's predicted W_ii) — the
+  /// bound on |W_ij| of a PSD matrix, unit-invariant as stepError of the Magnus integrator.
+  double stepError(const Eigen::MatrixXd& eY, const Eigen::MatrixXd& eW) const {
     const double yScale = std::max(Yh_.cwiseAbs().maxCoeff(), std::numeric_limits<double>::min());
-    double err = (dYh - dYf).cwiseAbs().maxCoeff() / (rtol_ * yScale);
-    const Eigen::VectorXd dd = Wh_.diagonal().cwiseMax(0.0).cwiseSqrt();
+    double err = eY.cwiseAbs().maxCoeff() / (rtol_ * yScale);
+    const Eigen::VectorXd dd = Wh_.diagonal().cwiseMax(wPred_).cwiseMax(0.0).cwiseSqrt();
     const double floor = std::sqrt(std::numeric_limits<double>::epsilon()) * dd.maxCoeff() + std::numeric_limits<double>::min();
     for (Eigen::Index j = 0; j < c_; ++j) {
       for (Eigen::Index i = 0; i <= j; ++i) {
-        const double diff = std::abs(dWh(i, j) - dWf(i, j));
+        const double diff = std::abs(eW(i, j));
         if (diff > 0.0) err = std::max(err, diff / (rtol_ * std::max(dd(i) * dd(j), floor * floor)));
       }
     }
     return std::isfinite(err) ? err : std::numeric_limits<double>::infinity();
   }
 
-  bool step(double t, double d, Eigen::MatrixXd& Y, Eigen::MatrixXd& W) {
+  /// One collocation step from t of length d, its last node (c₃ = 1) at exactly `end`; with
+  /// reuseEnd, A_[2].. already hold that node's matrices (the previous call ended there).
+  bool step(double t, double d, double end, bool reuseEnd, Eigen::MatrixXd& Y, Eigen::MatrixXd& W) {
     const Eigen::Index n = nx_;
     for (int j = 0; j < 3; ++j) {
-      if (!s_.evaluate(t + nodes_[j] * d)) return false;
+      if (j == 2 && reuseEnd) break;
+      if (!s_.evaluate(j == 2 ? end : t + nodes_[j] * d)) return false;
       A_[j] = s_.A;
       B_[j] = s_.B;
       Q_[j] = s_.Q;
@@ -557,6 +575,8 @@ class RadauIntegrator {
   Eigen::Index nx_, nu_, c_;
   double rtol_;
   double a_[3][3] = {}, nodes_[3] = {};
+  double firstStep_ = 0.0;        ///< the previous interval's first accepted step (0: none yet)
+  Eigen::VectorXd wRate_, wPred_;  ///< its W_ii per unit time; this interval's W scale floor
   Eigen::MatrixXd A_[3], B_[3], Q_[3], R_[3];
   Eigen::MatrixXd M_, rhs_, stages_, QY_, Yf_, Wf_, Yh_, Wh_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
