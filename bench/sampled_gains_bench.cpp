@@ -10,8 +10,9 @@
 // Weights Q = I, R = I, Qf = I; solveTvlqr with its default tolerances (continuous: Riccati rtol
 // 1e-8, atol 1e-10; sampled: rtol 1e-10, atol 1e-12).
 //
-// Benchmarks: `Continuous/<problem>` and `Sampled/<problem>/rate:<Hz>/integrator:<i>` (i: 0 Magnus,
-// 1 Radau — the default —, 2 CVODES BDF; SampledIntegrator). Counter `max_rel_err`:
+// Benchmarks: `Continuous/<problem>` and `Sampled/<problem>/rate:<Hz>/integrator:<i>/rtol:<E>` (i: 0
+// Magnus, 1 Radau — the default —, 2 CVODES BDF; SampledIntegrator; rtol 10^−E, E = 0: the default
+// 1e-10; the swing's Radau rows at E = 4…10 give time against error). Counter `max_rel_err`:
 // max |K − K_ref| / max |K_ref| against every interval integrated by CVODES at rtol 1e-12, atol
 // 1e-14 (exactConstantIntervals = false; computed once, outside the timing, at 10 and 100 Hz — at
 // 1000 Hz that reference takes ~15 s and is left out: −1). Magnus on the stiff swing takes ~10 s
