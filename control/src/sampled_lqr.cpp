@@ -488,11 +488,15 @@ class RadauIntegrator {
     // (which would be rejected twice per interval).
     if (firstStep_ > 0.0) control.next = firstStep_;
     bool first = true;
-    // W's error scale: at least half the interval's predicted cost diagonal (the previous
-    // interval's W_ii per unit time × this length), not only the partial sum so far, which starts
-    // at zero in every interval — the recursion uses the interval's total.
-    if (wRate_.size() != c_) wRate_ = Eigen::VectorXd::Zero(c_);
-    wPred_ = (0.5 * (b - a)) * wRate_;
+    // W's error scale: at least half the interval's predicted cost diagonal, not only the partial
+    // sum so far, which starts at zero in every interval — the recursion uses the interval's total.
+    // The prediction is the smaller of two rates × the length: the previous interval's average
+    // W_ii per unit time (only if it ends at a: a neighbour on the same reference) and the cost
+    // rate (YᵀQY + blkdiag(0, R))_ii at the step's end — so a cost that drops (a jump in Q(t), a
+    // gap) lowers the scale at once.
+    if (wRate_.size() != c_ || !(a == prevEnd_)) wRate_ = Eigen::VectorXd::Zero(c_);
+    halfLength_ = 0.5 * (b - a);
+    wPred_.resize(c_);
     const bool ok = control.run(a, b, breakpoints, [&](double t, double d, double& factor) {
       // One step of d, and two of d/2 (kept). The halves first: the second ends on t + d, the
       // full step's last node, whose A, B, Q, R it leaves in A_[2].. (8 linearizations, not 9).
@@ -517,6 +521,7 @@ class RadauIntegrator {
     });
     W = 0.5 * (W + W.transpose());
     if (ok) wRate_ = W.diagonal().cwiseMax(0.0) / (b - a);
+    prevEnd_ = ok ? b : std::numeric_limits<double>::quiet_NaN();
     return ok;
   }
 
@@ -524,9 +529,16 @@ class RadauIntegrator {
   /// The halves' and the full step's difference (eY, eW) relative to rtol: Y's against max |Y|,
   /// W's against √(D_ii D_jj), D_ii = max(W_ii so far, half the interval's predicted W_ii) — the
   /// bound on |W_ij| of a PSD matrix, unit-invariant as stepError of the Magnus integrator.
-  double stepError(const Eigen::MatrixXd& eY, const Eigen::MatrixXd& eW) const {
+  double stepError(const Eigen::MatrixXd& eY, const Eigen::MatrixXd& eW) {
     const double yScale = std::max(Yh_.cwiseAbs().maxCoeff(), std::numeric_limits<double>::min());
     double err = eY.cwiseAbs().maxCoeff() / (rtol_ * yScale);
+    // The cost rate at t + d (Q_[2], R_[2]: the full step's last node, the halves' end Yh_).
+    QY_.noalias() = Q_[2] * Yh_;
+    for (Eigen::Index j = 0; j < c_; ++j) {
+      double rate = Yh_.col(j).dot(QY_.col(j));
+      if (j >= nx_) rate += R_[2](j - nx_, j - nx_);
+      wPred_(j) = halfLength_ * std::min(wRate_(j), rate);
+    }
     const Eigen::VectorXd dd = Wh_.diagonal().cwiseMax(wPred_).cwiseMax(0.0).cwiseSqrt();
     const double floor = std::sqrt(std::numeric_limits<double>::epsilon()) * dd.maxCoeff() + std::numeric_limits<double>::min();
     for (Eigen::Index j = 0; j < c_; ++j) {
@@ -577,6 +589,7 @@ class RadauIntegrator {
   double a_[3][3] = {}, nodes_[3] = {};
   double firstStep_ = 0.0;        ///< the previous interval's first accepted step (0: none yet)
   Eigen::VectorXd wRate_, wPred_;  ///< its W_ii per unit time; this interval's W scale floor
+  double prevEnd_ = std::numeric_limits<double>::quiet_NaN(), halfLength_ = 0.0;
   Eigen::MatrixXd A_[3], B_[3], Q_[3], R_[3];
   Eigen::MatrixXd M_, rhs_, stages_, QY_, Yf_, Wf_, Yh_, Wh_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;

@@ -716,6 +716,26 @@ TEST_CASE("sampled LQR: the Radau and Magnus integrations agree with CVODES on t
     CHECK(gainDifference(b.K, a.K) < 1e-8);
     CHECK(magnus.steps < ref.steps);  // no restart per interval
   }
+  SECTION("a state weight that drops 1e6-fold from one interval to the next") {
+    // Radau measures the cost's error against (among others) the previous interval's cost rate:
+    // a weight that falls at a sample time must not loosen the next interval's test.
+    LqrWeights w;
+    w.Qfun = [](double t, MatrixXd& Q) {
+      Q = (MatrixXd(2, 2) << 3.0, 0.5, 0.5, 1.0).finished();
+      if (t < 1.0) Q *= 1e6;
+    };
+    w.R = MatrixXd::Constant(1, 1, 0.7);
+    w.Qf = MatrixXd::Identity(2, 2);
+    const VectorXd times = trellis::sampleTimes(0.0, 2.0, 10.0);
+    const auto fastOut = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, fast);
+    const auto ref = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, bdf);
+    REQUIRE(fastOut.ok());
+    REQUIRE(ref.ok());
+    for (std::size_t k = 0; k < ref.intervals.size(); ++k) {
+      INFO("interval " << k);
+      CHECK(intervalDifference(ref.intervals[k], fastOut.intervals[k]) < 1e-9);
+    }
+  }
   SECTION("stiff (λh ≈ 140) and time-varying") {
     // The stiff oscillator pair of the exponential test with a slowly varying coupling and input.
     const trellis::LinearizationCallback lin = [](double t, MatrixXd& A, MatrixXd& B) {
