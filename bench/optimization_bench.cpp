@@ -109,12 +109,10 @@ const char* const kSwingups[] = {"cart_pole_swingup",
                                  "swingups/turntable_chain4_swingup",
                                  "swingups/paper_pendulum_force_bound_transfer"};
 
-void swingup(benchmark::State& state) {
-  const std::string name = kSwingups[state.range(0)];
-  const trellis::OptimalControlProblem problem = trellis::loadProblem(
-      std::string(TRELLIS_SOURCE_DIR) + "/examples/problems/" + name + ".json");
-  trellis::OptimizerOptions options;
-  options.hessian = state.range(1) == 0 ? trellis::HessianMode::kExact : trellis::HessianMode::kLimitedMemory;
+/// Runs the optimizer in the timed loop and reports the last run: label `what` + iterations per
+/// round, and the counters both swing-up families share.
+void runSwingup(benchmark::State& state, const trellis::OptimalControlProblem& problem,
+                const trellis::OptimizerOptions& options, const std::string& what) {
   trellis::OptimizationResult result;
   double cpu = 0.0;
   for (auto _ : state) {
@@ -127,7 +125,7 @@ void swingup(benchmark::State& state) {
     perRound += (perRound.empty() ? "" : "/") + std::to_string(r.iterations);
     limit = limit || r.ipoptStatus == "Maximum_Iterations_Exceeded";
   }
-  state.SetLabel(name + (state.range(1) == 0 ? " exact" : " lbfgs") + " rounds " + perRound);
+  state.SetLabel(what + " rounds " + perRound);
   state.counters["iterations"] = result.iterations;
   state.counters["rounds"] = static_cast<double>(result.rounds.size());
   state.counters["knots"] = result.trajectory.size();
@@ -137,6 +135,15 @@ void swingup(benchmark::State& state) {
   state.counters["cost"] = result.cost;
   state.counters["defect"] = result.consistency.maxDefect;
   state.counters["cpu_ms"] = 1e3 * cpu / static_cast<double>(state.iterations());
+}
+
+void swingup(benchmark::State& state) {
+  const std::string name = kSwingups[state.range(0)];
+  const trellis::OptimalControlProblem problem = trellis::loadProblem(
+      std::string(TRELLIS_SOURCE_DIR) + "/examples/problems/" + name + ".json");
+  trellis::OptimizerOptions options;
+  options.hessian = state.range(1) == 0 ? trellis::HessianMode::kExact : trellis::HessianMode::kLimitedMemory;
+  runSwingup(state, problem, options, name + (state.range(1) == 0 ? " exact" : " lbfgs"));
 }
 
 /// The refinement rule's robustness to the starting mesh (issue 30): the turntable arm and the
@@ -152,24 +159,7 @@ void swingupStart(benchmark::State& state) {
     options.refinementBand = 0;
     options.unresolvedDefect = std::numeric_limits<double>::infinity();
   }
-  trellis::OptimizationResult result;
-  double cpu = 0.0;
-  for (auto _ : state) {
-    result = trellis::optimizeTrajectory(problem, options);
-    cpu += result.solveCpuTime;
-  }
-  std::string perRound;
-  for (const trellis::RefinementRound& r : result.rounds) {
-    perRound += (perRound.empty() ? "" : "/") + std::to_string(r.iterations);
-  }
-  state.SetLabel(name + (state.range(2) == 0 ? " cuts only" : " default rule") + " rounds " + perRound);
-  state.counters["iterations"] = result.iterations;
-  state.counters["rounds"] = static_cast<double>(result.rounds.size());
-  state.counters["knots"] = result.trajectory.size();
-  state.counters["success"] = result.ok() ? 1.0 : 0.0;
-  state.counters["inconsistent"] = result.status.code == trellis::OptimizationCode::kInconsistent ? 1.0 : 0.0;
-  state.counters["defect"] = result.consistency.maxDefect;
-  state.counters["cpu_ms"] = 1e3 * cpu / static_cast<double>(state.iterations());
+  runSwingup(state, problem, options, name + (state.range(2) == 0 ? " cuts only" : " default rule"));
 }
 
 void swingupStartArguments(benchmark::internal::Benchmark* b) {

@@ -14,7 +14,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -97,25 +96,19 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
   Trajectory withDerivatives = input;
   {
     Data data(model);
-    Eigen::MatrixXd Xdot(nx, N);
-    for (int k = 0; k < N; ++k) {
-      const auto x = input.states().col(k);
-      const DynamicsStatus st = computeDynamics(model, data, x.head(n), x.tail(n), input.inputs().col(k));
-      if (!st.ok()) {
-        result.status.set(ConsistencyCode::kDynamicsFailure,
-                          "not checked: the dynamics fail at knot " + std::to_string(k) + ": " + st.describe(),
-                          input.times()(k), k);
-        return result;
-      }
-      Xdot.col(k) << x.tail(n), data.qdd;
+    const DynamicsStatus st = withDerivatives.tryComputeStateDerivatives(model, data);
+    if (!st.ok()) {
+      result.status.set(ConsistencyCode::kDynamicsFailure,
+                        "not checked: the dynamics fail at knot " + std::to_string(st.index) + ": " +
+                            st.name() + ": " + st.message,
+                        st.t, st.index);
+      return result;
     }
-    withDerivatives.setStateDerivatives(std::move(Xdot));
   }
   ReferenceOptions checks;
   checks.stateDerivatives = ReferenceOptions::StateDerivatives::kKeepSupplied;
-  std::optional<ReferenceEvaluator> reference;
-  reference.emplace(model, std::move(withDerivatives), checks);
-  const Trajectory& trajectory = reference->trajectory();
+  ReferenceEvaluator reference(model, std::move(withDerivatives), checks);
+  const Trajectory& trajectory = reference.trajectory();
 
   // Scales s_i (file comment).
   const Eigen::MatrixXd& X = trajectory.states();
@@ -126,7 +119,7 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
     result.stateScale(i) = std::max({range(i), options.rangeFloor * (i < n ? rq : rv), 1e-12});
   }
 
-  Integrand integrand(model, *reference);
+  Integrand integrand(model, reference);
   // The driver's step budget restarts at every start(): maxStepsPerInterval per interval.
   detail::OdeOptions ode = detail::makeOdeOptions(
       "checkConsistency", detail::OdeMethod::Adams, detail::OdeLinearSolver::FixedPoint,
@@ -160,8 +153,8 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
           throw std::logic_error("checkConsistency: no dense output at the midpoint of interval " +
                                  std::to_string(k));
         }
-        reference->evaluate(tm);
-        e = y - reference->x();
+        reference.evaluate(tm);
+        e = y - reference.x();
       } else {
         e = driver.state() - X.col(k + 1);
       }

@@ -115,7 +115,7 @@ void Trajectory::checkCompatible(const Model& model) const {
   if (inputNames_ != model.inputNames()) mismatch("input", inputNames_, model.inputNames());
 }
 
-void Trajectory::computeStateDerivatives(const Model& model, Data& data) {
+DynamicsStatus Trajectory::tryComputeStateDerivatives(const Model& model, Data& data) {
   checkCompatible(model);
   const int n = nq();
   Eigen::MatrixXd xd(2 * n, size());
@@ -124,17 +124,27 @@ void Trajectory::computeStateDerivatives(const Model& model, Data& data) {
     q = states_.col(k).head(n);
     dq = states_.col(k).tail(n);
     u = inputs_.col(k);
-    const DynamicsStatus st = computeDynamics(model, data, q, dq, u);
-    if (!st.ok() || !data.qdd.allFinite()) {
-      std::ostringstream m;
-      m << "trajectory: dynamics failed at knot " << k + 1 << " (t = " << times_(k)
-        << "): " << (st.ok() ? std::string("q'' is not finite") : st.message);
-      throw TrajectoryError(m.str());
+    DynamicsStatus st = computeDynamics(model, data, q, dq, u);
+    if (st.ok() && !data.qdd.allFinite()) st.set(DynamicsCode::kNonFinite, "q'' is not finite");
+    if (!st.ok()) {
+      st.t = times_(k);
+      st.index = k;
+      return st;
     }
     xd.col(k).head(n) = dq;
     xd.col(k).tail(n) = data.qdd;
   }
   stateDerivatives_ = std::move(xd);
+  return {};
+}
+
+void Trajectory::computeStateDerivatives(const Model& model, Data& data) {
+  const DynamicsStatus st = tryComputeStateDerivatives(model, data);
+  if (!st.ok()) {
+    std::ostringstream m;
+    m << "trajectory: dynamics failed at knot " << st.index + 1 << " (t = " << st.t << "): " << st.message;
+    throw TrajectoryError(m.str());
+  }
 }
 
 void Trajectory::setStateDerivatives(Eigen::MatrixXd stateDerivatives) {

@@ -38,6 +38,7 @@ namespace trellis {
 
 class Model;
 class Data;
+struct DynamicsStatus;
 
 /// Thrown for an invalid trajectory (file or arrays). The message names the row (1-based data
 /// row, and the file line) and the column (1-based, and its header name) when one is at fault.
@@ -76,6 +77,10 @@ class Trajectory {
   /// ẋ_k = [q̇_k; q̈_k] at every knot from computeDynamics. Throws TrajectoryError if the model
   /// does not match or the dynamics fail at a knot (the message names the knot and time).
   void computeStateDerivatives(const Model& model, Data& data);
+  /// The same with a failure returned, for callers whose verdict it is: the status of the first
+  /// knot whose dynamics fail (index: the knot, t: its time; a non-finite q̈ is kNonFinite), the
+  /// derivatives then unchanged. Throws TrajectoryError only when the model does not match.
+  DynamicsStatus tryComputeStateDerivatives(const Model& model, Data& data);
   /// Supplies ẋ at the knots directly (2n×N, finite).
   void setStateDerivatives(Eigen::MatrixXd stateDerivatives);
   bool hasStateDerivatives() const { return stateDerivatives_.cols() == times_.size() && size() > 0; }  ///< evaluate() needs them
