@@ -14,12 +14,14 @@
 namespace trellis::bench {
 
 /// "kind/N:n/nc:k" — the hand tree always has 20 joints (3 constraint rows when constrained),
-/// the chains `links` joints (1 row).
+/// the chains `links` joints (1, 2 or 3 rows: TipRows); the planar chain's redundant z row is
+/// named "nc:3z".
 inline std::string caseName(const ModelSpec& spec) {
   const bool hand = spec.kind == ModelKind::kHandTree;
   const int n = hand ? 20 : spec.links;
-  const int nc = !spec.constrained ? 0 : hand ? 3 : 1;
-  return std::string(kindName(spec.kind)) + "/N:" + std::to_string(n) + "/nc:" + std::to_string(nc);
+  const bool redundant = spec.constrained && !hand && spec.tip == TipRows::kRedundant;
+  return std::string(kindName(spec.kind)) + "/N:" + std::to_string(n) + "/nc:" +
+         std::to_string(constraintRows(spec)) + (redundant ? "z" : "");
 }
 
 /// The Fixture for spec (constructed from it on first use; it has members `error`, a string set

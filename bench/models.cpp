@@ -8,6 +8,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
+#include <Eigen/QR>
 
 #include <array>
 #include <cstdio>
@@ -207,6 +208,8 @@ BenchModel makeBenchModel(const ModelSpec& spec, std::uint32_t seed) {
   b.addFrame("anchor", "world", Transform::constSE3(se3(Eigen::Matrix3d::Identity(), anchor)));
   if (spec.kind == ModelKind::kHandTree) {
     for (int axis = 0; axis < 3; ++axis) b.addPointConstraint(tip, "anchor", axis);
+  } else if (spec.tip != TipRows::kOne) {
+    for (int axis = 0; axis < constraintRows(spec); ++axis) b.addPointConstraint(tip, "anchor", axis);
   } else if (spec.kind == ModelKind::kSpatialChain) {
     // Not x: a 2-link x-y chain swings its tip in the y-z plane only, which would make the
     // x row identically zero.
@@ -219,14 +222,16 @@ BenchModel makeBenchModel(const ModelSpec& spec, std::uint32_t seed) {
     throw std::runtime_error("makeBenchModel: adding the constraint changed the configuration");
   }
 
-  // q̇ ← q̇ − Aᵀ (A Aᵀ)⁻¹ A q̇: the nearest velocity with A q̇ = 0.
+  // q̇ ← q̇ − Aᵀ (A Aᵀ)⁺ A q̇: the nearest velocity with A q̇ = 0 (a pseudo-inverse: the planar
+  // chain's redundant z row is zero).
   Data data(model);
   computeKinematics(model, data, q, dq);
   computeConstraints(model, data, q, dq);
   const Eigen::MatrixXd& A = data.constraintJacobian;
-  const Eigen::MatrixXd AAt = A * A.transpose();
-  const Eigen::LDLT<Eigen::MatrixXd> ldlt(AAt);
-  dq -= A.transpose() * ldlt.solve(A * dq);
+  const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(A.transpose());
+  Eigen::VectorXd t = cod.householderQ().adjoint() * dq;  // range(Aᵀ) is Q's first rank columns
+  t.tail(n - cod.rank()).setZero();
+  dq -= cod.householderQ() * t;
   const double hErr = data.constraintValue.cwiseAbs().maxCoeff();
   const double vErr = (A * dq).cwiseAbs().maxCoeff();
   if (!(hErr < 1e-12) || !(vErr < 1e-10)) {
@@ -235,6 +240,17 @@ BenchModel makeBenchModel(const ModelSpec& spec, std::uint32_t seed) {
                              ", |A dq| = " + std::to_string(vErr));
   }
   return BenchModel{std::move(model), q, dq, u, kindName(spec.kind)};
+}
+
+int constraintRows(const ModelSpec& spec) {
+  if (!spec.constrained) return 0;
+  if (spec.kind == ModelKind::kHandTree) return 3;
+  switch (spec.tip) {
+    case TipRows::kOne: return 1;
+    case TipRows::kPinned: return spec.kind == ModelKind::kSpatialChain ? 3 : 2;
+    case TipRows::kRedundant: return 3;
+  }
+  return 1;
 }
 
 bool parseProfileModel(const char* kind, const char* links, const char* constrained, ModelSpec& spec) {
@@ -250,7 +266,13 @@ bool parseProfileModel(const char* kind, const char* links, const char* constrai
     return false;
   }
   spec.links = k == "scene" ? 0 : std::atoi(links);
-  spec.constrained = std::atoi(constrained) != 0;
+  const int c = std::atoi(constrained);
+  if (c < 0 || c > 3 || (c == 3 && spec.kind != ModelKind::kPlanarChain)) {
+    std::fprintf(stderr, "constrained must be 0, 1, 2 or 3 (3: planar only), got '%s'\n", constrained);
+    return false;
+  }
+  spec.constrained = c != 0;
+  spec.tip = c == 3 ? TipRows::kRedundant : c == 2 ? TipRows::kPinned : TipRows::kOne;
   return true;
 }
 

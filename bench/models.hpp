@@ -23,15 +23,25 @@ enum class ModelKind {
   kHandTree,     ///< 20 joints: a fixed palm with 5 fingers × (1 abduction + 3 flexion joints)
 };
 
+/// Which rows a constrained chain's tip gets (ignored for the hand and for free models).
+enum class TipRows {
+  kOne,        ///< one scalar row: the tip's world x (planar chain) or z (3D chain)
+  kPinned,     ///< the tip pinned: rows x, y, z (3D chain); x, y (planar chain, in its plane)
+  kRedundant,  ///< planar chain only: x, y and the z row, identically zero (a degenerate row)
+};
+
 /// What to build. `links` is ignored for kHandTree (always 20 joints).
 struct ModelSpec {
   ModelKind kind = ModelKind::kPlanarChain;
   int links = 2;
-  /// Chains: one scalar point-constraint row on the tip's world coordinate (x for the planar
-  /// chain, z for the 3D one).
+  /// Chains: point-constraint rows on the tip's world coordinates (see `tip`).
   /// Hand: a 3D point constraint (three rows x, y, z) on the index fingertip.
   bool constrained = false;
+  TipRows tip = TipRows::kOne;
 };
+
+/// The number of constraint rows of spec's model.
+int constraintRows(const ModelSpec& spec);
 
 /// A model with the state to evaluate it at.
 struct BenchModel {
@@ -51,7 +61,8 @@ const char* kindName(ModelKind kind);
 BenchModel makeBenchModel(const ModelSpec& spec, std::uint32_t seed = 20100503u);
 
 /// The profile drivers' model arguments: kind (planar, spatial, hand, or scene = the hand scene),
-/// links (ignored for scene) and constrained (0 or 1). Returns false, having printed why, for an
+/// links (ignored for scene) and constrained (0 free, 1 one tip row, 2 the tip pinned, 3 the
+/// planar tip pinned with its redundant z row: TipRows). Returns false, having printed why, for an
 /// unknown kind.
 bool parseProfileModel(const char* kind, const char* links, const char* constrained, ModelSpec& spec);
 

@@ -21,7 +21,7 @@
 int main(int argc, char** argv) {
   if (argc < 5) {
     std::fprintf(stderr,
-                 "usage: %s <planar|spatial|hand> <N> <constrained 0|1> <lin|dyn|fd> [iterations]\n",
+                 "usage: %s <planar|spatial|hand> <N> <constrained 0|1|2|3> <lin|dyn|fd> [iterations]\n",
                  argv[0]);
     return 2;
   }
