@@ -100,6 +100,20 @@ struct PointKind {
     emit(c.a.joint, pa, pointDisplacement(dir, c.a.joint, pa), e, zero);
     emit(c.b.joint, pb, pointDisplacement(dir, c.b.joint, pb), Vector3d(-e), zero);
   }
+  /// The wrench tangents of the rows of one point pair together, whose force is f = Σ λ_r e_r on
+  /// a and −f on b (e_r fixed: δf = 0): emit(joint, [0; δp × f]) for each body that moves.
+  template <class Emit>
+  static void pairWrenchTangents(const Data& data, const Direction& dir, const Constraint& c, const Vector3d& f,
+                                 Emit&& emit) {
+    if (!dir.velocity && dir.moves(c.a.joint)) {
+      const Vector3d dp = pointDisplacement(dir, c.a.joint, pointPosition(data, c.a));
+      emit(c.a.joint, make(Vector3d::Zero(), dp.cross(f)));
+    }
+    if (!dir.velocity && dir.moves(c.b.joint)) {
+      const Vector3d dp = pointDisplacement(dir, c.b.joint, pointPosition(data, c.b));
+      emit(c.b.joint, make(Vector3d::Zero(), f.cross(dp)));
+    }
+  }
 };
 
 /// Normal n = R_a n_a of the plane body a, and its derivative along a configuration direction.

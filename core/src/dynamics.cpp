@@ -268,10 +268,13 @@ void solveMass(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X) {
 
 namespace {
 
-/// One row group's operands for correctForConstraints (coordinate-major: entry (i, r) at i ng + r).
+/// One row group's operands for correctForConstraints: A_g row by row (row r's entries on the
+/// group's coordinates at a + r len), (M⁻¹Aᵀ)_g column by column (at u + r uStride, the
+/// workspace's own columns), the Cholesky factor of Ŝ_g (row-major) and its scaling D_g.
 struct GroupColumns {
   int ng, len;
-  const double *a, *u, *l, *d;  ///< A_g, (M⁻¹Aᵀ)_g, the Cholesky factor of Ŝ_g (row-major), D_g
+  const double *a, *u, *l, *d;
+  Eigen::Index uStride;
   double* t;                ///< ng entries of workspace
   double* x;                ///< X on the group's coordinates, column 0
   Eigen::Index xStride;
@@ -279,8 +282,12 @@ struct GroupColumns {
   Eigen::Index lStride, cols;
 };
 
+using Pack = Eigen::Array2d;  // two lanes: one SSE2/NEON register (fixed lane order, as mass_factor.cpp)
+inline Pack loadPack(const double* x) { return Eigen::Map<const Pack>(x); }
+
 /// For every column: t = C_g − A_g X, Λ_g = (A M⁻¹ Aᵀ)_g⁻¹ t, X += (M⁻¹Aᵀ)_g Λ_g. NG: the row count
-/// when fixed at compile time (the inner loops then unroll), 0 for g.ng.
+/// when fixed at compile time (the rows then share each pass over X, two coordinates per
+/// step), 0 for g.ng.
 template <int NG>
 void correctGroupColumns(const GroupColumns& g) {
   const int ng = NG > 0 ? NG : g.ng;
@@ -288,11 +295,26 @@ void correctGroupColumns(const GroupColumns& g) {
   double* t = NG > 0 ? local : g.t;
   double* x = g.x;
   double* lam = g.lambda;
+  const int len = g.len, pairs = len & ~1;
   for (Eigen::Index c = 0; c < g.cols; ++c, x += g.xStride, lam += g.lStride) {
-    for (int r = 0; r < ng; ++r) t[r] = lam[r];
-    for (int i = 0; i < g.len; ++i) {
-      const double xi = x[i];
-      for (int r = 0; r < ng; ++r) t[r] -= g.a[i * ng + r] * xi;
+    if constexpr (NG > 0) {
+      Pack s[NG];
+      for (int r = 0; r < NG; ++r) s[r] = Pack::Zero();
+      for (int i = 0; i < pairs; i += 2) {
+        const Pack xi = loadPack(x + i);
+        for (int r = 0; r < NG; ++r) s[r] += loadPack(g.a + r * len + i) * xi;
+      }
+      for (int r = 0; r < NG; ++r) {
+        double v = lam[r] - (s[r][0] + s[r][1]);
+        if (pairs < len) v -= g.a[r * len + pairs] * x[pairs];
+        t[r] = v;
+      }
+    } else {
+      for (int r = 0; r < ng; ++r) {
+        double v = lam[r];
+        for (int i = 0; i < len; ++i) v -= g.a[r * len + i] * x[i];
+        t[r] = v;
+      }
     }
     // Λ = D L⁻ᵀ L⁻¹ D t: the substitutions of the group's Cholesky factor (an explicit inverse
     // here was cheaper by a few percent but less accurate: the hand's closed-loop error floor
@@ -308,10 +330,19 @@ void correctGroupColumns(const GroupColumns& g) {
       t[r] = v / g.l[r * ng + r];
       lam[r] = t[r] * g.d[r];
     }
-    for (int i = 0; i < g.len; ++i) {
-      double v = x[i];
-      for (int r = 0; r < ng; ++r) v += g.u[i * ng + r] * lam[r];
-      x[i] = v;
+    if constexpr (NG > 0) {
+      Pack lr[NG];
+      for (int r = 0; r < NG; ++r) lr[r] = Pack::Constant(lam[r]);
+      for (int i = 0; i < pairs; i += 2) {
+        Pack xi = loadPack(x + i);
+        for (int r = 0; r < NG; ++r) xi += loadPack(g.u + r * g.uStride + i) * lr[r];
+        Eigen::Map<Pack>(x + i) = xi;
+      }
+      if (pairs < len)
+        for (int r = 0; r < NG; ++r) x[pairs] += g.u[r * g.uStride + pairs] * lam[r];
+    } else {
+      for (int r = 0; r < ng; ++r)
+        for (int i = 0; i < len; ++i) x[i] += g.u[r * g.uStride + i] * lam[r];
     }
   }
 }
@@ -337,21 +368,19 @@ void correctForConstraints(const Model& model, Data& data, Eigen::Ref<Eigen::Mat
           hi = std::max(hi, model.topology().rowHi[r]);
         }
       if (hi <= lo) lo = hi = 0;  // rows that touch no coordinate: Λ = (A M⁻¹ Aᵀ)⁻¹ C
-      // Copies of the group's operands, coordinate-major (entry (i, r) at i ng + r), then the
-      // column loop with the row count fixed at compile time for the usual groups.
+      // A copy of the group's rows of A, each contiguous on the group's coordinates (M⁻¹Aᵀ is
+      // read in place: its columns are), and of its Cholesky factor; then the column loop with
+      // the row count fixed at compile time for the usual groups.
       const int len = hi - lo;
       double* ag = ws.correctionWork.data();  // A_g
-      double* ug = ag + ng * len;               // (M⁻¹Aᵀ)_g
-      double* sg = ug + ng * len;               // the group's Cholesky factor
-      for (int i = 0; i < len; ++i)
-        for (int r = 0; r < ng; ++r) {
-          ag[i * ng + r] = A(g0 + r, lo + i);
-          ug[i * ng + r] = U(lo + i, g0 + r);
-        }
+      double* sg = ag + ng * len;               // the group's Cholesky factor
+      for (int r = 0; r < ng; ++r)
+        for (int i = 0; i < len; ++i) ag[r * len + i] = A(g0 + r, lo + i);
       for (int r = 0; r < ng; ++r)
         for (int t = 0; t < ng; ++t) sg[r * ng + t] = t <= r ? LL(g0 + r, g0 + t) : 0.0;
-      GroupColumns cols{ng, len, ag, ug, sg, ws.schurScale.data() + g0, sg + ng * ng, X.data() + lo, X.outerStride(), Lambda.data() + g0, Lambda.outerStride(),
-                        X.cols()};
+      GroupColumns cols{ng, len, ag, U.data() + lo + g0 * U.outerStride(), sg, ws.schurScale.data() + g0,
+                        U.outerStride(), sg + ng * ng, X.data() + lo, X.outerStride(), Lambda.data() + g0,
+                        Lambda.outerStride(), X.cols()};
       switch (ng) {
         case 1: correctGroupColumns<1>(cols); break;
         case 2: correctGroupColumns<2>(cols); break;

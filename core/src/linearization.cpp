@@ -23,9 +23,22 @@ void forceTangents(const Model& model, const Data& data, const Direction& dir, c
     decltype(kind)::wrenchTangents(model, data, dir, e, i, u, emit);
   });
   const auto& cs = model.constraints();
-  for (int r = 0; r < model.nc(); ++r)
-    if (dir.moves(cs[r].a.joint) || dir.moves(cs[r].b.joint))
-      constraintWrenchTangents(data, dir, cs[r], data.lambda[r], emit);
+  for (int r = 0; r < model.nc();) {
+    const Constraint& c = cs[r];
+    if (!dir.moves(c.a.joint) && !dir.moves(c.b.joint)) {
+      ++r;
+    } else if (c.type == ConstraintType::kPoint) {
+      // Consecutive rows on one point pair: one force f = Σ λ_r e_r, one tangent per body.
+      Vector3d f = Vector3d::Zero();
+      int e = r;
+      for (; e < model.nc() && PointKind::samePair(c, cs[e]); ++e) f[cs[e].axis] += data.lambda[e];
+      PointKind::pairWrenchTangents(data, dir, c, f, emit);
+      r = e;
+    } else {
+      constraintWrenchTangents(data, dir, c, data.lambda[r], emit);
+      ++r;
+    }
+  }
 }
 
 /// The subtree sum D = Σ (I crm(v) − crf(v) I) enters only as D x ± x ×* H (H = [p; L] = Σ I v, the
@@ -122,18 +135,31 @@ void tangentPass(const Model& model, Data& data, const Eigen::VectorXd& u, const
     // External wrenches enter r with a minus sign; positions do not depend on q̇.
     // The wrench tangents are gathered per body, then carried to the root in one sweep (each
     // joint j sees the sum over its subtree), instead of walking up from every element.
-    int hi = -1, lo = model.nq();
+    // With all of them on one body (a closing point on a chain, one fingertip) the sweep is
+    // only S_j·δW on that body's ancestors, without the carrying.
+    int hi = -1, lo = model.nq(), single = -1;
+    bool several = false;
     forceTangents(model, data, dir, u, [&](int joint, const Vector6d& dW) {
       if (joint == kWorld) return;
       ws.tangentWrench[joint] += dW;
+      several = several || (single >= 0 && joint != single);
+      single = joint;
       hi = std::max(hi, joint);
       lo = std::min(lo, model.topology().treeRoot[joint]);
     });
-    for (int j = hi; j >= lo; --j) {
-      Vector6d& w = ws.tangentWrench[j];
-      dr(j) += ws.S[j].dot(w);
-      if (joints[j].parent != kWorld) ws.tangentWrench[joints[j].parent] += w;
+    if (!several && single >= 0) {
+      Vector6d& w = ws.tangentWrench[single];
+      forAncestorRuns(model.topology(), single, true, [&](int s, int e) {
+        for (int j = s; j <= e; ++j) dr(j) += ws.S[j].dot(w);
+      });
       w.setZero();
+    } else {
+      for (int j = hi; j >= lo; --j) {
+        Vector6d& w = ws.tangentWrench[j];
+        dr(j) += ws.S[j].dot(w);
+        if (joints[j].parent != kWorld) ws.tangentWrench[joints[j].parent] += w;
+        w.setZero();
+      }
     }
   }
   // Forces on coordinates (springs, damping): r contains −Q.

@@ -301,6 +301,12 @@ int factorMass(const Model& model, Data& data, double tol) {
   auto& ws = detail::workspace(data);
   ws.massInverseCurrent = false;
   ws.articulatedCurrent = false;
+  if (blocksAreChains(model)) {
+    // Chains: the articulated factor, O(n) against the dense factor's n³/6 (mass_factor.hpp).
+    const int bad = factorArticulated(model, data, tol);
+    ws.articulatedCurrent = bad < 0;
+    return bad;
+  }
   ws.massFactor = data.M;  // zero off the ancestor pattern, as M is
   for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
     const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];
@@ -312,6 +318,13 @@ int factorMass(const Model& model, Data& data, double tol) {
 
 void solveMassVector(const Model& model, Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi) {
   auto& ws = detail::workspace(data);
+  if (ws.articulatedCurrent) {
+    for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
+      const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];
+      if (be > lo && bs < hi) solveArticulatedBlock(model, data, x.data(), bs, be);
+    }
+    return;
+  }
   for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
     const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];
     if (be <= lo || bs >= hi) continue;
@@ -391,18 +404,21 @@ int factorArticulated(const Model& model, Data& data, double tol) {
 }
 
 void solveArticulated(const Model& model, Data& data, Eigen::VectorXd& x) {
+  solveArticulatedBlock(model, data, x.data(), 0, model.nq());
+}
+
+void solveArticulatedBlock(const Model& model, Data& data, double* x, int lo, int hi) {
   auto& ws = detail::workspace(data);
   const auto& joints = model.joints();
-  const int n = model.nq();
   std::vector<Vector6d>& w = ws.articulatedWork;  // p_i from the leaves, then a_i from the roots
-  for (int i = 0; i < n; ++i) w[i].setZero();
-  for (int i = n - 1; i >= 0; --i) {
+  for (int i = lo; i < hi; ++i) w[i].setZero();
+  for (int i = hi - 1; i >= lo; --i) {
     const double ui = x[i] - ws.S[i].dot(w[i]);
     x[i] = ui;
     const int p = joints[i].parent;
     if (p != kWorld) w[p] += w[i] + ws.articulatedU[i] * (ui / ws.articulatedPivot[i]);
   }
-  for (int i = 0; i < n; ++i) {
+  for (int i = lo; i < hi; ++i) {
     const int p = joints[i].parent;
     if (p == kWorld) {
       x[i] /= ws.articulatedPivot[i];

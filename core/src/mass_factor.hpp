@@ -35,8 +35,9 @@ inline void forAncestorRuns(const ModelTopology& topo, int i, bool self, F&& f) 
   }
 }
 
-/// Factors data.M into ws.massFactor. Returns −1 on success, else the joint whose pivot Dᵢ is
-/// not above tol (then the factor is unusable).
+/// Factors M: the articulated factor (factorArticulated, ws.articulatedCurrent) when every block
+/// is a chain, else data.M into ws.massFactor. Returns −1 on success, else the joint whose pivot
+/// Dᵢ is not above tol (then the factor is unusable). Both factors have the same pivots Dᵢ.
 int factorMass(const Model& model, Data& data, double tol);
 
 /// x ← M⁻¹ x on the coordinates [lo, hi), a union of whole blocks (x is 0 elsewhere or ignored).
@@ -62,7 +63,8 @@ void applyMassInverse(const Model& model, Data& data, const Eigen::Ref<const Eig
 // zero velocity): IA_i = I_i + Σ_children (IA_c − U_c U_cᵀ / D_c), U_i = IA_i S_i, D_i = S_iᵀ U_i.
 // The D_i are the pivots of M = Lᵀ D L above; the work is O(n) 6×6 products instead of the
 // factor's O(Σ dᵢ²) (M itself is still formed: data.M is a result of computeDynamics). Used for
-// models whose trees are all chains and have no constraints (computeDynamics).
+// every model whose trees are all chains, with or without constraints (factorMass; M⁻¹Aᵀ of the
+// constraint rows is then one articulated solve per row, inside the row's blocks).
 
 /// Fills ws.articulatedU, articulatedPivot from the world inertias (needs updateJoints), for a
 /// model whose blocks are chains (blocksAreChains). Returns −1 on success, else the joint whose
@@ -73,5 +75,8 @@ int factorArticulated(const Model& model, Data& data, double tol);
 /// p_parent += p_i + U_i u_i / D_i, then from the roots x_i = (u_i − U_i·a_parent) / D_i,
 /// a_i = a_parent + S_i x_i.
 void solveArticulated(const Model& model, Data& data, Eigen::VectorXd& x);
+
+/// The same on the joints [lo, hi), a union of whole blocks (x[lo, hi) only is read and written).
+void solveArticulatedBlock(const Model& model, Data& data, double* x, int lo, int hi);
 
 }  // namespace trellis::detail
