@@ -95,6 +95,7 @@ int main(int argc, char** argv) {
   };
   const std::vector<Pair> pairs = {
       chain(ModelKind::kSpatialChain, 20, TipRows::kPinned), chain(ModelKind::kSpatialChain, 40, TipRows::kPinned),
+      chain(ModelKind::kSpatialChain, 5, TipRows::kPinned),  chain(ModelKind::kSpatialChain, 10, TipRows::kPinned),
       chain(ModelKind::kSpatialChain, 20, TipRows::kOne),    chain(ModelKind::kSpatialChain, 40, TipRows::kOne),
       chain(ModelKind::kPlanarChain, 40, TipRows::kPinned),  chain(ModelKind::kPlanarChain, 40, TipRows::kRedundant),
       chain(ModelKind::kPlanarChain, 20, TipRows::kPinned),  chain(ModelKind::kPlanarChain, 20, TipRows::kRedundant),

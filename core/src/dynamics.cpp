@@ -166,14 +166,24 @@ void factorizeKkt(const Model& model, Data& data) {
                       : std::string(" and no configuration variable moves its points")) +
                  " (its gradient vanishes or the configuration is singular; the constraint force is undetermined)";
   };
-  // M⁻¹ Aᵀ by one tree solve per row, inside the blocks the row touches; then A M⁻¹ Aᵀ, whose
-  // entries between groups of rows on disjoint blocks are exactly zero.
-  for (int r = 0; r < nc; ++r) {
-    auto x = ws.massInverseAt.col(r);
-    x.setZero();
-    const int lo = model.topology().rowLo[r], len = model.topology().rowHi[r] - lo;
-    x.segment(lo, len) = data.constraintJacobian.row(r).segment(lo, len).transpose();
-    solveMassVector(model, data, x, lo, lo + len);
+  // M⁻¹ Aᵀ by tree solves inside the blocks each group of rows touches (the rows of a group in
+  // one sweep: solveMassColumns); then A M⁻¹ Aᵀ, whose entries between groups of rows on
+  // disjoint blocks are exactly zero.
+  for (size_t g = 0; g + 1 < model.topology().rowGroupStart.size(); ++g) {
+    const int g0 = model.topology().rowGroupStart[g], g1 = model.topology().rowGroupStart[g + 1];
+    int glo = n, ghi = 0;
+    for (int r = g0; r < g1; ++r) {
+      auto x = ws.massInverseAt.col(r);
+      x.setZero();
+      const int lo = model.topology().rowLo[r], len = model.topology().rowHi[r] - lo;
+      x.segment(lo, len) = data.constraintJacobian.row(r).segment(lo, len).transpose();
+      if (len > 0) {
+        glo = std::min(glo, lo);
+        ghi = std::max(ghi, lo + len);
+      }
+    }
+    if (ghi > glo)
+      solveMassColumns(model, data, ws.massInverseAt.col(g0).data(), ws.massInverseAt.outerStride(), g1 - g0, glo, ghi);
   }
   ws.schur.setZero();
   for (size_t g = 0; g + 1 < model.topology().rowGroupStart.size(); ++g) {

@@ -292,6 +292,13 @@ void invertChainArticulated(Data& data, int bs, int be) {
 /// branching there is nothing for the tree to skip, and Eigen's blocked kernels run the O(n³)
 /// work with fewer instructions than the run loops (measured with callgrind on chains of 10–40).
 constexpr int kDenseChain = 6;
+/// Models whose blocks are all chains, the longest of at least this many joints, take the
+/// articulated factor in factorMass (the constrained models: computeDynamics takes it for every
+/// chain model without constraints). Timed interleaved against the tree and dense factors
+/// (bench/closed_loop_bench.cpp, the 3D chain with its tip pinned): at 5 joints the tree factor
+/// is faster (1.07 against 1.16 µs for q̈), from 10 on the articulated one (1.96 against 2.12 µs;
+/// 7.8 against 11.1 µs at 40); the hand's 4-joint digits keep the tree factor.
+constexpr int kArticulatedChain = 8;
 bool denseBlock(const Model& model, int bs, int be) {
   return be - bs >= kDenseChain && model.topology().runStart[static_cast<size_t>(be - 1)] == bs;
 }
@@ -301,7 +308,10 @@ int factorMass(const Model& model, Data& data, double tol) {
   auto& ws = detail::workspace(data);
   ws.massInverseCurrent = false;
   ws.articulatedCurrent = false;
-  if (blocksAreChains(model)) {
+  int longest = 0;
+  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b)
+    longest = std::max(longest, model.topology().blockStart[b + 1] - model.topology().blockStart[b]);
+  if (blocksAreChains(model) && longest >= kArticulatedChain) {
     // Chains: the articulated factor, O(n) against the dense factor's n³/6 (mass_factor.hpp).
     const int bad = factorArticulated(model, data, tol);
     ws.articulatedCurrent = bad < 0;
@@ -316,13 +326,72 @@ int factorMass(const Model& model, Data& data, double tol) {
   return -1;
 }
 
+namespace {
+/// K columns x + c stride (c < K) ← M_b⁻¹ x on the chain block [bs, be) with the articulated
+/// factor, in one sweep each way (solveArticulated's recursion with one child per joint: p and a
+/// are the running bias and acceleration of the parent): the columns share the loads of S_i,
+/// U_i, D_i and their recursions run side by side instead of one after the other.
+template <int K>
+void solveChainArticulated(const DataWorkspace& ws, double* x, Eigen::Index stride, int bs, int be) {
+  Pack p[K][3], a[K][3];
+  for (int c = 0; c < K; ++c)
+    for (int t = 0; t < 3; ++t) p[c][t] = a[c][t] = Pack::Zero();
+  for (int i = be - 1; i >= bs; --i) {
+    const double* S = ws.S[i].data();
+    const double* U = ws.articulatedU[i].data();
+    const Pack S0 = loadPack(S), S1 = loadPack(S + 2), S2 = loadPack(S + 4);
+    const Pack U0 = loadPack(U), U1 = loadPack(U + 2), U2 = loadPack(U + 4);
+    const double dInv = 1.0 / ws.articulatedPivot[i];
+    for (int c = 0; c < K; ++c) {
+      const Pack d = S0 * p[c][0] + S1 * p[c][1] + S2 * p[c][2];
+      const double u = x[c * stride + i] - (d[0] + d[1]);
+      x[c * stride + i] = u;
+      const Pack f = Pack::Constant(u * dInv);
+      p[c][0] += U0 * f;
+      p[c][1] += U1 * f;
+      p[c][2] += U2 * f;
+    }
+  }
+  for (int i = bs; i < be; ++i) {
+    const double* S = ws.S[i].data();
+    const double* U = ws.articulatedU[i].data();
+    const Pack S0 = loadPack(S), S1 = loadPack(S + 2), S2 = loadPack(S + 4);
+    const Pack U0 = loadPack(U), U1 = loadPack(U + 2), U2 = loadPack(U + 4);
+    const double dInv = 1.0 / ws.articulatedPivot[i];
+    for (int c = 0; c < K; ++c) {
+      const Pack d = U0 * a[c][0] + U1 * a[c][1] + U2 * a[c][2];
+      const double xi = (x[c * stride + i] - (d[0] + d[1])) * dInv;
+      x[c * stride + i] = xi;
+      const Pack f = Pack::Constant(xi);
+      a[c][0] += S0 * f;
+      a[c][1] += S1 * f;
+      a[c][2] += S2 * f;
+    }
+  }
+}
+}  // namespace
+
+void solveMassColumns(const Model& model, Data& data, double* x, Eigen::Index stride, int cols, int lo, int hi) {
+  auto& ws = detail::workspace(data);
+  if (!ws.articulatedCurrent) {
+    for (int c = 0; c < cols; ++c)
+      solveMassVector(model, data, Eigen::Map<Eigen::VectorXd>(x + c * stride, model.nq()), lo, hi);
+    return;
+  }
+  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
+    const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];
+    if (be <= lo || bs >= hi) continue;
+    int c = 0;
+    for (; c + 3 <= cols; c += 3) solveChainArticulated<3>(ws, x + c * stride, stride, bs, be);
+    if (cols - c == 2) solveChainArticulated<2>(ws, x + c * stride, stride, bs, be);
+    if (cols - c == 1) solveChainArticulated<1>(ws, x + c * stride, stride, bs, be);
+  }
+}
+
 void solveMassVector(const Model& model, Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi) {
   auto& ws = detail::workspace(data);
   if (ws.articulatedCurrent) {
-    for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
-      const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];
-      if (be > lo && bs < hi) solveArticulatedBlock(model, data, x.data(), bs, be);
-    }
+    solveMassColumns(model, data, x.data(), x.size(), 1, lo, hi);
     return;
   }
   for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
@@ -404,21 +473,18 @@ int factorArticulated(const Model& model, Data& data, double tol) {
 }
 
 void solveArticulated(const Model& model, Data& data, Eigen::VectorXd& x) {
-  solveArticulatedBlock(model, data, x.data(), 0, model.nq());
-}
-
-void solveArticulatedBlock(const Model& model, Data& data, double* x, int lo, int hi) {
   auto& ws = detail::workspace(data);
   const auto& joints = model.joints();
+  const int n = model.nq();
   std::vector<Vector6d>& w = ws.articulatedWork;  // p_i from the leaves, then a_i from the roots
-  for (int i = lo; i < hi; ++i) w[i].setZero();
-  for (int i = hi - 1; i >= lo; --i) {
+  for (int i = 0; i < n; ++i) w[i].setZero();
+  for (int i = n - 1; i >= 0; --i) {
     const double ui = x[i] - ws.S[i].dot(w[i]);
     x[i] = ui;
     const int p = joints[i].parent;
     if (p != kWorld) w[p] += w[i] + ws.articulatedU[i] * (ui / ws.articulatedPivot[i]);
   }
-  for (int i = lo; i < hi; ++i) {
+  for (int i = 0; i < n; ++i) {
     const int p = joints[i].parent;
     if (p == kWorld) {
       x[i] /= ws.articulatedPivot[i];

@@ -43,6 +43,10 @@ int factorMass(const Model& model, Data& data, double tol);
 /// x ← M⁻¹ x on the coordinates [lo, hi), a union of whole blocks (x is 0 elsewhere or ignored).
 void solveMassVector(const Model& model, Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi);
 
+/// The same for `cols` columns x + c stride (each n long) at once; with the articulated factor
+/// the columns share one sweep (the rows of a constraint group: M⁻¹Aᵀ in factorizeKkt).
+void solveMassColumns(const Model& model, Data& data, double* x, Eigen::Index stride, int cols, int lo, int hi);
+
 /// ws.massInverse = M⁻¹ (block diagonal, zero between blocks) from the current factor: the tree
 /// factor, M⁻¹ = W D⁻¹ Wᵀ with W = L⁻¹, which keeps the ancestor pattern of L, O(Σ per block
 /// n_b³/3); or, when ws.articulatedCurrent (only used when blocksAreChains), the articulated
@@ -75,8 +79,5 @@ int factorArticulated(const Model& model, Data& data, double tol);
 /// p_parent += p_i + U_i u_i / D_i, then from the roots x_i = (u_i − U_i·a_parent) / D_i,
 /// a_i = a_parent + S_i x_i.
 void solveArticulated(const Model& model, Data& data, Eigen::VectorXd& x);
-
-/// The same on the joints [lo, hi), a union of whole blocks (x[lo, hi) only is read and written).
-void solveArticulatedBlock(const Model& model, Data& data, double* x, int lo, int hi);
 
 }  // namespace trellis::detail
