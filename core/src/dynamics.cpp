@@ -7,6 +7,7 @@
 #include "force_elements.hpp"
 #include "trellis/core/detail/report_json.hpp"
 
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -45,10 +46,17 @@ void updateAccelerations(const Model& model, Data& data, const Eigen::VectorXd& 
 
 namespace {
 
-std::string formatNumber(double x) {
+/// x as printf's "%.6g" (std::to_chars with a precision is specified as printf's conversion),
+/// without printf's cost: a redundant or degenerate row is reported at every call, with the state.
+void appendNumber(std::string& out, double x) {
   char buf[32];
-  std::snprintf(buf, sizeof buf, "%.6g", x);
-  return buf;
+  const auto res = std::to_chars(buf, buf + sizeof buf, x, std::chars_format::general, 6);
+  out.append(buf, res.ptr);
+}
+std::string formatNumber(double x) {
+  std::string s;
+  appendNumber(s, x);
+  return s;
 }
 
 }  // namespace
@@ -198,8 +206,21 @@ void factorizeKkt(const Model& model, Data& data) {
       }
     }
   }
-  for (int r = 0; r < nc; ++r) ws.schurScale[r] = ws.schur(r, r) > 0 ? 1.0 / std::sqrt(ws.schur(r, r)) : 1.0;
+  // A zero row of A (A M⁻¹ Aᵀ has a zero there exactly then: M⁻¹ is definite) says nothing about
+  // q̈ and leaves its λ free: it is dropped here by a zero scale D_r and a unit pivot in Ŝ, so
+  // that the Cholesky path below solves the other rows and the correction gives λ_r = 0 — the
+  // minimum-norm choice the pivoted path makes, at the cost of the regular path (the z row of a
+  // point on a planar chain; the redundant-row path cost 2–3× the model without the row).
+  int zeroRows = 0;
+  for (int r = 0; r < nc; ++r) {
+    const double s = ws.schur(r, r);
+    ws.schurScale[r] = s > 0 ? 1.0 / std::sqrt(s) : s == 0.0 ? 0.0 : 1.0;
+    zeroRows += s == 0.0;
+  }
   ws.schur = ws.schurScale.asDiagonal() * ws.schur * ws.schurScale.asDiagonal();
+  if (zeroRows > 0)
+    for (int r = 0; r < nc; ++r)
+      if (ws.schurScale[r] == 0.0) ws.schur(r, r) = 1.0;
   ws.schurLLT.compute(ws.schur);
   const double sScale = ws.schur.diagonal().maxCoeff();
   if (ws.schurLLT.info() == Eigen::Success && sScale > 0) {
@@ -208,7 +229,9 @@ void factorizeKkt(const Model& model, Data& data) {
     const double ratio = diag.minCoeff() / diag.maxCoeff();
     const double rcond = ratio * ratio;
     st.constraintConditioning = std::min(kinematic, rcond);
-    if (rcond > 1e-13 && kinematic > 0) {
+    // κ_r = 0 only for a zero row (‖A_r‖ = 0), which was dropped above.
+    if (rcond > 1e-13 && (kinematic > 0 || zeroRows > 0)) {
+      st.constraintRank = nc - zeroRows;
       if (kinematic < 1e-5) reportDegenerate();
       return;
     }
@@ -247,7 +270,7 @@ void factorizeKkt(const Model& model, Data& data) {
   }
   ws.schurNullity = nullity;
   ws.schurUsesPinv = true;
-  st.constraintRank = rank;
+  st.constraintRank = rank - zeroRows;  // the dropped zero rows have unit pivots
   st.constraintConditioning = 0.0;
   st.code = DynamicsStatus::Code::kRedundantConstraints;
   // Which constraint the first dropped pivot belongs to: undo the row swaps (applied in order
@@ -480,8 +503,12 @@ void appendState(const Model& model, const Eigen::VectorXd& q, const Eigen::Vect
   for (int pass = 0; pass < 2; ++pass) {
     const Eigen::VectorXd& x = pass == 0 ? q : dq;
     message += pass == 0 ? " at q = (" : ", dq = (";
-    for (int i = 0; i < std::min(n, kShown); ++i)
-      message += (i ? ", " : "") + model.configNames()[i] + "=" + formatNumber(x[i]);
+    for (int i = 0; i < std::min(n, kShown); ++i) {
+      if (i) message += ", ";
+      message += model.configNames()[i];
+      message += '=';
+      appendNumber(message, x[i]);
+    }
     if (n > kShown) message += ", … " + std::to_string(n - kShown) + " more";
     message += ")";
   }

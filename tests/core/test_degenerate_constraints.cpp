@@ -186,3 +186,76 @@ TEST_CASE("ModelBuilder: the size limits of scene files, checked in finalize", "
     }
   }
 }
+
+namespace {
+
+/// A planar chain of `links` rz joints in gravity −y, its tip held on a world point by the rows
+/// x, y and, with `zRow`, also z (which holds everywhere: its row of A is identically zero).
+Model pinnedPlanarChain(int links, bool zRow) {
+  ModelBuilder b;
+  std::string parent = "world";
+  for (int k = 0; k < links; ++k) {
+    const std::string index = std::to_string(k);
+    b.addFrame(std::string("j").append(index), parent, Transform::rz(std::string("q").append(index)));
+    parent = std::string("b").append(index);
+    b.addFrame(parent, std::string("j").append(index), Transform::ty(-0.3),
+               Mass{0.5, Eigen::Vector3d(1e-3, 1e-3, 2e-3).asDiagonal()});
+    b.addConfigForce(std::string("q").append(index), std::string("u").append(index));
+  }
+  b.addGravity(Eigen::Vector3d(0.0, -9.81, 0.0));
+  // The tip at q = (0.4, −0.3, 0.4, …) (its y sums the links' −0.3 cos of the running angle).
+  double angle = 0.0, x = 0.0, y = 0.0;
+  for (int k = 0; k < links; ++k) {
+    angle += k % 2 == 0 ? 0.4 : -0.3;
+    x += 0.3 * std::sin(angle);
+    y -= 0.3 * std::cos(angle);
+  }
+  Eigen::Matrix4d g = Eigen::Matrix4d::Identity();
+  g(0, 3) = x;
+  g(1, 3) = y;
+  b.addFrame("anchor", "world", Transform::constSE3(g));
+  for (int axis = 0; axis < (zRow ? 3 : 2); ++axis) b.addPointConstraint(parent, "anchor", axis);
+  return std::move(b).finalize();
+}
+
+}  // namespace
+
+// The z row of a point on a planar chain is zero at every state: it is reported (a degenerate
+// row, never ok) and dropped — q̈, A, B and the x, y rows of λ and ∂λ/∂x are those of the model
+// without the row (to rounding), its λ and ∂λ/∂x are 0 (the minimum-norm choice), and the rank
+// is 2. On the tree factor (5 joints) and the articulated one (12 joints).
+TEST_CASE("Degenerate rows: a zero row is dropped, the rest is the model without it", "[degenerate][redundant]") {
+  for (const int links : {5, 12}) {
+    INFO(links << " links");
+    const Model with = pinnedPlanarChain(links, true), without = pinnedPlanarChain(links, false);
+    const int n = with.nq();
+    Eigen::VectorXd q(n), dq(n), u(n);
+    for (int k = 0; k < n; ++k) {
+      q[k] = k % 2 == 0 ? 0.4 : -0.3;
+      u[k] = 0.1 * std::sin(1.0 + k);
+    }
+    q[0] = 0.4;
+    // A velocity along the constraint manifold: the tip still, from a null vector of the x, y rows.
+    Data dw(without), d3(with);
+    computeConstraints(without, dw, q, Eigen::VectorXd::Zero(n));
+    const Eigen::MatrixXd J = dw.constraintJacobian;
+    const Eigen::MatrixXd nullBasis = Eigen::FullPivLU<Eigen::MatrixXd>(J).kernel();
+    dq = nullBasis * Eigen::VectorXd::LinSpaced(nullBasis.cols(), 0.5, -0.5);
+    REQUIRE(computeLinearization(without, dw, q, dq, u).ok());
+    const DynamicsStatus st = computeLinearization(with, d3, q, dq, u);
+    INFO(st.message);
+    CHECK(st.code == DynamicsStatus::Code::kSingularConstraints);
+    CHECK_THAT(st.message, Contains("degenerate constraint row 2"));
+    CHECK(st.constraintRank == 2);
+    const auto close = [](const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+      return (a - b).cwiseAbs().maxCoeff() <= 1e-12 * std::max(1.0, b.cwiseAbs().maxCoeff());
+    };
+    CHECK(close(d3.qdd, dw.qdd));
+    CHECK(close(d3.A, dw.A));
+    CHECK(close(d3.B, dw.B));
+    CHECK(close(d3.lambda.head(2), dw.lambda));
+    CHECK(close(d3.dlambda_dx.topRows(2), dw.dlambda_dx));
+    CHECK(d3.lambda[2] == 0.0);
+    CHECK(d3.dlambda_dx.row(2).cwiseAbs().maxCoeff() == 0.0);
+  }
+}
