@@ -103,7 +103,7 @@ struct PointKind {
   /// The wrench tangents of the rows of one point pair together, whose force is f = Σ λ_r e_r on
   /// a and −f on b (e_r fixed: δf = 0): emit(joint, [0; δp × f]) for each body that moves.
   template <class Emit>
-  static void pairWrenchTangents(const Data& data, const Direction& dir, const Constraint& c, const Vector3d& f,
+  static inline __attribute__((always_inline)) void pairWrenchTangents(const Data& data, const Direction& dir, const Constraint& c, const Vector3d& f,
                                  Emit&& emit) {
     if (!dir.velocity && dir.moves(c.a.joint)) {
       const Vector3d dp = pointDisplacement(dir, c.a.joint, pointPosition(data, c.a));
