@@ -3,9 +3,11 @@
 //
 //   trellis_bench_closed [rounds] [runs] [target_ms]
 //
-// Each pair is a free model and the same model with constraint rows added (bench/models.hpp:
-// one tip row, the tip pinned, the planar tip pinned with its redundant z row, the hand's
-// fingertip). In each round the free and the constrained computation are timed alternately,
+// Each pair is a free model and the same model with constraint rows added: the synthetic chains
+// and hand of bench/models.hpp (one tip row, the tip pinned, the planar tip pinned with its
+// redundant z row, the hand's fingertip), the Panda of tests/data/robots with its tool centre
+// point pinned, and the hand scene (examples/scenes/hand.json, five pads on a ball) against the
+// same scene without its constraints. In each round the free and the constrained computation are timed alternately,
 // `runs` batches each (free, constrained, free, constrained, …; the batch size is calibrated once
 // so that a free batch takes about target_ms), and the round's figure is the ratio of the two
 // fastest batches: the minimum removes the batches another process interrupted, the alternation
@@ -18,14 +20,25 @@
 
 #include "trellis/core/data.hpp"
 #include "trellis/core/dynamics.hpp"
+#include "trellis/core/kinematics.hpp"
 #include "trellis/core/linearization.hpp"
+#include "trellis/core/scene.hpp"
+#include "trellis/core/urdf.hpp"
+
+#include <Eigen/QR>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace {
@@ -36,6 +49,7 @@ using trellis::bench::TipRows;
 
 struct Case {
   explicit Case(const ModelSpec& spec) : bm(trellis::bench::makeBenchModel(spec)), data(bm.model) {}
+  explicit Case(trellis::bench::BenchModel model) : bm(std::move(model)), data(bm.model) {}
   trellis::bench::BenchModel bm;
   trellis::Data data;
   /// One call; false when the status is not ok.
@@ -64,6 +78,59 @@ double quantile(std::vector<double> x, double p) {
   return i + 1 < x.size() ? x[i] * (1.0 - f) + x[i + 1] * f : x[i];
 }
 
+std::string readFile(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot read " + path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+/// The Panda arm (tests/data/robots/panda.urdf: 7 revolute joints and two prismatic fingers, a
+/// tree) free and with its tool centre point pinned (x, y, z on a world point placed where the
+/// point is at a seeded random q; q̇ projected onto the null space of the rows).
+std::pair<trellis::bench::BenchModel, trellis::bench::BenchModel> pandaPair() {
+  const std::string path = std::string(TRELLIS_ROBOTS_DIR) + "/panda.urdf";
+  trellis::UrdfImport robot = trellis::importUrdf(readFile(path), path);
+  trellis::Model free = robot.builder.finalize();
+  const int n = free.nq();
+  std::mt19937 rng(20100503u);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  Eigen::VectorXd q(n), dq(n), u(free.nu());
+  for (int i = 0; i < n; ++i) q[i] = free.configNames()[i].find("finger") != std::string::npos ? 0.02 : unit(rng);
+  for (int i = 0; i < n; ++i) dq[i] = unit(rng);
+  for (int i = 0; i < u.size(); ++i) u[i] = unit(rng);
+  trellis::Data fd(free);
+  trellis::computeKinematics(free, fd, q, dq);
+  Eigen::Matrix4d anchor = Eigen::Matrix4d::Identity();
+  anchor.topRightCorner<3, 1>() = fd.framePose[free.frameIndex("panda_hand_tcp")].translation();
+  robot.builder.addFrame("anchor", robot.rootLink, trellis::Transform::constSE3(anchor));
+  for (int axis = 0; axis < 3; ++axis) robot.builder.addPointConstraint("panda_hand_tcp", "anchor", axis);
+  trellis::Model closed = std::move(robot.builder).finalize();
+  if (closed.configNames() != free.configNames()) throw std::runtime_error("panda: the constraint changed the configuration");
+  trellis::Data cd(closed);
+  trellis::computeConstraints(closed, cd, q, dq);
+  const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(cd.constraintJacobian.transpose());
+  Eigen::VectorXd t = cod.householderQ().adjoint() * dq;
+  t.tail(n - cod.rank()).setZero();
+  dq -= cod.householderQ() * t;
+  return {trellis::bench::BenchModel{std::move(free), q, dq, u, "panda"},
+          trellis::bench::BenchModel{std::move(closed), q, dq, u, "panda"}};
+}
+
+/// The hand scene (examples/scenes/hand.json: 20 joints, 23 tendons, 15 rows pinning the five
+/// pads to a ball) at its stored state, and the same scene without its constraints.
+std::pair<trellis::bench::BenchModel, trellis::bench::BenchModel> handScenePair() {
+  const std::string path = std::string(TRELLIS_SCENES_DIR) + "/hand.json";
+  const std::string text = readFile(path);
+  nlohmann::json j = nlohmann::json::parse(text);
+  j.erase("constraints");
+  trellis::Scene closed = trellis::parseScene(text, path), free = trellis::parseScene(j.dump(), path);
+  if (closed.model.configNames() != free.model.configNames()) throw std::runtime_error("hand scene: configurations differ");
+  return {trellis::bench::BenchModel{std::move(free.model), closed.q, closed.dq, closed.u, "hand scene"},
+          trellis::bench::BenchModel{std::move(closed.model), closed.q, closed.dq, closed.u, "hand scene"}};
+}
+
 std::string name(const ModelSpec& spec) {
   std::string s = std::string(trellis::bench::kindName(spec.kind)) + " " + std::to_string(spec.links);
   if (spec.kind == ModelKind::kHandTree) s = "hand 20";
@@ -89,6 +156,7 @@ int main(int argc, char** argv) {
   }
   struct Pair {
     ModelSpec free, closed;
+    int real = 0;  ///< 1: the Panda pinned, 2: the hand scene (the specs are then unused)
   };
   const auto chain = [](ModelKind k, int n, TipRows t) {
     return Pair{{k, n, false, TipRows::kOne}, {k, n, true, t}};
@@ -100,19 +168,26 @@ int main(int argc, char** argv) {
       chain(ModelKind::kPlanarChain, 40, TipRows::kPinned),  chain(ModelKind::kPlanarChain, 40, TipRows::kRedundant),
       chain(ModelKind::kPlanarChain, 20, TipRows::kPinned),  chain(ModelKind::kPlanarChain, 20, TipRows::kRedundant),
       {{ModelKind::kHandTree, 20, false}, {ModelKind::kHandTree, 20, true}},
+      {{}, {}, 1},
+      {{}, {}, 2},
   };
   std::printf("# trellis_bench_closed: %d rounds x %d runs per side, batches of ~%.2f ms\n", rounds, runs, targetMs);
   std::printf("%-36s %-4s %10s %10s %8s %8s %8s\n", "constrained model", "alg", "free us", "closed us", "ratio",
               "q10", "q90");
   int status = 0;
   for (const Pair& p : pairs) {
+    const std::string label = p.real == 1 ? "panda tcp xyz" : p.real == 2 ? "hand scene (15 rows)" : name(p.closed);
     try {
-      Case fr(p.free), cl(p.closed);
+      std::pair<trellis::bench::BenchModel, trellis::bench::BenchModel> models =
+          p.real == 1 ? pandaPair() : p.real == 2 ? handScenePair()
+                                    : std::make_pair(trellis::bench::makeBenchModel(p.free), trellis::bench::makeBenchModel(p.closed));
+      Case fr(std::move(models.first)), cl(std::move(models.second));
       for (bool lin : {false, true}) {
-        // The model with the redundant row reports it (kRedundantConstraints): not ok, but exact.
-        if (!fr.call(lin) || (!cl.call(lin) && p.closed.tip != TipRows::kRedundant)) {
-          std::fprintf(stderr, "%s: %s did not return ok: %s\n", name(p.closed).c_str(), lin ? "lin" : "dyn",
-                       cl.data.status.message.c_str());
+        // The model with the redundant row reports it (a degenerate row): not ok, but exact.
+        const bool redundant = p.real == 0 && p.closed.tip == TipRows::kRedundant;
+        if (!fr.call(lin) || (!cl.call(lin) && !redundant)) {
+          std::fprintf(stderr, "%s: %s did not return ok: %s\n", label.c_str(), lin ? "lin" : "dyn",
+                       (fr.data.status.ok() ? cl : fr).data.status.message.c_str());
           status = 1;
           continue;
         }
@@ -135,13 +210,13 @@ int main(int argc, char** argv) {
           tf.push_back(bf);
           tc.push_back(bc);
         }
-        std::printf("%-36s %-4s %10.2f %10.2f %8.3f %8.3f %8.3f\n", name(p.closed).c_str(), lin ? "lin" : "dyn",
+        std::printf("%-36s %-4s %10.2f %10.2f %8.3f %8.3f %8.3f\n", label.c_str(), lin ? "lin" : "dyn",
                     1e6 * quantile(tf, 0.5), 1e6 * quantile(tc, 0.5), quantile(ratio, 0.5), quantile(ratio, 0.1),
                     quantile(ratio, 0.9));
         std::fflush(stdout);
       }
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "%s: %s\n", name(p.closed).c_str(), e.what());
+      std::fprintf(stderr, "%s: %s\n", label.c_str(), e.what());
       status = 1;
     }
   }
