@@ -11,6 +11,7 @@
 
 #include "trellis/core/linearization.hpp"
 #include "adjoint_tape.hpp"
+#include "internal.hpp"
 #include "hyper_dual.hpp"
 
 #include <Eigen/Cholesky>
@@ -268,44 +269,6 @@ struct ResidualPass {
   }
 };
 
-/// Cyclic Jacobi rotations: A (symmetric) → diagonal (its eigenvalues), V ← its eigenvectors, so
-/// that A_in = V diag(A_out) Vᵀ. Allocation-free (Eigen's tridiagonalization is not); for the
-/// small Schur complement of redundant constraint rows. Each rotation zeroes A(p, q) with
-/// θ = (A_qq − A_pp) / 2A_pq, t = sgn θ / (|θ| + √(θ² + 1)), c = 1/√(t² + 1), s = t c.
-void jacobiEigen(Eigen::MatrixXd& A, Eigen::MatrixXd& V) {
-  const Eigen::Index n = A.rows();
-  V.setIdentity();
-  const double scale = A.cwiseAbs().maxCoeff();
-  for (int sweep = 0; sweep < 60; ++sweep) {
-    double off = 0.0;
-    for (Eigen::Index p = 0; p < n; ++p)
-      for (Eigen::Index q = p + 1; q < n; ++q) off = std::max(off, std::abs(A(p, q)));
-    if (off <= 1e-17 * scale) return;
-    for (Eigen::Index p = 0; p < n; ++p)
-      for (Eigen::Index q = p + 1; q < n; ++q) {
-        if (A(p, q) == 0.0) continue;
-        const double theta = (A(q, q) - A(p, p)) / (2.0 * A(p, q));
-        const double t = (theta >= 0 ? 1.0 : -1.0) / (std::abs(theta) + std::sqrt(theta * theta + 1.0));
-        const double c = 1.0 / std::sqrt(t * t + 1.0), s = t * c;
-        for (Eigen::Index k = 0; k < n; ++k) {
-          const double akp = A(k, p), akq = A(k, q);
-          A(k, p) = c * akp - s * akq;
-          A(k, q) = s * akp + c * akq;
-        }
-        for (Eigen::Index k = 0; k < n; ++k) {
-          const double apk = A(p, k), aqk = A(q, k);
-          A(p, k) = c * apk - s * aqk;
-          A(q, k) = s * apk + c * aqk;
-        }
-        for (Eigen::Index k = 0; k < n; ++k) {
-          const double vkp = V(k, p), vkq = V(k, q);
-          V(k, p) = c * vkp - s * vkq;
-          V(k, q) = s * vkp + c * vkq;
-        }
-      }
-  }
-}
-
 namespace {
 
 /// One block of L = 4, 8 or 16 directions: the tangent and second-order reverse sweeps
@@ -387,15 +350,6 @@ struct SecondOrderImpl {
   Eigen::MatrixXd Y;                   ///< (n + nc)×N: ∂[q̈; λ]/∂z from the linearization
   Eigen::VectorXd z, y;                ///< the point: [q; q̇; u], [q̈; λ]
   std::vector<std::pair<int, int>> pairs;  ///< (a ≤ b), every pair but (u, u)
-  Eigen::LLT<Eigen::MatrixXd> massLLT;
-  Eigen::MatrixXd massInverseAt;       ///< n×nc: M⁻¹ Aᵀ
-  Eigen::MatrixXd schur;               ///< nc×nc: D A M⁻¹ Aᵀ D, D = diag(A M⁻¹ Aᵀ)^(−1/2)
-  Eigen::VectorXd schurScale;          ///< D
-  Eigen::LLT<Eigen::MatrixXd> schurLLT;
-  Eigen::MatrixXd schurDiagonalized, schurVectors;  ///< redundant rows: Ŝ = V diag V ᵀ (jacobiEigen)
-  Eigen::VectorXd schurEigenInverse;   ///< 1/eigenvalue, 0 for the dropped ones
-  Eigen::VectorXd schurWork;
-  bool schurPseudo = false;
   static constexpr int kChunk = 32;    ///< pairs per block solve of the tensors
   Eigen::MatrixXd G;                   ///< (n + nc)×kChunk: G[a, b] of a block of pairs
   Eigen::MatrixXd Xr, Xc;              ///< n×kChunk, nc×kChunk
@@ -415,9 +369,7 @@ struct SecondOrderImpl {
       : n(model.nq()),
         m(model.nu()),
         nc(model.nc()),
-        N(2 * model.nq() + model.nu()),
-        massLLT(model.nq()),
-        schurLLT(model.nc()) {
+        N(2 * model.nq() + model.nu()) {
     joints.resize(n);
     for (int i = 0; i < n; ++i) {
       const Joint& j = model.joints()[i];
@@ -439,16 +391,6 @@ struct SecondOrderImpl {
     for (int a = 0; a < N; ++a)
       for (int b = a; b < N; ++b)
         if (a < 2 * n) pairs.emplace_back(a, b);
-    // Factor once at the right size (Eigen's size constructors leave the info flag unset).
-    massLLT.compute(Eigen::MatrixXd::Identity(n, n));
-    schurLLT.compute(Eigen::MatrixXd::Identity(nc, nc));
-    schurDiagonalized = Eigen::MatrixXd::Zero(nc, nc);
-    schurVectors = Eigen::MatrixXd::Identity(nc, nc);
-    massInverseAt = Eigen::MatrixXd::Zero(n, nc);
-    schur = Eigen::MatrixXd::Zero(nc, nc);
-    schurScale = Eigen::VectorXd::Ones(nc);
-    schurEigenInverse = Eigen::VectorXd::Zero(nc);
-    schurWork = Eigen::VectorXd::Zero(nc);
     G = Eigen::MatrixXd::Zero(n + nc, kChunk);
     Xr = Eigen::MatrixXd::Zero(n, kChunk);
     Xc = Eigen::MatrixXd::Zero(nc, kChunk);
@@ -485,7 +427,10 @@ struct SecondOrderImpl {
     activeTape = nullptr;
   }
 
-  /// After computeLinearization: the point, Y, and the factors of M and A M⁻¹ Aᵀ.
+  /// After computeLinearization: the point and Y. The KKT solves below reuse the first-order
+  /// factorization that computeLinearization left in data (detail::solveKkt: the factor of M, M⁻¹Aᵀ
+  /// and the factor of A M⁻¹ Aᵀ, its zero and redundant rows handled as there), so that the
+  /// second derivatives solve exactly the system whose solution the first ones differentiate.
   void prepare(const Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq, const Eigen::VectorXd& u) {
     z.head(n) = q;
     z.segment(n, n) = dq;
@@ -496,48 +441,6 @@ struct SecondOrderImpl {
     Y.block(0, n, n, n) = data.dqdd_ddq;
     if (m > 0) Y.topRightCorner(n, m) = data.dqdd_du;
     if (nc > 0) Y.bottomRows(nc) = data.dlambda_dx;
-    massLLT.compute(data.M);
-    if (nc == 0) return;
-    // Column by column (vector solves and products never allocate; the blocked matrix ones may).
-    for (int r = 0; r < nc; ++r) {
-      auto x = massInverseAt.col(r);
-      x = data.constraintJacobian.row(r).transpose();
-      massLLT.solveInPlace(x);
-    }
-    for (int r = 0; r < nc; ++r) schur.col(r).noalias() = data.constraintJacobian * massInverseAt.col(r);
-    for (int r = 0; r < nc; ++r) schurScale[r] = schur(r, r) > 0 ? 1.0 / std::sqrt(schur(r, r)) : 1.0;
-    schur = schurScale.asDiagonal() * schur * schurScale.asDiagonal();
-    // Full-rank rows: Cholesky. Redundant rows (data.status, from the first-order solve): the
-    // pseudo-inverse of the row-normalized Ŝ, the minimum-norm choice the first-order path makes.
-    schurPseudo = data.status.code == DynamicsStatus::Code::kRedundantConstraints;
-    if (!schurPseudo) {
-      schurLLT.compute(schur);
-      schurPseudo = schurLLT.info() != Eigen::Success;
-    }
-    if (schurPseudo) {
-      schurDiagonalized = schur;
-      jacobiEigen(schurDiagonalized, schurVectors);
-      const auto ev = schurDiagonalized.diagonal();
-      const double tol = 1e-12 * std::max(1.0, ev.cwiseAbs().maxCoeff());  // Ŝ has unit diagonal
-      for (int k = 0; k < nc; ++k) schurEigenInverse[k] = ev[k] > tol ? 1.0 / ev[k] : 0.0;
-    }
-  }
-
-  /// x ← (A M⁻¹ Aᵀ)⁻¹ x (pseudo-inverse for redundant rows), column by column.
-  template <class Derived>
-  void solveSchur(Eigen::MatrixBase<Derived>& x) {
-    for (Eigen::Index j = 0; j < x.cols(); ++j) {
-      auto col = x.col(j);
-      col = schurScale.asDiagonal() * col;
-      if (!schurPseudo) {
-        schurLLT.solveInPlace(col);
-      } else {
-        schurWork.noalias() = schurVectors.transpose() * col;
-        schurWork.array() *= schurEigenInverse.array();
-        col.noalias() = schurVectors * schurWork;
-      }
-      col = schurScale.asDiagonal() * col;
-    }
   }
 
   /// G[e_a, e_b] (n + nc) into `out`: one hyper-dual residual pass with z + ε1 e_a + ε2 e_b and
@@ -629,25 +532,17 @@ DynamicsStatus computeSecondOrderTensors(const Model& model, Data& data, SecondO
       const auto [a, b] = s.pairs[static_cast<size_t>(first + j)];
       s.mixedSecondDerivative(model, a, b, [&](int i, double g) { s.G(i, j) = g; });
     }
-    // K [δq̈; δλ] = −G with K = [M −Aᵀ; A 0]: X = M⁻¹ G_r, δλ = (A M⁻¹ Aᵀ)⁻¹ (A X − G_c),
-    // δq̈ = −X + M⁻¹Aᵀ δλ.
-    // (Column by column: vector solves and products never allocate.)
+    // K [δq̈; δλ] = −G with K = [M −Aᵀ; A 0]: M δq̈ = −G_r + Aᵀ δλ, A δq̈ = −G_c, the first-order
+    // system of solveKkt (M X = R + Aᵀ Λ, A X = C) with R = −G_r, C = −G_c.
+    // (Column by column: the vector solves never allocate.)
     auto Xr = s.Xr.leftCols(cols);
     auto Xc = s.Xc.leftCols(cols);
-    Xr = s.G.topLeftCorner(n, cols);
-    for (int j = 0; j < cols; ++j) {
-      auto xr = Xr.col(j);
-      s.massLLT.solveInPlace(xr);
-      if (nc == 0) continue;
-      auto xc = Xc.col(j);
-      xc.noalias() = data.constraintJacobian * xr;
-      xc -= s.G.col(j).tail(nc);
-      s.solveSchur(xc);
-      xr.noalias() -= s.massInverseAt * xc;
-    }
+    Xr = -s.G.topLeftCorner(n, cols);
+    Xc = -s.G.block(n, 0, nc, cols);
+    for (int j = 0; j < cols; ++j) detail::solveKkt(model, data, Xr.col(j), Xc.col(j));
     for (int j = 0; j < cols; ++j) {
       const auto [a, b] = s.pairs[static_cast<size_t>(first + j)];
-      for (int i = 0; i < n; ++i) ws.qddHessian[i](a, b) = ws.qddHessian[i](b, a) = -Xr(i, j);
+      for (int i = 0; i < n; ++i) ws.qddHessian[i](a, b) = ws.qddHessian[i](b, a) = Xr(i, j);
       for (int k = 0; k < nc; ++k) ws.lambdaHessian[k](a, b) = ws.lambdaHessian[k](b, a) = Xc(k, j);
     }
   }
@@ -673,15 +568,13 @@ DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, Sec
   if (!usable(status)) return status;
   detail::SecondOrderImpl& s = *ws.impl_;
   s.prepare(data, q, dq, u);
-  // μ = K⁻ᵀ [w; ρ], Kᵀ = [M Aᵀ; −A 0]: μ_c = (A M⁻¹ Aᵀ)⁻¹ (ρ + A M⁻¹ w), μ_r = M⁻¹ w − M⁻¹Aᵀ μ_c.
+  // μ = K⁻ᵀ [w; ρ], Kᵀ = [M Aᵀ; −A 0]: M μ_r = w − Aᵀ μ_c, A μ_r = −ρ, solveKkt's system
+  // (M X = R + Aᵀ Λ, A X = C) with R = w, C = −ρ, X = μ_r, Λ = −μ_c.
   s.muR = w;
-  s.massLLT.solveInPlace(s.muR);
-  if (nc > 0) {
-    s.muC.noalias() = data.constraintJacobian * s.muR;
-    if (rho.size() == nc) s.muC += rho;
-    s.solveSchur(s.muC);
-    s.muR.noalias() -= s.massInverseAt * s.muC;
-  }
+  if (rho.size() == nc) s.muC = -rho;
+  else s.muC.setZero();
+  detail::solveKkt(model, data, s.muR, s.muC);
+  s.muC = -s.muC;
   // wᵀ δq̈ + ρᵀ δλ = −μᵀ G[a, b] = −∂²φ/∂z_a∂z_b with φ(z') = μᵀ F(z', y + Y (z' − z)): the
   // Hessian of one scalar, by forward-over-reverse on the recorded residual pass. One reverse
   // sweep gives φ's adjoints; per q or q̇ direction a, a tangent sweep (z' = z + s e_a, y + s Y e_a)

@@ -237,6 +237,24 @@ TEST_CASE("Second derivatives for every constraint kind", "[second_order][fd][co
     checkAtRandomStates(std::move(s).finish().model, 603);
   }
   SECTION("paper example (Sec. IV)") { checkAtRandomStates(paperPendulum().model, 604); }
+  SECTION("10-joint 3D chain with its tip pinned (the articulated factor, one group of three rows)") {
+    // The solves share computeLinearization's factorization, which takes the articulated factor
+    // for constrained chains of 8 joints or more (mass_factor.cpp).
+    SystemBuilder s;
+    std::string parent = "world";
+    for (int k = 0; k < 10; ++k) {
+      const std::string index = std::to_string(k), q = std::string("q").append(index);
+      const std::string joint = std::string("j").append(index), body = std::string("b").append(index);
+      s.frame(joint, parent, k % 3 == 0 ? Transform::rx(q) : k % 3 == 1 ? Transform::ry(q) : Transform::rz(q));
+      s.frame(body, joint, Transform::ty(-0.3), Mass{0.4, Eigen::Vector3d(2e-3, 1e-3, 3e-3).asDiagonal()});
+      parent = body;
+    }
+    s.frame("anchor", "world", Transform::ty(-1.5));
+    s.b.addGravity(Eigen::Vector3d(0.0, 0.0, -9.81));
+    s.b.addConfigForce("q0", "u0");
+    for (int axis = 0; axis < 3; ++axis) s.b.addPointConstraint(parent, "anchor", axis);
+    checkAtRandomStates(std::move(s).finish().model, 605);
+  }
 }
 
 TEST_CASE("Second derivatives for a system with every element", "[second_order][fd][constraints]") {
