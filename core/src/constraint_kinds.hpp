@@ -83,6 +83,35 @@ struct PointKind {
   static ConstraintEval fromDifferenceTangent(const Constraint& c, const PointKin& d) {
     return {d.p[c.axis], d.v[c.axis], d.a[c.axis]};
   }
+  /// The values of `count` consecutive rows on one point pair (rows[k] for k < count), from one
+  /// evaluation of the two points: out(k, eval).
+  template <class Out>
+  static void pairValues(const Data& data, const Constraint* rows, int count, Out&& out) {
+    const PointKin a = pointKin(data, rows[0].a), b = pointKin(data, rows[0].b);
+    const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
+    for (int k = 0; k < count; ++k) {
+      const int axis = rows[k].axis;
+      out(k, ConstraintEval{d[axis], dd[axis], ddd[axis]});
+    }
+  }
+  /// Rows firstRow … firstRow + count − 1 of A for `count` consecutive rows on one point pair:
+  /// A(r, j) = ±∂p/∂q_j along the row's axis, each ∂p/∂q_j formed once for all the rows, and
+  /// bound(j) += ‖∂p/∂q_j‖ (the rows' common natural scale, addConstraintJacobianRow's).
+  template <class Mat>
+  static void addPairJacobianRows(const Model& model, const Data& data, const Constraint* rows, int count, int firstRow,
+                                  Mat& A, Eigen::VectorXd& bound) {
+    auto& ws = detail::workspace(data);
+    for (int side = 0; side < 2; ++side) {
+      const BodyPoint& bp = side == 0 ? rows[0].a : rows[0].b;
+      const Vector3d p = pointPosition(data, bp);
+      const double sign = side == 0 ? 1.0 : -1.0;
+      for (int j = bp.joint; j != kWorld; j = model.joints()[j].parent) {
+        const Vector3d dp = lin(ws.S[j]) + ang(ws.S[j]).cross(p);
+        for (int k = 0; k < count; ++k) A(firstRow + k, j) += sign * dp[rows[k].axis];
+        bound[j] += dp.norm();
+      }
+    }
+  }
   static bool samePair(const Constraint& x, const Constraint& y) {
     return x.type == ConstraintType::kPoint && y.type == ConstraintType::kPoint && x.a.joint == y.a.joint &&
            x.b.joint == y.b.joint && x.a.local == y.a.local && x.b.local == y.b.local;

@@ -102,6 +102,24 @@ void evaluateConstraints(const Model& model, Data& data, Eigen::VectorXd* h, Eig
   const auto& cs = model.constraints();
   if (A) A->setZero();
   for (int r = 0; r < model.nc(); ++r) {
+    if (cs[r].type == ConstraintType::kPoint) {
+      // Consecutive rows on one point pair: the points and their gradients once for all rows.
+      int end = r + 1;
+      while (end < model.nc() && PointKind::samePair(cs[r], cs[end])) ++end;
+      PointKind::pairValues(data, &cs[r], end - r, [&](int k, const ConstraintEval& e) {
+        if (h) (*h)[r + k] = e.h;
+        if (hdot) (*hdot)[r + k] = e.hdot;
+        if (c) (*c)[r + k] = e.c;
+      });
+      if (A) {
+        ws.tmpN.setZero();
+        PointKind::addPairJacobianRows(model, data, &cs[r], end - r, r, *A, ws.tmpN);
+        const double scale = ws.tmpN.norm();
+        for (int k = r; k < end; ++k) ws.constraintScale[k] = scale;
+      }
+      r = end - 1;
+      continue;
+    }
     const ConstraintEval e = evaluateConstraint(data, cs[r]);
     if (h) (*h)[r] = e.h;
     if (hdot) (*hdot)[r] = e.hdot;
