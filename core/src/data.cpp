@@ -1,5 +1,6 @@
 // Sizes every result and every buffer of the workspace once (see data.hpp, data_workspace.hpp).
 #include "data_workspace.hpp"
+#include "mass_factor.hpp"
 
 namespace trellis {
 
@@ -42,6 +43,7 @@ DataWorkspace::DataWorkspace(const Model& model)
   articulatedU.assign(n, Vector6d::Zero());
   articulatedWork.assign(n, Vector6d::Zero());
   articulatedPivot = Eigen::VectorXd::Zero(n);
+  articulatedModel = suitsArticulatedFactor(model);
   articulatedColumns = Eigen::Matrix<double, 6, Eigen::Dynamic>::Zero(6, n);
   massInverseAt = Eigen::MatrixXd::Zero(n, nc);
   schur = Eigen::MatrixXd::Zero(nc, nc);

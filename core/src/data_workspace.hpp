@@ -60,6 +60,7 @@ struct DataWorkspace {
   Eigen::VectorXd articulatedPivot;                             ///< n: D_i = S_iᵀ IA_i S_i
   Eigen::Matrix<double, 6, Eigen::Dynamic> articulatedColumns;  ///< 6×n workspace of invertMass
   bool articulatedCurrent = false;                              ///< the articulated factor is the current one
+  bool articulatedModel = false;  ///< factorMass takes the articulated factor (suitsArticulatedFactor, fixed by the model)
 
   // ---- The KKT system [M Aᵀ; A 0] (dynamics.cpp) ----------------------------------------------
   Eigen::MatrixXd massInverseAt;         ///< n×nc: M⁻¹ Aᵀ

@@ -304,19 +304,27 @@ bool denseBlock(const Model& model, int bs, int be) {
 }
 }  // namespace
 
+/// factorArticulated, marking the factor current on success. (Out of line: inlined into
+/// factorMass it cost the tree factor's path ~60 instructions per call, Panda q̈.)
+static __attribute__((noinline)) int factorArticulatedCurrent(const Model& model, Data& data, double tol) {
+  const int bad = factorArticulated(model, data, tol);
+  detail::workspace(data).articulatedCurrent = bad < 0;
+  return bad;
+}
+
+bool suitsArticulatedFactor(const Model& model) {
+  int longest = 0;
+  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b)
+    longest = std::max(longest, model.topology().blockStart[b + 1] - model.topology().blockStart[b]);
+  return blocksAreChains(model) && longest >= kArticulatedChain;
+}
+
 int factorMass(const Model& model, Data& data, double tol) {
   auto& ws = detail::workspace(data);
   ws.massInverseCurrent = false;
   ws.articulatedCurrent = false;
-  int longest = 0;
-  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b)
-    longest = std::max(longest, model.topology().blockStart[b + 1] - model.topology().blockStart[b]);
-  if (blocksAreChains(model) && longest >= kArticulatedChain) {
-    // Chains: the articulated factor, O(n) against the dense factor's n³/6 (mass_factor.hpp).
-    const int bad = factorArticulated(model, data, tol);
-    ws.articulatedCurrent = bad < 0;
-    return bad;
-  }
+  // Long chains: the articulated factor, O(n) against the dense factor's n³/6 (mass_factor.hpp).
+  if (ws.articulatedModel) return factorArticulatedCurrent(model, data, tol);
   ws.massFactor = data.M;  // zero off the ancestor pattern, as M is
   for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
     const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];

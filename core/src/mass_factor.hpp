@@ -35,8 +35,12 @@ inline void forAncestorRuns(const ModelTopology& topo, int i, bool self, F&& f) 
   }
 }
 
-/// Factors M: the articulated factor (factorArticulated, ws.articulatedCurrent) when every block
-/// is a chain, else data.M into ws.massFactor. Returns −1 on success, else the joint whose pivot
+/// Whether factorMass takes the articulated factor for this model: every block a chain, the
+/// longest of at least 8 joints (decided once per model: ws.articulatedModel).
+bool suitsArticulatedFactor(const Model& model);
+
+/// Factors M: the articulated factor (factorArticulated, ws.articulatedCurrent) when
+/// ws.articulatedModel (suitsArticulatedFactor), else data.M into ws.massFactor. Returns −1 on success, else the joint whose pivot
 /// Dᵢ is not above tol (then the factor is unusable). Both factors have the same pivots Dᵢ.
 int factorMass(const Model& model, Data& data, double tol);
 
