@@ -68,7 +68,7 @@ struct DataWorkspace {
   Eigen::VectorXd constraintScale;       ///< nc: largest possible ‖A_r‖ (see factorizeKkt)
   Eigen::VectorXd schurScale;            ///< nc: D = 1 / constraintScale
   Eigen::LLT<Eigen::MatrixXd> schurLLT;
-  Eigen::VectorXd correctionWork;        ///< 2 nc n + nc² + nc: one row group's operands (correctForConstraints)
+  Eigen::VectorXd correctionWork;        ///< ≥ nc n + nc² + nc: one row group's operands (correctForConstraints)
   Eigen::LDLT<Eigen::MatrixXd> schurLDLT;  ///< pivoted, for rank-deficient Ŝ
   Eigen::VectorXd schurPivotInverse;     ///< 1/D_i of schurLDLT, 0 for the dropped pivots
   Eigen::MatrixXd schurNullBasis;        ///< nc×nc, first schurNullity columns: null space of Ŝ

@@ -40,8 +40,9 @@ inline void forAncestorRuns(const ModelTopology& topo, int i, bool self, F&& f) 
 bool suitsArticulatedFactor(const Model& model);
 
 /// Factors M: the articulated factor (factorArticulated, ws.articulatedCurrent) when
-/// ws.articulatedModel (suitsArticulatedFactor), else data.M into ws.massFactor. Returns −1 on success, else the joint whose pivot
-/// Dᵢ is not above tol (then the factor is unusable). Both factors have the same pivots Dᵢ.
+/// ws.articulatedModel (suitsArticulatedFactor), else data.M into ws.massFactor. Returns −1 on
+/// success, else the joint whose pivot Dᵢ is not above tol (then the factor is unusable). Both
+/// factors have the same pivots Dᵢ.
 int factorMass(const Model& model, Data& data, double tol);
 
 /// x ← M⁻¹ x on the coordinates [lo, hi), a union of whole blocks (x is 0 elsewhere or ignored).
@@ -71,8 +72,9 @@ void applyMassInverse(const Model& model, Data& data, const Eigen::Ref<const Eig
 // zero velocity): IA_i = I_i + Σ_children (IA_c − U_c U_cᵀ / D_c), U_i = IA_i S_i, D_i = S_iᵀ U_i.
 // The D_i are the pivots of M = Lᵀ D L above; the work is O(n) 6×6 products instead of the
 // factor's O(Σ dᵢ²) (M itself is still formed: data.M is a result of computeDynamics). Used for
-// every model whose trees are all chains, with or without constraints (factorMass; M⁻¹Aᵀ of the
-// constraint rows is then one articulated solve per row, inside the row's blocks).
+// every model whose trees are all chains without constraints (computeDynamics), and with
+// constraints when a chain has 8 joints or more (factorMass; M⁻¹Aᵀ of a group of constraint rows
+// is then one articulated sweep, solveMassColumns).
 
 /// Fills ws.articulatedU, articulatedPivot from the world inertias (needs updateJoints), for a
 /// model whose blocks are chains (blocksAreChains). Returns −1 on success, else the joint whose
