@@ -17,6 +17,7 @@
 #include <climits>
 #include <csignal>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <iostream>
 #include <sstream>
@@ -159,7 +160,15 @@ int main(int argc, char** argv) {
   distribution.rank = rank;
   distribution.size = size;
   distribution.agree = [size](const std::string& error) { return joinFailures(allTexts(error, size)); };
-  distribution.gather = [rank, size](std::vector<FunnelSample> local, const std::string& error) {
+  // TRELLIS_MPI_FAIL_RANK=r (tests only): rank r reports its samples as failed to run, to check
+  // that one rank's failure fails the whole run with nothing written.
+  const char* injected = std::getenv("TRELLIS_MPI_FAIL_RANK");
+  const int failRank = injected ? std::atoi(injected) : -1;
+  distribution.gather = [rank, size, failRank](std::vector<FunnelSample> local, std::string error) {
+    if (rank == failRank && error.empty() && !local.empty()) {
+      error = "samples [" + std::to_string(local.front().index) + ", " + std::to_string(local.back().index + 1) +
+              "): injected failure (TRELLIS_MPI_FAIL_RANK=" + std::to_string(failRank) + ")";
+    }
     // The errors first (every rank learns whether the run failed), then the records to rank 0.
     const std::string failures = joinFailures(allTexts(error, size));
     if (!failures.empty()) throw std::runtime_error("funnel: a process could not run its samples: " + failures);
