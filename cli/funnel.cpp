@@ -79,6 +79,8 @@ options:
   --rate HZ              sampled feedback (as `trellis simulate --rate`)
   --umin U, --umax U     input bounds: one number or a comma list of m (default unbounded)
   --no-project           do not project onto the constraints
+  --drift-tolerance D    constraint drift tolerated before projecting, and after it (a start whose
+                         drift stays above D fails); default 10 (atol + rtol)
   --rtol X, --atol X     CVODES tolerances (defaults 1e-8, 1e-10)
   --method M             adams (default) or bdf
   --max-steps N          integrator steps per closed loop (default 500000)
@@ -203,9 +205,12 @@ std::string funnelSvg(const FunnelProblem& problem, const FunnelResult& r, const
     for (Eigen::Index k = 0; k < reference.size(); ++k) out << X(reference.times()(k)) << "," << Y(reference.states()(i, k)) << " ";
     out << "\"/>\n";
     // At most 2000 starts per panel (evenly by index) keep the file small.
+    // Successes first, failures over them (the failures are what a reader looks for).
     const std::size_t stride = std::max<std::size_t>(1, r.samples.size() / 2000);
+    for (int pass = 0; pass < 2; ++pass)
     for (std::size_t k = 0; k < r.samples.size(); k += stride) {
       const FunnelSample& s = r.samples[k];
+      if (s.success != (pass == 0)) continue;
       out << "<circle cx=\"" << X(r.startTimes[static_cast<std::size_t>(s.start)]) + 6 << "\" cy=\""
           << Y(centre[static_cast<std::size_t>(s.start)] + s.dx0(i)) << "\" r=\"1.5\" fill=\"" << (s.success ? "#31a354" : "#de2d26")
           << "\"/>\n";
@@ -250,7 +255,7 @@ int runFunnel(std::span<const std::string> args, std::ostream& out) {
                    OptionSpec{.valued = {"--trajectory", "--gains", "--cost-to-go", "--out", "--levels", "--level-range",
                                          "--samples", "--seed", "--threads", "--start-knots", "--goal", "--confidence",
                                          "--rate", "--umin", "--umax", "--rtol", "--atol", "--method", "--max-steps",
-                                         "--samples-out", "--plot", "--plot-states"},
+                                         "--samples-out", "--plot", "--plot-states", "--drift-tolerance"},
                               .flags = {"--no-project", "--json"},
                               .repeatable = {}});
     const ParsedOptions& options = *parsed;
@@ -299,6 +304,9 @@ int runFunnel(std::span<const std::string> args, std::ostream& out) {
       }
     }
     if (options.flag("--no-project")) simulation.constraints = ConstraintHandling::kNone;
+    if (auto v = options.value("--drift-tolerance")) {
+      simulation.driftTolerance = options.positiveNumber("--drift-tolerance", *v, true);
+    }
 
     loaded.emplace(loadSceneArgument(scenePath));
     const Model& model = loaded->scene.model;
@@ -420,6 +428,7 @@ int runFunnel(std::span<const std::string> args, std::ostream& out) {
     if (auto v = parsed->value("--rtol")) reproduce += " --rtol " + *v;
     if (auto v = parsed->value("--atol")) reproduce += " --atol " + *v;
     if (auto v = parsed->value("--max-steps")) reproduce += " --max-steps " + *v;
+    if (parsed->has("--drift-tolerance")) reproduce += " (simulate has no --drift-tolerance: its default applies)";
     if (parsed->flag("--no-project")) reproduce += " --no-project";
   }
   if (parsed->flag("--json")) {
