@@ -49,7 +49,8 @@ the input clipped to [--umin, --umax] and the constraints projected. A start SUC
 simulation is ok and V(T, x(T) - x_ref(T)) <= --goal (default: the smallest tested level).
 
 Sample g = (start·L + level)·N + i draws its direction from a generator keyed by (--seed, g) only:
-the output is bit-identical for any --threads and any number of MPI ranks.
+the output is bit-identical for any --threads and any number of MPI ranks (rank r of K runs the
+samples r, r + K, r + 2K, ...).
 
 Output (--out), a CSV:
   # trellis funnel: samples=N seed=S goal_level=... confidence=0.95 failure_bound=... feedback=...
@@ -249,7 +250,7 @@ int runFunnel(std::span<const std::string> args, std::ostream& out) {
   std::string scenePath, trajectoryPath, gainsPath, outPath;
   std::vector<std::string> names;
   std::vector<int> plotStates;
-  long begin = 0, end = 0;
+  long total = 0;
   try {
     parsed.emplace("funnel", args,
                    OptionSpec{.valued = {"--trajectory", "--gains", "--cost-to-go", "--out", "--levels", "--level-range",
@@ -371,16 +372,11 @@ int runFunnel(std::span<const std::string> args, std::ostream& out) {
       throw UsageError(e.what());
     }
     problem.emplace(model, *reference, *gains, *costToGo, funnel);
-    const long total = problem->sampleCount();
+    total = problem->sampleCount();
     if (total < ranks) {
       throw UsageError("funnel: " + std::to_string(ranks) + " MPI ranks for " + std::to_string(total) +
                        " samples: every rank needs at least one (use at most " + std::to_string(total) + " ranks)");
     }
-    // Rank r runs a contiguous block in index order: q = total / K samples each, the first
-    // total mod K ranks one more (no product that could overflow).
-    const long q = total / ranks, extra = total % ranks;
-    begin = rank * q + std::min<long>(rank, extra);
-    end = begin + q + (rank < extra ? 1 : 0);
   } catch (const std::exception& e) {
     if (distribution) distribution->agree(std::string(e.what()));
     throw;
@@ -396,9 +392,11 @@ int runFunnel(std::span<const std::string> args, std::ostream& out) {
     std::vector<FunnelSample> local;
     std::string error;
     try {
-      local = problem->run(begin, end);
+      // Rank r runs the samples r, r + K, r + 2K, ...: the costly high levels are shared out.
+      local = problem->run(rank, total, ranks);
     } catch (const std::exception& e) {
-      error = "samples [" + std::to_string(begin) + ", " + std::to_string(end) + "): " + e.what();
+      error = "samples " + std::to_string(rank) + ", " + std::to_string(rank + ranks) + ", ... (every " +
+              std::to_string(ranks) + "th below " + std::to_string(total) + "): " + e.what();
     }
     samples = distribution->gather(std::move(local), error);
     if (rank != 0) return 0;  // rank 0 writes

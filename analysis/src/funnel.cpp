@@ -228,12 +228,12 @@ FunnelSample FunnelProblem::run(long g) const {
   return sample;
 }
 
-std::vector<FunnelSample> FunnelProblem::run(long begin, long end) const {
-  if (begin < 0 || end > count_ || begin > end) {
-    throw std::out_of_range("funnel: sample range [" + std::to_string(begin) + ", " + std::to_string(end) +
-                            ") is outside [0, " + std::to_string(count_) + ")");
+std::vector<FunnelSample> FunnelProblem::run(long first, long end, long stride) const {
+  if (first < 0 || end > count_ || first > end || stride < 1) {
+    throw std::out_of_range("funnel: samples " + std::to_string(first) + ", +" + std::to_string(stride) + ", ... below " +
+                            std::to_string(end) + " are outside [0, " + std::to_string(count_) + ")");
   }
-  const long count = end - begin;
+  const long count = (end - first + stride - 1) / stride;
   std::vector<FunnelSample> out(static_cast<std::size_t>(count));
   const int hardware = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   const int workers = static_cast<int>(std::min<long>(options_.threads > 0 ? options_.threads : hardware, std::max<long>(count, 1)));
@@ -245,10 +245,10 @@ std::vector<FunnelSample> FunnelProblem::run(long begin, long end) const {
   auto work = [&](int w) {
     long k = -1;
     try {
-      for (k = next++; k < count; k = next++) out[static_cast<std::size_t>(k)] = run(begin + k);
+      for (k = next++; k < count; k = next++) out[static_cast<std::size_t>(k)] = run(first + k * stride);
     } catch (...) {
       errors[static_cast<std::size_t>(w)] = std::current_exception();
-      failedAt[static_cast<std::size_t>(w)] = begin + k;
+      failedAt[static_cast<std::size_t>(w)] = first + k * stride;
       next = count;
     }
   };

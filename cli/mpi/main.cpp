@@ -4,7 +4,7 @@
 //
 // Every rank parses the same command line and reads the same files; the ranks agree that the
 // set-up succeeded everywhere (MPI_Allgather of the error texts), each runs its contiguous block
-// of sample indices on its threads, and rank 0 gathers the blocks (MPI_Gatherv of a flat byte
+// of sample indices (r, r + K, ...) on its threads, and rank 0 gathers them (MPI_Gatherv of a flat byte
 // record per sample), summarizes and writes. A rank whose samples could not be run sends its
 // error instead: rank 0 then fails naming the rank, its samples and the cause, and writes nothing.
 #include "../command.hpp"
@@ -14,6 +14,7 @@
 
 #include <mpi.h>
 
+#include <algorithm>
 #include <climits>
 #include <csignal>
 #include <cstdint>
@@ -113,9 +114,9 @@ std::string oneLine(std::string text) {
 
 constexpr std::string_view kUsage = R"(usage: mpirun -n K trellis-mpi funnel SCENE.json [the options of 'trellis funnel']
 
-The `funnel` command of trellis over K MPI processes: the samples are split by index in K
-contiguous blocks, every sample's random stream depends only on --seed and its index, and rank 0
-gathers and writes, so the output is bit-identical to `trellis funnel` and to any other K and
+The `funnel` command of trellis over K MPI processes: the samples are split by index (rank r
+runs r, r + K, r + 2K, ...), every sample's random stream depends only on --seed and its index, and rank 0
+gathers and writes (rank r runs the samples r, r + K, ...), so the output is bit-identical to `trellis funnel` and to any other K and
 --threads. Each rank runs its block on --threads threads (default: every hardware thread; with
 several ranks per machine give --threads = cores / ranks per machine). See docs/funnels.md.
 )";
@@ -166,8 +167,8 @@ int main(int argc, char** argv) {
   const int failRank = injected ? std::atoi(injected) : -1;
   distribution.gather = [rank, size, failRank](std::vector<FunnelSample> local, std::string error) {
     if (rank == failRank && error.empty() && !local.empty()) {
-      error = "samples [" + std::to_string(local.front().index) + ", " + std::to_string(local.back().index + 1) +
-              "): injected failure (TRELLIS_MPI_FAIL_RANK=" + std::to_string(failRank) + ")";
+      error = "samples " + std::to_string(local.front().index) + ", " + std::to_string(local.front().index + size) +
+              ", ...: injected failure (TRELLIS_MPI_FAIL_RANK=" + std::to_string(failRank) + ")";
     }
     // The errors first (every rank learns whether the run failed), then the records to rank 0.
     const std::string failures = joinFailures(allTexts(error, size));
@@ -191,7 +192,10 @@ int main(int argc, char** argv) {
     std::string all(rank == 0 ? static_cast<std::size_t>(total) : 0, '\0');
     MPI_Gatherv(bytes.data(), length, MPI_CHAR, all.data(), lengths.data(), offsets.data(), MPI_CHAR, 0, MPI_COMM_WORLD);
     std::vector<FunnelSample> samples;
-    if (rank == 0) unpack(all.data(), all.data() + all.size(), samples);
+    if (rank == 0) {
+      unpack(all.data(), all.data() + all.size(), samples);
+      std::sort(samples.begin(), samples.end(), [](const FunnelSample& a, const FunnelSample& b) { return a.index < b.index; });
+    }
     return samples;
   };
   trellis::cli::setFunnelDistribution(&distribution);

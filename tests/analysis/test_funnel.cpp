@@ -158,11 +158,17 @@ TEST_CASE("funnel: the same samples for 1 and 2 threads and for any split of the
   REQUIRE(one.ok());
   options.threads = 2;
   const FunnelProblem problem(setup.model, setup.reference, setup.gains, setup.costToGo, options);
-  // Three uneven blocks, as three processes would run them, then summarized together.
-  std::vector<FunnelSample> joined;
-  for (auto [b, e] : {std::pair<long, long>{0, 5}, {5, 6}, {6, 16}}) {
-    for (FunnelSample& s : problem.run(b, e)) joined.push_back(std::move(s));
+  // As three processes run them (every third index from 0, 1, 2), then sorted and summarized;
+  // and as uneven blocks.
+  std::vector<FunnelSample> joined, blocks;
+  for (long r = 0; r < 3; ++r) {
+    for (FunnelSample& s : problem.run(r, 16, 3)) joined.push_back(std::move(s));
   }
+  std::sort(joined.begin(), joined.end(), [](const FunnelSample& a, const FunnelSample& b) { return a.index < b.index; });
+  for (auto [b, e] : {std::pair<long, long>{0, 5}, {5, 6}, {6, 16}}) {
+    for (FunnelSample& s : problem.run(b, e)) blocks.push_back(std::move(s));
+  }
+  for (std::size_t k = 0; k < blocks.size(); ++k) REQUIRE(sameSample(blocks[k], joined[k]));
   const FunnelResult split = problem.summarize(std::move(joined));
   REQUIRE(split.samples.size() == one.samples.size());
   for (std::size_t k = 0; k < one.samples.size(); ++k) REQUIRE(sameSample(one.samples[k], split.samples[k]));

@@ -149,9 +149,12 @@ class FunnelProblem {
   const Trajectory& reference(int start) const { return references_.at(static_cast<std::size_t>(start)); }
   /// Simulates sample g (thread-safe: only const state is shared).
   FunnelSample run(long g) const;
-  /// Simulates samples [begin, end) on options().threads threads; the result by index. An
-  /// exception in a worker stops the others and is rethrown, prefixed with the sample's index.
-  std::vector<FunnelSample> run(long begin, long end) const;
+  /// Simulates the samples first, first + stride, … below end on options().threads threads; the
+  /// result in that order. An exception in a worker stops the others and is rethrown (as
+  /// std::runtime_error) prefixed with the sample's index. Processes that split the indices by
+  /// stride (first = rank, stride = ranks) share the expensive samples: their cost grows with the
+  /// level, and the levels are contiguous in the index.
+  std::vector<FunnelSample> run(long first, long end, long stride = 1) const;
   /// The estimate from all samples (count of them, by index: from run(0, count) or gathered from
   /// several processes). Throws std::invalid_argument when samples are missing or out of order.
   FunnelResult summarize(std::vector<FunnelSample> samples) const;
