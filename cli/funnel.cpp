@@ -159,7 +159,7 @@ std::string samplesTable(const FunnelResult& r, const std::vector<std::string>& 
 /// one), and the sampled starts at their start time (green: succeeded, red: failed).
 std::string funnelSvg(const FunnelProblem& problem, const FunnelResult& r, const Trajectory& reference,
                       const std::vector<int>& states, const std::vector<std::string>& names) {
-  const double width = 720, panel = 220, left = 70, right = 20, top = 30;
+  const double width = 760, panel = 220, left = 130, right = 20, top = 30;
   const double t0 = reference.startTime(), T = reference.endTime();
   std::ostringstream out;
   out << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << width << "\" height=\""
@@ -186,7 +186,7 @@ std::string funnelSvg(const FunnelProblem& problem, const FunnelResult& r, const
     const auto Y = [&](double v) { return y0 + 10 + h * (1.0 - (v - lo) / (hi - lo)); };
     out << "<rect x=\"" << left << "\" y=\"" << y0 + 10 << "\" width=\"" << width - left - right << "\" height=\"" << h
         << "\" fill=\"none\" stroke=\"#888\"/>\n";
-    out << "<text x=\"4\" y=\"" << y0 + 10 + h / 2 << "\">" << names[static_cast<std::size_t>(i)] << "</text>\n";
+    out << "<text x=\"4\" y=\"" << y0 + 10 + h / 2 + 16 << "\">" << names[static_cast<std::size_t>(i)] << "</text>\n";
     out << "<text x=\"" << left - 4 << "\" y=\"" << y0 + 20 << "\" text-anchor=\"end\">" << formatNumber(hi, 3) << "</text>\n";
     out << "<text x=\"" << left - 4 << "\" y=\"" << y0 + 10 + h << "\" text-anchor=\"end\">" << formatNumber(lo, 3) << "</text>\n";
     out << "<text x=\"" << left << "\" y=\"" << y0 + h + 26 << "\">t = " << formatNumber(t0, 4) << "</text>\n";
