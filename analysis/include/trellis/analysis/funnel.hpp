@@ -68,7 +68,7 @@ struct FunnelOptions {
 /// data (FunnelSample), not a failed run.
 enum class FunnelCode {
   kOk,
-  kSampleError,  ///< a sample threw; status.index is its global index, the message says why
+  kSampleError,  ///< a sample threw; the message names its global index and the cause
 };
 
 /// Names: ok, sample_error.
@@ -101,7 +101,7 @@ struct FunnelCell {
 /// The funnel's estimate: counts per cell, ρ(t_s), the worst failing start per start time, and
 /// every sample (sorted by index).
 struct FunnelResult {
-  Status<FunnelCode> status;     ///< ok, or kSampleError (index: the sample)
+  Status<FunnelCode> status;     ///< ok, or kSampleError (the message names the sample)
   std::vector<double> startTimes;  ///< t_s
   std::vector<double> levels;      ///< ρ_j
   double goalLevel = 0.0;          ///< ρ_f used
@@ -128,7 +128,8 @@ long funnelSampleCount(const FunnelOptions& options);
 
 /// What the samples need, prepared once and shared read-only by every worker: the options
 /// checked against the model, the reference, the gains and S; one reference per start time (the
-/// knots from t_s on); S(t_s)'s range factor U_r Λ_r^{-1/2}; S(T).
+/// knots from t_s on); S(t_s)'s range factor U_r Λ_r^{-1/2}; S(T). It keeps references to the
+/// model, the gains and the cost-to-go (they must outlive it) and copies the reference.
 class FunnelProblem {
  public:
   /// Throws std::invalid_argument (options, sizes, a start time that is not a knot, sampled
