@@ -178,7 +178,7 @@ CostToGo CostToGo::readCsv(std::istream& in, const std::string& source) {
     if (header.empty()) {
       if (nx < 1) throw TrajectoryError(at + ": expected the metadata line '# trellis cost-to-go: nx=<nx>' before the header");
       header = splitCommas(line);
-      const std::size_t entries = static_cast<std::size_t>(nx) * static_cast<std::size_t>(nx + 1) / 2;
+      const std::size_t entries = static_cast<std::size_t>(nx) * (static_cast<std::size_t>(nx) + 1) / 2;
       if (header.size() != entries + 1) {
         throw TrajectoryError(at + " (header): " + std::to_string(header.size() - 1) + " columns after t, expected nx(nx+1)/2 = " +
                               std::to_string(entries) + " for nx=" + std::to_string(nx));
