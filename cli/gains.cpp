@@ -7,6 +7,7 @@
 #include "model_questions.hpp"
 #include "weights.hpp"
 
+#include "trellis/analysis/cost_to_go.hpp"
 #include "trellis/control/controllability.hpp"
 #include "trellis/core/gain_schedule.hpp"
 #include "trellis/control/manifold_lqr.hpp"
@@ -93,6 +94,8 @@ options:
                       trajectory's knots). This only SAMPLES the continuous K(t): it does not
                       make gains for a controller running at 1/DT; use --rate for that
   --rate HZ           zero-order-hold gains for a controller sampling at HZ (see above)
+  --cost-to-go FILE   also write the Riccati solution S(t) at the gains' times (CSV, the upper
+                      triangle; `trellis funnel` measures its level sets V = dx^T S dx)
   --json              print the summary as one JSON object
   --rtol X, --atol X  CVODES tolerances on S (defaults 1e-8, 1e-10)
   --method M          bdf (default), adams (non-stiff problems only) or factored (Cholesky
@@ -146,7 +149,7 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   const ParsedOptions options(
       "gains", args,
       {.valued = {"--trajectory", "--hold", "--state", "--out", "--Q", "--R", "--Qf", "--dt", "--rate", "--rtol", "--atol", "--method",
-                  "--max-steps"},
+                  "--max-steps", "--cost-to-go"},
        .flags = {"--json"},
        .repeatable = {}});
   const std::string scenePath = options.singlePositional("scene file");
@@ -169,6 +172,7 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
     for (const char* option : {"--state", "--Q", "--R", "--Qf"})
       if (auto v = options.value(option)) inputs.emplace_back(option, *v);
     checkOutputIsNotInput("gains", outPath, inputs);
+    if (auto v = options.value("--cost-to-go")) checkOutputIsNotInput("gains", *v, inputs);
   }
 
   TvlqrOptions tvlqr;
@@ -234,6 +238,11 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   const TvlqrSolution solution = solveTvlqr(model, trajectory, weights, tvlqr);
   if (!solution.ok()) throw std::runtime_error("gains: " + solution.status.describe());
   solution.gains.writeCsvFile(outPath);
+  if (auto v = options.value("--cost-to-go")) {
+    CostToGo costToGo(solution.gains.times(), solution.S);
+    costToGo.setStateNames(GainSchedule::stateNames(model.configNames()));
+    costToGo.writeCsvFile(*v);
+  }
 
   // The summary, after the file is written.
   const bool json = options.flag("--json");

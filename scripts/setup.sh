@@ -12,6 +12,7 @@ packages=(
   nlohmann-json3-dev     # scene files (JSON)
   libtinyxml2-dev        # URDF import (XML with line numbers)
   libsundials-dev        # CVODES: Riccati / trajectory integration (control, planned)
+  openmpi-bin libopenmpi-dev  # trellis-mpi: `mpirun trellis-mpi funnel` (docs/funnels.md)
   coinor-libipopt-dev    # Ipopt: trajectory optimization (optimization, planned)
   catch2                 # Catch2 2.13: the test suite
   libbenchmark-dev       # Google Benchmark: bench/

@@ -185,6 +185,7 @@ void bindLqr(py::module_& m);             // bind_lqr.cpp
 void bindControllability(py::module_& m); // bind_controllability.cpp
 void bindTvlqr(py::module_& m);           // bind_tvlqr.cpp
 void bindSimulation(py::module_& m);      // bind_simulation.cpp
+void bindFunnel(py::module_& m);          // bind_funnel.cpp
 void bindOptimization(py::module_& m);
 void bindHand(py::module_& m);
 void bindSecondOrder(py::module_& m);  // bind_second_order.cpp

@@ -200,6 +200,7 @@ PYBIND11_MODULE(_trellis_mech, m) {
   tp::bindControllability(m);
   tp::bindTvlqr(m);
   tp::bindSimulation(m);
+  tp::bindFunnel(m);
   tp::bindOptimization(m);
   tp::bindView(m);
 #ifdef TRELLIS_PYTHON_HAND
