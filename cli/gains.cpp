@@ -69,11 +69,28 @@ over the interval with the input held (which gives per-sample weights with a cro
 discrete Riccati recursion gives K_k at the sample times. The file's metadata line says
 "sample_rate_hz=HZ": `trellis simulate` applies such gains only with the same --rate.
 
+What the sampled controller applies: at t_k it measures x(t_k) and holds
+  u_k = uff_k - K_k (x(t_k) - x_ref(t_k))   until t_{k+1}.
+K_k is exact for the hold; so is the feed-forward uff_k (--feedforward consistent, the default):
+the held input that carries x_ref(t_k) to x_ref(t_{k+1}) through the exact nonlinear dynamics
+as closely as one held input can, in the metric of the cost-to-go S_{k+1} (Gauss-Newton from
+the interval average of u_ref, with the hold's exact input matrix as the Jacobian; on the
+constraint manifold when there are constraints). u_ref(t_k) held instead lets the unperturbed
+loop leave the reference by O(h^2 |u_ref'|) per interval, which the feedback then chases (at
+100 Hz up to 10x the tracking error of continuous feedback). The summary gives the largest defect
+left at the next sample, sqrt(d^T S_{k+1} d), beside that of u_ref(t_k) held: what remains is
+what one held input cannot do (m < 2n), including the reference's own collocation error.
+Written as columns uff[<input>] after the gains. --feedforward average writes the interval
+average of u_ref; --feedforward reference writes none (the controller then applies u_ref(t_k),
+as files from before this option do).
+
 Output (--out): a CSV whose first line is metadata ("# trellis gain schedule: m=.. nx=.. " then
-"continuous" or "sample_rate_hz=HZ"), then the header t,K_<input>_<state>,... (K row-major: the
-inputs in order, each with the states [q; dq] in order, e.g. K_push_x, K_push_dtheta), one row per
-output time: the trajectory's knots, or with --dt a uniform grid from t0 (T included), or with
---rate the sample times (T included, repeating the last sample's gain).
+"continuous" or "sample_rate_hz=HZ"), then the header t,K[<input>|<state>],...[,uff[<input>],...]
+(K row-major: the inputs in order, each with the states [q; dq] in order, e.g. K[push|x],
+K[push|dtheta]; a column splits at its first '|', which input names may not contain; files with
+the older K_<input>_<state> columns are still read), one row per output time: the trajectory's
+knots, or with --dt a uniform grid from t0 (T included), or with --rate the sample times (T
+included, repeating the last sample's gain and feed-forward).
 `trellis simulate --gains` reads it and checks the names against the scene. Then a summary on standard output: the rows written, the
 Riccati solve (steps, right-hand-side evaluations, time taken), the smallest and largest
 eigenvalue of S over the solver's steps (of Sr on the tangent space for a constrained scene),
@@ -93,6 +110,7 @@ options:
                       trajectory's knots). This only SAMPLES the continuous K(t): it does not
                       make gains for a controller running at 1/DT; use --rate for that
   --rate HZ           zero-order-hold gains for a controller sampling at HZ (see above)
+  --feedforward F     with --rate: consistent (default), average or reference (see above)
   --json              print the summary as one JSON object
   --rtol X, --atol X  CVODES tolerances on S (defaults 1e-8, 1e-10)
   --method M          bdf (default), adams (non-stiff problems only) or factored (Cholesky
@@ -146,7 +164,7 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   const ParsedOptions options(
       "gains", args,
       {.valued = {"--trajectory", "--hold", "--state", "--out", "--Q", "--R", "--Qf", "--dt", "--rate", "--rtol", "--atol", "--method",
-                  "--max-steps"},
+                  "--max-steps", "--feedforward"},
        .flags = {"--json"},
        .repeatable = {}});
   const std::string scenePath = options.singlePositional("scene file");
@@ -193,6 +211,14 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   }
   if (options.has("--rate") && options.has("--method")) {
     throw UsageError("gains: --method applies to continuous gains only (--rate uses the exact discretization)");
+  }
+  if (auto v = options.value("--feedforward")) {
+    if (!options.has("--rate")) throw UsageError("gains: --feedforward applies to sampled gains only (--rate)");
+    try {
+      tvlqr.feedforward = parseEnum<SampledFeedforward>(*v, "--feedforward");
+    } catch (const std::invalid_argument& e) {
+      throw UsageError(std::string("gains: ") + e.what());
+    }
   }
   if (options.has("--rate")) {
     if (auto v = options.value("--rtol")) tvlqr.sampled.rtol = options.relativeTolerance("--rtol", *v);

@@ -34,13 +34,20 @@ along the reference trajectory (x_ref: cubic Hermite through its knots; u_ref li
 knots, or cubic Hermite when the file has rate_<input> columns; K linear between gain times, or
 cubic with interpolation=cubic in its metadata line), from x(t0) = x_ref(t0) + dx0, over the reference's time span,
 with SUNDIALS CVODES. GAINS.csv is a gain schedule as `trellis gains` writes it (header
-t,K_<input>_<state>, checked against the scene's names; K is m x 2n and must cover the reference's
-time span). sat clips u to [--umin, --umax].
+t,K[<input>|<state>],... or the older t,K_<input>_<state>,..., checked against the scene's names;
+K is m x 2n and must cover the reference's time span). sat clips u to [--umin, --umax].
 
 Sampled gains: a file from `trellis gains --rate HZ` holds zero-order-hold gains for a controller
-sampling at HZ; it is applied only with the same --rate (u = the sample's value, held until the
-next sample). Running it continuously or at another rate is refused. Continuous gains with --rate
-are sampled (a warning on standard error says so: they were not designed for that rate).
+sampling at HZ; it is applied only with the same --rate. What the sampled controller applies: at
+each sample t_k = t0 + k/HZ it measures x(t_k) and holds, until t_{k+1},
+  u_k = sat( uff_k - K_k (x(t_k) - x_ref(t_k)) ),
+uff_k the file's feed-forward column uff[<input>] (the held input that carries the reference from
+t_k to t_{k+1} through the exact dynamics, see `trellis gains --help`); a file without those
+columns (older files, or gains --feedforward reference) gives uff_k = u_ref(t_k), the reference's
+input sampled at t_k, which lets even an unperturbed loop drift from the reference by
+O(h^2 |u_ref'|) per sample. Running sampled gains continuously or at another rate is refused.
+Continuous gains with --rate are sampled, with uff_k = u_ref(t_k) (a warning on standard error
+says so: they were not designed for that rate). The summary names the feed-forward used.
 
 Perturbation dx0 (the sum of both; default none):
   --perturb NAME=VALUE[,NAME=VALUE...]   add VALUE to the state NAME, a column name of the
@@ -240,6 +247,7 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
     report["out"] = outPath;
     report["sample_rate_hz"] = number(simulation.sampleRate);
     report["gains_sample_rate_hz"] = number(gains.sampleRate());
+    report["feedforward"] = simulation.sampleRate > 0.0 ? (gains.hasFeedforward() ? "gain_file" : "reference_sampled") : "reference";
     report["perturbation_norm"] = number(delta.norm());
     out << report.dump() << "\n";
     return 0;
@@ -251,6 +259,9 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
       << formatNumber(result.trajectory.startTime()) << ", " << formatNumber(result.trajectory.endTime())
       << "], feedback "
       << (simulation.sampleRate > 0.0 ? "sampled at " + formatNumber(simulation.sampleRate) + " Hz" : "continuous")
+      << (simulation.sampleRate > 0.0 ? (gains.hasFeedforward() ? ", feed-forward uff_k from the gain file"
+                                                                  : ", feed-forward u_ref(t_k) (the gain file has none)")
+                                      : std::string())
       << "\n";
   out << "perturbation: |dx0| = " << formatNumber(delta.stableNorm()) << "\n";  // no overflow of the squares
   out << "tracking error |x - x_ref|: initial " << formatNumber(error(0)) << ", final "

@@ -6,17 +6,20 @@
 
 #include "trellis/core/detail/report_json.hpp"
 
+#include "trellis/analysis/simulation.hpp"
 #include "trellis/core/reference.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/core/model.hpp"
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/QR>
 
 #include <chrono>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
 #include <memory>
 #include <optional>
 #include <sstream>
@@ -81,6 +84,10 @@ void TvlqrOptions::validate() const {
     throw std::invalid_argument("TvlqrOptions.outputStep = " + std::to_string(outputStep) +
                                 " is invalid (must be finite and >= 0)");
   }
+  if (feedforwardIterations < 1) {
+    throw std::invalid_argument("TvlqrOptions.feedforwardIterations = " + std::to_string(feedforwardIterations) +
+                                " is invalid (must be >= 1)");
+  }
   riccati.validate();
   sampled.validate();
   transport.validate();
@@ -107,6 +114,31 @@ Eigen::VectorXd outputGrid(const Trajectory& reference, double step) {
   }
   times.push_back(T);
   return Eigen::Map<Eigen::VectorXd>(times.data(), static_cast<Eigen::Index>(times.size()));
+}
+
+/// ∫_a^b u_ref(s) ds / (b − a): Simpson's rule on each piece between knots, exact for the linear
+/// and the cubic Hermite input rules (both are polynomials of degree ≤ 3 on a piece).
+Eigen::VectorXd intervalAverage(const Trajectory& reference, double a, double b, Eigen::VectorXd& x,
+                                Eigen::VectorXd& u) {
+  Eigen::VectorXd sum = Eigen::VectorXd::Zero(reference.nu());
+  const Eigen::VectorXd& knots = reference.times();
+  double lo = a;
+  const double* first = knots.data();
+  const double* last = first + knots.size();
+  for (const double* it = std::upper_bound(first, last, a);; ++it) {
+    const double hi = (it == last || *it >= b) ? b : *it;
+    if (hi > lo) {
+      reference.evaluate(lo, x, u);
+      sum += (hi - lo) / 6.0 * u;
+      reference.evaluate(0.5 * (lo + hi), x, u);
+      sum += (hi - lo) * 4.0 / 6.0 * u;
+      reference.evaluate(hi, x, u);
+      sum += (hi - lo) / 6.0 * u;
+    }
+    if (hi >= b) break;
+    lo = hi;
+  }
+  return sum / (b - a);
 }
 
 }  // namespace
@@ -136,6 +168,18 @@ std::string TvlqrSolution::summary() const {
   o << ", " << fmt(seconds, 3) << " s\n";
   o << "S" << (constrained ? "r" : "") << ": min eigenvalue " << fmt(minEigenvalueS) << ", max eigenvalue "
     << fmt(maxEigenvalueS) << "\n";
+  if (sampleRate > 0.0) {
+    if (feedforward == SampledFeedforward::kReference) {
+      o << "feed-forward: none written (the controller applies u_ref(t_k), held); largest defect at the next sample "
+        << "sqrt(d'S d) " << fmt(referenceDefect, 3) << "\n";
+    } else {
+      o << "feed-forward: " << toString(feedforward) << " (uff_k held with K_k); largest defect at the next sample "
+        << "sqrt(d'S d) " << fmt(feedforwardDefect, 3) << " (u_ref(t_k) held: " << fmt(referenceDefect, 3) << "), "
+        << feedforwardSimulations << " plant runs\n";
+    }
+    o << "what the hold allows: the defects left, propagated by the sampled closed loop, predict a largest "
+      << "|x - x_ref| of " << fmt(predictedDeviation, 3) << " at the samples of the unperturbed loop (first order)\n";
+  }
   return o.str();
 }
 
@@ -167,6 +211,11 @@ std::string TvlqrSolution::json() const {
   j["min_eigenvalue_S"] = detail::toJson(minEigenvalueS);
   j["max_eigenvalue_S"] = detail::toJson(maxEigenvalueS);
   j["method"] = method;
+  j["feedforward"] = sampleRate > 0.0 ? toString(feedforward) : "none";
+  j["feedforward_defect"] = detail::toJson(feedforwardDefect);
+  j["reference_defect"] = detail::toJson(referenceDefect);
+  j["feedforward_simulations"] = feedforwardSimulations;
+  j["predicted_deviation"] = detail::toJson(predictedDeviation);
   return j.dump();
 }
 
@@ -311,7 +360,107 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
     sol.maxEigenvalueS = std::max(sol.maxEigenvalueS, ev(ev.size() - 1));
   }
   sol.maxBasisCorrection = sol.constrained ? basis.maxCorrection() : 0.0;
+  // The held feed-forward (file comment), in the metric of S_{k+1} (set above), and the defect
+  // r_k it leaves at each next sample (for every choice: u_ref(t_k) held too).
+  std::vector<Eigen::VectorXd> uff, residual;
+  {
+    sol.feedforward = options.feedforward;
+    Eigen::VectorXd xa(nx), xb(nx), ua(nu), ub(nu), dk(nx);
+    SimulationOptions so;
+    so.rtol = options.sampled.rtol;
+    so.atol = options.sampled.atol;
+    // BDF with the exact Jacobian: a held input is a "sampled" policy (∂u/∂x = 0, so ∂f/∂x = A),
+    // one sample per run at its start.
+    so.method = IntegrationMethod::kBDF;
+    // An exactly constant stretch is time-invariant: (stretch start, h) → (ū, its defect).
+    std::map<std::pair<double, double>, std::pair<Eigen::VectorXd, Eigen::VectorXd>> constantSolved;
+    Eigen::VectorXd held(nu);
+    const Policy hold = [&held](double, const Eigen::VectorXd&, Eigen::VectorXd& u) { u = held; };
+    for (std::size_t k = 0; k < N; ++k) {
+      const double a = times(static_cast<Eigen::Index>(k)), b = times(static_cast<Eigen::Index>(k + 1));
+      reference.evaluate(a, xa, ua);
+      Eigen::VectorXd ubar = intervalAverage(reference, a, b, xb, ub);
+      reference.evaluate(b, xb, ub);
+      const Eigen::MatrixXd& W = sol.S[k + 1];
+      const Eigen::MatrixXd G = Tk[k + 1] * disc.intervals[k].Gamma;
+      so.sampleRate = 1.0 / (b - a);
+      so.outputStep = b - a;
+      // The defect dk of a held input v and its S-norm squared; false when the plant's run failed.
+      auto defect = [&](const Eigen::VectorXd& v, double& f) {
+        held = v;
+        const SimulationResult run = simulate(model, xa, a, b, hold, so);
+        ++sol.feedforwardSimulations;
+        if (!run.ok()) {
+          sol.status.set(TvlqrCode::kFeedforwardFailure,
+                         "the plant's run over the sample interval [" + fmt(a, 17) + ", " + fmt(b, 17) +
+                             "] with a held input failed: " + run.status.describe(),
+                         run.status.t, static_cast<long>(k));
+          return false;
+        }
+        dk = run.trajectory.states().col(run.trajectory.size() - 1) - xb;
+        f = dk.dot(W * dk);
+        return true;
+      };
+      const double stretch = structure.constantOn ? structure.constantOn(a, b) : std::numeric_limits<double>::quiet_NaN();
+      const auto key = std::make_pair(stretch, b - a);
+      if (!std::isnan(stretch) && constantSolved.count(key)) {
+        ubar = constantSolved[key].first;
+        dk = constantSolved[key].second;
+      } else {
+        double f = 0.0;
+        if (!defect(ua, f)) return sol;
+        sol.referenceDefect = std::max(sol.referenceDefect, std::sqrt(std::max(f, 0.0)));
+        if (options.feedforward == SampledFeedforward::kReference) {
+          ubar = ua;
+        } else {
+          if (!defect(ubar, f)) return sol;
+        }
+        if (options.feedforward == SampledFeedforward::kConsistent) {
+          // Gauss–Newton with Γ as ∂d/∂ū (chord method, file comment); a step that does not
+          // lower dᵀSd is halved (at most 4 times), and none that lowers it ends the iteration.
+          const Eigen::MatrixXd H = G.transpose() * W * G;
+          const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(0.5 * (H + H.transpose()));
+          Eigen::VectorXd dBest = dk;
+          for (int it = 0; it < options.feedforwardIterations && f > 0.0; ++it) {
+            const Eigen::VectorXd step = cod.solve(G.transpose() * (W * dBest));
+            if (!step.allFinite() || step.isZero(0.0)) break;
+            double scale = 1.0, fTrial = 0.0;
+            bool lowered = false;
+            Eigen::VectorXd trial;
+            for (int halving = 0; halving <= 4 && !lowered; ++halving, scale *= 0.5) {
+              trial = ubar - scale * step;
+              if (!defect(trial, fTrial)) return sol;
+              lowered = fTrial < f;
+            }
+            if (!lowered) break;
+            const bool stalled = fTrial > (1.0 - 1e-6) * f;  // no longer worth a run
+            ubar = trial;
+            f = fTrial;
+            dBest = dk;
+            if (stalled) break;
+          }
+          dk = dBest;
+        }
+        if (!std::isnan(stretch)) constantSolved[key] = {ubar, dk};
+      }
+      sol.feedforwardDefect = std::max(sol.feedforwardDefect, std::sqrt(std::max(dk.dot(W * dk), 0.0)));
+      uff.push_back(ubar);
+      residual.push_back(dk);
+    }
+    uff.push_back(uff.back());  // the row at T repeats the last sample's
+    // What the hold allows: the residuals propagated by the sampled closed loop of the
+    // linearization, z_{k+1} = (Φ_k − Γ_k K_k) z_k + T_{k+1}ᵀ r_k, z_0 = 0 (reduced coordinates;
+    // T = I without constraints), e_k = T_k z_k — to first order in r the unperturbed loop's
+    // deviation at the samples.
+    Eigen::VectorXd z = Eigen::VectorXd::Zero(d);
+    for (std::size_t k = 0; k < N; ++k) {
+      const SampledInterval& iv = disc.intervals[k];
+      z = (iv.Phi * z - iv.Gamma * (rec.K[k] * z) + Tk[k + 1].transpose() * residual[k]).eval();
+      sol.predictedDeviation = std::max(sol.predictedDeviation, (Tk[k + 1] * z).norm());
+    }
+  }
   finish(times, std::move(K));
+  if (sol.ok() && options.feedforward != SampledFeedforward::kReference) sol.gains.setFeedforward(std::move(uff));
   return sol;
 }
 
