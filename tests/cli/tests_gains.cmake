@@ -7,7 +7,7 @@ set(_cart_pole_upright "${_trajectories}/cart_pole_upright.csv")
 set(_paper "${_scenes}/paper_pendulum.json")
 set(_paper_swing "${_trajectories}/paper_pendulum_swing.csv")
 # The first line is the metadata (m, 2n, continuous or the sample rate); FILE_ROWS counts the
-# named header t,K_<input>_<state>,... and the data rows.
+# named header t,K[<input>|<state>],... (and uff[<input>] with --rate) and the data rows.
 set(_gain_header "# trellis gain schedule: m=1 nx=4 continuous .*")
 
 # ---- success ----------------------------------------------------------------------------------
@@ -92,7 +92,7 @@ trellis_cli_files_test(gains.names_checked_and_json
   ARGS2 simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}" --gains @WORK@/paper.csv
         --rate 100 --out @WORK@/closed.csv
   CHECKS2 -DEXIT=1 -DSTDOUT_EMPTY=ON -DSTDERR_ONE_LINE=ON
-          "-DSTDERR_REGEX=paper.csv \\(for the scene .*cart_pole.json\\): column 2 is 'K_u_theta1', but the scene's gain column there is 'K_push_x'"
+          "-DSTDERR_REGEX=paper.csv \\(for the scene .*cart_pole.json\\): column 2 is 'K\\[u\\|theta1\\]', but the scene's gain column there is 'K\\[push\\|x\\]'"
   ARGS3 simulate "${_paper}" --trajectory "${_paper_swing}" --gains @WORK@/paper.csv
         --perturb theta1=0.05 --rate 100 --json --out @WORK@/closed.csv
   # The report is built with the JSON library (issue 23): compact, the same keys.
@@ -100,7 +100,7 @@ trellis_cli_files_test(gains.names_checked_and_json
 
 # ---- help -------------------------------------------------------------------------------------
 trellis_cli_test(gains.help ARGS gains --help
-  CHECKS "-DSTDOUT_REGEX=usage: trellis gains SCENE.json --trajectory.*constraint manifold.*--rate HZ.*K_<input>_<state>.*--Q W +state weight \\(default 1\\).*--R W.*--Qf W.*--dt DT +continuous gains written on a uniform grid.*only SAMPLES the continuous K\\(t\\): it does not\n *make gains for a controller running at 1/DT; use --rate for that"
+  CHECKS "-DSTDOUT_REGEX=usage: trellis gains SCENE.json --trajectory.*constraint manifold.*--rate HZ.*u_k = uff_k - K_k \\(x\\(t_k\\) - x_ref\\(t_k\\)\\).*K\\[<input>\\|<state>\\].*--Q W +state weight \\(default 1\\).*--R W.*--Qf W.*--dt DT +continuous gains written on a uniform grid.*only SAMPLES the continuous K\\(t\\): it does not\n *make gains for a controller running at 1/DT; use --rate for that"
          -DSTDERR_EMPTY=ON)
 trellis_cli_test(gains.in_command_list ARGS --help CHECKS "-DSTDOUT_REGEX=  gains +TV-LQR")
 
