@@ -245,14 +245,19 @@ class GainSchedule:
     def __repr__(self: GainSchedule) -> str: ...
     @property
     def column_names(self) -> List[str]:
-        """K_<input>_<state>, row-major"""
+        """K[<input>|<state>], row-major (older files: K_<input>_<state>)"""
     @property
     def end_time(self) -> float: ...
     def evaluate(self: GainSchedule, t: float) -> numpy.typing.NDArray[numpy.float64]:
         """K(t) (nu, nx) by the schedule's interpolation rule"""
     @property
+    def feedforward(self) -> object:
+        """(N, nu) held feed-forward uff_k of sampled gains (the sampled controller applies u_k = uff_k - K_k (x(t_k) - x_ref(t_k)), held), or None (then u_ref(t_k))"""
+    @property
     def gains(self) -> numpy.typing.NDArray[numpy.float64]:
         """(N, nu, nx)"""
+    @property
+    def has_feedforward(self) -> bool: ...
     @property
     def is_sampled(self) -> bool: ...
     @property
@@ -270,6 +275,8 @@ class GainSchedule:
     @sample_rate.setter
     def sample_rate(self, value: float) -> None: ...
     def set_column_names(self: GainSchedule, input_names: List[str], state_names: List[str]) -> None: ...
+    def set_feedforward(self: GainSchedule, uff: numpy.typing.NDArray[numpy.float64]) -> None:
+        """Sets the held feed-forward (N, nu) of sampled gains (raises ValueError unless sampled, the shape matches and every entry is finite)."""
     @property
     def start_time(self) -> float: ...
     @property
@@ -958,6 +965,29 @@ class SampledDiscretizationOptions:
     @rtol.setter
     def rtol(self, value: float) -> None: ...
 
+class SampledFeedforward:
+    """The feed-forward written with sampled gains: REFERENCE (none: u_ref(t_k) held), AVERAGE (the interval average of u_ref), CONSISTENT (the held input that carries x_ref(t_k) closest to x_ref(t_k+1) through the exact dynamics, in the metric of S_k+1; the default).
+
+    Members:
+
+      REFERENCE
+
+      AVERAGE
+
+      CONSISTENT
+    """
+    AVERAGE: ClassVar[SampledFeedforward]
+    CONSISTENT: ClassVar[SampledFeedforward]
+    REFERENCE: ClassVar[SampledFeedforward]
+    @property
+    def value(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    def __init__(self, value: int) -> None: ...
+    def __int__(self) -> int: ...
+    def __eq__(self, other: object) -> bool: ...
+    def __ne__(self, other: object) -> bool: ...
+
 class SampledIntegrator:
     """Members:
 
@@ -1332,8 +1362,16 @@ class TransportStatus:
         """when it happened (NaN: not applicable)"""
 
 class TvlqrOptions:
-    """Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati (RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions)."""
+    """Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati (RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions), feedforward (SampledFeedforward, sampled only), feedforward_iterations."""
     def __init__(self: TvlqrOptions, **kwargs) -> None: ...
+    @property
+    def feedforward(self) -> SampledFeedforward: ...
+    @feedforward.setter
+    def feedforward(self, value: SampledFeedforward) -> None: ...
+    @property
+    def feedforward_iterations(self) -> int: ...
+    @feedforward_iterations.setter
+    def feedforward_iterations(self, value: int) -> None: ...
     @property
     def output_step(self) -> float: ...
     @output_step.setter
@@ -1370,6 +1408,13 @@ class TvlqrSolution:
     @property
     def dimension(self) -> int: ...
     @property
+    def feedforward(self) -> SampledFeedforward: ...
+    @property
+    def feedforward_defect(self) -> float:
+        """largest sqrt(d^T S_k+1 d) left at the next sample by the feed-forward written"""
+    @property
+    def feedforward_simulations(self) -> int: ...
+    @property
     def gains(self) -> GainSchedule: ...
     def json(self: TvlqrSolution) -> str: ...
     @property
@@ -1389,6 +1434,12 @@ class TvlqrSolution:
     @property
     def ok(self) -> bool: ...
     @property
+    def predicted_deviation(self) -> float:
+        """what the hold allows: the defects propagated by the sampled closed loop, the largest |x - x_ref| at the samples of the unperturbed loop (first order)"""
+    @property
+    def reference_defect(self) -> float:
+        """the same for u_ref(t_k) held"""
+    @property
     def rhs_evaluations(self) -> int: ...
     @property
     def sample_rate(self) -> float: ...
@@ -1403,7 +1454,7 @@ class TvlqrSolution:
     def transport_steps(self) -> int: ...
 
 class TvlqrStatus:
-    """Status of solve_tvlqr (code: ok, transport_failure, riccati_failure, discretization_failure, recursion_failure, non_finite, indefinite, not_solved); the message carries the inner solver's report."""
+    """Status of solve_tvlqr (code: ok, transport_failure, riccati_failure, discretization_failure, recursion_failure, non_finite, indefinite, feedforward_failure, not_solved); the message carries the inner solver's report."""
     def __repr__(self: TvlqrStatus) -> str: ...
     @property
     def code(self) -> str:
