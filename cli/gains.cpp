@@ -27,7 +27,8 @@ namespace trellis::cli {
 namespace {
 
 constexpr std::string_view kHelp = R"(usage: trellis gains SCENE.json --trajectory TRAJ.csv --out GAINS.csv [options]
-       trellis gains SCENE.json --hold T [--state STATE.json] --out GAINS.csv [options]
+       trellis gains SCENE.json --hold T [--state STATE.json] [--infinite-horizon]
+                     [--write-reference REF.csv] --out GAINS.csv [options]
 
 Time-varying LQR along a reference trajectory x_ref(t), u_ref(t) of the scene (SCENE_FORMAT.md):
 with the exact linearization dx' = A(t) dx + B(t) du at the reference, x = [q; q'] (2n states,
@@ -52,6 +53,18 @@ of the scene's stored state (or of --state; its velocities are ignored) at rest 
 the inputs that hold it still (as `trellis equilibrium --hold`: B_u u + A^T lambda = b(q), least
 squares of minimum norm; the command fails if no inputs hold the pose exactly), 101 knots. On a
 scene with constraints the pose must satisfy them (`trellis project` moves a state onto them).
+--write-reference REF.csv writes the reference used (the held pose, or the trajectory read) in
+the trajectory layout, for `trellis simulate --trajectory` (or use `simulate --hold T`, which
+builds the same pose).
+
+Balancing (--hold with --infinite-horizon): the finite-horizon gain ends in a terminal layer
+(K(T) = R^-1 B^T Qf for continuous gains) that can destabilize a loop run up to T. With
+--infinite-horizon the terminal cost Qf is the stationary cost-to-go S_inf at the pose: the
+solution of the CARE (continuous gains) or, with --rate, of the DARE of the exact sampled-data
+discretization (with its cross term) -- on the tangent space of the constraint manifold when the
+scene has constraints. The Riccati equation (recursion) then starts at its fixed point: K(t) =
+K_inf at every row, no terminal layer (the summary gives max |K_k - K_inf| / |K_inf|). --Qf
+does not apply. A pose that cannot be stabilized (no stabilizing CARE/DARE solution) fails.
 
 Weights W (for --Q, --Qf: 2n x 2n, positive semidefinite; for --R: m x m, positive definite):
   a number            that multiple of the identity            --Q 10
@@ -95,7 +108,8 @@ included, repeating the last sample's gain and feed-forward).
 Riccati solve (steps, right-hand-side evaluations, time taken), the smallest and largest
 eigenvalue of S over the solver's steps (of Sr on the tangent space for a constrained scene),
 the controllability of the linearization at the first knot (rank of the Krylov matrix) and the
-reachability Gramian over the whole trajectory (smallest and largest eigenvalue). With --json the
+reachability Gramian over the whole trajectory (largest eigenvalue, and the smallest when it is
+resolved, above 1e-10 x the largest; below that the line says it was not computed and why). With --json the
 summary is one JSON object instead.
 
 options:
@@ -111,6 +125,8 @@ options:
                       make gains for a controller running at 1/DT; use --rate for that
   --rate HZ           zero-order-hold gains for a controller sampling at HZ (see above)
   --feedforward F     with --rate: consistent (default), average or reference (see above)
+  --infinite-horizon  with --hold: Qf = S_inf of the CARE (DARE with --rate), see Balancing
+  --write-reference F write the reference used (the held pose, or the trajectory) to F (CSV)
   --json              print the summary as one JSON object
   --rtol X, --atol X  CVODES tolerances on S (defaults 1e-8, 1e-10)
   --method M          bdf (default), adams (non-stiff problems only) or factored (Cholesky
@@ -135,37 +151,12 @@ std::string gramianVerdict(const GramianReport& gramian) {
          (gramian.maxEigenvalue > 1e8 ? ", max grows as an unstable reference does" : "") + "; see the rank at t0)";
 }
 
-/// The reference of --hold: the pose q at rest over [0, span] with the inputs that hold it
-/// (computeHoldingInputs), 101 knots; checked as a reference file is (constraints, dynamics).
-Trajectory heldPose(const LoadedScene& loaded, const std::optional<std::string>& statePath, double span) {
-  const Model& model = loaded.scene.model;
-  const ModelState state = stateFromFile(loaded, statePath);
-  Data data(model);
-  const InverseDynamicsResult hold = computeHoldingInputs(model, data, state.q);
-  if (!hold.ok()) {
-    throw std::runtime_error(loaded.path + ": gains --hold: the pose cannot be held (" + hold.status.name() +
-                             "): " + hold.status.message);
-  }
-  constexpr int kKnots = 101;
-  const Eigen::VectorXd times = Eigen::VectorXd::LinSpaced(kKnots, 0.0, span);
-  Eigen::VectorXd x = Eigen::VectorXd::Zero(2 * model.nq());
-  x.head(model.nq()) = state.q;
-  const Trajectory pose(model.configNames(), model.inputNames(), times, x.replicate(1, kKnots),
-                        hold.u.replicate(1, kKnots));
-  Trajectory checked = checkReference(model, loaded.path, "the held pose", pose);
-  // At rest by definition (the inputs balance the dynamics; the dynamics' q̈ at the knots is that
-  // balance's rounding): ẋ = 0 at every knot makes the reference exactly constant, which the
-  // sampled gains use (one exact exponential instead of an integration per interval).
-  checked.setStateDerivatives(Eigen::MatrixXd::Zero(2 * model.nq(), kKnots));
-  return checked;
-}
-
 int runGains(std::span<const std::string> args, std::ostream& out) {
   const ParsedOptions options(
       "gains", args,
       {.valued = {"--trajectory", "--hold", "--state", "--out", "--Q", "--R", "--Qf", "--dt", "--rate", "--rtol", "--atol", "--method",
-                  "--max-steps", "--feedforward"},
-       .flags = {"--json"},
+                  "--max-steps", "--feedforward", "--write-reference"},
+       .flags = {"--json", "--infinite-horizon"},
        .repeatable = {}});
   const std::string scenePath = options.singlePositional("scene file");
   if (options.has("--hold") && options.has("--trajectory")) {
@@ -181,12 +172,25 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   const std::string trajectoryPath =
       hold ? std::string("the held pose") : options.required("--trajectory", "(the reference trajectory CSV, or --hold T)");
   const std::string outPath = options.required("--out", "(the gains CSV to write)");
+  const bool infiniteHorizon = options.flag("--infinite-horizon");
+  if (infiniteHorizon && !hold) {
+    throw UsageError("gains: --infinite-horizon applies to a held pose only (--hold T): along a moving "
+                     "reference there is no stationary cost-to-go");
+  }
+  if (infiniteHorizon && options.has("--Qf")) {
+    throw UsageError("gains: --infinite-horizon and --Qf exclude each other (the terminal cost is S_inf)");
+  }
+  const std::optional<std::string> referenceOut = options.value("--write-reference");
   {
     std::vector<std::pair<std::string, std::string>> inputs{{"scene", scenePath}};
     if (!hold) inputs.emplace_back("--trajectory", trajectoryPath);
     for (const char* option : {"--state", "--Q", "--R", "--Qf"})
       if (auto v = options.value(option)) inputs.emplace_back(option, *v);
     checkOutputIsNotInput("gains", outPath, inputs);
+    if (referenceOut) {
+      inputs.emplace_back("--out", outPath);
+      checkOutputIsNotInput("gains", *referenceOut, inputs);
+    }
   }
 
   TvlqrOptions tvlqr;
@@ -230,7 +234,7 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   const int n = model.nq(), m = model.nu(), nx = 2 * n;
   if (m == 0) throw std::runtime_error(scenePath + ": the scene has no inputs: there is nothing to control");
 
-  const Trajectory trajectory = hold ? heldPose(loaded, options.value("--state"), holdSpan)
+  const Trajectory trajectory = hold ? heldPoseReference(loaded, options.value("--state"), holdSpan, "gains --hold")
                                          : loadReference(model, scenePath, trajectoryPath);
   if (tvlqr.outputStep > 0.0) options.gridPoints("--dt", tvlqr.outputStep, trajectory.endTime() - trajectory.startTime(), kMaxOutputRows, "output rows");
   if (tvlqr.sampleRate > 0.0) {
@@ -257,14 +261,17 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
                    : weights.Q;
 
   // The solve (on the tangent space of the constraint manifold for a constrained scene).
+  tvlqr.infiniteHorizon = infiniteHorizon;
   const TvlqrSolution solution = solveTvlqr(model, trajectory, weights, tvlqr);
   if (!solution.ok()) throw std::runtime_error("gains: " + solution.status.describe());
   solution.gains.writeCsvFile(outPath);
+  if (referenceOut) trajectory.writeCsvFile(*referenceOut);
 
   // The summary, after the file is written.
   const bool json = options.flag("--json");
   if (!json) {
     out << "wrote " << outPath << ": " << solution.summary();
+    if (referenceOut) out << "wrote " << *referenceOut << ": the reference used (" << trajectory.size() << " knots)\n";
   }
   const ControllabilityReport pointwise = computeControllabilityAt(
       model, data, trajectory.states().col(0).head(n), trajectory.states().col(0).tail(n),
@@ -276,12 +283,14 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
     // The library's report, then the file and the controllability checks (their own reports).
     OutputJson body = OutputJson::parse(solution.json());
     body["out"] = outPath;
+    body["reference_out"] = referenceOut ? OutputJson(*referenceOut) : OutputJson(nullptr);
     body["controllable_at_t0"] = pointwise.controllable();
     body["rank_at_t0"] = pointwise.rank;
     body["gramian_ok"] = gramian.ok();
     body["gramian_resolved"] = gramian.controllable();
     const OutputJson gramianReport = OutputJson::parse(gramian.json());
-    body["gramian_min_eigenvalue"] = gramianReport["min_eigenvalue"];
+    // null when not resolved (below 1e-10 x max: rounding, see the text summary).
+    body["gramian_min_eigenvalue"] = gramian.controllable() ? gramianReport["min_eigenvalue"] : OutputJson(nullptr);
     body["gramian_max_eigenvalue"] = gramianReport["max_eigenvalue"];
     body["controllability_at_t0"] = OutputJson::parse(pointwise.json());
     body["gramian"] = gramianReport;
@@ -291,11 +300,20 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   out << "controllability at t = " << formatNumber(trajectory.startTime()) << ": rank " << pointwise.rank
       << " of " << pointwise.dimension << (pointwise.controllable() ? " (controllable)" : " (NOT controllable)")
       << ", smallest singular value " << formatNumber(pointwise.smallestSingularValue, 3) << "\n";
-  if (gramian.ok()) {
+  if (gramian.ok() && gramian.controllable()) {
     out << "gramian on [" << formatNumber(trajectory.startTime()) << ", "
         << formatNumber(trajectory.endTime()) << "]: min eigenvalue " << formatNumber(gramian.minEigenvalue, 3)
         << ", max eigenvalue " << formatNumber(gramian.maxEigenvalue, 3)
         << gramianVerdict(gramian) << "\n";
+  } else if (gramian.ok()) {
+    // Below 1e-10 x max the integration's rounding decides the smallest eigenvalue's sign and
+    // size: printing it (even a negative one, of a PSD matrix) would pass rounding off as a result.
+    out << "gramian on [" << formatNumber(trajectory.startTime()) << ", " << formatNumber(trajectory.endTime())
+        << "]: max eigenvalue " << formatNumber(gramian.maxEigenvalue, 3)
+        << "; min eigenvalue not computed: it lies below 1e-10 x max, where the integration's rounding "
+           "decides its sign and size"
+        << (gramian.maxEigenvalue > 1e8 ? " (an unstable reference makes the Gramian grow like exp(2 sigma T))" : "")
+        << "; controllability is decided by the rank at t = " << formatNumber(trajectory.startTime()) << " above\n";
   } else {
     out << "gramian: not available (" << gramian.status.describe() << ")\n";
   }

@@ -2,6 +2,7 @@
 // --out CLOSED.csv`: the nonlinear closed loop u = u_ref − K(t)(x − x_ref) from a perturbed start.
 #include "cli_options.hpp"
 #include "command.hpp"
+#include "model_questions.hpp"
 
 #include "trellis/core/gain_schedule.hpp"
 #include "trellis/analysis/simulation.hpp"
@@ -25,6 +26,8 @@ namespace {
 
 constexpr std::string_view kHelp = R"(usage: trellis simulate SCENE.json --trajectory TRAJ.csv --gains GAINS.csv --out CLOSED.csv
                         [--perturb NAME=VALUE,...] [--perturb-random SIGMA [--seed N]] [options]
+       trellis simulate SCENE.json --hold T [--state STATE.json] --gains GAINS.csv --out CLOSED.csv
+                        [--perturb ...] [options]
 
 Simulates the NONLINEAR scene (SCENE_FORMAT.md) under the time-varying feedback
 
@@ -49,6 +52,13 @@ O(h^2 |u_ref'|) per sample. Running sampled gains continuously or at another rat
 Continuous gains with --rate are sampled, with uff_k = u_ref(t_k) (a warning on standard error
 says so: they were not designed for that rate). The summary names the feed-forward used.
 
+Balancing a pose (--hold T instead of --trajectory): the reference is the held pose that
+`trellis gains --hold T` builds -- the pose q of the scene's stored state (or of --state) at
+rest over [0, T] with the inputs that hold it (on the constraints, for a scene with them) -- so
+  trellis gains SCENE --hold 10 --rate 100 --infinite-horizon --out G.csv
+  trellis simulate SCENE --hold 10 --rate 100 --gains G.csv --perturb q1=0.1 --out C.csv
+balances the pose at 100 Hz from the command line alone. The gains must cover [0, T].
+
 Perturbation dx0 (the sum of both; default none):
   --perturb NAME=VALUE[,NAME=VALUE...]   add VALUE to the state NAME, a column name of the
                                          trajectory (a configuration or d<configuration>);
@@ -69,7 +79,9 @@ drift max(|h|, |A q'|) (before projection), the saturation (control evaluations 
 input), and the integrator's work; with --json one JSON object instead.
 
 options:
-  --trajectory FILE      the reference trajectory (CSV; required)
+  --trajectory FILE      the reference trajectory (CSV; required unless --hold)
+  --hold T               instead of --trajectory: the held pose over [0, T] (see above)
+  --state FILE           with --hold: the pose (a state object, see `trellis linearize --help`)
   --gains FILE           the gain schedule (CSV; required)
   --out FILE             where to write the closed-loop trajectory (CSV; required)
   --perturb ...          see above
@@ -155,15 +167,29 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
   const ParsedOptions options(
       "simulate", args,
       {.valued = {"--trajectory", "--gains", "--out", "--perturb", "--perturb-random", "--seed", "--rate",
-                  "--umin", "--umax", "--output-step", "--rtol", "--atol", "--method", "--max-steps"},
+                  "--umin", "--umax", "--output-step", "--rtol", "--atol", "--method", "--max-steps", "--hold",
+                  "--state"},
        .flags = {"--no-project", "--json"},
        .repeatable = {"--perturb"}});
   const std::string scenePath = options.singlePositional("scene file");
-  const std::string trajectoryPath = options.required("--trajectory", "(the reference trajectory CSV)");
+  if (options.has("--hold") && options.has("--trajectory")) {
+    throw UsageError("simulate: --hold and --trajectory exclude each other (--hold makes the reference)");
+  }
+  if (options.has("--state") && !options.has("--hold")) {
+    throw UsageError("simulate: --state applies to --hold only (the reference comes from --trajectory)");
+  }
+  const bool hold = options.has("--hold");
+  const double holdSpan = hold ? options.positiveNumber("--hold", *options.value("--hold")) : 0.0;
+  const std::string trajectoryPath =
+      hold ? std::string("the held pose") : options.required("--trajectory", "(the reference trajectory CSV, or --hold T)");
   const std::string gainsPath = options.required("--gains", "(the gain schedule CSV from 'trellis gains')");
   const std::string outPath = options.required("--out", "(the closed-loop trajectory CSV to write)");
-  checkOutputIsNotInput("simulate", outPath,
-                        {{"scene", scenePath}, {"--trajectory", trajectoryPath}, {"--gains", gainsPath}});
+  {
+    std::vector<std::pair<std::string, std::string>> inputs{{"scene", scenePath}, {"--gains", gainsPath}};
+    if (!hold) inputs.emplace_back("--trajectory", trajectoryPath);
+    if (auto v = options.value("--state")) inputs.emplace_back("--state", *v);
+    checkOutputIsNotInput("simulate", outPath, inputs);
+  }
 
   SimulationOptions simulation;
   if (auto v = options.value("--rtol")) simulation.rtol = options.relativeTolerance("--rtol", *v);
@@ -187,10 +213,11 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
     seed = options.integer<std::uint64_t>("--seed", *v);
   }
 
-  const Scene scene = loadScene(scenePath);
-  const Model& model = scene.model;
+  const LoadedScene loaded = loadSceneArgument(scenePath);
+  const Model& model = loaded.scene.model;
   const int n = model.nq(), m = model.nu(), nx = 2 * n;
-  const Trajectory reference = loadReference(model, scenePath, trajectoryPath);
+  const Trajectory reference = hold ? heldPoseReference(loaded, options.value("--state"), holdSpan, "simulate --hold")
+                                    : loadReference(model, scenePath, trajectoryPath);
   const double span = reference.endTime() - reference.startTime();
   if (simulation.outputStep > 0.0) options.gridPoints("--output-step", simulation.outputStep, span, kMaxOutputRows, "output rows");
   if (simulation.sampleRate > 0.0) options.gridPoints("--rate", 1.0 / simulation.sampleRate, span, kMaxFeedbackSamples, "feedback samples");

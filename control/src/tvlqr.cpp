@@ -7,6 +7,8 @@
 #include "trellis/core/detail/report_json.hpp"
 
 #include "trellis/analysis/simulation.hpp"
+#include "trellis/control/care.hpp"
+#include "trellis/control/dare.hpp"
 #include "trellis/core/reference.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/core/model.hpp"
@@ -19,7 +21,6 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
-#include <map>
 #include <memory>
 #include <optional>
 #include <sstream>
@@ -168,6 +169,10 @@ std::string TvlqrSolution::summary() const {
   o << ", " << fmt(seconds, 3) << " s\n";
   o << "S" << (constrained ? "r" : "") << ": min eigenvalue " << fmt(minEigenvalueS) << ", max eigenvalue "
     << fmt(maxEigenvalueS) << "\n";
+  if (infiniteHorizon) {
+    o << "infinite horizon: Qf = S_inf of the " << infiniteHorizonSolve << "; max |K_k - K_inf| / |K_inf| "
+      << fmt(maxGainDeviation, 3) << " over the rows\n";
+  }
   if (sampleRate > 0.0) {
     if (feedforward == SampledFeedforward::kReference) {
       o << "feed-forward: none written (the controller applies u_ref(t_k), held); largest defect at the next sample "
@@ -216,12 +221,90 @@ std::string TvlqrSolution::json() const {
   j["reference_defect"] = detail::toJson(referenceDefect);
   j["feedforward_simulations"] = feedforwardSimulations;
   j["predicted_deviation"] = detail::toJson(predictedDeviation);
+  j["infinite_horizon"] = infiniteHorizon;
+  j["infinite_horizon_solve"] = infiniteHorizonSolve;
+  j["max_gain_deviation"] = detail::toJson(maxGainDeviation);
   return j.dump();
 }
+
+namespace {
+
+/// options.infiniteHorizon (file comment): S∞ at the held pose, then the usual solve with Qf = S∞.
+TvlqrSolution solveHeldInfiniteHorizon(const Model& model, const Trajectory& input, const LqrWeights& weights,
+                                       const TvlqrOptions& options) {
+  if (weights.Qfun || weights.Rfun) {
+    throw std::invalid_argument("solveTvlqr: options.infiniteHorizon needs constant weights Q and R");
+  }
+  const int n = model.nq();
+  for (Eigen::Index k = 0; k < input.size(); ++k) {
+    const bool same = input.states().col(k) == input.states().col(0) && input.inputs().col(k) == input.inputs().col(0);
+    if (!same || !input.states().col(k).tail(n).isZero(0.0)) {
+      throw std::invalid_argument("solveTvlqr: options.infiniteHorizon needs a held pose (every knot the same state "
+                                  "at rest and the same input); knot " + std::to_string(k) + " (t = " +
+                                  fmt(input.times()(k), 17) + ") differs from knot 0 or moves");
+    }
+  }
+  const ReferenceEvaluator checked(model, input);
+  const Trajectory& reference = checked.trajectory();
+  TvlqrSolution failed;
+  failed.sampleRate = options.sampleRate;
+  failed.constrained = model.nc() > 0;
+  failed.infiniteHorizon = true;
+  const TangentBasisTrajectory basis = transportTangentBasis(model, reference, options.transport);
+  if (!basis.ok()) {
+    failed.status.set(TvlqrCode::kTransportFailure, "the tangent basis transport failed: " + basis.status().message,
+                      basis.status().t);
+    return failed;
+  }
+  const detail::ReducedProblem problem = detail::makeReducedProblem(model, basis, weights);
+  const double t0 = reference.startTime();
+  Eigen::MatrixXd Ar, Br;
+  const ReferenceStatus at = problem.linearization(t0, Ar, Br);
+  if (!at.ok()) {
+    failed.status.set(TvlqrCode::kRiccatiFailure, "the linearization at the held pose failed: " + at.message, t0);
+    return failed;
+  }
+  Eigen::MatrixXd Qr = problem.weights.Q;
+  if (problem.weights.Qfun) problem.weights.Qfun(t0, Qr);
+  LqrResult lqr;
+  if (options.sampleRate > 0.0) {
+    SampledInterval iv;
+    discretizeConstantInterval(Ar, Br, Qr, weights.R, std::min(1.0 / options.sampleRate, reference.endTime() - t0), iv);
+    lqr = solveDare(iv.Phi, iv.Gamma, iv.Q, iv.R, iv.N);
+  } else {
+    lqr = solveCare(Ar, Br, Qr, weights.R);
+  }
+  if (!lqr.ok()) {
+    failed.status.set(TvlqrCode::kRiccatiFailure,
+                      std::string("the ") + (options.sampleRate > 0.0 ? "DARE" : "CARE") +
+                          " at the held pose failed (no stationary gain: is the pose stabilizable?): " + lqr.describe(),
+                      t0);
+    return failed;
+  }
+  const Eigen::MatrixXd T = basis.basis(t0);
+  LqrWeights held = weights;
+  held.Qf = T * lqr.S * T.transpose();
+  held.Qf = 0.5 * (held.Qf + held.Qf.transpose()).eval();
+  TvlqrOptions inner = options;
+  inner.infiniteHorizon = false;
+  TvlqrSolution sol = solveTvlqr(model, input, held, inner);
+  sol.infiniteHorizon = true;
+  sol.infiniteHorizonSolve = std::string(options.sampleRate > 0.0 ? "DARE" : "CARE") + ": " + lqr.describe();
+  if (sol.gains.size() > 0) {
+    const Eigen::MatrixXd Kinf = lqr.K * T.transpose();
+    for (const Eigen::MatrixXd& K : sol.gains.gains()) {
+      sol.maxGainDeviation = std::max(sol.maxGainDeviation, (K - Kinf).norm() / Kinf.norm());
+    }
+  }
+  return sol;
+}
+
+}  // namespace
 
 TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrWeights& weights,
                          const TvlqrOptions& options) {
   options.validate();
+  if (options.infiniteHorizon) return solveHeldInfiniteHorizon(model, input, weights, options);
   // Names checked, knot derivatives the reference's own or from the core's dynamics: one check,
   // and every solve below reads this copy.
   const ReferenceEvaluator checked(model, input);
@@ -372,8 +455,14 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
     // BDF with the exact Jacobian: a held input is a "sampled" policy (∂u/∂x = 0, so ∂f/∂x = A),
     // one sample per run at its start.
     so.method = IntegrationMethod::kBDF;
-    // An exactly constant stretch is time-invariant: (stretch start, h) → (ū, its defect).
-    std::map<std::pair<double, double>, std::pair<Eigen::VectorXd, Eigen::VectorXd>> constantSolved;
+    // An exactly constant stretch is time-invariant: (stretch start, h) → (ū, its defect). The
+    // lengths t_{k+1} − t_k of equal intervals differ by rounding (~1e-16 h): equal within 1e-9 h
+    // (the sample grid's own tolerance; ū moves by O(Δh) far below that).
+    struct Solved {
+      double stretch, h;
+      Eigen::VectorXd u, defect;
+    };
+    std::vector<Solved> constantSolved;
     Eigen::VectorXd held(nu);
     const Policy hold = [&held](double, const Eigen::VectorXd&, Eigen::VectorXd& u) { u = held; };
     for (std::size_t k = 0; k < N; ++k) {
@@ -402,10 +491,12 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
         return true;
       };
       const double stretch = structure.constantOn ? structure.constantOn(a, b) : std::numeric_limits<double>::quiet_NaN();
-      const auto key = std::make_pair(stretch, b - a);
-      if (!std::isnan(stretch) && constantSolved.count(key)) {
-        ubar = constantSolved[key].first;
-        dk = constantSolved[key].second;
+      const auto cached = std::find_if(constantSolved.begin(), constantSolved.end(), [&](const Solved& c) {
+        return c.stretch == stretch && std::abs(c.h - (b - a)) <= 1e-9 * (b - a);
+      });
+      if (!std::isnan(stretch) && cached != constantSolved.end()) {
+        ubar = cached->u;
+        dk = cached->defect;
       } else {
         double f = 0.0;
         if (!defect(ua, f)) return sol;
@@ -441,7 +532,7 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
           }
           dk = dBest;
         }
-        if (!std::isnan(stretch)) constantSolved[key] = {ubar, dk};
+        if (!std::isnan(stretch)) constantSolved.push_back({stretch, b - a, ubar, dk});
       }
       sol.feedforwardDefect = std::max(sol.feedforwardDefect, std::sqrt(std::max(dk.dot(W * dk), 0.0)));
       uff.push_back(ubar);

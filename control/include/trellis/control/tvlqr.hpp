@@ -39,6 +39,17 @@
 // constant stretch (a held pose) is solved once. kReference writes no feed-forward (the older
 // behaviour: the simulator applies u_ref(t_k)).
 //
+// Infinite horizon (options.infiniteHorizon; a held pose only: every knot the same state at rest
+// and the same input, constant weights): the terminal cost is the stationary cost-to-go S∞ of the
+// linearization at the pose — the CARE's solution (continuous gains) or the DARE's of the exact
+// sampled-data discretization with its cross term (sampled gains), on the tangent space of the
+// constraint manifold when there are constraints (Sr∞, S∞ = T Sr∞ Tᵀ) — so Qf is replaced by S∞
+// and the Riccati equation or recursion starts at its own fixed point: K(t) = K∞ all along, with
+// no terminal layer (a finite-horizon gain ends in K(T) = R⁻¹BᵀQf, which can destabilize a loop
+// that runs to T). The solution reports the LQR solve and the largest ‖K_k − K∞‖ / ‖K∞‖ over the
+// rows (the integration's error; for sampled gains the last interval, when shorter than 1/f, has
+// its own exact gain).
+//
 // The result is plain data (it owns the gains and S; no reference to the model).
 #pragma once
 
@@ -84,6 +95,10 @@ struct TvlqrOptions {
   /// Sampled only: the held feed-forward written beside K_k (file comment).
   SampledFeedforward feedforward = SampledFeedforward::kConsistent;
   int feedforwardIterations = 6;  ///< kConsistent: Gauss–Newton iterations per interval at most (≥ 1)
+  /// A held pose only: Qf := S∞ of the CARE (DARE when sampled) at the pose (file comment);
+  /// weights.Qf is then not used. Throws std::invalid_argument for a reference that is not a held
+  /// pose or time-varying weights.
+  bool infiniteHorizon = false;
   /// Throws std::invalid_argument naming the field and its value.
   void validate() const;
 };
@@ -159,6 +174,9 @@ struct TvlqrSolution {
   /// closed loop of the linearization, e_{k+1} = (Φ_k − Γ_k K_k) e_k + r_k, e_0 = 0: to first order
   /// in r, the unperturbed sampled loop's deviation from the reference at the samples.
   double predictedDeviation = 0.0;
+  bool infiniteHorizon = false;      ///< solved with Qf = S∞ (options.infiniteHorizon)
+  std::string infiniteHorizonSolve;  ///< the CARE's (DARE's) LqrResult::describe() line
+  double maxGainDeviation = 0.0;     ///< infinite horizon: max_k ‖K_k − K∞‖_F / ‖K∞‖_F
 
   bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   /// A few lines for people (what was solved, work, S's spectrum).
@@ -169,7 +187,7 @@ struct TvlqrSolution {
   /// nu, tangent_dimension, rows, t0, t1, seconds, steps, rhs_evaluations, linearizations,
   /// transport_steps, max_basis_correction, min_eigenvalue_S, max_eigenvalue_S, method, feedforward: reference|average|consistent or "none"
   /// for continuous gains, feedforward_defect, reference_defect, feedforward_simulations,
-  /// predicted_deviation).
+  /// predicted_deviation, infinite_horizon, infinite_horizon_solve, max_gain_deviation).
   std::string json() const;
 };
 
