@@ -249,9 +249,15 @@ def test_tvlqr_matches_cli_gains(tm, cli, tmp_path, scene, trajectory, Q, R):
     assert f"rank {rank.rank} of {rank.dimension}" in summary
     gramian = tm.compute_controllability_gramian(model, ref)
     m = re.search(r"gramian on \[[^]]*\]: min eigenvalue (\S+), max eigenvalue (\S+)", summary)
-    assert gramian.ok and m, summary
-    assert gramian.min_eigenvalue == pytest.approx(float(m.group(1)), rel=5e-3)
-    assert gramian.max_eigenvalue == pytest.approx(float(m.group(2).rstrip(",")), rel=5e-3)
+    if gramian.controllable():
+        assert gramian.ok and m, summary
+        assert gramian.min_eigenvalue == pytest.approx(float(m.group(1)), rel=5e-3)
+        assert gramian.max_eigenvalue == pytest.approx(float(m.group(2).rstrip(",")), rel=5e-3)
+    else:
+        # Unresolved (the upright cart-pole is unstable): only the largest is printed (issue 27).
+        m = re.search(r"gramian on \[[^]]*\]: max eigenvalue (\S+); min eigenvalue not computed", summary)
+        assert gramian.ok and m, summary
+        assert gramian.max_eigenvalue == pytest.approx(float(m.group(1)), rel=5e-3)
 
 
 def test_tvlqr_long_horizon_converges_to_care(tm):
