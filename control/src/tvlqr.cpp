@@ -523,7 +523,12 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
           const double mu = 1e-3 * std::max(sigma.eigenvalues().maxCoeff(), 0.0);
           const Eigen::LDLT<Eigen::MatrixXd> damped(Hs + mu * Rk);
           Eigen::VectorXd dBest = dk;
-          for (int it = 0; it < options.feedforwardIterations && f > 0.0 && mu > 0.0; ++it) {
+          // A defect within the plant runs' own accuracy (10 (atol + rtol |x|) per entry) is
+          // resolved: further steps would chase the integration error (a held equilibrium).
+          const auto resolved = [&](const Eigen::VectorXd& dv) {
+            return (dv.array().abs() <= 10.0 * (so.atol + so.rtol * xb.array().abs())).all();
+          };
+          for (int it = 0; it < options.feedforwardIterations && f > 0.0 && mu > 0.0 && !resolved(dBest); ++it) {
             const Eigen::VectorXd step = damped.solve(G.transpose() * (W * dBest));
             if (!step.allFinite() || step.isZero(0.0)) break;
             double scale = 1.0, fTrial = 0.0;
