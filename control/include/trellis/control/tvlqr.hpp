@@ -165,9 +165,8 @@ struct TvlqrSolution {
   /// Sampled: the feed-forward written (options.feedforward) and, over the sample intervals, the
   /// largest defect √(dᵀ S_{k+1} d) it leaves (file comment) and the same for u_ref(t_k) held.
   SampledFeedforward feedforward = SampledFeedforward::kReference;
-  ///@{
-  double feedforwardDefect = 0.0, referenceDefect = 0.0;
-  ///@}
+  double feedforwardDefect = 0.0;  ///< max_k √(dᵀ S_{k+1} d) with the feed-forward written
+  double referenceDefect = 0.0;    ///< the same with u_ref(t_k) held
   long feedforwardSimulations = 0;  ///< plant simulations over one interval for the feed-forward
   /// Sampled: what the hold allows — the largest ‖e_k‖₂ (full state, the simulator's tracking
   /// error's norm) of the defects r_k left by the feed-forward written, propagated by the sampled

@@ -93,10 +93,10 @@ class GainSchedule {
   /// Throws std::invalid_argument unless hz is finite and ≥ 0.
   void setSampleRate(double hz);
 
-  /// Column names (m·nx, row-major), "K[<input>|<state>]" (or the older "K_<input>_<state>" of
+  /// Column names (m·nx, row-major), `K[<input>|<state>]` (or the older `K_<input>_<state>` of
   /// a file read); empty when unnamed.
   const std::vector<std::string>& columnNames() const { return columnNames_; }
-  /// Names the columns K[<input>|<state>] (inputs: m names; states: nx names, e.g. the
+  /// Names the columns `K[<input>|<state>]` (inputs: m names; states: nx names, e.g. the
   /// configuration names then "d" + each). Throws std::invalid_argument for wrong counts and for
   /// an input name containing '|' (the separator: the column would not split back).
   void setColumnNames(const std::vector<std::string>& inputNames,
@@ -105,8 +105,8 @@ class GainSchedule {
   static std::vector<std::string> stateNames(const std::vector<std::string>& configNames);
   /// Throws TrajectoryError (naming `source`, the first mismatching column and both names) unless
   /// K is (inputNames.size()) × (stateNames.size()) and, when the schedule has column names, they
-  /// are K[<input>|<state>] (or all the older K_<input>_<state>) for these names, and the
-  /// feed-forward columns uff[<input>]. Unnamed (older) schedules pass on sizes alone.
+  /// are `K[<input>|<state>]` (or all the older `K_<input>_<state>`) for these names, and the
+  /// feed-forward columns `uff[<input>]`. Unnamed (older) schedules pass on sizes alone.
   void checkNames(const std::vector<std::string>& inputNames,
                   const std::vector<std::string>& stateNames, const std::string& source) const;
 
