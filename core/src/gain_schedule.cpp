@@ -172,6 +172,8 @@ void GainSchedule::setSampleRate(double hz) {
   if (!(hz >= 0.0) || !std::isfinite(hz)) {
     throw std::invalid_argument("gain schedule: sample rate " + std::to_string(hz) + " (must be finite and >= 0)");
   }
+  // A held feed-forward belongs to the rate it was computed for.
+  if (hz != sampleRate_) feedforward_.clear();
   sampleRate_ = hz;
 }
 

@@ -87,10 +87,12 @@ void bindTvlqr(py::module_& m) {
       "Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f "
       "Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati "
       "(RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions), "
-      "feedforward (SampledFeedforward, sampled only), feedforward_iterations.")
+      "feedforward (SampledFeedforward, sampled only), feedforward_iterations, infinite_horizon (a held "
+      "pose only: Qf = S_inf of the CARE, or of the DARE when sampled).")
       .def(py::init(&makeFromKwargs<TvlqrOptions>))
       .def_readwrite("feedforward", &TvlqrOptions::feedforward)
       .def_readwrite("feedforward_iterations", &TvlqrOptions::feedforwardIterations)
+      .def_readwrite("infinite_horizon", &TvlqrOptions::infiniteHorizon)
       .def_readwrite("sample_rate", &TvlqrOptions::sampleRate)
       .def_readwrite("output_step", &TvlqrOptions::outputStep)
       .def_readwrite("riccati", &TvlqrOptions::riccati)
@@ -127,6 +129,10 @@ void bindTvlqr(py::module_& m) {
       .def_readonly("max_eigenvalue_S", &TvlqrSolution::maxEigenvalueS)
       .def_readonly("method", &TvlqrSolution::method)
       .def_readonly("feedforward", &TvlqrSolution::feedforward)
+      .def_readonly("infinite_horizon", &TvlqrSolution::infiniteHorizon)
+      .def_readonly("infinite_horizon_solve", &TvlqrSolution::infiniteHorizonSolve)
+      .def_readonly("max_gain_deviation", &TvlqrSolution::maxGainDeviation,
+                    "infinite horizon: max_k |K_k - K_inf|_F / |K_inf|_F")
       .def_readonly("feedforward_defect", &TvlqrSolution::feedforwardDefect,
                     "largest sqrt(d^T S_k+1 d) left at the next sample by the feed-forward written")
       .def_readonly("reference_defect", &TvlqrSolution::referenceDefect,

@@ -322,6 +322,11 @@ TEST_CASE("gain schedule: held feed-forward and the K[<input>|<state>] columns",
     }
     CHECK(g.rowAt(0.3) == 3);
     CHECK_THROWS_AS(g.rowAt(0.31), std::out_of_range);
+    g.setSampleRate(10.0);  // the same rate keeps it
+    CHECK(g.hasFeedforward());
+    g.setSampleRate(20.0);  // another rate drops it (computed for 10 Hz)
+    CHECK_FALSE(g.hasFeedforward());
+    CHECK_THROWS_AS(g.evaluateFeedforward(0.0, u), std::logic_error);
   }
   SECTION("CSV round trip, named: K[<input>|<state>] then uff[<input>]") {
     g.setSampleRate(10.0);

@@ -271,6 +271,13 @@ def test_tvlqr_long_horizon_converges_to_care(tm):
     lin = tm.linearize(model, [math.pi], [0.0], [0.0])
     care = tm.solve_care(lin.A, lin.B, np.diag([10.0, 1.0]), [[0.5]])
     np.testing.assert_allclose(sol.K(0.0), care.K, rtol=1e-6)
+    # Issue 27: infinite_horizon (Qf = S_inf) gives the CARE gain at every row, T included (the
+    # finite horizon's last row is R^-1 B^T Qf instead).
+    inf = tm.solve_tvlqr(model, ref, Q=np.diag([10.0, 1.0]), R=[[0.5]],
+                         options=tm.TvlqrOptions(infinite_horizon=True))
+    assert inf.ok and inf.infinite_horizon and inf.max_gain_deviation < 1e-6
+    np.testing.assert_allclose(inf.K(20.0), care.K, rtol=1e-6)
+    assert np.abs(sol.K(20.0) - care.K).max() > 0.1 * np.abs(care.K).max()
 
 
 def test_riccati_linear_solvers_agree(tm):

@@ -90,7 +90,8 @@ class GainSchedule {
   /// 0: continuous gains; f > 0: zero-order-hold gains for a controller sampling at f Hz.
   double sampleRate() const { return sampleRate_; }
   bool isSampled() const { return sampleRate_ > 0.0; }  ///< sampleRate() > 0
-  /// Throws std::invalid_argument unless hz is finite and ≥ 0.
+  /// Throws std::invalid_argument unless hz is finite and ≥ 0. A new rate drops the held
+  /// feed-forward (it was computed for the old one).
   void setSampleRate(double hz);
 
   /// Column names (m·nx, row-major), `K[<input>|<state>]` (or the older `K_<input>_<state>` of
