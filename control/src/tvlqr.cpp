@@ -463,6 +463,7 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
       Eigen::VectorXd u, defect;
     };
     std::vector<Solved> constantSolved;
+    std::vector<Eigen::VectorXd> offManifold(N + 1, Eigen::VectorXd::Zero(nx));  // P(x_ref(t_k)) − x_ref(t_k)
     Eigen::VectorXd held(nu);
     const Policy hold = [&held](double, const Eigen::VectorXd&, Eigen::VectorXd& u) { u = held; };
     for (std::size_t k = 0; k < N; ++k) {
@@ -470,6 +471,19 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
       reference.evaluate(a, xa, ua);
       Eigen::VectorXd ubar = intervalAverage(reference, a, b, xb, ub);
       reference.evaluate(b, xb, ub);
+      if (sol.constrained) {
+        // Between knots the reference's spline leaves the constraints by its interpolation error;
+        // the plant's run starts from the projection of x_ref(t_k) (simulate projects it), so it
+        // ends compared with the projection of x_ref(t_{k+1}): otherwise the mass-metric
+        // projection's tangent part at the start would count as a defect every interval. The
+        // offset P(x_ref) − x_ref is what no loop on the constraints can follow (the prediction
+        // below adds it).
+        const Eigen::VectorXd xa0 = xa, xb0 = xb;
+        projectOntoConstraints(model, xa);
+        projectOntoConstraints(model, xb);
+        if (k == 0) offManifold[0] = xa - xa0;
+        offManifold[k + 1] = xb - xb0;
+      }
       const Eigen::MatrixXd& W = sol.S[k + 1];
       const Eigen::MatrixXd G = Tk[k + 1] * disc.intervals[k].Gamma;
       so.sampleRate = 1.0 / (b - a);
@@ -557,13 +571,15 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
     uff.push_back(uff.back());  // the row at T repeats the last sample's
     // What the hold allows: the residuals propagated by the sampled closed loop of the
     // linearization, z_{k+1} = (Φ_k − Γ_k K_k) z_k + T_{k+1}ᵀ r_k, z_0 = 0 (reduced coordinates;
-    // T = I without constraints), e_k = T_k z_k — to first order in r the unperturbed loop's
-    // deviation at the samples.
+    // T = I without constraints), e_k = T_k z_k + (P(x_ref(t_k)) − x_ref(t_k)) — to first order
+    // in r the unperturbed loop's deviation at the samples (the loop follows the reference's
+    // projection onto the constraints).
     Eigen::VectorXd z = Eigen::VectorXd::Zero(d);
+    sol.predictedDeviation = offManifold[0].norm();
     for (std::size_t k = 0; k < N; ++k) {
       const SampledInterval& iv = disc.intervals[k];
       z = (iv.Phi * z - iv.Gamma * (rec.K[k] * z) + Tk[k + 1].transpose() * residual[k]).eval();
-      sol.predictedDeviation = std::max(sol.predictedDeviation, (Tk[k + 1] * z).norm());
+      sol.predictedDeviation = std::max(sol.predictedDeviation, (Tk[k + 1] * z + offManifold[k + 1]).norm());
     }
   }
   finish(times, std::move(K));

@@ -171,7 +171,9 @@ struct TvlqrSolution {
   /// Sampled: what the hold allows — the largest ‖e_k‖₂ (full state, the simulator's tracking
   /// error's norm) of the defects r_k left by the feed-forward written, propagated by the sampled
   /// closed loop of the linearization, e_{k+1} = (Φ_k − Γ_k K_k) e_k + r_k, e_0 = 0: to first order
-  /// in r, the unperturbed sampled loop's deviation from the reference at the samples.
+  /// in r, the unperturbed sampled loop's deviation from the reference at the samples. With
+  /// constraints, in the tangent coordinates between the projections of the reference onto the
+  /// constraints, plus the reference's own distance from them, P(x_ref(t_k)) − x_ref(t_k).
   double predictedDeviation = 0.0;
   bool infiniteHorizon = false;      ///< solved with Qf = S∞ (options.infiniteHorizon)
   std::string infiniteHorizonSolve;  ///< the CARE's (DARE's) LqrResult::describe() line
