@@ -227,3 +227,17 @@ trellis_cli_test(gains.error.infinite_horizon_and_qf
 trellis_cli_test(simulate.error.hold_and_trajectory
   ARGS simulate "${_cart_pole}" --hold 1 --trajectory "${_cart_pole_upright}" --gains g.csv --out /dev/null
   CHECKS ${_e2} "-DSTDERR_REGEX=--hold and --trajectory exclude each other")
+trellis_cli_test(gains.error.feedforward_needs_rate
+  ARGS gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --feedforward average --out /dev/null
+  CHECKS ${_e2} "-DSTDERR_REGEX=--feedforward applies to sampled gains only \\(--rate\\)")
+trellis_cli_test(gains.error.feedforward_unknown
+  ARGS gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --rate 10 --feedforward best --out /dev/null
+  CHECKS ${_e2} "-DSTDERR_REGEX=--feedforward 'best' is not one of reference, average, consistent")
+
+# A sampled gain file written before issue 27 (columns K_<input>_<state>, no uff columns) is still
+# read and applied; the summary says the feed-forward is then u_ref(t_k).
+trellis_cli_test(simulate.older_sampled_gain_file
+  ARGS simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}"
+       --gains "${_data}/cart_pole_gains_older_sampled_10hz.csv" --rate 10 --perturb theta=0.05 --out /dev/null
+  CHECKS -DSTDERR_EMPTY=ON
+         "-DSTDOUT_REGEX=feedback sampled at 10 Hz, feed-forward u_ref\\(t_k\\) \\(the gain file has none\\)")
