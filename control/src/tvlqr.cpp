@@ -182,8 +182,12 @@ std::string TvlqrSolution::summary() const {
         << "sqrt(d'S d) " << fmt(feedforwardDefect, 3) << " (u_ref(t_k) held: " << fmt(referenceDefect, 3) << "), "
         << feedforwardSimulations << " plant runs\n";
     }
-    o << "what the hold allows: the defects left, propagated by the sampled closed loop, predict a largest "
-      << "|x - x_ref| of " << fmt(predictedDeviation, 3) << " at the samples of the unperturbed loop (first order)\n";
+    if (predictionFailure.empty()) {
+      o << "what the hold allows: the defects left, propagated by the sampled closed loop, predict a largest "
+        << "|x - x_ref| of " << fmt(predictedDeviation, 3) << " at the samples of the unperturbed loop (first order)\n";
+    } else {
+      o << "what the hold allows: not predicted (" << predictionFailure << ")\n";
+    }
   }
   return o.str();
 }
@@ -221,6 +225,7 @@ std::string TvlqrSolution::json() const {
   j["reference_defect"] = detail::toJson(referenceDefect);
   j["feedforward_simulations"] = feedforwardSimulations;
   j["predicted_deviation"] = detail::toJson(predictedDeviation);
+  j["prediction_failure"] = predictionFailure;
   j["infinite_horizon"] = infiniteHorizon;
   j["infinite_horizon_solve"] = infiniteHorizonSolve;
   j["max_gain_deviation"] = detail::toJson(maxGainDeviation);
@@ -452,6 +457,7 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
     SimulationOptions so;
     so.rtol = options.sampled.rtol;
     so.atol = options.sampled.atol;
+    so.maxSteps = options.sampled.maxSteps;  // per interval, as for the discretization
     // BDF with the exact Jacobian: a held input is a "sampled" policy (∂u/∂x = 0, so ∂f/∂x = A),
     // one sample per run at its start.
     so.method = IntegrationMethod::kBDF;
@@ -494,10 +500,17 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
         const SimulationResult run = simulate(model, xa, a, b, hold, so);
         ++sol.feedforwardSimulations;
         if (!run.ok()) {
-          sol.status.set(TvlqrCode::kFeedforwardFailure,
-                         "the plant's run over the sample interval [" + fmt(a, 17) + ", " + fmt(b, 17) +
-                             "] with a held input failed: " + run.status.describe(),
-                         run.status.t, static_cast<long>(k));
+          const std::string what = "the plant's run over the sample interval [" + fmt(a, 17) + ", " + fmt(b, 17) +
+                                   "] with a held input failed: " + run.status.describe();
+          // With no feed-forward to compute the runs only serve the prediction: the gains stand.
+          if (options.feedforward == SampledFeedforward::kReference) {
+            sol.predictionFailure = what;
+          } else {
+            sol.status.set(TvlqrCode::kFeedforwardFailure,
+                           what + " (feedforward = reference needs none of these runs; a looser sampled.rtol "
+                                  "may help)",
+                           run.status.t, static_cast<long>(k));
+          }
           return false;
         }
         dk = run.trajectory.states().col(run.trajectory.size() - 1) - xb;
@@ -513,7 +526,10 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
         dk = cached->defect;
       } else {
         double f = 0.0;
-        if (!defect(ua, f)) return sol;
+        if (!defect(ua, f)) {
+          if (!sol.predictionFailure.empty()) break;  // feedforward = reference: gains without prediction
+          return sol;
+        }
         sol.referenceDefect = std::max(sol.referenceDefect, std::sqrt(std::max(f, 0.0)));
         if (options.feedforward == SampledFeedforward::kReference) {
           ubar = ua;
@@ -568,15 +584,21 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
       uff.push_back(ubar);
       residual.push_back(dk);
     }
-    uff.push_back(uff.back());  // the row at T repeats the last sample's
+    if (!sol.predictionFailure.empty()) {
+      const double nan = std::numeric_limits<double>::quiet_NaN();
+      sol.predictedDeviation = sol.referenceDefect = sol.feedforwardDefect = nan;
+      residual.clear();
+    } else {
+      uff.push_back(uff.back());  // the row at T repeats the last sample's
+    }
     // What the hold allows: the residuals propagated by the sampled closed loop of the
     // linearization, z_{k+1} = (Φ_k − Γ_k K_k) z_k + T_{k+1}ᵀ r_k, z_0 = 0 (reduced coordinates;
     // T = I without constraints), e_k = T_k z_k + (P(x_ref(t_k)) − x_ref(t_k)) — to first order
     // in r the unperturbed loop's deviation at the samples (the loop follows the reference's
     // projection onto the constraints).
     Eigen::VectorXd z = Eigen::VectorXd::Zero(d);
-    sol.predictedDeviation = offManifold[0].norm();
-    for (std::size_t k = 0; k < N; ++k) {
+    if (sol.predictionFailure.empty()) sol.predictedDeviation = offManifold[0].norm();
+    for (std::size_t k = 0; k < residual.size(); ++k) {
       const SampledInterval& iv = disc.intervals[k];
       z = (iv.Phi * z - iv.Gamma * (rec.K[k] * z) + Tk[k + 1].transpose() * residual[k]).eval();
       sol.predictedDeviation = std::max(sol.predictedDeviation, (Tk[k + 1] * z + offManifold[k + 1]).norm());

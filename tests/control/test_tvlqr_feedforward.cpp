@@ -2,6 +2,8 @@
 // double inverted pendulum on a cart swinging up in 3 s, the unperturbed 100 Hz loop stays on the
 // reference within what the hold allows (the predicted deviation) with the consistent feed-forward,
 // and leaves it by 20x more with u_ref(t_k) held (the control case: the test can fail).
+#include "control_test_support.hpp"
+
 #include <trellis/analysis/simulation.hpp>
 #include <trellis/control/tvlqr.hpp>
 #include <trellis/core/model.hpp>
@@ -12,6 +14,7 @@
 
 #include <Eigen/Core>
 
+#include <cmath>
 #include <string>
 
 using Eigen::MatrixXd;
@@ -119,4 +122,34 @@ TEST_CASE("sampled gains: the predicted deviation on a constrained scene", "[sam
   // Both ways: the prediction is neither exceeded nor pessimistic (to 10 %).
   CHECK(simulated <= 1.1 * sol.predictedDeviation);
   CHECK(simulated >= 0.9 * sol.predictedDeviation);
+}
+
+TEST_CASE("sampled gains: a failed plant run", "[sampled][feedforward]") {
+  // A held cart-pole: the discretization takes no integrator step (one exact exponential), the
+  // plant runs over an interval need more than 1: with maxSteps = 1 they fail.
+  const trellis::Model model = trellis::ctest::makeCartPole();
+  trellis::Trajectory ref(model.configNames(), model.inputNames(), (VectorXd(2) << 0.0, 1.0).finished(),
+                          MatrixXd::Zero(4, 2), MatrixXd::Zero(1, 2));
+  ref.setStateDerivatives(MatrixXd::Zero(4, 2));
+  trellis::LqrWeights w;
+  w.Q = MatrixXd::Identity(4, 4);
+  w.R = MatrixXd::Identity(1, 1);
+  w.Qf = w.Q;
+  trellis::TvlqrOptions opt;
+  opt.sampleRate = 10.0;
+  opt.sampled.maxSteps = 1;
+  // With a feed-forward to compute: the status, naming the interval.
+  const trellis::TvlqrSolution failed = trellis::solveTvlqr(model, ref, w, opt);
+  REQUIRE_FALSE(failed.ok());
+  CHECK(failed.status.code == trellis::TvlqrCode::kFeedforwardFailure);
+  CHECK_THAT(failed.status.message, Catch::Contains("sample interval [0, 0.1") &&
+                                        Catch::Contains("feedforward = reference needs none"));
+  // Without (reference): the runs only serve the prediction; the gains stand, the prediction is
+  // NaN and says why.
+  opt.feedforward = SampledFeedforward::kReference;
+  const trellis::TvlqrSolution gains = trellis::solveTvlqr(model, ref, w, opt);
+  REQUIRE(gains.ok());
+  CHECK_FALSE(gains.gains.hasFeedforward());
+  CHECK(std::isnan(gains.predictedDeviation));
+  CHECK_THAT(gains.summary(), Catch::Contains("what the hold allows: not predicted (the plant's run"));
 }

@@ -175,6 +175,10 @@ struct TvlqrSolution {
   /// constraints, in the tangent coordinates between the projections of the reference onto the
   /// constraints, plus the reference's own distance from them, P(x_ref(t_k)) − x_ref(t_k).
   double predictedDeviation = 0.0;
+  /// Empty, or (feedforward = kReference only, where the plant runs serve only the prediction)
+  /// why a run failed: the gains stand, the defects and the prediction are NaN. With a
+  /// feed-forward to compute, a failed run is the status kFeedforwardFailure instead.
+  std::string predictionFailure;
   bool infiniteHorizon = false;      ///< solved with Qf = S∞ (options.infiniteHorizon)
   std::string infiniteHorizonSolve;  ///< the CARE's (DARE's) LqrResult::describe() line
   double maxGainDeviation = 0.0;     ///< infinite horizon: max_k ‖K_k − K∞‖_F / ‖K∞‖_F
@@ -188,7 +192,8 @@ struct TvlqrSolution {
   /// nu, tangent_dimension, rows, t0, t1, seconds, steps, rhs_evaluations, linearizations,
   /// transport_steps, max_basis_correction, min_eigenvalue_S, max_eigenvalue_S, method, feedforward: reference|average|consistent or "none"
   /// for continuous gains, feedforward_defect, reference_defect, feedforward_simulations,
-  /// predicted_deviation, infinite_horizon, infinite_horizon_solve, max_gain_deviation).
+  /// predicted_deviation, prediction_failure, infinite_horizon, infinite_horizon_solve,
+  /// max_gain_deviation).
   std::string json() const;
 };
 
