@@ -129,6 +129,9 @@ void bindTvlqr(py::module_& m) {
       .def_readonly("max_eigenvalue_S", &TvlqrSolution::maxEigenvalueS)
       .def_readonly("method", &TvlqrSolution::method)
       .def_readonly("feedforward", &TvlqrSolution::feedforward)
+      .def_readonly("prediction_failure", &TvlqrSolution::predictionFailure,
+                    "feedforward = REFERENCE only: why a plant run failed (the gains stand; the "
+                    "prediction is NaN), else empty")
       .def_readonly("infinite_horizon", &TvlqrSolution::infiniteHorizon)
       .def_readonly("infinite_horizon_solve", &TvlqrSolution::infiniteHorizonSolve)
       .def_readonly("max_gain_deviation", &TvlqrSolution::maxGainDeviation,

@@ -1448,6 +1448,9 @@ class TvlqrSolution:
     def predicted_deviation(self) -> float:
         """what the hold allows: the defects propagated by the sampled closed loop, the largest |x - x_ref| at the samples of the unperturbed loop (first order)"""
     @property
+    def prediction_failure(self) -> str:
+        """feedforward = REFERENCE only: why a plant run failed (the gains stand; the prediction is NaN), else empty"""
+    @property
     def reference_defect(self) -> float:
         """the same for u_ref(t_k) held"""
     @property
