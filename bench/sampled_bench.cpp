@@ -11,8 +11,12 @@
 // Closed loop: examples/hand/hand_feedback.hpp's options (BDF, rtol 1e-7, atol 5e-10, tensions clipped at 0), perturbation of norm --perturbation
 // along a seeded random tangent direction at t0.
 //
+// --feedforward reference|average|consistent: the held feed-forward of the ZOH gains (TvlqrOptions::
+// feedforward). Default reference (none: u_ref(t_k) held), so that the solve times stay those of
+// the discretization and recursion measured before issue 27; consistent adds one plant run per
+// interval and Gauss-Newton step (its cost is printed in the solve's line as plant runs).
 //   trellis_bench_sampled [--duration 3] [--knots 301] [--rates 100,1000] [--perturbation 0.01]
-//                         [--seed 1] [--repeat 1] [--no-simulate]
+//                         [--seed 1] [--repeat 1] [--no-simulate] [--feedforward reference]
 // One line per solve and per closed loop; a JSON line (prefix "json: ") per row for scripts.
 #include "hand_feedback.hpp"
 #include "reference_motion.hpp"
@@ -38,6 +42,7 @@ struct Args {
   unsigned seed = 1;
   int repeat = 1;
   bool simulate = true;
+  trellis::SampledFeedforward feedforward = trellis::SampledFeedforward::kReference;
 };
 
 Args parse(int argc, char** argv) {
@@ -54,6 +59,7 @@ Args parse(int argc, char** argv) {
     else if (k == "--seed") a.seed = static_cast<unsigned>(std::stoul(next()));
     else if (k == "--repeat") a.repeat = std::stoi(next());
     else if (k == "--no-simulate") a.simulate = false;
+    else if (k == "--feedforward") a.feedforward = trellis::parseEnum<trellis::SampledFeedforward>(next(), "--feedforward");
     else if (k == "--rates") {
       a.rates.clear();
       std::stringstream ss(next());
@@ -120,10 +126,14 @@ int main(int argc, char** argv) try {
   for (double rate : args.rates) {
     trellis::TvlqrOptions o = base;
     o.sampleRate = rate;
+    o.feedforward = args.feedforward;
     double tSamp = 0.0;
     const trellis::TvlqrSolution samp = timed(o, tSamp);
-    std::printf("sampled %g Hz: %.3f s (%.2fx the continuous solve), %ld steps, %ld rhs, %ld linearizations\n",
-                rate, tSamp, tSamp / tCont, samp.steps, samp.rhsEvaluations, samp.linearizations);
+    std::printf("sampled %g Hz: %.3f s (%.2fx the continuous solve), %ld steps, %ld rhs, %ld linearizations, "
+                "feed-forward %s (%ld plant runs, defect %.3g against %.3g for u_ref(t_k), predicted deviation %.3g)\n",
+                rate, tSamp, tSamp / tCont, samp.steps, samp.rhsEvaluations, samp.linearizations,
+                std::string(trellis::toString(args.feedforward)).c_str(), samp.feedforwardSimulations,
+                samp.feedforwardDefect, samp.referenceDefect, samp.predictedDeviation);
     std::printf("json: {\"solve\": \"sampled\", \"rate_hz\": %g, \"seconds\": %.6g, \"ratio_to_continuous\": %.4g, "
                 "\"steps\": %ld, \"rhs\": %ld, \"linearizations\": %ld}\n",
                 rate, tSamp, tSamp / tCont, samp.steps, samp.rhsEvaluations, samp.linearizations);

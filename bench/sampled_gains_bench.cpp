@@ -95,6 +95,8 @@ trellis::TvlqrSolution solve(int which, double rate, bool exact = true, bool tig
   trellis::TvlqrOptions o;
   if (rtol > 0.0) o.sampled.rtol = rtol;
   o.sampleRate = rate;
+  // The gains alone (discretization and recursion), as measured before issue 27's feed-forward.
+  o.feedforward = trellis::SampledFeedforward::kReference;
   o.sampled.integrator = integrator;
   o.sampled.exactConstantIntervals = exact;
   if (tight) {

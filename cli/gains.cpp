@@ -28,7 +28,8 @@ namespace trellis::cli {
 namespace {
 
 constexpr std::string_view kHelp = R"(usage: trellis gains SCENE.json --trajectory TRAJ.csv --out GAINS.csv [options]
-       trellis gains SCENE.json --hold T [--state STATE.json] --out GAINS.csv [options]
+       trellis gains SCENE.json --hold T [--state STATE.json] [--infinite-horizon]
+                     [--write-reference REF.csv] --out GAINS.csv [options]
 
 Time-varying LQR along a reference trajectory x_ref(t), u_ref(t) of the scene (SCENE_FORMAT.md):
 with the exact linearization dx' = A(t) dx + B(t) du at the reference, x = [q; q'] (2n states,
@@ -53,6 +54,18 @@ of the scene's stored state (or of --state; its velocities are ignored) at rest 
 the inputs that hold it still (as `trellis equilibrium --hold`: B_u u + A^T lambda = b(q), least
 squares of minimum norm; the command fails if no inputs hold the pose exactly), 101 knots. On a
 scene with constraints the pose must satisfy them (`trellis project` moves a state onto them).
+--write-reference REF.csv writes the reference used (the held pose, or the trajectory read) in
+the trajectory layout, for `trellis simulate --trajectory` (or use `simulate --hold T`, which
+builds the same pose).
+
+Balancing (--hold with --infinite-horizon): the finite-horizon gain ends in a terminal layer
+(K(T) = R^-1 B^T Qf for continuous gains) that can destabilize a loop run up to T. With
+--infinite-horizon the terminal cost Qf is the stationary cost-to-go S_inf at the pose: the
+solution of the CARE (continuous gains) or, with --rate, of the DARE of the exact sampled-data
+discretization (with its cross term) -- on the tangent space of the constraint manifold when the
+scene has constraints. The Riccati equation (recursion) then starts at its fixed point: K(t) =
+K_inf at every row, no terminal layer (the summary gives max |K_k - K_inf| / |K_inf|). --Qf
+does not apply. A pose that cannot be stabilized (no stabilizing CARE/DARE solution) fails.
 
 Weights W (for --Q, --Qf: 2n x 2n, positive semidefinite; for --R: m x m, positive definite):
   a number            that multiple of the identity            --Q 10
@@ -70,16 +83,34 @@ over the interval with the input held (which gives per-sample weights with a cro
 discrete Riccati recursion gives K_k at the sample times. The file's metadata line says
 "sample_rate_hz=HZ": `trellis simulate` applies such gains only with the same --rate.
 
+What the sampled controller applies: at t_k it measures x(t_k) and holds
+  u_k = uff_k - K_k (x(t_k) - x_ref(t_k))   until t_{k+1}.
+K_k is exact for the hold; so is the feed-forward uff_k (--feedforward consistent, the default):
+the held input that carries x_ref(t_k) to x_ref(t_{k+1}) through the exact nonlinear dynamics
+as closely as one held input can, in the metric of the cost-to-go S_{k+1} (Gauss-Newton from
+the interval average of u_ref, with the hold's exact input matrix as the Jacobian; on the
+constraint manifold when there are constraints). u_ref(t_k) held instead lets the unperturbed
+loop leave the reference by O(h^2 |u_ref'|) per interval, which the feedback then chases (at
+100 Hz up to 10x the tracking error of continuous feedback). The summary gives the largest defect
+left at the next sample, sqrt(d^T S_{k+1} d), beside that of u_ref(t_k) held: what remains is
+what one held input cannot do (m < 2n), including the reference's own collocation error.
+Written as columns uff[<input>] after the gains. --feedforward average writes the interval
+average of u_ref; --feedforward reference writes none (the controller then applies u_ref(t_k),
+as files from before this option do).
+
 Output (--out): a CSV whose first line is metadata ("# trellis gain schedule: m=.. nx=.. " then
-"continuous" or "sample_rate_hz=HZ"), then the header t,K_<input>_<state>,... (K row-major: the
-inputs in order, each with the states [q; dq] in order, e.g. K_push_x, K_push_dtheta), one row per
-output time: the trajectory's knots, or with --dt a uniform grid from t0 (T included), or with
---rate the sample times (T included, repeating the last sample's gain).
+"continuous" or "sample_rate_hz=HZ"), then the header t,K[<input>|<state>],...[,uff[<input>],...]
+(K row-major: the inputs in order, each with the states [q; dq] in order, e.g. K[push|x],
+K[push|dtheta]; a column splits at its first '|', which input names may not contain; files with
+the older K_<input>_<state> columns are still read), one row per output time: the trajectory's
+knots, or with --dt a uniform grid from t0 (T included), or with --rate the sample times (T
+included, repeating the last sample's gain and feed-forward).
 `trellis simulate --gains` reads it and checks the names against the scene. Then a summary on standard output: the rows written, the
 Riccati solve (steps, right-hand-side evaluations, time taken), the smallest and largest
 eigenvalue of S over the solver's steps (of Sr on the tangent space for a constrained scene),
 the controllability of the linearization at the first knot (rank of the Krylov matrix) and the
-reachability Gramian over the whole trajectory (smallest and largest eigenvalue). With --json the
+reachability Gramian over the whole trajectory (largest eigenvalue, and the smallest when it is
+resolved, above 1e-10 x the largest; below that the line says it was not computed and why). With --json the
 summary is one JSON object instead.
 
 options:
@@ -94,6 +125,9 @@ options:
                       trajectory's knots). This only SAMPLES the continuous K(t): it does not
                       make gains for a controller running at 1/DT; use --rate for that
   --rate HZ           zero-order-hold gains for a controller sampling at HZ (see above)
+  --feedforward F     with --rate: consistent (default), average or reference (see above)
+  --infinite-horizon  with --hold: Qf = S_inf of the CARE (DARE with --rate), see Balancing
+  --write-reference F write the reference used (the held pose, or the trajectory) to F (CSV)
   --cost-to-go FILE   also write the Riccati solution S(t) at the gains' times (CSV, the upper
                       triangle; `trellis funnel` measures its level sets V = dx^T S dx)
   --json              print the summary as one JSON object
@@ -120,37 +154,12 @@ std::string gramianVerdict(const GramianReport& gramian) {
          (gramian.maxEigenvalue > 1e8 ? ", max grows as an unstable reference does" : "") + "; see the rank at t0)";
 }
 
-/// The reference of --hold: the pose q at rest over [0, span] with the inputs that hold it
-/// (computeHoldingInputs), 101 knots; checked as a reference file is (constraints, dynamics).
-Trajectory heldPose(const LoadedScene& loaded, const std::optional<std::string>& statePath, double span) {
-  const Model& model = loaded.scene.model;
-  const ModelState state = stateFromFile(loaded, statePath);
-  Data data(model);
-  const InverseDynamicsResult hold = computeHoldingInputs(model, data, state.q);
-  if (!hold.ok()) {
-    throw std::runtime_error(loaded.path + ": gains --hold: the pose cannot be held (" + hold.status.name() +
-                             "): " + hold.status.message);
-  }
-  constexpr int kKnots = 101;
-  const Eigen::VectorXd times = Eigen::VectorXd::LinSpaced(kKnots, 0.0, span);
-  Eigen::VectorXd x = Eigen::VectorXd::Zero(2 * model.nq());
-  x.head(model.nq()) = state.q;
-  const Trajectory pose(model.configNames(), model.inputNames(), times, x.replicate(1, kKnots),
-                        hold.u.replicate(1, kKnots));
-  Trajectory checked = checkReference(model, loaded.path, "the held pose", pose);
-  // At rest by definition (the inputs balance the dynamics; the dynamics' q̈ at the knots is that
-  // balance's rounding): ẋ = 0 at every knot makes the reference exactly constant, which the
-  // sampled gains use (one exact exponential instead of an integration per interval).
-  checked.setStateDerivatives(Eigen::MatrixXd::Zero(2 * model.nq(), kKnots));
-  return checked;
-}
-
 int runGains(std::span<const std::string> args, std::ostream& out) {
   const ParsedOptions options(
       "gains", args,
       {.valued = {"--trajectory", "--hold", "--state", "--out", "--Q", "--R", "--Qf", "--dt", "--rate", "--rtol", "--atol", "--method",
-                  "--max-steps", "--cost-to-go"},
-       .flags = {"--json"},
+                  "--max-steps", "--feedforward", "--write-reference", "--cost-to-go"},
+       .flags = {"--json", "--infinite-horizon"},
        .repeatable = {}});
   const std::string scenePath = options.singlePositional("scene file");
   if (options.has("--hold") && options.has("--trajectory")) {
@@ -166,12 +175,27 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   const std::string trajectoryPath =
       hold ? std::string("the held pose") : options.required("--trajectory", "(the reference trajectory CSV, or --hold T)");
   const std::string outPath = options.required("--out", "(the gains CSV to write)");
+  const bool infiniteHorizon = options.flag("--infinite-horizon");
+  if (infiniteHorizon && !hold) {
+    throw UsageError("gains: --infinite-horizon applies to a held pose only (--hold T): along a moving "
+                     "reference there is no stationary cost-to-go");
+  }
+  if (infiniteHorizon && options.has("--Qf")) {
+    throw UsageError("gains: --infinite-horizon and --Qf exclude each other (the terminal cost is S_inf)");
+  }
+  const std::optional<std::string> referenceOut = options.value("--write-reference");
   {
     std::vector<std::pair<std::string, std::string>> inputs{{"scene", scenePath}};
     if (!hold) inputs.emplace_back("--trajectory", trajectoryPath);
     for (const char* option : {"--state", "--Q", "--R", "--Qf"})
       if (auto v = options.value(option)) inputs.emplace_back(option, *v);
     checkOutputIsNotInput("gains", outPath, inputs);
+    // The other outputs may not overwrite an input nor each other.
+    inputs.emplace_back("--out", outPath);
+    if (referenceOut) {
+      checkOutputIsNotInput("gains", *referenceOut, inputs);
+      inputs.emplace_back("--write-reference", *referenceOut);
+    }
     if (auto v = options.value("--cost-to-go")) checkOutputIsNotInput("gains", *v, inputs);
   }
 
@@ -198,6 +222,14 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   if (options.has("--rate") && options.has("--method")) {
     throw UsageError("gains: --method applies to continuous gains only (--rate uses the exact discretization)");
   }
+  if (auto v = options.value("--feedforward")) {
+    if (!options.has("--rate")) throw UsageError("gains: --feedforward applies to sampled gains only (--rate)");
+    try {
+      tvlqr.feedforward = parseEnum<SampledFeedforward>(*v, "--feedforward");
+    } catch (const std::invalid_argument& e) {
+      throw UsageError(std::string("gains: ") + e.what());
+    }
+  }
   if (options.has("--rate")) {
     if (auto v = options.value("--rtol")) tvlqr.sampled.rtol = options.relativeTolerance("--rtol", *v);
     if (auto v = options.value("--atol")) tvlqr.sampled.atol = options.absoluteTolerance("--atol", *v);
@@ -208,7 +240,7 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   const int n = model.nq(), m = model.nu(), nx = 2 * n;
   if (m == 0) throw std::runtime_error(scenePath + ": the scene has no inputs: there is nothing to control");
 
-  const Trajectory trajectory = hold ? heldPose(loaded, options.value("--state"), holdSpan)
+  const Trajectory trajectory = hold ? heldPoseReference(loaded, options.value("--state"), holdSpan, "gains --hold")
                                          : loadReference(model, scenePath, trajectoryPath);
   if (tvlqr.outputStep > 0.0) options.gridPoints("--dt", tvlqr.outputStep, trajectory.endTime() - trajectory.startTime(), kMaxOutputRows, "output rows");
   if (tvlqr.sampleRate > 0.0) {
@@ -235,6 +267,7 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
                    : weights.Q;
 
   // The solve (on the tangent space of the constraint manifold for a constrained scene).
+  tvlqr.infiniteHorizon = infiniteHorizon;
   const TvlqrSolution solution = solveTvlqr(model, trajectory, weights, tvlqr);
   if (!solution.ok()) throw std::runtime_error("gains: " + solution.status.describe());
   solution.gains.writeCsvFile(outPath);
@@ -243,11 +276,13 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
     costToGo.setStateNames(GainSchedule::stateNames(model.configNames()));
     costToGo.writeCsvFile(*v);
   }
+  if (referenceOut) trajectory.writeCsvFile(*referenceOut);
 
   // The summary, after the file is written.
   const bool json = options.flag("--json");
   if (!json) {
     out << "wrote " << outPath << ": " << solution.summary();
+    if (referenceOut) out << "wrote " << *referenceOut << ": the reference used (" << trajectory.size() << " knots)\n";
   }
   const ControllabilityReport pointwise = computeControllabilityAt(
       model, data, trajectory.states().col(0).head(n), trajectory.states().col(0).tail(n),
@@ -259,12 +294,14 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
     // The library's report, then the file and the controllability checks (their own reports).
     OutputJson body = OutputJson::parse(solution.json());
     body["out"] = outPath;
+    body["reference_out"] = referenceOut ? OutputJson(*referenceOut) : OutputJson(nullptr);
     body["controllable_at_t0"] = pointwise.controllable();
     body["rank_at_t0"] = pointwise.rank;
     body["gramian_ok"] = gramian.ok();
     body["gramian_resolved"] = gramian.controllable();
     const OutputJson gramianReport = OutputJson::parse(gramian.json());
-    body["gramian_min_eigenvalue"] = gramianReport["min_eigenvalue"];
+    // null when not resolved (below 1e-10 x max: rounding, see the text summary).
+    body["gramian_min_eigenvalue"] = gramian.controllable() ? gramianReport["min_eigenvalue"] : OutputJson(nullptr);
     body["gramian_max_eigenvalue"] = gramianReport["max_eigenvalue"];
     body["controllability_at_t0"] = OutputJson::parse(pointwise.json());
     body["gramian"] = gramianReport;
@@ -274,11 +311,20 @@ int runGains(std::span<const std::string> args, std::ostream& out) {
   out << "controllability at t = " << formatNumber(trajectory.startTime()) << ": rank " << pointwise.rank
       << " of " << pointwise.dimension << (pointwise.controllable() ? " (controllable)" : " (NOT controllable)")
       << ", smallest singular value " << formatNumber(pointwise.smallestSingularValue, 3) << "\n";
-  if (gramian.ok()) {
+  if (gramian.ok() && gramian.controllable()) {
     out << "gramian on [" << formatNumber(trajectory.startTime()) << ", "
         << formatNumber(trajectory.endTime()) << "]: min eigenvalue " << formatNumber(gramian.minEigenvalue, 3)
         << ", max eigenvalue " << formatNumber(gramian.maxEigenvalue, 3)
         << gramianVerdict(gramian) << "\n";
+  } else if (gramian.ok()) {
+    // Below 1e-10 x max the integration's rounding decides the smallest eigenvalue's sign and
+    // size: printing it (even a negative one, of a PSD matrix) would pass rounding off as a result.
+    out << "gramian on [" << formatNumber(trajectory.startTime()) << ", " << formatNumber(trajectory.endTime())
+        << "]: max eigenvalue " << formatNumber(gramian.maxEigenvalue, 3)
+        << "; min eigenvalue not computed: it lies below 1e-10 x max, where the integration's rounding "
+           "decides its sign and size"
+        << (gramian.maxEigenvalue > 1e8 ? " (an unstable reference makes the Gramian grow like exp(2 sigma T))" : "")
+        << "; controllability is decided by the rank at t = " << formatNumber(trajectory.startTime()) << " above\n";
   } else {
     out << "gramian: not available (" << gramian.status.describe() << ")\n";
   }

@@ -1,7 +1,10 @@
 // cli/model_questions.cpp — see model_questions.hpp.
 #include "model_questions.hpp"
 
+#include "cli_options.hpp"
 #include "command.hpp"
+
+#include "trellis/core/equilibrium.hpp"
 
 #include "trellis/core/io.hpp"
 
@@ -51,6 +54,30 @@ ModelState stateFromFile(const LoadedScene& loaded, const std::optional<std::str
   stored.u = loaded.scene.u;
   if (!statePath) return stored;
   return loadState(loaded.scene.model, *statePath, stored);
+}
+
+Trajectory heldPoseReference(const LoadedScene& loaded, const std::optional<std::string>& statePath, double span,
+                             const std::string& what) {
+  const Model& model = loaded.scene.model;
+  const ModelState state = stateFromFile(loaded, statePath);
+  Data data(model);
+  const InverseDynamicsResult hold = computeHoldingInputs(model, data, state.q);
+  if (!hold.ok()) {
+    throw std::runtime_error(loaded.path + ": " + what + ": the pose cannot be held (" + hold.status.name() +
+                             "): " + hold.status.message);
+  }
+  constexpr int kKnots = 101;
+  const Eigen::VectorXd times = Eigen::VectorXd::LinSpaced(kKnots, 0.0, span);
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(2 * model.nq());
+  x.head(model.nq()) = state.q;
+  const Trajectory pose(model.configNames(), model.inputNames(), times, x.replicate(1, kKnots),
+                        hold.u.replicate(1, kKnots));
+  Trajectory checked = checkReference(model, loaded.path, "the held pose", pose);
+  // At rest by definition (the inputs balance the dynamics; the dynamics' q̈ at the knots is that
+  // balance's rounding): ẋ = 0 at every knot makes the reference exactly constant, which the
+  // sampled gains use (one exact exponential instead of an integration per interval).
+  checked.setStateDerivatives(Eigen::MatrixXd::Zero(2 * model.nq(), kKnots));
+  return checked;
 }
 
 Trajectory readTrajectoryFor(const LoadedScene& loaded, const std::string& trajectoryPath) {

@@ -31,6 +31,14 @@ ModelState stateFromFile(const LoadedScene& loaded, const std::optional<std::str
 /// A trajectory CSV (t, <configs>, d<configs>, <inputs>; ≥ 1 knot) whose names equal the model's.
 Trajectory readTrajectoryFor(const LoadedScene& loaded, const std::string& trajectoryPath);
 
+/// The reference of --hold (gains, simulate): the pose q of the scene's stored state (or of the
+/// --state file; its velocities are ignored) at rest over [0, span], with the inputs that hold it
+/// (computeHoldingInputs: least squares of minimum norm, refused unless they hold it exactly),
+/// 101 knots, zero state derivatives (exactly constant); checked as a reference file is (on the
+/// constraints). Errors start with `what` (e.g. "gains --hold").
+Trajectory heldPoseReference(const LoadedScene& loaded, const std::optional<std::string>& statePath, double span,
+                             const std::string& what);
+
 /// "a,b,c" → frame (or configuration) indices of the model; unknown names are a UsageError naming
 /// the name, the option and the known names.
 std::vector<int> frameIndices(const Model& model, const std::string& command, const std::string& option,

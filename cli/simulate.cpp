@@ -2,6 +2,7 @@
 // --out CLOSED.csv`: the nonlinear closed loop u = u_ref − K(t)(x − x_ref) from a perturbed start.
 #include "cli_options.hpp"
 #include "command.hpp"
+#include "model_questions.hpp"
 
 #include "trellis/core/gain_schedule.hpp"
 #include "trellis/analysis/simulation.hpp"
@@ -25,6 +26,8 @@ namespace {
 
 constexpr std::string_view kHelp = R"(usage: trellis simulate SCENE.json --trajectory TRAJ.csv --gains GAINS.csv --out CLOSED.csv
                         [--perturb NAME=VALUE,...] [--perturb-random SIGMA [--seed N]] [options]
+       trellis simulate SCENE.json --hold T [--state STATE.json] --gains GAINS.csv --out CLOSED.csv
+                        [--perturb ...] [options]
 
 Simulates the NONLINEAR scene (SCENE_FORMAT.md) under the time-varying feedback
 
@@ -34,13 +37,27 @@ along the reference trajectory (x_ref: cubic Hermite through its knots; u_ref li
 knots, or cubic Hermite when the file has rate_<input> columns; K linear between gain times, or
 cubic with interpolation=cubic in its metadata line), from x(t0) = x_ref(t0) + dx0, over the reference's time span,
 with SUNDIALS CVODES. GAINS.csv is a gain schedule as `trellis gains` writes it (header
-t,K_<input>_<state>, checked against the scene's names; K is m x 2n and must cover the reference's
-time span). sat clips u to [--umin, --umax].
+t,K[<input>|<state>],... or the older t,K_<input>_<state>,..., checked against the scene's names;
+K is m x 2n and must cover the reference's time span). sat clips u to [--umin, --umax].
 
 Sampled gains: a file from `trellis gains --rate HZ` holds zero-order-hold gains for a controller
-sampling at HZ; it is applied only with the same --rate (u = the sample's value, held until the
-next sample). Running it continuously or at another rate is refused. Continuous gains with --rate
-are sampled (a warning on standard error says so: they were not designed for that rate).
+sampling at HZ; it is applied only with the same --rate. What the sampled controller applies: at
+each sample t_k = t0 + k/HZ it measures x(t_k) and holds, until t_{k+1},
+  u_k = sat( uff_k - K_k (x(t_k) - x_ref(t_k)) ),
+uff_k the file's feed-forward column uff[<input>] (the held input that carries the reference from
+t_k to t_{k+1} through the exact dynamics, see `trellis gains --help`); a file without those
+columns (older files, or gains --feedforward reference) gives uff_k = u_ref(t_k), the reference's
+input sampled at t_k, which lets even an unperturbed loop drift from the reference by
+O(h^2 |u_ref'|) per sample. Running sampled gains continuously or at another rate is refused.
+Continuous gains with --rate are sampled, with uff_k = u_ref(t_k) (a warning on standard error
+says so: they were not designed for that rate). The summary names the feed-forward used.
+
+Balancing a pose (--hold T instead of --trajectory): the reference is the held pose that
+`trellis gains --hold T` builds -- the pose q of the scene's stored state (or of --state) at
+rest over [0, T] with the inputs that hold it (on the constraints, for a scene with them) -- so
+  trellis gains SCENE --hold 10 --rate 100 --infinite-horizon --out G.csv
+  trellis simulate SCENE --hold 10 --rate 100 --gains G.csv --perturb q1=0.1 --out C.csv
+balances the pose at 100 Hz from the command line alone. The gains must cover [0, T].
 
 Perturbation dx0 (the sum of both; default none):
   --perturb NAME=VALUE[,NAME=VALUE...]   add VALUE to the state NAME, a column name of the
@@ -62,7 +79,9 @@ drift max(|h|, |A q'|) (before projection), the saturation (control evaluations 
 input), and the integrator's work; with --json one JSON object instead.
 
 options:
-  --trajectory FILE      the reference trajectory (CSV; required)
+  --trajectory FILE      the reference trajectory (CSV; required unless --hold)
+  --hold T               instead of --trajectory: the held pose over [0, T] (see above)
+  --state FILE           with --hold: the pose (a state object, see `trellis linearize --help`)
   --gains FILE           the gain schedule (CSV; required)
   --out FILE             where to write the closed-loop trajectory (CSV; required)
   --perturb ...          see above
@@ -148,15 +167,29 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
   const ParsedOptions options(
       "simulate", args,
       {.valued = {"--trajectory", "--gains", "--out", "--perturb", "--perturb-random", "--seed", "--rate",
-                  "--umin", "--umax", "--output-step", "--rtol", "--atol", "--method", "--max-steps"},
+                  "--umin", "--umax", "--output-step", "--rtol", "--atol", "--method", "--max-steps", "--hold",
+                  "--state"},
        .flags = {"--no-project", "--json"},
        .repeatable = {"--perturb"}});
   const std::string scenePath = options.singlePositional("scene file");
-  const std::string trajectoryPath = options.required("--trajectory", "(the reference trajectory CSV)");
+  if (options.has("--hold") && options.has("--trajectory")) {
+    throw UsageError("simulate: --hold and --trajectory exclude each other (--hold makes the reference)");
+  }
+  if (options.has("--state") && !options.has("--hold")) {
+    throw UsageError("simulate: --state applies to --hold only (the reference comes from --trajectory)");
+  }
+  const bool hold = options.has("--hold");
+  const double holdSpan = hold ? options.positiveNumber("--hold", *options.value("--hold")) : 0.0;
+  const std::string trajectoryPath =
+      hold ? std::string("the held pose") : options.required("--trajectory", "(the reference trajectory CSV, or --hold T)");
   const std::string gainsPath = options.required("--gains", "(the gain schedule CSV from 'trellis gains')");
   const std::string outPath = options.required("--out", "(the closed-loop trajectory CSV to write)");
-  checkOutputIsNotInput("simulate", outPath,
-                        {{"scene", scenePath}, {"--trajectory", trajectoryPath}, {"--gains", gainsPath}});
+  {
+    std::vector<std::pair<std::string, std::string>> inputs{{"scene", scenePath}, {"--gains", gainsPath}};
+    if (!hold) inputs.emplace_back("--trajectory", trajectoryPath);
+    if (auto v = options.value("--state")) inputs.emplace_back("--state", *v);
+    checkOutputIsNotInput("simulate", outPath, inputs);
+  }
 
   SimulationOptions simulation;
   if (auto v = options.value("--rtol")) simulation.rtol = options.relativeTolerance("--rtol", *v);
@@ -180,10 +213,11 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
     seed = options.integer<std::uint64_t>("--seed", *v);
   }
 
-  const Scene scene = loadScene(scenePath);
-  const Model& model = scene.model;
+  const LoadedScene loaded = loadSceneArgument(scenePath);
+  const Model& model = loaded.scene.model;
   const int n = model.nq(), m = model.nu(), nx = 2 * n;
-  const Trajectory reference = loadReference(model, scenePath, trajectoryPath);
+  const Trajectory reference = hold ? heldPoseReference(loaded, options.value("--state"), holdSpan, "simulate --hold")
+                                    : loadReference(model, scenePath, trajectoryPath);
   const double span = reference.endTime() - reference.startTime();
   if (simulation.outputStep > 0.0) options.gridPoints("--output-step", simulation.outputStep, span, kMaxOutputRows, "output rows");
   if (simulation.sampleRate > 0.0) options.gridPoints("--rate", 1.0 / simulation.sampleRate, span, kMaxFeedbackSamples, "feedback samples");
@@ -240,6 +274,7 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
     report["out"] = outPath;
     report["sample_rate_hz"] = number(simulation.sampleRate);
     report["gains_sample_rate_hz"] = number(gains.sampleRate());
+    report["feedforward"] = simulation.sampleRate > 0.0 ? (gains.hasFeedforward() ? "gain_file" : "reference_sampled") : "reference";
     report["perturbation_norm"] = number(delta.norm());
     out << report.dump() << "\n";
     return 0;
@@ -251,6 +286,9 @@ int runSimulate(std::span<const std::string> args, std::ostream& out) {
       << formatNumber(result.trajectory.startTime()) << ", " << formatNumber(result.trajectory.endTime())
       << "], feedback "
       << (simulation.sampleRate > 0.0 ? "sampled at " + formatNumber(simulation.sampleRate) + " Hz" : "continuous")
+      << (simulation.sampleRate > 0.0 ? (gains.hasFeedforward() ? ", feed-forward uff_k from the gain file"
+                                                                  : ", feed-forward u_ref(t_k) (the gain file has none)")
+                                      : std::string())
       << "\n";
   out << "perturbation: |dx0| = " << formatNumber(delta.stableNorm()) << "\n";  // no overflow of the squares
   out << "tracking error |x - x_ref|: initial " << formatNumber(error(0)) << ", final "

@@ -7,7 +7,7 @@
                 [--title NAME] [--configs a,b,...] [--trellis PROGRAM] [--closed-after-go]
 
 TRAJ.csv and CLOSED.csv use the trajectory layout (t, configurations, d + configurations,
-inputs); GAINS.csv the gains layout (t, K_i_j row-major). Writes DIR/states.png, DIR/inputs.png,
+inputs); GAINS.csv the gains layout (t, K row-major; uff columns ignored). Writes DIR/states.png, DIR/inputs.png,
 and, when given, DIR/gains.png, DIR/tracking_error.png and DIR/controllability.png (from a
 CSV t,dimension,rank,smallest_singular_value). Uses matplotlib's Agg backend (no
 display needed); Debian's python3-matplotlib is enough.
@@ -213,14 +213,17 @@ def plot_inputs(ref, closed, out, title):
 def plot_gains(path, out, title):
     header, columns = read_csv(path)
     t = columns[0]
-    # Columns are K row-major. Named files ('K_<input>_<state>') say m and nx in their metadata
-    # line; old files name the indices ('K_i_j').
+    # Columns are K row-major, then (sampled gains) the feed-forward uff[<input>], not plotted.
+    # Named files ('K[<input>|<state>]', older 'K_<input>_<state>') say m and nx in their
+    # metadata line; old files name the indices ('K_i_j').
     with open(path) as f:
         meta = re.search(r"m=(\d+) nx=(\d+)", f.readline())
     rows = {}
     for index, (name, col) in enumerate(zip(header[1:], columns[1:])):
-        if not name.startswith("K_"):
-            sys.exit(f"plot_run.py: {path}: gain column '{name}' is not K_<input>_<state>")
+        if name.startswith("uff"):
+            break
+        if not (name.startswith("K_") or name.startswith("K[")):
+            sys.exit(f"plot_run.py: {path}: gain column '{name}' is not K[<input>|<state>]")
         if meta:
             row = index // int(meta.group(2))
         else:

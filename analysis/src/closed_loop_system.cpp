@@ -141,7 +141,13 @@ bool ClosedLoopSystem::input(double t, const Eigen::VectorXd& x, Eigen::VectorXd
       case InputLaw::Kind::kFeedback:
         law_.gains->evaluate(t, K_);
         dx_ = x - xr_;
-        out = ur_;
+        // Sampled gains with a held feed-forward: ū_k of the sample interval instead of
+        // u_ref(t_k) (gain_schedule.hpp: the input that carries the reference over the hold).
+        if (sampled_ && law_.gains->hasFeedforward()) {
+          law_.gains->evaluateFeedforward(t, out);
+        } else {
+          out = ur_;
+        }
         out.noalias() -= K_ * dx_;
         break;
     }

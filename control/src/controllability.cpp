@@ -35,9 +35,13 @@ std::string ControllabilityReport::json() const {
 }
 
 std::string GramianReport::describe() const {
-  return status.describe() + " (dimension " + std::to_string(dimension) + ", eigenvalues " +
-         formatStatusNumber(minEigenvalue) + " .. " + formatStatusNumber(maxEigenvalue) + ", " +
-         std::to_string(steps) + " steps)";
+  // Below 1e-10 λ_max the smallest eigenvalue is the integration's rounding (controllable()):
+  // its value, possibly negative, is not a result and is not printed as one.
+  const std::string smallest = !ok() || controllable() || dimension == 0
+                                   ? formatStatusNumber(minEigenvalue)
+                                   : std::string("(unresolved, below 1e-10 x max)");
+  return status.describe() + " (dimension " + std::to_string(dimension) + ", eigenvalues " + smallest + " .. " +
+         formatStatusNumber(maxEigenvalue) + ", " + std::to_string(steps) + " steps)";
 }
 
 std::string GramianReport::json() const {

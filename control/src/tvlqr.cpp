@@ -6,11 +6,15 @@
 
 #include "trellis/core/detail/report_json.hpp"
 
+#include "trellis/analysis/simulation.hpp"
+#include "trellis/control/care.hpp"
+#include "trellis/control/dare.hpp"
 #include "trellis/core/reference.hpp"
 #include "trellis/core/trajectory.hpp"
 #include "trellis/core/model.hpp"
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/QR>
 
 #include <chrono>
 #include <algorithm>
@@ -81,6 +85,10 @@ void TvlqrOptions::validate() const {
     throw std::invalid_argument("TvlqrOptions.outputStep = " + std::to_string(outputStep) +
                                 " is invalid (must be finite and >= 0)");
   }
+  if (feedforwardIterations < 1) {
+    throw std::invalid_argument("TvlqrOptions.feedforwardIterations = " + std::to_string(feedforwardIterations) +
+                                " is invalid (must be >= 1)");
+  }
   riccati.validate();
   sampled.validate();
   transport.validate();
@@ -107,6 +115,31 @@ Eigen::VectorXd outputGrid(const Trajectory& reference, double step) {
   }
   times.push_back(T);
   return Eigen::Map<Eigen::VectorXd>(times.data(), static_cast<Eigen::Index>(times.size()));
+}
+
+/// ∫_a^b u_ref(s) ds / (b − a): Simpson's rule on each piece between knots, exact for the linear
+/// and the cubic Hermite input rules (both are polynomials of degree ≤ 3 on a piece).
+Eigen::VectorXd intervalAverage(const Trajectory& reference, double a, double b, Eigen::VectorXd& x,
+                                Eigen::VectorXd& u) {
+  Eigen::VectorXd sum = Eigen::VectorXd::Zero(reference.nu());
+  const Eigen::VectorXd& knots = reference.times();
+  double lo = a;
+  const double* first = knots.data();
+  const double* last = first + knots.size();
+  for (const double* it = std::upper_bound(first, last, a);; ++it) {
+    const double hi = (it == last || *it >= b) ? b : *it;
+    if (hi > lo) {
+      reference.evaluate(lo, x, u);
+      sum += (hi - lo) / 6.0 * u;
+      reference.evaluate(0.5 * (lo + hi), x, u);
+      sum += (hi - lo) * 4.0 / 6.0 * u;
+      reference.evaluate(hi, x, u);
+      sum += (hi - lo) / 6.0 * u;
+    }
+    if (hi >= b) break;
+    lo = hi;
+  }
+  return sum / (b - a);
 }
 
 }  // namespace
@@ -136,6 +169,26 @@ std::string TvlqrSolution::summary() const {
   o << ", " << fmt(seconds, 3) << " s\n";
   o << "S" << (constrained ? "r" : "") << ": min eigenvalue " << fmt(minEigenvalueS) << ", max eigenvalue "
     << fmt(maxEigenvalueS) << "\n";
+  if (infiniteHorizon) {
+    o << "infinite horizon: Qf = S_inf of the " << infiniteHorizonSolve << "; max |K_k - K_inf| / |K_inf| "
+      << fmt(maxGainDeviation, 3) << " over the rows\n";
+  }
+  if (sampleRate > 0.0) {
+    if (feedforward == SampledFeedforward::kReference) {
+      o << "feed-forward: none written (the controller applies u_ref(t_k), held); largest defect at the next sample "
+        << "sqrt(d'S d) " << fmt(referenceDefect, 3) << "\n";
+    } else {
+      o << "feed-forward: " << toString(feedforward) << " (uff_k held with K_k); largest defect at the next sample "
+        << "sqrt(d'S d) " << fmt(feedforwardDefect, 3) << " (u_ref(t_k) held: " << fmt(referenceDefect, 3) << "), "
+        << feedforwardSimulations << " plant runs\n";
+    }
+    if (predictionFailure.empty()) {
+      o << "what the hold allows: the defects left, propagated by the sampled closed loop, predict a largest "
+        << "|x - x_ref| of " << fmt(predictedDeviation, 3) << " at the samples of the unperturbed loop (first order)\n";
+    } else {
+      o << "what the hold allows: not predicted (" << predictionFailure << ")\n";
+    }
+  }
   return o.str();
 }
 
@@ -167,12 +220,96 @@ std::string TvlqrSolution::json() const {
   j["min_eigenvalue_S"] = detail::toJson(minEigenvalueS);
   j["max_eigenvalue_S"] = detail::toJson(maxEigenvalueS);
   j["method"] = method;
+  j["feedforward"] = sampleRate > 0.0 ? toString(feedforward) : "none";
+  j["feedforward_defect"] = detail::toJson(feedforwardDefect);
+  j["reference_defect"] = detail::toJson(referenceDefect);
+  j["feedforward_simulations"] = feedforwardSimulations;
+  j["predicted_deviation"] = detail::toJson(predictedDeviation);
+  j["prediction_failure"] = predictionFailure;
+  j["infinite_horizon"] = infiniteHorizon;
+  j["infinite_horizon_solve"] = infiniteHorizonSolve;
+  j["max_gain_deviation"] = detail::toJson(maxGainDeviation);
   return j.dump();
 }
+
+namespace {
+
+/// options.infiniteHorizon (file comment): S∞ at the held pose, then the usual solve with Qf = S∞.
+TvlqrSolution solveHeldInfiniteHorizon(const Model& model, const Trajectory& input, const LqrWeights& weights,
+                                       const TvlqrOptions& options) {
+  if (weights.Qfun || weights.Rfun) {
+    throw std::invalid_argument("solveTvlqr: options.infiniteHorizon needs constant weights Q and R");
+  }
+  const int n = model.nq();
+  for (Eigen::Index k = 0; k < input.size(); ++k) {
+    const bool same = input.states().col(k) == input.states().col(0) && input.inputs().col(k) == input.inputs().col(0);
+    if (!same || !input.states().col(k).tail(n).isZero(0.0)) {
+      throw std::invalid_argument("solveTvlqr: options.infiniteHorizon needs a held pose (every knot the same state "
+                                  "at rest and the same input); knot " + std::to_string(k) + " (t = " +
+                                  fmt(input.times()(k), 17) + ") differs from knot 0 or moves");
+    }
+  }
+  const ReferenceEvaluator checked(model, input);
+  const Trajectory& reference = checked.trajectory();
+  TvlqrSolution failed;
+  failed.sampleRate = options.sampleRate;
+  failed.constrained = model.nc() > 0;
+  failed.infiniteHorizon = true;
+  const TangentBasisTrajectory basis = transportTangentBasis(model, reference, options.transport);
+  if (!basis.ok()) {
+    failed.status.set(TvlqrCode::kTransportFailure, "the tangent basis transport failed: " + basis.status().message,
+                      basis.status().t);
+    return failed;
+  }
+  const detail::ReducedProblem problem = detail::makeReducedProblem(model, basis, weights);
+  const double t0 = reference.startTime();
+  Eigen::MatrixXd Ar, Br;
+  const ReferenceStatus at = problem.linearization(t0, Ar, Br);
+  if (!at.ok()) {
+    failed.status.set(TvlqrCode::kRiccatiFailure, "the linearization at the held pose failed: " + at.message, t0);
+    return failed;
+  }
+  Eigen::MatrixXd Qr = problem.weights.Q;
+  if (problem.weights.Qfun) problem.weights.Qfun(t0, Qr);
+  LqrResult lqr;
+  if (options.sampleRate > 0.0) {
+    SampledInterval iv;
+    discretizeConstantInterval(Ar, Br, Qr, weights.R, std::min(1.0 / options.sampleRate, reference.endTime() - t0), iv);
+    lqr = solveDare(iv.Phi, iv.Gamma, iv.Q, iv.R, iv.N);
+  } else {
+    lqr = solveCare(Ar, Br, Qr, weights.R);
+  }
+  if (!lqr.ok()) {
+    failed.status.set(TvlqrCode::kRiccatiFailure,
+                      std::string("the ") + (options.sampleRate > 0.0 ? "DARE" : "CARE") +
+                          " at the held pose failed (no stationary gain: is the pose stabilizable?): " + lqr.describe(),
+                      t0);
+    return failed;
+  }
+  const Eigen::MatrixXd T = basis.basis(t0);
+  LqrWeights held = weights;
+  held.Qf = T * lqr.S * T.transpose();
+  held.Qf = 0.5 * (held.Qf + held.Qf.transpose()).eval();
+  TvlqrOptions inner = options;
+  inner.infiniteHorizon = false;
+  TvlqrSolution sol = solveTvlqr(model, input, held, inner);
+  sol.infiniteHorizon = true;
+  sol.infiniteHorizonSolve = std::string(options.sampleRate > 0.0 ? "DARE" : "CARE") + ": " + lqr.describe();
+  if (sol.gains.size() > 0) {
+    const Eigen::MatrixXd Kinf = lqr.K * T.transpose();
+    for (const Eigen::MatrixXd& K : sol.gains.gains()) {
+      sol.maxGainDeviation = std::max(sol.maxGainDeviation, (K - Kinf).norm() / Kinf.norm());
+    }
+  }
+  return sol;
+}
+
+}  // namespace
 
 TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrWeights& weights,
                          const TvlqrOptions& options) {
   options.validate();
+  if (options.infiniteHorizon) return solveHeldInfiniteHorizon(model, input, weights, options);
   // Names checked, knot derivatives the reference's own or from the core's dynamics: one check,
   // and every solve below reads this copy.
   const ReferenceEvaluator checked(model, input);
@@ -311,7 +448,164 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
     sol.maxEigenvalueS = std::max(sol.maxEigenvalueS, ev(ev.size() - 1));
   }
   sol.maxBasisCorrection = sol.constrained ? basis.maxCorrection() : 0.0;
+  // The held feed-forward (file comment), in the metric of S_{k+1} (set above), and the defect
+  // r_k it leaves at each next sample (for every choice: u_ref(t_k) held too).
+  std::vector<Eigen::VectorXd> uff, residual;
+  {
+    sol.feedforward = options.feedforward;
+    Eigen::VectorXd xa(nx), xb(nx), ua(nu), ub(nu), dk(nx);
+    SimulationOptions so;
+    so.rtol = options.sampled.rtol;
+    so.atol = options.sampled.atol;
+    so.maxSteps = options.sampled.maxSteps;  // per interval, as for the discretization
+    // BDF with the exact Jacobian: a held input is a "sampled" policy (∂u/∂x = 0, so ∂f/∂x = A),
+    // one sample per run at its start.
+    so.method = IntegrationMethod::kBDF;
+    // An exactly constant stretch is time-invariant: (stretch start, h) → (ū, its defect). The
+    // lengths t_{k+1} − t_k of equal intervals differ by rounding (~1e-16 h): equal within 1e-9 h
+    // (the sample grid's own tolerance; ū moves by O(Δh) far below that).
+    struct Solved {
+      double stretch, h;
+      Eigen::VectorXd u, defect;
+    };
+    std::vector<Solved> constantSolved;
+    std::vector<Eigen::VectorXd> offManifold(N + 1, Eigen::VectorXd::Zero(nx));  // P(x_ref(t_k)) − x_ref(t_k)
+    Eigen::VectorXd held(nu);
+    const Policy hold = [&held](double, const Eigen::VectorXd&, Eigen::VectorXd& u) { u = held; };
+    for (std::size_t k = 0; k < N; ++k) {
+      const double a = times(static_cast<Eigen::Index>(k)), b = times(static_cast<Eigen::Index>(k + 1));
+      reference.evaluate(a, xa, ua);
+      Eigen::VectorXd ubar = intervalAverage(reference, a, b, xb, ub);
+      reference.evaluate(b, xb, ub);
+      if (sol.constrained) {
+        // Between knots the reference's spline leaves the constraints by its interpolation error;
+        // the plant's run starts from the projection of x_ref(t_k) (simulate projects it), so it
+        // ends compared with the projection of x_ref(t_{k+1}): otherwise the mass-metric
+        // projection's tangent part at the start would count as a defect every interval. The
+        // offset P(x_ref) − x_ref is what no loop on the constraints can follow (the prediction
+        // below adds it).
+        const Eigen::VectorXd xa0 = xa, xb0 = xb;
+        projectOntoConstraints(model, xa);
+        projectOntoConstraints(model, xb);
+        if (k == 0) offManifold[0] = xa - xa0;
+        offManifold[k + 1] = xb - xb0;
+      }
+      const Eigen::MatrixXd& W = sol.S[k + 1];
+      const Eigen::MatrixXd G = Tk[k + 1] * disc.intervals[k].Gamma;
+      so.sampleRate = 1.0 / (b - a);
+      so.outputStep = b - a;
+      // The defect dk of a held input v and its S-norm squared; false when the plant's run failed.
+      auto defect = [&](const Eigen::VectorXd& v, double& f) {
+        held = v;
+        const SimulationResult run = simulate(model, xa, a, b, hold, so);
+        ++sol.feedforwardSimulations;
+        if (!run.ok()) {
+          const std::string what = "the plant's run over the sample interval [" + fmt(a, 17) + ", " + fmt(b, 17) +
+                                   "] with a held input failed: " + run.status.describe();
+          // With no feed-forward to compute the runs only serve the prediction: the gains stand.
+          if (options.feedforward == SampledFeedforward::kReference) {
+            sol.predictionFailure = what;
+          } else {
+            sol.status.set(TvlqrCode::kFeedforwardFailure,
+                           what + " (feedforward = reference needs none of these runs; a looser sampled.rtol "
+                                  "may help)",
+                           run.status.t, static_cast<long>(k));
+          }
+          return false;
+        }
+        dk = run.trajectory.states().col(run.trajectory.size() - 1) - xb;
+        f = dk.dot(W * dk);
+        return true;
+      };
+      const double stretch = structure.constantOn ? structure.constantOn(a, b) : std::numeric_limits<double>::quiet_NaN();
+      const auto cached = std::find_if(constantSolved.begin(), constantSolved.end(), [&](const Solved& c) {
+        return c.stretch == stretch && std::abs(c.h - (b - a)) <= 1e-9 * (b - a);
+      });
+      if (!std::isnan(stretch) && cached != constantSolved.end()) {
+        ubar = cached->u;
+        dk = cached->defect;
+      } else {
+        double f = 0.0;
+        if (!defect(ua, f)) {
+          if (!sol.predictionFailure.empty()) break;  // feedforward = reference: gains without prediction
+          return sol;
+        }
+        sol.referenceDefect = std::max(sol.referenceDefect, std::sqrt(std::max(f, 0.0)));
+        if (options.feedforward == SampledFeedforward::kReference) {
+          ubar = ua;
+        } else {
+          if (!defect(ubar, f)) return sol;
+        }
+        if (options.feedforward == SampledFeedforward::kConsistent) {
+          // Gauss–Newton with Γ as ∂d/∂ū (chord method, file comment), damped in the metric of
+          // the interval's input cost R_k (Levenberg–Marquardt, μ = 1e-3 σ_max, σ the generalized
+          // eigenvalues of (ΓᵀSΓ, R_k): what a unit of input cost buys in cost-to-go). Directions
+          // with σ ≪ μ — inputs that barely move the state, such as tendons pulling against each
+          // other — then move by at most |d|_S/(2√μ) per step instead of |d|_S/√σ (measured on the
+          // hand without it: held tensions of ±300 against |u_ref| ≤ 5.6); the fixed point
+          // (Γᵀ S d = 0 in the directions that matter) is unchanged. A step that does not lower
+          // dᵀSd is halved (at most 4 times), and none that lowers it ends the iteration.
+          const Eigen::MatrixXd H = G.transpose() * W * G;
+          const Eigen::MatrixXd& Rk = disc.intervals[k].R;
+          const Eigen::MatrixXd Hs = 0.5 * (H + H.transpose());
+          const Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> sigma(Hs, 0.5 * (Rk + Rk.transpose()),
+                                                                                Eigen::EigenvaluesOnly);
+          const double mu = 1e-3 * std::max(sigma.eigenvalues().maxCoeff(), 0.0);
+          const Eigen::LDLT<Eigen::MatrixXd> damped(Hs + mu * Rk);
+          Eigen::VectorXd dBest = dk;
+          // A defect within the plant runs' own accuracy (10 (atol + rtol |x|) per entry) is
+          // resolved: further steps would chase the integration error (a held equilibrium).
+          const auto resolved = [&](const Eigen::VectorXd& dv) {
+            return (dv.array().abs() <= 10.0 * (so.atol + so.rtol * xb.array().abs())).all();
+          };
+          for (int it = 0; it < options.feedforwardIterations && f > 0.0 && mu > 0.0 && !resolved(dBest); ++it) {
+            const Eigen::VectorXd step = damped.solve(G.transpose() * (W * dBest));
+            if (!step.allFinite() || step.isZero(0.0)) break;
+            double scale = 1.0, fTrial = 0.0;
+            bool lowered = false;
+            Eigen::VectorXd trial;
+            for (int halving = 0; halving <= 4 && !lowered; ++halving, scale *= 0.5) {
+              trial = ubar - scale * step;
+              if (!defect(trial, fTrial)) return sol;
+              lowered = fTrial < f;
+            }
+            if (!lowered) break;
+            const bool stalled = fTrial > (1.0 - 1e-6) * f;  // no longer worth a run
+            ubar = trial;
+            f = fTrial;
+            dBest = dk;
+            if (stalled) break;
+          }
+          dk = dBest;
+        }
+        if (!std::isnan(stretch)) constantSolved.push_back({stretch, b - a, ubar, dk});
+      }
+      sol.feedforwardDefect = std::max(sol.feedforwardDefect, std::sqrt(std::max(dk.dot(W * dk), 0.0)));
+      uff.push_back(ubar);
+      residual.push_back(dk);
+    }
+    if (!sol.predictionFailure.empty()) {
+      const double nan = std::numeric_limits<double>::quiet_NaN();
+      sol.predictedDeviation = sol.referenceDefect = sol.feedforwardDefect = nan;
+      residual.clear();
+    } else {
+      uff.push_back(uff.back());  // the row at T repeats the last sample's
+    }
+    // What the hold allows: the residuals propagated by the sampled closed loop of the
+    // linearization, z_{k+1} = (Φ_k − Γ_k K_k) z_k + T_{k+1}ᵀ r_k, z_0 = 0 (reduced coordinates;
+    // T = I without constraints), e_k = T_k z_k + (P(x_ref(t_k)) − x_ref(t_k)) — to first order
+    // in r the unperturbed loop's deviation at the samples (the loop follows the reference's
+    // projection onto the constraints).
+    Eigen::VectorXd z = Eigen::VectorXd::Zero(d);
+    if (sol.predictionFailure.empty()) sol.predictedDeviation = offManifold[0].norm();
+    for (std::size_t k = 0; k < residual.size(); ++k) {
+      const SampledInterval& iv = disc.intervals[k];
+      z = (iv.Phi * z - iv.Gamma * (rec.K[k] * z) + Tk[k + 1].transpose() * residual[k]).eval();
+      sol.predictedDeviation = std::max(sol.predictedDeviation, (Tk[k + 1] * z + offManifold[k + 1]).norm());
+    }
+  }
   finish(times, std::move(K));
+  if (sol.ok() && options.feedforward != SampledFeedforward::kReference) sol.gains.setFeedforward(std::move(uff));
   return sol;
 }
 

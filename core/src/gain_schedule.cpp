@@ -172,6 +172,8 @@ void GainSchedule::setSampleRate(double hz) {
   if (!(hz >= 0.0) || !std::isfinite(hz)) {
     throw std::invalid_argument("gain schedule: sample rate " + std::to_string(hz) + " (must be finite and >= 0)");
   }
+  // A held feed-forward belongs to the rate it was computed for.
+  if (hz != sampleRate_) feedforward_.clear();
   sampleRate_ = hz;
 }
 
@@ -182,14 +184,30 @@ std::vector<std::string> GainSchedule::stateNames(const std::vector<std::string>
 }
 
 namespace {
+// K[<input>|<state>]: input names hold no '|' (setColumnNames), so the first '|' splits.
 std::vector<std::string> namedColumns(const std::vector<std::string>& inputs,
                                       const std::vector<std::string>& states) {
+  std::vector<std::string> cols;
+  for (const std::string& in : inputs) {
+    for (const std::string& st : states) cols.push_back("K[" + in + "|" + st + "]");
+  }
+  return cols;
+}
+// The older form, read only: K_<input>_<state>.
+std::vector<std::string> olderNamedColumns(const std::vector<std::string>& inputs,
+                                           const std::vector<std::string>& states) {
   std::vector<std::string> cols;
   for (const std::string& in : inputs) {
     for (const std::string& st : states) cols.push_back("K_" + in + "_" + st);
   }
   return cols;
 }
+std::vector<std::string> feedforwardColumns(const std::vector<std::string>& inputs) {
+  std::vector<std::string> cols;
+  for (const std::string& in : inputs) cols.push_back("uff[" + in + "]");
+  return cols;
+}
+std::string feedforwardIndexName(int i) { return "uff_" + std::to_string(i); }
 }  // namespace
 
 void GainSchedule::setColumnNames(const std::vector<std::string>& inputNames,
@@ -199,7 +217,62 @@ void GainSchedule::setColumnNames(const std::vector<std::string>& inputNames,
                                 std::to_string(stateNames.size()) + " state names for K of size " +
                                 std::to_string(nu_) + "x" + std::to_string(nx_));
   }
+  for (const std::string& in : inputNames) {
+    if (in.find('|') != std::string::npos) {
+      throw std::invalid_argument("gain schedule: input name '" + in +
+                                  "' contains '|', the separator of the gain columns K[<input>|<state>] "
+                                  "(the column would not split back into input and state)");
+    }
+  }
   columnNames_ = namedColumns(inputNames, stateNames);
+  feedforwardNames_ = feedforwardColumns(inputNames);
+}
+
+void GainSchedule::setFeedforward(std::vector<Eigen::VectorXd> uff) {
+  if (!isSampled()) {
+    throw std::invalid_argument("gain schedule: a held feed-forward needs sampled gains (set the sample rate first)");
+  }
+  if (static_cast<int>(uff.size()) != size()) {
+    throw std::invalid_argument("gain schedule: " + std::to_string(uff.size()) + " feed-forward rows for " +
+                                std::to_string(size()) + " gain rows");
+  }
+  for (std::size_t k = 0; k < uff.size(); ++k) {
+    if (uff[k].size() != nu_) {
+      throw std::invalid_argument("gain schedule: feed-forward row " + std::to_string(k) + " has " +
+                                  std::to_string(uff[k].size()) + " entries, expected m = " + std::to_string(nu_));
+    }
+    for (int i = 0; i < nu_; ++i) {
+      if (!std::isfinite(uff[k](i))) {
+        std::ostringstream m;
+        m << "gain schedule: feed-forward row " << k << " (t = " << times_(static_cast<Eigen::Index>(k))
+          << "), entry " << i << " is " << uff[k](i) << " (must be finite)";
+        throw std::invalid_argument(m.str());
+      }
+    }
+  }
+  feedforward_ = std::move(uff);
+}
+
+int GainSchedule::rowAt(double t) const {
+  if (size() == 0) throw std::logic_error("gain schedule: rowAt on an empty schedule");
+  const double t0 = startTime(), t1 = endTime();
+  const double slack = 1e-12 * std::max({1.0, std::abs(t0), std::abs(t1)});
+  if (!(t >= t0 - slack && t <= t1 + slack)) {
+    std::ostringstream m;
+    m << "gain schedule: time " << t << " is outside [" << t0 << ", " << t1 << "]";
+    throw std::out_of_range(m.str());
+  }
+  // A sample time computed as t0 + k/f elsewhere may differ from times_(k) by rounding: the same
+  // 1e-9-of-a-period tolerance as the sample grid (sampleTimes) and checkGainScheduleApplies.
+  const double tol = sampleRate_ > 0.0 ? 1e-9 / sampleRate_ : slack;
+  const double* begin = times_.data();
+  const int k = static_cast<int>(std::upper_bound(begin, begin + size(), t + tol) - begin) - 1;
+  return std::clamp(k, 0, size() - 1);
+}
+
+void GainSchedule::evaluateFeedforward(double t, Eigen::VectorXd& u) const {
+  if (!hasFeedforward()) throw std::logic_error("gain schedule: no feed-forward to evaluate");
+  u = feedforward_[static_cast<std::size_t>(rowAt(t))];
 }
 
 void GainSchedule::checkNames(const std::vector<std::string>& inputNames,
@@ -210,12 +283,24 @@ void GainSchedule::checkNames(const std::vector<std::string>& inputNames,
                           std::to_string(stateNames.size()));
   }
   if (columnNames_.empty()) return;
-  const std::vector<std::string> want = namedColumns(inputNames, stateNames);
+  // New form, or (a file written before it) the older K_<input>_<state> in every column.
+  const bool older = !columnNames_.empty() && columnNames_[0].rfind("K[", 0) != 0;
+  const std::vector<std::string> want =
+      older ? olderNamedColumns(inputNames, stateNames) : namedColumns(inputNames, stateNames);
   for (std::size_t c = 0; c < want.size(); ++c) {
     if (columnNames_[c] != want[c]) {
       throw TrajectoryError(source + ": column " + std::to_string(c + 2) + " is '" + columnNames_[c] +
                             "', but the scene's gain column there is '" + want[c] +
                             "' (a gain file for another scene?)");
+    }
+  }
+  if (feedforwardNames_.empty()) return;
+  const std::vector<std::string> wantFf = feedforwardColumns(inputNames);
+  for (std::size_t i = 0; i < wantFf.size(); ++i) {
+    if (feedforwardNames_[i] != wantFf[i]) {
+      throw TrajectoryError(source + ": column " + std::to_string(want.size() + i + 2) + " is '" +
+                            feedforwardNames_[i] + "', but the scene's feed-forward column there is '" +
+                            wantFf[i] + "' (a gain file for another scene?)");
     }
   }
 }
@@ -263,7 +348,8 @@ GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) 
   bool haveMetadata = false;
   std::string interpolation;
   GainInterpolation interpolationRule = GainInterpolation::kLinear;
-  std::vector<std::string> names;
+  std::vector<std::string> names, ffNames;
+  bool withFeedforward = false;
   const detail::NumericCsv csv = detail::readNumericCsv(
       in, source, [&](const std::vector<std::string>& comments, const std::vector<std::string>& header, int lineNo) {
         // The metadata line ('# trellis gain schedule: m=.. nx=.. ...') is among the comments.
@@ -296,21 +382,42 @@ GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) 
         const int ncols = static_cast<int>(header.size()) - 1;
         if (ncols < 1) throw TrajectoryError(hat + ": no gain columns after 't' (expected K_0_0, ...)");
         if (haveMetadata) {
-          if (ncols != static_cast<long long>(m) * nx) {
+          const long long nK = static_cast<long long>(m) * nx;
+          // m·nx gain columns, then (sampled gains with a held feed-forward) m uff columns.
+          withFeedforward = rate > 0.0 && ncols == nK + m;
+          if (ncols != nK && !withFeedforward) {
             throw TrajectoryError(hat + ": " + std::to_string(ncols) + " gain columns, but the metadata line says m=" +
-                                  std::to_string(m) + " nx=" + std::to_string(nx) + " (" +
-                                  std::to_string(static_cast<long long>(m) * nx) + " columns)");
+                                  std::to_string(m) + " nx=" + std::to_string(nx) + " (" + std::to_string(nK) +
+                                  " columns" + (rate > 0.0 ? ", or " + std::to_string(nK + m) + " with the feed-forward" : "") +
+                                  ")");
           }
-          for (int c = 0; c < ncols; ++c) {
-            if (header[1 + c].rfind("K_", 0) != 0) {
-              throw TrajectoryError(hat + ", column " + std::to_string(c + 2) + " ('" + header[1 + c] +
-                                    "'): expected a gain name K_<input>_<state>");
+          const bool newForm = header[1].rfind("K[", 0) == 0;
+          for (int c = 0; c < nK; ++c) {
+            const std::string& h = header[1 + c];
+            const bool fits = newForm ? h.rfind("K[", 0) == 0 && h.back() == ']' && h.find('|') != std::string::npos
+                                      : h.rfind("K_", 0) == 0;
+            if (!fits) {
+              throw TrajectoryError(hat + ", column " + std::to_string(c + 2) + " ('" + h +
+                                    "'): expected a gain name " +
+                                    (newForm ? "K[<input>|<state>] (as column 2)" : "K_<input>_<state> (as column 2)"));
             }
           }
-          // Index names K_i_j are the unnamed layout; anything else is kept as column names.
+          for (int i = 0; withFeedforward && i < m; ++i) {
+            const std::string& h = header[1 + nK + i];
+            if (h.rfind("uff", 0) != 0) {
+              throw TrajectoryError(hat + ", column " + std::to_string(nK + i + 2) + " ('" + h +
+                                    "'): expected a feed-forward name uff[<input>] (the last m = " +
+                                    std::to_string(m) + " columns)");
+            }
+          }
+          // Index names K_i_j (uff_i) are the unnamed layout; anything else is kept as column names.
           bool indexed = true;
-          for (int c = 0; c < ncols && indexed; ++c) indexed = header[1 + c] == gainName(c / nx, c % nx);
-          if (!indexed) names.assign(header.begin() + 1, header.end());
+          for (int c = 0; c < nK && indexed; ++c) indexed = header[1 + c] == gainName(c / nx, c % nx);
+          for (int i = 0; withFeedforward && i < m && indexed; ++i) indexed = header[1 + nK + i] == feedforwardIndexName(i);
+          if (!indexed) {
+            names.assign(header.begin() + 1, header.begin() + 1 + nK);
+            if (withFeedforward) ffNames.assign(header.begin() + 1 + nK, header.end());
+          }
           return;
         }
         // No metadata line (the older layout): nx = the number of leading K_0_j columns; then every
@@ -342,17 +449,21 @@ GainSchedule GainSchedule::readCsv(std::istream& in, const std::string& source) 
       });
   std::vector<double> times;
   std::vector<Eigen::MatrixXd> gains;
+  std::vector<Eigen::VectorXd> feedforward;
   for (const std::vector<double>& values : csv.rows) {
     times.push_back(values[0]);
     // Row-major K_i_j after t: the m×nx gain of this row.
     gains.push_back(Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
         values.data() + 1, m, nx));
+    if (withFeedforward) feedforward.push_back(Eigen::Map<const Eigen::VectorXd>(values.data() + 1 + m * nx, m));
   }
   GainSchedule schedule(
       Eigen::Map<const Eigen::VectorXd>(times.data(), static_cast<Eigen::Index>(times.size())),
       std::move(gains));
   schedule.sampleRate_ = rate;
   schedule.columnNames_ = std::move(names);
+  schedule.feedforwardNames_ = std::move(ffNames);
+  if (withFeedforward) schedule.feedforward_ = std::move(feedforward);  // finite: the reader checked
   if (interpolationRule == GainInterpolation::kCubic) schedule.setInterpolation(interpolationRule);
   return schedule;
 }
@@ -368,8 +479,9 @@ void GainSchedule::writeCsv(std::ostream& out) const {
   const auto oldPrecision = out.precision(17);
   out << "# trellis gain schedule: m=" << nu_ << " nx=" << nx_;
   if (sampleRate_ > 0.0) {
-    out << " sample_rate_hz=" << sampleRate_ << " (zero-order-hold gains: apply K at t0 + k/"
-        << sampleRate_ << " and hold u until the next sample)\n";
+    out << " sample_rate_hz=" << sampleRate_ << " (zero-order-hold gains: at t_k = t0 + k/" << sampleRate_
+        << " apply u_k = " << (hasFeedforward() ? "uff_k" : "u_ref(t_k)")
+        << " - K_k (x(t_k) - x_ref(t_k)) and hold it until the next sample)\n";
   } else if (interpolation_ == GainInterpolation::kCubic) {
     out << " continuous interpolation=cubic (K(t) cubic Hermite between rows, slopes of the parabola "
            "through neighbouring rows)\n";
@@ -382,12 +494,16 @@ void GainSchedule::writeCsv(std::ostream& out) const {
       out << "," << (columnNames_.empty() ? gainName(i, j) : columnNames_[static_cast<std::size_t>(i * nx_ + j)]);
     }
   }
+  for (int i = 0; hasFeedforward() && i < nu_; ++i) {
+    out << "," << (feedforwardNames_.empty() ? feedforwardIndexName(i) : feedforwardNames_[static_cast<std::size_t>(i)]);
+  }
   out << "\n";
   for (int k = 0; k < size(); ++k) {
     out << times_(k);
     for (int i = 0; i < nu_; ++i) {
       for (int j = 0; j < nx_; ++j) out << "," << gains_[k](i, j);
     }
+    for (int i = 0; hasFeedforward() && i < nu_; ++i) out << "," << feedforward_[static_cast<std::size_t>(k)](i);
     out << "\n";
   }
   out.precision(oldPrecision);

@@ -164,7 +164,33 @@ void bindTrajectory(py::module_& m) {
       .def_property("sample_rate", &GainSchedule::sampleRate, &GainSchedule::setSampleRate,
                     "0: continuous gains; f > 0: zero-order-hold gains for a controller sampling at f Hz")
       .def_property_readonly("is_sampled", &GainSchedule::isSampled)
-      .def_property_readonly("column_names", &GainSchedule::columnNames, "K_<input>_<state>, row-major")
+      .def_property_readonly("column_names", &GainSchedule::columnNames,
+                             "K[<input>|<state>], row-major (older files: K_<input>_<state>)")
+      .def_property_readonly("has_feedforward", &GainSchedule::hasFeedforward)
+      .def_property_readonly(
+          "feedforward",
+          [](const GainSchedule& g) -> py::object {
+            if (!g.hasFeedforward()) return py::none();
+            Eigen::MatrixXd u(g.size(), g.nu());
+            for (int k = 0; k < g.size(); ++k) u.row(k) = g.feedforward()[static_cast<std::size_t>(k)].transpose();
+            return toArray(u);
+          },
+          "(N, nu) held feed-forward uff_k of sampled gains (the sampled controller applies "
+          "u_k = uff_k - K_k (x(t_k) - x_ref(t_k)), held), or None (then u_ref(t_k))")
+      .def("set_feedforward",
+           [](GainSchedule& g, const RealMatrix<"uff">& uff) {
+             const Eigen::MatrixXd& u = uff.value;
+             if (u.rows() != g.size() || u.cols() != g.nu()) {
+               throw std::invalid_argument("set_feedforward: uff is (" + std::to_string(u.rows()) + ", " +
+                                           std::to_string(u.cols()) + "), expected (N, nu) = (" +
+                                           std::to_string(g.size()) + ", " + std::to_string(g.nu()) + ")");
+             }
+             std::vector<Eigen::VectorXd> rows;
+             for (Eigen::Index k = 0; k < u.rows(); ++k) rows.push_back(u.row(k).transpose());
+             g.setFeedforward(std::move(rows));
+           },
+           py::arg("uff"), "Sets the held feed-forward (N, nu) of sampled gains (raises ValueError "
+           "unless sampled, the shape matches and every entry is finite).")
       .def("set_column_names", &GainSchedule::setColumnNames, py::arg("input_names"), py::arg("state_names"))
       .def("evaluate", [](const GainSchedule& g, double t) { return toArray(g.evaluate(t)); },
            py::arg("t"), "K(t) (nu, nx) by the schedule's interpolation rule")

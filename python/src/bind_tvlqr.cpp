@@ -33,6 +33,13 @@ void bindTvlqr(py::module_& m) {
       .value("MAGNUS", SampledIntegrator::kMagnus)
       .value("RADAU", SampledIntegrator::kRadau)
       .value("BDF", SampledIntegrator::kBdf);
+  py::enum_<SampledFeedforward>(m, "SampledFeedforward",
+      "The feed-forward written with sampled gains: REFERENCE (none: u_ref(t_k) held), AVERAGE "
+      "(the interval average of u_ref), CONSISTENT (the held input that carries x_ref(t_k) closest "
+      "to x_ref(t_k+1) through the exact dynamics, in the metric of S_k+1; the default).")
+      .value("REFERENCE", SampledFeedforward::kReference)
+      .value("AVERAGE", SampledFeedforward::kAverage)
+      .value("CONSISTENT", SampledFeedforward::kConsistent);
   py::enum_<TangentTransport>(m, "TangentTransport")
       .value("INTEGRATED", TangentTransport::kIntegrated)
       .value("PROJECTED", TangentTransport::kProjected);
@@ -79,8 +86,13 @@ void bindTvlqr(py::module_& m) {
   py::class_<TvlqrOptions>(m, "TvlqrOptions",
       "Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f "
       "Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati "
-      "(RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions).")
+      "(RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions), "
+      "feedforward (SampledFeedforward, sampled only), feedforward_iterations, infinite_horizon (a held "
+      "pose only: Qf = S_inf of the CARE, or of the DARE when sampled).")
       .def(py::init(&makeFromKwargs<TvlqrOptions>))
+      .def_readwrite("feedforward", &TvlqrOptions::feedforward)
+      .def_readwrite("feedforward_iterations", &TvlqrOptions::feedforwardIterations)
+      .def_readwrite("infinite_horizon", &TvlqrOptions::infiniteHorizon)
       .def_readwrite("sample_rate", &TvlqrOptions::sampleRate)
       .def_readwrite("output_step", &TvlqrOptions::outputStep)
       .def_readwrite("riccati", &TvlqrOptions::riccati)
@@ -90,7 +102,7 @@ void bindTvlqr(py::module_& m) {
 
   bindStatus<TvlqrCode>(m, "TvlqrStatus",
       "Status of solve_tvlqr (code: ok, transport_failure, riccati_failure, discretization_failure, "
-      "recursion_failure, non_finite, indefinite, not_solved); the message carries the inner "
+      "recursion_failure, non_finite, indefinite, feedforward_failure, not_solved); the message carries the inner "
       "solver's report.");
 
   py::class_<TvlqrSolution>(m, "TvlqrSolution",
@@ -116,6 +128,22 @@ void bindTvlqr(py::module_& m) {
       .def_readonly("min_eigenvalue_S", &TvlqrSolution::minEigenvalueS)
       .def_readonly("max_eigenvalue_S", &TvlqrSolution::maxEigenvalueS)
       .def_readonly("method", &TvlqrSolution::method)
+      .def_readonly("feedforward", &TvlqrSolution::feedforward)
+      .def_readonly("prediction_failure", &TvlqrSolution::predictionFailure,
+                    "feedforward = REFERENCE only: why a plant run failed (the gains stand; the "
+                    "prediction is NaN), else empty")
+      .def_readonly("infinite_horizon", &TvlqrSolution::infiniteHorizon)
+      .def_readonly("infinite_horizon_solve", &TvlqrSolution::infiniteHorizonSolve)
+      .def_readonly("max_gain_deviation", &TvlqrSolution::maxGainDeviation,
+                    "infinite horizon: max_k |K_k - K_inf|_F / |K_inf|_F")
+      .def_readonly("feedforward_defect", &TvlqrSolution::feedforwardDefect,
+                    "largest sqrt(d^T S_k+1 d) left at the next sample by the feed-forward written")
+      .def_readonly("reference_defect", &TvlqrSolution::referenceDefect,
+                    "the same for u_ref(t_k) held")
+      .def_readonly("feedforward_simulations", &TvlqrSolution::feedforwardSimulations)
+      .def_readonly("predicted_deviation", &TvlqrSolution::predictedDeviation,
+                    "what the hold allows: the defects propagated by the sampled closed loop, the "
+                    "largest |x - x_ref| at the samples of the unperturbed loop (first order)")
       .def("K", [](const TvlqrSolution& s, double t) { return toArray(s.gains.evaluate(t)); }, py::arg("t"),
            "K(t) (nu, nx) from the gain schedule (its interpolation rule)")
       .def("describe", &TvlqrSolution::describe)

@@ -323,14 +323,19 @@ class GainSchedule:
     def __repr__(self: GainSchedule) -> str: ...
     @property
     def column_names(self) -> List[str]:
-        """K_<input>_<state>, row-major"""
+        """K[<input>|<state>], row-major (older files: K_<input>_<state>)"""
     @property
     def end_time(self) -> float: ...
     def evaluate(self: GainSchedule, t: float) -> numpy.typing.NDArray[numpy.float64]:
         """K(t) (nu, nx) by the schedule's interpolation rule"""
     @property
+    def feedforward(self) -> object:
+        """(N, nu) held feed-forward uff_k of sampled gains (the sampled controller applies u_k = uff_k - K_k (x(t_k) - x_ref(t_k)), held), or None (then u_ref(t_k))"""
+    @property
     def gains(self) -> numpy.typing.NDArray[numpy.float64]:
         """(N, nu, nx)"""
+    @property
+    def has_feedforward(self) -> bool: ...
     @property
     def is_sampled(self) -> bool: ...
     @property
@@ -348,6 +353,8 @@ class GainSchedule:
     @sample_rate.setter
     def sample_rate(self, value: float) -> None: ...
     def set_column_names(self: GainSchedule, input_names: List[str], state_names: List[str]) -> None: ...
+    def set_feedforward(self: GainSchedule, uff: numpy.typing.NDArray[numpy.float64]) -> None:
+        """Sets the held feed-forward (N, nu) of sampled gains (raises ValueError unless sampled, the shape matches and every entry is finite)."""
     @property
     def start_time(self) -> float: ...
     @property
@@ -1036,6 +1043,29 @@ class SampledDiscretizationOptions:
     @rtol.setter
     def rtol(self, value: float) -> None: ...
 
+class SampledFeedforward:
+    """The feed-forward written with sampled gains: REFERENCE (none: u_ref(t_k) held), AVERAGE (the interval average of u_ref), CONSISTENT (the held input that carries x_ref(t_k) closest to x_ref(t_k+1) through the exact dynamics, in the metric of S_k+1; the default).
+
+    Members:
+
+      REFERENCE
+
+      AVERAGE
+
+      CONSISTENT
+    """
+    AVERAGE: ClassVar[SampledFeedforward]
+    CONSISTENT: ClassVar[SampledFeedforward]
+    REFERENCE: ClassVar[SampledFeedforward]
+    @property
+    def value(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    def __init__(self, value: int) -> None: ...
+    def __int__(self) -> int: ...
+    def __eq__(self, other: object) -> bool: ...
+    def __ne__(self, other: object) -> bool: ...
+
 class SampledIntegrator:
     """Members:
 
@@ -1410,8 +1440,20 @@ class TransportStatus:
         """when it happened (NaN: not applicable)"""
 
 class TvlqrOptions:
-    """Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati (RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions)."""
+    """Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati (RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions), feedforward (SampledFeedforward, sampled only), feedforward_iterations, infinite_horizon (a held pose only: Qf = S_inf of the CARE, or of the DARE when sampled)."""
     def __init__(self: TvlqrOptions, **kwargs) -> None: ...
+    @property
+    def feedforward(self) -> SampledFeedforward: ...
+    @feedforward.setter
+    def feedforward(self, value: SampledFeedforward) -> None: ...
+    @property
+    def feedforward_iterations(self) -> int: ...
+    @feedforward_iterations.setter
+    def feedforward_iterations(self, value: int) -> None: ...
+    @property
+    def infinite_horizon(self) -> bool: ...
+    @infinite_horizon.setter
+    def infinite_horizon(self, value: bool) -> None: ...
     @property
     def output_step(self) -> float: ...
     @output_step.setter
@@ -1448,7 +1490,18 @@ class TvlqrSolution:
     @property
     def dimension(self) -> int: ...
     @property
+    def feedforward(self) -> SampledFeedforward: ...
+    @property
+    def feedforward_defect(self) -> float:
+        """largest sqrt(d^T S_k+1 d) left at the next sample by the feed-forward written"""
+    @property
+    def feedforward_simulations(self) -> int: ...
+    @property
     def gains(self) -> GainSchedule: ...
+    @property
+    def infinite_horizon(self) -> bool: ...
+    @property
+    def infinite_horizon_solve(self) -> str: ...
     def json(self: TvlqrSolution) -> str: ...
     @property
     def linearizations(self) -> int: ...
@@ -1456,6 +1509,9 @@ class TvlqrSolution:
     def max_basis_correction(self) -> float: ...
     @property
     def max_eigenvalue_S(self) -> float: ...
+    @property
+    def max_gain_deviation(self) -> float:
+        """infinite horizon: max_k |K_k - K_inf|_F / |K_inf|_F"""
     @property
     def method(self) -> str: ...
     @property
@@ -1466,6 +1522,15 @@ class TvlqrSolution:
     def nx(self) -> int: ...
     @property
     def ok(self) -> bool: ...
+    @property
+    def predicted_deviation(self) -> float:
+        """what the hold allows: the defects propagated by the sampled closed loop, the largest |x - x_ref| at the samples of the unperturbed loop (first order)"""
+    @property
+    def prediction_failure(self) -> str:
+        """feedforward = REFERENCE only: why a plant run failed (the gains stand; the prediction is NaN), else empty"""
+    @property
+    def reference_defect(self) -> float:
+        """the same for u_ref(t_k) held"""
     @property
     def rhs_evaluations(self) -> int: ...
     @property
@@ -1481,7 +1546,7 @@ class TvlqrSolution:
     def transport_steps(self) -> int: ...
 
 class TvlqrStatus:
-    """Status of solve_tvlqr (code: ok, transport_failure, riccati_failure, discretization_failure, recursion_failure, non_finite, indefinite, not_solved); the message carries the inner solver's report."""
+    """Status of solve_tvlqr (code: ok, transport_failure, riccati_failure, discretization_failure, recursion_failure, non_finite, indefinite, feedforward_failure, not_solved); the message carries the inner solver's report."""
     def __repr__(self: TvlqrStatus) -> str: ...
     @property
     def code(self) -> str:

@@ -3,7 +3,7 @@
 #
 # Included from a tests_*.cmake file it defines
 #   trellis_cli_files_test(NAME ARGS1 <args...> [CHECKS1 <-Dcheck=value...>]
-#                               [ARGS2 ... CHECKS2 ...] [ARGS3 ... CHECKS3 ...])
+#                               [ARGS2 ... CHECKS2 ...] ... [ARGS6 ... CHECKS6 ...])  (up to 6 steps)
 # where "@WORK@" in an argument or a check stands for an empty directory made for the test
 # (build dir/cli_work/NAME), so a later step can read what an earlier one wrote.
 # Run with -P (by CTest) it executes the steps. Checks of step i (given without the STEPi_ prefix
@@ -27,10 +27,11 @@ if(NOT CMAKE_SCRIPT_MODE_FILE)
   endif()
   set(_trellis_cli_files_runner "${CMAKE_CURRENT_LIST_FILE}")
   function(trellis_cli_files_test name)
-    cmake_parse_arguments(PARSE_ARGV 1 T "" "" "ARGS1;CHECKS1;ARGS2;CHECKS2;ARGS3;CHECKS3")
+    cmake_parse_arguments(PARSE_ARGV 1 T "" ""
+      "ARGS1;CHECKS1;ARGS2;CHECKS2;ARGS3;CHECKS3;ARGS4;CHECKS4;ARGS5;CHECKS5;ARGS6;CHECKS6")
     set(_defs "")
     set(_steps 0)
-    foreach(_i 1 2 3)
+    foreach(_i 1 2 3 4 5 6)
       if(NOT DEFINED T_ARGS${_i})
         break()
       endif()

@@ -7,7 +7,7 @@ set(_cart_pole_upright "${_trajectories}/cart_pole_upright.csv")
 set(_paper "${_scenes}/paper_pendulum.json")
 set(_paper_swing "${_trajectories}/paper_pendulum_swing.csv")
 # The first line is the metadata (m, 2n, continuous or the sample rate); FILE_ROWS counts the
-# named header t,K_<input>_<state>,... and the data rows.
+# named header t,K[<input>|<state>],... (and uff[<input>] with --rate) and the data rows.
 set(_gain_header "# trellis gain schedule: m=1 nx=4 continuous .*")
 
 # ---- success ----------------------------------------------------------------------------------
@@ -20,7 +20,7 @@ trellis_cli_files_test(gains.cart_pole_upright_stabilizes
   ARGS1 gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --Q 10,10,1,1 --R 0.1
         --out @WORK@/gains.csv
   CHECKS1 -DFILE=@WORK@/gains.csv "-DFILE_HEADER=${_gain_header}" -DFILE_ROWS=32 -DSTDERR_EMPTY=ON
-          "-DSTDOUT_REGEX=wrote .*gains.csv: 31 rows of K \\(1 x 4\\).*riccati: full state.*steps.*S: min eigenvalue [0-9].*controllability at t = 0: rank 4 of 4 \\(controllable\\).*gramian on \\[0, 3\\]: min eigenvalue"
+          "-DSTDOUT_REGEX=wrote .*gains.csv: 31 rows of K \\(1 x 4\\).*riccati: full state.*steps.*S: min eigenvalue [0-9].*controllability at t = 0: rank 4 of 4 \\(controllable\\).*gramian on \\[0, 3\\]: max eigenvalue [0-9.e+]+; min eigenvalue not computed"
   ARGS2 simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}" --gains @WORK@/gains.csv
         --perturb theta=0.1 --out @WORK@/closed.csv
   CHECKS2 -DFILE=@WORK@/closed.csv "-DFILE_HEADER=t,x,theta,dx,dtheta,push" -DFILE_ROWS=31
@@ -92,15 +92,49 @@ trellis_cli_files_test(gains.names_checked_and_json
   ARGS2 simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}" --gains @WORK@/paper.csv
         --rate 100 --out @WORK@/closed.csv
   CHECKS2 -DEXIT=1 -DSTDOUT_EMPTY=ON -DSTDERR_ONE_LINE=ON
-          "-DSTDERR_REGEX=paper.csv \\(for the scene .*cart_pole.json\\): column 2 is 'K_u_theta1', but the scene's gain column there is 'K_push_x'"
+          "-DSTDERR_REGEX=paper.csv \\(for the scene .*cart_pole.json\\): column 2 is 'K\\[u\\|theta1\\]', but the scene's gain column there is 'K\\[push\\|x\\]'"
   ARGS3 simulate "${_paper}" --trajectory "${_paper_swing}" --gains @WORK@/paper.csv
         --perturb theta1=0.05 --rate 100 --json --out @WORK@/closed.csv
   # The report is built with the JSON library (issue 23): compact, the same keys.
   CHECKS3 "-DSTDOUT_REGEX=^\\{\"status\":\"ok\",\"ok\":true.*\"tracking_error_final\":[0-9].*\"sample_rate_hz\":100(\\.0)?,\"gains_sample_rate_hz\":100(\\.0)?.*\\}\n$")
 
+# ---- balancing a pose from the command line (issue 27 part 2) ---------------------------------
+# A fixed-base two-joint arm (URDF: a revolute shoulder and a light prismatic slide, joint inputs)
+# held at its stored pose for 10 s at 100 Hz. --infinite-horizon: Qf = S_inf of the DARE, so every
+# row is K_inf (measured 5.6e-15 relative); the reference used is written; the Gramian of the
+# unstable hold does not print a smallest eigenvalue it could not resolve. simulate --hold runs the
+# loop about the same pose: from a 0.1 rad shoulder error it settles and stays (final 2.1e-6,
+# bound 1e-4). Step 3, the control that makes the test able to fail: the finite-horizon
+# continuous gain with Qf = 100 ends in its terminal layer K(T) = R^-1 B^T Qf, which the 100 Hz
+# loop cannot follow on the light slide: the settled loop blows up in the last 0.1 s (final error
+# measured 5726, bound > 1). Step 4: the CARE gain (continuous, infinite horizon) sampled at
+# 100 Hz also settles (final 2.1e-6).
+set(_arm "${_data}/two_link_arm_scene.json")
+trellis_cli_files_test(gains.hold_infinite_horizon_balances_at_100hz
+  ARGS1 gains "${_arm}" --hold 10 --rate 100 --Q 10 --infinite-horizon
+        --write-reference @WORK@/pose.csv --out @WORK@/gains.csv
+  CHECKS1 -DSTDERR_EMPTY=ON -DFILE=@WORK@/pose.csv "-DFILE_HEADER=t,shoulder,slide,dshoulder,dslide,shoulder,slide"
+          -DFILE_ROWS=101
+          "-DSTDOUT_REGEX=1001 rows of K \\(2 x 4\\).*infinite horizon: Qf = S_inf of the DARE: ok.*feed-forward: consistent.*wrote .*pose.csv: the reference used \\(101 knots\\).*gramian on \\[0, 10\\]: max eigenvalue [0-9.e+]+; min eigenvalue not computed: it lies below 1e-10 x max"
+          "-DNUMBERS=/ \\|K_inf\\| :LESS:1e-12"
+  ARGS2 simulate "${_arm}" --hold 10 --rate 100 --gains @WORK@/gains.csv --perturb shoulder=0.1
+        --out @WORK@/closed.csv
+  CHECKS2 -DSTDERR_EMPTY=ON "-DSTDOUT_REGEX=feedback sampled at 100 Hz, feed-forward uff_k from the gain file"
+          "-DNUMBERS=initial :GREATER:0.0999999&&final :LESS:1e-4"
+  ARGS3 gains "${_arm}" --hold 10 --Q 10 --Qf 100 --out @WORK@/finite.csv
+  CHECKS3 -DSTDERR_EMPTY=ON
+  ARGS4 simulate "${_arm}" --hold 10 --rate 100 --gains @WORK@/finite.csv --perturb shoulder=0.1
+        --out @WORK@/blown.csv
+  CHECKS4 "-DNUMBERS=final :GREATER:1"
+  ARGS5 gains "${_arm}" --hold 10 --Q 10 --infinite-horizon --out @WORK@/care.csv
+  CHECKS5 -DSTDERR_EMPTY=ON "-DSTDOUT_REGEX=infinite horizon: Qf = S_inf of the CARE: ok"
+  ARGS6 simulate "${_arm}" --hold 10 --rate 100 --gains @WORK@/care.csv --perturb shoulder=0.1
+        --out @WORK@/closed_care.csv
+  CHECKS6 "-DNUMBERS=final :LESS:1e-4")
+
 # ---- help -------------------------------------------------------------------------------------
 trellis_cli_test(gains.help ARGS gains --help
-  CHECKS "-DSTDOUT_REGEX=usage: trellis gains SCENE.json --trajectory.*constraint manifold.*--rate HZ.*K_<input>_<state>.*--Q W +state weight \\(default 1\\).*--R W.*--Qf W.*--dt DT +continuous gains written on a uniform grid.*only SAMPLES the continuous K\\(t\\): it does not\n *make gains for a controller running at 1/DT; use --rate for that"
+  CHECKS "-DSTDOUT_REGEX=usage: trellis gains SCENE.json --trajectory.*constraint manifold.*--rate HZ.*u_k = uff_k - K_k \\(x\\(t_k\\) - x_ref\\(t_k\\)\\).*K\\[<input>\\|<state>\\].*--Q W +state weight \\(default 1\\).*--R W.*--Qf W.*--dt DT +continuous gains written on a uniform grid.*only SAMPLES the continuous K\\(t\\): it does not\n *make gains for a controller running at 1/DT; use --rate for that"
          -DSTDERR_EMPTY=ON)
 trellis_cli_test(gains.in_command_list ARGS --help CHECKS "-DSTDOUT_REGEX=  gains +TV-LQR")
 
@@ -182,3 +216,28 @@ trellis_cli_test(gains.error.rate_and_dt
 trellis_cli_test(gains.error.rate_not_positive
   ARGS gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --rate -5 --out /dev/null
   CHECKS ${_e2} "-DSTDERR_REGEX=--rate: -5 must be > 0")
+
+# --infinite-horizon needs a held pose and excludes --Qf; simulate --hold excludes --trajectory.
+trellis_cli_test(gains.error.infinite_horizon_needs_hold
+  ARGS gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --infinite-horizon --out /dev/null
+  CHECKS ${_e2} "-DSTDERR_REGEX=--infinite-horizon applies to a held pose only \\(--hold T\\)")
+trellis_cli_test(gains.error.infinite_horizon_and_qf
+  ARGS gains "${_cart_pole}" --hold 1 --infinite-horizon --Qf 5 --out /dev/null
+  CHECKS ${_e2} "-DSTDERR_REGEX=--infinite-horizon and --Qf exclude each other")
+trellis_cli_test(simulate.error.hold_and_trajectory
+  ARGS simulate "${_cart_pole}" --hold 1 --trajectory "${_cart_pole_upright}" --gains g.csv --out /dev/null
+  CHECKS ${_e2} "-DSTDERR_REGEX=--hold and --trajectory exclude each other")
+trellis_cli_test(gains.error.feedforward_needs_rate
+  ARGS gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --feedforward average --out /dev/null
+  CHECKS ${_e2} "-DSTDERR_REGEX=--feedforward applies to sampled gains only \\(--rate\\)")
+trellis_cli_test(gains.error.feedforward_unknown
+  ARGS gains "${_cart_pole}" --trajectory "${_cart_pole_upright}" --rate 10 --feedforward best --out /dev/null
+  CHECKS ${_e2} "-DSTDERR_REGEX=--feedforward 'best' is not one of reference, average, consistent")
+
+# A sampled gain file written before issue 27 (columns K_<input>_<state>, no uff columns) is still
+# read and applied; the summary says the feed-forward is then u_ref(t_k).
+trellis_cli_test(simulate.older_sampled_gain_file
+  ARGS simulate "${_cart_pole}" --trajectory "${_cart_pole_upright}"
+       --gains "${_data}/cart_pole_gains_older_sampled_10hz.csv" --rate 10 --perturb theta=0.05 --out /dev/null
+  CHECKS -DSTDERR_EMPTY=ON
+         "-DSTDOUT_REGEX=feedback sampled at 10 Hz, feed-forward u_ref\\(t_k\\) \\(the gain file has none\\)")

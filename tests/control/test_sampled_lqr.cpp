@@ -436,9 +436,12 @@ TEST_CASE("gain schedule: named columns, sample rate, checks against the scene",
   const std::string text = csv.str();
   INFO(text.substr(0, 200));
   CHECK(text.find("# trellis gain schedule: m=1 nx=4 sample_rate_hz=20") == 0);
-  CHECK(text.find("t,K_push_x,K_push_theta,K_push_dx,K_push_dtheta\n") != std::string::npos);
+  CHECK(text.find("t,K[push|x],K[push|theta],K[push|dx],K[push|dtheta],uff[push]\n") != std::string::npos);
   const GainSchedule back = GainSchedule::readCsv(csv, "mem");
   CHECK(back.sampleRate() == 20.0);
+  // A held equilibrium: the held input u_ref carries it exactly, so the feed-forward is u_ref.
+  REQUIRE(back.hasFeedforward());
+  for (const VectorXd& u : back.feedforward()) CHECK(u(0) == 0.0);
   CHECK(back.size() == sol.gains.size());
   CHECK((back.gains()[3] - sol.gains.gains()[3]).norm() == 0.0);
   const auto states = GainSchedule::stateNames(model.configNames());
@@ -449,7 +452,7 @@ TEST_CASE("gain schedule: named columns, sample rate, checks against the scene",
     back.checkNames(model.inputNames(), other, "mem");
     FAIL("expected a name mismatch");
   } catch (const trellis::TrajectoryError& e) {
-    CHECK(std::string(e.what()).find("column 2 is 'K_push_x', but the scene's gain column there is 'K_push_y'") !=
+    CHECK(std::string(e.what()).find("column 2 is 'K[push|x]', but the scene's gain column there is 'K[push|y]'") !=
           std::string::npos);
   }
   // The older layout (no metadata line, K_i_j) is read as continuous gains.

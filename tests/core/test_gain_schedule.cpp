@@ -289,3 +289,90 @@ TEST_CASE("gain schedule: the cubic rule (parabola slopes from the table)", "[ga
                       Catch::Matchers::Contains("g.csv") && Catch::Matchers::Contains("interpolation=spline"));
   }
 }
+
+TEST_CASE("gain schedule: held feed-forward and the K[<input>|<state>] columns", "[gain_schedule]") {
+  // Sampled gains at 10 Hz over [0, 0.3]: rows at 0, 0.1, 0.2, 0.3 (the last repeats).
+  const VectorXd t = (VectorXd(4) << 0.0, 0.1, 0.2, 0.3).finished();
+  std::vector<MatrixXd> K(4, MatrixXd::Constant(1, 2, 1.5));
+  GainSchedule g(t, K);
+  const std::vector<VectorXd> uff = {VectorXd::Constant(1, 1.0), VectorXd::Constant(1, 2.0),
+                                     VectorXd::Constant(1, 3.0), VectorXd::Constant(1, 3.0)};
+  SECTION("only for sampled gains, one finite m-vector per row") {
+    CHECK_THROWS_WITH(g.setFeedforward(uff), Catch::Contains("needs sampled gains"));
+    g.setSampleRate(10.0);
+    CHECK_THROWS_WITH(g.setFeedforward({uff[0]}), Catch::Contains("1 feed-forward rows for 4 gain rows"));
+    std::vector<VectorXd> bad = uff;
+    bad[2] = VectorXd::Constant(2, 0.0);
+    CHECK_THROWS_WITH(g.setFeedforward(bad), Catch::Contains("row 2 has 2 entries, expected m = 1"));
+    bad[2] = VectorXd::Constant(1, std::numeric_limits<double>::quiet_NaN());
+    CHECK_THROWS_WITH(g.setFeedforward(bad), Catch::Contains("row 2 (t = 0.2), entry 0 is nan"));
+    CHECK_FALSE(g.hasFeedforward());
+  }
+  SECTION("the sample interval holding t: a sample time 1e-12 early still selects its own row") {
+    g.setSampleRate(10.0);
+    g.setFeedforward(uff);
+    VectorXd u(1);
+    const double h = 0.1;
+    for (int k = 0; k < 3; ++k) {
+      // t0 + k·h computed elsewhere may round below times(k): the 1e-9-of-a-period tolerance.
+      g.evaluateFeedforward(k * h - 1e-12, u);
+      CHECK(u(0) == uff[static_cast<std::size_t>(k)](0));
+      g.evaluateFeedforward(k * h + 0.5 * h, u);
+      CHECK(u(0) == uff[static_cast<std::size_t>(k)](0));
+    }
+    CHECK(g.rowAt(0.3) == 3);
+    CHECK_THROWS_AS(g.rowAt(0.31), std::out_of_range);
+    g.setSampleRate(10.0);  // the same rate keeps it
+    CHECK(g.hasFeedforward());
+    g.setSampleRate(20.0);  // another rate drops it (computed for 10 Hz)
+    CHECK_FALSE(g.hasFeedforward());
+    CHECK_THROWS_AS(g.evaluateFeedforward(0.0, u), std::logic_error);
+  }
+  SECTION("CSV round trip, named: K[<input>|<state>] then uff[<input>]") {
+    g.setSampleRate(10.0);
+    // State names with '_' and '|' are fine; the input's '|' would make the split ambiguous.
+    CHECK_THROWS_WITH(g.setColumnNames({"a|b"}, {"q_1", "dq_1"}),
+                      Catch::Contains("input name 'a|b' contains '|'"));
+    g.setColumnNames({"push_x"}, {"q_1", "d|q"});
+    g.setFeedforward(uff);
+    std::stringstream ss;
+    g.writeCsv(ss);
+    const std::string text = ss.str();
+    INFO(text);
+    CHECK(text.find("apply u_k = uff_k - K_k (x(t_k) - x_ref(t_k))") != std::string::npos);
+    CHECK(text.find("\nt,K[push_x|q_1],K[push_x|d|q],uff[push_x]\n") != std::string::npos);
+    const GainSchedule back = GainSchedule::readCsv(ss, "mem");
+    REQUIRE(back.hasFeedforward());
+    CHECK(back.feedforward()[1](0) == 2.0);
+    CHECK(back.sampleRate() == 10.0);
+    CHECK_NOTHROW(back.checkNames({"push_x"}, {"q_1", "d|q"}, "mem"));
+    CHECK_THROWS_WITH(back.checkNames({"push_y"}, {"q_1", "d|q"}, "mem"),
+                      Catch::Contains("column 2 is 'K[push_x|q_1]'"));
+  }
+  SECTION("unnamed: uff_<i>; a file without it is read without a feed-forward") {
+    g.setSampleRate(10.0);
+    g.setFeedforward(uff);
+    std::stringstream ss;
+    g.writeCsv(ss);
+    CHECK(ss.str().find("\nt,K_0_0,K_0_1,uff_0\n") != std::string::npos);
+    const GainSchedule back = GainSchedule::readCsv(ss, "mem");
+    CHECK(back.hasFeedforward());
+    CHECK(back.columnNames().empty());
+    std::stringstream older("# trellis gain schedule: m=1 nx=2 sample_rate_hz=10\nt,K_0_0,K_0_1\n0,1,2\n0.1,1,2\n");
+    CHECK_FALSE(GainSchedule::readCsv(older, "older").hasFeedforward());
+  }
+  SECTION("the older named form K_<input>_<state> is read and checked by position") {
+    // 'a_b' × 'c' and 'a' × 'b_c' give the same older name: only the position tells them apart.
+    std::stringstream older("# trellis gain schedule: m=1 nx=2 sample_rate_hz=10\nt,K_a_b_c,K_a_b_dc\n0,1,2\n0.1,1,2\n");
+    const GainSchedule back = GainSchedule::readCsv(older, "older");
+    CHECK_NOTHROW(back.checkNames({"a_b"}, {"c", "dc"}, "older"));
+    CHECK_THROWS_WITH(back.checkNames({"a_b"}, {"d", "dd"}, "older"),
+                      Catch::Contains("column 2 is 'K_a_b_c', but the scene's gain column there is 'K_a_b_d'"));
+    std::stringstream mixed("# trellis gain schedule: m=1 nx=2 sample_rate_hz=10\nt,K[a|c],K_a_dc\n0,1,2\n");
+    CHECK_THROWS_WITH(GainSchedule::readCsv(mixed, "mixed"),
+                      Catch::Contains("column 3 ('K_a_dc'): expected a gain name K[<input>|<state>]"));
+    std::stringstream noUff("# trellis gain schedule: m=1 nx=2 sample_rate_hz=10\nt,K[a|c],K[a|dc],v\n0,1,2,3\n");
+    CHECK_THROWS_WITH(GainSchedule::readCsv(noUff, "noUff"),
+                      Catch::Contains("column 4 ('v'): expected a feed-forward name uff[<input>]"));
+  }
+}

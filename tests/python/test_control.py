@@ -249,9 +249,15 @@ def test_tvlqr_matches_cli_gains(tm, cli, tmp_path, scene, trajectory, Q, R):
     assert f"rank {rank.rank} of {rank.dimension}" in summary
     gramian = tm.compute_controllability_gramian(model, ref)
     m = re.search(r"gramian on \[[^]]*\]: min eigenvalue (\S+), max eigenvalue (\S+)", summary)
-    assert gramian.ok and m, summary
-    assert gramian.min_eigenvalue == pytest.approx(float(m.group(1)), rel=5e-3)
-    assert gramian.max_eigenvalue == pytest.approx(float(m.group(2).rstrip(",")), rel=5e-3)
+    if gramian.controllable():
+        assert gramian.ok and m, summary
+        assert gramian.min_eigenvalue == pytest.approx(float(m.group(1)), rel=5e-3)
+        assert gramian.max_eigenvalue == pytest.approx(float(m.group(2).rstrip(",")), rel=5e-3)
+    else:
+        # Unresolved (the upright cart-pole is unstable): only the largest is printed (issue 27).
+        m = re.search(r"gramian on \[[^]]*\]: max eigenvalue (\S+); min eigenvalue not computed", summary)
+        assert gramian.ok and m, summary
+        assert gramian.max_eigenvalue == pytest.approx(float(m.group(1)), rel=5e-3)
 
 
 def test_tvlqr_long_horizon_converges_to_care(tm):
@@ -265,6 +271,13 @@ def test_tvlqr_long_horizon_converges_to_care(tm):
     lin = tm.linearize(model, [math.pi], [0.0], [0.0])
     care = tm.solve_care(lin.A, lin.B, np.diag([10.0, 1.0]), [[0.5]])
     np.testing.assert_allclose(sol.K(0.0), care.K, rtol=1e-6)
+    # Issue 27: infinite_horizon (Qf = S_inf) gives the CARE gain at every row, T included (the
+    # finite horizon's last row is R^-1 B^T Qf instead).
+    inf = tm.solve_tvlqr(model, ref, Q=np.diag([10.0, 1.0]), R=[[0.5]],
+                         options=tm.TvlqrOptions(infinite_horizon=True))
+    assert inf.ok and inf.infinite_horizon and inf.max_gain_deviation < 1e-6
+    np.testing.assert_allclose(inf.K(20.0), care.K, rtol=1e-6)
+    assert np.abs(sol.K(20.0) - care.K).max() > 0.1 * np.abs(care.K).max()
 
 
 def test_riccati_linear_solvers_agree(tm):
@@ -452,3 +465,37 @@ def test_project_onto_constraints_reports_a_status(tm):
     assert p.ok and p.status.code == "ok" and p.drift_after < 1e-12 < p.drift_before
     assert json.loads(p.json())["iterations"] == p.iterations
     assert p.describe().startswith("ok (drift ")
+
+
+def test_sampled_feedforward_python_and_cli(tm, cli, tmp_path):
+    """Issue 27: sampled gains carry a held feed-forward; the Python loop applies it as the CLI
+    does, and the unperturbed 100 Hz loop stays within what the hold allows."""
+    scene = SCENES / "cart_double_pendulum.json"
+    traj_path = TRAJECTORIES / "cart_double_pendulum_swing.csv"
+    gains_path, closed = tmp_path / "gains.csv", tmp_path / "closed.csv"
+    cli("gains", scene, "--trajectory", traj_path, "--Q", "10", "--rate", "100", "--out", gains_path)
+    header = gains_path.read_text().splitlines()[1]
+    assert header.startswith("t,K[push|x],K[push|theta1]") and header.endswith(",uff[push]")
+    cli("simulate", scene, "--trajectory", traj_path, "--gains", gains_path, "--rate", "100",
+        "--output-step", "0.01", "--out", closed)
+    expected = tm.Trajectory.read_csv(str(closed))
+    model = tm.load_scene(str(scene)).model
+    ref = reference(tm, model, "cart_double_pendulum_swing.csv")
+    sol = tm.solve_tvlqr(model, ref, Q=10.0, R=1.0,
+                         options=tm.TvlqrOptions(sample_rate=100.0))
+    assert sol.ok and sol.feedforward == tm.SampledFeedforward.CONSISTENT
+    assert sol.gains.has_feedforward and sol.gains.feedforward.shape == (len(sol.gains), 1)
+    # The same C++ solve as the CLI's; the CSV keeps 17 digits.
+    np.testing.assert_allclose(sol.gains.feedforward, tm.GainSchedule.read_csv(str(gains_path)).feedforward,
+                               rtol=1e-13, atol=1e-13)
+    opts = tm.SimulationOptions(sample_rate=100.0, output_step=0.01)
+    result = tm.simulate_closed_loop(model, ref, sol.gains, ref.states[0], options=opts)
+    assert result.ok, result.status.describe()
+    np.testing.assert_allclose(result.trajectory.states, expected.states, rtol=0, atol=1e-12)
+    assert result.tracking_error.max() <= 1.1 * sol.predicted_deviation  # measured 0.0157 (0.2 %)
+    older = tm.solve_tvlqr(model, ref, Q=10.0, R=1.0,
+                           options=tm.TvlqrOptions(sample_rate=100.0,
+                                                   feedforward=tm.SampledFeedforward.REFERENCE))
+    assert not older.gains.has_feedforward and older.gains.feedforward is None
+    drift = tm.simulate_closed_loop(model, ref, older.gains, ref.states[0], options=opts)
+    assert drift.tracking_error.max() > 10 * result.tracking_error.max()  # measured 0.338

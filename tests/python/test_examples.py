@@ -38,7 +38,7 @@ def test_cart_pole(tmp_path):
     assert (tmp_path / "cart_pole.png").stat().st_size > 10000
     lines = (tmp_path / "gains.csv").read_text().splitlines()
     assert lines[0].startswith("# trellis gain schedule: m=1 nx=4")
-    assert lines[1].startswith("t,K_")
+    assert lines[1].startswith("t,K[push|x],")
 
 
 def test_hand_gains(tmp_path, tm):

@@ -9,6 +9,9 @@
 //    constant (zero-order hold) on [s_k, s_{k+1}).
 // The closed loop about a reference (x_ref, u_ref) with a gain schedule K(t) is the policy
 //   π(t, x) = u_ref(t) − K(t) (x − x_ref(t)),
+// except for sampled gains with a held feed-forward (GainSchedule::hasFeedforward), sampled at
+// their rate: there u_k = ū_k − K_k (x(s_k) − x_ref(s_k)), ū_k the input that carries the
+// reference over the hold (u_ref(s_k) would leave a drift of O(h·|u̇_ref|) per interval);
 // the open loop π(t, x) = u_ref(t). x_ref is the reference's cubic Hermite spline, u_ref and K are
 // interpolated by Trajectory::evaluate and GainSchedule::evaluate (continuous in t).
 //

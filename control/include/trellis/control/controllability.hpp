@@ -106,7 +106,8 @@ struct GramianReport {
   bool controllable(double relTol = 1e-10) const {
     return ok() && dimension > 0 && minEigenvalue > relTol * maxEigenvalue;
   }
-  /// One line: the status, then λ_min, λ_max and the steps.
+  /// One line: the status, then λ_min (or "unresolved" when below 1e-10 λ_max: see controllable()),
+  /// λ_max and the steps.
   std::string describe() const;
   /// {"status", "ok", "message", "t", "index", "dimension", "min_eigenvalue", "max_eigenvalue",
   /// "steps", "linearizations"}.

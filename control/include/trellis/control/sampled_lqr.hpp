@@ -116,7 +116,8 @@ struct SampledDiscretizationOptions {
                            ///< Magnus steps' local error relative to each block's size
   double atol = 1e-12;     ///< kBdf: absolute tolerance on the entries of Φ, Γ (> 0); the cost's is
                            ///< atol·h·max(1, max|Q|, max|R|)
-  long maxSteps = 100000;  ///< internal steps per interval (> 0)
+  long maxSteps = 100000;  ///< internal steps per interval (> 0); also bounds each plant run of
+                           ///< solveTvlqr's held feed-forward
   /// Intervals the ConstantSpanCallback declares constant get the exact block exponential (file
   /// comment); false integrates every interval (the reference path of the tests).
   bool exactConstantIntervals = true;

@@ -14,6 +14,42 @@
 // repeats the last sample's gain), S_k there. On a constrained scene the reduced system is that of
 // the transported basis T(t) (z = T(t)ᵀδx), and K_k = Kr_k T(t_k)ᵀ, S_k = T(t_k) Sr_k T(t_k)ᵀ.
 //
+// Feed-forward of sampled gains (options.feedforward; GainSchedule::setFeedforward). K_k is exact
+// for the hold, but u_ref(t_k) held over [t_k, t_{k+1}) is not the input that keeps the plant on
+// the reference: with u_ref changing at rate u̇ the unperturbed loop leaves it by O(h² |B u̇|) per
+// interval, which the feedback then chases (issue 27: 0.26 on a double pendulum on a cart at
+// 100 Hz). kConsistent (the default) writes, per interval, the held input ū_k that carries
+// x_ref(t_k) to x_ref(t_{k+1}) through the exact nonlinear dynamics as closely as one held input
+// can, measured by the cost-to-go there:
+//   ū_k = argmin_ū  d(ū)ᵀ S_{k+1} d(ū),   d(ū) = x(t_{k+1}; x(t_k) = x_ref(t_k), u ≡ ū) − x_ref(t_{k+1}).
+// S_{k+1} is the metric the LQR itself puts on a deviation at t_{k+1} (unit-invariant: rescaling
+// a state rescales S to match). From the interval average of u_ref (kAverage stops there: it is
+// the minimizer of the input cost ∫ (ū − u_ref)ᵀR(ū − u_ref) ds for a constant R, and exact to
+// O(h²) per interval in the defect against O(h) for u_ref(t_k)) a Gauss–Newton iteration
+//   ū ← ū − (Γᵀ S Γ)⁺ Γᵀ S d(ū),   Γ = T(t_{k+1}) Γ_k  (the hold's exact input matrix of the
+//                                                       sampled discretization, 2n × m),
+// with d(ū) from the nonlinear plant (analysis's simulate, held ū, projected onto the
+// constraints) and Γ_k as the Jacobian ∂d/∂ū: Γ_k is that Jacobian exactly along the reference
+// with u_ref(s); along the held ū it differs by O(h·|ū − u_ref|), so the iteration (a chord
+// method) converges linearly at that small rate, to the point where Γᵀ S d = 0 (the least-squares
+// optimum up to the same order). With m < 2n a residual remains — what one held input cannot do
+// (the reference's own curvature over the interval, and its collocation error): the solution
+// reports its largest value, √(dᵀ S_{k+1} d), beside the same for u_ref(t_k). An interval with
+// S_{k+1} = 0 (the last, when Qf = 0) keeps the average (nothing weighs its end state); an exactly
+// constant stretch (a held pose) is solved once. kReference writes no feed-forward (the older
+// behaviour: the simulator applies u_ref(t_k)).
+//
+// Infinite horizon (options.infiniteHorizon; a held pose only: every knot the same state at rest
+// and the same input, constant weights): the terminal cost is the stationary cost-to-go S∞ of the
+// linearization at the pose — the CARE's solution (continuous gains) or the DARE's of the exact
+// sampled-data discretization with its cross term (sampled gains), on the tangent space of the
+// constraint manifold when there are constraints (Sr∞, S∞ = T Sr∞ Tᵀ) — so Qf is replaced by S∞
+// and the Riccati equation or recursion starts at its own fixed point: K(t) = K∞ all along, with
+// no terminal layer (a finite-horizon gain ends in K(T) = R⁻¹BᵀQf, which can destabilize a loop
+// that runs to T). The solution reports the LQR solve and the largest ‖K_k − K∞‖ / ‖K∞‖ over the
+// rows (the integration's error; for sampled gains the last interval, when shorter than 1/f, has
+// its own exact gain).
+//
 // The result is plain data (it owns the gains and S; no reference to the model).
 #pragma once
 
@@ -32,6 +68,21 @@ namespace trellis {
 class Model;
 class Trajectory;
 
+/// The feed-forward written with sampled gains (file comment).
+enum class SampledFeedforward {
+  kReference,   ///< none: the controller applies u_ref(t_k) (the older behaviour)
+  kAverage,     ///< ū_k = the average of u_ref over [t_k, t_{k+1}] (exact quadrature)
+  kConsistent,  ///< ū_k carries x_ref(t_k) closest to x_ref(t_{k+1}) in the S_{k+1} metric
+};
+
+/// Names: reference, average, consistent.
+inline EnumNameTable<SampledFeedforward> enumNames(SampledFeedforward) {
+  static constexpr EnumName<SampledFeedforward> table[] = {{SampledFeedforward::kReference, "reference"},
+                                                           {SampledFeedforward::kAverage, "average"},
+                                                           {SampledFeedforward::kConsistent, "consistent"}};
+  return table;
+}
+
 /// Options of the TV-LQR along a trajectory (solveTvlqr): continuous or zero-order-hold gains,
 /// where they are tabulated, and the options of the solvers it uses.
 struct TvlqrOptions {
@@ -41,6 +92,13 @@ struct TvlqrOptions {
   RiccatiOptions riccati;                 ///< the continuous solve
   SampledDiscretizationOptions sampled;   ///< the sampled discretization
   TangentTransportOptions transport;      ///< the tangent basis (scenes with constraints)
+  /// Sampled only: the held feed-forward written beside K_k (file comment).
+  SampledFeedforward feedforward = SampledFeedforward::kConsistent;
+  int feedforwardIterations = 6;  ///< kConsistent: Gauss–Newton iterations per interval at most (≥ 1)
+  /// A held pose only: Qf := S∞ of the CARE (DARE when sampled) at the pose (file comment);
+  /// weights.Qf is then not used. Throws std::invalid_argument for a reference that is not a held
+  /// pose or time-varying weights.
+  bool infiniteHorizon = false;
   /// Throws std::invalid_argument naming the field and its value.
   void validate() const;
 };
@@ -55,11 +113,12 @@ enum class TvlqrCode {
   kNonFinite,              ///< a tabulated K(t) or S(t) is not finite
   kIndefinite,             ///< S (Sr) has an eigenvalue below −1e-6·max|λ| (isSemidefiniteToRoundoff):
                            ///< the integration did not resolve the Riccati equation; gains are set
+  kFeedforwardFailure,     ///< the plant's simulation over a sample interval failed (kConsistent)
   kNotSolved,              ///< a default-constructed solution (no solve ran)
 };
 
 /// Names: ok, transport_failure, riccati_failure, discretization_failure, recursion_failure,
-/// non_finite, indefinite, not_solved.
+/// non_finite, indefinite, feedforward_failure, not_solved.
 inline EnumNameTable<TvlqrCode> enumNames(TvlqrCode) {
   static constexpr EnumName<TvlqrCode> table[] = {
       {TvlqrCode::kOk, "ok"},
@@ -69,6 +128,7 @@ inline EnumNameTable<TvlqrCode> enumNames(TvlqrCode) {
       {TvlqrCode::kRecursionFailure, "recursion_failure"},
       {TvlqrCode::kNonFinite, "non_finite"},
       {TvlqrCode::kIndefinite, "indefinite"},
+      {TvlqrCode::kFeedforwardFailure, "feedforward_failure"},
       {TvlqrCode::kNotSolved, "not_solved"}};
   return table;
 }
@@ -102,6 +162,26 @@ struct TvlqrSolution {
   double minEigenvalueS = 0.0, maxEigenvalueS = 0.0;
   ///@}
   std::string method;             ///< "bdf", "adams", "factored" or "sampled-zoh"
+  /// Sampled: the feed-forward written (options.feedforward) and, over the sample intervals, the
+  /// largest defect √(dᵀ S_{k+1} d) it leaves (file comment) and the same for u_ref(t_k) held.
+  SampledFeedforward feedforward = SampledFeedforward::kReference;
+  double feedforwardDefect = 0.0;  ///< max_k √(dᵀ S_{k+1} d) with the feed-forward written
+  double referenceDefect = 0.0;    ///< the same with u_ref(t_k) held
+  long feedforwardSimulations = 0;  ///< plant simulations over one interval for the feed-forward
+  /// Sampled: what the hold allows — the largest ‖e_k‖₂ (full state, the simulator's tracking
+  /// error's norm) of the defects r_k left by the feed-forward written, propagated by the sampled
+  /// closed loop of the linearization, e_{k+1} = (Φ_k − Γ_k K_k) e_k + r_k, e_0 = 0: to first order
+  /// in r, the unperturbed sampled loop's deviation from the reference at the samples. With
+  /// constraints, in the tangent coordinates between the projections of the reference onto the
+  /// constraints, plus the reference's own distance from them, P(x_ref(t_k)) − x_ref(t_k).
+  double predictedDeviation = 0.0;
+  /// Empty, or (feedforward = kReference only, where the plant runs serve only the prediction)
+  /// why a run failed: the gains stand, the defects and the prediction are NaN. With a
+  /// feed-forward to compute, a failed run is the status kFeedforwardFailure instead.
+  std::string predictionFailure;
+  bool infiniteHorizon = false;      ///< solved with Qf = S∞ (options.infiniteHorizon)
+  std::string infiniteHorizonSolve;  ///< the CARE's (DARE's) LqrResult::describe() line
+  double maxGainDeviation = 0.0;     ///< infinite horizon: max_k ‖K_k − K∞‖_F / ‖K∞‖_F
 
   bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   /// A few lines for people (what was solved, work, S's spectrum).
@@ -110,7 +190,10 @@ struct TvlqrSolution {
   std::string describe() const;
   /// One JSON object (keys: status, ok, message, t, index, mode, sample_rate_hz, constrained, nx,
   /// nu, tangent_dimension, rows, t0, t1, seconds, steps, rhs_evaluations, linearizations,
-  /// transport_steps, max_basis_correction, min_eigenvalue_S, max_eigenvalue_S, method).
+  /// transport_steps, max_basis_correction, min_eigenvalue_S, max_eigenvalue_S, method, feedforward: reference|average|consistent or "none"
+  /// for continuous gains, feedforward_defect, reference_defect, feedforward_simulations,
+  /// predicted_deviation, prediction_failure, infinite_horizon, infinite_horizon_solve,
+  /// max_gain_deviation).
   std::string json() const;
 };
 

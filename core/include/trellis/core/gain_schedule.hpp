@@ -24,13 +24,25 @@
 // or at another rate is not what they were designed for (trellis simulate refuses it).
 // sampleRate() = 0: continuous gains (K(t) along the horizon; sampling them is an approximation).
 //
+// Feed-forward of sampled gains (setFeedforward): per sample k the held input ū_k that the
+// controller applies with the feedback, u_k = ū_k − K_k (x(t_k) − x_ref(t_k)), held on
+// [t_k, t_{k+1}) (the last row, at the end time, repeats the last sample's). Without it a sampled
+// controller applies u_ref(t_k) (the reference's input sampled at t_k; what older files mean).
+// solveTvlqr (control/tvlqr.hpp) computes the ū_k that carries x_ref(t_k) to x_ref(t_{k+1})
+// through the exact dynamics as closely as one held input can.
+//
 // CSV form, one row per time, 17 significant digits (round trip exact):
 //   # trellis gain schedule: m=<m> nx=<nx> sample_rate_hz=<f>   (or: continuous)
 //     [interpolation=cubic]   (absent or interpolation=linear: the linear rule)
-//   t,K_<input>_<state>,…        (row-major: input by input, the states [q; dq] in order)
-// e.g. `t,K_push_x,K_push_theta,K_push_dx,K_push_dtheta`. Without names (setColumnNames not
-// called) the columns are K_<i>_<j> (i: input row, j: state column); such files without the
-// metadata line (the older layout) are read as continuous gains.
+//   t,K[<input>|<state>],…[,uff[<input>],…]   (K row-major: input by input, the states [q; dq]
+//                                              in order; then the m feed-forward columns)
+// e.g. `t,K[push|x],K[push|theta],K[push|dx],K[push|dtheta],uff[push]`. The separator '|' is
+// refused in input names (setColumnNames), so a column splits at its first '|' whatever the
+// names hold. The older form K_<input>_<state> (ambiguous to split when names contain '_') is
+// still read: against a scene it is checked column by column (checkNames), by position, which is
+// unambiguous. Without names (setColumnNames not called) the columns are K_<i>_<j> (i: input
+// row, j: state column) and uff_<i>; such files without the metadata line (the older layout) are
+// read as continuous gains.
 #pragma once
 
 #include "trellis/core/enum_names.hpp"
@@ -78,22 +90,41 @@ class GainSchedule {
   /// 0: continuous gains; f > 0: zero-order-hold gains for a controller sampling at f Hz.
   double sampleRate() const { return sampleRate_; }
   bool isSampled() const { return sampleRate_ > 0.0; }  ///< sampleRate() > 0
-  /// Throws std::invalid_argument unless hz is finite and ≥ 0.
+  /// Throws std::invalid_argument unless hz is finite and ≥ 0. A new rate drops the held
+  /// feed-forward (it was computed for the old one).
   void setSampleRate(double hz);
 
-  /// Column names (m·nx, row-major), "K_<input>_<state>"; empty when unnamed.
+  /// Column names (m·nx, row-major), `K[<input>|<state>]` (or the older `K_<input>_<state>` of
+  /// a file read); empty when unnamed.
   const std::vector<std::string>& columnNames() const { return columnNames_; }
-  /// Names the columns K_<input>_<state> (inputs: m names; states: nx names, e.g. the
-  /// configuration names then "d" + each). Throws std::invalid_argument for wrong counts.
+  /// Names the columns `K[<input>|<state>]` (inputs: m names; states: nx names, e.g. the
+  /// configuration names then "d" + each). Throws std::invalid_argument for wrong counts and for
+  /// an input name containing '|' (the separator: the column would not split back).
   void setColumnNames(const std::vector<std::string>& inputNames,
                       const std::vector<std::string>& stateNames);
   /// The state names of a model's x = [q; dq]: configuration names, then "d" + each.
   static std::vector<std::string> stateNames(const std::vector<std::string>& configNames);
   /// Throws TrajectoryError (naming `source`, the first mismatching column and both names) unless
   /// K is (inputNames.size()) × (stateNames.size()) and, when the schedule has column names, they
-  /// are K_<input>_<state> for these names. Unnamed (older) schedules pass on sizes alone.
+  /// are `K[<input>|<state>]` (or all the older `K_<input>_<state>`) for these names, and the
+  /// feed-forward columns `uff[<input>]`. Unnamed (older) schedules pass on sizes alone.
   void checkNames(const std::vector<std::string>& inputNames,
                   const std::vector<std::string>& stateNames, const std::string& source) const;
+
+  /// Sets the held feed-forward ū_k (file comment): one m-vector per row (the last row repeats
+  /// the last sample's). Throws std::invalid_argument unless the schedule is sampled, the count is
+  /// size() and every vector has m finite entries (naming the row and entry).
+  void setFeedforward(std::vector<Eigen::VectorXd> uff);
+  bool hasFeedforward() const { return !feedforward_.empty(); }  ///< setFeedforward was called
+  /// ū_k per row (empty without a feed-forward).
+  const std::vector<Eigen::VectorXd>& feedforward() const { return feedforward_; }
+  /// The row k of the sample interval holding t: the last k with t_k ≤ t (within 1e-9 of a period
+  /// for sampled gains, 1e-12 relative otherwise), clamped to [0, size() − 1]. Throws
+  /// std::out_of_range outside [start, end] (as evaluate) and std::logic_error when empty.
+  int rowAt(double t) const;
+  /// ū of the sample interval holding t (rowAt); u must be m (no allocation then). Throws
+  /// std::logic_error without a feed-forward.
+  void evaluateFeedforward(double t, Eigen::VectorXd& u) const;
 
   GainInterpolation interpolation() const { return interpolation_; }  ///< the rule between rows (file comment)
   /// Chooses the rule between rows (file comment); kCubic computes the slopes here.
@@ -130,9 +161,10 @@ class GainSchedule {
   int nu_ = 0, nx_ = 0;
   double sampleRate_ = 0.0;
   GainInterpolation interpolation_ = GainInterpolation::kLinear;
-  std::vector<std::string> columnNames_;
+  std::vector<std::string> columnNames_, feedforwardNames_;
   Eigen::VectorXd times_;
   std::vector<Eigen::MatrixXd> gains_, slopes_;
+  std::vector<Eigen::VectorXd> feedforward_;
 };
 
 class Model;

@@ -1,7 +1,7 @@
 // trellis/core/names.hpp — the one rule for names that files must carry back.
 //
 // Configuration and input names become CSV column headers (trajectories: t, <configs>,
-// d<configs>, <inputs>, rate_<inputs>; gain schedules: K_<input>_<state>) and JSON keys (states,
+// d<configs>, <inputs>, rate_<inputs>; gain schedules: K[<input>|<state>], uff[<input>]) and JSON keys (states,
 // command output); frame names appear in JSON and messages. A name is accepted only if every
 // writer can write it and every reader read it back as the same name:
 //   - every name (frames, configurations, inputs): not empty, valid UTF-8 (JSON carries only
