@@ -26,7 +26,8 @@ namespace fs = std::filesystem;
 
 /// A fresh empty directory for one test case.
 fs::path scratch(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("trellis_test_io_" + name);
+  // Per process: two test runs on one machine (two build trees) must not share a directory.
+  const fs::path dir = fs::temp_directory_path() / ("trellis_test_io_" + std::to_string(::getpid()) + "_" + name);
   fs::remove_all(dir);
   fs::create_directories(dir);
   return dir;

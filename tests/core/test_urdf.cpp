@@ -4,6 +4,8 @@
 // (A, B equal to 1e-14), scenes that include a URDF, compound joints, and the refusals.
 #include <catch2/catch.hpp>
 
+#include <unistd.h>
+
 #include "support/finite_difference.hpp"
 #include "support/linearization_checks.hpp"
 #include "support/matrix_compare.hpp"
@@ -273,7 +275,7 @@ TEST_CASE("URDF panda equals the arm built in C++ from primitives", "[urdf][equi
 }
 
 TEST_CASE("A scene can start from a URDF and add constraints, forces and state", "[urdf][scene]") {
-  const auto dir = std::filesystem::temp_directory_path() / "trellis_test_urdf_include";
+  const auto dir = std::filesystem::temp_directory_path() / ("trellis_test_urdf_include_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   const std::string rel = std::filesystem::relative(robotPath("double_pendulum_continuous.urdf"), dir).string();
   const auto write = [&](const std::string& text) {

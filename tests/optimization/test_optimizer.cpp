@@ -7,6 +7,8 @@
 
 #include <catch2/catch.hpp>
 
+#include <unistd.h>
+
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -299,7 +301,7 @@ TEST_CASE("optimizer: problem-file horizon bounds and a CSV initial guess", "[op
     const OptimizationResult cold = trellis::optimizeTrajectory(p, singleSolve());
     REQUIRE(cold.ok());
     const std::string csv =
-        (std::filesystem::temp_directory_path() / "trellis_optimization_guess.csv").string();
+        (std::filesystem::temp_directory_path() / ("trellis_optimization_guess_" + std::to_string(::getpid()) + ".csv")).string();
     cold.trajectory.writeCsvFile(csv);
     std::string warmText = text;
     warmText.replace(warmText.rfind('}'), 1, ", \"initial_guess\": \"" + csv + "\"}");

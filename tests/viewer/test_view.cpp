@@ -10,6 +10,8 @@
 #include "trellis/viewer/view.hpp"
 
 #include <catch2/catch.hpp>
+
+#include <unistd.h>
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
@@ -28,7 +30,7 @@ const std::string kSource = TRELLIS_SOURCE_DIR;
 /// A fresh directory under the system's temporary directory, removed at the end of the test.
 struct TempDir {
   fs::path path;
-  explicit TempDir(const std::string& name) : path(fs::temp_directory_path() / ("trellis_viewer_" + name)) {
+  explicit TempDir(const std::string& name) : path(fs::temp_directory_path() / ("trellis_viewer_" + std::to_string(::getpid()) + "_" + name)) {
     fs::remove_all(path);
     fs::create_directories(path);
   }
