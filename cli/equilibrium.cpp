@@ -7,6 +7,8 @@
 #include "trellis/core/equilibrium.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <sstream>
 #include <stdexcept>
 
 namespace trellis::cli {
@@ -75,6 +77,34 @@ Eigen::VectorXd applyInputs(const Model& model, const ParsedOptions& options, Ei
   return u;
 }
 
+/// Why a pose cannot be held when coordinates are free: no input and no constraint acts on them
+/// (their rows of [B_u Aᵀ] are zero) while the pose needs a force there, e.g. a floating base
+/// without contacts under gravity. Empty when there is no such coordinate.
+std::string unheldReason(const Model& model, const Data& data, const InverseDynamicsResult& r) {
+  if (r.status.code != InverseDynamicsCode::kUnreachable || r.residual.size() != model.nq()) return "";
+  std::vector<std::string> free, loaded;
+  double need = 0.0;
+  for (int i = 0; i < model.nq(); ++i) {
+    const bool noInput = model.nu() == 0 || data.inputMatrix.row(i).isZero(0.0);
+    const bool noConstraint = model.nc() == 0 || data.constraintJacobian.col(i).isZero(0.0);
+    if (!noInput || !noConstraint) continue;
+    free.push_back(model.configNames()[i]);
+    if (r.residual[i] != 0.0) {
+      loaded.push_back(model.configNames()[i]);
+      need = std::max(need, std::abs(r.residual[i]));
+    }
+  }
+  if (loaded.empty()) return "";
+  std::ostringstream s;
+  s.precision(4);
+  s << "; no input and no constraint acts on " << joinNames(free) << ", yet the pose needs a generalized force of up to "
+    << need << " on " << joinNames(loaded) << ": a floating base without contacts cannot be held (nothing holds it up). Add contacts: "
+    << "point constraints from the feet to the ground in a scene that includes the URDF (docs/urdf.md, "
+    << "\"Floating bases and contacts\"); or, to push the base by forces from nowhere, urdf_options "
+    << "{\"base_inputs\": true}";
+  return s.str();
+}
+
 int runEquilibrium(std::span<const std::string> args, std::ostream& out) {
   const ParsedOptions options("equilibrium", args,
                               {{"--state", "--inputs", "--tolerance", "--max-iterations"},
@@ -94,7 +124,8 @@ int runEquilibrium(std::span<const std::string> args, std::ostream& out) {
     const InverseDynamicsResult r = computeHoldingInputs(model, data, state.q, io);
     const bool accepted = r.ok() || (r.status.code == InverseDynamicsCode::kUnreachable && options.flag("--allow-residual"));
     if (!accepted) {
-      throw std::runtime_error(loaded.path + ": the pose cannot be held (" + r.status.name() + "): " + r.status.message);
+      throw std::runtime_error(loaded.path + ": the pose cannot be held (" + r.status.name() + "): " + r.status.message +
+                               unheldReason(model, data, r));
     }
     if (r.ok()) {
       // The pose must lie on the constraints, as `gains --hold` requires: inverse dynamics at an

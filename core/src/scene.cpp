@@ -146,7 +146,7 @@ class SceneReader {
       throw ModelError("the scene must be a JSON object, not " + kind(root) + " " + show(root));
     }
     Element top(root, "scene");
-    Scene scene{Model{}, {}, {}, {}, {}, {}, {}};
+    Scene scene{Model{}, {}, {}, {}, {}, {}, {}, {}};
     if (auto name = optionalText(top, "name")) scene.name = *name;
     if (auto description = optionalText(top, "description")) scene.description = *description;
     builder_ = ModelBuilder(scene.name);
@@ -544,14 +544,23 @@ class SceneReader {
     UrdfOptions options;
     if (const Json* node = top.optionalObject("urdf_options")) {
       Element o(*node, "urdf_options");
+      static const char* const kKnown = "gravity, joint_inputs, base_inputs, floating_root, ignore_friction";
       for (const auto& [key, value] : node->items()) {
-        if (key != "gravity" && key != "joint_inputs") o.fail(key, "unknown option (known: gravity, joint_inputs)");
+        if (key != "gravity" && key != "joint_inputs" && key != "base_inputs" && key != "floating_root" &&
+            key != "ignore_friction")
+          o.fail(key, std::string("unknown option (known: ") + kKnown + ")");
       }
       if (o.find("gravity")) options.gravity = o.vector3("gravity");
-      if (const Json* inputs = o.find("joint_inputs")) {
-        if (!inputs->is_boolean()) o.failValue("joint_inputs", *inputs, "must be true or false, not " + kind(*inputs));
-        options.jointInputs = inputs->get<bool>();
-      }
+      const auto flag = [&](const char* key, bool& target) {
+        if (const Json* v = o.find(key)) {
+          if (!v->is_boolean()) o.failValue(key, *v, "must be true or false, not " + kind(*v));
+          target = v->get<bool>();
+        }
+      };
+      flag("joint_inputs", options.jointInputs);
+      flag("base_inputs", options.baseInputs);
+      flag("floating_root", options.floatingRoot);
+      flag("ignore_friction", options.ignoreFriction);
     }
     std::filesystem::path path(file);
     if (path.is_relative()) path = baseDir_ / path;
@@ -569,6 +578,7 @@ class SceneReader {
       configOrder_.push_back(c);
     }
     scene.visuals = std::move(robot.visuals);
+    for (auto& w : robot.warnings) scene.warnings.push_back(std::move(w));
     if (scene.name.empty()) scene.name = robot.robotName;
   }
 

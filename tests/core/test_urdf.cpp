@@ -396,6 +396,162 @@ TEST_CASE("URDF root link named world is the world frame (ROS convention)", "[ur
   CHECK((rel - db.framePose[onBase.model.frameIndex("b")].matrix()).cwiseAbs().maxCoeff() < 1e-14);
 }
 
+TEST_CASE("URDF joint whose parent is an undeclared 'world' hangs from the world (Drake, Pinocchio)", "[urdf]") {
+  // Drake's acrobot welds its base so: <joint type="fixed"><parent link="world"/>… with no <link name="world"/>.
+  const std::string body = R"(
+  <link name="base_link"><inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>
+  <link name="upper"><inertial><origin xyz="0 0 -0.5"/><mass value="1"/><inertia ixx="0.083" ixy="0" ixz="0" iyy="0.083" iyz="0" izz="0.001"/></inertial></link>
+  <link name="lower"><inertial><origin xyz="0 0 -1"/><mass value="1"/><inertia ixx="0.33" ixy="0" ixz="0" iyy="0.33" iyz="0" izz="0.001"/></inertial></link>
+  <joint name="base_weld" type="fixed"><parent link="world"/><child link="base_link"/><origin xyz="0 0 2"/></joint>
+  <joint name="shoulder" type="continuous"><parent link="base_link"/><child link="upper"/><axis xyz="0 1 0"/><dynamics damping="0.1"/></joint>
+  <joint name="elbow" type="continuous"><parent link="upper"/><child link="lower"/><origin xyz="0 0 -1"/><axis xyz="0 1 0"/><dynamics damping="0.1"/></joint>
+)";
+  const Scene implicit = parseScene(robot(body), "acrobot.urdf");
+  const Scene declared = parseScene(robot("  <link name=\"world\"/>" + body), "acrobot_world.urdf");
+  REQUIRE(implicit.model.nq() == 2);
+  CHECK(implicit.model.configNames() == std::vector<std::string>{"shoulder", "elbow"});
+  CHECK(importUrdf(robot(body), "acrobot.urdf").rootLink == "world");
+  std::mt19937 rng(64);
+  for (int k = 0; k < 2; ++k) checkSameLinearization(declared.model, implicit.model, randomState(implicit.model, rng), 0.0);
+  Data d(implicit.model);
+  computeKinematics(implicit.model, d, Eigen::VectorXd::Zero(2), Eigen::VectorXd::Zero(2));
+  CHECK(d.framePose[implicit.model.frameIndex("base_link")].translation() == Eigen::Vector3d(0, 0, 2));
+  // Another undeclared parent is still an unknown link.
+  CHECK_THROWS_WITH(parseScene(robot(R"(<link name="a"/><joint name="j" type="fixed"><parent link="ground"/><child link="a"/></joint>)"), "bad.urdf"),
+                    Catch::Contains("joint 'j': <parent> attribute 'link': unknown link 'ground'"));
+}
+
+TEST_CASE("URDF Coulomb friction: refused, or dropped with a warning on request", "[urdf][friction]") {
+  const std::string body = std::string(kTwoLinks) + R"(<joint name="j" type="revolute"><parent link="a"/><child link="b"/>
+<dynamics damping="0.1" friction="0.2"/></joint>
+)";
+  CHECK_THROWS_WITH(importUrdf(robot(body), "f.urdf"),
+                    Catch::Contains("f.urdf:6: joint 'j': <dynamics> attribute 'friction': value '0.2': Coulomb friction is "
+                                    "not modelled") && Catch::Contains("ignore_friction"));
+  UrdfOptions o;
+  o.ignoreFriction = true;
+  const Scene s = sceneFromUrdf(importUrdf(robot(body), "f.urdf", o));
+  REQUIRE(s.warnings.size() == 1);
+  CHECK(s.warnings[0] == "f.urdf:6: joint 'j': <dynamics> attribute 'friction': value '0.2': Coulomb friction ignored (ignore_friction)");
+  CHECK(s.model.damping()[0] == 0.1);  // the viscous part stays
+  // The same through a scene's urdf_options, and <joint_properties friction> (CAD exporters).
+  const std::string props = std::string(kTwoLinks) + R"(<joint name="j" type="revolute"><parent link="a"/><child link="b"/>
+<joint_properties friction="0.5"/></joint>
+)";
+  CHECK_THROWS_WITH(importUrdf(robot(props), "p.urdf"), Catch::Contains("<joint_properties> attribute 'friction': value '0.5'"));
+  CHECK(sceneFromUrdf(importUrdf(robot(props), "p.urdf", o)).warnings.size() == 1);
+  const auto dir = std::filesystem::temp_directory_path() / "trellis_test_urdf_friction";
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "f.urdf") << robot(body);
+  std::ofstream(dir / "f.json") << R"({"urdf": "f.urdf", "urdf_options": {"ignore_friction": true}})";
+  const Scene viaScene = loadScene((dir / "f.json").string());
+  REQUIRE(viaScene.warnings.size() == 1);
+  CHECK_THAT(viaScene.warnings[0], Catch::Contains("f.urdf:6") && Catch::Contains("Coulomb friction ignored"));
+  std::ofstream(dir / "g.json") << R"({"urdf": "f.urdf", "urdf_options": {"ignore_friction": 1}})";
+  CHECK_THROWS_WITH(loadScene((dir / "g.json").string()), Catch::Contains("ignore_friction") && Catch::Contains("must be true or false"));
+  std::filesystem::remove_all(dir);
+}
+
+namespace {
+
+/// The sum of every <mass value> of a URDF text (the robot's total mass).
+double totalMass(const std::string& text) {
+  double sum = 0.0;
+  const std::string key = "<mass value=\"";
+  for (std::size_t at = text.find(key); at != std::string::npos; at = text.find(key, at + 1))
+    sum += std::stod(text.substr(at + key.size()));
+  return sum;
+}
+
+std::string readFile(const std::string& path) {
+  std::ifstream f(path);
+  return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+}
+
+}  // namespace
+
+TEST_CASE("URDF floating bases: unactuated by default, floating_root, contacts from a scene", "[urdf][floating]") {
+  SECTION("floating and planar coordinates get no inputs unless base_inputs") {
+    const std::string body = std::string(kTwoLinks) + R"(<link name="c"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+<joint name="f" type="floating"><parent link="a"/><child link="b"/></joint>
+<joint name="h" type="revolute"><parent link="b"/><child link="c"/></joint>
+)";
+    const Model m = sceneFromUrdf(importUrdf(robot(body), "f.urdf")).model;
+    CHECK(m.nq() == 7);
+    CHECK(m.inputNames() == std::vector<std::string>{"h"});
+    UrdfOptions o;
+    o.baseInputs = true;
+    const Model actuated = sceneFromUrdf(importUrdf(robot(body), "f.urdf", o)).model;
+    CHECK(actuated.inputNames() == actuated.configNames());
+    const std::string planar = std::string(kTwoLinks) + R"(<joint name="p" type="planar"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/></joint>)";
+    CHECK(sceneFromUrdf(importUrdf(robot(planar), "p.urdf")).model.nu() == 0);
+    CHECK(sceneFromUrdf(importUrdf(robot(planar), "p.urdf", o)).model.nu() == 3);
+  }
+  SECTION("floating_root: solo12's trunk floats, its mass counts, the legs are the inputs") {
+    UrdfOptions o;
+    o.floatingRoot = true;
+    const std::string text = readFile(robotPath("solo12.urdf"));
+    const Model m = sceneFromUrdf(importUrdf(text, "solo12.urdf", o)).model;
+    REQUIRE(m.nq() == 18);
+    CHECK(m.configNames()[0] == "floating_base.x");
+    CHECK(m.configNames()[5] == "floating_base.roll");
+    CHECK(m.nu() == 12);
+    CHECK(m.inputNames()[0] == "FL_HAA");
+    // M's translational entry is the total mass, the trunk's 1.16 kg included.
+    Data d(m);
+    REQUIRE(computeDynamics(m, d, Eigen::VectorXd::Zero(18), Eigen::VectorXd::Zero(18), Eigen::VectorXd::Zero(12)).ok());
+    const double total = totalMass(text);
+    CHECK(total > 2.4);
+    CHECK(std::abs(d.M(0, 0) - total) <= 1e-14 * total);
+    CHECK(std::abs(d.M(2, 2) - total) <= 1e-14 * total);
+    // Nothing holds it: it falls with g, whatever the legs do.
+    CHECK(std::abs(d.qdd[2] + 9.81) <= 1e-12);
+    std::mt19937 rng(65);
+    checkLinearizationAgainstFd(m, randomState(m, rng, 0.5, 1.0, 0.1));
+  }
+  SECTION("floating_root on a root named world makes its fixed joint floating") {
+    const std::string body = R"(<link name="world"/>)" + std::string(kTwoLinks) + R"(
+<joint name="weld" type="fixed"><parent link="world"/><child link="a"/><origin xyz="0 0 1"/></joint>
+<joint name="h" type="revolute"><parent link="a"/><child link="b"/></joint>
+)";
+    UrdfOptions o;
+    o.floatingRoot = true;
+    const Model m = sceneFromUrdf(importUrdf(robot(body), "w.urdf", o)).model;
+    CHECK(m.configNames()[0] == "weld.x");
+    CHECK(m.nq() == 7);
+    CHECK(m.inputNames() == std::vector<std::string>{"h"});
+    const std::string twoChildren = body + R"(<link name="c"/><joint name="k" type="fixed"><parent link="world"/><child link="c"/></joint>)";
+    CHECK_THROWS_WITH(importUrdf(robot(twoChildren), "w.urdf", o),
+                      Catch::Contains("floating_root: the root link is 'world' and 2 joints hang from it"));
+    const std::string clash = std::string(kTwoLinks) + R"(<joint name="floating_base" type="revolute"><parent link="a"/><child link="b"/></joint>)";
+    CHECK_THROWS_WITH(importUrdf(robot(clash), "c.urdf", o),
+                      Catch::Contains("floating_root: the file already has a joint or link named 'floating_base'"));
+  }
+  SECTION("contacts from a scene overlay hold the standing robot; without them nothing does") {
+    const Scene standing = loadScene(robotPath("solo12_standing.json"));
+    const Model& m = standing.model;
+    REQUIRE(m.nq() == 18);
+    REQUIRE(m.nc() == 12);
+    Data d(m);
+    const InverseDynamicsResult held = computeHoldingInputs(m, d, standing.q);
+    INFO(held.describe());
+    REQUIRE(held.ok());
+    // The four normal forces carry the weight (λ of the z rows: h = (p_foot − p_ground)·e_z).
+    double normal = 0.0;
+    for (int r = 2; r < 12; r += 3) normal += held.lambda[r];
+    const double weight = totalMass(readFile(robotPath("solo12.urdf"))) * 9.81;
+    CHECK(std::abs(normal - weight) <= 1e-12 * weight);
+    // The same pose on the robot without its contacts cannot be held by the legs alone.
+    UrdfOptions o;
+    o.floatingRoot = true;
+    const Model free = sceneFromUrdf(importUrdf(readFile(robotPath("solo12.urdf")), "solo12.urdf", o)).model;
+    Data df(free);
+    const InverseDynamicsResult r = computeHoldingInputs(free, df, standing.q);
+    CHECK(r.status.code == InverseDynamicsCode::kUnreachable);
+    CHECK(std::abs(std::abs(r.residual[2]) - weight) <= 1e-12 * weight);  // the weight, on floating_base.z
+  }
+}
+
 TEST_CASE("URDF errors name link, joint, attribute, value and line", "[urdf][errors]") {
   const auto fails = [](const std::string& body, const std::string& expected) {
     INFO("expected message containing: " << expected);

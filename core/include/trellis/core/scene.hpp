@@ -33,6 +33,9 @@ struct Scene {
   std::string name, description;
   ///@}
   std::vector<VisualGeometry> visuals;  ///< from an imported URDF; empty otherwise
+  /// What was read but not modelled (e.g. URDF friction dropped by "ignore_friction"), one line
+  /// each naming file, line and value; callers show them (the CLI prints them on stderr).
+  std::vector<std::string> warnings;
 };
 
 /// Parses a scene from JSON text. `source` names the file in messages (and, when it is a path,
