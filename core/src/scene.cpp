@@ -146,7 +146,7 @@ class SceneReader {
       throw ModelError("the scene must be a JSON object, not " + kind(root) + " " + show(root));
     }
     Element top(root, "scene");
-    Scene scene{Model{}, {}, {}, {}, {}, {}, {}, {}};
+    Scene scene{Model{}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}};
     if (auto name = optionalText(top, "name")) scene.name = *name;
     if (auto description = optionalText(top, "description")) scene.description = *description;
     builder_ = ModelBuilder(scene.name);
@@ -163,6 +163,7 @@ class SceneReader {
     readList(top, "constraints", [this](Element& e, const std::string& type) { readConstraint(e, type); });
 
     call("scene", [&] { scene.model = std::move(builder_).finalize(); });
+    if (urdfJoints_) setUrdfLimits(scene, *urdfJoints_);
     readState(top, scene);
     return scene;
   }
@@ -572,6 +573,7 @@ class SceneReader {
     }
     UrdfImport robot = importUrdf(text, path.string(), options);
     builder_ = std::move(robot.builder);
+    urdfJoints_ = std::move(robot.joints);
     for (const auto& f : robot.frames) frames_.emplace(f, "frame '" + f + "' of " + file);
     for (const auto& c : robot.configs) {
       configs_.emplace(c, "a joint of " + file);
@@ -599,6 +601,7 @@ class SceneReader {
   std::map<std::string, std::string> frames_;   // name -> where it was defined, for messages
   std::map<std::string, std::string> configs_;  // config -> frame that carries it
   std::vector<std::string> configOrder_;
+  std::optional<std::vector<UrdfJoint>> urdfJoints_;  // a "urdf" include's joints (for the limits)
 };
 
 /// Rejects text nested deeper than kMaxNestingDepth before nlohmann builds a tree of it.

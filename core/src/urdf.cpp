@@ -20,6 +20,7 @@
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
+#include <limits>
 #include <map>
 #include <optional>
 #include <set>
@@ -621,9 +622,28 @@ UrdfImport importUrdf(const std::string& xmlText, const std::string& source, con
   return UrdfReader(source, options).read(xmlText);
 }
 
+void setUrdfLimits(Scene& scene, const std::vector<UrdfJoint>& joints) {
+  const int n = scene.model.nq();
+  const double inf = std::numeric_limits<double>::infinity();
+  scene.lowerLimit = Eigen::VectorXd::Constant(n, -inf);
+  scene.upperLimit = Eigen::VectorXd::Constant(n, inf);
+  scene.effortLimit = Eigen::VectorXd::Constant(n, inf);
+  for (const UrdfJoint& j : joints) {
+    // One coordinate: revolute (continuous has no position limits) and prismatic joints.
+    if (!j.hasLimits || j.configs.size() != 1 || (j.type != "revolute" && j.type != "prismatic")) continue;
+    const int i = scene.model.configIndex(j.configs[0]);
+    if (j.lower < j.upper) {
+      scene.lowerLimit[i] = j.lower;
+      scene.upperLimit[i] = j.upper;
+    }
+    if (j.effort > 0.0) scene.effortLimit[i] = j.effort;
+  }
+}
+
 Scene sceneFromUrdf(UrdfImport&& robot) {
   Scene scene{std::move(robot.builder).finalize(), {}, {}, {}, robot.robotName, "URDF robot",
-              std::move(robot.visuals), std::move(robot.warnings)};
+              std::move(robot.visuals), {}, {}, {}, std::move(robot.warnings)};
+  setUrdfLimits(scene, robot.joints);
   scene.q = Eigen::VectorXd::Zero(scene.model.nq());
   scene.dq = Eigen::VectorXd::Zero(scene.model.nq());
   scene.u = Eigen::VectorXd::Zero(scene.model.nu());

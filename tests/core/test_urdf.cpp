@@ -17,6 +17,7 @@
 #include <Eigen/Geometry>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
@@ -419,6 +420,28 @@ TEST_CASE("URDF joint whose parent is an undeclared 'world' hangs from the world
   // Another undeclared parent is still an unknown link.
   CHECK_THROWS_WITH(parseScene(robot(R"(<link name="a"/><joint name="j" type="fixed"><parent link="ground"/><child link="a"/></joint>)"), "bad.urdf"),
                     Catch::Contains("joint 'j': <parent> attribute 'link': unknown link 'ground'"));
+}
+
+TEST_CASE("URDF joint limits reach the scene: position limits and effort per coordinate", "[urdf][limits]") {
+  const Scene panda = loadScene(robotPath("panda.urdf"));
+  const Model& m = panda.model;
+  REQUIRE(panda.lowerLimit.size() == m.nq());
+  const int j1 = m.configIndex("panda_joint1"), f1 = m.configIndex("panda_finger_joint1");
+  CHECK(panda.lowerLimit[j1] == -2.8973);
+  CHECK(panda.upperLimit[j1] == 2.8973);
+  CHECK(panda.effortLimit[j1] == 87.0);
+  CHECK(panda.upperLimit[f1] == 0.04);
+  // Continuous joints have no position limits; a scene that includes a URDF keeps them by name,
+  // its own coordinates unlimited.
+  const Scene pendulum = loadScene(robotPath("double_pendulum_continuous.urdf"));
+  CHECK(std::isinf(pendulum.lowerLimit[0]));
+  CHECK(std::isinf(pendulum.upperLimit[1]));
+  const Scene standing = loadScene(robotPath("solo12_standing.json"));
+  REQUIRE(standing.upperLimit.size() == 18);
+  CHECK(std::isinf(standing.upperLimit[standing.model.configIndex("floating_base.z")]));
+  CHECK(standing.upperLimit[standing.model.configIndex("FL_KFE")] == 10.0);
+  // A scene without a URDF has none.
+  CHECK(parseScene(R"({"frames": [{"name": "a", "type": "rz", "config": "q"}]})").lowerLimit.size() == 0);
 }
 
 TEST_CASE("URDF Coulomb friction: refused, or dropped with a warning on request", "[urdf][friction]") {

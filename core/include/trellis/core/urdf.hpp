@@ -82,6 +82,10 @@ UrdfImport importUrdf(const std::string& xmlText, const std::string& source = "<
 /// Reads a URDF file into a Scene (state all zero, visuals kept). Throws ModelError.
 Scene loadUrdf(const std::string& path, const UrdfOptions& options = {});
 
+/// Fills scene.lowerLimit, upperLimit and effortLimit (Scene) from an import's joints, matched by
+/// configuration name (the scene's other coordinates unlimited).
+void setUrdfLimits(Scene& scene, const std::vector<UrdfJoint>& joints);
+
 /// The finalized scene of an import (state all zero; the import's warnings kept in Scene::warnings).
 Scene sceneFromUrdf(UrdfImport&& robot);
 
