@@ -423,10 +423,27 @@ class UrdfReader {
     for (const auto& l : links_) readVisuals(l);
 
     if (!damping.empty()) b.addDamping(0.0, damping);
-    // Inputs on the joints' coordinates; on a floating or planar joint's only with baseInputs.
+    // <mimic>: q_j = m q_leader + o, a holonomic constraint row (ModelBuilder::addCoordinateCoupling).
+    std::set<std::string> followers;
+    for (const Mimic& mm : mimics_) {
+      const std::string element = "joint '" + mm.joint + "'";
+      const auto leader = std::find_if(out_.joints.begin(), out_.joints.end(),
+                                       [&](const UrdfJoint& u) { return u.name == mm.leader; });
+      if (leader == out_.joints.end())
+        fail(mm.at, element, "<mimic> attribute 'joint': value '" + mm.leader + "' is not a movable joint of the file");
+      if (leader->configs.size() != 1)
+        fail(mm.at, element, "<mimic> attribute 'joint': value '" + mm.leader + "' is a " + leader->type +
+                                 " joint; a mimic follows a revolute, continuous or prismatic joint");
+      if (mm.multiplier == 0.0)
+        fail(mm.at, element, "<mimic> attribute 'multiplier': value '0' would fix the joint, not couple it");
+      call(mm.at, element, [&] { b.addCoordinateCoupling(mm.joint, mm.leader, mm.multiplier, mm.offset); });
+      followers.insert(mm.joint);
+    }
+    // Inputs on the joints' coordinates; on a floating or planar joint's only with baseInputs; none
+    // on a mimic joint (it is driven through its coupling, as by a linkage or a gear).
     if (options_.jointInputs)
       for (const auto& j : out_.joints)
-        if (options_.baseInputs || (j.type != "floating" && j.type != "planar"))
+        if ((options_.baseInputs || (j.type != "floating" && j.type != "planar")) && !followers.count(j.name))
           for (const auto& c : j.configs) b.addConfigForce(c, c);
     if (!options_.gravity.isZero(0.0)) b.addGravity(options_.gravity);
   }
@@ -439,9 +456,12 @@ class UrdfReader {
     const std::string element = addedRoot ? std::string("floating_root") : "joint '" + j.name + "'";
     const XMLElement* x = j.xml;
     if (const XMLElement* m = x->FirstChildElement("mimic")) {
-      fail(m, element, "<mimic> (joint '" + attribute(m, "joint", element, false) +
-                           "') is not supported: a coupling q = m·q' + o is not a trellis constraint; "
-                           "remove <mimic> to make the joint independent");
+      // q_j = multiplier · q_leader + offset: a coordinate coupling, added once every joint exists.
+      const std::string leader = attribute(m, "joint", element, true);
+      if (j.type != "revolute" && j.type != "continuous" && j.type != "prismatic")
+        fail(m, element, "<mimic> on a " + j.type + " joint: only revolute, continuous and prismatic joints can mimic");
+      mimics_.push_back({j.name, leader, optionalNumber(m, "multiplier", element, 1.0),
+                         optionalNumber(m, "offset", element, 0.0), m});
     }
     const Eigen::Matrix4d g = addedRoot ? Eigen::Matrix4d::Identity() : origin(x, element);
     std::optional<Mass> mass;
@@ -591,6 +611,12 @@ class UrdfReader {
     }
   }
 
+  struct Mimic {
+    std::string joint, leader;
+    double multiplier, offset;
+    const XMLElement* at;
+  };
+
   struct InertialFrame {
     std::string link;
     Eigen::Matrix4d origin;
@@ -604,7 +630,8 @@ class UrdfReader {
   UrdfOptions options_;
   const XMLElement* robotXml_ = nullptr;    // <robot>, for messages about the whole file
   const XMLElement* implicitWorld_ = nullptr;  // the first joint naming an undeclared 'world' parent
-  int floatingJoint_ = -1;                  // floatingRoot with root 'world': the joint made floating
+  int floatingJoint_ = -1;
+  std::vector<Mimic> mimics_;               // <mimic> elements, added as couplings after the tree                  // floatingRoot with root 'world': the joint made floating
   UrdfImport out_;
   std::vector<LinkSpec> links_;
   std::map<std::string, int> linkIndex_;

@@ -21,6 +21,7 @@
 #include <filesystem>
 #include <fstream>
 #include <numbers>
+#include <sstream>
 #include <string>
 
 using namespace trellis;
@@ -575,6 +576,112 @@ TEST_CASE("URDF floating bases: unactuated by default, floating_root, contacts f
   }
 }
 
+namespace {
+
+/// A link with mass m and a diagonal inertia (its centre of mass at the origin unless com is given).
+std::string massLink(const std::string& name, double m, double ixx, double iyy, double izz, const std::string& com = "0 0 0") {
+  std::ostringstream s;
+  s << "<link name=\"" << name << "\"><inertial><origin xyz=\"" << com << "\"/><mass value=\"" << m
+    << "\"/><inertia ixx=\"" << ixx << "\" ixy=\"0\" ixz=\"0\" iyy=\"" << iyy << "\" iyz=\"0\" izz=\"" << izz
+    << "\"/></inertial></link>\n";
+  return s.str();
+}
+
+/// A 3D chain with gravity and two mimics: a prismatic joint following a revolute one two levels
+/// up (multiplier 0.5, offset 0.1) and a continuous joint following another with multiplier −1.
+std::string mimicChain() {
+  return robot("<link name=\"base\"/>\n" + massLink("l1", 1.2, 0.02, 0.03, 0.025, "0.1 0 -0.2") +
+               massLink("l2", 0.8, 0.01, 0.015, 0.012, "0 0.05 -0.15") + massLink("l3", 0.5, 0.004, 0.005, 0.006, "0.02 0 0") +
+               massLink("l4", 0.3, 0.002, 0.003, 0.001, "0 0 -0.1") + R"(
+<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 1 0"/><origin xyz="0 0 1" rpy="0.1 0 0"/></joint>
+<joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><axis xyz="1 0 0.3"/><origin xyz="0.1 0 -0.4"/></joint>
+<joint name="s3" type="prismatic"><parent link="l2"/><child link="l3"/><axis xyz="0 0.6 0.8"/><origin xyz="0 0 -0.3"/>
+  <mimic joint="j1" multiplier="0.5" offset="0.1"/></joint>
+<joint name="j4" type="continuous"><parent link="l2"/><child link="l4"/><axis xyz="0 0 1"/><origin xyz="0.05 0 -0.3" rpy="0 0.4 0"/>
+  <mimic joint="j2" multiplier="-1"/></joint>
+)");
+}
+
+}  // namespace
+
+TEST_CASE("URDF <mimic> is a coordinate coupling q_j = m q_i + o", "[urdf][mimic]") {
+  SECTION("two coaxial rotors coupled by m move as one joint with inertia I_b + m² I_c") {
+    // Both spin about the world z axis through their centres of mass: gravity exerts no torque.
+    // With q_c = m q_b + o, T = ½ (I_b + m² I_c) q̇_b², so q̈_b = τ / (I_b + m² I_c), q̈_c = m q̈_b, and
+    // the coupling's multiplier is the torque on c: I_c q̈_c = λ.
+    const double Ib = 0.3, Ic = 0.05, m = -2.0, o = 0.3, tau = 1.5;
+    std::ostringstream text;
+    text << "<link name=\"a\"/>\n" << massLink("b", 1.0, 0.2, 0.2, Ib) << massLink("c", 2.0, 0.1, 0.1, Ic)
+         << R"(<joint name="jb" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/></joint>
+<joint name="jc" type="revolute"><parent link="a"/><child link="c"/><axis xyz="0 0 1"/>)"
+         << "<mimic joint=\"jb\" multiplier=\"" << m << "\" offset=\"" << o << "\"/></joint>\n";
+    const Scene scene = sceneFromUrdf(importUrdf(robot(text.str()), "rotors.urdf"));
+    const Model& model = scene.model;
+    REQUIRE(model.nq() == 2);
+    REQUIRE(model.nc() == 1);
+    CHECK(model.constraints()[0].type == ConstraintType::kCoordinateCoupling);
+    CHECK(model.inputNames() == std::vector<std::string>{"jb"});  // the follower has no input of its own
+    Data d(model);
+    const Eigen::Vector2d q(0.4, m * 0.4 + o), dq(0.7, m * 0.7);
+    REQUIRE(computeDynamics(model, d, q, dq, Eigen::VectorXd::Constant(1, tau)).ok());
+    const double qddB = tau / (Ib + m * m * Ic);
+    CHECK(std::abs(d.qdd[0] - qddB) <= 1e-14 * std::abs(qddB));
+    CHECK(std::abs(d.qdd[1] - m * qddB) <= 1e-14 * std::abs(m * qddB));
+    CHECK(std::abs(d.lambda[0] - Ic * m * qddB) <= 1e-13 * std::abs(Ic * m * qddB));
+    // h and A: the row is e_c − m e_b, h = q_c − m q_b − o.
+    computeConstraints(model, d, q, dq);
+    CHECK(std::abs(d.constraintValue[0]) <= 1e-15);
+    CHECK(d.constraintJacobian(0, 0) == -m);
+    CHECK(std::abs(d.constraintJacobian(0, 1) - 1.0) <= 1e-15);
+    std::mt19937 rng(66);
+    checkLinearizationAgainstFd(model, randomState(model, rng));
+  }
+  SECTION("a 3D chain with revolute, prismatic and continuous mimics: central differences, energy") {
+    const Model model = sceneFromUrdf(importUrdf(mimicChain(), "chain.urdf")).model;
+    REQUIRE(model.nq() == 4);
+    REQUIRE(model.nc() == 2);
+    CHECK(model.inputNames() == std::vector<std::string>{"j1", "j2"});
+    std::mt19937 rng(67);
+    for (int k = 0; k < 3; ++k) {
+      // Off the constraint manifold too: h, A and the forces are defined everywhere.
+      const State s = randomState(model, rng, 1.2, 1.0, 0.5);
+      INFO("random state #" << k);
+      checkLinearizationAgainstFd(model, s);
+    }
+    // On the manifold the coupled chain conserves energy up to the input power (the couplings' forces do no work).
+    State s = randomState(model, rng, 1.2, 1.0, 0.5);
+    s.q[2] = 0.5 * s.q[0] + 0.1;
+    s.q[3] = -s.q[1];
+    s.dq[2] = 0.5 * s.dq[0];
+    s.dq[3] = -s.dq[1];
+    checkEnergyBalance(model, s);
+  }
+  SECTION("panda with its finger mimic (as upstream): one input fewer, one coupling row") {
+    std::string text = readFile(robotPath("panda.urdf"));
+    const std::string at = R"(<child link="panda_rightfinger" />)";
+    REQUIRE(text.find(at) != std::string::npos);
+    text.insert(text.find(at) + at.size(), R"(<mimic joint="panda_finger_joint1" />)");
+    const Model model = sceneFromUrdf(importUrdf(text, "panda_mimic.urdf")).model;
+    CHECK(model.nq() == 9);
+    CHECK(model.nu() == 8);
+    REQUIRE(model.nc() == 1);
+    std::mt19937 rng(68);
+    checkLinearizationAgainstFd(model, randomState(model, rng));
+  }
+  SECTION("refusals name the joint and the value") {
+    const std::string two = std::string(kTwoLinks) + R"(<link name="c"/><joint name="j" type="revolute"><parent link="a"/><child link="b"/></joint>
+)";
+    CHECK_THROWS_WITH(importUrdf(robot(two + R"(<joint name="k" type="revolute"><parent link="b"/><child link="c"/><mimic joint="nope"/></joint>)"), "m.urdf"),
+                      Catch::Contains("m.urdf:6: joint 'k': <mimic> attribute 'joint': value 'nope' is not a movable joint of the file"));
+    CHECK_THROWS_WITH(importUrdf(robot(two + R"(<joint name="k" type="revolute"><parent link="b"/><child link="c"/><mimic joint="j" multiplier="0"/></joint>)"), "m.urdf"),
+                      Catch::Contains("joint 'k': <mimic> attribute 'multiplier': value '0' would fix the joint"));
+    CHECK_THROWS_WITH(importUrdf(robot(two + R"(<joint name="k" type="revolute"><parent link="b"/><child link="c"/><mimic/></joint>)"), "m.urdf"),
+                      Catch::Contains("joint 'k': <mimic> attribute 'joint': missing"));
+    CHECK_THROWS_WITH(importUrdf(robot(two + R"(<joint name="k" type="floating"><parent link="b"/><child link="c"/><mimic joint="j"/></joint>)"), "m.urdf"),
+                      Catch::Contains("joint 'k': <mimic> on a floating joint"));
+  }
+}
+
 TEST_CASE("URDF errors name link, joint, attribute, value and line", "[urdf][errors]") {
   const auto fails = [](const std::string& body, const std::string& expected) {
     INFO("expected message containing: " << expected);
@@ -621,9 +728,6 @@ TEST_CASE("URDF errors name link, joint, attribute, value and line", "[urdf][err
           "<inertia> attribute 'ixx': value 'nan' must be 1 finite number");
   }
   SECTION("unsupported features are refused, not approximated") {
-    fails(std::string(kTwoLinks) + R"(<link name="c"/><joint name="j" type="revolute"><parent link="a"/><child link="b"/></joint>
-<joint name="k" type="revolute"><parent link="b"/><child link="c"/><mimic joint="j" multiplier="2"/></joint>)",
-          "joint 'k': <mimic> (joint 'j') is not supported");
     fails(std::string(kTwoLinks) + R"(<joint name="j" type="revolute"><parent link="a"/><child link="b"/>
 <dynamics damping="0.1" friction="0.2"/></joint>)",
           "bad.urdf:6: joint 'j': <dynamics> attribute 'friction': value '0.2': Coulomb friction is not modelled");

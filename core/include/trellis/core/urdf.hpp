@@ -7,7 +7,8 @@
 // and unit axis) driven by a configuration variable named as the joint; a fixed joint a constant
 // frame (folded away by the builder); <inertial> a mass; <dynamics damping> damping. floating and
 // planar joints become documented sequences of primitive coordinates, unactuated by default (a
-// base moves by contacts, not by forces from nowhere). Mimic joints are refused; Coulomb
+// base moves by contacts, not by forces from nowhere). A <mimic> joint is coupled to its leader
+// by a holonomic constraint q_j = multiplier · q_i + offset (and gets no input of its); Coulomb
 // friction is refused unless UrdfOptions::ignoreFriction (then dropped with a warning). Parsed with
 // tinyxml2, so every message carries the line number.
 #pragma once
@@ -74,7 +75,8 @@ struct UrdfImport {
 /// Reads URDF XML text. `source` names the file in messages ("<source>:<line>: joint 'j':
 /// attribute 'xyz': value '1 2' ..."). Throws ModelError on malformed XML, a missing or bad
 /// element or attribute, a link with two parents, several roots or a cycle, and on unsupported
-/// features (mimic, nonzero friction unless options.ignoreFriction, damping on planar/floating
+/// features (mimic on a compound joint or of a missing joint, nonzero friction unless
+/// options.ignoreFriction, damping on planar/floating
 /// joints), and on floatingRoot when the root is `world` without a single fixed child joint.
 UrdfImport importUrdf(const std::string& xmlText, const std::string& source = "<urdf>",
                       const UrdfOptions& options = {});
