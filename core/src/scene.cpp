@@ -531,8 +531,15 @@ class SceneReader {
       const Eigen::Vector3d axis = e.vector3("axis");
       if (axis.isZero(0.0)) e.failValue("axis", e.require("axis"), "must not be zero");
       call(e.label(), [&] { builder_.addKnifeEdgeConstraint(frame, axis); });
+    } else if (type == "coordinate_coupling") {
+      // q_config = multiplier · q_leader + offset (a URDF <mimic>).
+      const std::string follower = configRef(e, "config"), leader = configRef(e, "leader");
+      const double multiplier = e.number("multiplier");
+      if (multiplier == 0.0) e.failValue("multiplier", e.require("multiplier"), "must not be 0 (that fixes the coordinate)");
+      const double offset = e.optionalNumber("offset").value_or(0.0);
+      call(e.label(), [&] { builder_.addCoordinateCoupling(follower, leader, multiplier, offset); });
     } else {
-      e.failValue("type", Json(type), "is not one of distance, point, point_on_plane, knife_edge");
+      e.failValue("type", Json(type), "is not one of distance, point, point_on_plane, knife_edge, coordinate_coupling");
     }
   }
 

@@ -668,6 +668,27 @@ TEST_CASE("URDF <mimic> is a coordinate coupling q_j = m q_i + o", "[urdf][mimic
     std::mt19937 rng(68);
     checkLinearizationAgainstFd(model, randomState(model, rng));
   }
+  SECTION("the same coupling written in a scene over the URDF (coordinate_coupling) gives the same model") {
+    const auto dir = std::filesystem::temp_directory_path() / "trellis_test_urdf_mimic";
+    std::filesystem::create_directories(dir);
+    std::string plain = mimicChain();
+    for (const char* tag : {R"(<mimic joint="j1" multiplier="0.5" offset="0.1"/>)", R"(<mimic joint="j2" multiplier="-1"/>)"}) {
+      REQUIRE(plain.find(tag) != std::string::npos);
+      plain.erase(plain.find(tag), std::string(tag).size());
+    }
+    std::ofstream(dir / "chain.urdf") << plain;
+    std::ofstream(dir / "chain.json") << R"({"urdf": "chain.urdf", "urdf_options": {"joint_inputs": false},
+      "forces": [{"type": "config_force", "config": "j1", "input": "j1"}, {"type": "config_force", "config": "j2", "input": "j2"}],
+      "constraints": [{"type": "coordinate_coupling", "config": "s3", "leader": "j1", "multiplier": 0.5, "offset": 0.1},
+                      {"type": "coordinate_coupling", "config": "j4", "leader": "j2", "multiplier": -1}]})";
+    const Model viaScene = loadScene((dir / "chain.json").string()).model;
+    const Model viaUrdf = sceneFromUrdf(importUrdf(mimicChain(), "chain.urdf")).model;
+    std::mt19937 rng(69);
+    checkSameLinearization(viaUrdf, viaScene, randomState(viaUrdf, rng), 0.0);
+    std::ofstream(dir / "bad.json") << R"({"urdf": "chain.urdf", "constraints": [{"type": "coordinate_coupling", "config": "s3", "leader": "j9", "multiplier": 1}]})";
+    CHECK_THROWS_WITH(loadScene((dir / "bad.json").string()), Catch::Contains("field 'leader': unknown configuration variable \"j9\""));
+    std::filesystem::remove_all(dir);
+  }
   SECTION("refusals name the joint and the value") {
     const std::string two = std::string(kTwoLinks) + R"(<link name="c"/><joint name="j" type="revolute"><parent link="a"/><child link="b"/></joint>
 )";
