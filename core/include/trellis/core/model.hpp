@@ -195,7 +195,7 @@ enum class ConstraintType {
   kPoint,         ///< h = (p_a − p_b)·e_axis           (holonomic, one row)
   kPointOnPlane,  ///< h = n_w·(p_a − p_b), n_w = R_a n  (holonomic; a = plane frame, b = point)
   kKnifeEdge,     ///< e_w·ṗ_a = 0, e_w = R_a e          (nonholonomic A(q) q̇ = 0, one row)
-  kCoordinateCoupling,  ///< h = q_j − m q_i − o             (holonomic, one row; URDF <mimic>)
+  kCoordinateCoupling,  ///< h = q_j − m q_i − o             (holonomic, one row; URDF `<mimic>`)
 };
 /// Names as in scene files: distance, point, point_on_plane, knife_edge, coordinate_coupling.
 inline EnumNameTable<ConstraintType> enumNames(ConstraintType) {
@@ -234,7 +234,8 @@ struct Constraint {
     /// Whether j and i are revolute (else prismatic).
     bool followerRevolute = true, leaderRevolute = true;
     ///@}
-  } coupling;
+  };
+  Coupling coupling;  ///< kCoordinateCoupling: multiplier, offset, and the two joints' parents and kinds
   /// Whether the row is h(q) = 0 (all kinds but the knife edge, a velocity constraint A(q) q̇ = 0).
   bool holonomic() const { return type != ConstraintType::kKnifeEdge; }
 };

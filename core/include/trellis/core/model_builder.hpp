@@ -78,7 +78,7 @@ class ModelBuilder {
   /// frame's axes) is zero, e_wᵀ ṗ = 0 — an A(q) q̇ = 0 row that is not the derivative of any h(q).
   void addKnifeEdgeConstraint(const std::string& frame, const Eigen::Vector3d& axis);
   /// h = q_follower − multiplier · q_leader − offset = 0 (one holonomic row with the constant
-  /// Jacobian row e_follower − multiplier · e_leader): a URDF <mimic>. Its force Aᵀλ is a
+  /// Jacobian row e_follower − multiplier · e_leader): a URDF `<mimic>`. Its force Aᵀλ is a
   /// generalized force λ on the follower and −multiplier·λ on the leader. Throws on an unknown
   /// configuration (at finalize), one coupled to itself, or a non-finite or zero multiplier.
   void addCoordinateCoupling(const std::string& follower, const std::string& leader, double multiplier,

@@ -32,7 +32,7 @@ struct UrdfOptions {
   /// its contacts (constraints added in a scene, docs/urdf.md "Floating bases and contacts").
   bool baseInputs = false;
   /// Makes the root link a floating body: a floating joint named `floating_base` (coordinates
-  /// floating_base.x … .roll) between the world and the root link, whose <inertial> then counts.
+  /// floating_base.x … .roll) between the world and the root link, whose `<inertial>` then counts.
   /// For a file whose root is `world` with a single fixed joint to the base, that joint becomes
   /// the floating one. The file need not be edited (legged robots ship with the trunk as root).
   bool floatingRoot = false;
