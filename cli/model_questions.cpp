@@ -41,10 +41,16 @@ std::string known(const std::vector<std::string>& names) {
 }  // namespace
 
 LoadedScene loadSceneArgument(const std::string& path) {
-  if (path != "-") return {loadScene(path), path};
-  // Bounded: an endless standard input is refused at the limit, not read to the end of memory.
-  const std::string text = trellis::readTextStream(0, kMaxSceneFileBytes, "<stdin>", "scene on standard input");
-  return {parseScene(text, "<stdin>"), "<stdin>"};
+  LoadedScene loaded = [&]() -> LoadedScene {
+    if (path != "-") return {loadScene(path), path};
+    // Bounded: an endless standard input is refused at the limit, not read to the end of memory.
+    const std::string text = trellis::readTextStream(0, kMaxSceneFileBytes, "<stdin>", "scene on standard input");
+    return {parseScene(text, "<stdin>"), "<stdin>"};
+  }();
+  // What the scene read but does not model (URDF friction with ignore_friction): on stderr, so
+  // that stdout stays the command's result.
+  for (const auto& w : loaded.scene.warnings) std::cerr << "trellis: warning: " << w << '\n';
+  return loaded;
 }
 
 ModelState stateFromFile(const LoadedScene& loaded, const std::optional<std::string>& statePath) {

@@ -211,6 +211,72 @@ struct KnifeEdgeKind {
   }
 };
 
+/// h = q_j − m q_i − o (j = a.joint, i = b.joint): a constant row A = e_j − m e_i, so A q̇ = q̇_j −
+/// m q̇_i, c = q̈_j − m q̈_i (Ȧ = 0) and every tangent at fixed q̈ is the row itself (position
+/// directions, on h; velocity directions, on A q̇). Its force Aᵀλ is a generalized force on two
+/// coordinates, applied as wrenches so that every algorithm that sums body wrenches sees it: on a
+/// revolute joint a unit couple about its axis a on the joint's body and the opposite couple on
+/// its parent body — forces g = (a × u)/2 at o + u and −g at o − u (o on the axis, u ⟂ a unit;
+/// (2u) × g = a); on a prismatic joint the force a at o and −a on the parent. In the row
+/// Σ gᵀ ∂p/∂q the ancestors' columns cancel (equal and opposite forces at one point) and the
+/// joint's own column is g·(a × u) + (−g)·(a × (−u)) = 1 (resp. a·a = 1). The points and forces
+/// move rigidly with the joint's body, so their tangents are the body's: the couple's derivative
+/// is δa = ω × a, exact whatever u is chosen.
+struct CoordinateCouplingKind {
+  static ConstraintEval value(const Data& data, const Constraint& c) {
+    const auto& ws = detail::workspace(data);
+    const int j = c.a.joint, i = c.b.joint;
+    const double m = c.coupling.multiplier;
+    return {ws.q[j] - m * ws.q[i] - c.coupling.offset, ws.dq[j] - m * ws.dq[i], ws.qddOfA[j] - m * ws.qddOfA[i]};
+  }
+  static ConstraintEval tangent(const Data&, const Direction& dir, const Constraint& c) {
+    const double row = (dir.k == c.a.joint ? 1.0 : 0.0) - (dir.k == c.b.joint ? c.coupling.multiplier : 0.0);
+    return dir.velocity ? ConstraintEval{0.0, row, 0.0} : ConstraintEval{row, 0.0, 0.0};
+  }
+  /// The generalized force `weight` on coordinate `joint` as emit(body, p, g, gScale) calls (with
+  /// emitTangent: emit(body, p, δp, g, δg) along `dir`).
+  template <class Emit>
+  static void unitForce(const Data& data, int joint, int parent, bool revolute, double weight, Emit&& emit) {
+    const auto& ws = detail::workspace(data);
+    const Vector3d o = ws.jointP[joint];
+    if (revolute) {
+      const Vector3d a = ang(ws.S[joint]);
+      int k = 0;
+      a.cwiseAbs().minCoeff(&k);
+      const Vector3d u = a.cross(Vector3d::Unit(k)).normalized();
+      const Vector3d g = 0.5 * weight * a.cross(u);
+      const Vector3d p1 = o + u, p2 = o - u;
+      emit(joint, p1, g, 0.5 * std::abs(weight));
+      emit(joint, p2, Vector3d(-g), 0.5 * std::abs(weight));
+      emit(parent, p1, Vector3d(-g), 0.5 * std::abs(weight));
+      emit(parent, p2, g, 0.5 * std::abs(weight));
+    } else {
+      const Vector3d g = weight * lin(ws.S[joint]);
+      emit(joint, o, g, std::abs(weight));
+      emit(parent, o, Vector3d(-g), std::abs(weight));
+    }
+  }
+  template <class Emit>
+  static void forces(const Data& data, const Constraint& c, Emit&& emit) {
+    unitForce(data, c.a.joint, c.coupling.followerParent, c.coupling.followerRevolute, 1.0, emit);
+    unitForce(data, c.b.joint, c.coupling.leaderParent, c.coupling.leaderRevolute, -c.coupling.multiplier, emit);
+  }
+  template <class Emit>
+  static void forceTangents(const Data& data, const Direction& dir, const Constraint& c, Emit&& emit) {
+    // Each joint's points and forces are fixed to that joint's body (see above).
+    const auto tangentOf = [&](int joint) {
+      return [&, joint](int body, const Vector3d& p, const Vector3d& g, double) {
+        const bool moves = !dir.velocity && dir.moves(joint);
+        const Vector3d dg = moves ? Vector3d(ang(dir.Sk).cross(g)) : Vector3d::Zero().eval();
+        emit(body, p, pointDisplacement(dir, joint, p), g, dg);
+      };
+    };
+    unitForce(data, c.a.joint, c.coupling.followerParent, c.coupling.followerRevolute, 1.0, tangentOf(c.a.joint));
+    unitForce(data, c.b.joint, c.coupling.leaderParent, c.coupling.leaderRevolute, -c.coupling.multiplier,
+              tangentOf(c.b.joint));
+  }
+};
+
 /// The one dispatch on the kind: f(Kind{}) for c's kind.
 template <class F>
 inline decltype(auto) withConstraintKind(const Constraint& c, F&& f) {
@@ -219,6 +285,7 @@ inline decltype(auto) withConstraintKind(const Constraint& c, F&& f) {
     case ConstraintType::kPoint: return f(PointKind{});
     case ConstraintType::kPointOnPlane: return f(PointOnPlaneKind{});
     case ConstraintType::kKnifeEdge: return f(KnifeEdgeKind{});
+    case ConstraintType::kCoordinateCoupling: return f(CoordinateCouplingKind{});
   }
   return f(KnifeEdgeKind{});  // not reached: every enumerator is handled above
 }

@@ -34,6 +34,9 @@ DataWorkspace::DataWorkspace(const Model& model)
   tendonPoint.assign(static_cast<size_t>(model.topology().tendonFirst.back()), Eigen::Vector3d::Zero());
   u = Eigen::VectorXd::Zero(m);
   qddZero = Eigen::VectorXd::Zero(n);
+  q = Eigen::VectorXd::Zero(n);
+  dq = Eigen::VectorXd::Zero(n);
+  qddOfA = Eigen::VectorXd::Zero(n);
   rhsX = Eigen::MatrixXd::Zero(n, cols);
   crhsX = Eigen::MatrixXd::Zero(nc, cols);
   massInverse = Eigen::MatrixXd::Zero(n, n);

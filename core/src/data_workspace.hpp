@@ -35,6 +35,11 @@ struct DataWorkspace {
   std::vector<Eigen::Vector3d> tendonPoint;  ///< world positions of every tendon path point
   Eigen::VectorXd u;                     ///< inputs of the current evaluation
   Eigen::VectorXd qddZero;
+  ///@{
+  /// The coordinates of the current kinematics (set with ws.jointR, ws.v) and the q̈ that ws.a was
+  /// computed with (updateAccelerations): what a coordinate coupling's row reads.
+  Eigen::VectorXd q, dq, qddOfA;
+  ///@}
 
   // ---- Linearization (linearization.cpp) -------------------------------------------------------
   // Subtree sums: inertial wrench Σ I(a − g) + v ×* I v, momentum Σ I v, and the 3×3 block B of

@@ -36,6 +36,7 @@ using namespace spatial;
 void updateAccelerations(const Model& model, Data& data, const Eigen::VectorXd& dq, const Eigen::VectorXd& qdd) {
   auto& ws = detail::workspace(data);
   const auto& joints = model.joints();
+  if (&qdd != &ws.qddOfA) ws.qddOfA = qdd;
   for (int i = 0; i < model.nq(); ++i) {
     const int p = joints[i].parent;
     // a_i = a_p + S_i q̈_i + Ṡ_i q̇_i with Ṡ_i = v_i × S_i (S_i moves with body i).

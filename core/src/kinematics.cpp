@@ -19,6 +19,8 @@ void checkSize(const Eigen::VectorXd& v, int expected, const char* what) {
 
 void updateJoints(const Model& model, Data& data, const Eigen::VectorXd& q, const Eigen::VectorXd& dq) {
   auto& ws = detail::workspace(data);
+  ws.q = q;  // same size: no allocation
+  ws.dq = dq;
   const auto& joints = model.joints();
   const int n = model.nq();
   for (int i = 0; i < n; ++i) {

@@ -456,6 +456,23 @@ void ModelBuilder::addKnifeEdgeConstraint(const std::string& frame, const Eigen:
                           axis, element});
 }
 
+void ModelBuilder::addCoordinateCoupling(const std::string& follower, const std::string& leader, double multiplier,
+                                         double offset) {
+  const std::string element = "constraints[" + std::to_string(constraints_.size()) + "] (coordinate_coupling " +
+                              follower + "–" + leader + ")";
+  requireFinite(multiplier, element, "multiplier");
+  requireFinite(offset, element, "offset");
+  if (multiplier == 0.0)
+    throw ModelError(element + ": field 'multiplier': 0 would fix the coordinate (q = offset), not couple it");
+  if (follower == leader) throw ModelError(element + ": field 'leader': '" + leader + "' is the follower itself");
+  ConstraintSpec c{ConstraintType::kCoordinateCoupling, kWorld, kWorld, 0.0, 0, Eigen::Vector3d::Zero(), element};
+  c.follower = follower;
+  c.leader = leader;
+  c.multiplier = multiplier;
+  c.offset = offset;
+  constraints_.push_back(std::move(c));
+}
+
 Model ModelBuilder::finalize() const& { return ModelBuilder(*this).finalize(); }
 
 Model ModelBuilder::finalize() && {
@@ -617,6 +634,16 @@ Model ModelBuilder::finalize() && {
     k.axis = c.axis;
     if (c.type == ConstraintType::kPointOnPlane || c.type == ConstraintType::kKnifeEdge)
       k.direction = (c.f1 == kWorld ? Eigen::Matrix3d::Identity() : placed[c.f1].R) * c.direction;
+    if (c.type == ConstraintType::kCoordinateCoupling) {
+      // The coordinates' joints stand for the two "bodies" (topology: the row's blocks).
+      const int j = config(c.follower, c.name, "follower"), i = config(c.leader, c.name, "leader");
+      k.a = BodyPoint{};
+      k.b = BodyPoint{};
+      k.a.joint = j;
+      k.b.joint = i;
+      k.coupling = {c.multiplier, c.offset, model.joints_[j].parent, model.joints_[i].parent,
+                    model.joints_[j].revolute, model.joints_[i].revolute};
+    }
     if (k.holonomic()) ++model.nholonomic_;
     model.constraints_.push_back(k);
   }

@@ -106,6 +106,10 @@ ReferenceConstraintCheck checkReferenceOnConstraints(const Model& model, const T
         case ConstraintType::kPoint:
         case ConstraintType::kPointOnPlane: hScale = std::max(L, rowNorm * q.norm()); break;
         case ConstraintType::kKnifeEdge: hScale = 0.0; break;  // nonholonomic: h = 0
+        case ConstraintType::kCoordinateCoupling:  // q_j − m q_i − o: its terms, in rad or m
+          hScale = std::abs(q[c.a.joint]) + std::abs(c.coupling.multiplier * q[c.b.joint]) + std::abs(c.coupling.offset);
+          lengthScale = hScale;
+          break;
       }
       // A q̇ against ‖A_r‖‖q̇‖, floored by the row's size over the reference's duration (a knot at
       // rest must not be held to the rounding of a zero velocity).

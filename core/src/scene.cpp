@@ -146,7 +146,7 @@ class SceneReader {
       throw ModelError("the scene must be a JSON object, not " + kind(root) + " " + show(root));
     }
     Element top(root, "scene");
-    Scene scene{Model{}, {}, {}, {}, {}, {}, {}};
+    Scene scene{Model{}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}};
     if (auto name = optionalText(top, "name")) scene.name = *name;
     if (auto description = optionalText(top, "description")) scene.description = *description;
     builder_ = ModelBuilder(scene.name);
@@ -163,6 +163,7 @@ class SceneReader {
     readList(top, "constraints", [this](Element& e, const std::string& type) { readConstraint(e, type); });
 
     call("scene", [&] { scene.model = std::move(builder_).finalize(); });
+    if (urdfJoints_) setUrdfLimits(scene, *urdfJoints_);
     readState(top, scene);
     return scene;
   }
@@ -530,8 +531,15 @@ class SceneReader {
       const Eigen::Vector3d axis = e.vector3("axis");
       if (axis.isZero(0.0)) e.failValue("axis", e.require("axis"), "must not be zero");
       call(e.label(), [&] { builder_.addKnifeEdgeConstraint(frame, axis); });
+    } else if (type == "coordinate_coupling") {
+      // q_config = multiplier · q_leader + offset (a URDF <mimic>).
+      const std::string follower = configRef(e, "config"), leader = configRef(e, "leader");
+      const double multiplier = e.number("multiplier");
+      if (multiplier == 0.0) e.failValue("multiplier", e.require("multiplier"), "must not be 0 (that fixes the coordinate)");
+      const double offset = e.optionalNumber("offset").value_or(0.0);
+      call(e.label(), [&] { builder_.addCoordinateCoupling(follower, leader, multiplier, offset); });
     } else {
-      e.failValue("type", Json(type), "is not one of distance, point, point_on_plane, knife_edge");
+      e.failValue("type", Json(type), "is not one of distance, point, point_on_plane, knife_edge, coordinate_coupling");
     }
   }
 
@@ -544,14 +552,23 @@ class SceneReader {
     UrdfOptions options;
     if (const Json* node = top.optionalObject("urdf_options")) {
       Element o(*node, "urdf_options");
+      static const char* const kKnown = "gravity, joint_inputs, base_inputs, floating_root, ignore_friction";
       for (const auto& [key, value] : node->items()) {
-        if (key != "gravity" && key != "joint_inputs") o.fail(key, "unknown option (known: gravity, joint_inputs)");
+        if (key != "gravity" && key != "joint_inputs" && key != "base_inputs" && key != "floating_root" &&
+            key != "ignore_friction")
+          o.fail(key, std::string("unknown option (known: ") + kKnown + ")");
       }
       if (o.find("gravity")) options.gravity = o.vector3("gravity");
-      if (const Json* inputs = o.find("joint_inputs")) {
-        if (!inputs->is_boolean()) o.failValue("joint_inputs", *inputs, "must be true or false, not " + kind(*inputs));
-        options.jointInputs = inputs->get<bool>();
-      }
+      const auto flag = [&](const char* key, bool& target) {
+        if (const Json* v = o.find(key)) {
+          if (!v->is_boolean()) o.failValue(key, *v, "must be true or false, not " + kind(*v));
+          target = v->get<bool>();
+        }
+      };
+      flag("joint_inputs", options.jointInputs);
+      flag("base_inputs", options.baseInputs);
+      flag("floating_root", options.floatingRoot);
+      flag("ignore_friction", options.ignoreFriction);
     }
     std::filesystem::path path(file);
     if (path.is_relative()) path = baseDir_ / path;
@@ -563,12 +580,14 @@ class SceneReader {
     }
     UrdfImport robot = importUrdf(text, path.string(), options);
     builder_ = std::move(robot.builder);
+    urdfJoints_ = std::move(robot.joints);
     for (const auto& f : robot.frames) frames_.emplace(f, "frame '" + f + "' of " + file);
     for (const auto& c : robot.configs) {
       configs_.emplace(c, "a joint of " + file);
       configOrder_.push_back(c);
     }
     scene.visuals = std::move(robot.visuals);
+    for (auto& w : robot.warnings) scene.warnings.push_back(std::move(w));
     if (scene.name.empty()) scene.name = robot.robotName;
   }
 
@@ -589,6 +608,7 @@ class SceneReader {
   std::map<std::string, std::string> frames_;   // name -> where it was defined, for messages
   std::map<std::string, std::string> configs_;  // config -> frame that carries it
   std::vector<std::string> configOrder_;
+  std::optional<std::vector<UrdfJoint>> urdfJoints_;  // a "urdf" include's joints (for the limits)
 };
 
 /// Rejects text nested deeper than kMaxNestingDepth before nlohmann builds a tree of it.

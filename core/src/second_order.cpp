@@ -222,6 +222,8 @@ struct ResidualPass {
         case ConstraintType::kKnifeEdge:
           addWrench(con.a.joint, forceAt(position(con.a), lam * direction(con.a.joint, con.direction).p));
           break;
+        case ConstraintType::kCoordinateCoupling:
+          break;  // generalized forces on two coordinates: added to r below
       }
     }
     // Newton-Euler: F_i = I (a − g) + v ×* I v − F_ext, then subtree sums; r_i = S_i · F_i.
@@ -236,6 +238,12 @@ struct ResidualPass {
     }
     // Forces on coordinates enter r = ID − Q with a minus sign.
     for (const ConfigForce& cf : model.configForces()) r[cf.config] -= u[cf.input];
+    for (int k = 0; k < model.nc(); ++k) {  // a coupling's Aᵀλ: λ on q_j, −m λ on q_i
+      const Constraint& con = cs[k];
+      if (con.type != ConstraintType::kCoordinateCoupling) continue;
+      r[con.a.joint] -= lambda[k];
+      r[con.b.joint] += con.coupling.multiplier * lambda[k];
+    }
     for (const ConfigSpring& s : model.configSprings()) r[s.config] += s.k * (q[s.config] - s.q0);
     const Eigen::VectorXd& damping = model.damping();
     for (int i = 0; i < std::min<int>(n, static_cast<int>(damping.size())); ++i)
@@ -264,6 +272,9 @@ struct ResidualPass {
           c[k] = dot(nk.v, pa.v) + dot(nk.p, pa.a);
           break;
         }
+        case ConstraintType::kCoordinateCoupling:
+          c[k] = qdd[con.a.joint] - con.coupling.multiplier * qdd[con.b.joint];
+          break;
       }
     }
   }

@@ -20,6 +20,7 @@
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
+#include <limits>
 #include <map>
 #include <optional>
 #include <set>
@@ -74,6 +75,7 @@ class UrdfReader {
       throw ModelError(source_ + ":" + std::to_string(robot ? robot->GetLineNum() : 1) +
                        ": the root element must be <robot>, not <" + (robot ? robot->Name() : "") + ">");
     }
+    robotXml_ = robot;
     checkStructure(robot);
     const std::string robotLabel = "robot";
     out_.robotName = attribute(robot, "name", robotLabel, false);
@@ -263,7 +265,13 @@ class UrdfReader {
       if (!child) fail(j, element, "<child> missing");
       joint.parent = attribute(parent, "link", element, true);
       joint.child = attribute(child, "link", element, true);
-      if (!linkIndex_.count(joint.parent)) fail(parent, element, "<parent> attribute 'link': unknown link '" + joint.parent + "'");
+      // <parent link="world"> without a declared link 'world' (Drake's own examples weld their base
+      // so): the world itself, as Drake and Pinocchio read it.
+      if (joint.parent == "world" && !linkIndex_.count("world")) {
+        if (!implicitWorld_) implicitWorld_ = j;
+      } else if (!linkIndex_.count(joint.parent)) {
+        fail(parent, element, "<parent> attribute 'link': unknown link '" + joint.parent + "'");
+      }
       if (!linkIndex_.count(joint.child)) fail(child, element, "<child> attribute 'link': unknown link '" + joint.child + "'");
       if (joint.parent == joint.child) fail(child, element, "link '" + joint.child + "' is its own parent");
       if (auto it = parentJoint_.find(joint.child); it != parentJoint_.end()) {
@@ -328,14 +336,16 @@ class UrdfReader {
   }
 
   void build() {
-    // The root: the one link without a parent joint. It is the world (fixed base).
+    // The root: the one link without a parent joint. It is the world (fixed base). An undeclared
+    // 'world' named as a parent is that root (every declared link then has a parent joint).
     std::vector<std::string> roots;
+    if (implicitWorld_) roots.push_back("world");
     for (const auto& l : links_)
       if (!parentJoint_.count(l.name)) roots.push_back(l.name);
     if (roots.size() != 1) {
       std::string list;
       for (const auto& r : roots) list += (list.empty() ? "'" : ", '") + r + "'";
-      const XMLElement* at = roots.empty() ? links_[0].xml : links_[linkIndex_.at(roots[1])].xml;
+      const XMLElement* at = roots.empty() ? links_[0].xml : links_[linkIndex_.at(roots.back())].xml;
       fail(at, "robot", roots.empty() ? "no root link (the joints form a cycle)"
                                       : "several root links (" + list + "); a URDF is one tree");
     }
@@ -348,21 +358,48 @@ class UrdfReader {
            "the name 'world' is reserved for the fixed world frame; only the root link may have it "
            "(the root link is '" + out_.rootLink + "')");
     }
+    // floatingRoot: a floating joint from the world to the root link (whose mass then counts), or,
+    // for a root named 'world', its single fixed child joint made floating.
+    if (options_.floatingRoot) {
+      if (rootIsWorld) {
+        std::vector<int> fromWorld;
+        for (int i = 0; i < static_cast<int>(joints_.size()); ++i)
+          if (joints_[i].parent == "world") fromWorld.push_back(i);
+        if (fromWorld.size() != 1 || joints_[fromWorld[0]].type != "fixed") {
+          const XMLElement* at = fromWorld.empty() ? robotXml_ : joints_[fromWorld[0]].xml;
+          fail(at, "robot", "floating_root: the root link is 'world' and " +
+                                (fromWorld.size() == 1 ? "its child joint '" + joints_[fromWorld[0]].name +
+                                                             "' is " + joints_[fromWorld[0]].type + ", not fixed"
+                                                       : std::to_string(fromWorld.size()) + " joints hang from it") +
+                                "; floating_root needs a single fixed joint from 'world' to the base (it makes that "
+                                "joint floating)");
+        }
+        floatingJoint_ = fromWorld[0];
+      } else {
+        if (jointNames_.count(kFloatingRootJoint) || linkIndex_.count(kFloatingRootJoint))
+          fail(robotXml_, "robot", std::string("floating_root: the file already has a joint or link named '") +
+                                       kFloatingRootJoint + "', the name of the floating joint it would add");
+      }
+    }
+    const bool rootHasMass = options_.floatingRoot && !rootIsWorld;
     for (const auto& l : links_)
-      if (l.name != out_.rootLink) addInertial(l);
+      if (l.name != out_.rootLink || rootHasMass) addInertial(l);
     for (const auto& [link, f] : inertialFrames_)
       if (linkIndex_.count(f.link + ":inertial"))
         fail(f.at, "link '" + f.link + "' <inertial>", "frame name '" + f.link + ":inertial' clashes with a link");
 
+    std::map<std::string, double> damping;
     std::map<std::string, std::vector<int>> children;  // link -> child joints, in file order
     for (int i = 0; i < static_cast<int>(joints_.size()); ++i) children[joints_[i].parent].push_back(i);
 
     ModelBuilder& b = out_.builder;
-    if (!rootIsWorld) {
+    if (rootHasMass) {
+      // The root link floats: a floating joint 'floating_base' from the world (at its origin).
+      addJoint(JointSpec{robotXml_, kFloatingRootJoint, "floating", "world", out_.rootLink}, damping);
+    } else if (!rootIsWorld) {
       b.addFrame(out_.rootLink, "world", Transform::constSE3(Eigen::Matrix4d::Identity()));
       out_.frames.push_back(out_.rootLink);
     }
-    std::map<std::string, double> damping;
     // Depth first from the root, children in file order: the builder sees the tree in pre-order.
     std::vector<int> stack;
     auto push = [&](const std::string& link) {
@@ -386,20 +423,47 @@ class UrdfReader {
     for (const auto& l : links_) readVisuals(l);
 
     if (!damping.empty()) b.addDamping(0.0, damping);
+    // <mimic>: q_j = m q_leader + o, a holonomic constraint row (ModelBuilder::addCoordinateCoupling).
+    std::set<std::string> followers;
+    for (const Mimic& mm : mimics_) {
+      const std::string element = "joint '" + mm.joint + "'";
+      const auto leader = std::find_if(out_.joints.begin(), out_.joints.end(),
+                                       [&](const UrdfJoint& u) { return u.name == mm.leader; });
+      if (leader == out_.joints.end())
+        fail(mm.at, element, "<mimic> attribute 'joint': value '" + mm.leader + "' is not a movable joint of the file");
+      if (leader->configs.size() != 1)
+        fail(mm.at, element, "<mimic> attribute 'joint': value '" + mm.leader + "' is a " + leader->type +
+                                 " joint; a mimic follows a revolute, continuous or prismatic joint");
+      if (mm.multiplier == 0.0)
+        fail(mm.at, element, "<mimic> attribute 'multiplier': value '0' would fix the joint, not couple it");
+      call(mm.at, element, [&] { b.addCoordinateCoupling(mm.joint, mm.leader, mm.multiplier, mm.offset); });
+      followers.insert(mm.joint);
+    }
+    // Inputs on the joints' coordinates; on a floating or planar joint's only with baseInputs; none
+    // on a mimic joint (it is driven through its coupling, as by a linkage or a gear).
     if (options_.jointInputs)
-      for (const auto& c : out_.configs) b.addConfigForce(c, c);
+      for (const auto& j : out_.joints)
+        if ((options_.baseInputs || (j.type != "floating" && j.type != "planar")) && !followers.count(j.name))
+          for (const auto& c : j.configs) b.addConfigForce(c, c);
     if (!options_.gravity.isZero(0.0)) b.addGravity(options_.gravity);
   }
 
-  void addJoint(const JointSpec& j, std::map<std::string, double>& damping) {
-    const std::string element = "joint '" + j.name + "'";
+  void addJoint(const JointSpec& spec, std::map<std::string, double>& damping) {
+    JointSpec j = spec;
+    // floatingRoot with a root named world: its fixed joint to the base becomes floating.
+    if (floatingJoint_ >= 0 && &spec == &joints_[floatingJoint_]) j.type = "floating";
+    const bool addedRoot = j.name == kFloatingRootJoint && j.parent == "world" && j.xml == robotXml_;
+    const std::string element = addedRoot ? std::string("floating_root") : "joint '" + j.name + "'";
     const XMLElement* x = j.xml;
     if (const XMLElement* m = x->FirstChildElement("mimic")) {
-      fail(m, element, "<mimic> (joint '" + attribute(m, "joint", element, false) +
-                           "') is not supported: a coupling q = m·q' + o is not a trellis constraint; "
-                           "remove <mimic> to make the joint independent");
+      // q_j = multiplier · q_leader + offset: a coordinate coupling, added once every joint exists.
+      const std::string leader = attribute(m, "joint", element, true);
+      if (j.type != "revolute" && j.type != "continuous" && j.type != "prismatic")
+        fail(m, element, "<mimic> on a " + j.type + " joint: only revolute, continuous and prismatic joints can mimic");
+      mimics_.push_back({j.name, leader, optionalNumber(m, "multiplier", element, 1.0),
+                         optionalNumber(m, "offset", element, 0.0), m});
     }
-    const Eigen::Matrix4d g = origin(x, element);
+    const Eigen::Matrix4d g = addedRoot ? Eigen::Matrix4d::Identity() : origin(x, element);
     std::optional<Mass> mass;
     if (auto it = pendingMass_.find(j.child); it != pendingMass_.end()) mass = it->second;
     const bool movable = j.type == "revolute" || j.type == "continuous" || j.type == "prismatic";
@@ -414,10 +478,7 @@ class UrdfReader {
       d = optionalNumber(dyn, "damping", element, 0.0);
       if (d < 0) fail(dyn, element, "<dynamics> attribute 'damping': value '" + fmt(d) + "' must be >= 0");
       const double friction = optionalNumber(dyn, "friction", element, 0.0);
-      if (friction != 0.0) {
-        fail(dyn, element, "<dynamics> attribute 'friction': value '" + fmt(friction) +
-                               "': Coulomb friction is not modelled (set it to 0 or remove it)");
-      }
+      if (friction != 0.0) dropFriction(dyn, element, "<dynamics> attribute 'friction'", friction);
       if (d != 0.0 && !movable) {
         fail(dyn, element, "<dynamics> attribute 'damping': value '" + fmt(d) + "' on a " + j.type +
                                " joint is not supported");
@@ -428,7 +489,9 @@ class UrdfReader {
     if (const XMLElement* jp = x->FirstChildElement("joint_properties")) {
       for (const char* field : {"friction", "damping"}) {
         const double value = optionalNumber(jp, field, element, 0.0);
-        if (value != 0.0) {
+        if (value != 0.0 && std::string(field) == "friction" && options_.ignoreFriction) {
+          dropFriction(jp, element, "<joint_properties> attribute 'friction'", value);
+        } else if (value != 0.0) {
           fail(jp, element, std::string("<joint_properties> attribute '") + field + "': value '" + fmt(value) +
                                 "' is not modelled (only <dynamics damping> is; 0 is accepted)");
         }
@@ -500,6 +563,20 @@ class UrdfReader {
     if (j.type != "fixed") out_.joints.push_back(std::move(info));
   }
 
+  /// Coulomb friction (a force of size μ opposing the motion, discontinuous at q̇ = 0) has no
+  /// exact linearization at rest and trellis does not model it: refused, or with
+  /// ignoreFriction dropped with a warning naming the value.
+  void dropFriction(const XMLElement* at, const std::string& element, const std::string& field, double value) {
+    if (!options_.ignoreFriction) {
+      fail(at, element, field + ": value '" + fmt(value) +
+                            "': Coulomb friction is not modelled (set it to 0 or remove it, or import with "
+                            "ignore_friction: urdf_options {\"ignore_friction\": true} in a scene, "
+                            "UrdfOptions::ignoreFriction in C++)");
+    }
+    out_.warnings.push_back(source_ + ":" + std::to_string(at->GetLineNum()) + ": " + element + ": " + field +
+                            ": value '" + fmt(value) + "': Coulomb friction ignored (ignore_friction)");
+  }
+
   void readVisuals(const LinkSpec& l) {
     for (const XMLElement* v = l.xml->FirstChildElement("visual"); v; v = v->NextSiblingElement("visual")) {
       const std::string element = "link '" + l.name + "' <visual>";
@@ -534,6 +611,12 @@ class UrdfReader {
     }
   }
 
+  struct Mimic {
+    std::string joint, leader;
+    double multiplier, offset;
+    const XMLElement* at;
+  };
+
   struct InertialFrame {
     std::string link;
     Eigen::Matrix4d origin;
@@ -541,8 +624,14 @@ class UrdfReader {
     const XMLElement* at;
   };
 
+  static constexpr const char* kFloatingRootJoint = "floating_base";
+
   std::string source_;
   UrdfOptions options_;
+  const XMLElement* robotXml_ = nullptr;    // <robot>, for messages about the whole file
+  const XMLElement* implicitWorld_ = nullptr;  // the first joint naming an undeclared 'world' parent
+  int floatingJoint_ = -1;
+  std::vector<Mimic> mimics_;               // <mimic> elements, added as couplings after the tree                  // floatingRoot with root 'world': the joint made floating
   UrdfImport out_;
   std::vector<LinkSpec> links_;
   std::map<std::string, int> linkIndex_;
@@ -560,8 +649,28 @@ UrdfImport importUrdf(const std::string& xmlText, const std::string& source, con
   return UrdfReader(source, options).read(xmlText);
 }
 
+void setUrdfLimits(Scene& scene, const std::vector<UrdfJoint>& joints) {
+  const int n = scene.model.nq();
+  const double inf = std::numeric_limits<double>::infinity();
+  scene.lowerLimit = Eigen::VectorXd::Constant(n, -inf);
+  scene.upperLimit = Eigen::VectorXd::Constant(n, inf);
+  scene.effortLimit = Eigen::VectorXd::Constant(n, inf);
+  for (const UrdfJoint& j : joints) {
+    // One coordinate: revolute (continuous has no position limits) and prismatic joints.
+    if (!j.hasLimits || j.configs.size() != 1 || (j.type != "revolute" && j.type != "prismatic")) continue;
+    const int i = scene.model.configIndex(j.configs[0]);
+    if (j.lower < j.upper) {
+      scene.lowerLimit[i] = j.lower;
+      scene.upperLimit[i] = j.upper;
+    }
+    if (j.effort > 0.0) scene.effortLimit[i] = j.effort;
+  }
+}
+
 Scene sceneFromUrdf(UrdfImport&& robot) {
-  Scene scene{std::move(robot.builder).finalize(), {}, {}, {}, robot.robotName, "URDF robot", std::move(robot.visuals)};
+  Scene scene{std::move(robot.builder).finalize(), {}, {}, {}, robot.robotName, "URDF robot",
+              std::move(robot.visuals), {}, {}, {}, std::move(robot.warnings)};
+  setUrdfLimits(scene, robot.joints);
   scene.q = Eigen::VectorXd::Zero(scene.model.nq());
   scene.dq = Eigen::VectorXd::Zero(scene.model.nq());
   scene.u = Eigen::VectorXd::Zero(scene.model.nu());

@@ -14,7 +14,7 @@
 //      (simulateBatch) over the machine's cores;
 //   7. files in the output folder (default output/hand/): reference.csv, gains.csv,
 //      reference_accelerations.csv (q'' at the knots, for the plots' Hermite reference),
-//      controllability.csv, closed_loop_<k>.csv, summary.txt, the PNG plots (scripts/plot_run.py)
+//      controllability.csv, closed_loop_<k>.csv (one per run, at most kMaxClosedLoopFiles), summary.txt, the PNG plots (scripts/plot_run.py)
 //      and hand.html, the 3D view of the reference and every closed loop (docs/viewer.md).
 // The plots are ONE Python process, started as soon as the gains are written: matplotlib's start-up
 // and the gain and controllability plots overlap the closed loops; it is told "go" on its standard
@@ -58,6 +58,36 @@ double secondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
+constexpr const char* kHelp = R"(usage: hand_main_job [--out DIR] [--runs N] [--seed S] [--perturbation SIZE] [--no-plots]
+
+Feedback gains for the 20-joint, 23-tendon human hand (examples/scenes/hand.json) holding an
+object, end to end: a reference motion on the constraint manifold with positive tensions, the
+exact linearization at every knot, controllability, TV-LQR on the manifold, and closed loops from
+perturbed starts with tensions saturated at 0. States are joint angles [rad] and rates [rad/s];
+inputs are tendon tensions [N]; the gains map them, K [N/rad] and [N s/rad].
+
+options:
+  --out DIR             output folder (default output/hand)
+  --runs N              closed-loop simulations, 1..1000 (default 20); the first 100 are
+                        written as closed_loop_<k>.csv and drawn in the plots
+  --seed S              seed of the perturbed starts (default 1; same seed, same starts)
+  --perturbation SIZE   norm of each start's deviation from the reference, tangent to the
+                        constraint manifold, in [rad, rad/s] (default 0.05; > 0)
+  --no-plots            skip the PNG plots (they need python3-matplotlib)
+  -h, --help            show this help
+
+Files in DIR: reference.csv (t, angles, rates, tensions), reference_accelerations.csv (q'' at
+the knots [rad/s^2]), gains.csv (K(t) per knot, row-major), controllability.csv (rank and
+smallest singular value per knot), closed_loop_<k>.csv (the simulated runs, layout of
+reference.csv), summary.txt, states.png, inputs.png, gains.png, tracking_error.png,
+controllability.png (one panel row per digit) and hand.html (3D view).
+Exit status 0 when every run converges (final error < half the initial), the hand is
+controllable at every knot and over the trajectory, and the plots were written; else 1.
+)";
+
+/// The closed loops written as CSV files and drawn (each is a few MB of text; --runs may be larger).
+constexpr int kMaxClosedLoopFiles = 100;
+
 struct Options {
   std::string out = "output/hand";
   int runs = 20;
@@ -80,13 +110,13 @@ Options parseOptions(int argc, char** argv) {
     else if (a == "--perturbation") o.perturbation = std::stod(value());
     else if (a == "--no-plots") o.plots = false;
     else if (a == "-h" || a == "--help") {
-      std::printf("usage: hand_main_job [--out DIR] [--runs N] [--seed S] [--perturbation SIZE] [--no-plots]\n");
+      std::printf("%s", kHelp);
       std::exit(0);
     } else {
       throw std::invalid_argument("unknown option '" + a + "'");
     }
   }
-  if (o.runs < 1) throw std::invalid_argument("--runs must be ≥ 1");
+  if (o.runs < 1 || o.runs > 1000) throw std::invalid_argument("--runs " + std::to_string(o.runs) + " must be in 1..1000");
   if (!(o.perturbation > 0.0)) throw std::invalid_argument("--perturbation must be > 0");
   return o;
 }
@@ -285,8 +315,10 @@ int main(int argc, char** argv) try {
         << " --accelerations \"" << options.out << "/reference_accelerations.csv\""
         << " --reference \"" << options.out << "/reference.csv\" --gains \"" << options.out
         << "/gains.csv\" --controllability \"" << options.out << "/controllability.csv\" --out \""
-        << options.out << "\"";
-    for (int r = 0; r < std::min(options.runs, 5); ++r)
+        << options.out << "\""
+        // Small multiples by digit: the thumb's own muscles have no digit word in their names.
+        << " --group thumb=FPL,EPL,APL,ADP --config-unit rad --input-unit N --input-name 'tendon tension'";
+    for (int r = 0; r < std::min(options.runs, kMaxClosedLoopFiles); ++r)
       cmd << " --closed \"" << options.out << "/closed_loop_" << r << ".csv\"";
     std::fflush(stdout);  // the child inherits the stream: no duplicated buffered output
     plots = popen(cmd.str().c_str(), "w");
@@ -318,7 +350,7 @@ int main(int argc, char** argv) try {
       run.final = result.trackingError(result.trackingError.size() - 1);
     }
     if (!result.ok()) std::printf("      run %d: %s\n", r, result.status.describe().c_str());
-    if (r < 5) result.trajectory.writeCsvFile(options.out + "/closed_loop_" + std::to_string(r) + ".csv");
+    if (r < kMaxClosedLoopFiles) result.trajectory.writeCsvFile(options.out + "/closed_loop_" + std::to_string(r) + ".csv");
     steps += result.steps;
     restarts += result.restarts;
     projections += result.projections;
@@ -369,13 +401,19 @@ int main(int argc, char** argv) try {
   progress.end();
   std::ostringstream summary;
   summary << "\nhand main job — summary\n";
-  summary << "  stage                                                         time [s]\n";
-  for (const StageTime& s : progress.stages) {
-    char line[200];
-    std::snprintf(line, sizeof line, "  %-60.60s %9.3f\n", s.name.c_str(), s.seconds);
-    summary << line;
-  }
-  summary << format("  whole job                                                    %9.3f\n", secondsSince(jobStart));
+  // Stage names in full: the column is as wide as the longest (counted in characters, not bytes:
+  // the names hold "q''", "≤" and "σ").
+  const auto width = [](const std::string& text) {
+    return static_cast<int>(std::count_if(text.begin(), text.end(), [](char c) { return (c & 0xC0) != 0x80; }));
+  };
+  int nameWidth = width("whole job");
+  for (const StageTime& s : progress.stages) nameWidth = std::max(nameWidth, width(s.name));
+  const auto row = [&](const std::string& name, const std::string& value) {
+    summary << "  " << name << std::string(nameWidth - width(name) + 2, ' ') << value << '\n';
+  };
+  row("stage", "time [s]");
+  for (const StageTime& s : progress.stages) row(s.name, format("%8.3f", s.seconds));
+  row("whole job", format("%8.3f", secondsSince(jobStart)));
   summary << format("\n  linearization: exact %.1f µs per knot, central differences %.1f µs (relative difference %.1e)\n",
                     exactPerKnot * 1e6, fdTime * 1e6, fdError);
   summary << format("  controllability: manifold dimension %.0f, rank %.0f at every knot: ", dimension, minRank)
@@ -395,6 +433,9 @@ int main(int argc, char** argv) try {
   summary << format("  3D view: hand.html, %.2f MB, %.0f trajectories, %.0f pose samples (open it in a browser)\n",
                     static_cast<double>(view.bytes) / 1e6, static_cast<double>(shown.size()),
                     static_cast<double>(view.samples));
+  summary << format("  closed-loop files: closed_loop_0.csv … closed_loop_%.0f.csv (%.0f of ",
+                    std::min(options.runs, kMaxClosedLoopFiles) - 1.0, std::min(options.runs, kMaxClosedLoopFiles))
+          << format("%.0f runs), all drawn in the plots\n", options.runs);
   summary << "  files: " << std::filesystem::absolute(options.out).string() << "/\n";
   std::printf("%s", summary.str().c_str());
   std::fflush(stdout);

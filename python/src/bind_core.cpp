@@ -196,6 +196,9 @@ void bindCore(py::module_& m) {
            py::arg("plane_frame"), py::arg("normal"), py::arg("point_frame"))
       .def("add_knife_edge_constraint", &ModelBuilder::addKnifeEdgeConstraint, py::arg("frame"),
            py::arg("axis"), "nonholonomic: the velocity of the frame origin along its axis is 0")
+      .def("add_coordinate_coupling", &ModelBuilder::addCoordinateCoupling, py::arg("follower"),
+           py::arg("leader"), py::arg("multiplier"), py::arg("offset") = 0.0,
+           "h = q_follower - multiplier * q_leader - offset (a URDF <mimic>)")
       .def("finalize",
            [](const ModelBuilder& b) { return std::make_shared<Model>(b.finalize()); },
            "Validates cross references and returns the immutable Model (the builder stays usable).");

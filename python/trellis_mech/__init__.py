@@ -81,10 +81,30 @@ class Linearization:
     reduced_B: Optional[np.ndarray] = None
 
 
+def _require_finite(model, q, dq, u):
+    """ValueError naming the argument, entry, name and value of the first non-finite entry of the
+    state: at a NaN or infinite state the result would be a failed status beside arrays that
+    look like a linearization, and a convenience function must not hand those back."""
+    for label, values, names in (("q", q, model.config_names), ("dq", dq, model.config_names),
+                                 ("u", u, model.input_names)):
+        try:
+            array = np.asarray(values, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            continue  # not numbers: the bound function reports it with its own message
+        bad = np.flatnonzero(~np.isfinite(array))
+        if bad.size:
+            i = int(bad[0])
+            name = names[i] if i < len(names) else "?"
+            raise ValueError("%s[%d] (%s) = %r is not finite: the state must be finite"
+                             % (label, i, name, float(array[i])))
+
+
 def dynamics(model, q, dq, u=None, *, data=None):
-    """q̈ and λ at (q, dq, u) (u defaults to zeros); ``data`` is reused when given."""
+    """q̈ and λ at (q, dq, u) (u defaults to zeros); ``data`` is reused when given. Raises
+    ValueError when q, dq or u has a NaN or infinite entry (naming it)."""
     data = Data(model) if data is None else data
     u = np.zeros(model.nu) if u is None else u
+    _require_finite(model, q, dq, u)
     status = compute_dynamics(model, data, q, dq, u)
     return Dynamics(data.qdd, data.lambda_, data.M, status)
 
@@ -92,9 +112,11 @@ def dynamics(model, q, dq, u=None, *, data=None):
 def linearize(model, q, dq, u=None, *, data=None, tangent=False):
     """The exact linearization A, B at (q, dq, u) as a ``Linearization`` (copies of the arrays);
     ``data`` is reused when given. For hot loops call ``compute_linearization(model, data, q, dq,
-    u, A=A, B=B)`` with preallocated arrays instead (no allocation)."""
+    u, A=A, B=B)`` with preallocated arrays instead (no allocation). Raises ValueError when q, dq
+    or u has a NaN or infinite entry (naming it); other failures are the returned status."""
     data = Data(model) if data is None else data
     u = np.zeros(model.nu) if u is None else u
+    _require_finite(model, q, dq, u)
     status = compute_linearization(model, data, q, dq, u)
     result = Linearization(data.A, data.B, data.qdd, data.lambda_, data.M, status)
     if tangent and status.ok:

@@ -573,6 +573,8 @@ class ModelBuilder:
         """Q[config] += u[input] (the input is created on first use)"""
     def add_config_spring(self: ModelBuilder, config: str, k: float, q0: float) -> None:
         """V = 1/2 k (q_i - q0)^2"""
+    def add_coordinate_coupling(self: ModelBuilder, follower: str, leader: str, multiplier: float, offset: float = 0.0) -> None:
+        """h = q_follower - multiplier * q_leader - offset (a URDF <mimic>)"""
     def add_damping(self: ModelBuilder, default_coefficient: float, coefficients: Dict[str, float] = ...) -> None:
         """Q_i -= c_i dq_i with c_i = coefficients[config] if listed, else default_coefficient"""
     def add_distance_constraint(self: ModelBuilder, frame1: str, frame2: str, distance: float) -> None:

@@ -39,7 +39,7 @@ TEST_CASE("Core enums: one name table each, parsed and printed alike", "[status]
   checkRoundTrip<InverseDynamicsCode>({"ok", "unreachable", "inadmissible_acceleration", "input_bounds", "non_finite"});
   checkRoundTrip<ProjectionCode>({"ok", "not_converged", "non_finite"});
   checkRoundTrip<TransformType>({"tx", "ty", "tz", "rx", "ry", "rz", "const_se3", "r_axis", "t_axis"});
-  checkRoundTrip<ConstraintType>({"distance", "point", "point_on_plane", "knife_edge"});
+  checkRoundTrip<ConstraintType>({"distance", "point", "point_on_plane", "knife_edge", "coordinate_coupling"});
   checkRoundTrip<GainInterpolation>({"linear", "cubic"});
   checkRoundTrip<DifferenceScheme>({"forward", "central", "central4"});
 }

@@ -429,3 +429,9 @@ TEST_CASE("Second-order functions reject bad input", "[second_order]") {
   CHECK_THROWS_WITH(computeSecondOrderContraction(other, data, ws, q, q, u, q, Eigen::VectorXd(), H),
                     Catch::Contains("workspace was built for a model"));
 }
+
+TEST_CASE("Second derivatives with coordinate couplings (URDF <mimic>)", "[second_order][fd][mimic]") {
+  const Model model = mimicChain();  // test_models.hpp: revolute, prismatic and continuous couplings
+  REQUIRE(model.nc() == 2);
+  checkAtRandomStates(model, 4100);
+}

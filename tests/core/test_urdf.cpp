@@ -19,9 +19,11 @@
 #include <Eigen/Geometry>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
+#include <sstream>
 #include <string>
 
 using namespace trellis;
@@ -398,6 +400,311 @@ TEST_CASE("URDF root link named world is the world frame (ROS convention)", "[ur
   CHECK((rel - db.framePose[onBase.model.frameIndex("b")].matrix()).cwiseAbs().maxCoeff() < 1e-14);
 }
 
+TEST_CASE("URDF joint whose parent is an undeclared 'world' hangs from the world (Drake, Pinocchio)", "[urdf]") {
+  // Drake's acrobot welds its base so: <joint type="fixed"><parent link="world"/>… with no <link name="world"/>.
+  const std::string body = R"(
+  <link name="base_link"><inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>
+  <link name="upper"><inertial><origin xyz="0 0 -0.5"/><mass value="1"/><inertia ixx="0.083" ixy="0" ixz="0" iyy="0.083" iyz="0" izz="0.001"/></inertial></link>
+  <link name="lower"><inertial><origin xyz="0 0 -1"/><mass value="1"/><inertia ixx="0.33" ixy="0" ixz="0" iyy="0.33" iyz="0" izz="0.001"/></inertial></link>
+  <joint name="base_weld" type="fixed"><parent link="world"/><child link="base_link"/><origin xyz="0 0 2"/></joint>
+  <joint name="shoulder" type="continuous"><parent link="base_link"/><child link="upper"/><axis xyz="0 1 0"/><dynamics damping="0.1"/></joint>
+  <joint name="elbow" type="continuous"><parent link="upper"/><child link="lower"/><origin xyz="0 0 -1"/><axis xyz="0 1 0"/><dynamics damping="0.1"/></joint>
+)";
+  const Scene implicit = parseScene(robot(body), "acrobot.urdf");
+  const Scene declared = parseScene(robot("  <link name=\"world\"/>" + body), "acrobot_world.urdf");
+  REQUIRE(implicit.model.nq() == 2);
+  CHECK(implicit.model.configNames() == std::vector<std::string>{"shoulder", "elbow"});
+  CHECK(importUrdf(robot(body), "acrobot.urdf").rootLink == "world");
+  std::mt19937 rng(64);
+  for (int k = 0; k < 2; ++k) checkSameLinearization(declared.model, implicit.model, randomState(implicit.model, rng), 0.0);
+  Data d(implicit.model);
+  computeKinematics(implicit.model, d, Eigen::VectorXd::Zero(2), Eigen::VectorXd::Zero(2));
+  CHECK(d.framePose[implicit.model.frameIndex("base_link")].translation() == Eigen::Vector3d(0, 0, 2));
+  // Another undeclared parent is still an unknown link.
+  CHECK_THROWS_WITH(parseScene(robot(R"(<link name="a"/><joint name="j" type="fixed"><parent link="ground"/><child link="a"/></joint>)"), "bad.urdf"),
+                    Catch::Contains("joint 'j': <parent> attribute 'link': unknown link 'ground'"));
+}
+
+TEST_CASE("URDF joint limits reach the scene: position limits and effort per coordinate", "[urdf][limits]") {
+  const Scene panda = loadScene(robotPath("panda.urdf"));
+  const Model& m = panda.model;
+  REQUIRE(panda.lowerLimit.size() == m.nq());
+  const int j1 = m.configIndex("panda_joint1"), f1 = m.configIndex("panda_finger_joint1");
+  CHECK(panda.lowerLimit[j1] == -2.8973);
+  CHECK(panda.upperLimit[j1] == 2.8973);
+  CHECK(panda.effortLimit[j1] == 87.0);
+  CHECK(panda.upperLimit[f1] == 0.04);
+  // Continuous joints have no position limits; a scene that includes a URDF keeps them by name,
+  // its own coordinates unlimited.
+  const Scene pendulum = loadScene(robotPath("double_pendulum_continuous.urdf"));
+  CHECK(std::isinf(pendulum.lowerLimit[0]));
+  CHECK(std::isinf(pendulum.upperLimit[1]));
+  const Scene standing = loadScene(robotPath("solo12_standing.json"));
+  REQUIRE(standing.upperLimit.size() == 18);
+  CHECK(std::isinf(standing.upperLimit[standing.model.configIndex("floating_base.z")]));
+  CHECK(standing.upperLimit[standing.model.configIndex("FL_KFE")] == 10.0);
+  // A scene without a URDF has none.
+  CHECK(parseScene(R"({"frames": [{"name": "a", "type": "rz", "config": "q"}]})").lowerLimit.size() == 0);
+}
+
+TEST_CASE("URDF Coulomb friction: refused, or dropped with a warning on request", "[urdf][friction]") {
+  const std::string body = std::string(kTwoLinks) + R"(<joint name="j" type="revolute"><parent link="a"/><child link="b"/>
+<dynamics damping="0.1" friction="0.2"/></joint>
+)";
+  CHECK_THROWS_WITH(importUrdf(robot(body), "f.urdf"),
+                    Catch::Contains("f.urdf:6: joint 'j': <dynamics> attribute 'friction': value '0.2': Coulomb friction is "
+                                    "not modelled") && Catch::Contains("ignore_friction"));
+  UrdfOptions o;
+  o.ignoreFriction = true;
+  const Scene s = sceneFromUrdf(importUrdf(robot(body), "f.urdf", o));
+  REQUIRE(s.warnings.size() == 1);
+  CHECK(s.warnings[0] == "f.urdf:6: joint 'j': <dynamics> attribute 'friction': value '0.2': Coulomb friction ignored (ignore_friction)");
+  CHECK(s.model.damping()[0] == 0.1);  // the viscous part stays
+  // The same through a scene's urdf_options, and <joint_properties friction> (CAD exporters).
+  const std::string props = std::string(kTwoLinks) + R"(<joint name="j" type="revolute"><parent link="a"/><child link="b"/>
+<joint_properties friction="0.5"/></joint>
+)";
+  CHECK_THROWS_WITH(importUrdf(robot(props), "p.urdf"), Catch::Contains("<joint_properties> attribute 'friction': value '0.5'"));
+  CHECK(sceneFromUrdf(importUrdf(robot(props), "p.urdf", o)).warnings.size() == 1);
+  const auto dir = std::filesystem::temp_directory_path() / "trellis_test_urdf_friction";
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "f.urdf") << robot(body);
+  std::ofstream(dir / "f.json") << R"({"urdf": "f.urdf", "urdf_options": {"ignore_friction": true}})";
+  const Scene viaScene = loadScene((dir / "f.json").string());
+  REQUIRE(viaScene.warnings.size() == 1);
+  CHECK_THAT(viaScene.warnings[0], Catch::Contains("f.urdf:6") && Catch::Contains("Coulomb friction ignored"));
+  std::ofstream(dir / "g.json") << R"({"urdf": "f.urdf", "urdf_options": {"ignore_friction": 1}})";
+  CHECK_THROWS_WITH(loadScene((dir / "g.json").string()), Catch::Contains("ignore_friction") && Catch::Contains("must be true or false"));
+  std::filesystem::remove_all(dir);
+}
+
+namespace {
+
+/// The sum of every <mass value> of a URDF text (the robot's total mass).
+double totalMass(const std::string& text) {
+  double sum = 0.0;
+  const std::string key = "<mass value=\"";
+  for (std::size_t at = text.find(key); at != std::string::npos; at = text.find(key, at + 1))
+    sum += std::stod(text.substr(at + key.size()));
+  return sum;
+}
+
+std::string readFile(const std::string& path) {
+  std::ifstream f(path);
+  return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+}
+
+}  // namespace
+
+TEST_CASE("URDF floating bases: unactuated by default, floating_root, contacts from a scene", "[urdf][floating]") {
+  SECTION("floating and planar coordinates get no inputs unless base_inputs") {
+    const std::string body = std::string(kTwoLinks) + R"(<link name="c"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+<joint name="f" type="floating"><parent link="a"/><child link="b"/></joint>
+<joint name="h" type="revolute"><parent link="b"/><child link="c"/></joint>
+)";
+    const Model m = sceneFromUrdf(importUrdf(robot(body), "f.urdf")).model;
+    CHECK(m.nq() == 7);
+    CHECK(m.inputNames() == std::vector<std::string>{"h"});
+    UrdfOptions o;
+    o.baseInputs = true;
+    const Model actuated = sceneFromUrdf(importUrdf(robot(body), "f.urdf", o)).model;
+    CHECK(actuated.inputNames() == actuated.configNames());
+    const std::string planar = std::string(kTwoLinks) + R"(<joint name="p" type="planar"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/></joint>)";
+    CHECK(sceneFromUrdf(importUrdf(robot(planar), "p.urdf")).model.nu() == 0);
+    CHECK(sceneFromUrdf(importUrdf(robot(planar), "p.urdf", o)).model.nu() == 3);
+  }
+  SECTION("floating_root: solo12's trunk floats, its mass counts, the legs are the inputs") {
+    UrdfOptions o;
+    o.floatingRoot = true;
+    const std::string text = readFile(robotPath("solo12.urdf"));
+    const Model m = sceneFromUrdf(importUrdf(text, "solo12.urdf", o)).model;
+    REQUIRE(m.nq() == 18);
+    CHECK(m.configNames()[0] == "floating_base.x");
+    CHECK(m.configNames()[5] == "floating_base.roll");
+    CHECK(m.nu() == 12);
+    CHECK(m.inputNames()[0] == "FL_HAA");
+    // M's translational entry is the total mass, the trunk's 1.16 kg included.
+    Data d(m);
+    REQUIRE(computeDynamics(m, d, Eigen::VectorXd::Zero(18), Eigen::VectorXd::Zero(18), Eigen::VectorXd::Zero(12)).ok());
+    const double total = totalMass(text);
+    CHECK(total > 2.4);
+    CHECK(std::abs(d.M(0, 0) - total) <= 1e-14 * total);
+    CHECK(std::abs(d.M(2, 2) - total) <= 1e-14 * total);
+    // Nothing holds it: it falls with g, whatever the legs do.
+    CHECK(std::abs(d.qdd[2] + 9.81) <= 1e-12);
+    std::mt19937 rng(65);
+    checkLinearizationAgainstFd(m, randomState(m, rng, 0.5, 1.0, 0.1));
+  }
+  SECTION("floating_root on a root named world makes its fixed joint floating") {
+    const std::string body = R"(<link name="world"/>)" + std::string(kTwoLinks) + R"(
+<joint name="weld" type="fixed"><parent link="world"/><child link="a"/><origin xyz="0 0 1"/></joint>
+<joint name="h" type="revolute"><parent link="a"/><child link="b"/></joint>
+)";
+    UrdfOptions o;
+    o.floatingRoot = true;
+    const Model m = sceneFromUrdf(importUrdf(robot(body), "w.urdf", o)).model;
+    CHECK(m.configNames()[0] == "weld.x");
+    CHECK(m.nq() == 7);
+    CHECK(m.inputNames() == std::vector<std::string>{"h"});
+    const std::string twoChildren = body + R"(<link name="c"/><joint name="k" type="fixed"><parent link="world"/><child link="c"/></joint>)";
+    CHECK_THROWS_WITH(importUrdf(robot(twoChildren), "w.urdf", o),
+                      Catch::Contains("floating_root: the root link is 'world' and 2 joints hang from it"));
+    const std::string clash = std::string(kTwoLinks) + R"(<joint name="floating_base" type="revolute"><parent link="a"/><child link="b"/></joint>)";
+    CHECK_THROWS_WITH(importUrdf(robot(clash), "c.urdf", o),
+                      Catch::Contains("floating_root: the file already has a joint or link named 'floating_base'"));
+  }
+  SECTION("contacts from a scene overlay hold the standing robot; without them nothing does") {
+    const Scene standing = loadScene(robotPath("solo12_standing.json"));
+    const Model& m = standing.model;
+    REQUIRE(m.nq() == 18);
+    REQUIRE(m.nc() == 12);
+    Data d(m);
+    const InverseDynamicsResult held = computeHoldingInputs(m, d, standing.q);
+    INFO(held.describe());
+    REQUIRE(held.ok());
+    // The four normal forces carry the weight (λ of the z rows: h = (p_foot − p_ground)·e_z).
+    double normal = 0.0;
+    for (int r = 2; r < 12; r += 3) normal += held.lambda[r];
+    const double weight = totalMass(readFile(robotPath("solo12.urdf"))) * 9.81;
+    CHECK(std::abs(normal - weight) <= 1e-12 * weight);
+    // The same pose on the robot without its contacts cannot be held by the legs alone.
+    UrdfOptions o;
+    o.floatingRoot = true;
+    const Model free = sceneFromUrdf(importUrdf(readFile(robotPath("solo12.urdf")), "solo12.urdf", o)).model;
+    Data df(free);
+    const InverseDynamicsResult r = computeHoldingInputs(free, df, standing.q);
+    CHECK(r.status.code == InverseDynamicsCode::kUnreachable);
+    CHECK(std::abs(std::abs(r.residual[2]) - weight) <= 1e-12 * weight);  // the weight, on floating_base.z
+  }
+}
+
+namespace {
+
+/// A link with mass m and a diagonal inertia (its centre of mass at the origin unless com is given).
+std::string massLink(const std::string& name, double m, double ixx, double iyy, double izz, const std::string& com = "0 0 0") {
+  std::ostringstream s;
+  s << "<link name=\"" << name << "\"><inertial><origin xyz=\"" << com << "\"/><mass value=\"" << m
+    << "\"/><inertia ixx=\"" << ixx << "\" ixy=\"0\" ixz=\"0\" iyy=\"" << iyy << "\" iyz=\"0\" izz=\"" << izz
+    << "\"/></inertial></link>\n";
+  return s.str();
+}
+
+/// A 3D chain with gravity and two mimics: a prismatic joint following a revolute one two levels
+/// up (multiplier 0.5, offset 0.1) and a continuous joint following another with multiplier −1.
+std::string mimicChainUrdf() {
+  return robot("<link name=\"base\"/>\n" + massLink("l1", 1.2, 0.02, 0.03, 0.025, "0.1 0 -0.2") +
+               massLink("l2", 0.8, 0.01, 0.015, 0.012, "0 0.05 -0.15") + massLink("l3", 0.5, 0.004, 0.005, 0.006, "0.02 0 0") +
+               massLink("l4", 0.3, 0.002, 0.003, 0.001, "0 0 -0.1") + R"(
+<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 1 0"/><origin xyz="0 0 1" rpy="0.1 0 0"/></joint>
+<joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><axis xyz="1 0 0.3"/><origin xyz="0.1 0 -0.4"/></joint>
+<joint name="s3" type="prismatic"><parent link="l2"/><child link="l3"/><axis xyz="0 0.6 0.8"/><origin xyz="0 0 -0.3"/>
+  <mimic joint="j1" multiplier="0.5" offset="0.1"/></joint>
+<joint name="j4" type="continuous"><parent link="l2"/><child link="l4"/><axis xyz="0 0 1"/><origin xyz="0.05 0 -0.3" rpy="0 0.4 0"/>
+  <mimic joint="j2" multiplier="-1"/></joint>
+)");
+}
+
+}  // namespace
+
+TEST_CASE("URDF <mimic> is a coordinate coupling q_j = m q_i + o", "[urdf][mimic]") {
+  SECTION("two coaxial rotors coupled by m move as one joint with inertia I_b + m² I_c") {
+    // Both spin about the world z axis through their centres of mass: gravity exerts no torque.
+    // With q_c = m q_b + o, T = ½ (I_b + m² I_c) q̇_b², so q̈_b = τ / (I_b + m² I_c), q̈_c = m q̈_b, and
+    // the coupling's multiplier is the torque on c: I_c q̈_c = λ.
+    const double Ib = 0.3, Ic = 0.05, m = -2.0, o = 0.3, tau = 1.5;
+    std::ostringstream text;
+    text << "<link name=\"a\"/>\n" << massLink("b", 1.0, 0.2, 0.2, Ib) << massLink("c", 2.0, 0.1, 0.1, Ic)
+         << R"(<joint name="jb" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/></joint>
+<joint name="jc" type="revolute"><parent link="a"/><child link="c"/><axis xyz="0 0 1"/>)"
+         << "<mimic joint=\"jb\" multiplier=\"" << m << "\" offset=\"" << o << "\"/></joint>\n";
+    const Scene scene = sceneFromUrdf(importUrdf(robot(text.str()), "rotors.urdf"));
+    const Model& model = scene.model;
+    REQUIRE(model.nq() == 2);
+    REQUIRE(model.nc() == 1);
+    CHECK(model.constraints()[0].type == ConstraintType::kCoordinateCoupling);
+    CHECK(model.inputNames() == std::vector<std::string>{"jb"});  // the follower has no input of its own
+    Data d(model);
+    const Eigen::Vector2d q(0.4, m * 0.4 + o), dq(0.7, m * 0.7);
+    REQUIRE(computeDynamics(model, d, q, dq, Eigen::VectorXd::Constant(1, tau)).ok());
+    const double qddB = tau / (Ib + m * m * Ic);
+    CHECK(std::abs(d.qdd[0] - qddB) <= 1e-14 * std::abs(qddB));
+    CHECK(std::abs(d.qdd[1] - m * qddB) <= 1e-14 * std::abs(m * qddB));
+    CHECK(std::abs(d.lambda[0] - Ic * m * qddB) <= 1e-13 * std::abs(Ic * m * qddB));
+    // h and A: the row is e_c − m e_b, h = q_c − m q_b − o.
+    computeConstraints(model, d, q, dq);
+    CHECK(std::abs(d.constraintValue[0]) <= 1e-15);
+    CHECK(d.constraintJacobian(0, 0) == -m);
+    CHECK(std::abs(d.constraintJacobian(0, 1) - 1.0) <= 1e-15);
+    std::mt19937 rng(66);
+    checkLinearizationAgainstFd(model, randomState(model, rng));
+  }
+  SECTION("a 3D chain with revolute, prismatic and continuous mimics: central differences, energy") {
+    const Model model = sceneFromUrdf(importUrdf(mimicChainUrdf(), "chain.urdf")).model;
+    REQUIRE(model.nq() == 4);
+    REQUIRE(model.nc() == 2);
+    CHECK(model.inputNames() == std::vector<std::string>{"j1", "j2"});
+    std::mt19937 rng(67);
+    for (int k = 0; k < 3; ++k) {
+      // Off the constraint manifold too: h, A and the forces are defined everywhere.
+      const State s = randomState(model, rng, 1.2, 1.0, 0.5);
+      INFO("random state #" << k);
+      checkLinearizationAgainstFd(model, s);
+    }
+    // On the manifold the coupled chain conserves energy up to the input power (the couplings' forces do no work).
+    State s = randomState(model, rng, 1.2, 1.0, 0.5);
+    s.q[2] = 0.5 * s.q[0] + 0.1;
+    s.q[3] = -s.q[1];
+    s.dq[2] = 0.5 * s.dq[0];
+    s.dq[3] = -s.dq[1];
+    checkEnergyBalance(model, s);
+  }
+  SECTION("panda with its finger mimic (as upstream): one input fewer, one coupling row") {
+    std::string text = readFile(robotPath("panda.urdf"));
+    const std::string at = R"(<child link="panda_rightfinger" />)";
+    REQUIRE(text.find(at) != std::string::npos);
+    text.insert(text.find(at) + at.size(), R"(<mimic joint="panda_finger_joint1" />)");
+    const Model model = sceneFromUrdf(importUrdf(text, "panda_mimic.urdf")).model;
+    CHECK(model.nq() == 9);
+    CHECK(model.nu() == 8);
+    REQUIRE(model.nc() == 1);
+    std::mt19937 rng(68);
+    checkLinearizationAgainstFd(model, randomState(model, rng));
+  }
+  SECTION("the same coupling written in a scene over the URDF (coordinate_coupling) gives the same model") {
+    const auto dir = std::filesystem::temp_directory_path() / "trellis_test_urdf_mimic";
+    std::filesystem::create_directories(dir);
+    std::string plain = mimicChainUrdf();
+    for (const char* tag : {R"(<mimic joint="j1" multiplier="0.5" offset="0.1"/>)", R"(<mimic joint="j2" multiplier="-1"/>)"}) {
+      REQUIRE(plain.find(tag) != std::string::npos);
+      plain.erase(plain.find(tag), std::string(tag).size());
+    }
+    std::ofstream(dir / "chain.urdf") << plain;
+    std::ofstream(dir / "chain.json") << R"({"urdf": "chain.urdf", "urdf_options": {"joint_inputs": false},
+      "forces": [{"type": "config_force", "config": "j1", "input": "j1"}, {"type": "config_force", "config": "j2", "input": "j2"}],
+      "constraints": [{"type": "coordinate_coupling", "config": "s3", "leader": "j1", "multiplier": 0.5, "offset": 0.1},
+                      {"type": "coordinate_coupling", "config": "j4", "leader": "j2", "multiplier": -1}]})";
+    const Model viaScene = loadScene((dir / "chain.json").string()).model;
+    const Model viaUrdf = sceneFromUrdf(importUrdf(mimicChainUrdf(), "chain.urdf")).model;
+    std::mt19937 rng(69);
+    checkSameLinearization(viaUrdf, viaScene, randomState(viaUrdf, rng), 0.0);
+    std::ofstream(dir / "bad.json") << R"({"urdf": "chain.urdf", "constraints": [{"type": "coordinate_coupling", "config": "s3", "leader": "j9", "multiplier": 1}]})";
+    CHECK_THROWS_WITH(loadScene((dir / "bad.json").string()), Catch::Contains("field 'leader': unknown configuration variable \"j9\""));
+    std::filesystem::remove_all(dir);
+  }
+  SECTION("refusals name the joint and the value") {
+    const std::string two = std::string(kTwoLinks) + R"(<link name="c"/><joint name="j" type="revolute"><parent link="a"/><child link="b"/></joint>
+)";
+    CHECK_THROWS_WITH(importUrdf(robot(two + R"(<joint name="k" type="revolute"><parent link="b"/><child link="c"/><mimic joint="nope"/></joint>)"), "m.urdf"),
+                      Catch::Contains("m.urdf:6: joint 'k': <mimic> attribute 'joint': value 'nope' is not a movable joint of the file"));
+    CHECK_THROWS_WITH(importUrdf(robot(two + R"(<joint name="k" type="revolute"><parent link="b"/><child link="c"/><mimic joint="j" multiplier="0"/></joint>)"), "m.urdf"),
+                      Catch::Contains("joint 'k': <mimic> attribute 'multiplier': value '0' would fix the joint"));
+    CHECK_THROWS_WITH(importUrdf(robot(two + R"(<joint name="k" type="revolute"><parent link="b"/><child link="c"/><mimic/></joint>)"), "m.urdf"),
+                      Catch::Contains("joint 'k': <mimic> attribute 'joint': missing"));
+    CHECK_THROWS_WITH(importUrdf(robot(two + R"(<joint name="k" type="floating"><parent link="b"/><child link="c"/><mimic joint="j"/></joint>)"), "m.urdf"),
+                      Catch::Contains("joint 'k': <mimic> on a floating joint"));
+  }
+}
+
 TEST_CASE("URDF errors name link, joint, attribute, value and line", "[urdf][errors]") {
   const auto fails = [](const std::string& body, const std::string& expected) {
     INFO("expected message containing: " << expected);
@@ -444,9 +751,6 @@ TEST_CASE("URDF errors name link, joint, attribute, value and line", "[urdf][err
           "<inertia> attribute 'ixx': value 'nan' must be 1 finite number");
   }
   SECTION("unsupported features are refused, not approximated") {
-    fails(std::string(kTwoLinks) + R"(<link name="c"/><joint name="j" type="revolute"><parent link="a"/><child link="b"/></joint>
-<joint name="k" type="revolute"><parent link="b"/><child link="c"/><mimic joint="j" multiplier="2"/></joint>)",
-          "joint 'k': <mimic> (joint 'j') is not supported");
     fails(std::string(kTwoLinks) + R"(<joint name="j" type="revolute"><parent link="a"/><child link="b"/>
 <dynamics damping="0.1" friction="0.2"/></joint>)",
           "bad.urdf:6: joint 'j': <dynamics> attribute 'friction': value '0.2': Coulomb friction is not modelled");

@@ -254,3 +254,17 @@ def test_reused_data_does_not_grow_memory(tm):
     tracemalloc.stop()
     growth = sum(s.size_diff for s in after.compare_to(before, "filename"))
     assert growth < 4096, growth
+
+
+def test_linearize_raises_on_a_non_finite_state(tm):
+    """A NaN or infinite q, dq or u is bad input: the convenience functions raise ValueError naming
+    the entry (they returned a failed status beside a wrong A before)."""
+    model = tm.load_scene(str(SCENES / "paper_pendulum.json")).model
+    q, dq = [math.pi / 6, math.pi / 3], [0.0, 0.0]
+    with pytest.raises(ValueError, match=r"q\[1\] \(%s\) = nan is not finite" % model.config_names[1]):
+        tm.linearize(model, [q[0], float("nan")], dq, [0.0])
+    with pytest.raises(ValueError, match=r"dq\[0\] .* = inf is not finite"):
+        tm.linearize(model, q, [float("inf"), 0.0], [0.0])
+    with pytest.raises(ValueError, match=r"u\[0\] .* = -inf is not finite"):
+        tm.dynamics(model, q, dq, [-float("inf")])
+    assert tm.linearize(model, q, dq, [0.0]).status.ok

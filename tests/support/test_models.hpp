@@ -259,4 +259,34 @@ inline TestSystem planarChain(int links, double length = 0.1, double mass = 0.1)
   return std::move(s).finish();
 }
 
+/// A 3D chain with gravity and two coordinate couplings (URDF <mimic>): a prismatic joint coupled
+/// to a revolute one two levels up (s3 = 0.5 j1 + 0.1) and a revolute one coupled to its parent's
+/// joint (j4 = −j2); inputs on j1 and j2.
+inline Model mimicChain() {
+  const auto offset = [](double x, double y, double z) {
+    Eigen::Matrix4d g = Eigen::Matrix4d::Identity();
+    g.topRightCorner<3, 1>() << x, y, z;
+    return Transform::constSE3(g);
+  };
+  const auto body = [](double m, double ixx, double iyy, double izz) {
+    return Mass{m, Eigen::Vector3d(ixx, iyy, izz).asDiagonal().toDenseMatrix()};
+  };
+  ModelBuilder b("mimic chain");
+  b.addFrame("l1", "world", Transform::ry("j1"));
+  b.addFrame("c1", "l1", offset(0.1, 0, -0.2), body(1.2, 0.02, 0.03, 0.025));
+  b.addFrame("o2", "l1", offset(0.1, 0, -0.4));
+  b.addFrame("l2", "o2", Transform::rx("j2"));
+  b.addFrame("c2", "l2", offset(0, 0.05, -0.15), body(0.8, 0.01, 0.015, 0.012));
+  b.addFrame("l3", "l2", Transform::transAxis(Eigen::Vector3d(0, 0.6, 0.8), "s3", poseFromXyzRpy({0, 0, -0.3}, {0, 0, 0})),
+             body(0.5, 0.004, 0.005, 0.006));
+  b.addFrame("l4", "l2", Transform::rotAxis(Eigen::Vector3d(0, 0, 1), "j4", poseFromXyzRpy({0.05, 0, -0.3}, {0, 0.4, 0})));
+  b.addFrame("c4", "l4", offset(0, 0, -0.1), body(0.3, 0.002, 0.003, 0.001));
+  b.addConfigForce("j1", "j1");
+  b.addConfigForce("j2", "j2");
+  b.addGravity(Eigen::Vector3d(0, 0, -9.81));
+  b.addCoordinateCoupling("s3", "j1", 0.5, 0.1);
+  b.addCoordinateCoupling("j4", "j2", -1.0, 0.0);
+  return b.finalize();
+}
+
 }  // namespace trellis::test

@@ -110,6 +110,14 @@ TEST_CASE("No allocation after warm-up: holonomic and nonholonomic constraints",
   CHECK(data.status.code == DynamicsStatus::Code::kOk);
 }
 
+TEST_CASE("No allocation after warm-up: coordinate couplings (URDF mimic)", "[no_malloc]") {
+  const Model model = mimicChain();
+  const std::vector<State> states = makeStates(model, 4108);
+  Data data(model);
+  warmUp(model, data, states[0]);
+  CHECK(runGuarded(model, data, states) == 0);
+}
+
 TEST_CASE("No allocation after warm-up: redundant constraints (rank-deficient solve)",
           "[no_malloc]") {
   const Model model = paperPendulum(2).model;

@@ -70,3 +70,8 @@ TEST_CASE("No allocation after warm-up: second derivatives with redundant constr
           "[no_malloc][second_order]") {
   checkNoAllocation(paperPendulum(2).model, 73);  // the pseudo-inverse path
 }
+
+TEST_CASE("No allocation after warm-up: second derivatives with coordinate couplings (mimic)",
+          "[no_malloc][second_order]") {
+  checkNoAllocation(mimicChain(), 74);
+}

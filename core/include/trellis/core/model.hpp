@@ -195,13 +195,15 @@ enum class ConstraintType {
   kPoint,         ///< h = (p_a − p_b)·e_axis           (holonomic, one row)
   kPointOnPlane,  ///< h = n_w·(p_a − p_b), n_w = R_a n  (holonomic; a = plane frame, b = point)
   kKnifeEdge,     ///< e_w·ṗ_a = 0, e_w = R_a e          (nonholonomic A(q) q̇ = 0, one row)
+  kCoordinateCoupling,  ///< h = q_j − m q_i − o             (holonomic, one row; URDF `<mimic>`)
 };
-/// Names as in scene files: distance, point, point_on_plane, knife_edge.
+/// Names as in scene files: distance, point, point_on_plane, knife_edge, coordinate_coupling.
 inline EnumNameTable<ConstraintType> enumNames(ConstraintType) {
   static constexpr EnumName<ConstraintType> table[] = {{ConstraintType::kDistance, "distance"},
                                                        {ConstraintType::kPoint, "point"},
                                                        {ConstraintType::kPointOnPlane, "point_on_plane"},
-                                                       {ConstraintType::kKnifeEdge, "knife_edge"}};
+                                                       {ConstraintType::kKnifeEdge, "knife_edge"},
+                                                       {ConstraintType::kCoordinateCoupling, "coordinate_coupling"}};
   return table;
 }
 
@@ -218,6 +220,22 @@ struct Constraint {
   double distance = 0.0;                              ///< kDistance
   int axis = 0;                                       ///< kPoint
   Eigen::Vector3d direction = Eigen::Vector3d::UnitX();  ///< kPointOnPlane normal / kKnifeEdge axis, in a's body axes
+  /// kCoordinateCoupling: q_j = m q_i + o between the coordinates j = a.joint (the follower) and
+  /// i = b.joint (the leader); their joints' parents and kinds (revolute or prismatic) are kept
+  /// here so that the row's generalized forces can be applied as wrenches on the joints' bodies.
+  struct Coupling {
+    double multiplier = 1.0;   ///< m
+    double offset = 0.0;       ///< o [rad or m]
+    ///@{
+    /// Parent joints (kWorld at the root) of the follower j and of the leader i.
+    int followerParent = kWorld, leaderParent = kWorld;
+    ///@}
+    ///@{
+    /// Whether j and i are revolute (else prismatic).
+    bool followerRevolute = true, leaderRevolute = true;
+    ///@}
+  };
+  Coupling coupling;  ///< kCoordinateCoupling: multiplier, offset, and the two joints' parents and kinds
   /// Whether the row is h(q) = 0 (all kinds but the knife edge, a velocity constraint A(q) q̇ = 0).
   bool holonomic() const { return type != ConstraintType::kKnifeEdge; }
 };

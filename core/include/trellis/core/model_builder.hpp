@@ -77,6 +77,12 @@ class ModelBuilder {
   /// Nonholonomic knife edge: the velocity of `frame`'s origin along its own axis `axis` (in the
   /// frame's axes) is zero, e_wᵀ ṗ = 0 — an A(q) q̇ = 0 row that is not the derivative of any h(q).
   void addKnifeEdgeConstraint(const std::string& frame, const Eigen::Vector3d& axis);
+  /// h = q_follower − multiplier · q_leader − offset = 0 (one holonomic row with the constant
+  /// Jacobian row e_follower − multiplier · e_leader): a URDF `<mimic>`. Its force Aᵀλ is a
+  /// generalized force λ on the follower and −multiplier·λ on the leader. Throws on an unknown
+  /// configuration (at finalize), one coupled to itself, or a non-finite or zero multiplier.
+  void addCoordinateCoupling(const std::string& follower, const std::string& leader, double multiplier,
+                             double offset);
 
   /// Size limits of a model, the same as a scene file's: the workspace of the linearization (Data)
   /// holds about 25 dense n×n matrices, ≈ 200·n² bytes — 200 MB at 1000 configuration variables.
@@ -113,7 +119,8 @@ class ModelBuilder {
   struct WrenchSpec { int frame; std::array<double, 6> constant; std::array<int, 6> input; };
   struct TendonSpec { std::vector<int> path; int input; };
   struct ConstraintSpec { ConstraintType type; int f1, f2; double distance; int axis;
-                          Eigen::Vector3d direction; std::string name; };
+                          Eigen::Vector3d direction; std::string name;
+                          std::string follower = {}, leader = {}; double multiplier = 1.0, offset = 0.0; };
   std::vector<SpringSpec> springs_;
   std::vector<ConfigSpringSpec> configSprings_;
   std::vector<ConfigForceSpec> configForces_;

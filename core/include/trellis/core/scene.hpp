@@ -33,6 +33,19 @@ struct Scene {
   std::string name, description;
   ///@}
   std::vector<VisualGeometry> visuals;  ///< from an imported URDF; empty otherwise
+  ///@{
+  /// Position limits per configuration variable (n each, [rad or m]) from a URDF's `<limit lower
+  /// upper>` on revolute and prismatic joints; −∞/+∞ where there is none (continuous joints, floating
+  /// bases, frames of the scene itself, a limit with lower ≥ upper). Empty when the scene has no URDF.
+  /// trellis's dynamics do not enforce them; the CLI checks answers against them.
+  Eigen::VectorXd lowerLimit, upperLimit;
+  ///@}
+  /// Effort limit per configuration variable (n, [N m or N]) from `<limit effort>`, +∞ where there
+  /// is none or it is 0; empty without a URDF. It bounds the joint's own input (named as the joint).
+  Eigen::VectorXd effortLimit;
+  /// What was read but not modelled (e.g. URDF friction dropped by "ignore_friction"), one line
+  /// each naming file, line and value; callers show them (the CLI prints them on stderr).
+  std::vector<std::string> warnings;
 };
 
 /// Parses a scene from JSON text. `source` names the file in messages (and, when it is a path,
