@@ -589,7 +589,7 @@ std::string massLink(const std::string& name, double m, double ixx, double iyy, 
 
 /// A 3D chain with gravity and two mimics: a prismatic joint following a revolute one two levels
 /// up (multiplier 0.5, offset 0.1) and a continuous joint following another with multiplier −1.
-std::string mimicChain() {
+std::string mimicChainUrdf() {
   return robot("<link name=\"base\"/>\n" + massLink("l1", 1.2, 0.02, 0.03, 0.025, "0.1 0 -0.2") +
                massLink("l2", 0.8, 0.01, 0.015, 0.012, "0 0.05 -0.15") + massLink("l3", 0.5, 0.004, 0.005, 0.006, "0.02 0 0") +
                massLink("l4", 0.3, 0.002, 0.003, 0.001, "0 0 -0.1") + R"(
@@ -637,7 +637,7 @@ TEST_CASE("URDF <mimic> is a coordinate coupling q_j = m q_i + o", "[urdf][mimic
     checkLinearizationAgainstFd(model, randomState(model, rng));
   }
   SECTION("a 3D chain with revolute, prismatic and continuous mimics: central differences, energy") {
-    const Model model = sceneFromUrdf(importUrdf(mimicChain(), "chain.urdf")).model;
+    const Model model = sceneFromUrdf(importUrdf(mimicChainUrdf(), "chain.urdf")).model;
     REQUIRE(model.nq() == 4);
     REQUIRE(model.nc() == 2);
     CHECK(model.inputNames() == std::vector<std::string>{"j1", "j2"});
@@ -671,7 +671,7 @@ TEST_CASE("URDF <mimic> is a coordinate coupling q_j = m q_i + o", "[urdf][mimic
   SECTION("the same coupling written in a scene over the URDF (coordinate_coupling) gives the same model") {
     const auto dir = std::filesystem::temp_directory_path() / "trellis_test_urdf_mimic";
     std::filesystem::create_directories(dir);
-    std::string plain = mimicChain();
+    std::string plain = mimicChainUrdf();
     for (const char* tag : {R"(<mimic joint="j1" multiplier="0.5" offset="0.1"/>)", R"(<mimic joint="j2" multiplier="-1"/>)"}) {
       REQUIRE(plain.find(tag) != std::string::npos);
       plain.erase(plain.find(tag), std::string(tag).size());
@@ -682,7 +682,7 @@ TEST_CASE("URDF <mimic> is a coordinate coupling q_j = m q_i + o", "[urdf][mimic
       "constraints": [{"type": "coordinate_coupling", "config": "s3", "leader": "j1", "multiplier": 0.5, "offset": 0.1},
                       {"type": "coordinate_coupling", "config": "j4", "leader": "j2", "multiplier": -1}]})";
     const Model viaScene = loadScene((dir / "chain.json").string()).model;
-    const Model viaUrdf = sceneFromUrdf(importUrdf(mimicChain(), "chain.urdf")).model;
+    const Model viaUrdf = sceneFromUrdf(importUrdf(mimicChainUrdf(), "chain.urdf")).model;
     std::mt19937 rng(69);
     checkSameLinearization(viaUrdf, viaScene, randomState(viaUrdf, rng), 0.0);
     std::ofstream(dir / "bad.json") << R"({"urdf": "chain.urdf", "constraints": [{"type": "coordinate_coupling", "config": "s3", "leader": "j9", "multiplier": 1}]})";
