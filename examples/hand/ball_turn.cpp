@@ -109,6 +109,19 @@ OptimalControlProblem makeBallTurnProblem(std::shared_ptr<const Model> model, co
   }
   p.stateLower.head(n) = limits.qLower;
   p.stateUpper.head(n) = limits.qUpper;
+  // The ball stays in the hand: its centre within 2 cm of the grasp centre, pitch and roll within
+  // ±0.5 rad (far from the Z-Y-X singularity at ±π/2), the yaw within 0.5 rad of [0, angle].
+  // Without them Ipopt's first steps (‖d‖ ~ 10² in the variables) throw the ball away.
+  for (const char* c : {"ball_x", "ball_y", "ball_z"}) {
+    p.stateLower(m.configIndex(c)) = -0.02;
+    p.stateUpper(m.configIndex(c)) = 0.02;
+  }
+  for (const char* c : {"ball_pitch", "ball_roll"}) {
+    p.stateLower(m.configIndex(c)) = -0.5;
+    p.stateUpper(m.configIndex(c)) = 0.5;
+  }
+  p.stateLower(yaw) = std::min(0.0, options.angle) - 0.5;
+  p.stateUpper(yaw) = std::max(0.0, options.angle) + 0.5;
   p.inputLower = Eigen::VectorXd::Zero(m.nu());
   p.inputUpper = limits.uMax;
   p.R = Eigen::MatrixXd::Identity(m.nu(), m.nu());
