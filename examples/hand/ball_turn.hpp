@@ -87,4 +87,24 @@ struct ContactMargins {
 };
 ContactMargins contactMargins(const Eigen::VectorXd& lambda, const BallLimits& limits);
 
+/// A grasp equilibrium with every contact pressing and inside the pyramid: (q, u) with
+/// q̈(q, 0, u) = 0, h(q) = 0, 0 ≤ u ≤ u_max, λ_n ≥ normalMin and the F facets ≤ 0. Damped
+/// Gauss–Newton on ½‖[q̈/a; h/ℓ]‖² + ½ε‖u‖² with a log barrier on the inequalities (μ decreasing
+/// from 1e-2 to 1e-9; exact Jacobians: the core's ∂q̈/∂[q; u], ∂λ/∂[q; u] and A), from the
+/// stored grasp and the tensions that come closest to a static hold with the contacts pressing
+/// by 1 N; then findEquilibrium at the final tensions polishes q. `ok` only when the polished
+/// equilibrium converged and every contact condition holds there.
+struct GraspEquilibrium {
+  Eigen::VectorXd q, u, lambda;
+  double accelerationResidual = 0.0;  ///< ‖q̈(q, 0, u)‖∞ [rad/s², m/s²]
+  double constraintResidual = 0.0;    ///< ‖h(q)‖∞ [m]
+  ContactMargins margins;
+  int iterations = 0;
+  bool ok = false;
+  std::string message;                ///< what failed, when not ok
+};
+GraspEquilibrium findGraspEquilibrium(const Model& model, const Eigen::VectorXd& q0, const BallLimits& limits,
+                                      int facets = 8);
+
+
 }  // namespace trellis::hand

@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
   std::string scene = "hand_ball";
   hand::BallTurnOptions options;
   int printLevel = 0;
+  bool equilibriumOnly = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const auto value = [&]() -> std::string {
@@ -42,6 +43,7 @@ int main(int argc, char** argv) {
       else if (a == "--knots") options.knots = std::stoi(value());
       else if (a == "--facets") options.facets = std::stoi(value());
       else if (a == "--print-level") printLevel = std::stoi(value());
+      else if (a == "--equilibrium-only") equilibriumOnly = true;
       else if (a == "--help") {
         std::cout << "usage: hand_ball_turn [--scene NAME] [--angle DEG] [--horizon S] [--knots N] "
                      "[--facets F] [--print-level L]\n";
@@ -80,6 +82,13 @@ int main(int argc, char** argv) {
               "(0: an equilibrium); its contacts: min normal %.4f N (%s), worst friction ratio %.3f (%s)\n",
               hold.relativeResidual, holdMargins.minNormal, limits.digits[holdMargins.minNormalContact].c_str(),
               holdMargins.worstFrictionRatio, limits.digits[holdMargins.worstFrictionContact].c_str());
+  const hand::GraspEquilibrium ge = hand::findGraspEquilibrium(s.model, s.q, limits, options.facets);
+  std::printf("grasp equilibrium: %s after %d iterations: |qdd| %.3g, |h| %.3g m, min normal %.4f N, "
+              "worst friction ratio %.4f, max tension %.2f N%s%s\n",
+              ge.ok ? "found" : "NOT found", ge.iterations, ge.accelerationResidual, ge.constraintResidual,
+              ge.margins.minNormal, ge.margins.worstFrictionRatio, ge.u.size() ? ge.u.maxCoeff() : 0.0,
+              ge.message.empty() ? "" : ": ", ge.message.c_str());
+  if (equilibriumOnly) return ge.ok ? 0 : 1;
   OptimizerOptions oo;
   oo.printLevel = printLevel;
   oo.maxIterations = 500;
