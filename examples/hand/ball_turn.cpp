@@ -367,7 +367,8 @@ Trajectory quasiStaticTurn(const Model& model, const Eigen::VectorXd& q0, const 
     // Tensions: the closest static hold (the stored grasp is not an exact equilibrium under
     // u ≥ 0; hand_ball_turn reports the residual).
     states.col(k) << q, dq;
-    inputs.col(k) = closestStaticHold(model, q).tension;
+    inputs.col(k) = options.guessTensions.size() == model.nu() ? options.guessTensions
+                                                                : closestStaticHold(model, q).tension;
   }
   return Trajectory(model.configNames(), model.inputNames(), times, states, inputs);
 }

@@ -53,6 +53,8 @@ struct BallTurnOptions {
   /// The start's configuration free except the yaw (at rest): the stored grasp is not an
   /// equilibrium under u ≥ 0, so the optimizer chooses the grasp it starts from.
   bool freeInitialConfiguration = true;
+  /// Tensions of the warm start at every knot (m); empty: the closest static hold of each pose.
+  Eigen::VectorXd guessTensions;
 };
 
 /// The optimal control problem of the file comment; q0 the grasp (nq, on the manifold).

@@ -2,7 +2,11 @@
 // turn of ball_turn.hpp on a free-ball hand scene and checks the contacts along the result.
 //
 //   hand_ball_turn [--scene NAME] [--angle DEG] [--horizon S] [--knots N] [--facets F] [--print-level L]
+//                  [--equilibrium-only] [--lbfgs]
 //
+// First a grasp equilibrium is searched (findGraspEquilibrium; --equilibrium-only stops there, exit
+// 0 only when found); when its contacts hold, the turn starts from it, else from the stored grasp.
+// --lbfgs: Ipopt's limited-memory Hessian instead of the exact one.
 // NAME: a scene of examples/scenes written by make_hand_scene.py --free-ball (default hand_ball;
 // hand_ball_pinch is the thumb-and-index reduction), read with NAME_limits.json. Prints the
 // optimizer's one-line result, its time split, and the contact margins at every collocation point:
@@ -27,6 +31,7 @@ int main(int argc, char** argv) {
   hand::BallTurnOptions options;
   int printLevel = 0;
   bool equilibriumOnly = false;
+  bool lbfgs = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const auto value = [&]() -> std::string {
@@ -44,9 +49,10 @@ int main(int argc, char** argv) {
       else if (a == "--facets") options.facets = std::stoi(value());
       else if (a == "--print-level") printLevel = std::stoi(value());
       else if (a == "--equilibrium-only") equilibriumOnly = true;
+      else if (a == "--lbfgs") lbfgs = true;
       else if (a == "--help") {
         std::cout << "usage: hand_ball_turn [--scene NAME] [--angle DEG] [--horizon S] [--knots N] "
-                     "[--facets F] [--print-level L]\n";
+                     "[--facets F] [--print-level L] [--equilibrium-only] [--lbfgs]\n";
         return 0;
       } else {
         std::cerr << "hand_ball_turn: unknown option '" << a << "' (--help lists them)\n";
@@ -89,9 +95,18 @@ int main(int argc, char** argv) {
               ge.margins.minNormal, ge.margins.worstFrictionRatio, ge.u.size() ? ge.u.maxCoeff() : 0.0,
               ge.message.empty() ? "" : ": ", ge.message.c_str());
   if (equilibriumOnly) return ge.ok ? 0 : 1;
+  // Start from the equilibrium search's point when its contacts hold (even if its static residual
+  // is not yet at tolerance): the stored grasp is no equilibrium under u ≥ 0.
+  if (ge.q.size() == s.model.nq() && ge.lambda.size() == s.model.nc() &&
+      ge.margins.minNormal >= limits.normalMin && ge.margins.worstFrictionRatio <= 1.0) {
+    options.guessTensions = ge.u;
+    problem = hand::makeBallTurnProblem(problem.model, ge.q, limits, options);
+    std::printf("starting from the equilibrium search's grasp\n");
+  }
   OptimizerOptions oo;
   oo.printLevel = printLevel;
   oo.maxIterations = 500;
+  if (lbfgs) oo.hessian = HessianMode::kLimitedMemory;
   const OptimizationResult r = optimizeTrajectory(problem, oo);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("optimizer: %s\n", r.describe().c_str());
