@@ -1,5 +1,5 @@
 // examples/hand/ball_turn.hpp — the hand turns a free ball (issue 26): the limits of the scene
-// (examples/scenes/hand_ball*.json and their *_limits.json, written by make_hand_scene.py
+// (examples/scenes/hand_ball*.json and examples/hand/*_limits.json, written by make_hand_scene.py
 // --free-ball) and the trajectory optimization problem that turns the ball about the palm's normal.
 //
 // Contacts. Rows 3d, 3d+1, 3d+2 of the scene's constraints are digit d's force on the ball along

@@ -8,7 +8,7 @@
 // 0 only when found); when its contacts hold, the turn starts from it, else from the stored grasp.
 // --lbfgs: Ipopt's limited-memory Hessian instead of the exact one.
 // NAME: a scene of examples/scenes written by make_hand_scene.py --free-ball (default hand_ball;
-// hand_ball_pinch is the thumb-and-index reduction), read with NAME_limits.json. Prints the
+// hand_ball_pinch is the thumb-and-index reduction), read with examples/hand/NAME_limits.json. Prints the
 // optimizer's one-line result, its time split, and the contact margins at every collocation point:
 // the smallest normal force and the largest ‖λ_t‖ / (μ λ_n). Exit status 0 only when the
 // optimizer reports solved (its a-posteriori consistency check included), the ball turned by the
@@ -71,7 +71,7 @@ int main(int argc, char** argv) {
   try {
     s = loadScene(dir + "/" + scene + ".json");
     auto model = std::make_shared<const Model>(s.model);
-    limits = hand::loadBallLimits(dir + "/" + scene + "_limits.json", *model);
+    limits = hand::loadBallLimits(std::string(TRELLIS_HAND_DIR) + "/" + scene + "_limits.json", *model);
     problem = hand::makeBallTurnProblem(model, s.q, limits, options);
   } catch (const std::exception& e) {
     std::cerr << "hand_ball_turn: " << e.what() << "\n";

@@ -52,7 +52,7 @@ Modelling choices (no single published value; chosen so the model is physically 
    their singularities) and make the gains 23 x 52.
 
 The free ball (issue 26; `make_hand_scene.py --free-ball` writes examples/scenes/hand_ball.json and
-examples/scenes/hand_ball_limits.json): the ball becomes a free body of 6 coordinates,
+examples/hand/hand_ball_limits.json): the ball becomes a free body of 6 coordinates,
   ball_x, ball_y, ball_z  translation of its centre from the grasp's centre [m], palm axes;
   ball_yaw, ball_pitch, ball_roll  Z-Y-X Euler angles, R = Rz(yaw) Ry(pitch) Rx(roll) [rad].
 The order Z-Y-X is chosen because the task turns the ball about the palm's normal (z): that turn is
@@ -695,7 +695,10 @@ def main():
                 lo, hi = limits["joint_range"][n]
                 if not lo <= q[n] <= hi:
                     raise SystemExit(f"the grasp puts {n} = {q[n]:.3f} rad outside its range [{lo}, {hi}]")
-        with open(out_path[:-len(".json")] + "_limits.json", "w") as fh:
+        # Beside the generator, not among the scenes (every file there must be a scene).
+        limits_path = os.path.join(os.path.dirname(os.path.abspath(__file__)),
+                                   os.path.basename(out_path)[:-len(".json")] + "_limits.json")
+        with open(limits_path, "w") as fh:
             json.dump(limits, fh, indent=1)
             fh.write("\n")
     print(f"wrote {os.path.normpath(out_path)}: {len(state_q)} coordinates, {len(order)} tendons, "

@@ -25,6 +25,7 @@ using namespace trellis;
 namespace {
 
 const std::string kScenes = std::string(TRELLIS_SOURCE_DIR) + "/examples/scenes/";
+const std::string kLimits = std::string(TRELLIS_SOURCE_DIR) + "/examples/hand/";
 
 }  // namespace
 
@@ -32,7 +33,7 @@ TEST_CASE("hand ball: the pinch scene's limits file", "[hand_ball]") {
   const Scene s = loadScene(kScenes + "hand_ball_pinch.json");
   REQUIRE(s.model.nq() == 14);
   REQUIRE(s.model.nc() == 6);
-  const hand::BallLimits l = hand::loadBallLimits(kScenes + "hand_ball_pinch_limits.json", s.model);
+  const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_pinch_limits.json", s.model);
   CHECK(l.friction == 0.8);
   CHECK(l.normalMin == 0.05);
   REQUIRE(l.digits.size() == 2);
@@ -86,7 +87,7 @@ TEST_CASE("hand ball: the contact rows are λ_n and the pyramid facets, with exa
           "[hand_ball][force_bounds]") {
   const Scene s = loadScene(kScenes + "hand_ball_pinch.json");
   auto model = std::make_shared<const Model>(s.model);
-  const hand::BallLimits l = hand::loadBallLimits(kScenes + "hand_ball_pinch_limits.json", *model);
+  const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_pinch_limits.json", *model);
   hand::BallTurnOptions o;
   o.angle = 5.0 * std::numbers::pi / 180.0;
   o.horizon = 0.5;
@@ -181,7 +182,7 @@ TEST_CASE("hand ball: the grasp-equilibrium search never reports success it does
   // (examples/hand/README.md); whatever the outcome, ok must mean every condition holds at the
   // returned point, and a failure must say why.
   const Scene s = loadScene(kScenes + "hand_ball_pinch.json");
-  const hand::BallLimits l = hand::loadBallLimits(kScenes + "hand_ball_pinch_limits.json", s.model);
+  const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_pinch_limits.json", s.model);
   const hand::GraspEquilibrium ge = hand::findGraspEquilibrium(s.model, s.q, l);
   INFO(ge.message);
   if (ge.ok) {
