@@ -51,6 +51,42 @@ Modelling choices (no single published value; chosen so the model is physically 
    20 coordinates and its gains at 23 x 40; a free ball would add 6 coordinates (Euler angles with
    their singularities) and make the gains 23 x 52.
 
+The free ball (issue 26; `make_hand_scene.py --free-ball` writes examples/scenes/hand_ball.json and
+examples/hand/hand_ball_limits.json): the ball becomes a free body of 6 coordinates,
+  ball_x, ball_y, ball_z  translation of its centre from the grasp's centre [m], palm axes;
+  ball_yaw, ball_pitch, ball_roll  Z-Y-X Euler angles, R = Rz(yaw) Ry(pitch) Rx(roll) [rad].
+The order Z-Y-X is chosen because the task turns the ball about the palm's normal (z): that turn is
+the first angle alone, and Z-Y-X is singular only at pitch = +-90 deg (cos(pitch) = 0), a tilt of the
+ball's x axis out of the palm plane the grasp never comes near (pitch and roll stay small). Z-X-Z or
+any order repeating z would be singular exactly at the grasp (second angle 0).
+Mass: a solid sphere of light wood (pine or poplar, 400-450 kg/m^3; Forest Products Laboratory,
+Wood Handbook FPL-GTR-190, 2010, Table 5-3a) of radius 35 mm: 0.080 kg, I = 2/5 m r^2 =
+3.92e-5 kg m^2 about every axis through its centre (a solid sphere), within the 60-100 g the issue
+asks. Gravity acts on it.
+Contacts: each pad sticks to a point fixed on the ball; three point_on_plane rows per digit whose
+normals (in ball axes) are the contact frame's inward normal n (towards the centre), t1 (the
+direction of a positive turn about the palm normal z at that point, z x r normalized, r the point
+from the centre) and t2 = n x t1. The three rows together pin the pad to the point (they span R^3);
+each row's lambda is then the force of the pad on the ball along that direction
+(constraint_forces.hpp: point on plane applies lambda * (R_ball d) to the ball), so
+lambda_n >= 0 is a pad pressing, and the friction cone reads sqrt(lambda_t1^2 + lambda_t2^2) <=
+mu lambda_n directly on the constraint forces, in the contact frame, with no transformation.
+Limits (hand_ball_limits.json, read by the ball-turning job):
+  joint ranges, active range of motion of Hume MC, Gellman H, McKellop H, Brumfield RH (1990).
+  Functional range of motion of the joints of the hand. J Hand Surg 15A(2):240-243 (finger MCP
+  flexion about 0-100 deg, PIP 0-105, DIP 0-85; thumb MCP about 0-55, IP about 0-80), with MCP
+  abduction +-20 deg and thumb CMC +-45 deg about the grasp as modelling choices;
+  tendon tensions 0 <= u <= u_max, u_max = physiological cross-sectional area x a specific tension
+  of 35 N/cm^2 (the value Valero-Cuevas, Zajac & Burgar 1998, J Biomech 31:693, use), with areas
+  of the order of those of Lieber RL, Jacobson MD, Fazeli BM, Abrams RA, Botte MJ (1992),
+  Architecture of selected muscles of the arm and forearm, J Hand Surg 17A:787-798, and Jacobson
+  MD et al. (1992), Architectural design of the human intrinsic hand muscles, J Hand Surg
+  17A:804-809 (rounded to 5 N; per muscle in U_MAX below);
+  friction: mu = 0.8, inside the 0.5-1.0 that skin-on-object measurements report (Derler S,
+  Gerhardt LC (2012), Tribology of skin: review and analysis of experimental results for the
+  friction coefficient of human skin, Tribol Lett 45:1-27), used with the conservative inscribed
+  8-facet pyramid by the job.
+
 The grasp: from a guessed, loosely flexed posture, the ball (fixed radius) is fitted to the four
 finger pads by least squares, each finger's contact is its pad projected radially onto the ball,
 the thumb base is oriented so its guessed curl ends on the far side of the ball (opposition), and
@@ -129,6 +165,20 @@ BALL_RADIUS = 0.035        # m, modelling choice (about a tennis ball)
 PAD_DEPTH = 0.005          # m, pad contact point below the distal phalanx axis (half its radius)
 
 FINGERS = ["index", "middle", "ring", "little"]
+
+# ---- the free ball (--free-ball; see the module docstring) ----------------------------------------
+BALL_MASS = 0.080          # kg: solid light-wood sphere, r = 35 mm, rho = 0.080 / (4/3 pi r^3) = 445 kg/m^3
+BALL_INERTIA = 0.4 * BALL_MASS * BALL_RADIUS ** 2   # kg m^2, solid sphere
+FRICTION = 0.8             # skin on object, inside 0.5-1.0 [Derler & Gerhardt 2012]
+NORMAL_FORCE_MIN = 0.05    # N, the issue's margin on the normal force
+# Joint ranges (rad) [Hume 1990] (fingers, thumb MCP/IP); abduction and thumb CMC: modelling choice.
+JOINT_RANGE = {"mcp_abd": (-0.35, 0.35), "mcp_flex": (0.0, math.radians(100)),
+               "pip": (0.0, math.radians(105)), "dip": (0.0, math.radians(85)),
+               "cmc_abd": (-0.79, 0.79), "cmc_flex": (-0.79, 0.79),
+               "mcp": (0.0, math.radians(55)), "ip": (math.radians(-10), math.radians(80))}
+# Maximal tendon tensions (N): PCSA [Lieber 1992; Jacobson 1992] x 35 N/cm^2, rounded to 5 N.
+U_MAX = {"FDP": 70.0, "FDS": 60.0, "EDC": 20.0, "DI1": 70.0, "DI": 40.0, "PI": 25.0,
+         "FPL": 45.0, "EPL": 20.0, "APL": 35.0, "ADP": 60.0}
 
 
 # ---- small linear algebra on lists --------------------------------------------------------------
@@ -433,9 +483,39 @@ def opposition_rotation(centre, contact, beta):
             [0.0, 0.0, 0.0, 1.0]]
 
 
+def u_max(name):
+    muscle = name.split("_")[0]
+    if muscle in U_MAX:
+        return U_MAX[muscle]
+    return U_MAX[muscle[:2]]
+
+
+def contact_directions(r):
+    """Inward normal n, t1 = z x r (a positive turn about the palm normal), t2 = n x t1, from the
+    point r of the ball relative to its centre (ball axes = palm axes at the grasp)."""
+    n = unit([-x for x in r])
+    t1 = cross([0.0, 0.0, 1.0], r)
+    if math.sqrt(sum(x * x for x in t1)) < 0.3 * BALL_RADIUS:
+        raise SystemExit("a contact lies near the ball's pole: z x r is ill-defined there")
+    t1 = unit(t1)
+    t2 = cross(n, t1)
+    return n, t1, t2
+
+
 def main():
-    out_path = sys.argv[1] if len(sys.argv) > 1 else os.path.join(
-        os.path.dirname(os.path.abspath(__file__)), "..", "scenes", "hand.json")
+    args = sys.argv[1:]
+    free_ball = "--free-ball" in args
+    args = [a for a in args if a != "--free-ball"]
+    # --digits thumb,index: keep only these digits (the reduced scenes of the tests; free ball only).
+    kept = None
+    if "--digits" in args:
+        i = args.index("--digits")
+        kept = args[i + 1].split(",")
+        del args[i:i + 2]
+        if not free_ball or not set(kept) <= set(FINGERS + ["thumb"]):
+            raise SystemExit("--digits needs --free-ball and names among thumb, " + ", ".join(FINGERS))
+    scenes = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes")
+    out_path = args[0] if args else os.path.join(scenes, "hand_ball.json" if free_ball else "hand.json")
     tendons = []
     fingers = [finger(f, tendons) for f in FINGERS]
     digit_configs = {f: [f"{f}_mcp_abd", f"{f}_mcp_flex", f"{f}_pip", f"{f}_dip"] for f in FINGERS}
@@ -489,9 +569,30 @@ def main():
         if r > 1e-12:
             raise SystemExit(f"grasp solve failed for {d}: residual {r:.3e} m")
 
+    if kept is not None:
+        # The other digits lose their joints and bodies (their palm sites and via points stay: the
+        # ADP origin lives on the middle finger's site); tendons keep only if all their frames do.
+        for f in FINGERS:
+            if f not in kept:
+                site = next(x for x in frames if x["name"] == f"{f}_mcp_site")
+                site["children"] = [c for c in site["children"] if c["type"] == "const_se3"]
+        if "thumb" not in kept:
+            frames = [x for x in frames if x["name"] != "thumb_cmc_site"]
+        present = set(frame_positions(frames, q))
+        order = [name for name in order if set(by_name[name]) <= present]
+        digit_configs = {d: names for d, names in digit_configs.items() if d in kept}
     contact_frames = [const_frame(f"ball_contact_{d}", *[contacts[d][i] - centre[i] for i in range(3)])
                       for d in digit_configs]
-    frames.append(const_frame("ball", *centre, children=contact_frames))
+    if not free_ball:
+        frames.append(const_frame("ball", *centre, children=contact_frames))
+    else:
+        body = const_frame("ball", 0.0, 0.0, 0.0, children=contact_frames,
+                           mass={"m": BALL_MASS, "inertia": [BALL_INERTIA] * 3 + [0.0] * 3})
+        chain = [body]
+        for name, kind in (("ball_roll", "rx"), ("ball_pitch", "ry"), ("ball_yaw", "rz"),
+                           ("ball_z", "tz"), ("ball_y", "ty"), ("ball_x", "tx")):
+            chain = [joint_frame(name, kind, name, chain)]
+        frames.append(const_frame("ball_grasp_centre", *centre, children=chain))
 
     digit_mass = 0.0
 
@@ -502,6 +603,8 @@ def main():
                 digit_mass += f["mass"]["m"]
             collect(f.get("children", []))
     collect(frames)
+    if free_ball:
+        digit_mass -= BALL_MASS  # the hand's segments only
 
     potentials = [{"type": "gravity", "g": GRAVITY}]
     damping = {}
@@ -514,7 +617,15 @@ def main():
     forces = [{"type": "damping", "default": 0.0, "coefficients": damping}]
     forces += [{"type": "tendon", "input": name, "path": by_name[name]} for name in order]
     constraints = []
+    directions = {}
     for d in digit_configs:
+        if free_ball:
+            r = [contacts[d][i] - centre[i] for i in range(3)]
+            directions[d] = contact_directions(r)
+            for tag, v in zip(("n", "t1", "t2"), directions[d]):
+                constraints.append({"type": "point_on_plane", "plane_frame": f"ball_contact_{d}",
+                                    "normal": [round(x, 17) for x in v], "point_frame": f"{d}_tip"})
+            continue
         for axis in "xyz":
             constraints.append({"type": "point", "frame1": f"{d}_tip", "frame2": f"ball_contact_{d}",
                                 "axis": axis})
@@ -535,20 +646,62 @@ def main():
         "diameters, ball size and thumb pose are stated modelling choices. Generated by "
         "examples/hand/make_hand_scene.py (sources and choices documented there); the stored q "
         "solves h(q) = 0 by Newton's method.")
+    state_q = {n: q[n] for names in digit_configs.values() for n in names}
+    if free_ball:
+        description = (
+            "A right human hand holding a FREE ball (issue 26): the hand of hand.json (20 joint "
+            "coordinates, 23 tendons) and a solid light-wood ball of 80 g, radius 35 mm, "
+            "I = 2/5 m r^2, with 6 coordinates (ball_x, ball_y, ball_z: its centre's displacement "
+            "from the grasp centre; ball_yaw, ball_pitch, ball_roll: Z-Y-X Euler angles, singular "
+            "only at pitch = +-90 deg). 26 coordinates. Each pad sticks to a point fixed on the ball: "
+            "3 point_on_plane rows per digit along the contact frame's inward normal n, t1 (a turn "
+            "about the palm normal) and t2 = n x t1 in ball axes, so lambda_n, lambda_t1, lambda_t2 "
+            "are the pad's force on the ball in its contact frame (15 rows). Joint ranges, tendon "
+            "maxima and friction in hand_ball_limits.json. " + description)
+        for name in ("ball_x", "ball_y", "ball_z", "ball_yaw", "ball_pitch", "ball_roll"):
+            state_q[name] = 0.0
+    if kept is not None:
+        description = (f"REDUCED to the digits {', '.join(digit_configs)} (the others keep only "
+                       f"their palm sites): {len(state_q)} coordinates, {len(order)} tendons, "
+                       f"{len(constraints)} contact rows; generated by make_hand_scene.py --free-ball "
+                       f"--digits {','.join(kept)}. " + description)
     scene = {
-        "name": "hand",
+        "name": "hand_ball" if free_ball else "hand",
         "description": description,
         "frames": frames,
         "potentials": potentials,
         "forces": forces,
         "constraints": constraints,
-        "state": {"q": {n: q[n] for names in digit_configs.values() for n in names},
-                  "dq": {}, "u": {}},
+        "state": {"q": state_q, "dq": {}, "u": {}},
     }
     with open(out_path, "w") as fh:
         json.dump(scene, fh, indent=1)
         fh.write("\n")
-    print(f"wrote {os.path.normpath(out_path)}: 20 coordinates, {len(order)} tendons, "
+    if free_ball:
+        limits = {
+            "description": "Limits of the hand holding a free ball (issue 26), written by "
+                           "examples/hand/make_hand_scene.py --free-ball (sources there).",
+            "friction_coefficient": FRICTION,
+            "normal_force_min": NORMAL_FORCE_MIN,
+            "contacts": {d: {"rows": [3 * i, 3 * i + 1, 3 * i + 2],
+                             "normal": directions[d][0], "t1": directions[d][1], "t2": directions[d][2]}
+                         for i, d in enumerate(digit_configs)},
+            "joint_range": {n: list(JOINT_RANGE[n.split("_", 1)[1]])
+                            for names in digit_configs.values() for n in names},
+            "tension_max": {name: u_max(name) for name in order},
+        }
+        for d, names in digit_configs.items():
+            for n in names:
+                lo, hi = limits["joint_range"][n]
+                if not lo <= q[n] <= hi:
+                    raise SystemExit(f"the grasp puts {n} = {q[n]:.3f} rad outside its range [{lo}, {hi}]")
+        # Beside the generator, not among the scenes (every file there must be a scene).
+        limits_path = os.path.join(os.path.dirname(os.path.abspath(__file__)),
+                                   os.path.basename(out_path)[:-len(".json")] + "_limits.json")
+        with open(limits_path, "w") as fh:
+            json.dump(limits, fh, indent=1)
+            fh.write("\n")
+    print(f"wrote {os.path.normpath(out_path)}: {len(state_q)} coordinates, {len(order)} tendons, "
           f"{len(constraints)} constraint rows, digit mass {digit_mass * 1000:.1f} g")
 
 

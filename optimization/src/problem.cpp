@@ -204,6 +204,22 @@ void OptimalControlProblem::validate() const {
            std::to_string(r) + ") [" + str(forceLower(r)) + ", " + str(forceUpper(r)) + "] are empty or NaN");
     }
   }
+  for (std::size_t k = 0; k < forceCombinations.size(); ++k) {
+    const ForceCombination& c = forceCombinations[k];
+    const std::string what = "problem: forceCombinations[" + std::to_string(k) + "] ('" + c.name + "')";
+    if (c.coefficients.size() != model->nc()) {
+      fail(what + ": coefficients has " + std::to_string(c.coefficients.size()) +
+           " entries, expected nc = " + std::to_string(model->nc()));
+    }
+    if (!c.coefficients.allFinite() || c.coefficients.isZero(0.0)) {
+      fail(what + ": coefficients must be finite and not all zero");
+    }
+    if (std::isnan(c.lower) || std::isnan(c.upper) || c.lower > c.upper ||
+        (!std::isfinite(c.lower) && !std::isfinite(c.upper))) {
+      fail(what + ": bounds [" + str(c.lower) + ", " + str(c.upper) +
+           "] are empty, NaN or both infinite");
+    }
+  }
   checkWeight(R, m, "R");
   checkWeight(Q, nxs, "Q");
   checkWeight(Qf, nxs, "Qf");

@@ -55,6 +55,12 @@ struct Transcription::Impl {
   int numVars, numCons, defectRows;
   std::vector<int> forceRows;  // constraint rows r with a finite bound on λ_r (nF of them)
   int nF = 0, forceStart = 0;  // nF rows per point, from row forceStart on (point by point)
+  // Every force row j at a point is c_jᵀλ: unit rows for forceRows, then the problem's
+  // forceCombinations; bounds [forceLo_j, forceHi_j]. CF (nF×nc), per-point scratch CDL (nF×stride).
+  Eigen::MatrixXd CF;
+  Eigen::VectorXd forceLo, forceHi;
+  mutable Eigen::MatrixXd CDL;  // scratch of the const evaluations
+  mutable Eigen::VectorXd forceValues;
 
   std::vector<int> jacRows, jacCols;
 
@@ -127,7 +133,24 @@ struct Transcription::Impl {
     for (int r = 0; r < nc; ++r) {
       if (std::isfinite(problem.forceLower(r)) || std::isfinite(problem.forceUpper(r))) forceRows.push_back(r);
     }
-    nF = static_cast<int>(forceRows.size());
+    const int nBox = static_cast<int>(forceRows.size());
+    const int nComb = static_cast<int>(problem.forceCombinations.size());
+    nF = nBox + nComb;
+    CF = Eigen::MatrixXd::Zero(nF, nc);
+    forceLo.resize(nF);
+    forceHi.resize(nF);
+    for (int j = 0; j < nBox; ++j) {
+      CF(j, forceRows[j]) = 1.0;
+      forceLo(j) = problem.forceLower(forceRows[j]);
+      forceHi(j) = problem.forceUpper(forceRows[j]);
+    }
+    for (int j = 0; j < nComb; ++j) {
+      CF.row(nBox + j) = problem.forceCombinations[j].coefficients.transpose();
+      forceLo(nBox + j) = problem.forceCombinations[j].lower;
+      forceHi(nBox + j) = problem.forceCombinations[j].upper;
+    }
+    CDL = Eigen::MatrixXd::Zero(nF, stride);
+    forceValues = Eigen::VectorXd::Zero(nF);
     forceStart = defectRows + N * (ncH + nc);
     numCons = forceStart + P * nF;
 
@@ -443,8 +466,10 @@ struct Transcription::Impl {
       for (int j = 0; j < ncH; ++j) g[knotRow(k) + j] = hValue(holonomicRows[j], k);
       Eigen::Map<Eigen::VectorXd>(g + knotRow(k) + ncH, nc) = Ac[k] * dqk;
     }
-    for (int p = 0; p < P; ++p)
-      for (int j = 0; j < nF; ++j) g[forceStart + p * nF + j] = Lam(forceRows[j], p);
+    for (int p = 0; p < P && nF > 0; ++p) {
+      forceValues.noalias() = CF * Lam.col(p);
+      for (int j = 0; j < nF; ++j) g[forceStart + p * nF + j] = forceValues(j);
+    }
   }
 
   // ---- Constraint Jacobian ---------------------------------------------------------------------
@@ -556,10 +581,12 @@ struct Transcription::Impl {
         for (int j = 0; j < n; ++j) w.put(row0 + ncH + r, col0 + n + j, Ac[k](r, j));
       }
     }
-    // λ_r at point p: ∂λ_r/∂[x_p; u_p] (the core's dlambda_dx).
-    for (int p = 0; p < P; ++p)
+    // c_jᵀλ at point p: c_jᵀ ∂λ/∂[x_p; u_p] (the core's dlambda_dx).
+    for (int p = 0; p < P && nF > 0; ++p) {
+      if (!w.structure) CDL.noalias() = CF * DL[p];
       for (int j = 0; j < nF; ++j)
-        for (int c = 0; c < stride; ++c) w.put(forceStart + p * nF + j, p * stride + c, DL[p](forceRows[j], c));
+        for (int c = 0; c < stride; ++c) w.put(forceStart + p * nF + j, p * stride + c, CDL(j, c));
+    }
   }
 
   // ---- Lagrangian Hessian ----------------------------------------------------------------------
@@ -695,7 +722,8 @@ struct Transcription::Impl {
       hw = C.col(p).tail(n);
       // The force rows' multipliers weigh ∇²λ_r at this point (ρ of the contraction).
       rhoPoint.setZero();
-      for (int j = 0; j < nF; ++j) rhoPoint(forceRows[j]) = mult[forceStart + p * nF + j];
+      // Σ_j ρ_j c_jᵀλ = (CFᵀρ)ᵀλ: the contraction weighs ∇²λ by CFᵀρ.
+      if (nF > 0) rhoPoint.noalias() = CF.transpose() * Eigen::Map<const Eigen::VectorXd>(mult + forceStart + p * nF, nF);
       const bool forces = nF > 0 && !rhoPoint.isZero(0.0);
       const bool dynamics = !hw.isZero(0.0) || forces;
       if (dynamics) {
@@ -830,8 +858,8 @@ void Transcription::constraintBounds(Eigen::VectorXd& lower, Eigen::VectorXd& up
   upper = Eigen::VectorXd::Zero(s.numCons);
   for (int p = 0; p < s.P; ++p) {
     for (int j = 0; j < s.nF; ++j) {
-      lower(s.forceStart + p * s.nF + j) = s.problem.forceLower(s.forceRows[j]);
-      upper(s.forceStart + p * s.nF + j) = s.problem.forceUpper(s.forceRows[j]);
+      lower(s.forceStart + p * s.nF + j) = s.forceLo(j);
+      upper(s.forceStart + p * s.nF + j) = s.forceHi(j);
     }
   }
 }

@@ -228,3 +228,93 @@ TEST_CASE("hessian: constraint-force bounds add rows λ_r(x_p, u_p) with exact f
     }
   }
 }
+
+TEST_CASE("hessian: force combinations add rows cᵀλ(x_p, u_p) with exact first and second derivatives",
+          "[transcription][hessian][force_bounds]") {
+  // The rows a friction pyramid uses (cos θ λ_t1 + sin θ λ_t2 − μ' λ_n ≤ 0): linear combinations of
+  // λ, after the box rows. On the closed-chain pendulum with a box row on λ_0 and two combinations
+  // over every row, at a random point: values against the core's λ, Jacobian against central
+  // differences of g, Hessian against differences of the exact gradient (checkHessian).
+  std::mt19937 rng(2604);
+  for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
+    DYNAMIC_SECTION((method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : "trapezoidal")) {
+      OptimalControlProblem p = trellis::loadProblem(problemPath("paper_pendulum_transfer"));
+      const int nc = p.model->nc();
+      REQUIRE(nc >= 1);
+      p.knots = 3;
+      p.method = method;
+      p.forceLower(0) = -5.0;
+      std::uniform_real_distribution<double> unit(-1.0, 1.0);
+      for (int k = 0; k < 2; ++k) {
+        OptimalControlProblem::ForceCombination c;
+        c.name = "combination " + std::to_string(k);
+        c.coefficients = VectorXd(nc);
+        for (int r = 0; r < nc; ++r) c.coefficients(r) = unit(rng);
+        c.upper = 1.0 + k;
+        p.forceCombinations.push_back(c);
+      }
+      Transcription t(p);
+      const int P = t.numPoints();
+      REQUIRE(t.forceRowsPerPoint() == 3);
+      REQUIRE(t.numConstraints() == t.forceRow(0) + 3 * P);
+      VectorXd lower, upper;
+      t.constraintBounds(lower, upper);
+      CHECK(lower(t.forceRow(P - 1)) == -5.0);
+      CHECK(std::isinf(lower(t.forceRow(P - 1) + 1)));
+      CHECK(upper(t.forceRow(P - 1) + 2) == 2.0);
+      const VectorXd z = randomPoint(t, rng);
+      VectorXd g(t.numConstraints());
+      REQUIRE(t.evalConstraints(z.data(), g.data()));
+      trellis::Data data(*p.model);
+      for (int q = 0; q < P; ++q) {
+        const VectorXd x = z.segment(t.stateIndex(q), p.nx()), u = z.segment(t.inputIndex(q), p.nu());
+        trellis::computeDynamics(*p.model, data, x.head(p.nq()), x.tail(p.nq()), u);
+        CHECK(g(t.forceRow(q)) == Approx(data.lambda(0)).epsilon(1e-12));
+        for (int k = 0; k < 2; ++k) {
+          const double expected = p.forceCombinations[k].coefficients.dot(data.lambda);
+          CHECK(g(t.forceRow(q) + 1 + k) == Approx(expected).epsilon(1e-12).margin(1e-12 * data.lambda.norm()));
+        }
+      }
+      VectorXd values(t.jacobianRows().size());
+      REQUIRE(t.evalJacobian(z.data(), values.data()));
+      MatrixXd exact = MatrixXd::Zero(t.numConstraints(), t.numVariables());
+      for (std::size_t k = 0; k < t.jacobianRows().size(); ++k) exact(t.jacobianRows()[k], t.jacobianCols()[k]) = values(k);
+      // Central differences, step eps^(1/3)·max(1, |z_j|): error ~eps^(2/3) ≈ 4e-11 relative to
+      // the size of λ's second derivatives; 1e-6 as for the box rows above.
+      const double eps = std::cbrt(std::numeric_limits<double>::epsilon());
+      VectorXd zp = z, gp(g.size()), gm(g.size());
+      double worst = 0.0;
+      for (int j = 0; j < z.size(); ++j) {
+        const double step = eps * std::max(1.0, std::abs(z(j)));
+        zp(j) = z(j) + step;
+        REQUIRE(t.evalConstraints(zp.data(), gp.data()));
+        zp(j) = z(j) - step;
+        REQUIRE(t.evalConstraints(zp.data(), gm.data()));
+        zp(j) = z(j);
+        for (int r = t.forceRow(0); r < t.numConstraints(); ++r) {
+          const double fd = (gp(r) - gm(r)) / (2.0 * step);
+          worst = std::max(worst, std::abs(exact(r, j) - fd) / std::max(1.0, std::abs(fd)));
+        }
+      }
+      INFO("force rows of the Jacobian: worst relative error " << worst);
+      CHECK(worst < 1e-6);
+      checkHessian(t, z, 0.4, randomMultipliers(t, rng));
+    }
+  }
+}
+
+TEST_CASE("problem: a bad force combination is refused with its index, name and field",
+          "[problem][force_bounds]") {
+  OptimalControlProblem p = trellis::loadProblem(problemPath("paper_pendulum_transfer"));
+  OptimalControlProblem::ForceCombination c;
+  c.name = "facet";
+  c.coefficients = VectorXd::Ones(p.model->nc() + 1);
+  c.upper = 0.0;
+  p.forceCombinations.push_back(c);
+  CHECK_THROWS_WITH(p.validate(), Catch::Contains("forceCombinations[0] ('facet')") && Catch::Contains("coefficients"));
+  p.forceCombinations[0].coefficients = VectorXd::Ones(p.model->nc());
+  p.forceCombinations[0].upper = std::numeric_limits<double>::infinity();
+  CHECK_THROWS_WITH(p.validate(), Catch::Contains("both infinite"));
+  p.forceCombinations[0].upper = 0.0;
+  CHECK_NOTHROW(p.validate());
+}

@@ -32,7 +32,14 @@ TEST_CASE("no_malloc: the Lagrangian Hessian's values allocate nothing", "[no_ma
         trellis::OptimalControlProblem p =
             trellis::loadProblem(std::string(TRELLIS_SOURCE_DIR) + "/examples/problems/" + name + ".json");
         p.knots = 5;
-        if (p.model->nc() > 0) p.forceUpper(0) = 100.0;  // the constraint-force rows (ρ) too
+        if (p.model->nc() > 0) {
+          p.forceUpper(0) = 100.0;  // the constraint-force rows (ρ) too
+          trellis::OptimalControlProblem::ForceCombination c;  // and a combination (ρ = Cᵀ·multipliers)
+          c.name = "combination";
+          c.coefficients = Eigen::VectorXd::Constant(p.model->nc(), -0.5);
+          c.upper = 1.0;
+          p.forceCombinations.push_back(c);
+        }
         if (freeHorizon) {
           p.minHorizon = 0.5 * p.horizon;
           p.maxHorizon = 2.0 * p.horizon;

@@ -21,6 +21,7 @@
 
 #include <Eigen/Core>
 
+#include <limits>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -103,6 +104,17 @@ struct OptimalControlProblem {
   ///@{
   Eigen::VectorXd forceLower, forceUpper;
   ///@}
+  /// Bounds on linear combinations of the constraint forces, lower ≤ cᵀλ(x, u) ≤ upper, imposed at
+  /// every collocation point like forceLower/Upper (e.g. the facets of a friction pyramid on a
+  /// contact's (λ_n, λ_t1, λ_t2) rows: cos θ_k λ_t1 + sin θ_k λ_t2 − μ' λ_n ≤ 0). Not in the
+  /// problem file; C++ only.
+  struct ForceCombination {
+    std::string name;              ///< for messages and reports, e.g. "thumb friction facet 3"
+    Eigen::VectorXd coefficients;  ///< c (nc)
+    double lower = -std::numeric_limits<double>::infinity();  ///< may be −infinity
+    double upper = std::numeric_limits<double>::infinity();   ///< may be +infinity (not both)
+  };
+  std::vector<ForceCombination> forceCombinations;  ///< empty: none
 
   /// Cost weights: R (m×m), Q, Qf (2n×2n), all symmetric positive semidefinite; goal state
   /// (2n); w_T ≥ 0 weighs the horizon (minimum time when the other terms are small).
