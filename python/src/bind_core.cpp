@@ -20,11 +20,15 @@ struct PyScene {
   ModelPtr model;
   Eigen::VectorXd q, dq, u;
   std::string name, description;
+  Eigen::VectorXd lowerLimit, upperLimit, effortLimit;  // a URDF's <limit>s; empty without one
+  std::vector<std::string> warnings;                    // what was read but not modelled
 };
 
 PyScene toPyScene(Scene&& s) {
   return PyScene{std::make_shared<Model>(std::move(s.model)), std::move(s.q), std::move(s.dq),
-                 std::move(s.u), std::move(s.name), std::move(s.description)};
+                 std::move(s.u), std::move(s.name), std::move(s.description),
+                 std::move(s.lowerLimit), std::move(s.upperLimit), std::move(s.effortLimit),
+                 std::move(s.warnings)};
 }
 
 std::vector<std::string> frameNames(const Model& model) {
@@ -116,6 +120,17 @@ void bindCore(py::module_& m) {
           }, "[q; dq] (nx,)")
       .def_readonly("name", &PyScene::name)
       .def_readonly("description", &PyScene::description)
+      .def_property_readonly("lower_limit", [](const PyScene& s) { return toArray(s.lowerLimit); },
+                             "(nq,) a URDF's <limit lower> per configuration [rad or m], -inf where "
+                             "none; empty without a URDF (not enforced by the dynamics)")
+      .def_property_readonly("upper_limit", [](const PyScene& s) { return toArray(s.upperLimit); },
+                             "(nq,) a URDF's <limit upper>, +inf where none; empty without a URDF")
+      .def_property_readonly("effort_limit", [](const PyScene& s) { return toArray(s.effortLimit); },
+                             "(nq,) a URDF's <limit effort> [N m or N], +inf where none; empty "
+                             "without a URDF")
+      .def_readonly("warnings", &PyScene::warnings,
+                    "What was read but not modelled (e.g. URDF friction dropped by "
+                    "ignore_friction), one line each naming file, line and value")
       .def("__repr__", [](const PyScene& s) { return "<trellis_mech.Scene '" + s.name + "'>"; });
 
   m.def("load_scene", [](const std::string& path) { return toPyScene(loadScene(path)); },

@@ -1098,6 +1098,12 @@ class Scene:
     def dq(self) -> numpy.typing.NDArray[numpy.float64]:
         """(nq,)"""
     @property
+    def effort_limit(self) -> numpy.typing.NDArray[numpy.float64]:
+        """(nq,) a URDF's <limit effort> [N m or N], +inf where none; empty without a URDF"""
+    @property
+    def lower_limit(self) -> numpy.typing.NDArray[numpy.float64]:
+        """(nq,) a URDF's <limit lower> per configuration [rad or m], -inf where none; empty without a URDF (not enforced by the dynamics)"""
+    @property
     def model(self) -> Model: ...
     @property
     def name(self) -> str: ...
@@ -1107,6 +1113,12 @@ class Scene:
     @property
     def u(self) -> numpy.typing.NDArray[numpy.float64]:
         """(nu,)"""
+    @property
+    def upper_limit(self) -> numpy.typing.NDArray[numpy.float64]:
+        """(nq,) a URDF's <limit upper>, +inf where none; empty without a URDF"""
+    @property
+    def warnings(self) -> List[str]:
+        """What was read but not modelled (e.g. URDF friction dropped by ignore_friction), one line each naming file, line and value"""
     @property
     def x(self) -> numpy.typing.NDArray[numpy.float64]:
         """[q; dq] (nx,)"""

@@ -268,3 +268,27 @@ def test_linearize_raises_on_a_non_finite_state(tm):
     with pytest.raises(ValueError, match=r"u\[0\] .* = -inf is not finite"):
         tm.dynamics(model, q, dq, [-float("inf")])
     assert tm.linearize(model, q, dq, [0.0]).status.ok
+
+
+def test_scene_carries_urdf_limits_and_warnings(tm, tmp_path):
+    # A URDF with Coulomb friction read through a scene overlay that drops it: the scene says so
+    # (one warning naming the value) and carries the <limit>s per configuration.
+    urdf = (
+        '<robot name="arm"><link name="base"/>'
+        '<link name="upper"><inertial><mass value="1"/>'
+        '<inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>'
+        '<joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>'
+        '<axis xyz="0 1 0"/><limit lower="-1" upper="1.5" effort="5" velocity="3"/>'
+        '<dynamics friction="0.3"/></joint></robot>')
+    (tmp_path / "arm.urdf").write_text(urdf)
+    with pytest.raises(ValueError, match="friction"):
+        tm.load_scene(str(tmp_path / "arm.urdf"))
+    overlay = tmp_path / "arm.json"
+    overlay.write_text(json.dumps({"urdf": "arm.urdf", "urdf_options": {"ignore_friction": True}}))
+    scene = tm.load_scene(str(overlay))
+    assert len(scene.warnings) == 1 and "0.3" in scene.warnings[0]
+    np.testing.assert_array_equal(scene.lower_limit, [-1.0])
+    np.testing.assert_array_equal(scene.upper_limit, [1.5])
+    np.testing.assert_array_equal(scene.effort_limit, [5.0])
+    plain = tm.load_scene(str(SCENES / "pendulum.json"))
+    assert plain.warnings == [] and plain.lower_limit.shape == (0,)
