@@ -118,10 +118,11 @@ std::pair<trellis::bench::BenchModel, trellis::bench::BenchModel> pandaPair() {
           trellis::bench::BenchModel{std::move(closed), q, dq, u, "panda"}};
 }
 
-/// The hand scene (examples/scenes/hand.json: 20 joints, 23 tendons, 15 rows pinning the five
-/// pads to a ball) at its stored state, and the same scene without its constraints.
-std::pair<trellis::bench::BenchModel, trellis::bench::BenchModel> handScenePair() {
-  const std::string path = std::string(TRELLIS_SCENES_DIR) + "/hand.json";
+/// A hand scene at its stored state, and the same scene without its constraints: hand.json (20
+/// joints, 23 tendons, 15 rows pinning the five pads to a ball fixed to the world) or
+/// hand_ball.json (the same pads stuck to a free ball: 26 coordinates, the rows across the tree).
+std::pair<trellis::bench::BenchModel, trellis::bench::BenchModel> handScenePair(const char* file) {
+  const std::string path = std::string(TRELLIS_SCENES_DIR) + "/" + file;
   const std::string text = readFile(path);
   nlohmann::json j = nlohmann::json::parse(text);
   j.erase("constraints");
@@ -156,7 +157,7 @@ int main(int argc, char** argv) {
   }
   struct Pair {
     ModelSpec free, closed;
-    int real = 0;  ///< 1: the Panda pinned, 2: the hand scene (the specs are then unused)
+    int real = 0;  ///< 1: the Panda pinned, 2: the hand scene, 3: the hand with a free ball (specs unused)
   };
   const auto chain = [](ModelKind k, int n, TipRows t) {
     return Pair{{k, n, false, TipRows::kOne}, {k, n, true, t}};
@@ -170,16 +171,20 @@ int main(int argc, char** argv) {
       {{ModelKind::kHandTree, 20, false}, {ModelKind::kHandTree, 20, true}},
       {{}, {}, 1},
       {{}, {}, 2},
+      {{}, {}, 3},
   };
   std::printf("# trellis_bench_closed: %d rounds x %d runs per side, batches of ~%.2f ms\n", rounds, runs, targetMs);
   std::printf("%-36s %-4s %10s %10s %8s %8s %8s\n", "constrained model", "alg", "free us", "closed us", "ratio",
               "q10", "q90");
   int status = 0;
   for (const Pair& p : pairs) {
-    const std::string label = p.real == 1 ? "panda tcp xyz" : p.real == 2 ? "hand scene (15 rows)" : name(p.closed);
+    const std::string label = p.real == 1   ? "panda tcp xyz"
+                              : p.real == 2 ? "hand scene (15 rows)"
+                              : p.real == 3 ? "hand, free ball (15 rows)"
+                                            : name(p.closed);
     try {
       std::pair<trellis::bench::BenchModel, trellis::bench::BenchModel> models =
-          p.real == 1 ? pandaPair() : p.real == 2 ? handScenePair()
+          p.real == 1 ? pandaPair() : p.real == 2 ? handScenePair("hand.json") : p.real == 3 ? handScenePair("hand_ball.json")
                                     : std::make_pair(trellis::bench::makeBenchModel(p.free), trellis::bench::makeBenchModel(p.closed));
       Case fr(std::move(models.first)), cl(std::move(models.second));
       for (bool lin : {false, true}) {
