@@ -40,6 +40,16 @@ bool parseGainName(const std::string& s, int& i, int& j) {
   return parseIndex(s.substr(2, sep - 2), i) && parseIndex(s.substr(sep + 1), j);
 }
 
+// t within [t0, t1] up to a slack of 1e-12 of the larger end's size (a time computed elsewhere
+// may round just outside), which it returns; throws std::out_of_range naming t and the span.
+double requireWithin(double t, double t0, double t1) {
+  const double slack = 1e-12 * std::max({1.0, std::abs(t0), std::abs(t1)});
+  if (t >= t0 - slack && t <= t1 + slack) return slack;
+  std::ostringstream m;
+  m << "gain schedule: time " << t << " is outside [" << t0 << ", " << t1 << "]";
+  throw std::out_of_range(m.str());
+}
+
 }  // namespace
 
 GainSchedule::GainSchedule(Eigen::VectorXd times, std::vector<Eigen::MatrixXd> gains)
@@ -97,12 +107,7 @@ double GainSchedule::endTime() const {
 void GainSchedule::evaluate(double t, Eigen::MatrixXd& K) const {
   if (size() == 0) throw std::logic_error("gain schedule: evaluate on an empty schedule");
   const double t0 = startTime(), t1 = endTime();
-  const double slack = 1e-12 * std::max({1.0, std::abs(t0), std::abs(t1)});
-  if (!(t >= t0 - slack && t <= t1 + slack)) {
-    std::ostringstream m;
-    m << "gain schedule: time " << t << " is outside [" << t0 << ", " << t1 << "]";
-    throw std::out_of_range(m.str());
-  }
+  requireWithin(t, t0, t1);
   if (K.rows() != nu_ || K.cols() != nx_) K.resize(nu_, nx_);
   if (size() == 1) {
     K = gains_[0];
@@ -256,12 +261,7 @@ void GainSchedule::setFeedforward(std::vector<Eigen::VectorXd> uff) {
 int GainSchedule::rowAt(double t) const {
   if (size() == 0) throw std::logic_error("gain schedule: rowAt on an empty schedule");
   const double t0 = startTime(), t1 = endTime();
-  const double slack = 1e-12 * std::max({1.0, std::abs(t0), std::abs(t1)});
-  if (!(t >= t0 - slack && t <= t1 + slack)) {
-    std::ostringstream m;
-    m << "gain schedule: time " << t << " is outside [" << t0 << ", " << t1 << "]";
-    throw std::out_of_range(m.str());
-  }
+  const double slack = requireWithin(t, t0, t1);
   // A sample time computed as t0 + k/f elsewhere may differ from times_(k) by rounding: the same
   // 1e-9-of-a-period tolerance as the sample grid (sampleTimes) and checkGainScheduleApplies.
   const double tol = sampleRate_ > 0.0 ? 1e-9 / sampleRate_ : slack;

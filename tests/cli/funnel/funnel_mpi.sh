@@ -8,14 +8,7 @@
 # (the part "mpi" is registered only when trellis-mpi is built; without a working mpirun it fails).
 # The cart-pole held upright for 3 s: a closed loop takes about 1 ms.
 part=${1:?usage: funnel_mpi.sh threads|mpi}
-fail() { echo "FAILED: $*" >&2; exit 1; }
-run() {
-  expected=$1; shift
-  status=0
-  "$@" > out.txt 2> err.txt || status=$?
-  [ "$status" = "$expected" ] || fail "exit status $status, expected $expected: $* ($(cat err.txt))"
-}
-err_has() { grep -qF -- "$1" err.txt || fail "stderr lacks '$1': $(cat err.txt)"; }
+. "$SOURCE_DIR/tests/cli/shell/common.sh"  # fail, run, err_has, out_has
 absent() { for f in "$@"; do [ ! -e "$f" ] || fail "$f was written"; done; }
 
 CART="$SOURCE_DIR/examples/scenes/cart_pole.json"
