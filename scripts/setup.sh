@@ -12,6 +12,11 @@ packages=(
   nlohmann-json3-dev     # scene files (JSON)
   libtinyxml2-dev        # URDF import (XML with line numbers)
   libsundials-dev        # CVODES: Riccati / trajectory integration (control, planned)
+  # LAPACK: the Schur forms and inverses of the algebraic Riccati solvers (control/src/lapack.cpp),
+  # linked as the generic liblapack.so / libblas.so, which Debian's alternatives point at the
+  # reference implementation (liblapack-dev, libblas-dev) or at OpenBLAS (libopenblas-dev, the
+  # higher priority, so the default once installed: 3-4x faster CAREs at n = 400, bench/README.md)
+  liblapack-dev libblas-dev libopenblas-dev
   openmpi-bin libopenmpi-dev  # trellis-mpi: `mpirun trellis-mpi funnel` (docs/funnels.md)
   coinor-libipopt-dev    # Ipopt: trajectory optimization (optimization, planned)
   catch2                 # Catch2 2.13: the test suite
