@@ -66,7 +66,8 @@ namespace {
 /// upper triangular with corners (±(z^k)ᵀ, U_k, z^k) — the even powers' U_k antisymmetric —, so
 /// p(X) = V + U, q(X) = V − U need eight c×c products, and q F = p is solved for the two corners
 /// used, F₂₂ = R_q⁻¹R_p and F₁₂ = (R_pᵀ)⁻¹(U_p − U_q F₂₂) (q's top-left corner is R_pᵀ, as
-/// q(−zᵀ) = p(z)ᵀ). A workspace: no allocation after the first call at a size.
+/// q(−zᵀ) = p(z)ᵀ). A workspace: its buffers are kept from call to call (the symmetrizations
+/// still evaluate one temporary each).
 class BlockExponential {
  public:
   void operator()(const Eigen::MatrixXd& Z, const Eigen::MatrixXd& P, Eigen::Index nu, Eigen::MatrixXd& E,
