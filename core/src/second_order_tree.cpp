@@ -118,10 +118,6 @@ TRELLIS_LANES_INLINE void sinCos(const Lanes<L, W>& x, Lanes<L, W>& s, Lanes<L, 
 }
 
 template <class T>
-TRELLIS_LANES_INLINE Mat3<T> operator+(const Mat3<T>& a, const Mat3<T>& b) {
-  return {{a.c[0] + b.c[0], a.c[1] + b.c[1], a.c[2] + b.c[2]}};
-}
-template <class T>
 TRELLIS_LANES_INLINE Mat3<T>& operator+=(Mat3<T>& a, const Mat3<T>& b) {
   for (int j = 0; j < 3; ++j) a.c[j] += b.c[j];
   return a;
