@@ -2,6 +2,7 @@
 #include "trellis/control/lyapunov.hpp"
 
 #include "lapack.hpp"
+#include "matrix_equation_schur.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -18,25 +19,13 @@ using Eigen::MatrixXd;
 
 MatrixEquationSolution solveLyapunov(const MatrixXd& F, const MatrixXd& C) {
   const Index n = F.rows();
-  if (F.cols() != n || C.rows() != n || C.cols() != n) {
-    std::ostringstream m;
-    m << "solveLyapunov: F and C must be square and of the same size, got F " << F.rows() << "x"
-      << F.cols() << " and C " << C.rows() << "x" << C.cols();
-    throw std::invalid_argument(m.str());
-  }
+  detail::requireSquarePair("solveLyapunov", F, C);
   MatrixEquationSolution out;
   if (n == 0) return out;
   // F = U T Uᵀ (T quasi-triangular), X = U Y Uᵀ: Tᵀ Y + Y T = −Uᵀ C U, a triangular Sylvester
   // equation (dtrsyl). Its operator has the eigenvalues λ_i + λ_j.
   detail::lapack::RealSchur schur(n, true);
-  const int info = schur.compute(F);
-  if (info != 0) {
-    out.status.set(MatrixEquationCode::kNoConvergence,
-                   info > n ? std::string("solveLyapunov: F has a non-finite entry")
-                            : "solveLyapunov: the Schur form of F did not converge (LAPACK dgees "
-                              "INFO = " + std::to_string(info) + ")");
-    return out;
-  }
+  if (!detail::realSchurOrStatus("solveLyapunov", F, schur, out)) return out;
   // Singular when some λ_i + conj(λ_j) is at rounding level (the same test, and the same first
   // Schur column j in the status, as a pivot test of a complex column-by-column substitution).
   const double tiny =

@@ -2,6 +2,7 @@
 #include "trellis/control/stein.hpp"
 
 #include "lapack.hpp"
+#include "matrix_equation_schur.hpp"
 #include "schur_substitution.hpp"
 
 #include <algorithm>
@@ -61,23 +62,11 @@ void triangularize(const MatrixXd& T, const MatrixXd& U, MatrixXcd& Tc, MatrixXc
 
 MatrixEquationSolution solveStein(const MatrixXd& F, const MatrixXd& C) {
   const Index n = F.rows();
-  if (F.cols() != n || C.rows() != n || C.cols() != n) {
-    std::ostringstream m;
-    m << "solveStein: F and C must be square and of the same size, got F " << F.rows() << "x"
-      << F.cols() << " and C " << C.rows() << "x" << C.cols();
-    throw std::invalid_argument(m.str());
-  }
+  detail::requireSquarePair("solveStein", F, C);
   MatrixEquationSolution out;
   if (n == 0) return out;
   detail::lapack::RealSchur schur(n, true);
-  const int info = schur.compute(F);
-  if (info != 0) {
-    out.status.set(MatrixEquationCode::kNoConvergence,
-                   info > n ? std::string("solveStein: F has a non-finite entry")
-                            : "solveStein: the Schur form of F did not converge (LAPACK dgees INFO "
-                              "= " + std::to_string(info) + ")");
-    return out;
-  }
+  if (!detail::realSchurOrStatus("solveStein", F, schur, out)) return out;
   // F = U T Uᴴ, X = U Y Uᴴ: Tᴴ Y T − Y + Uᴴ C U = 0, solved column by column:
   // (T_jj Tᴴ − I) Y_j = −C̃_j − Tᴴ Σ_{k<j} Y_k T_kj  (lower triangular).
   MatrixXcd T, Uc;
