@@ -1,6 +1,7 @@
 // care.cpp — the continuous algebraic Riccati equation: scaled sign function of the balanced
-// Hamiltonian (LAPACK's inverse), then Newton–Kleinman steps (Lyapunov solves on LAPACK's Schur
-// form; see trellis/control/algebraic_riccati.hpp).
+// Hamiltonian (in its symmetric form, on LAPACK's symmetric indefinite inverse), then
+// Newton–Kleinman steps (Lyapunov solves on LAPACK's Schur form; see
+// trellis/control/algebraic_riccati.hpp).
 #include "trellis/control/care.hpp"
 
 #include "algebraic_riccati_common.hpp"
@@ -39,34 +40,43 @@ LqrResult solveCare(const MatrixXd& A, const MatrixXd& B, const MatrixXd& Q, con
   LqrResult res;
   res.stateScaling = p.d;
 
-  // Sign iteration Z ← (Z/c + c Z⁻¹)/2, c = |det Z|^{1/2n}, until Z = sign(H), H balanced. The
-  // inverse is LAPACK's (dgetrf + dgetri, blocked); Z, its inverse W and the pivots are allocated
-  // here, once per solve.
-  MatrixXd Z(2 * n, 2 * n), W(2 * n, 2 * n);
-  Z << p.A, -p.G, -p.Q, -p.A.transpose();
-  detail::lapack::LuInverse inverse(2 * n);
+  // Sign iteration Z ← (Z/c + c Z⁻¹)/2, c = |det Z|^{1/2n}, until Z = sign(H), H balanced. Every
+  // iterate is Hamiltonian, so it is carried as the symmetric W = J Z (J = [[0, I], [−I, 0]]):
+  //   W ← (W/c + c J W⁻¹ J)/2,  J Y J = [[−Y22, Y21], [Y12, −Y11]],
+  // since Z⁻¹ = (−J W)⁻¹ = W⁻¹ J (Byers' structured iteration). W⁻¹ is LAPACK's symmetric
+  // indefinite inverse (Bunch–Kaufman, n³ flops for the 2n×2n matrix instead of 2n³ by LU), and
+  // |det Z| = |det W|. W, its inverse Y and the pivots are allocated here, once per solve.
+  MatrixXd W(2 * n, 2 * n), Y(2 * n, 2 * n);
+  W << -p.Q, -p.A.transpose(), -p.A, p.G;
+  detail::lapack::SymmetricInverse inverse(2 * n);
   bool scaling = true, converged = false;
   int stalled = 0;
   double prev = std::numeric_limits<double>::infinity();
   for (int it = 0; it < options.maxIterations; ++it) {
     res.iterations = it + 1;
-    W = Z;
+    Y = W;
     double logdet = 0.0;
-    if (inverse.invert(W, logdet) != 0) {
+    if (inverse.invert(Y, logdet) != 0) {
       diagnoseFailure(res, p, false, options, "solveCare",
                       "the sign iteration met an exactly singular matrix at iteration " +
                           std::to_string(it + 1));
       return res;
     }
     const double c = scaling ? std::exp(logdet / static_cast<double>(2 * n)) : 1.0;
-    W = 0.5 * (Z / c + c * W);  // the next iterate, in place of Z⁻¹
-    if (!W.allFinite()) {
+    // The next iterate, in place of W⁻¹: (W/c + c J Y J)/2, J Y J by swapping Y's blocks.
+    Y.topLeftCorner(n, n).swap(Y.bottomRightCorner(n, n));
+    Y.topRightCorner(n, n).swap(Y.bottomLeftCorner(n, n));
+    Y.topLeftCorner(n, n) *= -1.0;
+    Y.bottomRightCorner(n, n) *= -1.0;
+    Y = 0.5 * (W / c + c * Y);
+    if (!Y.allFinite()) {
       diagnoseFailure(res, p, false, options, "solveCare",
                       "the sign iteration overflowed at iteration " + std::to_string(it + 1));
       return res;
     }
-    const double rel = (W - Z).lpNorm<1>() / std::max(1.0, W.lpNorm<1>());
-    Z.swap(W);
+    // ‖·‖₁ of J X equals that of X (J permutes rows and flips signs): the same test as on Z.
+    const double rel = (Y - W).lpNorm<1>() / std::max(1.0, Y.lpNorm<1>());
+    W.swap(Y);
     if (rel < 1e-2) scaling = false;  // quadratic convergence without scaling near the end
     if (rel <= options.tolerance || (!scaling && rel < 1e-8 && rel >= 0.5 * prev)) {
       converged = true;
@@ -88,6 +98,9 @@ LqrResult solveCare(const MatrixXd& A, const MatrixXd& B, const MatrixXd& Q, con
                         std::to_string(options.maxIterations) + " iterations");
     return res;
   }
+  // Z = sign(H) = −J W = [[−W21, −W22], [W11, W12]].
+  const MatrixXd Z = (MatrixXd(2 * n, 2 * n) << -W.bottomLeftCorner(n, n), -W.bottomRightCorner(n, n),
+                      W.topLeftCorner(n, n), W.topRightCorner(n, n)).finished();
   // The stable invariant subspace: [W12; W22 + I] X = −[W11 + I; W21].
   MatrixXd lhs(2 * n, n), rhs(2 * n, n);
   lhs << Z.topRightCorner(n, n), Z.bottomRightCorner(n, n) + MatrixXd::Identity(n, n);

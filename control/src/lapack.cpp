@@ -1,6 +1,7 @@
 // lapack.cpp — the LAPACK calls of control/ (see lapack.hpp); the only file that declares them.
 #include "lapack.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <stdexcept>
@@ -8,9 +9,10 @@
 
 // Fortran LAPACK (LP64: INTEGER is int); hidden CHARACTER lengths last, as gfortran passes them.
 extern "C" {
-void dgetrf_(const int* m, const int* n, double* a, const int* lda, int* ipiv, int* info);
-void dgetri_(const int* n, double* a, const int* lda, const int* ipiv, double* work,
-             const int* lwork, int* info);
+void dsytrf_(const char* uplo, const int* n, double* a, const int* lda, int* ipiv, double* work,
+             const int* lwork, int* info, std::size_t uploLen);
+void dsytri2_(const char* uplo, const int* n, double* a, const int* lda, const int* ipiv,
+              double* work, const int* lwork, int* info, std::size_t uploLen);
 void dgees_(const char* jobvs, const char* sort, int (*select)(const double*, const double*),
             const int* n, double* a, const int* lda, int* sdim, double* wr, double* wi, double* vs,
             const int* ldvs, double* work, const int* lwork, int* bwork, int* info,
@@ -39,30 +41,48 @@ int checkInfo(int info, const char* routine) {
 
 }  // namespace
 
-LuInverse::LuInverse(Eigen::Index n) : n_(checkedSize(n)), ipiv_(static_cast<std::size_t>(n_)) {
-  double query = 0.0, unused = 0.0;
+SymmetricInverse::SymmetricInverse(Eigen::Index n) : n_(checkedSize(n)), ipiv_(static_cast<std::size_t>(n_)) {
+  double qf = 0.0, qi = 0.0, unused = 0.0;
   const int lwork = -1;
   int info = 0;
-  dgetri_(&n_, &unused, &n_, ipiv_.data(), &query, &lwork, &info);
-  checkInfo(info, "dgetri (workspace query)");
-  work_.resize(static_cast<std::size_t>(std::max(static_cast<double>(n_), query)));
+  dsytrf_("L", &n_, &unused, &n_, ipiv_.data(), &qf, &lwork, &info, 1);
+  checkInfo(info, "dsytrf (workspace query)");
+  dsytri2_("L", &n_, &unused, &n_, ipiv_.data(), &qi, &lwork, &info, 1);
+  checkInfo(info, "dsytri2 (workspace query)");
+  work_.resize(static_cast<std::size_t>(std::max({static_cast<double>(n_), qf, qi})));
 }
 
-int LuInverse::invert(Eigen::MatrixXd& Z, double& logAbsDet) {
-  if (Z.rows() != n_ || Z.cols() != n_) throw std::logic_error("lapack: LuInverse size mismatch");
+int SymmetricInverse::invert(Eigen::MatrixXd& W, double& logAbsDet) {
+  if (W.rows() != n_ || W.cols() != n_) throw std::logic_error("lapack: SymmetricInverse size mismatch");
+  const int lwork = static_cast<int>(work_.size());
   int info = 0;
-  dgetrf_(&n_, &n_, Z.data(), &n_, ipiv_.data(), &info);
-  checkInfo(info, "dgetrf");
+  dsytrf_("L", &n_, W.data(), &n_, ipiv_.data(), work_.data(), &lwork, &info, 1);
+  checkInfo(info, "dsytrf");
+  // det W = Π det D_k: ipiv_k > 0 marks a 1×1 block D_kk; ipiv_k = ipiv_{k+1} < 0 a 2×2 block
+  // [[D_kk, D_k+1,k], [D_k+1,k, D_k+1,k+1]] (lower storage, 1-based pivots).
   logAbsDet = 0.0;
-  for (int i = 0; i < n_; ++i) {
-    const double u = std::abs(Z(i, i));
-    if (!(u > 0.0) || !std::isfinite(u)) return info > 0 ? info : i + 1;
-    logAbsDet += std::log(u);
+  for (int k = 0; k < n_; ++k) {
+    double logDet = 0.0;
+    if (ipiv_[static_cast<std::size_t>(k)] < 0 && k + 1 < n_) {
+      // ac − b² = b²((a/b)(c/b) − 1): Bunch–Kaufman takes a 2×2 block when |b| dominates, and the
+      // logarithms of the two factors do not overflow where the product would.
+      const double a = W(k, k), b = W(k + 1, k), c = W(k + 1, k + 1);
+      logDet = b != 0.0 ? 2.0 * std::log(std::abs(b)) + std::log(std::abs((a / b) * (c / b) - 1.0))
+                        : std::log(std::abs(a * c));
+      ++k;
+    } else {
+      logDet = std::log(std::abs(W(k, k)));
+    }
+    if (!std::isfinite(logDet)) return info > 0 ? info : k + 1;  // an exactly singular or non-finite block
+    logAbsDet += logDet;
   }
   if (info > 0) return info;
-  const int lwork = static_cast<int>(work_.size());
-  dgetri_(&n_, Z.data(), &n_, ipiv_.data(), work_.data(), &lwork, &info);
-  return checkInfo(info, "dgetri");
+  dsytri2_("L", &n_, W.data(), &n_, ipiv_.data(), work_.data(), &lwork, &info, 1);
+  checkInfo(info, "dsytri2");
+  if (info > 0) return info;
+  for (int j = 1; j < n_; ++j)
+    for (int i = 0; i < j; ++i) W(i, j) = W(j, i);
+  return 0;
 }
 
 RealSchur::RealSchur(Eigen::Index n, bool vectors)

@@ -1,7 +1,7 @@
 // lapack.hpp (private) — the LAPACK routines control/ calls, in one place, behind Eigen types.
 //
 // Why LAPACK: at n ≥ 100 the algebraic Riccati solvers spend their time in dense factorizations
-// (the sign iteration's 2n×2n inverse, the Schur forms of the Newton steps' closed loops, the
+// (the sign iteration's 2n×2n symmetric inverse, the Schur forms of the Newton steps' closed loops, the
 // closed-loop eigenvalues). LAPACK's are blocked (its Schur form also uses multishift QR with
 // aggressive early deflation), so that they run at the speed of the BLAS they are linked with;
 // Eigen's Schur forms are unblocked, and its products are compiled for baseline x86-64.
@@ -17,16 +17,19 @@
 
 namespace trellis::detail::lapack {
 
-/// In-place inverse of a square matrix by LU with partial pivoting (dgetrf, then dgetri). The pivot
-/// indices and dgetri's workspace are sized at construction, so invert() allocates nothing.
-class LuInverse {
+/// In-place inverse of a symmetric (indefinite) matrix by the Bunch–Kaufman factorization
+/// W = L D Lᵀ (dsytrf, D with 1×1 and 2×2 blocks), then dsytri2 (blocked): n³ flops against 2n³
+/// for LU and its inverse. The pivots and workspaces are sized at construction, so invert()
+/// allocates nothing.
+class SymmetricInverse {
  public:
-  /// Workspace for n×n matrices (dgetri's optimal size, queried once).
-  explicit LuInverse(Eigen::Index n);
-  /// Z ← Z⁻¹. logAbsDet ← Σ log|U_ii| of the factor (also when the inverse is not formed).
-  /// Returns dgetrf's INFO: k > 0 when U_kk is exactly zero (Z is left factored, not inverted);
-  /// also k > 0 when U_kk is not finite.
-  int invert(Eigen::MatrixXd& Z, double& logAbsDet);
+  /// Workspace for n×n matrices (dsytrf's and dsytri2's optimal sizes, queried once).
+  explicit SymmetricInverse(Eigen::Index n);
+  /// W ← W⁻¹ (both triangles), reading only W's lower triangle. logAbsDet ← log|det W| =
+  /// Σ log|det D_k| over D's blocks (also when the inverse is not formed). Returns dsytrf's INFO:
+  /// k > 0 when D's block at k is exactly singular (W is left factored, not inverted); also k > 0
+  /// when that block's determinant is not finite.
+  int invert(Eigen::MatrixXd& W, double& logAbsDet);
 
  private:
   int n_;

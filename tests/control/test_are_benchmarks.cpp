@@ -45,6 +45,20 @@ double scaledError(const MatrixXd& exact, const MatrixXd& got) {
   return scaledError(exact, got, exact.cwiseAbs());
 }
 
+/// max_kj |K_kj − Kexp_kj| / (|R⁻¹Bᵀ|·D)_kj, D_ij = max(√(Ŝ_ii Ŝ_jj), Ŝ_ij) with Ŝ = t.Sscale: the
+/// error of a continuous-time gain K = R⁻¹(BᵀS + Nᵀ) in units of S's scaled error (a K from S
+/// with scaledError ≤ tol has this ≤ tol).
+template <class Transformed>
+double scaledKError(const Transformed& t, const MatrixXd& K, const MatrixXd& Kexp) {
+  const Eigen::Index n = t.S.rows();
+  MatrixXd D(n, n);
+  for (Eigen::Index j = 0; j < n; ++j)
+    for (Eigen::Index i = 0; i < n; ++i)
+      D(i, j) = std::max(std::sqrt(t.Sscale(i, i) * t.Sscale(j, j)), t.Sscale(i, j));
+  const MatrixXd bound = (t.R.inverse() * t.B.transpose()).cwiseAbs() * D;
+  return ((K - Kexp).cwiseAbs().array() / bound.array()).maxCoeff();
+}
+
 MatrixXd diag(std::initializer_list<double> v) {
   VectorXd d(static_cast<Eigen::Index>(v.size()));
   Eigen::Index i = 0;
@@ -323,8 +337,11 @@ TEST_CASE("Riccati: cross term N and indefinite Q with a stabilizing solution", 
     CHECK(scaledError(t.S, res.S, t.Sscale) < 1e-11);
     // K = R⁻¹(BᵀS + Nᵀ) closes a Hurwitz loop.
     CHECK(res.closedLoopEigenvalues.real().maxCoeff() < 0.0);
+    // K = R⁻¹(BᵀS + Nᵀ) is as accurate as S: with |ΔS_ij| ≤ tol·D_ij (D the scale of
+    // scaledError), |ΔK| ≤ tol·|R⁻¹Bᵀ|·D entry by entry — a bound that follows the states' and
+    // inputs' units (a norm of K relative to ‖K‖ does not: K's columns span 1e4 in scale here).
     const MatrixXd Kexp = t.R.inverse() * (t.B.transpose() * t.S + t.N.transpose());
-    CHECK((res.K - Kexp).norm() <= 1e-9 * Kexp.norm());
+    CHECK(scaledKError(t, res.K, Kexp) < 1e-11);
   }
   SECTION("DARE") {
     // q < 0; an unstable plant; q > 0 but q < n²/r; a plain mode.

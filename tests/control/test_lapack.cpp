@@ -74,40 +74,67 @@ std::vector<std::complex<double>> sorted(const Eigen::VectorXcd& v) {
 
 }  // namespace
 
-TEST_CASE("LAPACK LU inverse against Eigen's", "[lqr][lapack]") {
+TEST_CASE("LAPACK symmetric indefinite inverse against Eigen's LU inverse", "[lqr][lapack]") {
   std::mt19937 rng(31);
   for (const double decades : {0.0, 3.0}) {
-    for (const Index n : {1, 7, 60}) {
-      const MatrixXd Z = badlyScaled(rng, gaussian(rng, n, n), decades);
-      MatrixXd W = Z;
-      lapack::LuInverse inverse(n);
+    for (const Index n : {1, 2, 7, 60}) {
+      // Symmetric and indefinite (half the eigenvalues negative: Bunch–Kaufman takes 2×2 pivots),
+      // badly scaled symmetrically (D M D keeps the symmetry), and the J·Z form the CARE's sign
+      // iteration inverts: J [[A, −G], [−Q, −Aᵀ]] = [[−Q, −Aᵀ], [−A, G]].
+      MatrixXd W;
+      if (n % 2 == 0 && n > 2) {
+        const Index h = n / 2;
+        const MatrixXd A = gaussian(rng, h, h), b = gaussian(rng, h, 2), c = gaussian(rng, h, h);
+        W.resize(n, n);
+        W << -(c * c.transpose()), -A.transpose(), -A, b * b.transpose();
+      } else {
+        const MatrixXd M = gaussian(rng, n, n);
+        W = M + M.transpose();
+      }
+      std::uniform_real_distribution<double> ud(-decades, decades);
+      const VectorXd d = VectorXd::NullaryExpr(n, [&](Index) { return std::pow(10.0, ud(rng)); });
+      W = (d.asDiagonal() * W * d.asDiagonal()).eval();
+      MatrixXd Y = W;
+      Y.triangularView<Eigen::StrictlyUpper>().setConstant(std::numeric_limits<double>::quiet_NaN());
+      lapack::SymmetricInverse inverse(n);
       double logdet = std::numeric_limits<double>::quiet_NaN();
-      REQUIRE(inverse.invert(W, logdet) == 0);
-      const Eigen::PartialPivLU<MatrixXd> lu(Z);
+      REQUIRE(inverse.invert(Y, logdet) == 0);  // reads only the lower triangle (upper is NaN)
+      const Eigen::PartialPivLU<MatrixXd> lu(W);
       const MatrixXd ref = lu.inverse();
-      // Both are backward stable: Z·W = I to cond·eps, and the two inverses agree to cond·eps.
-      const double cond = Z.norm() * ref.norm();
+      const double cond = W.norm() * ref.norm();
       INFO("n = " << n << ", decades = " << decades << ", cond = " << cond);
-      CHECK((Z * W - MatrixXd::Identity(n, n)).norm() <= 100 * cond * kEps);
-      CHECK((W - ref).norm() <= 100 * cond * kEps * ref.norm());
-      // log|det Z| = Σ log|U_ii| of either factorization.
+      CHECK((Y - Y.transpose()).norm() == 0.0);  // both triangles written, symmetric
+      CHECK((W * Y - MatrixXd::Identity(n, n)).norm() <= 100 * cond * kEps);
+      CHECK((Y - ref).norm() <= 100 * cond * kEps * ref.norm());
+      // log|det W| from D's 1×1 and 2×2 blocks against Σ log|U_ii| of the LU.
       const double refLogdet = lu.matrixLU().diagonal().cwiseAbs().array().log().sum();
       CHECK(std::abs(logdet - refLogdet) <= 1e-12 * std::max(1.0, std::abs(refLogdet)) + 1e-12 * n);
-      // The workspace is reused: a second inversion in the same object gives Z back.
-      REQUIRE(inverse.invert(W, logdet) == 0);
-      CHECK((W - Z).norm() <= 100 * cond * kEps * Z.norm());
+      // The workspace is reused: a second inversion in the same object gives W back.
+      REQUIRE(inverse.invert(Y, logdet) == 0);
+      CHECK((Y - W).norm() <= 100 * cond * kEps * W.norm());
     }
   }
-  SECTION("an exactly singular matrix is reported with its zero pivot, not inverted") {
+  SECTION("a 2×2 pivot block's determinant: [[0, b], [b, 0]] has |det| = b²") {
+    MatrixXd W{{0.0, 3.0e200}, {3.0e200, 0.0}};  // b² overflows; its logarithm does not
+    lapack::SymmetricInverse inverse(2);
+    double logdet = 0.0;
+    REQUIRE(inverse.invert(W, logdet) == 0);
+    CHECK(logdet == Approx(2.0 * std::log(3.0e200)).epsilon(1e-14));
+    CHECK(W(0, 1) == Approx(1.0 / 3.0e200).epsilon(1e-14));
+    CHECK(W(0, 0) == 0.0);
+  }
+  SECTION("an exactly singular matrix is reported with its zero block, not inverted") {
     MatrixXd Z = MatrixXd::Identity(3, 3);
     Z(2, 2) = 0.0;
-    lapack::LuInverse inverse(3);
+    lapack::SymmetricInverse inverse(3);
     double logdet = 0.0;
     CHECK(inverse.invert(Z, logdet) == 3);
+    MatrixXd S{{1.0, 0.0, 0.0}, {0.0, 1.0, 1.0}, {0.0, 1.0, 1.0}};  // rank 2
+    CHECK(inverse.invert(S, logdet) > 0);
     MatrixXd N = MatrixXd::Identity(2, 2);
     N(1, 1) = std::numeric_limits<double>::quiet_NaN();
-    lapack::LuInverse inverse2(2);
-    CHECK(inverse2.invert(N, logdet) == 2);
+    lapack::SymmetricInverse inverse2(2);
+    CHECK(inverse2.invert(N, logdet) > 0);
   }
 }
 
