@@ -157,8 +157,10 @@ std::string samplesTable(const FunnelResult& r, const std::vector<std::string>& 
 /// The funnel over time, one panel per chosen state: the reference x_ref,i(t), the band
 /// x_ref,i(t_s) ± the level set's extent at ρ(t_s) (a polygon through the start times, a bar for
 /// one), and the sampled starts at their start time (green: succeeded, red: failed).
+/// units[i]: state i's unit (rad or m, rad/s or m/s: the scene's lengths are metres).
 std::string funnelSvg(const FunnelProblem& problem, const FunnelResult& r, const Trajectory& reference,
-                      const std::vector<int>& states, const std::vector<std::string>& names) {
+                      const std::vector<int>& states, const std::vector<std::string>& names,
+                      const std::vector<std::string>& units) {
   const double width = 760, panel = 220, left = 130, right = 20, top = 30;
   const double t0 = reference.startTime(), T = reference.endTime();
   std::ostringstream out;
@@ -186,12 +188,13 @@ std::string funnelSvg(const FunnelProblem& problem, const FunnelResult& r, const
     const auto Y = [&](double v) { return y0 + 10 + h * (1.0 - (v - lo) / (hi - lo)); };
     out << "<rect x=\"" << left << "\" y=\"" << y0 + 10 << "\" width=\"" << width - left - right << "\" height=\"" << h
         << "\" fill=\"none\" stroke=\"#888\"/>\n";
-    out << "<text x=\"4\" y=\"" << y0 + 10 + h / 2 + 16 << "\">" << names[static_cast<std::size_t>(i)] << "</text>\n";
+    out << "<text x=\"4\" y=\"" << y0 + 10 + h / 2 + 16 << "\">" << names[static_cast<std::size_t>(i)] << " ["
+        << units[static_cast<std::size_t>(i)] << "]</text>\n";
     out << "<text x=\"" << left - 4 << "\" y=\"" << y0 + 20 << "\" text-anchor=\"end\">" << formatNumber(hi, 3) << "</text>\n";
     out << "<text x=\"" << left - 4 << "\" y=\"" << y0 + 10 + h << "\" text-anchor=\"end\">" << formatNumber(lo, 3) << "</text>\n";
-    out << "<text x=\"" << left << "\" y=\"" << y0 + h + 26 << "\">t = " << formatNumber(t0, 4) << "</text>\n";
+    out << "<text x=\"" << left << "\" y=\"" << y0 + h + 26 << "\">t = " << formatNumber(t0, 4) << " s</text>\n";
     out << "<text x=\"" << width - right << "\" y=\"" << y0 + h + 26 << "\" text-anchor=\"end\">t = " << formatNumber(T, 4)
-        << "</text>\n";
+        << " s</text>\n";
     if (r.startTimes.size() > 1) {
       out << "<polygon fill=\"#9ecae1\" fill-opacity=\"0.6\" stroke=\"none\" points=\"";
       for (std::size_t s = 0; s < r.startTimes.size(); ++s) out << X(r.startTimes[s]) << "," << Y(centre[s] + half[s]) << " ";
@@ -248,7 +251,7 @@ int runFunnel(std::span<const std::string> args, std::ostream& out) {
   std::optional<FunnelProblem> problem;
   FunnelOptions funnel;
   std::string scenePath, trajectoryPath, gainsPath, outPath;
-  std::vector<std::string> names;
+  std::vector<std::string> names, units;
   std::vector<int> plotStates;
   long total = 0;
   try {
@@ -323,6 +326,12 @@ int runFunnel(std::span<const std::string> args, std::ostream& out) {
                                                       gainsPath + " (for the scene " + scenePath + ")");
     if (!note.empty() && rank == 0) std::cerr << "funnel: warning: " << note << "\n";
     names = GainSchedule::stateNames(model.configNames());
+    units.resize(names.size());
+    for (int j = 0; j < model.nq(); ++j) {
+      const bool revolute = model.joints()[static_cast<std::size_t>(j)].revolute;
+      units[static_cast<std::size_t>(j)] = revolute ? "rad" : "m";
+      units[static_cast<std::size_t>(model.nq() + j)] = revolute ? "rad/s" : "m/s";
+    }
     costToGo.emplace(CostToGo::readCsvFile(costPath));
     costToGo->checkNames(names, costPath + " (for the scene " + scenePath + ")");
 
@@ -409,7 +418,7 @@ int runFunnel(std::span<const std::string> args, std::ostream& out) {
   writeFileAtomically(outPath, funnelTable(result, used, names));
   if (auto v = parsed->value("--samples-out")) writeFileAtomically(*v, samplesTable(result, names));
   if (auto v = parsed->value("--plot")) {
-    writeFileAtomically(*v, funnelSvg(*problem, result, *reference, plotStates, names));
+    writeFileAtomically(*v, funnelSvg(*problem, result, *reference, plotStates, names, units));
   }
 
   // The command that reproduces the worst failing start at the reference's start.

@@ -27,6 +27,10 @@ if [ "$part" = threads ]; then
 grep -q "^0,100,4,[0-3],[1-4],0$" t1.csv || fail "expected failures at level 100: $(cat t1.csv)"
 grep -q "^# worst failing start t=0 " t1.csv || fail "no worst failing start: $(cat t1.csv)"
 grep -q "<svg" t1.svg || fail "no plot"
+# Axes with units: the cart (prismatic) in m, the pole (revolute) in rad, time in s.
+grep -q ">x \[m\]<" t1.svg || fail "no unit on the cart's axis: $(grep '<text' t1.svg | head -5)"
+grep -q ">theta \[rad\]<" t1.svg || fail "no unit on the pole's axis"
+grep -q ">t = 3 s<" t1.svg || fail "no unit on the time axis"
 [ "$(wc -l < t1_samples.csv)" = 37 ] || fail "t1_samples.csv: $(wc -l < t1_samples.csv) lines, expected 37"
 # The printed command reproduces the worst start with `trellis simulate`.
 reproduce=$(grep "^worst failing start at t0" out.txt | sed 's/^[^:]*: trellis //; s|CLOSED.csv|closed.csv|')
