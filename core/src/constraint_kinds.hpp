@@ -160,15 +160,44 @@ struct PointOnPlaneKind {
     const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
     return {n.p.dot(d), n.v.dot(d) + n.p.dot(dd), n.a.dot(d) + 2.0 * n.v.dot(dd) + n.p.dot(ddd)};
   }
-  static ConstraintEval tangent(const Data& data, const Direction& dir, const Constraint& c) {
+  /// What the rows on one pair of points share along a direction: d = p_a − p_b with its
+  /// velocity and acceleration (`kin`), and their tangents (`tan`). The three rows of a sticking
+  /// contact (normal and two tangents, the same two points) differ only in their direction.
+  /// The plane body's tangent too (`planeBody`, when `planeMoves`): it turns each row's normal.
+  struct PairTangent {
+    PointKin kin, tan;
+    BodyTangent planeBody;
+    bool planeMoves = false;
+  };
+  static PairTangent pairTangent(const Data& data, const Direction& dir, const Constraint& c) {
     const PointKin a = pointKin(data, c.a), b = pointKin(data, c.b);
-    const PointKin ta = pointTangent(data, dir, c.a.joint, a), tb = pointTangent(data, dir, c.b.joint, b);
+    PairTangent pt;
+    pt.planeMoves = dir.moves(c.a.joint);
+    PointKin ta;
+    if (pt.planeMoves) {
+      pt.planeBody = bodyTangent(data, dir, c.a.joint);
+      ta = pointTangentOf(data, c.a.joint, pt.planeBody, a);
+    }
+    const PointKin tb = pointTangent(data, dir, c.b.joint, b);
+    pt.kin = {a.p - b.p, a.v - b.v, a.a - b.a};
+    pt.tan = {ta.p - tb.p, ta.v - tb.v, ta.a - tb.a};
+    return pt;
+  }
+  static ConstraintEval tangent(const Data& data, const Direction& dir, const Constraint& c) {
+    return fromPairTangent(data, c, pairTangent(data, dir, c));
+  }
+  static ConstraintEval fromPairTangent(const Data& data, const Constraint& c, const PairTangent& pt) {
     const PointKin n = directionKin(data, c.a.joint, c.direction);
-    const PointKin tn = directionTangent(data, dir, c.a.joint, n);
-    const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
-    const Vector3d td = ta.p - tb.p, tdd = ta.v - tb.v, tddd = ta.a - tb.a;
+    const PointKin tn = pt.planeMoves ? directionTangentOf(data, c.a.joint, pt.planeBody, n) : PointKin{};
+    const Vector3d &d = pt.kin.p, &dd = pt.kin.v, &ddd = pt.kin.a;
+    const Vector3d &td = pt.tan.p, &tdd = pt.tan.v, &tddd = pt.tan.a;
     return {tn.p.dot(d) + n.p.dot(td), tn.v.dot(d) + n.v.dot(td) + tn.p.dot(dd) + n.p.dot(tdd),
             tn.a.dot(d) + n.a.dot(td) + 2.0 * (tn.v.dot(dd) + n.v.dot(tdd)) + tn.p.dot(ddd) + n.p.dot(tddd)};
+  }
+  /// Whether rows x and y are point-on-plane rows on the same two body points (and plane body).
+  static bool samePair(const Constraint& x, const Constraint& y) {
+    return x.type == ConstraintType::kPointOnPlane && y.type == ConstraintType::kPointOnPlane && x.a.joint == y.a.joint &&
+           x.b.joint == y.b.joint && x.a.local == y.a.local && x.b.local == y.b.local;
   }
   template <class Emit>
   static void forces(const Data& data, const Constraint& c, Emit&& emit) {
@@ -183,6 +212,25 @@ struct PointOnPlaneKind {
     const Vector3d n = bodyDirection(data, c), dn = bodyDirectionDisplacement(dir, c, n);
     emit(c.a.joint, pb, dpb, n, dn);
     emit(c.b.joint, pb, dpb, Vector3d(-n), Vector3d(-dn));
+  }
+  /// The wrench tangents (configuration direction) of `count` consecutive rows on one pair
+  /// (samePair) with multipliers lambda[k], together: one force f = Σ λ_k n_k at p_b on the plane
+  /// body and −f on the point body, δf = Σ λ_k δn_k — two wrench tangents instead of two per row
+  /// (forceAtTangent is linear in f, δf at one point).
+  template <class Emit>
+  static void pairWrenchTangents(const Data& data, const Direction& dir, const Constraint* rows, const double* lambda,
+                                 int count, Emit&& emit) {
+    const Constraint& c = rows[0];
+    const Vector3d pb = pointPosition(data, c.b), dpb = pointDisplacement(dir, c.b.joint, pb);
+    const bool turns = dir.moves(c.a.joint);  // bodyDirectionDisplacement's test, once
+    Vector3d f = Vector3d::Zero(), df = Vector3d::Zero();
+    for (int k = 0; k < count; ++k) {
+      const Vector3d n = bodyDirection(data, rows[k]);
+      f += lambda[k] * n;
+      if (turns) df += lambda[k] * Vector3d(ang(dir.Sk).cross(n));
+    }
+    emit(c.a.joint, forceAtTangent(pb, dpb, f, df));
+    emit(c.b.joint, forceAtTangent(pb, dpb, Vector3d(-f), Vector3d(-df)));
   }
 };
 
@@ -303,12 +351,15 @@ inline ConstraintEval constraintTangent(const Data& data, const Direction& dir, 
 }
 
 /// constraintTangent of every row the direction moves, as out(r, eval) (rows it does not move
-/// get zeros); consecutive point rows on one pair of body points share the pair's tangent.
+/// get zeros); consecutive point rows, and consecutive point-on-plane rows, on one pair of body
+/// points share the pair's tangent.
 template <class Out>
 inline void constraintTangents(const Model& model, const Data& data, const Direction& dir, Out&& out) {
   const auto& cs = model.constraints();
   PointKin pair;
   int pairRow = -1;  // the row whose point pair `pair` belongs to
+  PointOnPlaneKind::PairTangent planePair;
+  int planeRow = -1;  // the same for point-on-plane rows (a contact's normal and tangent rows)
   for (int r = 0; r < model.nc(); ++r) {
     const Constraint& c = cs[r];
     if (!dir.moves(c.a.joint) && !dir.moves(c.b.joint)) {
@@ -319,6 +370,12 @@ inline void constraintTangents(const Model& model, const Data& data, const Direc
         pairRow = r;
       }
       out(r, PointKind::fromDifferenceTangent(c, pair));
+    } else if (c.type == ConstraintType::kPointOnPlane) {
+      if (planeRow < 0 || !PointOnPlaneKind::samePair(cs[planeRow], c)) {
+        planePair = PointOnPlaneKind::pairTangent(data, dir, c);
+        planeRow = r;
+      }
+      out(r, PointOnPlaneKind::fromPairTangent(data, c, planePair));
     } else {
       out(r, constraintTangent(data, dir, c));
     }

@@ -34,6 +34,12 @@ inline __attribute__((always_inline)) void constraintForceTangents(const Model& 
       for (; e < model.nc() && PointKind::samePair(c, cs[e]); ++e) f[cs[e].axis] += data.lambda[e];
       PointKind::pairWrenchTangents(data, dir, c, f, emit);
       r = e;
+    } else if (c.type == ConstraintType::kPointOnPlane) {
+      // A contact's rows (normal, two tangents) on one pair: one force at p_b.
+      int e = r + 1;
+      while (e < model.nc() && PointOnPlaneKind::samePair(c, cs[e])) ++e;
+      PointOnPlaneKind::pairWrenchTangents(data, dir, &cs[r], &data.lambda[r], e - r, emit);
+      r = e;
     } else {
       constraintWrenchTangents(data, dir, c, data.lambda[r], emit);
       ++r;
