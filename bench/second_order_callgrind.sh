@@ -4,9 +4,10 @@
 # one exact linearization (issue 30's cost figures). Per-call counts are the difference of the
 # totals of two runs (ITER1 and ITER2 calls) over ITER2 − ITER1, which removes the set-up.
 #
-#   bench/second_order_callgrind.sh BUILD_DIR [what...]     (default: lin contract tensors fdjac)
+#   bench/second_order_callgrind.sh BUILD_DIR [what...]     (default: lin contract tensors fdjac;
+#   also contract_tape: the contraction on the recorded tape where the tree pass would run)
 set -eu
-build=${1:?usage: $0 BUILD_DIR [lin contract tensors fdjac]}
+build=${1:?usage: $0 BUILD_DIR [lin contract contract_tape tensors fdjac]}
 shift
 whats=${*:-"lin contract tensors fdjac"}
 prog="$build/bench/trellis_bench_second_order_profile"

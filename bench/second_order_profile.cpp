@@ -8,6 +8,8 @@
 // (bench/second_order_callgrind.sh), which removes the set-up.
 //   lin       computeLinearization
 //   contract  computeSecondOrderContraction (w = 1, ρ = 1; includes its linearization)
+//   contract_tape  the same on the recorded tape, also where the tree pass applies (the
+//             comparison of second_order.hpp's cost figures)
 //   tensors   computeSecondOrderTensors (includes its linearization)
 //   fdjac     central differences of the exact Jacobians: 2N linearizations (the baseline)
 #include "models.hpp"
@@ -15,6 +17,8 @@
 #include "trellis/core/linearization.hpp"
 #include "trellis/core/scene.hpp"
 #include "trellis/core/second_order.hpp"
+
+#include "second_order_tree.hpp"  // core/src: the switch to the tape
 
 #include <cmath>
 #include <cstdio>
@@ -33,7 +37,7 @@ int main(int argc, char** argv) {
   trellis::bench::ModelSpec spec;
   if (!trellis::bench::parseProfileModel(argv[1], argv[2], argv[3], spec)) return 2;
   const long iterations = argc > 5 ? std::atol(argv[5]) : 10;
-  if (what != "lin" && what != "contract" && what != "tensors" && what != "fdjac") {
+  if (what != "lin" && what != "contract" && what != "contract_tape" && what != "tensors" && what != "fdjac") {
     std::fprintf(stderr, "unknown algorithm '%s'\n", what.c_str());
     return 2;
   }
@@ -47,7 +51,9 @@ int main(int argc, char** argv) {
     }
     const int n = bm.model.nq(), N = 2 * n + bm.model.nu();
     trellis::Data data(bm.model);
+    trellis::detail::secondOrderForceTape(what == "contract_tape");
     trellis::SecondOrderWorkspace ws(bm.model, what == "tensors");
+    trellis::detail::secondOrderForceTape(false);
     const Eigen::VectorXd w = Eigen::VectorXd::Ones(n), rho = Eigen::VectorXd::Ones(bm.model.nc());
     Eigen::MatrixXd H(N, N), J(n, N);
     Eigen::VectorXd z(N), zz(N), qv(n), dqv(n), uv(N - 2 * n);
@@ -57,7 +63,7 @@ int main(int argc, char** argv) {
       if (what == "lin") {
         trellis::computeLinearization(bm.model, data, bm.q, bm.dq, bm.u);
         checksum += data.A(data.A.rows() - 1, 0);
-      } else if (what == "contract") {
+      } else if (what == "contract" || what == "contract_tape") {
         trellis::computeSecondOrderContraction(bm.model, data, ws, bm.q, bm.dq, bm.u, w, rho, H);
         checksum += H(0, 0);
       } else if (what == "tensors") {

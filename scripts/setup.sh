@@ -12,6 +12,11 @@ packages=(
   nlohmann-json3-dev     # scene files (JSON)
   libtinyxml2-dev        # URDF import (XML with line numbers)
   libsundials-dev        # CVODES: Riccati / trajectory integration (control, planned)
+  # LAPACK: the Schur forms and inverses of the algebraic Riccati solvers (control/src/lapack.cpp),
+  # linked as the generic liblapack.so / libblas.so (Debian's alternatives). The reference
+  # implementation is what the suite is checked with; libopenblas-dev would take priority and make
+  # a CARE at n = 400 3x faster, but one CARE gain misses its 1e-9 test by 4x (docs/performance.md)
+  liblapack-dev libblas-dev
   openmpi-bin libopenmpi-dev  # trellis-mpi: `mpirun trellis-mpi funnel` (docs/funnels.md)
   coinor-libipopt-dev    # Ipopt: trajectory optimization (optimization, planned)
   catch2                 # Catch2 2.13: the test suite

@@ -1,6 +1,8 @@
 // algebraic_riccati_common.cpp — the parts CARE and DARE share (see algebraic_riccati_common.hpp).
 #include "algebraic_riccati_common.hpp"
 
+#include "lapack.hpp"
+
 #include "trellis/core/detail/report_json.hpp"
 
 #include <Eigen/Cholesky>
@@ -379,7 +381,17 @@ void finish(LqrResult& res, const Prepared& p, const MatrixXd& A, const MatrixXd
   res.K = gainFromWhitened(p, Kv);
   // Closed loop A − B̂Kv, in balanced coordinates for the eigenvalue solver.
   const MatrixXd Acl = dinv.asDiagonal() * (A - p.Bh * Kv) * p.d.asDiagonal();
-  res.closedLoopEigenvalues = Eigen::EigenSolver<MatrixXd>(Acl, false).eigenvalues();
+  lapack::RealSchur schur(Acl.rows(), false);
+  if (const int info = schur.compute(Acl); info != 0) {
+    diagnoseFailure(res, p, discrete, options, fn,
+                    info > Acl.rows() ? "the closed loop A - BK has a non-finite entry"
+                                      : "the eigenvalues of the closed loop A - BK did not "
+                                        "converge (LAPACK dgees INFO = " + std::to_string(info) + ")");
+    return;
+  }
+  res.closedLoopEigenvalues.resize(Acl.rows());
+  for (Index i = 0; i < Acl.rows(); ++i)
+    res.closedLoopEigenvalues(i) = Complex(schur.wr()(i), schur.wi()(i));
   const double worst = discrete ? res.closedLoopEigenvalues.cwiseAbs().maxCoeff()
                                 : res.closedLoopEigenvalues.real().maxCoeff();
   const bool stable = discrete ? worst < 1.0 : worst < 0.0;

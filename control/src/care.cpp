@@ -1,8 +1,10 @@
 // care.cpp — the continuous algebraic Riccati equation: scaled sign function of the balanced
-// Hamiltonian, then Newton–Kleinman steps (see trellis/control/algebraic_riccati.hpp).
+// Hamiltonian (LAPACK's inverse), then Newton–Kleinman steps (Lyapunov solves on LAPACK's Schur
+// form; see trellis/control/algebraic_riccati.hpp).
 #include "trellis/control/care.hpp"
 
 #include "algebraic_riccati_common.hpp"
+#include "lapack.hpp"
 #include "trellis/control/lyapunov.hpp"
 #include "trellis/control/riccati.hpp"  // checkWeightMatrix
 
@@ -37,37 +39,34 @@ LqrResult solveCare(const MatrixXd& A, const MatrixXd& B, const MatrixXd& Q, con
   LqrResult res;
   res.stateScaling = p.d;
 
-  // Sign iteration Z ← (Z/c + c Z⁻¹)/2, c = |det Z|^{1/2n}, until Z = sign(H), H balanced.
-  MatrixXd Z(2 * n, 2 * n);
+  // Sign iteration Z ← (Z/c + c Z⁻¹)/2, c = |det Z|^{1/2n}, until Z = sign(H), H balanced. The
+  // inverse is LAPACK's (dgetrf + dgetri, blocked); Z, its inverse W and the pivots are allocated
+  // here, once per solve.
+  MatrixXd Z(2 * n, 2 * n), W(2 * n, 2 * n);
   Z << p.A, -p.G, -p.Q, -p.A.transpose();
+  detail::lapack::LuInverse inverse(2 * n);
   bool scaling = true, converged = false;
   int stalled = 0;
   double prev = std::numeric_limits<double>::infinity();
   for (int it = 0; it < options.maxIterations; ++it) {
     res.iterations = it + 1;
-    Eigen::PartialPivLU<MatrixXd> lu(Z);
+    W = Z;
     double logdet = 0.0;
-    bool singular = false;
-    for (Index i = 0; i < 2 * n; ++i) {
-      const double u = std::abs(lu.matrixLU()(i, i));
-      singular = singular || !(u > 0.0) || !std::isfinite(u);
-      logdet += std::log(u);
-    }
-    if (singular) {
+    if (inverse.invert(W, logdet) != 0) {
       diagnoseFailure(res, p, false, options, "solveCare",
                       "the sign iteration met an exactly singular matrix at iteration " +
                           std::to_string(it + 1));
       return res;
     }
     const double c = scaling ? std::exp(logdet / static_cast<double>(2 * n)) : 1.0;
-    MatrixXd Zn = 0.5 * (Z / c + c * lu.inverse());
-    if (!Zn.allFinite()) {
+    W = 0.5 * (Z / c + c * W);  // the next iterate, in place of Z⁻¹
+    if (!W.allFinite()) {
       diagnoseFailure(res, p, false, options, "solveCare",
                       "the sign iteration overflowed at iteration " + std::to_string(it + 1));
       return res;
     }
-    const double rel = (Zn - Z).lpNorm<1>() / std::max(1.0, Zn.lpNorm<1>());
-    Z = std::move(Zn);
+    const double rel = (W - Z).lpNorm<1>() / std::max(1.0, W.lpNorm<1>());
+    Z.swap(W);
     if (rel < 1e-2) scaling = false;  // quadratic convergence without scaling near the end
     if (rel <= options.tolerance || (!scaling && rel < 1e-8 && rel >= 0.5 * prev)) {
       converged = true;

@@ -8,7 +8,6 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
-#include <unsupported/Eigen/MatrixFunctions>
 
 #include <algorithm>
 #include <cmath>
@@ -55,47 +54,94 @@ namespace {
 /// nu rows zero: the held input) and a symmetric P (c×c),
 ///   E = e^{Z},  W = ∫₀¹ e^{Zᵀs} P e^{Zs} ds,
 /// i.e. E = e^{Mh}, W = ∫₀ʰ e^{Mᵀs} Q̃ e^{Ms} ds for Z = Mh, P = Q̃h. Van Loan's exponential of
-/// [[−Zᵀ, P], [0, Z]] holds e^{−Zᵀ}·W in its corner: for a stiff Z (|λ| ≫ 1) e^{−Zᵀ} and e^{Z}
+/// X = [[−Zᵀ, P], [0, Z]] holds e^{−Zᵀ}·W in its corner: for a stiff Z (|λ| ≫ 1) e^{−Zᵀ} and e^{Z}
 /// differ by e^{2|λ|}, and W = e^{Zᵀ}·(that corner) loses every digit. So Van Loan is used only on
-/// Z/2^s with ‖Z‖₁/2^s ≤ ½ (where both factors are O(1): W to a few ulps of ‖W‖), and the doubling
-/// formulas, exact for a constant system,
+/// z = Z/2^s with max(‖z‖₁, ‖z‖∞) ≤ 1/8 (where both factors are O(1): W to a few ulps of ‖W‖), and
+/// the doubling formulas, exact for a constant system,
 ///   E(2δ) = E(δ)²,  W(2δ) = W(δ) + E(δ)ᵀ W(δ) E(δ),
 /// take it to 1 in s steps: W stays a sum of positive semidefinite terms when P is (no cancellation).
-void blockExponential(const Eigen::MatrixXd& Z, const Eigen::MatrixXd& P, Eigen::Index nu, Eigen::MatrixXd& E,
-                      Eigen::MatrixXd& W) {
-  const Eigen::Index c = Z.rows();
-  const double norm1 = Z.cwiseAbs().colwise().sum().maxCoeff();
-  int s = 0;
-  if (norm1 > 0.5) {
-    int e = 0;
-    std::frexp(norm1 / 0.5, &e);  // norm1/0.5 < 2^e
-    s = e;
+/// The small exponential is the [5/5] Padé approximant r = q(X)⁻¹p(X) (backward error below the
+/// unit roundoff for ‖X‖₁ ≤ 0.2539, Higham 2005; here ‖X‖₁ ≤ max(‖z‖∞, ‖p‖₁ + ‖z‖₁) ≤ ¼ with P
+/// scaled to ‖p‖₁ = 1/8) on the block structure, never forming the 2c×2c matrix: every power X^k is block
+/// upper triangular with corners (±(z^k)ᵀ, U_k, z^k) — the even powers' U_k antisymmetric —, so
+/// p(X) = V + U, q(X) = V − U need eight c×c products, and q F = p is solved for the two corners
+/// used, F₂₂ = R_q⁻¹R_p and F₁₂ = (R_pᵀ)⁻¹(U_p − U_q F₂₂) (q's top-left corner is R_pᵀ, as
+/// q(−zᵀ) = p(z)ᵀ). A workspace: its buffers are kept from call to call (the symmetrizations
+/// still evaluate one temporary each).
+class BlockExponential {
+ public:
+  void operator()(const Eigen::MatrixXd& Z, const Eigen::MatrixXd& P, Eigen::Index nu, Eigen::MatrixXd& E,
+                  Eigen::MatrixXd& W) {
+    const Eigen::Index c = Z.rows();
+    const double zNorm = std::max(Z.cwiseAbs().colwise().sum().maxCoeff(), Z.cwiseAbs().rowwise().sum().maxCoeff());
+    int s = 0;
+    if (zNorm > 0.125) {
+      int e = 0;
+      std::frexp(zNorm / 0.125, &e);  // zNorm/0.125 < 2^e
+      s = e;
+    }
+    const double scale = std::ldexp(1.0, -s);
+    // P enters the corner linearly: scaled to ‖p‖₁ = 1/8 like z, so that its size (unrelated to
+    // Z's) does not raise the degree or the doublings; W is scaled back below.
+    const double pScale =
+        std::max(8.0 * scale * P.cwiseAbs().colwise().sum().maxCoeff(), std::numeric_limits<double>::min());
+    z_ = scale * Z;
+    p_ = (scale / pScale) * P;
+    constexpr double b0 = 30240.0, b1 = 15120.0, b2 = 3360.0, b3 = 420.0, b4 = 30.0, b5 = 1.0;
+    // X²: (z²)ᵀ, U₂ = p z − zᵀp, z²;  X⁴: U₄ = U₂z² + (z²)ᵀU₂ = U₂z² − (U₂z²)ᵀ.
+    r2_.noalias() = z_ * z_;
+    t_.noalias() = p_ * z_;
+    u2_ = t_ - t_.transpose();
+    r4_.noalias() = r2_ * r2_;
+    t_.noalias() = u2_ * r2_;
+    u4_ = t_ - t_.transpose();
+    // Y = b5X⁴ + b3X² + b1I; the odd part U = X Y: corners (−R_Uᵀ, −zᵀU_Y + pR_Y, zR_Y).
+    rY_ = b5 * r4_ + b3 * r2_;
+    rY_.diagonal().array() += b1;
+    uY_ = b5 * u4_ + b3 * u2_;
+    rU_.noalias() = z_ * rY_;
+    uU_.noalias() = p_ * rY_;
+    uU_.noalias() -= z_.transpose() * uY_;
+    // The even part V = b4X⁴ + b2X² + b0I; p = V + U, q = V − U.
+    rp_ = b4 * r4_ + b2 * r2_;
+    rp_.diagonal().array() += b0;
+    rq_ = rp_ - rU_;
+    rp_ += rU_;
+    up_ = b4 * u4_ + b2 * u2_;
+    uq_ = up_ - uU_;
+    up_ += uU_;
+    luq_.compute(rq_);
+    E = luq_.solve(rp_);
+    // The held input's rows are exactly [0 I] (u̇ = 0); the approximant returns them to rounding.
+    E.bottomRows(nu).setZero();
+    E.bottomRightCorner(nu, nu).setIdentity();
+    up_.noalias() -= uq_ * E;
+    lup_.compute(rp_.transpose());
+    t_ = lup_.solve(up_);  // F₁₂ = e^{−zᵀ}·W(z)/pScale
+    W.noalias() = pScale * (E.transpose() * t_);
+    W = 0.5 * (W + W.transpose()).eval();
+    // The doublings on E = [[Φ, Γ], [0, I]]: W ← W + EᵀWE, E ← E² = [[Φ², ΦΓ + Γ], [0, I]].
+    const Eigen::Index nx = c - nu;
+    const auto Phi = E.topLeftCorner(nx, nx);
+    const auto Gamma = E.topRightCorner(nx, nu);
+    for (int i = 0; i < s; ++i) {
+      t_.leftCols(nx).noalias() = W.leftCols(nx) * Phi;
+      t_.rightCols(nu) = W.rightCols(nu);
+      t_.rightCols(nu).noalias() += W.leftCols(nx) * Gamma;
+      W.topRows(nx).noalias() += Phi.transpose() * t_.topRows(nx);
+      W.bottomRows(nu) += t_.bottomRows(nu);
+      W.bottomRows(nu).noalias() += Gamma.transpose() * t_.topRows(nx);
+      W = 0.5 * (W + W.transpose()).eval();
+      r2_.topRows(nx).noalias() = Phi * E.topRows(nx);
+      r2_.topRightCorner(nx, nu) += Gamma;
+      E.topRows(nx) = r2_.topRows(nx);
+    }
   }
-  const double scale = std::ldexp(1.0, -s);
-  // P enters the corner linearly: scaled to ‖scale·P/pScale‖₁ = ½ like the diagonal blocks, so
-  // that its size (unrelated to Z's) does not raise the exponential's degree or squarings.
-  const double pScale =
-      std::max(2.0 * scale * P.cwiseAbs().colwise().sum().maxCoeff(), std::numeric_limits<double>::min());
-  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(2 * c, 2 * c);
-  C.topLeftCorner(c, c) = -scale * Z.transpose();
-  C.topRightCorner(c, c) = (scale / pScale) * P;
-  C.bottomRightCorner(c, c) = scale * Z;
-  const Eigen::MatrixXd F = C.exp();
-  E = F.bottomRightCorner(c, c);
-  // The held input's rows are exactly [0 I] (u̇ = 0); the exponential returns them to rounding.
-  E.bottomRows(nu).setZero();
-  E.bottomRightCorner(nu, nu).setIdentity();
-  W.noalias() = pScale * (E.transpose() * F.topRightCorner(c, c));
-  W = 0.5 * (W + W.transpose());
-  Eigen::MatrixXd WE(c, c), E2(c, c);
-  for (int i = 0; i < s; ++i) {
-    WE.noalias() = W * E;
-    W.noalias() += E.transpose() * WE;
-    W = 0.5 * (W + W.transpose());
-    E2.noalias() = E * E;
-    E.swap(E2);
-  }
-}
+
+ private:
+  Eigen::MatrixXd z_, p_, r2_, u2_, r4_, u4_, rY_, uY_, rU_, uU_, rp_, rq_, up_, uq_, t_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> luq_, lup_;
+};
 
 }  // namespace
 
@@ -119,6 +165,7 @@ void discretizeConstantInterval(const Eigen::MatrixXd& A, const Eigen::MatrixXd&
   }
   // Z = Mh with M = [[A, B], [0, 0]] (the held input is a state with u̇ = 0), P = Q̃h.
   Eigen::MatrixXd Z = Eigen::MatrixXd::Zero(c, c), P = Eigen::MatrixXd::Zero(c, c), E, W;
+  BlockExponential blockExponential;
   Z.topLeftCorner(nx, nx) = h * A;
   Z.topRightCorner(nx, nu) = h * B;
   P.topLeftCorner(nx, nx) = (0.5 * h) * (Q + Q.transpose());
@@ -318,130 +365,221 @@ struct StepControl {
   }
 };
 
-/// The sixth-order Magnus integrator of the Van Loan system of an interval (sampled_lqr.hpp):
-/// with M(t) = [[A, B], [0, 0]] and Q̃(t) = blkdiag(Q, R), the block-triangular linear system
+/// The sixth-order Magnus exponential of the Van Loan system of an interval (sampled_lqr.hpp),
+/// over the whole interval at once and bisected only where a check asks for it.
+/// With M(t) = [[A, B], [0, 0]] and Q̃(t) = blkdiag(Q, R), the block-triangular linear system
 ///   Ẋ = V(t) X,  V = [[−Mᵀ, Q̃], [0, M]],  X(a) = I
 /// has X = [[Φ_M⁻ᵀ, Φ_M⁻ᵀ W], [0, Φ_M]] with Φ_M = [[Φ, Γ], [0, I]] and W the interval's cost
-/// blocks. Matrices of this form are closed under sums and commutators, so each Magnus step's
+/// blocks. Matrices of this form are closed under sums and commutators, so a Magnus step's
 /// generator Ω is again [[−Zᵀ, P], [0, Z]]: its exponential is blockExponential(Z, P) — exact to
-/// rounding however stiff Z is (no step-size limit from ‖A‖ as for an explicit scheme or Van
-/// Loan's raw exponential). Steps compose as E ← E_s E, W ← W + Eᵀ W_s E.
-/// Ω from three Gauss–Legendre nodes (Blanes, Casas & Ros' sixth-order scheme): with V_i at
+/// rounding however stiff Z is (|λ|h ≈ 140 on the 6-link chain at 10 Hz). Ω from three
+/// Gauss–Legendre nodes (Blanes, Casas & Ros' sixth-order scheme): with V_i at
 /// t + d(½ − √15/10), t + d/2, t + d(½ + √15/10),
 ///   α1 = d V_2,  α2 = (√15 d/3)(V_3 − V_1),  α3 = (10d/3)(V_3 − 2V_2 + V_1),
 ///   C1 = [α1, α2],  C2 = −(1/60)[α1, 2α3 + C1],
-///   Ω6 = α1 + α3/12 + (1/240)[−20α1 − α3 + C1, α2 + C2]   (local error O(d⁷)),
-///   Ω4 = α1 + α3/12 − C1/12                               (O(d⁵), from the same nodes).
-/// The difference of the two steps' blocks (stepError: relative, unit-invariant) is the error
-/// estimate (of the fourth-order step: conservative for the sixth-order one kept); steps are
-/// adapted to rtol and end on the sample times and on the breakpoints (the reference's knots,
-/// where A(t) may have a kink: a step across one would lose the order).
+///   Ω6 = α1 + α3/12 + (1/240)[−20α1 − α3 + C1, α2 + C2]   (local error O(d⁷) for smooth A).
+/// For a constant A, B, Q, R the step is exact at any length; its error comes from their change
+/// over the step, and for a stiff A the truncated series' error terms (nested commutators with
+/// the stiff part) are damped by the fast modes rather than bounded by the series — which no
+/// a-priori bound says, so a check decides: each piece's single step (E_f, W_f) against the
+/// composition of its two halves (E_h = E₂E₁, W_h = W₁ + E₁ᵀW₂E₁). Where they agree to rtol
+/// (stepError: relative, unit-invariant) the halves are kept; elsewhere each half is checked the
+/// same way against its own halves (its single step is already computed). A piece starts as all
+/// of [a, b] between stops (the breakpoints: the reference's knots, where A(t) may have a kink and
+/// a step across would lose the order). An interval where A(t) is smooth on the scale of h thus
+/// costs 9 linearizations and 3 exponentials of size 2(nx+m); no step size is carried from one
+/// interval to the next and nothing restarts inside one (the fast modes' transient is inside
+/// the exponential).
 class MagnusIntegrator {
  public:
   MagnusIntegrator(Discretizer& s, double rtol, long maxSteps)
-      : s_(s), nx_(s.nx), nu_(s.nu), c_(s.nx + s.nu), rtol_(rtol) {
-    control.maxSteps = maxSteps;
-    control.method = "Magnus";
-    for (auto& v : V_) v = Eigen::MatrixXd::Zero(2 * c_, 2 * c_);
+      : s_(s), nx_(s.nx), nu_(s.nu), c_(s.nx + s.nu), rtol_(rtol), maxSteps_(maxSteps) {
   }
 
-  StepControl control;  ///< the step sizes, the counts and the failure's message and time
+  long steps = 0;            ///< accepted steps (two per accepted piece: its halves)
+  long bisections = 0;       ///< pieces whose check failed (each then split in two)
+  double failTime = 0.0;     ///< where integrate() stopped, when it returned false
+  std::string failMessage;   ///< why (when not a callback failure: s.failed)
 
-  /// E, W over [a, b] (stops: the breakpoints inside). False on a callback failure (s.failed)
-  /// or when the step size collapses or exceeds maxSteps (control.failMessage).
+  /// E = [[Φ, Γ], [0, I]] and W (the cost blocks) over [a, b]. False on a callback failure
+  /// (s.failed), a non-finite step, or when the pieces would exceed maxSteps or fall below
+  /// rounding (failMessage).
   bool integrate(double a, double b, const std::vector<double>& breakpoints, Eigen::MatrixXd& E, Eigen::MatrixXd& W) {
     E = Eigen::MatrixXd::Identity(c_, c_);
     W = Eigen::MatrixXd::Zero(c_, c_);
-    return control.run(a, b, breakpoints, [&](double t, double d, double& factor) {
-      double err = 0.0;
-      if (!step(t, d, err)) return StepOutcome::kFailed;
-      factor = std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.2), 0.2, 5.0);
-      if (!(err <= 1.0)) return StepOutcome::kRejected;
-      Ws_.noalias() = W6_ * E;
-      W.noalias() += E.transpose() * Ws_;
-      W = 0.5 * (W + W.transpose());
-      Es_.noalias() = E6_ * E;
-      E.swap(Es_);
-      return StepOutcome::kAccepted;
-    });
+    long taken = 0;
+    auto nextBreak = std::upper_bound(breakpoints.begin(), breakpoints.end(), a);
+    double t = a;
+    while (t < b) {
+      // A breakpoint within rounding of t or b (a knot and a sample time that differ in the last
+      // bits) is that point: no sliver piece.
+      const double round = 8.0 * std::numeric_limits<double>::epsilon() * std::max({std::abs(t), std::abs(b), b - a});
+      while (nextBreak != breakpoints.end() && *nextBreak <= t + round) ++nextBreak;
+      const double stop = (nextBreak != breakpoints.end() && *nextBreak < b - round) ? *nextBreak : b;
+      // The piece stack: the last entry is the next piece (left to right), its single step done.
+      std::size_t top = 0;
+      Piece& first = slot(top++);
+      first.t = t;
+      first.d = stop - t;
+      if (!step(first.t, first.d, first.E, first.W)) return false;
+      bool segmentCheck = true;
+      while (top > 0) {
+        Piece& p = slot(top - 1);
+        const double half = 0.5 * p.d;
+        if (!(half > 8.0 * std::numeric_limits<double>::epsilon() * std::max(std::abs(p.t), b - a))) {
+          failTime = p.t;
+          failMessage = "the Magnus piece fell to " + std::to_string(p.d) + " s (A(t) not resolved)";
+          return false;
+        }
+        if ((taken += 2) > maxSteps_) {
+          failTime = p.t;
+          failMessage = "more than maxSteps = " + std::to_string(maxSteps_) + " Magnus steps in the interval";
+          return false;
+        }
+        // The second half ends exactly on the piece's end (no drift from t + d/2 + d/2).
+        if (!step(p.t, half, E1_, W1_) || !step(p.t + half, (p.t + p.d) - (p.t + half), E2_, W2_)) return false;
+        Eh_.noalias() = E2_ * E1_;
+        tmp_.noalias() = W2_ * E1_;
+        Wh_ = W1_;
+        Wh_.noalias() += E1_.transpose() * tmp_;
+        Wh_ = 0.5 * (Wh_ + Wh_.transpose()).eval();
+        if (segmentCheck) {
+          // The stretch's cost scale: the smaller of its two first estimates (if they disagree,
+          // the smaller is the stricter).
+          wScale_ = p.W.diagonal().cwiseMin(Wh_.diagonal()).cwiseMax(0.0);
+          segmentCheck = false;
+        }
+        if (stepError(p.E, p.W) <= 1.0) {
+          // Accepted: the halves, composed onto the interval so far.
+          tmp_.noalias() = Wh_ * E;
+          W.noalias() += E.transpose() * tmp_;
+          W = 0.5 * (W + W.transpose()).eval();
+          tmp_.noalias() = Eh_ * E;
+          E.swap(tmp_);
+          steps += 2;
+          --top;
+          continue;
+        }
+        // Bisect: the right half replaces p, the left half goes on top (next).
+        ++bisections;
+        const double pt = p.t, pd = p.d;
+        p.t = pt + half;
+        p.d = (pt + pd) - (pt + half);
+        p.E.swap(E2_);
+        p.W.swap(W2_);
+        Piece& left = slot(top++);
+        left.t = pt;
+        left.d = half;
+        left.E.swap(E1_);
+        left.W.swap(W1_);
+      }
+      t = stop;
+    }
+    return true;
   }
 
  private:
-  /// V(t) = [[−Mᵀ, Q̃], [0, M]] into V.
-  bool vanLoanAt(double t, Eigen::MatrixXd& V) {
+  struct Piece {
+    double t = 0.0, d = 0.0;
+    Eigen::MatrixXd E, W;  // its single step
+  };
+  /// Stack entry i (grown on first use; the matrices keep their storage afterwards).
+  Piece& slot(std::size_t i) {
+    while (stack_.size() <= i) stack_.emplace_back();
+    return stack_[i];
+  }
+
+  /// A generator [[−Zᵀ, P], [0, Z]] (P symmetric) held as its two corners: sums and commutators of
+  /// such matrices keep the form, and a commutator costs four c×c products instead of two
+  /// 2c×2c ones (sixteen c×c).
+  struct Generator {
+    Eigen::MatrixXd Z, P;
+  };
+  /// V(t) = [[−Mᵀ, Q̃], [0, M]]: Z = M = [[A, B], [0, 0]], P = Q̃ = blkdiag(Q, R) (symmetrized).
+  bool vanLoanAt(double t, Generator& V) {
     if (!s_.evaluate(t)) return false;
-    const Eigen::Index c = c_;
-    V.topLeftCorner(nx_, nx_) = -s_.A.transpose();
-    V.block(nx_, 0, nu_, nx_) = -s_.B.transpose();
-    V.block(c, c, nx_, nx_) = s_.A;  // bottom-right corner: M
-    V.block(c, c + nx_, nx_, nu_) = s_.B;
-    V.block(0, c, nx_, nx_) = 0.5 * (s_.Q + s_.Q.transpose());  // top-right corner: Q̃
-    V.block(nx_, c + nx_, nu_, nu_) = 0.5 * (s_.R + s_.R.transpose());
+    V.Z.setZero(c_, c_);
+    V.Z.topLeftCorner(nx_, nx_) = s_.A;
+    V.Z.topRightCorner(nx_, nu_) = s_.B;
+    V.P.setZero(c_, c_);
+    V.P.topLeftCorner(nx_, nx_) = 0.5 * (s_.Q + s_.Q.transpose());
+    V.P.bottomRightCorner(nu_, nu_) = 0.5 * (s_.R + s_.R.transpose());
     return true;
   }
-  void commutator(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, Eigen::MatrixXd& out) {
-    out.noalias() = X * Y;
-    out.noalias() -= Y * X;
+  /// [X, Y] = [[−Zᵀ, G + Gᵀ], [0, Z]] with Z = Z_x Z_y − Z_y Z_x, G = P_x Z_y − P_y Z_x (the
+  /// top-right corner of XY − YX is −Z_xᵀP_y + P_xZ_y + Z_yᵀP_x − P_yZ_x).
+  void commutator(const Generator& x, const Generator& y, Generator& out) {
+    out.Z.noalias() = x.Z * y.Z;
+    out.Z.noalias() -= y.Z * x.Z;
+    g_.noalias() = x.P * y.Z;
+    g_.noalias() -= y.P * x.Z;
+    out.P = g_ + g_.transpose();
   }
-  /// The step's error in units of rtol: E's entries relative to max |E| (≥ 1: E holds the
-  /// identity of the held input), W's entries relative to √(W_ii W_jj) — the bound on |W_ij| of a
-  /// positive semidefinite matrix, so the measure is the same in any units of the states and
-  /// inputs (floored at ε·max W_ii for a weight that vanishes).
-  double stepError() const {
-    const double eScale = E6_.cwiseAbs().maxCoeff();
-    double err = (E6_ - E4_).cwiseAbs().maxCoeff() / (rtol_ * eScale);
-    const Eigen::VectorXd d = W6_.diagonal().cwiseMax(0.0).cwiseSqrt();
+  /// The single step's (Ef, Wf) difference from the halves' (Eh_, Wh_) in units of rtol: E's
+  /// entries relative to max |E_h| (≥ 1: E holds the identity of the held input), W's relative
+  /// to √(D_i D_j), D = max(diag W_h, the smaller diagonal of the first single step and halves
+  /// over the whole stretch between stops) — the bound on |W_ij| of a positive semidefinite
+  /// matrix, so the measure is the same in any units of the states and inputs, and a small piece
+  /// is measured against the cost of the stretch it belongs to (floored at √ε·max D for a
+  /// weight that vanishes).
+  double stepError(const Eigen::MatrixXd& Ef, const Eigen::MatrixXd& Wf) const {
+    if (!Eh_.allFinite() || !Wh_.allFinite() || !Ef.allFinite() || !Wf.allFinite()) {
+      return std::numeric_limits<double>::infinity();
+    }
+    const double eScale = Eh_.cwiseAbs().maxCoeff();
+    double err = (Eh_ - Ef).cwiseAbs().maxCoeff() / (rtol_ * eScale);
+    const Eigen::VectorXd d = Wh_.diagonal().cwiseMax(wScale_).cwiseMax(0.0).cwiseSqrt();
     const double floor = std::sqrt(std::numeric_limits<double>::epsilon()) * d.maxCoeff() + std::numeric_limits<double>::min();
     for (Eigen::Index j = 0; j < c_; ++j) {
       for (Eigen::Index i = 0; i <= j; ++i) {
-        const double diff = std::abs(W6_(i, j) - W4_(i, j));
+        const double diff = std::abs(Wh_(i, j) - Wf(i, j));
         if (diff > 0.0) err = std::max(err, diff / (rtol_ * std::max(d(i) * d(j), floor * floor)));
       }
     }
     return err;
   }
-  bool step(double t, double d, double& err) {
+  /// One Magnus step from t of length d: E = e^{Z}, W (blockExponential of Ω6's corners).
+  bool step(double t, double d, Eigen::MatrixXd& E, Eigen::MatrixXd& W) {
     const double r15 = std::sqrt(15.0);
     const double nodes[3] = {0.5 - r15 / 10.0, 0.5, 0.5 + r15 / 10.0};
     for (int i = 0; i < 3; ++i) {
-      if (!vanLoanAt(t + nodes[i] * d, V_[i])) return false;
+      if (!vanLoanAt(t + nodes[i] * d, V_[i])) {
+        failTime = s_.failTime;
+        return false;
+      }
     }
-    a1_ = d * V_[1];
-    a2_ = (r15 * d / 3.0) * (V_[2] - V_[0]);
-    a3_ = (10.0 * d / 3.0) * (V_[2] - 2.0 * V_[1] + V_[0]);
+    a1_.Z = d * V_[1].Z;
+    a1_.P = d * V_[1].P;
+    a2_.Z = (r15 * d / 3.0) * (V_[2].Z - V_[0].Z);
+    a2_.P = (r15 * d / 3.0) * (V_[2].P - V_[0].P);
+    a3_.Z = (10.0 * d / 3.0) * (V_[2].Z - 2.0 * V_[1].Z + V_[0].Z);
+    a3_.P = (10.0 * d / 3.0) * (V_[2].P - 2.0 * V_[1].P + V_[0].P);
     commutator(a1_, a2_, c1_);
-    x_ = 2.0 * a3_ + c1_;
+    x_.Z = 2.0 * a3_.Z + c1_.Z;
+    x_.P = 2.0 * a3_.P + c1_.P;
     commutator(a1_, x_, c2_);
-    c2_ *= -1.0 / 60.0;
-    x_ = -20.0 * a1_ - a3_ + c1_;
-    y_ = a2_ + c2_;
+    x_.Z = -20.0 * a1_.Z - a3_.Z + c1_.Z;
+    x_.P = -20.0 * a1_.P - a3_.P + c1_.P;
+    y_.Z = a2_.Z - c2_.Z / 60.0;
+    y_.P = a2_.P - c2_.P / 60.0;
     commutator(x_, y_, om6_);
-    om6_ *= 1.0 / 240.0;
-    om6_ += a1_ + a3_ / 12.0;
-    om4_ = a1_ + a3_ / 12.0 - c1_ / 12.0;
-    const Eigen::Index c = c_;
-    // Z = the bottom-right corner (its input rows are exactly zero: every term has them zero),
-    // P = the top-right corner (symmetric by the closure; symmetrized against rounding).
-    Z_ = om6_.bottomRightCorner(c, c);
-    P_ = om6_.topRightCorner(c, c);
-    P_ = 0.5 * (P_ + P_.transpose()).eval();
-    blockExponential(Z_, P_, nu_, E6_, W6_);
-    Z_ = om4_.bottomRightCorner(c, c);
-    P_ = om4_.topRightCorner(c, c);
-    P_ = 0.5 * (P_ + P_.transpose()).eval();
-    blockExponential(Z_, P_, nu_, E4_, W4_);
-    if (!E6_.allFinite() || !W6_.allFinite() || !E4_.allFinite() || !W4_.allFinite()) {
-      err = std::numeric_limits<double>::infinity();
-      return true;  // a smaller step
-    }
-    err = stepError();
+    // Ω6's corners: Z (its input rows exactly zero: every term has them zero) and P (symmetric
+    // by construction).
+    om6_.Z = om6_.Z / 240.0 + a1_.Z + a3_.Z / 12.0;
+    om6_.P = om6_.P / 240.0 + a1_.P + a3_.P / 12.0;
+    blockExponential(om6_.Z, om6_.P, nu_, E, W);
     return true;
   }
 
   Discretizer& s_;
   Eigen::Index nx_, nu_, c_;
   double rtol_;
-  Eigen::MatrixXd V_[3], a1_, a2_, a3_, c1_, c2_, x_, y_, om6_, om4_, Z_, P_, E6_, W6_, E4_, W4_, Es_, Ws_;
+  long maxSteps_;
+  std::vector<Piece> stack_;
+  Eigen::VectorXd wScale_;
+  Generator V_[3], a1_, a2_, a3_, c1_, c2_, x_, y_, om6_;
+  Eigen::MatrixXd g_, E1_, W1_, E2_, W2_, Eh_, Wh_, tmp_;
+  BlockExponential blockExponential;
 };
 
 /// The three-stage Radau IIA collocation (order 5, L-stable, stiffly accurate) of the variational
@@ -611,6 +749,7 @@ std::string SampledDiscretization::json() const {
   j["linearizations"] = linearizations;
   j["constant_intervals"] = constantIntervals;
   j["exponentials"] = exponentials;
+  j["bisections"] = bisections;
   return j.dump();
 }
 
@@ -757,10 +896,10 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
         magnusE.bottomRightCorner(nu, nu).setIdentity();
       }
       if (!done) {
-        const double at = s.failed ? s.failTime : (byMagnus ? magnus->control.failTime : radau->control.failTime);
+        const double at = s.failed ? s.failTime : (byMagnus ? magnus->failTime : radau->control.failTime);
         std::ostringstream m;
         m << "sampled-data discretization stopped in interval " << k << " [" << a << ", " << b << "] at t = " << at
-          << ": " << (s.failed ? s.failMessage : (byMagnus ? magnus->control.failMessage : radau->control.failMessage));
+          << ": " << (s.failed ? s.failMessage : (byMagnus ? magnus->failMessage : radau->control.failMessage));
         out.status.set(s.failed ? SampledCode::kCallbackFailure : SampledCode::kIntegratorFailure, m.str(), at,
                        static_cast<long>(k));
         break;
@@ -825,7 +964,10 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
     out.steps = stats.steps;
     out.rhsEvaluations = stats.rhsEvaluations;
   }
-  if (magnus) out.steps += magnus->control.steps;
+  if (magnus) {
+    out.steps += magnus->steps;
+    out.bisections = magnus->bisections;
+  }
   if (radau) out.steps += radau->control.steps;
   out.linearizations = s.linearizations;
   return out;

@@ -1,6 +1,7 @@
-// schur_substitution.hpp (private) — what the Lyapunov and Stein solves share: in the Schur basis
-// F = U T Uᴴ, X = U Y Uᴴ, both equations become one lower-triangular system per column of Y,
-//   L_j Y_j = r_j   (Lyapunov: L_j = Tᴴ + T_jj I; Stein: L_j = T_jj Tᴴ − I),
+// schur_substitution.hpp (private) — the column substitution of the Stein solve (the Lyapunov
+// solve uses LAPACK's dtrsyl instead): in the complex Schur basis F = U T Uᴴ, X = U Y Uᴴ, the
+// equation becomes one lower-triangular system per column of Y,
+//   L_j Y_j = r_j   (Stein: L_j = T_jj Tᴴ − I; a Lyapunov equation would have L_j = Tᴴ + T_jj I),
 // solved for j = 0, 1, …, n−1 (r_j uses the columns before j). A pivot |L_j(i, i)| at rounding
 // level (≤ tiny) makes the equation singular: the status kSingular with index j, never a throw.
 #pragma once

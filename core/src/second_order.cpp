@@ -13,6 +13,7 @@
 #include "adjoint_tape.hpp"
 #include "internal.hpp"
 #include "hyper_dual.hpp"
+#include "second_order_tree.hpp"
 
 #include <Eigen/Cholesky>
 
@@ -375,6 +376,9 @@ struct SecondOrderImpl {
   int lastStride = 0;                  ///< lanes of the last block swept (its layout of xdot)
   Eigen::VectorXd laneRows;            ///< N rows × kTapeLanesMax lanes: one block's rows of ∇²φ
   Eigen::MatrixXd rows;                ///< N×2n: ∇²φ e_a for the q and q̇ directions a
+  /// The contraction's tree pass (second_order_tree.hpp) where it covers the model, chosen here
+  /// once; null: the contraction runs the recording.
+  std::unique_ptr<TreeSecondOrder> tree;
 
   SecondOrderImpl(const Model& model)
       : n(model.nq()),
@@ -408,6 +412,11 @@ struct SecondOrderImpl {
     muR = Eigen::VectorXd::Zero(n);
     muC = Eigen::VectorXd::Zero(nc);
     tmpC = Eigen::VectorXd::Zero(nc);
+    rows = Eigen::MatrixXd::Zero(N, 2 * n);
+    if (treeSecondOrderApplies(model) && !secondOrderTapeForced()) {
+      tree = std::make_unique<TreeSecondOrder>(model);
+      return;
+    }
     // One recording at z = 0 sizes the tape: its node count depends on the model only (which
     // operands are constant is structural), so later recordings fit.
     inputs = N + n + nc;
@@ -419,8 +428,9 @@ struct SecondOrderImpl {
     xdot = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kTapeLanesMax);
     xdotbar = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(tape.size) * kTapeLanesMax);
     laneRows = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(N) * kTapeLanesMax);
-    rows = Eigen::MatrixXd::Zero(N, 2 * n);
   }
+
+  static bool usesTree(const SecondOrderWorkspace& ws) { return ws.impl_->tree != nullptr; }
 
   /// Records the residual pass at (z, y) on the tape.
   void record(const Model& model) {
@@ -474,6 +484,8 @@ struct SecondOrderImpl {
     for (int k = 0; k < nc; ++k) out(n + k, pass.c[k].st);
   }
 };
+
+bool secondOrderUsesTreePath(const SecondOrderWorkspace& ws) { return SecondOrderImpl::usesTree(ws); }
 
 }  // namespace detail
 
@@ -593,38 +605,43 @@ DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, Sec
   // sweeps (blocks of L = 16, the last one of 4, 8 or 16).
   // The u directions follow by symmetry, and the (u, u) block is 0 (F is linear in u, K does not
   // depend on u).
-  s.record(model);
-  if (s.tape.size != s.recordedNodes)  // a folding rule that depended on the state would overrun the buffers
-    throw std::logic_error("computeSecondOrderContraction: internal error: the recording has " +
-                           std::to_string(s.tape.size) + " nodes at this state, " + std::to_string(s.recordedNodes) +
-                           " when the workspace was sized");
-  const int inputs = s.inputs, size = s.tape.size;
-  s.xbar.head(size).setZero();
-  for (int i = 0; i < n; ++i) s.xbar[s.recorded.r[i].idx] += s.muR[i];
-  for (int k = 0; k < nc; ++k) s.xbar[s.recorded.c[k].idx] += s.muC[k];
-  s.xbar[0] = 0.0;  // a constant output (index 0) has no adjoint
-  detail::reverseSweep(s.tape, s.xbar.data());
-  double* xdot = s.xdot.data();
-  double* xdotbar = s.xdotbar.data();
-  for (int a0 = 0, L = 0; a0 < 2 * n; a0 += L) {
-    const int lanes = std::min(detail::kTapeLanesMax, 2 * n - a0);
-    L = lanes <= 4 ? 4 : (lanes <= 8 ? 8 : 16);
-    // Seeds: lane l is the direction a0 + l (unused lanes and all other input rows zero: the
-    // seeds of the previous block are reset below; after a block of another stride, the input
-    // rows of this one may hold its tangents).
-    if (s.lastStride != L) std::fill(xdot, xdot + static_cast<size_t>(inputs + 1) * L, 0.0);
-    s.lastStride = L;
-    auto seed = [&](bool set) {
-      for (int l = 0; l < lanes; ++l) {
-        xdot[static_cast<size_t>(1 + a0 + l) * L + l] = set ? 1.0 : 0.0;
-        for (int i = 0; i < n + nc; ++i) xdot[static_cast<size_t>(1 + N + i) * L + l] = set ? s.Y(i, a0 + l) : 0.0;
-      }
-    };
-    seed(true);
-    detail::sweepBlock(L, {&s.tape, inputs, N, n + nc, s.xbar.data(), s.Y.data(), xdot, xdotbar, s.laneRows.data()});
-    for (int l = 0; l < lanes; ++l)
-      for (int b = 0; b < N; ++b) s.rows(b, a0 + l) = s.laneRows[static_cast<Eigen::Index>(b) * L + l];
-    seed(false);
+  if (s.tree) {
+    // The tree pass: the same rows by forward mode over the closed-form gradient (second_order_tree.hpp).
+    s.tree->computeRows(model, q, dq, data.qdd, s.muR, s.Y, s.rows);
+  } else {
+    s.record(model);
+    if (s.tape.size != s.recordedNodes)  // a folding rule that depended on the state would overrun the buffers
+      throw std::logic_error("computeSecondOrderContraction: internal error: the recording has " +
+                             std::to_string(s.tape.size) + " nodes at this state, " + std::to_string(s.recordedNodes) +
+                             " when the workspace was sized");
+    const int inputs = s.inputs, size = s.tape.size;
+    s.xbar.head(size).setZero();
+    for (int i = 0; i < n; ++i) s.xbar[s.recorded.r[i].idx] += s.muR[i];
+    for (int k = 0; k < nc; ++k) s.xbar[s.recorded.c[k].idx] += s.muC[k];
+    s.xbar[0] = 0.0;  // a constant output (index 0) has no adjoint
+    detail::reverseSweep(s.tape, s.xbar.data());
+    double* xdot = s.xdot.data();
+    double* xdotbar = s.xdotbar.data();
+    for (int a0 = 0, L = 0; a0 < 2 * n; a0 += L) {
+      const int lanes = std::min(detail::kTapeLanesMax, 2 * n - a0);
+      L = lanes <= 4 ? 4 : (lanes <= 8 ? 8 : 16);
+      // Seeds: lane l is the direction a0 + l (unused lanes and all other input rows zero: the
+      // seeds of the previous block are reset below; after a block of another stride, the input
+      // rows of this one may hold its tangents).
+      if (s.lastStride != L) std::fill(xdot, xdot + static_cast<size_t>(inputs + 1) * L, 0.0);
+      s.lastStride = L;
+      auto seed = [&](bool set) {
+        for (int l = 0; l < lanes; ++l) {
+          xdot[static_cast<size_t>(1 + a0 + l) * L + l] = set ? 1.0 : 0.0;
+          for (int i = 0; i < n + nc; ++i) xdot[static_cast<size_t>(1 + N + i) * L + l] = set ? s.Y(i, a0 + l) : 0.0;
+        }
+      };
+      seed(true);
+      detail::sweepBlock(L, {&s.tape, inputs, N, n + nc, s.xbar.data(), s.Y.data(), xdot, xdotbar, s.laneRows.data()});
+      for (int l = 0; l < lanes; ++l)
+        for (int b = 0; b < N; ++b) s.rows(b, a0 + l) = s.laneRows[static_cast<Eigen::Index>(b) * L + l];
+      seed(false);
+    }
   }
   // H = −∇²φ; the (q, q̇) block symmetrized (its two halves agree to rounding).
   H.topLeftCorner(2 * n, 2 * n) = -0.5 * (s.rows.topRows(2 * n) + s.rows.topRows(2 * n).transpose());

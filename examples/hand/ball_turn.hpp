@@ -53,32 +53,22 @@ struct BallTurnOptions {
   /// The start's configuration free except the yaw (at rest): the stored grasp is not an
   /// equilibrium under u ≥ 0, so the optimizer chooses the grasp it starts from.
   bool freeInitialConfiguration = true;
-  /// Tensions of the warm start at every knot (m); empty: the closest static hold of each pose.
-  Eigen::VectorXd guessTensions;
 };
 
 /// The optimal control problem of the file comment; q0 the grasp (nq, on the manifold).
 OptimalControlProblem makeBallTurnProblem(std::shared_ptr<const Model> model, const Eigen::VectorXd& q0,
                                           const BallLimits& limits, const BallTurnOptions& options);
 
-/// The tensions that come closest to holding the pose q at rest: the non-negative least squares of
-/// the static balance M q̈(q, 0, u) = 0 (q̈ is affine in u, exact from the core's linearization),
-/// the relative residual ‖M q̈‖ / ‖M q̈(q, 0, 0)‖ they leave (0: an equilibrium under u ≥ 0), and
-/// the constraint forces λ under them. Throws std::runtime_error when the dynamics fail.
-struct StaticHold {
-  Eigen::VectorXd tension, lambda;
-  double relativeResidual = 0.0;
-};
-StaticHold closestStaticHold(const Model& model, const Eigen::VectorXd& q);
-
 /// The warm start: a quasi-static turn. At each of `knots` uniform knots the yaw follows the
 /// smooth rest-to-rest profile ψ(t) = angle (3s² − 2s³), s = t/T; the other coordinates solve
 /// h(q) = 0 by Gauss–Newton with minimum-norm steps from the previous knot (the pads follow the
 /// ball), the velocities are the exact tangent q̇ = ψ̇ (e_ψ − A_o⁺ A_ψ), A_o the Jacobian without
-/// the yaw column, and the tensions are the non-negative least squares of the static balance
-/// M q̈(q, 0, u) = 0 (exact: q̈ is affine in u; the cone is left to the optimizer). Throws
-/// std::runtime_error naming the knot when the projection or the dynamics fail.
-Trajectory quasiStaticTurn(const Model& model, const Eigen::VectorXd& q0, const BallTurnOptions& options);
+/// the yaw column, and the tensions hold each pose at rest with the contacts inside the pyramid
+/// where they can (pyramidHold of grasp.hpp: normal force ≥ 2·normalMin, 90 % of the facets'
+/// friction, small tensions). Throws std::runtime_error naming the knot when the projection or the
+/// dynamics fail.
+Trajectory quasiStaticTurn(const Model& model, const Eigen::VectorXd& q0, const BallLimits& limits,
+                           const BallTurnOptions& options);
 
 /// Contact quality of a λ (nc): the smallest normal force and the largest ‖λ_t‖ / (μ λ_n) (+inf
 /// where λ_n ≤ 0) over the contacts, and the contact where each occurs.
@@ -88,25 +78,5 @@ struct ContactMargins {
   int minNormalContact = -1, worstFrictionContact = -1;
 };
 ContactMargins contactMargins(const Eigen::VectorXd& lambda, const BallLimits& limits);
-
-/// A grasp equilibrium with every contact pressing and inside the pyramid: (q, u) with
-/// q̈(q, 0, u) = 0, h(q) = 0, 0 ≤ u ≤ u_max, λ_n ≥ normalMin and the F facets ≤ 0. Damped
-/// Gauss–Newton on ½‖[q̈/a; h/ℓ]‖² + ½ε‖u‖² with a log barrier on the inequalities (μ decreasing
-/// from 1e-2 to 1e-9; exact Jacobians: the core's ∂q̈/∂[q; u], ∂λ/∂[q; u] and A), from the
-/// stored grasp and the tensions that come closest to a static hold with the contacts pressing
-/// by 1 N; then findEquilibrium at the final tensions polishes q. `ok` only when the polished
-/// equilibrium converged and every contact condition holds there.
-struct GraspEquilibrium {
-  Eigen::VectorXd q, u, lambda;
-  double accelerationResidual = 0.0;  ///< ‖q̈(q, 0, u)‖∞ [rad/s², m/s²]
-  double constraintResidual = 0.0;    ///< ‖h(q)‖∞ [m]
-  ContactMargins margins;
-  int iterations = 0;
-  bool ok = false;
-  std::string message;                ///< what failed, when not ok
-};
-GraspEquilibrium findGraspEquilibrium(const Model& model, const Eigen::VectorXd& q0, const BallLimits& limits,
-                                      int facets = 8);
-
 
 }  // namespace trellis::hand

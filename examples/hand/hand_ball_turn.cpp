@@ -2,10 +2,10 @@
 // turn of ball_turn.hpp on a free-ball hand scene and checks the contacts along the result.
 //
 //   hand_ball_turn [--scene NAME] [--angle DEG] [--horizon S] [--knots N] [--facets F] [--print-level L]
-//                  [--equilibrium-only] [--lbfgs]
+//                  [--lbfgs]
 //
-// First a grasp equilibrium is searched (findGraspEquilibrium; --equilibrium-only stops there, exit
-// 0 only when found); when its contacts hold, the turn starts from it, else from the stored grasp.
+// The turn starts at rest near the scene's stored grasp (the start's configuration is free: the
+// stored grasp is no hold with pushing pads; the program prints how far it is from one).
 // --lbfgs: Ipopt's limited-memory Hessian instead of the exact one.
 // NAME: a scene of examples/scenes written by make_hand_scene.py --free-ball (default hand_ball;
 // hand_ball_pinch is the thumb-and-index reduction), read with examples/hand/NAME_limits.json. Prints the
@@ -14,10 +14,14 @@
 // optimizer reports solved (its a-posteriori consistency check included), the ball turned by the
 // angle, and every point keeps λ_n ≥ the margin and ‖λ_t‖ ≤ μ λ_n; 1 otherwise; 2 on bad arguments.
 #include "ball_turn.hpp"
+#include "grasp.hpp"
 
 #include <trellis/core.hpp>
+#include <trellis/core/second_order.hpp>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
@@ -30,7 +34,6 @@ int main(int argc, char** argv) {
   std::string scene = "hand_ball";
   hand::BallTurnOptions options;
   int printLevel = 0;
-  bool equilibriumOnly = false;
   bool lbfgs = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -48,11 +51,10 @@ int main(int argc, char** argv) {
       else if (a == "--knots") options.knots = std::stoi(value());
       else if (a == "--facets") options.facets = std::stoi(value());
       else if (a == "--print-level") printLevel = std::stoi(value());
-      else if (a == "--equilibrium-only") equilibriumOnly = true;
       else if (a == "--lbfgs") lbfgs = true;
       else if (a == "--help") {
         std::cout << "usage: hand_ball_turn [--scene NAME] [--angle DEG] [--horizon S] [--knots N] "
-                     "[--facets F] [--print-level L] [--equilibrium-only] [--lbfgs]\n";
+                     "[--facets F] [--print-level L] [--lbfgs]\n";
         return 0;
       } else {
         std::cerr << "hand_ball_turn: unknown option '" << a << "' (--help lists them)\n";
@@ -81,27 +83,16 @@ int main(int argc, char** argv) {
               "%d-facet pyramid, mu = %.2f, normal >= %.3f N\n",
               scene.c_str(), s.model.nq(), s.model.nu(), s.model.nc(), options.angle * 180.0 / std::numbers::pi,
               options.horizon, options.knots, options.facets, limits.friction, limits.normalMin);
-  // What the start costs: the closest static hold of the stored grasp under 0 ≤ u (ball_turn.hpp).
-  const hand::StaticHold hold = hand::closestStaticHold(s.model, s.q);
-  const hand::ContactMargins holdMargins = hand::contactMargins(hold.lambda, limits);
-  std::printf("stored grasp: closest static hold with u >= 0 leaves %.3g of the static load unbalanced "
-              "(0: an equilibrium); its contacts: min normal %.4f N (%s), worst friction ratio %.3f (%s)\n",
-              hold.relativeResidual, holdMargins.minNormal, limits.digits[holdMargins.minNormalContact].c_str(),
-              holdMargins.worstFrictionRatio, limits.digits[holdMargins.worstFrictionContact].c_str());
-  const hand::GraspEquilibrium ge = hand::findGraspEquilibrium(s.model, s.q, limits, options.facets);
-  std::printf("grasp equilibrium: %s after %d iterations: |qdd| %.3g, |h| %.3g m, min normal %.4f N, "
-              "worst friction ratio %.4f, max tension %.2f N%s%s\n",
-              ge.ok ? "found" : "NOT found", ge.iterations, ge.accelerationResidual, ge.constraintResidual,
-              ge.margins.minNormal, ge.margins.worstFrictionRatio, ge.u.size() ? ge.u.maxCoeff() : 0.0,
-              ge.message.empty() ? "" : ": ", ge.message.c_str());
-  if (equilibriumOnly) return ge.ok ? 0 : 1;
-  // Start from the equilibrium search's point when its contacts hold (even if its static residual
-  // is not yet at tolerance): the stored grasp is no equilibrium under u ≥ 0.
-  if (ge.q.size() == s.model.nq() && ge.lambda.size() == s.model.nc() &&
-      ge.margins.minNormal >= limits.normalMin && ge.margins.worstFrictionRatio <= 1.0) {
-    options.guessTensions = ge.u;
-    problem = hand::makeBallTurnProblem(problem.model, ge.q, limits, options);
-    std::printf("starting from the equilibrium search's grasp\n");
+  // The start: how far the stored grasp is from a hold inside the pyramid (grasp.hpp; 0 = a hold).
+  {
+    const hand::PyramidHold h = hand::pyramidHold(s.model, s.q, limits.normalMin,
+                                                  limits.friction * std::cos(std::numbers::pi / options.facets),
+                                                  options.facets);
+    Eigen::Index worst = 0;
+    if (h.ok) h.residual.cwiseAbs().maxCoeff(&worst);
+    std::printf("stored grasp: the best hold with u >= 0 and the contacts inside the pyramid leaves %.3g of the "
+                "static load unbalanced (0: an equilibrium), most on %s\n",
+                h.ok ? h.relativeResidual : NAN, s.model.configNames()[worst].c_str());
   }
   OptimizerOptions oo;
   oo.printLevel = printLevel;
@@ -113,6 +104,34 @@ int main(int argc, char** argv) {
   std::printf("evaluations: %ld dynamics, %ld linearizations, %ld second-order; solve %.3f s wall, %.3f s CPU\n",
               r.dynamicsEvaluations, r.linearizationEvaluations, r.secondOrderEvaluations, r.solveTime,
               r.solveCpuTime);
+  // The time split: each kind of evaluation timed alone at the grasp (200 calls, the fastest of 3
+  // batches) times the count the solve made; the rest of the solve is Ipopt (MUMPS included), the
+  // transcription's own assembly and the a-posteriori check.
+  {
+    const int n = s.model.nq();
+    Data data(s.model);
+    SecondOrderWorkspace ws(s.model);
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n), w = Eigen::VectorXd::Ones(n),
+                          rho = Eigen::VectorXd::Ones(s.model.nc());
+    Eigen::MatrixXd H(2 * n + s.model.nu(), 2 * n + s.model.nu());
+    const auto perCall = [&](const auto& call) {
+      double best = 1e300;
+      for (int batch = 0; batch < 3; ++batch) {
+        const auto a = std::chrono::steady_clock::now();
+        for (int k = 0; k < 200; ++k) call();
+        best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - a).count() / 200);
+      }
+      return best;
+    };
+    const double tDyn = perCall([&] { computeDynamics(s.model, data, s.q, zero, s.u); });
+    const double tLin = perCall([&] { computeLinearization(s.model, data, s.q, zero, s.u); });
+    const double tSec = perCall([&] { computeSecondOrderContraction(s.model, data, ws, s.q, zero, s.u, w, rho, H); });
+    const double dyn = tDyn * r.dynamicsEvaluations, lin = tLin * r.linearizationEvaluations,
+                 sec = tSec * r.secondOrderEvaluations;
+    std::printf("time split (per-call cost x count, estimated): dynamics %.3f s (%.1f us each), derivatives %.3f s "
+                "(%.1f us), second order %.3f s (%.1f us); the rest (Ipopt/MUMPS, assembly, check) %.3f s\n",
+                dyn, 1e6 * tDyn, lin, 1e6 * tLin, sec, 1e6 * tSec, r.solveTime - dyn - lin - sec);
+  }
   bool ok = r.ok();
   if (!r.trajectory.size()) {
     std::printf("no trajectory\n");

@@ -20,7 +20,7 @@ void bindLqr(py::module_& m) {
   bindStatus<LqrCode>(m, "LqrStatus", "Status of solve_care / solve_dare (code: ok, not_stabilizable, "
                                       "no_stabilizing_solution, no_convergence).");
   bindStatus<MatrixEquationCode>(m, "MatrixEquationStatus",
-                                 "Status of solve_lyapunov (code: ok, singular, non_finite).");
+                                 "Status of solve_lyapunov (code: ok, singular, non_finite, no_convergence).");
 
   py::class_<CareOptions>(m, "CareOptions", "Options of solve_care / solve_dare (keywords).")
       .def(py::init(&makeFromKwargs<CareOptions>))

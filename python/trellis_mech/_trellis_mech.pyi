@@ -497,7 +497,7 @@ class MatrixEquationSolution:
     def status(self) -> MatrixEquationStatus: ...
 
 class MatrixEquationStatus:
-    """Status of solve_lyapunov (code: ok, singular, non_finite)."""
+    """Status of solve_lyapunov (code: ok, singular, non_finite, no_convergence)."""
     def __repr__(self: MatrixEquationStatus) -> str: ...
     @property
     def code(self) -> str:

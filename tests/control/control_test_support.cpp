@@ -53,4 +53,19 @@ Model makeConstrainedCarts() {
   return std::move(b).finalize();
 }
 
+Model makeDampedChain(int links) {
+  ModelBuilder b("chain");
+  std::string parent = "world";
+  for (int i = 1; i <= links; ++i) {
+    const std::string n = std::to_string(i);
+    b.addFrame("l" + n, parent, Transform::rz("q" + n));
+    b.addFrame("m" + n, "l" + n, Transform::ty(-0.1), Mass{0.1, Eigen::Matrix3d::Zero()});
+    b.addConfigForce("q" + n, "u" + n);
+    parent = "m" + n;
+  }
+  b.addGravity({0.0, -9.81, 0.0});
+  b.addDamping(0.1);
+  return std::move(b).finalize();
+}
+
 }  // namespace trellis::ctest

@@ -26,6 +26,11 @@ Model makeCartPole(double mc = 1.0, double mp = 0.2, double l = 0.5);
 /// "push" on x1. The constraint removes one configuration: 4 states, 2 tangent directions.
 Model makeConstrainedCarts();
 
+/// The damped hanging chain of bench/chain_scene.py: `links` links rz("q<i>") each carrying a
+/// 0.1 kg point mass 0.1 m below its joint (ty −0.1), a torque "u<i>" per joint, damping 0.1
+/// per joint, gravity −9.81 y. Its fast modes are stiff (|λ| ≈ 1.4e3 at 6 links).
+Model makeDampedChain(int links);
+
 }  // namespace trellis::ctest
 
 #define CONTROL_CHECK_CLOSE(expected, got, tol, floor)                                   \

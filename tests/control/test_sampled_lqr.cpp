@@ -12,6 +12,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
+#include <unsupported/Eigen/MatrixFunctions>
 
 #include <algorithm>
 #include <cmath>
@@ -612,6 +613,33 @@ TEST_CASE("sampled LQR: constant intervals by the exact block exponential agree 
     CHECK(Eigen::SelfAdjointEigenSolver<MatrixXd>(W).eigenvalues()(0) > -1e-12 * W.norm());
   }
 
+  // A mild system (‖M‖h ≈ 1), where Van Loan's single exponential of the 2c×2c matrix (Eigen's
+  // generic Padé) is accurate: an independent path to the structured Padé and doublings.
+  {
+    std::mt19937 rng(31);
+    std::normal_distribution<double> normal;
+    const MatrixXd Am = MatrixXd::NullaryExpr(4, 4, [&] { return normal(rng); });
+    const MatrixXd Bm = MatrixXd::NullaryExpr(4, 2, [&] { return normal(rng); });
+    const MatrixXd L = MatrixXd::NullaryExpr(4, 4, [&] { return normal(rng); });
+    const MatrixXd Qm = L * L.transpose();
+    const double h = 0.3;
+    MatrixXd C = MatrixXd::Zero(12, 12);  // [[−M̃ᵀ, Q̃], [0, M̃]] h
+    C.block(6, 6, 4, 4) = Am * h;
+    C.block(6, 10, 4, 2) = Bm * h;
+    C.topLeftCorner(6, 6) = -C.bottomRightCorner(6, 6).transpose();
+    C.block(0, 6, 4, 4) = Qm * h;
+    C.block(4, 10, 2, 2) = w.R * h;
+    const MatrixXd F = C.exp();
+    const MatrixXd Wv = F.bottomRightCorner(6, 6).transpose() * F.topRightCorner(6, 6);
+    SampledInterval structured;
+    trellis::discretizeConstantInterval(Am, Bm, Qm, w.R, h, structured);
+    CHECK(relErr(F.block(6, 6, 4, 4), structured.Phi) < 1e-13);
+    CHECK(relErr(F.block(6, 10, 4, 2), structured.Gamma) < 1e-13);
+    CHECK(relErr(Wv.topLeftCorner(4, 4), structured.Q) < 1e-12);
+    CHECK(relErr(Wv.topRightCorner(4, 2), structured.N) < 1e-12);
+    CHECK(relErr(Wv.bottomRightCorner(2, 2), structured.R) < 1e-12);
+  }
+
   // The recursion over 20 intervals: the exponential path (every interval declared constant,
   // sharing one exponential) against the integration of every interval.
   const VectorXd times = trellis::sampleTimes(0.0, 2.0, 10.0);
@@ -777,5 +805,70 @@ TEST_CASE("sampled LQR: the Radau and Magnus integrations agree with CVODES on t
     REQUIRE(a.ok());
     REQUIRE(b.ok());
     CHECK(gainDifference(b.gains.gains(), a.gains.gains()) < 1e-8);
+  }
+}
+
+TEST_CASE("sampled LQR: the Magnus exponential over whole intervals checks itself against its halves",
+          "[sampled][magnus]") {
+  trellis::SampledDiscretizationOptions bdf;  // the reference: every interval by CVODES, tight
+  bdf.integrator = trellis::SampledIntegrator::kBdf;
+  bdf.rtol = 1e-12;
+  bdf.atol = 1e-14;
+  trellis::SampledDiscretizationOptions magnus;
+  magnus.integrator = trellis::SampledIntegrator::kMagnus;
+  SECTION("one step per interval is not enough: the check bisects, or refuses when it may not") {
+    // tvSystem at 2 Hz: A(t) turns over ~1 rad per 0.25 s, so a single sixth-order step over
+    // 0.5 s misses rtol by orders of magnitude; with a smoothly varying Q(t) as well.
+    LqrWeights w;
+    w.Qfun = [](double t, MatrixXd& Q) {
+      Q = (MatrixXd(2, 2) << 3.0 + std::sin(5.0 * t), 0.5, 0.5, 1.0 + 0.5 * std::cos(2.0 * t)).finished();
+    };
+    w.R = MatrixXd::Constant(1, 1, 0.7);
+    w.Qf = MatrixXd::Identity(2, 2);
+    const VectorXd times = trellis::sampleTimes(0.0, 3.0, 2.0);
+    const auto ref = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, bdf);
+    const auto got = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, magnus);
+    REQUIRE(ref.ok());
+    REQUIRE(got.ok());
+    CHECK(got.bisections >= static_cast<long>(times.size() - 1));  // every interval was split
+    for (std::size_t k = 0; k < ref.intervals.size(); ++k) {
+      INFO("interval " << k);
+      CHECK(intervalDifference(ref.intervals[k], got.intervals[k]) < 1e-9);
+    }
+    // Room for one check only (its two half steps): the first failing check is the status.
+    trellis::SampledDiscretizationOptions tight = magnus;
+    tight.maxSteps = 2;
+    const auto refused = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, tight);
+    CHECK(refused.status.code == trellis::SampledCode::kIntegratorFailure);
+    CHECK(refused.status.index == 0);
+    CHECK(refused.status.message.find("maxSteps = 2") != std::string::npos);
+  }
+  SECTION("the stiff 6-link chain's free swing at 10 and 100 Hz against CVODES at rtol 1e-12") {
+    // |λ|h ≈ 140 / 14 for the fast modes; knots every 20 ms (at 10 Hz five pieces per interval).
+    const Model model = trellis::ctest::makeDampedChain(6);
+    SimulationOptions so;
+    so.rtol = 1e-11;
+    so.atol = 1e-12;
+    so.outputStep = 0.02;
+    const trellis::Policy zero = [](double, const VectorXd&, VectorXd& u) { u.setZero(); };
+    const VectorXd x0 = (VectorXd(12) << VectorXd::Constant(6, 0.3), VectorXd::Zero(6)).finished();
+    const SimulationResult swing = trellis::simulate(model, x0, 0.0, 0.4, zero, so);
+    REQUIRE(swing.ok());
+    LqrWeights w;
+    w.Q = MatrixXd::Identity(12, 12);
+    w.R = MatrixXd::Identity(6, 6);
+    w.Qf = w.Q;
+    for (double rate : {10.0, 100.0}) {
+      INFO("rate " << rate);
+      trellis::TvlqrOptions a, b;
+      a.sampleRate = b.sampleRate = rate;
+      a.sampled = magnus;
+      b.sampled = bdf;
+      const trellis::TvlqrSolution got = trellis::solveTvlqr(model, swing.trajectory, w, a);
+      const trellis::TvlqrSolution exact = trellis::solveTvlqr(model, swing.trajectory, w, b);
+      REQUIRE(got.ok());
+      REQUIRE(exact.ok());
+      CHECK(gainDifference(exact.gains.gains(), got.gains.gains()) < 1e-8);
+    }
   }
 }

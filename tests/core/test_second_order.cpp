@@ -27,9 +27,11 @@
 #include <trellis/core/second_order.hpp>
 #include <trellis/core/numdiff.hpp>
 
-#include "adjoint_tape.hpp"  // core/src: the sweeps' build switch
+#include "adjoint_tape.hpp"        // core/src: the sweeps' build switch
+#include "second_order_tree.hpp"  // core/src: the tree pass's switch
 
 #include <cmath>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -331,6 +333,102 @@ TEST_CASE("The contraction in blocks of directions, in both builds of its sweeps
       REQUIRE(computeSecondOrderContraction(model, data, ws, s.q, s.dq, s.u, w, rho, again).ok());
       CHECK(again == H);
     }
+  }
+}
+
+/// A branched 3D tree of every joint kind that the tree pass covers, with full inertias, skewed
+/// gravity, a configuration spring, damping and configuration forces (no point-force element, no
+/// constraint): root rz → {arm: ry, tx (prismatic), r_axis; leg: rx, t_axis}, plus a second root tz.
+TestSystem branchedTree(std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  SystemBuilder s;
+  s.frame("hip", "world", Transform::rz("yaw"), Mass{1.2, randomInertia(rng)});
+  s.frame("arm_base", "hip", Transform::constSE3(se3(0.4, {1.0, 0.5, 0.2}, {0.3, 0.1, 0.2})));
+  s.frame("shoulder", "arm_base", Transform::ry("pitch"), Mass{0.7, randomInertia(rng)});
+  s.frame("upper", "shoulder", Transform::tz(0.5), Mass{0.4, randomInertia(rng)});
+  s.frame("slide", "upper", Transform::tx("ext"), Mass{0.3, randomInertia(rng)});
+  s.frame("wrist", "slide", Transform::rotAxis(Eigen::Vector3d(0.3, -0.5, 0.8).normalized(), "twist"), Mass{0.2, randomInertia(rng)});
+  s.frame("hand", "wrist", Transform::ty(0.2), Mass{0.15, randomInertia(rng)});
+  s.frame("leg", "hip", Transform::rx("knee"), Mass{0.6, randomInertia(rng)});
+  s.frame("shin", "leg", Transform::ty(-0.6), Mass{0.5, randomInertia(rng)});
+  s.frame("foot", "shin", Transform::transAxis(Eigen::Vector3d(0.2, 0.9, -0.4).normalized(), "reach"), Mass{0.25, randomInertia(rng)});
+  s.frame("other", "world", Transform::constSE3(se3(-0.3, {0.0, 1.0, 0.0}, {1.0, 0.0, 0.5})));
+  s.frame("lift", "other", Transform::tz("lift"), Mass{0.9, randomInertia(rng)});
+  s.frame("lift_arm", "lift", Transform::ry("tilt"), Mass{0.35, randomInertia(rng)});
+  s.frame("lift_tip", "lift_arm", Transform::tx(0.4), Mass{0.1, randomInertia(rng)});
+  s.b.addGravity(Eigen::Vector3d(0.6, -1.3, -9.5));
+  s.b.addConfigSpring("knee", 2.5, 0.3);
+  s.b.addDamping(0.05, {{"ext", 0.4}});
+  s.b.addConfigForce("yaw", "u_yaw");
+  s.b.addConfigForce("ext", "u_ext");
+  s.b.addConfigForce("tilt", "u_tilt");
+  return std::move(s).finish();
+}
+
+TEST_CASE("The contraction's tree pass against the recording and the tensors", "[second_order][tree]") {
+  // Where the model holds only the tree, gravity and forces on coordinates, the workspace takes
+  // the tree pass (second_order_tree.hpp); secondOrderForceTape makes it record the tape instead.
+  // Both, and the sum of the hyper-dual tensors, agree to 1e-10 of the largest entry (three
+  // computations that share no code beyond the KKT factor), at random states and weights, on
+  // every block shape (2n = 4, 6, 20 = 16 + 4, 26 = 16 + 10, 12, 8) and every joint kind, in the
+  // baseline build and (where the CPU has it) the AVX2+FMA build of the pass.
+  struct ForceTape {  // restores the automatic choice even when a check fails
+    explicit ForceTape(bool force) { detail::secondOrderForceTape(force); }
+    ~ForceTape() { detail::secondOrderForceTape(false); }
+  };
+  struct ForceGeneric {
+    explicit ForceGeneric(bool force) { detail::secondOrderSweepsForceGeneric(force); }
+    ~ForceGeneric() { detail::secondOrderSweepsForceGeneric(false); }
+  };
+  std::vector<TestSystem> systems;
+  for (const int links : {2, 3, 10, 13}) systems.push_back(planarChain(links, 0.5, 1.0));
+  systems.push_back(branchedTree(41));
+  for (const TransformType t : {TransformType::kRx, TransformType::kTy, TransformType::kRotAxis, TransformType::kTransAxis})
+    systems.push_back(transformChain(t));
+  for (const bool generic : {false, true}) {
+    const ForceGeneric build(generic);
+    INFO((detail::secondOrderSweepsUseAvx2() ? "AVX2+FMA build" : "baseline build"));
+    std::mt19937 rng(4242);
+    for (const TestSystem& sys : systems) {
+      const Model& model = sys.model;
+      const int n = model.nq(), N = 2 * n + model.nu();
+      INFO("n = " << n << ", m = " << model.nu());
+      REQUIRE(detail::treeSecondOrderApplies(model));
+      Data data(model);
+      SecondOrderWorkspace fast(model, true);
+      CHECK(detail::secondOrderUsesTreePath(fast));
+      std::optional<SecondOrderWorkspace> tape;
+      {
+        const ForceTape force(true);
+        tape.emplace(model, false);
+      }
+      CHECK_FALSE(detail::secondOrderUsesTreePath(*tape));
+      for (int k = 0; k < 3; ++k) {
+        const State s = randomState(model, rng);
+        REQUIRE(computeSecondOrderTensors(model, data, fast, s.q, s.dq, s.u).ok());
+        const Eigen::VectorXd w = uniformVector(rng, n, -1.0, 1.0);
+        Eigen::MatrixXd expected = Eigen::MatrixXd::Zero(N, N), Hfast(N, N), Htape(N, N);
+        for (int i = 0; i < n; ++i) expected += w[i] * fast.qddHessian[i];
+        REQUIRE(computeSecondOrderContraction(model, data, fast, s.q, s.dq, s.u, w, Eigen::VectorXd(), Hfast).ok());
+        REQUIRE(computeSecondOrderContraction(model, data, *tape, s.q, s.dq, s.u, w, Eigen::VectorXd(), Htape).ok());
+        TRELLIS_CHECK_MATRIX(expected, Hfast, 1e-10, Scale::kMatrix);
+        TRELLIS_CHECK_MATRIX(Htape, Hfast, 1e-10, Scale::kMatrix);
+      }
+    }
+  }
+}
+
+TEST_CASE("The contraction's tree pass stays off where the model has more than the tree", "[second_order][tree]") {
+  // Springs between points, tendons, body wrenches and constraint rows: the recording.
+  std::vector<TestSystem> systems;
+  systems.push_back(kitchenSink(3, false));
+  systems.push_back(kitchenSink(3, true));
+  systems.push_back(planarSkate(0.3));
+  systems.push_back(paperPendulum());
+  for (const TestSystem& sys : systems) {
+    CHECK_FALSE(detail::treeSecondOrderApplies(sys.model));
+    const SecondOrderWorkspace ws(sys.model, false);
+    CHECK_FALSE(detail::secondOrderUsesTreePath(ws));
   }
 }
 

@@ -75,3 +75,9 @@ TEST_CASE("No allocation after warm-up: second derivatives with coordinate coupl
           "[no_malloc][second_order]") {
   checkNoAllocation(mimicChain(), 74);
 }
+
+TEST_CASE("No allocation after warm-up: second derivatives on the tree pass", "[no_malloc][second_order]") {
+  // planarChain(13): blocks of 16 and 10 directions; transformChain: a 16-lane block alone.
+  checkNoAllocation(planarChain(13, 0.5, 1.0).model, 75);
+  checkNoAllocation(transformChain(TransformType::kRotAxis).model, 76);
+}

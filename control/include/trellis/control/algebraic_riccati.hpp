@@ -26,10 +26,12 @@
 // not limited by cond(R)·1e-16. The states are then scaled (powers of 2, x = D z) to balance the
 // Hamiltonian [[A, −G], [−Q, −Aᵀ]]: D minimizes the sum of squares of its off-diagonal entries plus
 // a weak pull of each diag(Q, G) toward |A_ii| (a convex problem in log D, coordinate descent).
-// CARE: scaled sign function of the balanced Hamiltonian, then Newton–Kleinman steps. DARE:
+// CARE: scaled sign function of the balanced Hamiltonian (LAPACK's LU inverse), then
+// Newton–Kleinman steps (Lyapunov solves on LAPACK's real Schur form). DARE:
 // structure-preserving doubling stopped when every entry has converged relative to √(S_ii S_jj)
 // and the doubled transition has decayed, ‖A_k‖_F ≤ √tol ‖A_0‖_F (the per-entry test alone stops
-// early when modes of very different scales mix), then Newton (Hewer) steps. Stabilizability is diagnosed only when the solve fails (a successful
+// early when modes of very different scales mix), then Newton (Hewer) steps (Stein solves on
+// LAPACK's Schur form). The closed-loop eigenvalues are LAPACK's (dgees). Stabilizability is diagnosed only when the solve fails (a successful
 // solve proves it), in O(n³): one complex Schur form of A and a left eigenvector per unstable mode.
 #pragma once
 

@@ -7,11 +7,13 @@
 
 namespace trellis {
 
-/// Solves Fᵀ X + X F + C = 0 (F n×n with no eigenvalue pair λ_i + λ̄_j = 0, C n×n symmetric) by a
-/// complex Schur form F = U T Uᴴ and column-wise back substitution (Bartels–Stewart), O(n³); X is
-/// symmetric. Throws std::invalid_argument when F or C is not square or their sizes differ. A
-/// singular equation (a pivot T_ii + conj(T_jj) at rounding level, ≤ 1e3·eps·max(1, ‖T‖)) is the
-/// status kSingular, never thrown.
+/// Solves Fᵀ X + X F + C = 0 (F n×n with no eigenvalue pair λ_i + λ̄_j = 0, C n×n symmetric) by
+/// LAPACK's real Schur form F = U T Uᵀ (dgees) and the quasi-triangular Sylvester solve
+/// Tᵀ Y + Y T = −Uᵀ C U (dtrsyl; Bartels–Stewart), O(n³); X = U Y Uᵀ, symmetric. Throws
+/// std::invalid_argument when F or C is not square or their sizes differ. A singular equation
+/// (eigenvalues with |λ_i + conj(λ_j)| ≤ 1e3·eps·max(1, ‖T‖_F); index: the first such Schur column j)
+/// is the status kSingular, a Schur form that did not converge or a non-finite F kNoConvergence,
+/// never thrown.
 MatrixEquationSolution solveLyapunov(const Eigen::MatrixXd& F, const Eigen::MatrixXd& C);
 
 }  // namespace trellis

@@ -158,7 +158,9 @@ struct TvlqrSolution {
   long transportSteps = 0;        ///< basis transport steps (constrained)
   double maxBasisCorrection = 0.0;  ///< TangentBasisTrajectory::maxCorrection (constrained)
   ///@{
-  /// The smallest and largest eigenvalue of S (of the reduced Sr when constrained) over the solve.
+  /// The smallest and largest eigenvalue of S (of the reduced Sr when constrained) at
+  /// gains.times() (continuous: the output grid; sampled: the samples). The continuous solve's
+  /// per-step S ⪰ 0 check (RiccatiOptions::checkPositiveSemidefinite) covers the steps between.
   double minEigenvalueS = 0.0, maxEigenvalueS = 0.0;
   ///@}
   std::string method;             ///< "bdf", "adams", "factored" or "sampled-zoh"

@@ -27,12 +27,22 @@
 //    scalings, ∂²/∂x_i∂x_j for a product, g'' for sin, cos, sqrt, 1/x).
 //    Cost: O(n · pass) like the 2n separate sweeps it replaces: the recording, one reverse sweep
 //    and 2 sweeps per block of 16 directions, each over every node of the recording (some 330
-//    per joint of a 3D chain), plus the linearization it needs for Y. Callgrind, instructions
-//    per call against one exact linearization (bench/README.md): planar 10-chain 6×, 3D 40-chain
-//    14×, hand-like tree (n = 20) 15×, hand scene 10× (the baseline SSE2 build: 9×, 32×, 31×,
-//    19×). Issue 30's target of 4× is not reached: the linearization's own tangents are
-//    closed-form, O(1) per joint pair with composite subtree sums, where the recording sweeps
-//    every node for every block of directions.
+//    per joint of a 3D chain), plus the linearization it needs for Y.
+//  - Contraction on a joint tree (chosen per model when the workspace is built, where the residual
+//    holds only the tree's inertia, gravity and forces on coordinates — configuration springs,
+//    damping, configuration forces: no linear spring, tendon, body wrench or constraint row):
+//    the same rows, by forward mode over the closed-form gradient of φ instead of the recording.
+//    The linearization's tangents (O(1) per joint pair with composite subtree sums) contracted
+//    with μ give ∂φ/∂z in O(n), and ∂φ/∂q̈ = M μ also; that O(n) pass run on numbers that carry
+//    16 tangents (seeded with e_a and Y e_a) gives 16 rows ∇²φ e_a = ∂_a(∇_z φ) + Yᵀ ∂_a(M μ).
+//    O(n) per block of 16 directions over spatial quantities (6-vectors, 3×3 inertias), not
+//    scalar nodes (core/src/second_order_tree.hpp).
+//    Callgrind, instructions per call against one exact linearization (bench/README.md): tree
+//    pass: planar 10-chain 4.5×, 3D 40-chain 6.2×, hand-like tree (n = 20) 7.5× (the recording on
+//    the same models: 5.8×, 14×, 15×); recording: hand-like tree with a fingertip point 13×, hand
+//    scene 10×. Issue 30's target of 4× is not reached: the tree pass still evaluates some 1 300
+//    lane operations per joint and block (every composite sum carries 16 tangents), and the
+//    constraint rows and point-force elements run the recording.
 // Every input enters F linearly (configuration forces, body wrench entries, tendon tensions) and K
 // does not depend on u, so G[e_uj, e_uk] = 0 and ∂²q̈/∂u∂u = 0 exactly: those pairs (and, in the
 // contraction, the u directions, which follow by symmetry) are not evaluated.
@@ -111,7 +121,8 @@ DynamicsStatus computeSecondOrderTensors(const Model& model, Data& data, SecondO
                                          const Eigen::VectorXd& u);
 
 /// H = Σᵢ wᵢ ∇²_z q̈ᵢ + Σ_r ρ_r ∇²_z λ_r (N×N, symmetric; z = [q; q̇; u]) without forming the
-/// tensors: one transposed KKT solve and the second-order adjoint of one recorded residual pass. w: n entries;
+/// tensors: one transposed KKT solve, then forward mode over the closed-form gradient on a joint
+/// tree, else the second-order adjoint of one recorded residual pass (file comment). w: n entries;
 /// rho: nc entries, or empty for none. Computes the linearization on the way (in data). Status
 /// and throws as computeSecondOrderTensors (H must be N×N).
 DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, SecondOrderWorkspace& ws,

@@ -1,0 +1,474 @@
+// The second-order contraction of a joint tree: forward mode over the closed-form gradient of the
+// linearization (see second_order_tree.hpp for the formulation).
+#include "second_order_tree.hpp"
+
+#include "adjoint_tape.hpp"  // the sweeps' build switch, shared
+#include "hyper_dual.hpp"   // Vec3, Mat3, Vec6 over any scalar
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace trellis::detail {
+
+namespace {
+
+#define TRELLIS_LANES_INLINE inline __attribute__((always_inline))
+
+/// A value with L tangents (forward mode along L directions at once): g(x) = g(v) + g'(v) d.
+/// The tangents are processed W at a time as vectors (W = 2: SSE2, W = 4: AVX2), loaded and
+/// stored through an 8-byte aligned may_alias type (adjoint_tape.hpp: TapeChunk), so that the
+/// lane loops are vector instructions in either build.
+struct NoTangents {};  ///< tag: tangents left for the caller to write
+
+template <int L, int W>
+struct Lanes {
+  double d[L];
+  double v;
+  Lanes() : d{}, v(0.0) {}
+  Lanes(double value) : d{}, v(value) {}  // NOLINT: a constant has zero tangents
+  Lanes(double value, NoTangents) : v(value) {}  // every lane written next (no zero fill first)
+};
+
+template <int W>
+using LaneChunk = typename TapeChunk<W>::type;
+/// The W lanes at x as a vector lvalue (macros, not functions: a vector passed or returned by
+/// value would change the ABI between the two builds).
+#if defined(__clang__)
+#define TRELLIS_LANES_AT(W, x) (reinterpret_cast<typename TapeChunk<W>::Access*>(x)->v)
+#define TRELLIS_LANES_AT_C(W, x) (reinterpret_cast<const typename TapeChunk<W>::Access*>(x)->v)
+#else
+#define TRELLIS_LANES_AT(W, x) (*reinterpret_cast<typename TapeChunk<W>::Access*>(x))
+#define TRELLIS_LANES_AT_C(W, x) (*reinterpret_cast<const typename TapeChunk<W>::Access*>(x))
+#endif
+/// r.d = f(chunks of the operands), chunk by chunk.
+#define TRELLIS_LANES_MAP(expr)                                             \
+  for (int c = 0; c < L; c += W) {                                          \
+    TRELLIS_LANES_AT(W, r.d + c) = (expr);                                  \
+  }
+
+template <int L, int W>
+TRELLIS_LANES_INLINE Lanes<L, W> operator+(const Lanes<L, W>& a, const Lanes<L, W>& b) {
+  Lanes<L, W> r(a.v + b.v, NoTangents{});
+  TRELLIS_LANES_MAP(TRELLIS_LANES_AT_C(W, a.d + c) + TRELLIS_LANES_AT_C(W, b.d + c));
+  return r;
+}
+template <int L, int W>
+TRELLIS_LANES_INLINE Lanes<L, W> operator-(const Lanes<L, W>& a, const Lanes<L, W>& b) {
+  Lanes<L, W> r(a.v - b.v, NoTangents{});
+  TRELLIS_LANES_MAP(TRELLIS_LANES_AT_C(W, a.d + c) - TRELLIS_LANES_AT_C(W, b.d + c));
+  return r;
+}
+template <int L, int W>
+TRELLIS_LANES_INLINE Lanes<L, W> operator-(const Lanes<L, W>& a) {
+  Lanes<L, W> r(-a.v, NoTangents{});
+  TRELLIS_LANES_MAP(-TRELLIS_LANES_AT_C(W, a.d + c));
+  return r;
+}
+template <int L, int W>
+TRELLIS_LANES_INLINE Lanes<L, W> operator*(const Lanes<L, W>& a, const Lanes<L, W>& b) {
+  Lanes<L, W> r(a.v * b.v, NoTangents{});
+  TRELLIS_LANES_MAP(TRELLIS_LANES_AT_C(W, a.d + c) * b.v + a.v * TRELLIS_LANES_AT_C(W, b.d + c));
+  return r;
+}
+template <int L, int W>
+TRELLIS_LANES_INLINE Lanes<L, W> operator*(const Lanes<L, W>& a, double b) {
+  Lanes<L, W> r(a.v * b, NoTangents{});
+  TRELLIS_LANES_MAP(TRELLIS_LANES_AT_C(W, a.d + c) * b);
+  return r;
+}
+template <int L, int W>
+TRELLIS_LANES_INLINE Lanes<L, W> operator*(double b, const Lanes<L, W>& a) {
+  return a * b;
+}
+template <int L, int W>
+TRELLIS_LANES_INLINE Lanes<L, W> operator+(const Lanes<L, W>& a, double b) {
+  Lanes<L, W> r = a;
+  r.v += b;
+  return r;
+}
+template <int L, int W>
+TRELLIS_LANES_INLINE Lanes<L, W> operator+(double b, const Lanes<L, W>& a) {
+  return a + b;
+}
+template <int L, int W>
+TRELLIS_LANES_INLINE Lanes<L, W> operator-(const Lanes<L, W>& a, double b) {
+  return a + (-b);
+}
+template <int L, int W>
+TRELLIS_LANES_INLINE Lanes<L, W> operator-(double b, const Lanes<L, W>& a) {
+  return -a + b;
+}
+template <int L, int W>
+TRELLIS_LANES_INLINE Lanes<L, W>& operator+=(Lanes<L, W>& a, const Lanes<L, W>& b) {
+  a.v += b.v;
+  for (int c = 0; c < L; c += W) TRELLIS_LANES_AT(W, a.d + c) = (TRELLIS_LANES_AT_C(W, a.d + c) + TRELLIS_LANES_AT_C(W, b.d + c));
+  return a;
+}
+/// sin x and cos x together.
+template <int L, int W>
+TRELLIS_LANES_INLINE void sinCos(const Lanes<L, W>& x, Lanes<L, W>& s, Lanes<L, W>& c) {
+  const double sv = std::sin(x.v), cv = std::cos(x.v);
+  s.v = sv;
+  c.v = cv;
+  for (int i = 0; i < L; i += W) {
+    TRELLIS_LANES_AT(W, s.d + i) = (cv * TRELLIS_LANES_AT_C(W, x.d + i));
+    TRELLIS_LANES_AT(W, c.d + i) = (-sv * TRELLIS_LANES_AT_C(W, x.d + i));
+  }
+}
+
+template <class T>
+TRELLIS_LANES_INLINE Mat3<T>& operator+=(Mat3<T>& a, const Mat3<T>& b) {
+  for (int j = 0; j < 3; ++j) a.c[j] += b.c[j];
+  return a;
+}
+template <class T>
+TRELLIS_LANES_INLINE T& entry(Mat3<T>& m, int r, int c) {
+  return r == 0 ? m.c[c].x : (r == 1 ? m.c[c].y : m.c[c].z);
+}
+template <class T>
+TRELLIS_LANES_INLINE const T& entry(const Mat3<T>& m, int r, int c) {
+  return r == 0 ? m.c[c].x : (r == 1 ? m.c[c].y : m.c[c].z);
+}
+
+/// Spatial inertia (m, h, I about the world origin) applied to a twist: [m x_v + x_ω × h; h × x_v + I x_ω].
+template <class M, class T, class X>
+TRELLIS_LANES_INLINE auto applyInertia(const M& m, const Vec3<T>& h, const Mat3<T>& I, const Vec6<X>& x) {
+  return Vec6<T>{m * x.l + cross(x.a, h), cross(h, x.l) + I * x.a};
+}
+/// D x − x ×* H and the angular part of D x + x ×* H (linearization.cpp: dMinusCross,
+/// dPlusCrossAngular), H = [p; L] the subtree momentum, B the 3×3 block of D.
+template <class T, class X>
+TRELLIS_LANES_INLINE Vec6<T> dMinusCross(const Vec6<T>& H, const Mat3<T>& B, const Vec6<X>& x) {
+  return {2.0 * cross(H.l, x.a), B * x.a + cross(H.a, x.a)};
+}
+template <class T, class X>
+TRELLIS_LANES_INLINE Vec3<T> dPlusCrossAngular(const Vec6<T>& H, const Mat3<T>& B, const Vec6<X>& x) {
+  return 2.0 * cross(x.l, H.l) + B * x.a + cross(x.a, H.a);
+}
+
+struct TreeJoint {
+  int parent = kWorld, axis = 2;
+  bool revolute = true;
+  Mat3<double> R0, inertia;  ///< placement in the parent body; rotational inertia about the origin (body axes)
+  Vec3<double> p0, firstMoment;
+  double mass = 0.0, subtreeMass = 0.0;
+};
+
+Vec3<double> vec3(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+Mat3<double> mat3(const Eigen::Matrix3d& m) {
+  Mat3<double> r;
+  for (int j = 0; j < 3; ++j) r.c[j] = vec3(m.col(j));
+  return r;
+}
+
+/// The buffers of one block width L (per joint, the lanes of every quantity the pass keeps).
+template <int L, int W>
+struct TreePass {
+  using T = Lanes<L, W>;
+  std::vector<T> q, dq, qdd;
+  std::vector<Mat3<T>> R, cI, B;
+  std::vector<Vec3<T>> p, ch, gammaMu;
+  std::vector<Vec6<T>> S, v, a, psi, fin, H, betaMu;
+  std::vector<T> gq, gv, mmu;  ///< outputs: −∂φ̃/∂q_k, −∂φ̃/∂q̇_k, (M μ)_k
+
+  explicit TreePass(int n) {
+    for (auto* x : {&q, &dq, &qdd, &gq, &gv, &mmu}) x->assign(n, T{});
+    for (auto* x : {&R, &cI, &B}) x->assign(n, Mat3<T>{});
+    for (auto* x : {&p, &ch, &gammaMu}) x->assign(n, Vec3<T>{});
+    for (auto* x : {&S, &v, &a, &psi, &fin, &H, &betaMu}) x->assign(n, Vec6<T>{});
+  }
+
+  /// The gradient pass of the header at the seeded q, q̇, q̈: one sweep outwards (kinematics,
+  /// world inertias, per-body terms), one inwards (subtree sums and, as each joint's subtree is
+  /// complete, its two gradient entries and (M μ)_k).
+  TRELLIS_LANES_INLINE void run(const std::vector<TreeJoint>& joints, const Vec3<double>& gravity, const double* mu) {
+    const int n = static_cast<int>(joints.size());
+    for (int i = 0; i < n; ++i) {
+      const TreeJoint& jc = joints[i];
+      Mat3<T> Rpre;
+      Vec3<T> ppre;
+      Vec6<T> vP, aP, psiP;
+      if (jc.parent == kWorld) {
+        for (int c = 0; c < 3; ++c) Rpre.c[c] = {T(jc.R0.c[c].x), T(jc.R0.c[c].y), T(jc.R0.c[c].z)};
+        ppre = {T(jc.p0.x), T(jc.p0.y), T(jc.p0.z)};
+      } else {
+        Rpre = R[jc.parent] * jc.R0;
+        ppre = p[jc.parent] + R[jc.parent] * jc.p0;
+        vP = v[jc.parent];
+        aP = a[jc.parent];
+        psiP = psi[jc.parent];
+      }
+      const Vec3<T> e = Rpre.c[jc.axis];
+      if (jc.revolute) {
+        T sq, cq;
+        sinCos(q[i], sq, cq);
+        const int a1 = (jc.axis + 1) % 3, a2 = (jc.axis + 2) % 3;
+        R[i].c[jc.axis] = e;
+        R[i].c[a1] = cq * Rpre.c[a1] + sq * Rpre.c[a2];
+        R[i].c[a2] = (-sq) * Rpre.c[a1] + cq * Rpre.c[a2];
+        p[i] = ppre;
+        S[i] = {cross(ppre, e), e};
+      } else {
+        R[i] = Rpre;
+        p[i] = ppre + q[i] * e;
+        S[i] = {e, Vec3<T>{}};
+      }
+      v[i] = vP + dq[i] * S[i];
+      a[i] = aP + qdd[i] * S[i] + dq[i] * crossMotion(v[i], S[i]);
+      psi[i] = psiP + mu[i] * S[i];
+
+      // World inertia about the origin: h = m p + h_B, I = I_B + m (|p|² E − p pᵀ) + 2 (p·h_B) E
+      // − p h_Bᵀ − h_B pᵀ, with h_B = R h_b and I_B = R I_b Rᵀ about the body origin.
+      const Mat3<T>& Ri = R[i];
+      const Vec3<T>& pi = p[i];
+      const Vec3<T> hB = Ri * jc.firstMoment;
+      Mat3<T> RI;
+      for (int c = 0; c < 3; ++c) RI.c[c] = Ri * jc.inertia.c[c];
+      Mat3<T>& I = cI[i];
+      const T shift = jc.mass * dot(pi, pi) + 2.0 * dot(pi, hB);
+      for (int c = 0; c < 3; ++c)
+        for (int r = c; r < 3; ++r) {
+          T x = component(RI.c[0], r) * component(Ri.c[0], c) + component(RI.c[1], r) * component(Ri.c[1], c) +
+                component(RI.c[2], r) * component(Ri.c[2], c) - jc.mass * (component(pi, r) * component(pi, c)) -
+                component(pi, r) * component(hB, c) - component(hB, r) * component(pi, c);
+          if (r == c) x += shift;
+          entry(I, r, c) = x;
+          if (r != c) entry(I, c, r) = x;
+        }
+      const Vec3<T> h = jc.mass * pi + hB;
+      ch[i] = h;
+      const Vec6<T>& vi = v[i];
+      const Vec6<T> Iv = applyInertia(jc.mass, h, I, vi);
+      Vec6<T> ag = a[i];
+      ag.l = ag.l - gravity;
+      fin[i] = applyInertia(jc.mass, h, I, ag) + crossForce(vi, Iv);
+      H[i] = Iv;
+      // B = X + Xᵀ − 2 (h·v) E with X = I ω̂ + v hᵀ (linearization.cpp: compositePass).
+      const Vec3<T>& w = vi.a;
+      Mat3<T> X;
+      X.c[0] = w.z * I.c[1] - w.y * I.c[2] + h.x * vi.l;
+      X.c[1] = w.x * I.c[2] - w.z * I.c[0] + h.y * vi.l;
+      X.c[2] = w.y * I.c[0] - w.x * I.c[1] + h.z * vi.l;
+      const T hv2 = 2.0 * dot(h, vi.l);
+      Mat3<T>& Bi = B[i];
+      for (int c = 0; c < 3; ++c)
+        for (int r = c; r < 3; ++r) {
+          T x = entry(X, r, c) + entry(X, c, r);
+          if (r == c) x = x - hv2;
+          entry(Bi, r, c) = x;
+          if (r != c) entry(Bi, c, r) = x;
+        }
+      betaMu[i] = Vec6<T>{};
+      gammaMu[i] = Vec3<T>{};
+    }
+
+    const Vec6<double> g{gravity, Vec3<double>{}};
+    for (int k = n - 1; k >= 0; --k) {
+      // The subtree sums at k are complete (its descendants have larger indices).
+      const TreeJoint& jc = joints[k];
+      const Vec6<T>& Sk = S[k];
+      const double mk = jc.subtreeMass;
+      Vec6<T> vP, aPg, psiP;
+      if (jc.parent == kWorld) {
+        aPg = Vec6<T>{} - g;
+      } else {
+        vP = v[jc.parent];
+        aPg = a[jc.parent] - g;
+        psiP = psi[jc.parent];
+      }
+      const Vec6<T> IcS = applyInertia(mk, ch[k], cI[k], Sk);  // β_k
+      betaMu[k] += mu[k] * IcS;
+      gammaMu[k] += mu[k] * dPlusCrossAngular(H[k], B[k], Sk);
+      const Vec6<T> w = crossMotion(Sk, vP);
+      const Vec6<T> c = crossMotion(Sk, aPg) - crossMotion(w, vP);
+      const Vec6<T> dFq = crossForce(Sk, fin[k]) - applyInertia(mk, ch[k], cI[k], c) + dMinusCross(H[k], B[k], w);
+      const Vec6<T> dFv = -1.0 * dMinusCross(H[k], B[k], Sk) - 2.0 * applyInertia(mk, ch[k], cI[k], w);
+      gq[k] = dot(c, betaMu[k]) - dot(w.a, gammaMu[k]) - dot(psiP, dFq);
+      gv[k] = 2.0 * dot(w, betaMu[k]) + dot(Sk.a, gammaMu[k]) - dot(psiP, dFv);
+      mmu[k] = dot(Sk, applyInertia(mk, ch[k], cI[k], psiP) + betaMu[k]);
+      const int par = jc.parent;
+      if (par == kWorld) continue;
+      ch[par] += ch[k];
+      cI[par] += cI[k];
+      fin[par] += fin[k];
+      H[par] += H[k];
+      B[par] += B[k];
+      betaMu[par] += betaMu[k];
+      gammaMu[par] += gammaMu[k];
+    }
+  }
+};
+
+/// What one block of directions reads and writes.
+struct BlockIO {
+  int a0 = 0, lanes = 0, n = 0, N = 0;
+  const double *q = nullptr, *dq = nullptr, *qdd = nullptr, *mu = nullptr;
+  const Eigen::MatrixXd* Y = nullptr;  ///< n×N
+  Eigen::MatrixXd* rows = nullptr;     ///< N×2n
+  const std::vector<TreeJoint>* joints = nullptr;
+  Vec3<double> gravity;
+};
+
+/// One block of L directions a0 … a0 + lanes − 1: seeds, the pass, then the block's rows
+/// ∇²φ e_a = −ġ_z + Yᵀ (d/dε M μ) (the u entries of ġ are zero: Q is affine in u here; M μ does
+/// not depend on q̇, so its tangents vanish in the q̇ lanes and a block of q̇ directions skips Yᵀ).
+template <int L, int W>
+TRELLIS_LANES_INLINE void blockBody(TreePass<L, W>& P, const BlockIO& io) {
+  const int n = io.n, N = io.N, a0 = io.a0;
+  const Eigen::MatrixXd& Y = *io.Y;
+  for (int i = 0; i < n; ++i) {
+    P.q[i] = Lanes<L, W>(io.q[i]);
+    P.dq[i] = Lanes<L, W>(io.dq[i]);
+    P.qdd[i] = Lanes<L, W>(io.qdd[i]);
+    for (int l = 0; l < io.lanes; ++l) {
+      const int a = a0 + l;
+      P.q[i].d[l] = a == i ? 1.0 : 0.0;
+      P.dq[i].d[l] = a == n + i ? 1.0 : 0.0;
+      P.qdd[i].d[l] = Y(i, a);
+    }
+  }
+  P.run(*io.joints, io.gravity, io.mu);
+  Eigen::MatrixXd& rows = *io.rows;
+  for (int l = 0; l < io.lanes; ++l) {
+    double* col = rows.data() + static_cast<Eigen::Index>(a0 + l) * N;
+    for (int k = 0; k < n; ++k) {
+      col[k] = -P.gq[k].d[l];
+      col[n + k] = -P.gv[k].d[l];
+    }
+    for (int b = 2 * n; b < N; ++b) col[b] = 0.0;
+  }
+  if (a0 >= n) return;
+  for (int b = 0; b < N; ++b) {
+    LaneChunk<W> acc[L / W] = {};
+    const double* y = Y.data() + static_cast<Eigen::Index>(b) * n;
+    for (int k = 0; k < n; ++k) {
+      const double yk = y[k];
+      for (int c = 0; c < L / W; ++c) acc[c] += yk * TRELLIS_LANES_AT_C(W, P.mmu[k].d + c * W);
+    }
+    double sum[L];
+    for (int c = 0; c < L / W; ++c) TRELLIS_LANES_AT(W, sum + c * W) = (acc[c]);
+    for (int l = 0; l < io.lanes; ++l) rows(b, a0 + l) += sum[l];
+  }
+}
+
+/// The block, compiled for the baseline (W = 2) and, chosen when the workspace is built on a CPU
+/// with AVX2 and FMA (as the tape's sweeps are), for those (W = 4; the same source; FMA
+/// contraction changes results at rounding level only).
+template <int L>
+void blockGeneric(TreePass<L, 2>& P, const BlockIO& io) {
+  blockBody<L, 2>(P, io);
+}
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+template <int L>
+__attribute__((target("avx2,fma"), flatten)) void blockAvx2(TreePass<L, 4>& P, const BlockIO& io) {
+  blockBody<L, 4>(P, io);
+}
+constexpr bool kHaveAvx2Build = true;
+#else
+constexpr bool kHaveAvx2Build = false;
+#endif
+
+/// The passes of one vector width, for the block widths the model's 2n directions need.
+template <int W>
+struct PassSet {
+  std::unique_ptr<TreePass<4, W>> p4;
+  std::unique_ptr<TreePass<8, W>> p8;
+  std::unique_ptr<TreePass<16, W>> p16;
+  void make(int L, int n) {
+    if (L == 4 && !p4) p4 = std::make_unique<TreePass<4, W>>(n);
+    if (L == 8 && !p8) p8 = std::make_unique<TreePass<8, W>>(n);
+    if (L == 16 && !p16) p16 = std::make_unique<TreePass<16, W>>(n);
+  }
+};
+
+/// The block widths: 16 directions each, the last block 4, 8 or 16 wide.
+int blockWidth(int lanes) { return lanes <= 4 ? 4 : (lanes <= 8 ? 8 : 16); }
+
+}  // namespace
+
+struct TreeSecondOrderImpl {
+  int n = 0, N = 0;
+  std::vector<TreeJoint> joints;
+  Vec3<double> gravity;
+  bool avx2 = false;  ///< the W = 4 build (chosen at construction)
+  PassSet<2> generic;
+  PassSet<4> wide;
+};
+
+bool treeSecondOrderApplies(const Model& model) {
+  return model.nc() == 0 && model.linearSprings().empty() && model.tendons().empty() && model.bodyWrenches().empty();
+}
+
+namespace {
+bool forceTape = false;
+}
+void secondOrderForceTape(bool force) { forceTape = force; }
+bool secondOrderTapeForced() { return forceTape; }
+
+TreeSecondOrder::TreeSecondOrder(const Model& model) : impl_(std::make_unique<TreeSecondOrderImpl>()) {
+  TreeSecondOrderImpl& s = *impl_;
+  s.n = model.nq();
+  s.N = 2 * model.nq() + model.nu();
+  s.joints.resize(s.n);
+  for (int i = 0; i < s.n; ++i) {
+    const Joint& j = model.joints()[i];
+    TreeJoint& jc = s.joints[i];
+    jc.parent = j.parent;
+    jc.axis = j.axis;
+    jc.revolute = j.revolute;
+    jc.R0 = mat3(j.R0);
+    jc.p0 = vec3(j.p0);
+    jc.inertia = mat3(j.inertiaAtOrigin);
+    jc.firstMoment = vec3(j.firstMoment);
+    jc.mass = j.mass;
+    jc.subtreeMass = j.mass;
+  }
+  for (int i = s.n - 1; i >= 0; --i)
+    if (s.joints[i].parent != kWorld) s.joints[s.joints[i].parent].subtreeMass += s.joints[i].subtreeMass;
+  s.gravity = vec3(model.gravity());
+  s.avx2 = kHaveAvx2Build && secondOrderSweepsUseAvx2();
+  for (int a0 = 0; a0 < 2 * s.n; a0 += 16) {
+    const int L = blockWidth(std::min(16, 2 * s.n - a0));
+    if (s.avx2) s.wide.make(L, s.n);
+    else s.generic.make(L, s.n);
+  }
+}
+TreeSecondOrder::~TreeSecondOrder() = default;
+TreeSecondOrder::TreeSecondOrder(TreeSecondOrder&&) noexcept = default;
+TreeSecondOrder& TreeSecondOrder::operator=(TreeSecondOrder&&) noexcept = default;
+
+void TreeSecondOrder::computeRows(const Model&, const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
+                                  const Eigen::VectorXd& qdd, const Eigen::VectorXd& mu, const Eigen::MatrixXd& Y,
+                                  Eigen::MatrixXd& rows) {
+  TreeSecondOrderImpl& s = *impl_;
+  BlockIO io;
+  io.n = s.n;
+  io.N = s.N;
+  io.q = q.data();
+  io.dq = dq.data();
+  io.qdd = qdd.data();
+  io.mu = mu.data();
+  io.Y = &Y;
+  io.rows = &rows;
+  io.joints = &s.joints;
+  io.gravity = s.gravity;
+  for (int a0 = 0; a0 < 2 * s.n; a0 += 16) {
+    io.a0 = a0;
+    io.lanes = std::min(16, 2 * s.n - a0);
+    const int L = blockWidth(io.lanes);
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+    if (s.avx2) {
+      if (L == 4) blockAvx2<4>(*s.wide.p4, io);
+      else if (L == 8) blockAvx2<8>(*s.wide.p8, io);
+      else blockAvx2<16>(*s.wide.p16, io);
+      continue;
+    }
+#endif
+    if (L == 4) blockGeneric<4>(*s.generic.p4, io);
+    else if (L == 8) blockGeneric<8>(*s.generic.p8, io);
+    else blockGeneric<16>(*s.generic.p16, io);
+  }
+}
+
+}  // namespace trellis::detail

@@ -1,0 +1,97 @@
+// examples/hand/hand_ball_grasp.cpp — finds a grasp of the free ball that the pads hold by pushing
+// (issue 26, step 1; grasp.hpp) and writes it for make_hand_scene.py.
+//
+//   hand_ball_grasp [--scene NAME] [--out FILE]
+//
+// NAME: a free-ball scene of examples/scenes (default hand_ball; hand_ball_pinch the thumb-and-index
+// reduction), read with examples/hand/NAME_limits.json; its hand is used and its stored grasp is the
+// start. Writes FILE (default examples/hand/NAME_grasp.json): the ball's centre, the contact points,
+// q and u of the polished equilibrium (make_hand_scene.py does not read it yet: no grasp has been
+// found, examples/hand/README.md). Exit status 0 only when the grasp holds (grasp.hpp: q̈ = 0 polished,
+// every contact pressing by the margin and inside the pyramid, tensions and joints in range); 1
+// otherwise (nothing written); 2 on bad arguments.
+#include "grasp.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+
+using namespace trellis;
+
+int main(int argc, char** argv) {
+  std::string scene = "hand_ball", out;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if ((a == "--scene" || a == "--out") && i + 1 < argc) (a == "--scene" ? scene : out) = argv[++i];
+    else if (a == "--help") {
+      std::cout << "usage: hand_ball_grasp [--scene NAME] [--out FILE]\n";
+      return 0;
+    } else {
+      std::cerr << "hand_ball_grasp: unknown option or missing value '" << a << "' (--help)\n";
+      return 2;
+    }
+  }
+  const std::string hand = TRELLIS_HAND_DIR;
+  if (out.empty()) out = hand + "/" + scene + "_grasp.json";
+  const auto t0 = std::chrono::steady_clock::now();
+  std::string text;
+  hand::BallLimits limits;
+  Eigen::VectorXd q0;
+  try {
+    const std::string path = std::string(TRELLIS_EXAMPLE_SCENES_DIR) + "/" + scene + ".json";
+    std::ifstream in(path);
+    if (!in) throw std::runtime_error(path + ": cannot be read");
+    std::stringstream buffer;
+    buffer << in.rdbuf();
+    text = buffer.str();
+    const Scene s = parseScene(text, path);
+    limits = hand::loadBallLimits(hand + "/" + scene + "_limits.json", s.model);
+    q0 = s.q;
+  } catch (const std::exception& e) {
+    std::cerr << "hand_ball_grasp: " << e.what() << "\n";
+    return 2;
+  }
+  const hand::FreeBallGrasp g = hand::findFreeBallGrasp(text, limits);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("grasp search: %d evaluations, %.2f s; target f_min %.2f N, mu' %.3f\n", g.evaluations, seconds,
+              g.targetNormal, g.targetFriction);
+  if (g.ok) {
+    std::printf("ball centre (%.5f, %.5f, %.5f) m; |qdd| %.3g; pad normals within %.3g rad of the centre\n",
+                g.centre(0), g.centre(1), g.centre(2), g.accelerationResidual, g.alignment);
+    std::printf("min normal force %.4f N (%s), worst friction ratio %.4f (%s), max tension %.3f N\n",
+                g.margins.minNormal, limits.digits[g.margins.minNormalContact].c_str(), g.margins.worstFrictionRatio,
+                limits.digits[g.margins.worstFrictionContact].c_str(), g.u.maxCoeff());
+    for (std::size_t d = 0; d < limits.digits.size(); ++d)
+      std::printf("  %-7s lambda (n, t1, t2) = (%.4f, %.4f, %.4f) N\n", limits.digits[d].c_str(), g.lambda(3 * d),
+                  g.lambda(3 * d + 1), g.lambda(3 * d + 2));
+  }
+  if (!g.ok) {
+    std::printf("FAILED: %s\n", g.message.c_str());
+    return 1;
+  }
+  const Scene s = parseScene(text, scene);
+  nlohmann::json j;
+  j["description"] = "A grasp of the free ball held by pushing pads (issue 26), found by hand_ball_grasp --scene " +
+                     scene + " (examples/hand/grasp.hpp).";
+  j["centre"] = {g.centre(0), g.centre(1), g.centre(2)};
+  for (std::size_t d = 0; d < limits.digits.size(); ++d)
+    j["contacts"][limits.digits[d]] = {g.contacts[d](0), g.contacts[d](1), g.contacts[d](2)};
+  for (int i = 0; i < s.model.nq(); ++i) j["q"][s.model.configNames()[i]] = g.q(i);
+  for (int i = 0; i < s.model.nu(); ++i) j["u"][s.model.inputNames()[i]] = g.u(i);
+  j["min_normal_force"] = g.margins.minNormal;
+  j["worst_friction_ratio"] = g.margins.worstFrictionRatio;
+  std::ofstream f(out);
+  f.precision(17);
+  f << j.dump(1) << "\n";
+  if (!f) {
+    std::cerr << "hand_ball_grasp: " << out << ": cannot be written\n";
+    return 1;
+  }
+  std::printf("wrote %s\nok\n", out.c_str());
+  return 0;
+}
