@@ -213,13 +213,33 @@ struct PointOnPlaneKind {
     emit(c.a.joint, pb, dpb, n, dn);
     emit(c.b.joint, pb, dpb, Vector3d(-n), Vector3d(-dn));
   }
+  /// constraintTangents' work for one contact: the tangents ev[k] of the rows rows[0 … count − 1]
+  /// that lie on rows[0]'s pair (samePair; at most kContactRows of the `available` rows), the
+  /// pair's tangent once; returns count. Out of line, as contactWrenchTangents.
+  static constexpr int kContactRows = 3;
+  static __attribute__((noinline)) int contactTangents(const Data& data, const Direction& dir, const Constraint* rows,
+                                                      int available, ConstraintEval* ev) {
+    const PairTangent pt = pairTangent(data, dir, rows[0]);
+    int count = 0;
+    do {
+      ev[count] = fromPairTangent(data, rows[count], pt);
+      ++count;
+    } while (count < kContactRows && count < available && samePair(rows[0], rows[count]));
+    return count;
+  }
+  /// Wrench tangents on the plane body (`a`) and on the point body (`b`).
+  struct ContactWrenchTangents {
+    Vector6d a, b;
+  };
   /// The wrench tangents (configuration direction) of `count` consecutive rows on one pair
   /// (samePair) with multipliers lambda[k], together: one force f = Σ λ_k n_k at p_b on the plane
   /// body and −f on the point body, δf = Σ λ_k δn_k — two wrench tangents instead of two per row
-  /// (forceAtTangent is linear in f, δf at one point).
-  template <class Emit>
-  static void pairWrenchTangents(const Data& data, const Direction& dir, const Constraint* rows, const double* lambda,
-                                 int count, Emit&& emit) {
+  /// (forceAtTangent is linear in f, δf at one point). Out of line, as contactTangents: inlined
+  /// into the tangent pass with it, code that free models never run cost their passes up to ~50
+  /// instructions per direction (callgrind, planar 10-chain: +1.6 % of a linearization).
+  static __attribute__((noinline)) ContactWrenchTangents contactWrenchTangents(const Data& data, const Direction& dir,
+                                                                              const Constraint* rows,
+                                                                              const double* lambda, int count) {
     const Constraint& c = rows[0];
     const Vector3d pb = pointPosition(data, c.b), dpb = pointDisplacement(dir, c.b.joint, pb);
     const bool turns = dir.moves(c.a.joint);  // bodyDirectionDisplacement's test, once
@@ -229,8 +249,7 @@ struct PointOnPlaneKind {
       f += lambda[k] * n;
       if (turns) df += lambda[k] * Vector3d(ang(dir.Sk).cross(n));
     }
-    emit(c.a.joint, forceAtTangent(pb, dpb, f, df));
-    emit(c.b.joint, forceAtTangent(pb, dpb, Vector3d(-f), Vector3d(-df)));
+    return {forceAtTangent(pb, dpb, f, df), forceAtTangent(pb, dpb, Vector3d(-f), Vector3d(-df))};
   }
 };
 
@@ -351,15 +370,19 @@ inline ConstraintEval constraintTangent(const Data& data, const Direction& dir, 
 }
 
 /// constraintTangent of every row the direction moves, as out(r, eval) (rows it does not move
-/// get zeros); consecutive point rows, and consecutive point-on-plane rows, on one pair of body
-/// points share the pair's tangent.
+/// get zeros); consecutive point rows, and consecutive point-on-plane rows (a contact), on one
+/// pair of body points share the pair's tangent. Always inlined into the tangent pass (its one
+/// caller), as the loop before contacts shared their tangents was by itself: out of line, the
+/// call and its callback's captures in memory cost every direction, free models' too (+30
+/// instructions per direction on the planar 10-chain, +165 on hand.json; callgrind).
 template <class Out>
-inline void constraintTangents(const Model& model, const Data& data, const Direction& dir, Out&& out) {
+inline __attribute__((always_inline)) void constraintTangents(const Model& model, const Data& data, const Direction& dir,
+                                                              Out&& out) {
   const auto& cs = model.constraints();
   PointKin pair;
   int pairRow = -1;  // the row whose point pair `pair` belongs to
-  PointOnPlaneKind::PairTangent planePair;
-  int planeRow = -1;  // the same for point-on-plane rows (a contact's normal and tangent rows)
+  ConstraintEval contact[PointOnPlaneKind::kContactRows];
+  int contactRow = -1;  // the first row of the contact whose rows' tangents are in `contact`
   for (int r = 0; r < model.nc(); ++r) {
     const Constraint& c = cs[r];
     if (!dir.moves(c.a.joint) && !dir.moves(c.b.joint)) {
@@ -371,11 +394,12 @@ inline void constraintTangents(const Model& model, const Data& data, const Direc
       }
       out(r, PointKind::fromDifferenceTangent(c, pair));
     } else if (c.type == ConstraintType::kPointOnPlane) {
-      if (planeRow < 0 || !PointOnPlaneKind::samePair(cs[planeRow], c)) {
-        planePair = PointOnPlaneKind::pairTangent(data, dir, c);
-        planeRow = r;
+      // A contact's rows (normal, two tangents) together, out of line, on its first row.
+      if (contactRow < 0 || r - contactRow >= PointOnPlaneKind::kContactRows || !PointOnPlaneKind::samePair(cs[contactRow], c)) {
+        PointOnPlaneKind::contactTangents(data, dir, &c, model.nc() - r, contact);
+        contactRow = r;
       }
-      out(r, PointOnPlaneKind::fromPairTangent(data, c, planePair));
+      out(r, contact[r - contactRow]);
     } else {
       out(r, constraintTangent(data, dir, c));
     }

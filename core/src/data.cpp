@@ -85,6 +85,23 @@ DataWorkspace::DataWorkspace(const Model& model)
       rowRunStart.push_back(r);
   }
   if (nc > 0) rowRunStart.push_back(nc);
+  // Groups whose rows do not all cover the group's coordinate range [lo, hi) take the run kernel.
+  groupInRuns.assign(topo.rowGroupStart.empty() ? 0 : topo.rowGroupStart.size() - 1, 0);
+  for (size_t g = 0; g < groupInRuns.size(); ++g) {
+    const int g0 = topo.rowGroupStart[g], g1 = topo.rowGroupStart[g + 1];
+    int lo = n, hi = 0;
+    for (int r = g0; r < g1; ++r)
+      if (topo.rowHi[static_cast<size_t>(r)] > topo.rowLo[static_cast<size_t>(r)]) {
+        lo = std::min(lo, topo.rowLo[static_cast<size_t>(r)]);
+        hi = std::max(hi, topo.rowHi[static_cast<size_t>(r)]);
+      }
+    if (hi <= lo) lo = hi = 0;
+    for (int r = g0; r < g1; ++r) {
+      const size_t i = static_cast<size_t>(r);
+      if (topo.rowLo[i] != lo || topo.rowHi[i] != hi || rowGapLo[i] != hi) groupInRuns[g] = 1;
+    }
+    anyGroupInRuns |= groupInRuns[g] != 0;
+  }
   constraintScale = Eigen::VectorXd::Ones(nc);
   schurScale = Eigen::VectorXd::Ones(nc);
   schurPivotInverse = Eigen::VectorXd::Zero(nc);

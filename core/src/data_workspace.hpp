@@ -92,6 +92,11 @@ struct DataWorkspace {
   /// of one contact: one digit and the ball), then nc ({0} when nc = 0); each group is a union of
   /// whole runs. Fixed by the model.
   std::vector<int> rowRunStart;
+  /// Per row group of ModelTopology: 1 when its rows do not all cover the group's coordinate
+  /// range (rows on different segments), so that correctForConstraints takes the run kernel.
+  /// Fixed by the model.
+  std::vector<unsigned char> groupInRuns;
+  bool anyGroupInRuns = false;           ///< some groupInRuns[g] is 1
   bool correctInRuns = true;             ///< false: every group takes the hull kernels (tests compare both)
   Eigen::LDLT<Eigen::MatrixXd> schurLDLT;  ///< pivoted, for rank-deficient Ŝ
   Eigen::VectorXd schurPivotInverse;     ///< 1/D_i of schurLDLT, 0 for the dropped pivots

@@ -38,7 +38,9 @@ inline __attribute__((always_inline)) void constraintForceTangents(const Model& 
       // A contact's rows (normal, two tangents) on one pair: one force at p_b.
       int e = r + 1;
       while (e < model.nc() && PointOnPlaneKind::samePair(c, cs[e])) ++e;
-      PointOnPlaneKind::pairWrenchTangents(data, dir, &cs[r], &data.lambda[r], e - r, emit);
+      const auto w = PointOnPlaneKind::contactWrenchTangents(data, dir, &cs[r], &data.lambda[r], e - r);
+      emit(c.a.joint, w.a);
+      emit(c.b.joint, w.b);
       r = e;
     } else {
       constraintWrenchTangents(data, dir, c, data.lambda[r], emit);

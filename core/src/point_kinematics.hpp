@@ -98,7 +98,7 @@ inline BodyTangent bodyTangent(const Data& data, const Direction& d, int joint) 
 }
 
 /// Tangent of pointKin, given the body's tangent t (bodyTangent; the body moves).
-inline PointKin pointTangentOf(const Data& data, int joint, const BodyTangent& t, const PointKin& k) {
+inline __attribute__((always_inline)) PointKin pointTangentOf(const Data& data, int joint, const BodyTangent& t, const PointKin& k) {
   auto& ws = detail::workspace(data);
   PointKin d;
   const Vector3d w = ang(ws.v[joint]), al = ang(ws.a[joint]);
@@ -108,8 +108,9 @@ inline PointKin pointTangentOf(const Data& data, int joint, const BodyTangent& t
   return d;
 }
 
-/// Tangent of pointKin.
-inline PointKin pointTangent(const Data& data, const Direction& dir, int joint, const PointKin& k) {
+/// Tangent of pointKin. Out of line, as GCC chose before pointTangentOf was split off: inlined,
+/// its callers (PointKind::differenceTangent) grew out of the tangent pass (+0.6 %, hand.json).
+inline __attribute__((noinline)) PointKin pointTangent(const Data& data, const Direction& dir, int joint, const PointKin& k) {
   if (!dir.moves(joint)) return PointKin{};
   return pointTangentOf(data, joint, bodyTangent(data, dir, joint), k);
 }
@@ -121,7 +122,7 @@ inline Vector3d pointDisplacement(const Direction& dir, int joint, const Vector3
 }
 
 /// Tangent of directionKin, given the body's tangent t (bodyTangent; the body moves).
-inline PointKin directionTangentOf(const Data& data, int joint, const BodyTangent& t, const PointKin& k) {
+inline __attribute__((always_inline)) PointKin directionTangentOf(const Data& data, int joint, const BodyTangent& t, const PointKin& k) {
   auto& ws = detail::workspace(data);
   PointKin d;
   const Vector3d w = ang(ws.v[joint]), al = ang(ws.a[joint]);

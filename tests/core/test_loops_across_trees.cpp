@@ -1,7 +1,7 @@
 // tests/core/test_loops_across_trees.cpp — constraint loops between two top-level trees that skip
 // the blocks between them (issue 25): the hand holding a free ball (each contact row on one digit
 // and the ball), a body held by two and by three arms, and two arms pinned tip to tip with a
-// pendulum declared between them. factorizeKkt and correctForConstraints walk such rows in runs
+// pendulum declared between them, and a body touched by point-on-plane contacts of 3, 2 and 1 rows. factorizeKkt and correctForConstraints walk such rows in runs
 // on their two coordinate segments (DataWorkspace::rowGapLo/Hi, rowRunStart) instead of the
 // group's whole range. Three legs: the run kernels against the hull kernels (the same model and
 // state, ws.correctInRuns off: the path every group took before), q̈ and λ against a dense LU of
@@ -59,6 +59,7 @@ std::vector<AcrossCase> acrossCases() {
   add("body held by three arms of 4", heldBody(3, 4), 2502);
   add("body held by two arms of 7", heldBody(2, 7), 2503);
   add("two arms of 5 pinned tip to tip, a pendulum between", twoArmClosedChain(5), 2504);
+  add("body touched by contacts of 3, 2 and 1 rows", bodyHeldByContacts(), 2505);
   return cases;
 }
 

@@ -60,6 +60,47 @@ inline TestSystem heldBody(int chains, int links, std::uint32_t seed = 41) {
   return std::move(s).finish();
 }
 
+/// A free 6-DOF body (heldBody's) touched by three spatial arms of 4 joints through contacts of
+/// point-on-plane rows of different sizes: arm 0's tip on a plane of the body with 3 rows (a
+/// sticking contact), arm 1's with 2, the body's grip point on a plane of arm 2's tip with 1
+/// (the plane body is the arm: it turns the normal in the arm's directions, not the body's), and
+/// a third row of arm 1's contact declared after it (not next to its pair's rows). Covers the
+/// contact grouping of the tangent passes (PointOnPlaneKind::contactTangents) for every size and
+/// both orientations. Gravity, an input on each arm's first joint.
+inline TestSystem bodyHeldByContacts(std::uint32_t seed = 47) {
+  std::mt19937 rng(seed);
+  SystemBuilder s;
+  std::vector<std::string> tips;
+  for (int c = 0; c < 3; ++c) {
+    const std::string base = std::string("base").append(std::to_string(c));
+    const double angle = 2.0 * 3.14159265358979 * c / 3;
+    s.frame(base, "world", Transform::constSE3(se3(angle, {0.0, 0.0, 1.0}, {0.4 * std::cos(angle), 0.4 * std::sin(angle), 0.0})));
+    tips.push_back(spatialArm(s, rng, std::string("arm").append(std::to_string(c)).append("_"), base, 4));
+    s.b.addConfigForce(std::string("arm").append(std::to_string(c)).append("_0"), std::string("tau").append(std::to_string(c)));
+  }
+  s.frame("body_x", "world", Transform::tx("body_x"));
+  s.frame("body_y", "body_x", Transform::ty("body_y"));
+  s.frame("body_z", "body_y", Transform::tz("body_z"));
+  s.frame("body_yaw", "body_z", Transform::rz("body_yaw"));
+  s.frame("body_pitch", "body_yaw", Transform::ry("body_pitch"));
+  s.frame("body", "body_pitch", Transform::rx("body_roll"), Mass{0.8, randomInertia(rng, 0.002, 0.01)});
+  for (int c = 0; c < 3; ++c) {
+    const double angle = 2.0 * 3.14159265358979 * c / 3;
+    s.frame(std::string("grip").append(std::to_string(c)), "body",
+            Transform::constSE3(se3(0.3 * c, {1.0, 0.0, 0.0}, {0.06 * std::cos(angle), 0.06 * std::sin(angle), 0.01 * c})));
+  }
+  const Eigen::Vector3d n0(0.3, -0.2, 0.9), n1(0.8, 0.5, -0.1), n2(-0.2, 0.9, 0.4);
+  s.b.addPointOnPlaneConstraint("grip0", n0, tips[0]);
+  s.b.addPointOnPlaneConstraint("grip0", n1, tips[0]);
+  s.b.addPointOnPlaneConstraint("grip0", n2, tips[0]);
+  s.b.addPointOnPlaneConstraint("grip1", n1, tips[1]);
+  s.b.addPointOnPlaneConstraint("grip1", n2, tips[1]);
+  s.b.addPointOnPlaneConstraint(tips[2], n0, "grip2");
+  s.b.addPointOnPlaneConstraint("grip1", n0, tips[1]);
+  s.b.addGravity(Eigen::Vector3d(0.0, 0.0, -9.81));
+  return std::move(s).finish();
+}
+
 /// Two spatial arms of `links` joints whose tips are pinned together (3 point rows), with an
 /// unconstrained 2-joint pendulum declared between them: the loop runs across two top-level
 /// trees and skips the block between them. Gravity, an input on each arm's first joint.
