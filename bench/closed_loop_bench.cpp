@@ -1,13 +1,14 @@
 // bench/closed_loop_bench.cpp — what a closing constraint costs, measured against the same model
 // without it, interleaved in one process (issue 25).
 //
-//   trellis_bench_closed [rounds] [runs] [target_ms]
+//   trellis_bench_closed [rounds] [runs] [target_ms] [label]   (label: only the pairs whose name contains it)
 //
 // Each pair is a free model and the same model with constraint rows added: the synthetic chains
 // and hand of bench/models.hpp (one tip row, the tip pinned, the planar tip pinned with its
 // redundant z row, the hand's fingertip), the Panda of tests/data/robots with its tool centre
-// point pinned, and the hand scene (examples/scenes/hand.json, five pads on a ball) against the
-// same scene without its constraints. In each round the free and the constrained computation are timed alternately,
+// point pinned, the hand scene (examples/scenes/hand.json, five pads on a ball) and the hand with
+// a free ball (hand_ball.json) against the same scenes without their constraints, and a free box
+// held by two or three arms (loops across the tree). In each round the free and the constrained computation are timed alternately,
 // `runs` batches each (free, constrained, free, constrained, …; the batch size is calibrated once
 // so that a free batch takes about target_ms), and the round's figure is the ratio of the two
 // fastest batches: the minimum removes the batches another process interrupted, the alternation
@@ -25,11 +26,13 @@
 #include "trellis/core/scene.hpp"
 #include "trellis/core/urdf.hpp"
 
+#include <Eigen/Geometry>
 #include <Eigen/QR>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
@@ -132,6 +135,77 @@ std::pair<trellis::bench::BenchModel, trellis::bench::BenchModel> handScenePair(
           trellis::bench::BenchModel{std::move(closed.model), closed.q, closed.dq, closed.u, "hand scene"}};
 }
 
+/// `arms` 3D arms of `links` revolute joints (rz, ry, rx in turn, 0.3 m links, 1 kg each) around
+/// a free box (tx, ty, tz, rz, ry, rx; 2 kg, declared after the arms), free and with each arm's
+/// tip pinned to the box (3 point rows per arm, at the box point where the tip is at a seeded
+/// random q; q̇ projected onto the null space of the rows): a floating body held by several
+/// limbs, each loop between one arm's tree and the box's, skipping the arms between.
+std::pair<trellis::bench::BenchModel, trellis::bench::BenchModel> heldBoxPair(int arms, int links) {
+  const auto build = [&](const std::vector<Eigen::Vector3d>* grips) {
+    trellis::ModelBuilder b("held box");
+    const Eigen::Matrix3d linkInertia = Eigen::Vector3d(0.01, 0.012, 0.008).asDiagonal();
+    for (int a = 0; a < arms; ++a) {
+      const std::string arm = "arm" + std::to_string(a) + "_";
+      const double angle = 2.0 * 3.14159265358979 * a / arms;
+      Eigen::Matrix4d base = Eigen::Matrix4d::Identity();
+      base.topLeftCorner<3, 3>() = Eigen::AngleAxisd(angle, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+      base.topRightCorner<3, 1>() << 0.8 * std::cos(angle), 0.8 * std::sin(angle), 0.0;
+      b.addFrame(arm + "base", "world", trellis::Transform::constSE3(base));
+      std::string parent = arm + "base";
+      for (int k = 0; k < links; ++k) {
+        const std::string j = arm + std::to_string(k);
+        b.addFrame(j, parent, k % 3 == 0 ? trellis::Transform::rz(j) : k % 3 == 1 ? trellis::Transform::ry(j) : trellis::Transform::rx(j),
+                   trellis::Mass{1.0, linkInertia});
+        Eigen::Matrix4d link = Eigen::Matrix4d::Identity();
+        link.topLeftCorner<3, 3>() = Eigen::AngleAxisd(0.4, Eigen::Vector3d(1.0, 0.5, -0.3).normalized()).toRotationMatrix();
+        link.topRightCorner<3, 1>() << -0.3, 0.05, 0.02;
+        b.addFrame(j + "_end", j, trellis::Transform::constSE3(link));
+        parent = j + "_end";
+      }
+      b.addConfigForce(arm + "0", arm + "tau");
+    }
+    b.addFrame("box_x", "world", trellis::Transform::tx("box_x"));
+    b.addFrame("box_y", "box_x", trellis::Transform::ty("box_y"));
+    b.addFrame("box_z", "box_y", trellis::Transform::tz("box_z"));
+    b.addFrame("box_yaw", "box_z", trellis::Transform::rz("box_yaw"));
+    b.addFrame("box_pitch", "box_yaw", trellis::Transform::ry("box_pitch"));
+    b.addFrame("box", "box_pitch", trellis::Transform::rx("box_roll"),
+               trellis::Mass{2.0, Eigen::Matrix3d(Eigen::Vector3d(0.02, 0.03, 0.025).asDiagonal())});
+    b.addGravity(Eigen::Vector3d(0.0, 0.0, -9.81));
+    if (grips)
+      for (int a = 0; a < arms; ++a) {
+        const std::string arm = "arm" + std::to_string(a) + "_";
+        Eigen::Matrix4d g = Eigen::Matrix4d::Identity();
+        g.topRightCorner<3, 1>() = (*grips)[static_cast<size_t>(a)];
+        b.addFrame(arm + "grip", "box", trellis::Transform::constSE3(g));
+        for (int axis = 0; axis < 3; ++axis) b.addPointConstraint(arm + std::to_string(links - 1) + "_end", arm + "grip", axis);
+      }
+    return std::move(b).finalize();
+  };
+  trellis::Model free = build(nullptr);
+  const int n = free.nq();
+  std::mt19937 rng(20261202u);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  Eigen::VectorXd q = Eigen::VectorXd::Zero(n), dq(n), u(free.nu());
+  for (int i = 0; i < n - 6; ++i) q[i] = unit(rng);  // the box at the origin, unrotated
+  for (int i = 0; i < n; ++i) dq[i] = unit(rng);
+  for (int i = 0; i < u.size(); ++i) u[i] = unit(rng);
+  trellis::Data fd(free);
+  trellis::computeKinematics(free, fd, q, dq);
+  std::vector<Eigen::Vector3d> grips;
+  for (int a = 0; a < arms; ++a)
+    grips.push_back(fd.framePose[free.frameIndex("arm" + std::to_string(a) + "_" + std::to_string(links - 1) + "_end")].translation());
+  trellis::Model closed = build(&grips);
+  trellis::Data cd(closed);
+  trellis::computeConstraints(closed, cd, q, dq);
+  const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(cd.constraintJacobian.transpose());
+  Eigen::VectorXd t = cod.householderQ().adjoint() * dq;
+  t.tail(n - cod.rank()).setZero();
+  dq -= cod.householderQ() * t;
+  return {trellis::bench::BenchModel{std::move(free), q, dq, u, "held box"},
+          trellis::bench::BenchModel{std::move(closed), q, dq, u, "held box"}};
+}
+
 std::string name(const ModelSpec& spec) {
   std::string s = std::string(trellis::bench::kindName(spec.kind)) + " " + std::to_string(spec.links);
   if (spec.kind == ModelKind::kHandTree) s = "hand 20";
@@ -151,13 +225,16 @@ int main(int argc, char** argv) {
   const int rounds = argc > 1 ? std::atoi(argv[1]) : 41;
   const int runs = argc > 2 ? std::atoi(argv[2]) : 11;
   const double targetMs = argc > 3 ? std::atof(argv[3]) : 0.5;
+  const std::string only = argc > 4 ? argv[4] : "";  // run only the pairs whose label contains it
   if (rounds < 1 || runs < 1 || !(targetMs > 0)) {
-    std::fprintf(stderr, "usage: %s [rounds >= 1] [runs >= 1] [target_ms > 0]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s [rounds >= 1] [runs >= 1] [target_ms > 0] [label]\n", argv[0]);
     return 2;
   }
   struct Pair {
     ModelSpec free, closed;
-    int real = 0;  ///< 1: the Panda pinned, 2: the hand scene, 3: the hand with a free ball (specs unused)
+    /// 1: the Panda pinned, 2: the hand scene, 3: the hand with a free ball, 4 / 5: a box held by
+    /// two arms of 7 / three arms of 4 (specs unused)
+    int real = 0;
   };
   const auto chain = [](ModelKind k, int n, TipRows t) {
     return Pair{{k, n, false, TipRows::kOne}, {k, n, true, t}};
@@ -172,6 +249,8 @@ int main(int argc, char** argv) {
       {{}, {}, 1},
       {{}, {}, 2},
       {{}, {}, 3},
+      {{}, {}, 4},
+      {{}, {}, 5},
   };
   std::printf("# trellis_bench_closed: %d rounds x %d runs per side, batches of ~%.2f ms\n", rounds, runs, targetMs);
   std::printf("%-36s %-4s %10s %10s %8s %8s %8s\n", "constrained model", "alg", "free us", "closed us", "ratio",
@@ -181,10 +260,14 @@ int main(int argc, char** argv) {
     const std::string label = p.real == 1   ? "panda tcp xyz"
                               : p.real == 2 ? "hand scene (15 rows)"
                               : p.real == 3 ? "hand, free ball (15 rows)"
+                              : p.real == 4 ? "box held by 2 arms of 7 (6 rows)"
+                              : p.real == 5 ? "box held by 3 arms of 4 (9 rows)"
                                             : name(p.closed);
+    if (!only.empty() && label.find(only) == std::string::npos) continue;
     try {
       std::pair<trellis::bench::BenchModel, trellis::bench::BenchModel> models =
           p.real == 1 ? pandaPair() : p.real == 2 ? handScenePair("hand.json") : p.real == 3 ? handScenePair("hand_ball.json")
+          : p.real == 4 ? heldBoxPair(2, 7) : p.real == 5 ? heldBoxPair(3, 4)
                                     : std::make_pair(trellis::bench::makeBenchModel(p.free), trellis::bench::makeBenchModel(p.closed));
       Case fr(std::move(models.first)), cl(std::move(models.second));
       for (bool lin : {false, true}) {

@@ -160,15 +160,44 @@ struct PointOnPlaneKind {
     const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
     return {n.p.dot(d), n.v.dot(d) + n.p.dot(dd), n.a.dot(d) + 2.0 * n.v.dot(dd) + n.p.dot(ddd)};
   }
-  static ConstraintEval tangent(const Data& data, const Direction& dir, const Constraint& c) {
+  /// What the rows on one pair of points share along a direction: d = p_a − p_b with its
+  /// velocity and acceleration (`kin`), and their tangents (`tan`). The three rows of a sticking
+  /// contact (normal and two tangents, the same two points) differ only in their direction.
+  /// The plane body's tangent too (`planeBody`, when `planeMoves`): it turns each row's normal.
+  struct PairTangent {
+    PointKin kin, tan;
+    BodyTangent planeBody;
+    bool planeMoves = false;
+  };
+  static PairTangent pairTangent(const Data& data, const Direction& dir, const Constraint& c) {
     const PointKin a = pointKin(data, c.a), b = pointKin(data, c.b);
-    const PointKin ta = pointTangent(data, dir, c.a.joint, a), tb = pointTangent(data, dir, c.b.joint, b);
+    PairTangent pt;
+    pt.planeMoves = dir.moves(c.a.joint);
+    PointKin ta;
+    if (pt.planeMoves) {
+      pt.planeBody = bodyTangent(data, dir, c.a.joint);
+      ta = pointTangentOf(data, c.a.joint, pt.planeBody, a);
+    }
+    const PointKin tb = pointTangent(data, dir, c.b.joint, b);
+    pt.kin = {a.p - b.p, a.v - b.v, a.a - b.a};
+    pt.tan = {ta.p - tb.p, ta.v - tb.v, ta.a - tb.a};
+    return pt;
+  }
+  static ConstraintEval tangent(const Data& data, const Direction& dir, const Constraint& c) {
+    return fromPairTangent(data, c, pairTangent(data, dir, c));
+  }
+  static ConstraintEval fromPairTangent(const Data& data, const Constraint& c, const PairTangent& pt) {
     const PointKin n = directionKin(data, c.a.joint, c.direction);
-    const PointKin tn = directionTangent(data, dir, c.a.joint, n);
-    const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
-    const Vector3d td = ta.p - tb.p, tdd = ta.v - tb.v, tddd = ta.a - tb.a;
+    const PointKin tn = pt.planeMoves ? directionTangentOf(data, c.a.joint, pt.planeBody, n) : PointKin{};
+    const Vector3d &d = pt.kin.p, &dd = pt.kin.v, &ddd = pt.kin.a;
+    const Vector3d &td = pt.tan.p, &tdd = pt.tan.v, &tddd = pt.tan.a;
     return {tn.p.dot(d) + n.p.dot(td), tn.v.dot(d) + n.v.dot(td) + tn.p.dot(dd) + n.p.dot(tdd),
             tn.a.dot(d) + n.a.dot(td) + 2.0 * (tn.v.dot(dd) + n.v.dot(tdd)) + tn.p.dot(ddd) + n.p.dot(tddd)};
+  }
+  /// Whether rows x and y are point-on-plane rows on the same two body points (and plane body).
+  static bool samePair(const Constraint& x, const Constraint& y) {
+    return x.type == ConstraintType::kPointOnPlane && y.type == ConstraintType::kPointOnPlane && x.a.joint == y.a.joint &&
+           x.b.joint == y.b.joint && x.a.local == y.a.local && x.b.local == y.b.local;
   }
   template <class Emit>
   static void forces(const Data& data, const Constraint& c, Emit&& emit) {
@@ -183,6 +212,44 @@ struct PointOnPlaneKind {
     const Vector3d n = bodyDirection(data, c), dn = bodyDirectionDisplacement(dir, c, n);
     emit(c.a.joint, pb, dpb, n, dn);
     emit(c.b.joint, pb, dpb, Vector3d(-n), Vector3d(-dn));
+  }
+  /// constraintTangents' work for one contact: the tangents ev[k] of the rows rows[0 … count − 1]
+  /// that lie on rows[0]'s pair (samePair; at most kContactRows of the `available` rows), the
+  /// pair's tangent once; returns count. Out of line, as contactWrenchTangents.
+  static constexpr int kContactRows = 3;
+  static __attribute__((noinline)) int contactTangents(const Data& data, const Direction& dir, const Constraint* rows,
+                                                      int available, ConstraintEval* ev) {
+    const PairTangent pt = pairTangent(data, dir, rows[0]);
+    int count = 0;
+    do {
+      ev[count] = fromPairTangent(data, rows[count], pt);
+      ++count;
+    } while (count < kContactRows && count < available && samePair(rows[0], rows[count]));
+    return count;
+  }
+  /// Wrench tangents on the plane body (`a`) and on the point body (`b`).
+  struct ContactWrenchTangents {
+    Vector6d a, b;
+  };
+  /// The wrench tangents (configuration direction) of `count` consecutive rows on one pair
+  /// (samePair) with multipliers lambda[k], together: one force f = Σ λ_k n_k at p_b on the plane
+  /// body and −f on the point body, δf = Σ λ_k δn_k — two wrench tangents instead of two per row
+  /// (forceAtTangent is linear in f, δf at one point). Out of line, as contactTangents: inlined
+  /// into the tangent pass with it, code that free models never run cost their passes up to ~50
+  /// instructions per direction (callgrind, planar 10-chain: +1.6 % of a linearization).
+  static __attribute__((noinline)) ContactWrenchTangents contactWrenchTangents(const Data& data, const Direction& dir,
+                                                                              const Constraint* rows,
+                                                                              const double* lambda, int count) {
+    const Constraint& c = rows[0];
+    const Vector3d pb = pointPosition(data, c.b), dpb = pointDisplacement(dir, c.b.joint, pb);
+    const bool turns = dir.moves(c.a.joint);  // bodyDirectionDisplacement's test, once
+    Vector3d f = Vector3d::Zero(), df = Vector3d::Zero();
+    for (int k = 0; k < count; ++k) {
+      const Vector3d n = bodyDirection(data, rows[k]);
+      f += lambda[k] * n;
+      if (turns) df += lambda[k] * Vector3d(ang(dir.Sk).cross(n));
+    }
+    return {forceAtTangent(pb, dpb, f, df), forceAtTangent(pb, dpb, Vector3d(-f), Vector3d(-df))};
   }
 };
 
@@ -303,12 +370,19 @@ inline ConstraintEval constraintTangent(const Data& data, const Direction& dir, 
 }
 
 /// constraintTangent of every row the direction moves, as out(r, eval) (rows it does not move
-/// get zeros); consecutive point rows on one pair of body points share the pair's tangent.
+/// get zeros); consecutive point rows, and consecutive point-on-plane rows (a contact), on one
+/// pair of body points share the pair's tangent. Always inlined into the tangent pass (its one
+/// caller), as the loop before contacts shared their tangents was by itself: out of line, the
+/// call and its callback's captures in memory cost every direction, free models' too (+30
+/// instructions per direction on the planar 10-chain, +165 on hand.json; callgrind).
 template <class Out>
-inline void constraintTangents(const Model& model, const Data& data, const Direction& dir, Out&& out) {
+inline __attribute__((always_inline)) void constraintTangents(const Model& model, const Data& data, const Direction& dir,
+                                                              Out&& out) {
   const auto& cs = model.constraints();
   PointKin pair;
   int pairRow = -1;  // the row whose point pair `pair` belongs to
+  ConstraintEval contact[PointOnPlaneKind::kContactRows];
+  int contactRow = -1;  // the first row of the contact whose rows' tangents are in `contact`
   for (int r = 0; r < model.nc(); ++r) {
     const Constraint& c = cs[r];
     if (!dir.moves(c.a.joint) && !dir.moves(c.b.joint)) {
@@ -319,6 +393,13 @@ inline void constraintTangents(const Model& model, const Data& data, const Direc
         pairRow = r;
       }
       out(r, PointKind::fromDifferenceTangent(c, pair));
+    } else if (c.type == ConstraintType::kPointOnPlane) {
+      // A contact's rows (normal, two tangents) together, out of line, on its first row.
+      if (contactRow < 0 || r - contactRow >= PointOnPlaneKind::kContactRows || !PointOnPlaneKind::samePair(cs[contactRow], c)) {
+        PointOnPlaneKind::contactTangents(data, dir, &c, model.nc() - r, contact);
+        contactRow = r;
+      }
+      out(r, contact[r - contactRow]);
     } else {
       out(r, constraintTangent(data, dir, c));
     }

@@ -2,6 +2,9 @@
 #include "data_workspace.hpp"
 #include "mass_factor.hpp"
 
+#include <algorithm>
+#include <utility>
+
 namespace trellis {
 
 namespace detail {
@@ -50,7 +53,55 @@ DataWorkspace::DataWorkspace(const Model& model)
   articulatedColumns = Eigen::Matrix<double, 6, Eigen::Dynamic>::Zero(6, n);
   massInverseAt = Eigen::MatrixXd::Zero(n, nc);
   schur = Eigen::MatrixXd::Zero(nc, nc);
-  correctionWork = Eigen::VectorXd::Zero(2 * nc * n + nc * nc + nc);
+  correctionWork = Eigen::VectorXd::Zero(2 * nc * n + 2 * nc * nc + nc);
+  correctionRuns.assign(static_cast<size_t>(nc), RowRun{});
+  // The rows' segments: a row between two non-empty blocks apart skips the blocks between them.
+  const ModelTopology& topo = model.topology();
+  const auto blockOf = [&](int j) {  // [first, end) of j's top-level tree; empty for the world
+    if (j == kWorld) return std::pair<int, int>(n, 0);
+    const int root = topo.treeRoot[static_cast<size_t>(j)];
+    return std::pair<int, int>(root, model.joints()[static_cast<size_t>(root)].subtreeEnd);
+  };
+  rowGapLo.assign(static_cast<size_t>(nc), 0);
+  rowGapHi.assign(static_cast<size_t>(nc), 0);
+  for (int r = 0; r < nc; ++r) {
+    const size_t i = static_cast<size_t>(r);
+    const auto [a0, a1] = blockOf(model.constraints()[i].a.joint);
+    const auto [b0, b1] = blockOf(model.constraints()[i].b.joint);
+    rowGapLo[i] = rowGapHi[i] = topo.rowHi[i];
+    if (a1 > a0 && b1 > b0 && (a1 < b0 || b1 < a0)) {
+      rowGapLo[i] = std::min(a1, b1);
+      rowGapHi[i] = std::max(a0, b0);
+    }
+  }
+  // Runs of rows on the same segments, broken at every group start.
+  rowRunStart.assign(1, 0);
+  for (int r = 1, g = 1; r < nc; ++r) {
+    const size_t i = static_cast<size_t>(r);
+    const bool groupStart = topo.rowGroupStart[static_cast<size_t>(g)] == r;
+    g += groupStart;
+    if (groupStart || topo.rowLo[i] != topo.rowLo[i - 1] || topo.rowHi[i] != topo.rowHi[i - 1] ||
+        rowGapLo[i] != rowGapLo[i - 1] || rowGapHi[i] != rowGapHi[i - 1])
+      rowRunStart.push_back(r);
+  }
+  if (nc > 0) rowRunStart.push_back(nc);
+  // Groups whose rows do not all cover the group's coordinate range [lo, hi) take the run kernel.
+  groupInRuns.assign(topo.rowGroupStart.empty() ? 0 : topo.rowGroupStart.size() - 1, 0);
+  for (size_t g = 0; g < groupInRuns.size(); ++g) {
+    const int g0 = topo.rowGroupStart[g], g1 = topo.rowGroupStart[g + 1];
+    int lo = n, hi = 0;
+    for (int r = g0; r < g1; ++r)
+      if (topo.rowHi[static_cast<size_t>(r)] > topo.rowLo[static_cast<size_t>(r)]) {
+        lo = std::min(lo, topo.rowLo[static_cast<size_t>(r)]);
+        hi = std::max(hi, topo.rowHi[static_cast<size_t>(r)]);
+      }
+    if (hi <= lo) lo = hi = 0;
+    for (int r = g0; r < g1; ++r) {
+      const size_t i = static_cast<size_t>(r);
+      if (topo.rowLo[i] != lo || topo.rowHi[i] != hi || rowGapLo[i] != hi) groupInRuns[g] = 1;
+    }
+    anyGroupInRuns |= groupInRuns[g] != 0;
+  }
   constraintScale = Eigen::VectorXd::Ones(nc);
   schurScale = Eigen::VectorXd::Ones(nc);
   schurPivotInverse = Eigen::VectorXd::Zero(nc);

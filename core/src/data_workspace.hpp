@@ -14,6 +14,14 @@
 
 namespace trellis::detail {
 
+/// Consecutive rows of one constraint group that live on the same coordinate segments
+/// (DataWorkspace::rowRunStart), as correctForConstraints walks them.
+struct RowRun {
+  int first, count;   ///< the group's rows first … first + count − 1 (relative to the group)
+  int lo[2], len[2];  ///< the two coordinate segments of the rows (len 0: none)
+  int a;              ///< offset of the run's rows of A, stored compactly on the segments
+};
+
 struct DataWorkspace {
   explicit DataWorkspace(const Model& model);
 
@@ -73,7 +81,23 @@ struct DataWorkspace {
   Eigen::VectorXd constraintScale;       ///< nc: largest possible ‖A_r‖ (see factorizeKkt)
   Eigen::VectorXd schurScale;            ///< nc: D = 1 / constraintScale
   Eigen::LLT<Eigen::MatrixXd> schurLLT;
-  Eigen::VectorXd correctionWork;        ///< ≥ nc n + nc² + nc: one row group's operands (correctForConstraints)
+  Eigen::VectorXd correctionWork;        ///< ≥ nc n + 2 nc² + nc: one row group's operands (correctForConstraints)
+  std::vector<RowRun> correctionRuns;    ///< nc: one group's runs of rows (correctForConstraints)
+  /// nc: the coordinates [rowGapLo[r], rowGapHi[r]) inside the range [rowLo[r], rowHi[r]) of
+  /// ModelTopology that row r cannot touch: the blocks between its two bodies' blocks (a loop
+  /// across two top-level trees, e.g. a digit and a free ball); both rowHi[r] when there are none.
+  /// Row r lives on [rowLo, rowGapLo) and [rowGapHi, rowHi) (forRowSegments). Fixed by the model.
+  std::vector<int> rowGapLo, rowGapHi;
+  /// Starts of the runs of consecutive rows of one group that live on the same segments (the rows
+  /// of one contact: one digit and the ball), then nc ({0} when nc = 0); each group is a union of
+  /// whole runs. Fixed by the model.
+  std::vector<int> rowRunStart;
+  /// Per row group of ModelTopology: 1 when its rows do not all cover the group's coordinate
+  /// range (rows on different segments), so that correctForConstraints takes the run kernel.
+  /// Fixed by the model.
+  std::vector<unsigned char> groupInRuns;
+  bool anyGroupInRuns = false;           ///< some groupInRuns[g] is 1
+  bool correctInRuns = true;             ///< false: every group takes the hull kernels (tests compare both)
   Eigen::LDLT<Eigen::MatrixXd> schurLDLT;  ///< pivoted, for rank-deficient Ŝ
   Eigen::VectorXd schurPivotInverse;     ///< 1/D_i of schurLDLT, 0 for the dropped pivots
   Eigen::MatrixXd schurNullBasis;        ///< nc×nc, first schurNullity columns: null space of Ŝ

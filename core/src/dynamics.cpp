@@ -3,6 +3,7 @@
 
 #include "internal.hpp"
 #include "mass_factor.hpp"
+#include "packs.hpp"
 #include "constraint_kinds.hpp"
 #include "force_elements.hpp"
 #include "trellis/core/detail/report_json.hpp"
@@ -11,6 +12,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <type_traits>
 #include <string>
 
 namespace trellis {
@@ -193,33 +195,35 @@ void factorizeKkt(const Model& model, Data& data) {
                       : std::string(" and no configuration variable moves its points")) +
                  " (its gradient vanishes or the configuration is singular; the constraint force is undetermined)";
   };
-  // M⁻¹ Aᵀ by tree solves inside the blocks each group of rows touches (the rows of a group in
-  // one sweep: solveMassColumns); then A M⁻¹ Aᵀ, whose entries between groups of rows on
-  // disjoint blocks are exactly zero.
-  for (size_t g = 0; g + 1 < model.topology().rowGroupStart.size(); ++g) {
-    const int g0 = model.topology().rowGroupStart[g], g1 = model.topology().rowGroupStart[g + 1];
-    int glo = n, ghi = 0;
-    for (int r = g0; r < g1; ++r) {
+  // M⁻¹ Aᵀ by tree solves inside the blocks each run of rows on the same segments touches (the
+  // rows of a run in one sweep: solveMassColumns; a contact between a digit and a free ball
+  // solves on those two blocks only); then A M⁻¹ Aᵀ over the segments two rows share, whose
+  // entries between groups of rows on disjoint blocks are exactly zero.
+  const ModelTopology& topo = model.topology();
+  for (size_t b = 0; b + 1 < ws.rowRunStart.size(); ++b) {
+    const int b0 = ws.rowRunStart[b], b1 = ws.rowRunStart[b + 1];
+    for (int r = b0; r < b1; ++r) {
       auto x = ws.massInverseAt.col(r);
       x.setZero();
-      const int lo = model.topology().rowLo[r], len = model.topology().rowHi[r] - lo;
-      x.segment(lo, len) = data.constraintJacobian.row(r).segment(lo, len).transpose();
-      if (len > 0) {
-        glo = std::min(glo, lo);
-        ghi = std::max(ghi, lo + len);
-      }
+      forRowSegments(topo, ws, r, [&](int lo, int hi) {
+        x.segment(lo, hi - lo) = data.constraintJacobian.row(r).segment(lo, hi - lo).transpose();
+      });
     }
-    if (ghi > glo)
-      solveMassColumns(model, data, ws.massInverseAt.col(g0).data(), ws.massInverseAt.outerStride(), g1 - g0, glo, ghi);
+    forRowSegments(topo, ws, b0, [&](int lo, int hi) {
+      solveMassColumns(model, data, ws.massInverseAt.col(b0).data(), ws.massInverseAt.outerStride(), b1 - b0, lo, hi);
+    });
   }
   ws.schur.setZero();
-  for (size_t g = 0; g + 1 < model.topology().rowGroupStart.size(); ++g) {
-    for (int r = model.topology().rowGroupStart[g]; r < model.topology().rowGroupStart[g + 1]; ++r) {
-      for (int s = model.topology().rowGroupStart[g]; s <= r; ++s) {
-        const int lo = std::max(model.topology().rowLo[r], model.topology().rowLo[s]), hi = std::min(model.topology().rowHi[r], model.topology().rowHi[s]);
-        const double v =
-            hi > lo ? data.constraintJacobian.row(r).segment(lo, hi - lo).dot(ws.massInverseAt.col(s).segment(lo, hi - lo))
-                    : 0.0;
+  for (size_t g = 0; g + 1 < topo.rowGroupStart.size(); ++g) {
+    for (int r = topo.rowGroupStart[g]; r < topo.rowGroupStart[g + 1]; ++r) {
+      for (int s = topo.rowGroupStart[g]; s <= r; ++s) {
+        double v = 0.0;
+        forRowSegments(topo, ws, r, [&](int rlo, int rhi) {
+          forRowSegments(topo, ws, s, [&](int slo, int shi) {
+            const int lo = std::max(rlo, slo), hi = std::min(rhi, shi);
+            if (hi > lo) v += data.constraintJacobian.row(r).segment(lo, hi - lo).dot(ws.massInverseAt.col(s).segment(lo, hi - lo));
+          });
+        });
         ws.schur(r, s) = v;
         ws.schur(s, r) = v;
       }
@@ -335,9 +339,6 @@ struct GroupColumns {
   Eigen::Index lStride, cols;
 };
 
-using Pack = Eigen::Array2d;  // two lanes: one SSE2/NEON register (fixed lane order, as mass_factor.cpp)
-inline Pack loadPack(const double* x) { return Eigen::Map<const Pack>(x); }
-
 /// For every column: t = C_g − A_g X, Λ_g = (A M⁻¹ Aᵀ)_g⁻¹ t, X += (M⁻¹Aᵀ)_g Λ_g. NG: the row count
 /// when fixed at compile time (the rows then share each pass over X, two coordinates per
 /// step), 0 for g.ng.
@@ -401,6 +402,137 @@ void correctGroupColumns(const GroupColumns& g) {
   }
 }
 
+/// s_k += a_k · x over len entries for the NB rows a_k = a + k w (the rows share each load of x).
+template <int NB>
+inline void runDots(const double* a, int w, const double* x, int len, double* s) {
+  Pack acc[NB];
+  for (int k = 0; k < NB; ++k) acc[k] = Pack::Zero();
+  const int pairs = len & ~1;
+  for (int i = 0; i < pairs; i += 2) {
+    const Pack xi = loadPack(x + i);
+    for (int k = 0; k < NB; ++k) acc[k] += loadPack(a + k * w + i) * xi;
+  }
+  for (int k = 0; k < NB; ++k) {
+    double v = acc[k][0] + acc[k][1];
+    if (pairs < len) v += a[k * w + pairs] * x[pairs];
+    s[k] += v;
+  }
+}
+/// x += Σ_k u_k λ_k over len entries for the NB columns u_k = u + k stride.
+template <int NB>
+inline void runUpdates(const double* u, Eigen::Index stride, const double* lam, double* x, int len) {
+  Pack lr[NB];
+  for (int k = 0; k < NB; ++k) lr[k] = Pack::Constant(lam[k]);
+  const int pairs = len & ~1;
+  for (int i = 0; i < pairs; i += 2) {
+    Pack xi = loadPack(x + i);
+    for (int k = 0; k < NB; ++k) xi += loadPack(u + k * stride + i) * lr[k];
+    Eigen::Map<Pack>(x + i) = xi;
+  }
+  if (pairs < len)
+    for (int k = 0; k < NB; ++k) x[pairs] += u[k * stride + pairs] * lam[k];
+}
+/// runDots / runUpdates over a run's rows in threes (a contact's three rows), then the rest.
+template <class F>
+inline void inThrees(int count, F&& f) {
+  int k = 0;
+  for (; k + 3 <= count; k += 3) f(std::integral_constant<int, 3>{}, k);
+  if (count - k == 2) f(std::integral_constant<int, 2>{}, k);
+  if (count - k == 1) f(std::integral_constant<int, 1>{}, k);
+}
+
+/// correctGroupColumns for a group whose rows live on different segments (loops across the tree: each
+/// contact row on one digit's block and the free ball's, not on the other digits'): the group's
+/// rows in runs on the same segments (DataWorkspace::rowRunStart), each run's rows of A stored
+/// compactly on its segments (at a + run.a, row k at k (len[0] + len[1])), M⁻¹Aᵀ and X read in
+/// place on those segments only (RowRun, data_workspace.hpp). Same operations as
+/// correctGroupColumns without the zeros.
+/// Here g.a holds the compact rows, g.u and g.x point at coordinate 0.
+void correctRunColumns(const GroupColumns& g, const RowRun* runs, int nRuns) {
+  const int ng = g.ng;
+  double* t = g.t;
+  const double* lt = t + ng;  // Lᵀ row-major: lt[r ng + q] = L(q, r) for q > r
+  double* x = g.x;
+  double* lam = g.lambda;
+  for (Eigen::Index c = 0; c < g.cols; ++c, x += g.xStride, lam += g.lStride) {
+    for (int b = 0; b < nRuns; ++b) {
+      const RowRun& run = runs[b];
+      const int w = run.len[0] + run.len[1];
+      double* tb = t + run.first;
+      for (int k = 0; k < run.count; ++k) tb[k] = 0.0;
+      inThrees(run.count, [&](auto nb, int k) {
+        const double* a = g.a + run.a + k * w;
+        runDots<decltype(nb)::value>(a, w, x + run.lo[0], run.len[0], tb + k);
+        runDots<decltype(nb)::value>(a + run.len[0], w, x + run.lo[1], run.len[1], tb + k);
+      });
+      for (int k = 0; k < run.count; ++k) tb[k] = lam[run.first + k] - tb[k];
+    }
+    // Λ = D L⁻ᵀ L⁻¹ D t, as in correctGroupColumns; each substitution step a contiguous dot
+    // product, with Lᵀ stored row by row beside L (a group of 15 rows: 105 terms each way).
+    for (int r = 0; r < ng; ++r) t[r] = (t[r] * g.d[r] - dotRun(g.l + r * ng, t, r)) * g.l[r * ng + r];
+    for (int r = ng - 1; r >= 0; --r) {
+      t[r] = (t[r] - dotRun(lt + r * ng + r + 1, t + r + 1, ng - r - 1)) * g.l[r * ng + r];
+      lam[r] = t[r] * g.d[r];
+    }
+    for (int b = 0; b < nRuns; ++b) {
+      const RowRun& run = runs[b];
+      inThrees(run.count, [&](auto nb, int k) {
+        const double* u = g.u + (run.first + k) * g.uStride;
+        const double* l = lam + run.first + k;
+        runUpdates<decltype(nb)::value>(u + run.lo[0], g.uStride, l, x + run.lo[0], run.len[0]);
+        runUpdates<decltype(nb)::value>(u + run.lo[1], g.uStride, l, x + run.lo[1], run.len[1]);
+      });
+    }
+  }
+}
+
+/// correctForConstraints' Cholesky path for the rows g0 … g1 − 1 of one group, in runs.
+void correctGroupInRuns(const Model& model, Data& data, double* X, Eigen::Index xStride, Eigen::Index cols,
+                        double* Lambda, Eigen::Index lStride, int g0, int g1) {
+  auto& ws = detail::workspace(data);
+  const ModelTopology& topo = model.topology();
+  const Eigen::MatrixXd &A = data.constraintJacobian, &U = ws.massInverseAt, &LL = ws.schurLLT.matrixLLT();
+  const int ng = g1 - g0;
+  double* ag = ws.correctionWork.data();  // the runs' rows of A, compact (≤ ng n)
+  double* sg = ag + ng * model.nq();      // the group's Cholesky factor (ng²), t (ng), Lᵀ (ng²)
+  RowRun* runs = ws.correctionRuns.data();
+  int nRuns = 0, a = 0;
+  for (size_t b = 0; b + 1 < ws.rowRunStart.size(); ++b) {
+    const int b0 = ws.rowRunStart[b], b1 = ws.rowRunStart[b + 1];
+    if (b0 < g0 || b0 >= g1) continue;
+    RowRun& run = runs[nRuns++];
+    run = RowRun{b0 - g0, b1 - b0, {0, 0}, {0, 0}, a};
+    int s = 0;
+    forRowSegments(topo, ws, b0, [&](int lo, int hi) {
+      run.lo[s] = lo;
+      run.len[s++] = hi - lo;
+    });
+    for (int r = b0; r < b1; ++r)
+      for (int k = 0; k < 2; ++k)
+        for (int i = 0; i < run.len[k]; ++i) ag[a++] = A(r, run.lo[k] + i);
+  }
+  double* lt = sg + ng * ng + ng;  // after t: Lᵀ, row-major
+  for (int r = 0; r < ng; ++r)
+    for (int t = 0; t < ng; ++t) {
+      sg[r * ng + t] = t < r ? LL(g0 + r, g0 + t) : t == r ? 1.0 / LL(g0 + r, g0 + r) : 0.0;
+      lt[r * ng + t] = t > r ? LL(g0 + t, g0 + r) : 0.0;
+    }
+  const GroupColumns g{ng, 0, ag, U.data() + g0 * U.outerStride(), sg, ws.schurScale.data() + g0, U.outerStride(),
+                       sg + ng * ng, X, xStride, Lambda + g0, lStride, cols};
+  correctRunColumns(g, runs, nRuns);
+}
+
+/// correctGroupInRuns for every group that takes the run kernel (DataWorkspace::groupInRuns).
+/// Apart from the hull kernels' loop and out of line: a call inside that loop cost hand.json's
+/// correction +800 instructions per linearization (callgrind), for groups it never has.
+__attribute__((noinline)) void correctGroupsInRuns(const Model& model, Data& data, double* X, Eigen::Index xStride,
+                                                   Eigen::Index cols, double* Lambda, Eigen::Index lStride) {
+  const auto& ws = detail::workspace(data);
+  const auto& starts = model.topology().rowGroupStart;
+  for (size_t g = 0; g + 1 < starts.size(); ++g)
+    if (ws.groupInRuns[g]) correctGroupInRuns(model, data, X, xStride, cols, Lambda, lStride, starts[g], starts[g + 1]);
+}
+
 }  // namespace
 
 void correctForConstraints(const Model& model, Data& data, Eigen::Ref<Eigen::MatrixXd> X,
@@ -412,6 +544,8 @@ void correctForConstraints(const Model& model, Data& data, Eigen::Ref<Eigen::Mat
     // Group by group (rows g0…g1 on the coordinates [lo, hi) of their blocks) and column by
     // column: Λ = (A M⁻¹ Aᵀ)⁻¹ (C − A X), X += M⁻¹Aᵀ Λ, with the group's block of the Cholesky
     // factor of Ŝ; every operand is a few contiguous numbers (a digit: 3 rows on 4 coordinates).
+    const bool runGroups = ws.anyGroupInRuns && ws.correctInRuns;
+    if (runGroups) correctGroupsInRuns(model, data, X.data(), X.outerStride(), X.cols(), Lambda.data(), Lambda.outerStride());
     const Eigen::MatrixXd &A = data.constraintJacobian, &U = ws.massInverseAt, &LL = ws.schurLLT.matrixLLT();
     for (size_t g = 0; g + 1 < model.topology().rowGroupStart.size(); ++g) {
       const int g0 = model.topology().rowGroupStart[g], g1 = model.topology().rowGroupStart[g + 1], ng = g1 - g0;
@@ -426,6 +560,7 @@ void correctForConstraints(const Model& model, Data& data, Eigen::Ref<Eigen::Mat
       // read in place: its columns are), and of its Cholesky factor; then the column loop with
       // the row count fixed at compile time for the usual groups.
       const int len = hi - lo;
+      if (runGroups && ws.groupInRuns[g]) continue;  // done above
       double* ag = ws.correctionWork.data();  // A_g
       double* sg = ag + ng * len;               // the group's Cholesky factor
       for (int r = 0; r < ng; ++r)

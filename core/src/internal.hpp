@@ -46,6 +46,16 @@ bool inputsAreFinite(const Model& model, Data& data, const Eigen::VectorXd& q, c
 /// Appends " at q = (name=value, …), dq = (…)" to a status message (the first coordinates).
 void appendState(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& dq, std::string& message);
 
+/// f(lo, hi) for the (at most two) coordinate ranges row r of A lives on: [rowLo, rowGapLo) and
+/// [rowGapHi, rowHi) (ModelTopology, DataWorkspace), each a union of whole blocks; A is exactly 0
+/// elsewhere, and so is column r of M⁻¹Aᵀ (M⁻¹ is block diagonal).
+template <class F>
+inline void forRowSegments(const ModelTopology& t, const DataWorkspace& ws, int r, F&& f) {
+  const size_t i = static_cast<size_t>(r);
+  if (ws.rowGapLo[i] > t.rowLo[i]) f(t.rowLo[i], ws.rowGapLo[i]);
+  if (t.rowHi[i] > ws.rowGapHi[i]) f(ws.rowGapHi[i], t.rowHi[i]);
+}
+
 /// Factorizes [M Aᵀ; A 0] from data.M and data.constraintJacobian; fills data.status.
 void factorizeKkt(const Model& model, Data& data);
 

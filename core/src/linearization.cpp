@@ -34,6 +34,14 @@ inline __attribute__((always_inline)) void constraintForceTangents(const Model& 
       for (; e < model.nc() && PointKind::samePair(c, cs[e]); ++e) f[cs[e].axis] += data.lambda[e];
       PointKind::pairWrenchTangents(data, dir, c, f, emit);
       r = e;
+    } else if (c.type == ConstraintType::kPointOnPlane) {
+      // A contact's rows (normal, two tangents) on one pair: one force at p_b.
+      int e = r + 1;
+      while (e < model.nc() && PointOnPlaneKind::samePair(c, cs[e])) ++e;
+      const auto w = PointOnPlaneKind::contactWrenchTangents(data, dir, &cs[r], &data.lambda[r], e - r);
+      emit(c.a.joint, w.a);
+      emit(c.b.joint, w.b);
+      r = e;
     } else {
       constraintWrenchTangents(data, dir, c, data.lambda[r], emit);
       ++r;

@@ -97,17 +97,22 @@ inline BodyTangent bodyTangent(const Data& data, const Direction& d, int joint) 
   return t;
 }
 
-/// Tangent of pointKin.
-inline PointKin pointTangent(const Data& data, const Direction& dir, int joint, const PointKin& k) {
+/// Tangent of pointKin, given the body's tangent t (bodyTangent; the body moves).
+inline __attribute__((always_inline)) PointKin pointTangentOf(const Data& data, int joint, const BodyTangent& t, const PointKin& k) {
   auto& ws = detail::workspace(data);
   PointKin d;
-  if (!dir.moves(joint)) return d;
-  const BodyTangent t = bodyTangent(data, dir, joint);
   const Vector3d w = ang(ws.v[joint]), al = ang(ws.a[joint]);
   d.p = lin(t.theta) + ang(t.theta).cross(k.p);
   d.v = lin(t.v) + ang(t.v).cross(k.p) + w.cross(d.p);
   d.a = lin(t.a) + ang(t.a).cross(k.p) + al.cross(d.p) + ang(t.v).cross(k.v) + w.cross(d.v);
   return d;
+}
+
+/// Tangent of pointKin. Out of line, as GCC chose before pointTangentOf was split off: inlined,
+/// its callers (PointKind::differenceTangent) grew out of the tangent pass (+0.6 %, hand.json).
+inline __attribute__((noinline)) PointKin pointTangent(const Data& data, const Direction& dir, int joint, const PointKin& k) {
+  if (!dir.moves(joint)) return PointKin{};
+  return pointTangentOf(data, joint, bodyTangent(data, dir, joint), k);
 }
 
 /// Displacement δp of a body point under direction dir (zero for q̇ directions).
@@ -116,17 +121,21 @@ inline Vector3d pointDisplacement(const Direction& dir, int joint, const Vector3
   return lin(dir.Sk) + ang(dir.Sk).cross(p);
 }
 
-/// Tangent of directionKin.
-inline PointKin directionTangent(const Data& data, const Direction& dir, int joint, const PointKin& k) {
+/// Tangent of directionKin, given the body's tangent t (bodyTangent; the body moves).
+inline __attribute__((always_inline)) PointKin directionTangentOf(const Data& data, int joint, const BodyTangent& t, const PointKin& k) {
   auto& ws = detail::workspace(data);
   PointKin d;
-  if (!dir.moves(joint)) return d;
-  const BodyTangent t = bodyTangent(data, dir, joint);
   const Vector3d w = ang(ws.v[joint]), al = ang(ws.a[joint]);
   d.p = ang(t.theta).cross(k.p);
   d.v = ang(t.v).cross(k.p) + w.cross(d.p);
   d.a = ang(t.a).cross(k.p) + al.cross(d.p) + ang(t.v).cross(k.v) + w.cross(d.v);
   return d;
+}
+
+/// Tangent of directionKin.
+inline PointKin directionTangent(const Data& data, const Direction& dir, int joint, const PointKin& k) {
+  if (!dir.moves(joint)) return PointKin{};
+  return directionTangentOf(data, joint, bodyTangent(data, dir, joint), k);
 }
 
 /// Tension per unit length τ(L) of a linear spring: the force on a is τ (p_b − p_a).

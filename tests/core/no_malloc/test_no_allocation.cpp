@@ -19,6 +19,7 @@
 #include <catch2/catch.hpp>
 
 #include "support/random_state.hpp"
+#include "support/held_models.hpp"
 #include "support/test_models.hpp"
 
 #include <trellis/core.hpp>
@@ -197,4 +198,27 @@ TEST_CASE("No allocation after warm-up: the hand scene (tree blocks, tendons, gr
   Data data(model);
   warmUp(model, data, states[0]);
   CHECK(runGuarded(model, data, states) == 0);
+}
+
+TEST_CASE("No allocation after warm-up: loops across top-level trees (rows in runs)", "[no_malloc][across]") {
+  // The hand holding a free ball (15 rows, each on one digit's block and the ball's, one group)
+  // and a body held by three arms: the correction walks the rows in runs on their two segments.
+  const Scene scene = loadScene(std::string(TRELLIS_SOURCE_DIR) + "/examples/scenes/hand_ball.json");
+  std::vector<State> ball(2);
+  ball[0].q = scene.q;
+  ball[0].dq = scene.dq;
+  ball[0].u = Eigen::VectorXd::Constant(scene.model.nu(), 2.0);
+  ball[1] = ball[0];
+  ball[1].u = Eigen::VectorXd::Constant(scene.model.nu(), 5.0);
+  Data ballData(scene.model);
+  warmUp(scene.model, ballData, ball[0]);
+  CHECK(runGuarded(scene.model, ballData, ball) == 0);
+
+  const Model held = heldBody(3, 4).model;
+  std::mt19937 rng(4105);
+  std::vector<State> states;
+  for (int k = 0; k < 2; ++k) states.push_back(randomConsistentState(held, rng, 0.5));
+  Data data(held);
+  warmUp(held, data, states[0]);
+  CHECK(runGuarded(held, data, states) == 0);
 }
