@@ -238,26 +238,52 @@ TRELLIS_LANES_INLINE void momentumBlock(const Mat3<K>& I, const Vec3<K>& h, cons
     }
 }
 
-/// The values (no tangents) that the q̇ blocks read as constants: kinematics and inertias do not
-/// depend on q̇, nor does ψ (μ is fixed), so one plain pass per call serves every q̇ block.
+/// x as lanes with zero tangents.
+template <class T>
+TRELLIS_LANES_INLINE void lift(const Vec3<double>& x, Vec3<T>& y) {
+  y = {T(x.x), T(x.y), T(x.z)};
+}
+template <class T>
+TRELLIS_LANES_INLINE void lift(const Vec6<double>& x, Vec6<T>& y) {
+  lift(x.l, y.l);
+  lift(x.a, y.a);
+}
+template <class T>
+TRELLIS_LANES_INLINE void lift(const Mat3<double>& x, Mat3<T>& y) {
+  for (int c = 0; c < 3; ++c) lift(x.c[c], y.c[c]);
+}
+
+/// The values (no tangents) that blocks read as constants, one plain pass per call: a q̇ block
+/// reads the kinematics, inertias, ψ and β (they do not depend on q̇; μ is fixed); a q block reads
+/// the per-body terms of the joints none of whose ancestors (or itself) is one of its directions
+/// (their pose, twist and inertia do not depend on those q).
 struct TreeValues {
-  std::vector<Mat3<double>> R, I, Ic;      ///< pose; body inertia (world, about the origin); subtree sum
-  std::vector<Vec3<double>> p, h, hc;      ///< origin; body first moment; subtree sum
-  std::vector<Vec6<double>> S, psi, beta;  ///< motion subspace; ψ; Σ_{j∈sub(k)} μ_j Ic_j S_j
+  std::vector<Mat3<double>> R, I, Ic, B;          ///< pose; body inertia (world, about the origin); subtree sum; body B
+  std::vector<Vec3<double>> p, h, hc;             ///< origin; body first moment; subtree sum
+  std::vector<Vec6<double>> S, psi, beta, v, Iv;  ///< motion subspace; ψ; Σ_{j∈sub(k)} μ_j Ic_j S_j; twist; I v
+  std::vector<Vec6<double>> vS, vIv;              ///< q̇_i v × S_i; v ×* I v
 
   explicit TreeValues(int n) {
-    for (auto* x : {&R, &I, &Ic}) x->assign(n, Mat3<double>{});
+    for (auto* x : {&R, &I, &Ic, &B}) x->assign(n, Mat3<double>{});
     for (auto* x : {&p, &h, &hc}) x->assign(n, Vec3<double>{});
-    for (auto* x : {&S, &psi, &beta}) x->assign(n, Vec6<double>{});
+    for (auto* x : {&S, &psi, &beta, &v, &Iv, &vS, &vIv}) x->assign(n, Vec6<double>{});
   }
-  void compute(const std::vector<TreeJoint>& joints, const double* q, const double* mu) {
+  void compute(const std::vector<TreeJoint>& joints, const double* q, const double* dq, const double* mu) {
     const int n = static_cast<int>(joints.size());
     for (int i = 0; i < n; ++i) {
       const TreeJoint& jc = joints[i];
       placeJoint(jc, R.data(), p.data(), q[i], R[i], p[i], S[i]);
       psi[i] = mu[i] * S[i];
-      if (jc.parent != kWorld) psi[i] += psi[jc.parent];
+      v[i] = dq[i] * S[i];
+      if (jc.parent != kWorld) {
+        psi[i] += psi[jc.parent];
+        v[i] += v[jc.parent];
+      }
       worldInertia(jc, R[i], p[i], I[i], h[i]);
+      Iv[i] = applyInertia(jc.mass, h[i], I[i], v[i]);
+      momentumBlock(I[i], h[i], v[i], B[i]);
+      vS[i] = dq[i] * crossMotion(v[i], S[i]);
+      vIv[i] = crossForce(v[i], Iv[i]);
       Ic[i] = I[i];
       hc[i] = h[i];
       beta[i] = Vec6<double>{};
@@ -280,7 +306,7 @@ struct BlockIO {
   const Eigen::MatrixXd* Y = nullptr;  ///< n×N
   Eigen::MatrixXd* rows = nullptr;     ///< N×2n
   const std::vector<TreeJoint>* joints = nullptr;
-  const TreeValues* values = nullptr;  ///< the q̇ blocks' constants (computed for this call)
+  const TreeValues* values = nullptr;  ///< the plain values (computed for this call)
   Vec3<double> gravity;
 };
 
@@ -293,8 +319,10 @@ struct TreePass {
   std::vector<Vec3<T>> p, ch, gammaMu;
   std::vector<Vec6<T>> S, v, a, psi, fin, H, betaMu;
   std::vector<T> gq, gv, mmu;  ///< outputs: −∂φ̃/∂q_k, −∂φ̃/∂q̇_k, (M μ)_k
+  std::vector<char> moving;    ///< whether joint i or an ancestor is one of the block's directions
 
   explicit TreePass(int n) {
+    moving.assign(n, 0);
     for (auto* x : {&q, &dq, &qdd, &gq, &gv, &mmu}) x->assign(n, T{});
     for (auto* x : {&R, &cI, &B}) x->assign(n, Mat3<T>{});
     for (auto* x : {&p, &ch, &gammaMu}) x->assign(n, Vec3<T>{});
@@ -304,15 +332,37 @@ struct TreePass {
   /// The gradient pass of the header at the seeded q, q̇, q̈: one sweep outwards (kinematics,
   /// world inertias, per-body terms), one inwards (subtree sums and, as each joint's subtree is
   /// complete, its two gradient entries and (M μ)_k).
-  TRELLIS_LANES_INLINE void run(const std::vector<TreeJoint>& joints, const Vec3<double>& gravity, const double* mu) {
+  TRELLIS_LANES_INLINE void run(const std::vector<TreeJoint>& joints, const Vec3<double>& gravity, const double* mu,
+                                const TreeValues& cv) {
     const int n = static_cast<int>(joints.size());
     for (int i = 0; i < n; ++i) {
       const TreeJoint& jc = joints[i];
+      Vec6<T> aP;
+      if (jc.parent != kWorld) aP = a[jc.parent];
+      if (!moving[i]) {
+        // Nothing above joint i moves in these directions: its pose, twist, inertia and momenta
+        // are the plain values; only a (through q̈) and the force moving it carry tangents.
+        lift(cv.R[i], R[i]);
+        lift(cv.p[i], p[i]);
+        lift(cv.S[i], S[i]);
+        lift(cv.v[i], v[i]);
+        lift(cv.psi[i], psi[i]);
+        lift(cv.I[i], cI[i]);
+        lift(cv.h[i], ch[i]);
+        lift(cv.Iv[i], H[i]);
+        lift(cv.B[i], B[i]);
+        a[i] = aP + qdd[i] * cv.S[i] + cv.vS[i];
+        Vec6<T> ag = a[i];
+        ag.l = ag.l - gravity;
+        fin[i] = applyInertia(jc.mass, cv.h[i], cv.I[i], ag) + cv.vIv[i];
+        betaMu[i] = Vec6<T>{};
+        gammaMu[i] = Vec3<T>{};
+        continue;
+      }
       placeJoint(jc, R.data(), p.data(), q[i], R[i], p[i], S[i]);
-      Vec6<T> vP, aP, psiP;
+      Vec6<T> vP, psiP;
       if (jc.parent != kWorld) {
         vP = v[jc.parent];
-        aP = a[jc.parent];
         psiP = psi[jc.parent];
       }
       v[i] = vP + dq[i] * S[i];
@@ -374,6 +424,8 @@ struct TreePass {
     const int n = io.n, N = io.N, a0 = io.a0;
     const Eigen::MatrixXd& Y = *io.Y;
     for (int i = 0; i < n; ++i) {
+      const int par = (*io.joints)[i].parent;
+      moving[i] = (i >= a0 && i < a0 + io.lanes) || (par != kWorld && moving[par]);
       q[i] = T(io.q[i]);
       dq[i] = T(io.dq[i]);
       qdd[i] = T(io.qdd[i]);
@@ -382,7 +434,7 @@ struct TreePass {
         qdd[i].d[l] = Y(i, a0 + l);
       }
     }
-    run(*io.joints, io.gravity, io.mu);
+    run(*io.joints, io.gravity, io.mu, *io.values);
     Eigen::MatrixXd& rows = *io.rows;
     for (int l = 0; l < io.lanes; ++l) {
       double* col = rows.data() + static_cast<Eigen::Index>(a0 + l) * N;
@@ -590,7 +642,7 @@ void TreeSecondOrder::computeRows(const Model&, const Eigen::VectorXd& q, const 
                                   Eigen::MatrixXd& rows) {
   TreeSecondOrderImpl& s = *impl_;
   const int n = s.n;
-  s.values.compute(s.joints, q.data(), mu.data());
+  s.values.compute(s.joints, q.data(), dq.data(), mu.data());
   BlockIO io;
   io.n = n;
   io.N = s.N;

@@ -339,7 +339,8 @@ TEST_CASE("The contraction in blocks of directions, in both builds of its sweeps
 /// A branched 3D tree of every joint kind that the tree pass covers, with full inertias, skewed
 /// gravity, a configuration spring, damping and configuration forces (no point-force element, no
 /// constraint): root rz → {arm: ry, tx (prismatic), r_axis; leg: rx, t_axis}, plus a second root tz;
-/// `copies` such trees side by side (8 coordinates each: 3 copies need two blocks of each kind).
+/// `copies` such trees side by side (8 coordinates each: 3 copies need two blocks of each kind,
+/// and a block's joints include others' that do not move with it).
 TestSystem branchedTree(std::uint32_t seed, int copies = 1) {
   std::mt19937 rng(seed);
   SystemBuilder s;
@@ -372,13 +373,43 @@ TestSystem branchedTree(std::uint32_t seed, int copies = 1) {
   return std::move(s).finish();
 }
 
+/// A 3D chain of `links` joints cycling through every driven kind (rz, ry, tx, r_axis, rx, t_axis),
+/// each body offset from its joint, with full inertias: past 16 joints, a block of q directions
+/// holds moving joints below ones that do not move with it.
+TestSystem spatialChain(int links, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  SystemBuilder s;
+  std::string parent = "world";
+  for (int k = 0; k < links; ++k) {
+    const std::string index = std::to_string(k);
+    const std::string joint = std::string("joint").append(index), body = std::string("body").append(index);
+    const std::string q = std::string("q").append(index);
+    Transform t = Transform::rz(q);
+    switch (k % 6) {
+      case 1: t = Transform::ry(q); break;
+      case 2: t = Transform::tx(q); break;
+      case 3: t = Transform::rotAxis(Eigen::Vector3d(0.3, -0.5, 0.8).normalized(), q); break;
+      case 4: t = Transform::rx(q); break;
+      case 5: t = Transform::transAxis(Eigen::Vector3d(0.2, 0.9, -0.4).normalized(), q); break;
+      default: break;
+    }
+    s.frame(joint, parent, t);
+    s.frame(body, joint, Transform::constSE3(se3(0.3, {0.2, 1.0, 0.4}, {0.1, -0.25, 0.2})), Mass{0.3, randomInertia(rng)});
+    parent = body;
+  }
+  s.b.addGravity(Eigen::Vector3d(0.4, -9.7, 1.1));
+  s.b.addDamping(0.05);
+  s.b.addConfigForce("q0", "u0");
+  return std::move(s).finish();
+}
+
 TEST_CASE("The contraction's tree pass against the recording and the tensors", "[second_order][tree]") {
   // Where the model holds only the tree, gravity and forces on coordinates, the workspace takes
   // the tree pass (second_order_tree.hpp); secondOrderForceTape makes it record the tape instead.
   // Both, and the sum of the hyper-dual tensors, agree to 1e-10 of the largest entry (three
   // computations that share no code beyond the KKT factor), at random states and weights, on
   // every block shape (the q and the q̇ directions in blocks of their own, 16 wide, the last 4, 8,
-  // 12 or 16: n = 2, 3, 10, 13, 18 = 16 + 2, 8, 24 = 16 + 8) and every joint kind, in the
+  // 12 or 16: n = 2, 3, 10, 13, 18 = 16 + 2, 8, 24 = 16 + 8, 20 = 16 + 4) and every joint kind, in the
   // baseline build and (where the CPU has it) the AVX2+FMA build of the pass.
   struct ForceTape {  // restores the automatic choice even when a check fails
     explicit ForceTape(bool force) { detail::secondOrderForceTape(force); }
@@ -392,6 +423,7 @@ TEST_CASE("The contraction's tree pass against the recording and the tensors", "
   for (const int links : {2, 3, 10, 13, 18}) systems.push_back(planarChain(links, 0.5, 1.0));
   systems.push_back(branchedTree(41));
   systems.push_back(branchedTree(43, 3));
+  systems.push_back(spatialChain(20, 47));
   for (const TransformType t : {TransformType::kRx, TransformType::kTy, TransformType::kRotAxis, TransformType::kTransAxis})
     systems.push_back(transformChain(t));
   for (const bool generic : {false, true}) {
