@@ -320,9 +320,11 @@ struct TreePass {
   std::vector<Vec6<T>> S, v, a, psi, fin, H, betaMu;
   std::vector<T> gq, gv, mmu;  ///< outputs: −∂φ̃/∂q_k, −∂φ̃/∂q̇_k, (M μ)_k
   std::vector<char> moving;    ///< whether joint i or an ancestor is one of the block's directions
+  std::vector<char> busy;      ///< whether a joint of sub(k) moves
 
   explicit TreePass(int n) {
     moving.assign(n, 0);
+    busy.assign(n, 0);
     for (auto* x : {&q, &dq, &qdd, &gq, &gv, &mmu}) x->assign(n, T{});
     for (auto* x : {&R, &cI, &B}) x->assign(n, Mat3<T>{});
     for (auto* x : {&p, &ch, &gammaMu}) x->assign(n, Vec3<T>{});
@@ -386,26 +388,44 @@ struct TreePass {
     for (int k = n - 1; k >= 0; --k) {
       // The subtree sums at k are complete (its descendants have larger indices).
       const TreeJoint& jc = joints[k];
-      const Vec6<T>& Sk = S[k];
       const double mk = jc.subtreeMass;
-      Vec6<T> vP, aPg, psiP;
-      if (jc.parent == kWorld) {
-        aPg = Vec6<T>{} - g;
+      Vec6<T> aPg = jc.parent == kWorld ? Vec6<T>{} - g : a[jc.parent] - g;
+      if (!busy[k]) {
+        // Nothing in sub(k) moves with the block's directions: S_k, the parent's v and ψ, and the
+        // subtree sums of I, I v, B, β and γ keep their plain values; only a and the inertial
+        // forces move (through q̈). So −∂φ̃/∂q̇_k and (M μ)_k have no tangents, and of −∂φ̃/∂q_k
+        // only c = S_k × (a_λ − g) and the S_k ×* F_k − Ic c part of δF_k move (tangents only:
+        // gq's value here is not −∂φ̃/∂q_k, and only tangents are read).
+        const Vec6<double>& S0 = cv.S[k];
+        Vec6<double> psiP0;
+        if (jc.parent != kWorld) psiP0 = cv.psi[jc.parent];
+        const Vec6<T> c = crossMotion(S0, aPg);
+        const Vec6<T> dFq = crossForce(S0, fin[k]) - applyInertia(mk, cv.hc[k], cv.Ic[k], c);
+        gq[k] = dot(c, cv.beta[k]) - dot(psiP0, dFq);
+        gv[k] = T(0.0);
+        mmu[k] = T(0.0);
+        // The value of β that the parent's sums read. (γ's is not needed: no joint above k moves,
+        // and at a joint that does not move, S and w have no tangents, so γ enters its rows
+        // only through γ's tangents.)
+        lift(cv.beta[k], betaMu[k]);
       } else {
-        vP = v[jc.parent];
-        aPg = a[jc.parent] - g;
-        psiP = psi[jc.parent];
+        const Vec6<T>& Sk = S[k];
+        Vec6<T> vP, psiP;
+        if (jc.parent != kWorld) {
+          vP = v[jc.parent];
+          psiP = psi[jc.parent];
+        }
+        const Vec6<T> IcS = applyInertia(mk, ch[k], cI[k], Sk);  // β_k
+        betaMu[k] += mu[k] * IcS;
+        gammaMu[k] += mu[k] * dPlusCrossAngular(H[k], B[k], Sk);
+        const Vec6<T> w = crossMotion(Sk, vP);
+        const Vec6<T> c = crossMotion(Sk, aPg) - crossMotion(w, vP);
+        const Vec6<T> dFq = crossForce(Sk, fin[k]) - applyInertia(mk, ch[k], cI[k], c) + dMinusCross(H[k], B[k], w);
+        const Vec6<T> dFv = -1.0 * dMinusCross(H[k], B[k], Sk) - 2.0 * applyInertia(mk, ch[k], cI[k], w);
+        gq[k] = dot(c, betaMu[k]) - dot(w.a, gammaMu[k]) - dot(psiP, dFq);
+        gv[k] = 2.0 * dot(w, betaMu[k]) + dot(Sk.a, gammaMu[k]) - dot(psiP, dFv);
+        mmu[k] = dot(Sk, applyInertia(mk, ch[k], cI[k], psiP) + betaMu[k]);
       }
-      const Vec6<T> IcS = applyInertia(mk, ch[k], cI[k], Sk);  // β_k
-      betaMu[k] += mu[k] * IcS;
-      gammaMu[k] += mu[k] * dPlusCrossAngular(H[k], B[k], Sk);
-      const Vec6<T> w = crossMotion(Sk, vP);
-      const Vec6<T> c = crossMotion(Sk, aPg) - crossMotion(w, vP);
-      const Vec6<T> dFq = crossForce(Sk, fin[k]) - applyInertia(mk, ch[k], cI[k], c) + dMinusCross(H[k], B[k], w);
-      const Vec6<T> dFv = -1.0 * dMinusCross(H[k], B[k], Sk) - 2.0 * applyInertia(mk, ch[k], cI[k], w);
-      gq[k] = dot(c, betaMu[k]) - dot(w.a, gammaMu[k]) - dot(psiP, dFq);
-      gv[k] = 2.0 * dot(w, betaMu[k]) + dot(Sk.a, gammaMu[k]) - dot(psiP, dFv);
-      mmu[k] = dot(Sk, applyInertia(mk, ch[k], cI[k], psiP) + betaMu[k]);
       const int par = jc.parent;
       if (par == kWorld) continue;
       ch[par] += ch[k];
@@ -426,6 +446,7 @@ struct TreePass {
     for (int i = 0; i < n; ++i) {
       const int par = (*io.joints)[i].parent;
       moving[i] = (i >= a0 && i < a0 + io.lanes) || (par != kWorld && moving[par]);
+      busy[i] = moving[i];
       q[i] = T(io.q[i]);
       dq[i] = T(io.dq[i]);
       qdd[i] = T(io.qdd[i]);
@@ -433,6 +454,10 @@ struct TreePass {
         q[i].d[l] = a0 + l == i ? 1.0 : 0.0;
         qdd[i].d[l] = Y(i, a0 + l);
       }
+    }
+    for (int k = n - 1; k >= 0; --k) {
+      const int par = (*io.joints)[k].parent;
+      if (par != kWorld && busy[k]) busy[par] = 1;
     }
     run(*io.joints, io.gravity, io.mu, *io.values);
     Eigen::MatrixXd& rows = *io.rows;

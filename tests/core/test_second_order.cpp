@@ -339,15 +339,24 @@ TEST_CASE("The contraction in blocks of directions, in both builds of its sweeps
 /// A branched 3D tree of every joint kind that the tree pass covers, with full inertias, skewed
 /// gravity, a configuration spring, damping and configuration forces (no point-force element, no
 /// constraint): root rz → {arm: ry, tx (prismatic), r_axis; leg: rx, t_axis}, plus a second root tz;
-/// `copies` such trees side by side (8 coordinates each: 3 copies need two blocks of each kind,
-/// and a block's joints include others' that do not move with it).
+/// With `copies` > 1, that many such trees (8 coordinates each) hang from a hub of two joints
+/// (rz, then rx): 3 copies need two blocks of each kind, and a block of q directions holds whole
+/// subtrees that do not move with it but are coupled to it through the hub, below a hub joint
+/// that does not move with it either but is not a root.
 TestSystem branchedTree(std::uint32_t seed, int copies = 1) {
   std::mt19937 rng(seed);
   SystemBuilder s;
+  std::string base = "world";
+  if (copies > 1) {
+    s.frame("hub", "world", Transform::rz("hub"), Mass{2.0, randomInertia(rng)});
+    s.frame("hub_offset", "hub", Transform::constSE3(se3(0.7, {0.3, 0.4, 1.0}, {0.2, 0.3, -0.1})));
+    s.frame("hub2", "hub_offset", Transform::rx("hub2"), Mass{1.5, randomInertia(rng)});
+    base = "hub2";
+  }
   for (int k = 0; k < copies; ++k) {
     const std::string x = k == 0 ? std::string() : std::string("_").append(std::to_string(k));
     auto name = [&](const char* base) { return std::string(base).append(x); };
-    s.frame(name("hip"), "world", Transform::rz(name("yaw")), Mass{1.2, randomInertia(rng)});
+    s.frame(name("hip"), base, Transform::rz(name("yaw")), Mass{1.2, randomInertia(rng)});
     s.frame(name("arm_base"), name("hip"), Transform::constSE3(se3(0.4, {1.0, 0.5, 0.2}, {0.3, 0.1, 0.2})));
     s.frame(name("shoulder"), name("arm_base"), Transform::ry(name("pitch")), Mass{0.7, randomInertia(rng)});
     s.frame(name("upper"), name("shoulder"), Transform::tz(0.5), Mass{0.4, randomInertia(rng)});
@@ -359,7 +368,7 @@ TestSystem branchedTree(std::uint32_t seed, int copies = 1) {
     s.frame(name("shin"), name("leg"), Transform::ty(-0.6), Mass{0.5, randomInertia(rng)});
     s.frame(name("foot"), name("shin"), Transform::transAxis(Eigen::Vector3d(0.2, 0.9, -0.4).normalized(), name("reach")),
             Mass{0.25, randomInertia(rng)});
-    s.frame(name("other"), "world", Transform::constSE3(se3(-0.3, {0.0, 1.0, 0.0}, {1.0, 0.0, 0.5})));
+    s.frame(name("other"), base, Transform::constSE3(se3(-0.3, {0.0, 1.0, 0.0}, {1.0, 0.0, 0.5})));
     s.frame(name("lift"), name("other"), Transform::tz(name("lift")), Mass{0.9, randomInertia(rng)});
     s.frame(name("lift_arm"), name("lift"), Transform::ry(name("tilt")), Mass{0.35, randomInertia(rng)});
     s.frame(name("lift_tip"), name("lift_arm"), Transform::tx(0.4), Mass{0.1, randomInertia(rng)});
@@ -409,7 +418,7 @@ TEST_CASE("The contraction's tree pass against the recording and the tensors", "
   // Both, and the sum of the hyper-dual tensors, agree to 1e-10 of the largest entry (three
   // computations that share no code beyond the KKT factor), at random states and weights, on
   // every block shape (the q and the q̇ directions in blocks of their own, 16 wide, the last 4, 8,
-  // 12 or 16: n = 2, 3, 10, 13, 18 = 16 + 2, 8, 24 = 16 + 8, 20 = 16 + 4) and every joint kind, in the
+  // 12 or 16: n = 2, 3, 10, 13, 18 = 16 + 2, 8, 26 = 16 + 10, 20 = 16 + 4) and every joint kind, in the
   // baseline build and (where the CPU has it) the AVX2+FMA build of the pass.
   struct ForceTape {  // restores the automatic choice even when a check fails
     explicit ForceTape(bool force) { detail::secondOrderForceTape(force); }
