@@ -18,7 +18,8 @@
 // tangents only on twists and momenta and gives the (q̇, q̇) rows; the (q, q̇) rows are the
 // transpose of the q blocks' (q̇, q) rows (∇²φ is symmetric), the (u, q̇) rows are zero. In a q
 // block, a joint none of whose ancestors (nor itself) is one of the block's directions keeps the
-// plain values of its pose, twist and inertia (one plain pass per call computes them).
+// plain values of its pose, twist and inertia (one plain pass per call computes them), and where
+// no joint of a subtree moves, only its inertial forces carry tangents (through q̈) inwards.
 //
 // It covers the models whose residual holds nothing but the tree's inertia, gravity and the
 // forces on coordinates (configuration springs, damping, configuration forces: affine in z, so
