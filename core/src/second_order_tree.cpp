@@ -132,9 +132,10 @@ TRELLIS_LANES_INLINE const T& entry(const Mat3<T>& m, int r, int c) {
 }
 
 /// Spatial inertia (m, h, I about the world origin) applied to a twist: [m x_v + x_ω × h; h × x_v + I x_ω].
-template <class M, class T, class X>
-TRELLIS_LANES_INLINE auto applyInertia(const M& m, const Vec3<T>& h, const Mat3<T>& I, const Vec6<X>& x) {
-  return Vec6<T>{m * x.l + cross(x.a, h), cross(h, x.l) + I * x.a};
+template <class M, class K, class X>
+TRELLIS_LANES_INLINE auto applyInertia(const M& m, const Vec3<K>& h, const Mat3<K>& I, const Vec6<X>& x) {
+  const auto lin = m * x.l + cross(x.a, h);
+  return Vec6<decltype(lin.x)>{lin, cross(h, x.l) + I * x.a};
 }
 /// D x − x ×* H and the angular part of D x + x ×* H (linearization.cpp: dMinusCross,
 /// dPlusCrossAngular), H = [p; L] the subtree momentum, B the 3×3 block of D.
@@ -145,6 +146,11 @@ TRELLIS_LANES_INLINE Vec6<T> dMinusCross(const Vec6<T>& H, const Mat3<T>& B, con
 template <class T, class X>
 TRELLIS_LANES_INLINE Vec3<T> dPlusCrossAngular(const Vec6<T>& H, const Mat3<T>& B, const Vec6<X>& x) {
   return 2.0 * cross(x.l, H.l) + B * x.a + cross(x.a, H.a);
+}
+/// sin x and cos x of a plain value (the q̇ blocks' kinematics).
+TRELLIS_LANES_INLINE void sinCos(double x, double& s, double& c) {
+  s = std::sin(x);
+  c = std::cos(x);
 }
 
 struct TreeJoint {
@@ -162,140 +168,133 @@ Mat3<double> mat3(const Eigen::Matrix3d& m) {
   return r;
 }
 
-/// The buffers of one block width L (per joint, the lanes of every quantity the pass keeps).
-template <int L, int W>
-struct TreePass {
-  using T = Lanes<L, W>;
-  std::vector<T> q, dq, qdd;
-  std::vector<Mat3<T>> R, cI, B;
-  std::vector<Vec3<T>> p, ch, gammaMu;
-  std::vector<Vec6<T>> S, v, a, psi, fin, H, betaMu;
-  std::vector<T> gq, gv, mmu;  ///< outputs: −∂φ̃/∂q_k, −∂φ̃/∂q̇_k, (M μ)_k
-
-  explicit TreePass(int n) {
-    for (auto* x : {&q, &dq, &qdd, &gq, &gv, &mmu}) x->assign(n, T{});
-    for (auto* x : {&R, &cI, &B}) x->assign(n, Mat3<T>{});
-    for (auto* x : {&p, &ch, &gammaMu}) x->assign(n, Vec3<T>{});
-    for (auto* x : {&S, &v, &a, &psi, &fin, &H, &betaMu}) x->assign(n, Vec6<T>{});
+/// Joint i's pose (body axes R, origin p in the world) and motion subspace S (world axes, about
+/// the world origin) from its parent's pose (in R, p) and q_i; T is a plain value or lanes.
+template <class T>
+TRELLIS_LANES_INLINE void placeJoint(const TreeJoint& jc, const Mat3<T>* R, const Vec3<T>* p, const T& qi, Mat3<T>& Ri,
+                                     Vec3<T>& pi, Vec6<T>& Si) {
+  Mat3<T> Rpre;
+  Vec3<T> ppre;
+  if (jc.parent == kWorld) {
+    for (int c = 0; c < 3; ++c) Rpre.c[c] = {T(jc.R0.c[c].x), T(jc.R0.c[c].y), T(jc.R0.c[c].z)};
+    ppre = {T(jc.p0.x), T(jc.p0.y), T(jc.p0.z)};
+  } else {
+    Rpre = R[jc.parent] * jc.R0;
+    ppre = p[jc.parent] + R[jc.parent] * jc.p0;
   }
+  const Vec3<T> e = Rpre.c[jc.axis];
+  if (jc.revolute) {
+    T sq, cq;
+    sinCos(qi, sq, cq);
+    const int a1 = (jc.axis + 1) % 3, a2 = (jc.axis + 2) % 3;
+    Ri.c[jc.axis] = e;
+    Ri.c[a1] = cq * Rpre.c[a1] + sq * Rpre.c[a2];
+    Ri.c[a2] = (-sq) * Rpre.c[a1] + cq * Rpre.c[a2];
+    pi = ppre;
+    Si = {cross(ppre, e), e};
+  } else {
+    Ri = Rpre;
+    pi = ppre + qi * e;
+    Si = {e, Vec3<T>{}};
+  }
+}
 
-  /// The gradient pass of the header at the seeded q, q̇, q̈: one sweep outwards (kinematics,
-  /// world inertias, per-body terms), one inwards (subtree sums and, as each joint's subtree is
-  /// complete, its two gradient entries and (M μ)_k).
-  TRELLIS_LANES_INLINE void run(const std::vector<TreeJoint>& joints, const Vec3<double>& gravity, const double* mu) {
+/// Body i's inertia about the world origin: h = m p + h_B, I = I_B + m (|p|² E − p pᵀ) + 2 (p·h_B) E
+/// − p h_Bᵀ − h_B pᵀ, with h_B = R h_b and I_B = R I_b Rᵀ about the body origin.
+template <class T>
+TRELLIS_LANES_INLINE void worldInertia(const TreeJoint& jc, const Mat3<T>& Ri, const Vec3<T>& pi, Mat3<T>& I, Vec3<T>& h) {
+  const Vec3<T> hB = Ri * jc.firstMoment;
+  Mat3<T> RI;
+  for (int c = 0; c < 3; ++c) RI.c[c] = Ri * jc.inertia.c[c];
+  const T shift = jc.mass * dot(pi, pi) + 2.0 * dot(pi, hB);
+  for (int c = 0; c < 3; ++c)
+    for (int r = c; r < 3; ++r) {
+      T x = component(RI.c[0], r) * component(Ri.c[0], c) + component(RI.c[1], r) * component(Ri.c[1], c) +
+            component(RI.c[2], r) * component(Ri.c[2], c) - jc.mass * (component(pi, r) * component(pi, c)) -
+            component(pi, r) * component(hB, c) - component(hB, r) * component(pi, c);
+      if (r == c) x += shift;
+      entry(I, r, c) = x;
+      if (r != c) entry(I, c, r) = x;
+    }
+  h = jc.mass * pi + hB;
+}
+
+/// B = X + Xᵀ − 2 (h·v) E with X = I ω̂ + v hᵀ (linearization.cpp: compositePass), for the body
+/// inertia (I, h) and twist v.
+template <class K, class T>
+TRELLIS_LANES_INLINE void momentumBlock(const Mat3<K>& I, const Vec3<K>& h, const Vec6<T>& v, Mat3<T>& B) {
+  const Vec3<T>& w = v.a;
+  Mat3<T> X;
+  X.c[0] = w.z * I.c[1] - w.y * I.c[2] + h.x * v.l;
+  X.c[1] = w.x * I.c[2] - w.z * I.c[0] + h.y * v.l;
+  X.c[2] = w.y * I.c[0] - w.x * I.c[1] + h.z * v.l;
+  const T hv2 = 2.0 * dot(h, v.l);
+  for (int c = 0; c < 3; ++c)
+    for (int r = c; r < 3; ++r) {
+      T x = entry(X, r, c) + entry(X, c, r);
+      if (r == c) x = x - hv2;
+      entry(B, r, c) = x;
+      if (r != c) entry(B, c, r) = x;
+    }
+}
+
+/// x as lanes with zero tangents.
+template <class T>
+TRELLIS_LANES_INLINE void lift(const Vec3<double>& x, Vec3<T>& y) {
+  y = {T(x.x), T(x.y), T(x.z)};
+}
+template <class T>
+TRELLIS_LANES_INLINE void lift(const Vec6<double>& x, Vec6<T>& y) {
+  lift(x.l, y.l);
+  lift(x.a, y.a);
+}
+template <class T>
+TRELLIS_LANES_INLINE void lift(const Mat3<double>& x, Mat3<T>& y) {
+  for (int c = 0; c < 3; ++c) lift(x.c[c], y.c[c]);
+}
+
+/// The values (no tangents) that blocks read as constants, one plain pass per call: a q̇ block
+/// reads the kinematics, inertias, ψ and β (they do not depend on q̇; μ is fixed); a q block reads
+/// the per-body terms of the joints none of whose ancestors (or itself) is one of its directions
+/// (their pose, twist and inertia do not depend on those q).
+struct TreeValues {
+  std::vector<Mat3<double>> R, I, Ic, B;          ///< pose; body inertia (world, about the origin); subtree sum; body B
+  std::vector<Vec3<double>> p, h, hc;             ///< origin; body first moment; subtree sum
+  std::vector<Vec6<double>> S, psi, beta, v, Iv;  ///< motion subspace; ψ; Σ_{j∈sub(k)} μ_j Ic_j S_j; twist; I v
+  std::vector<Vec6<double>> vS, vIv;              ///< q̇_i v × S_i; v ×* I v
+
+  explicit TreeValues(int n) {
+    for (auto* x : {&R, &I, &Ic, &B}) x->assign(n, Mat3<double>{});
+    for (auto* x : {&p, &h, &hc}) x->assign(n, Vec3<double>{});
+    for (auto* x : {&S, &psi, &beta, &v, &Iv, &vS, &vIv}) x->assign(n, Vec6<double>{});
+  }
+  void compute(const std::vector<TreeJoint>& joints, const double* q, const double* dq, const double* mu) {
     const int n = static_cast<int>(joints.size());
     for (int i = 0; i < n; ++i) {
       const TreeJoint& jc = joints[i];
-      Mat3<T> Rpre;
-      Vec3<T> ppre;
-      Vec6<T> vP, aP, psiP;
-      if (jc.parent == kWorld) {
-        for (int c = 0; c < 3; ++c) Rpre.c[c] = {T(jc.R0.c[c].x), T(jc.R0.c[c].y), T(jc.R0.c[c].z)};
-        ppre = {T(jc.p0.x), T(jc.p0.y), T(jc.p0.z)};
-      } else {
-        Rpre = R[jc.parent] * jc.R0;
-        ppre = p[jc.parent] + R[jc.parent] * jc.p0;
-        vP = v[jc.parent];
-        aP = a[jc.parent];
-        psiP = psi[jc.parent];
+      placeJoint(jc, R.data(), p.data(), q[i], R[i], p[i], S[i]);
+      psi[i] = mu[i] * S[i];
+      v[i] = dq[i] * S[i];
+      if (jc.parent != kWorld) {
+        psi[i] += psi[jc.parent];
+        v[i] += v[jc.parent];
       }
-      const Vec3<T> e = Rpre.c[jc.axis];
-      if (jc.revolute) {
-        T sq, cq;
-        sinCos(q[i], sq, cq);
-        const int a1 = (jc.axis + 1) % 3, a2 = (jc.axis + 2) % 3;
-        R[i].c[jc.axis] = e;
-        R[i].c[a1] = cq * Rpre.c[a1] + sq * Rpre.c[a2];
-        R[i].c[a2] = (-sq) * Rpre.c[a1] + cq * Rpre.c[a2];
-        p[i] = ppre;
-        S[i] = {cross(ppre, e), e};
-      } else {
-        R[i] = Rpre;
-        p[i] = ppre + q[i] * e;
-        S[i] = {e, Vec3<T>{}};
-      }
-      v[i] = vP + dq[i] * S[i];
-      a[i] = aP + qdd[i] * S[i] + dq[i] * crossMotion(v[i], S[i]);
-      psi[i] = psiP + mu[i] * S[i];
-
-      // World inertia about the origin: h = m p + h_B, I = I_B + m (|p|² E − p pᵀ) + 2 (p·h_B) E
-      // − p h_Bᵀ − h_B pᵀ, with h_B = R h_b and I_B = R I_b Rᵀ about the body origin.
-      const Mat3<T>& Ri = R[i];
-      const Vec3<T>& pi = p[i];
-      const Vec3<T> hB = Ri * jc.firstMoment;
-      Mat3<T> RI;
-      for (int c = 0; c < 3; ++c) RI.c[c] = Ri * jc.inertia.c[c];
-      Mat3<T>& I = cI[i];
-      const T shift = jc.mass * dot(pi, pi) + 2.0 * dot(pi, hB);
-      for (int c = 0; c < 3; ++c)
-        for (int r = c; r < 3; ++r) {
-          T x = component(RI.c[0], r) * component(Ri.c[0], c) + component(RI.c[1], r) * component(Ri.c[1], c) +
-                component(RI.c[2], r) * component(Ri.c[2], c) - jc.mass * (component(pi, r) * component(pi, c)) -
-                component(pi, r) * component(hB, c) - component(hB, r) * component(pi, c);
-          if (r == c) x += shift;
-          entry(I, r, c) = x;
-          if (r != c) entry(I, c, r) = x;
-        }
-      const Vec3<T> h = jc.mass * pi + hB;
-      ch[i] = h;
-      const Vec6<T>& vi = v[i];
-      const Vec6<T> Iv = applyInertia(jc.mass, h, I, vi);
-      Vec6<T> ag = a[i];
-      ag.l = ag.l - gravity;
-      fin[i] = applyInertia(jc.mass, h, I, ag) + crossForce(vi, Iv);
-      H[i] = Iv;
-      // B = X + Xᵀ − 2 (h·v) E with X = I ω̂ + v hᵀ (linearization.cpp: compositePass).
-      const Vec3<T>& w = vi.a;
-      Mat3<T> X;
-      X.c[0] = w.z * I.c[1] - w.y * I.c[2] + h.x * vi.l;
-      X.c[1] = w.x * I.c[2] - w.z * I.c[0] + h.y * vi.l;
-      X.c[2] = w.y * I.c[0] - w.x * I.c[1] + h.z * vi.l;
-      const T hv2 = 2.0 * dot(h, vi.l);
-      Mat3<T>& Bi = B[i];
-      for (int c = 0; c < 3; ++c)
-        for (int r = c; r < 3; ++r) {
-          T x = entry(X, r, c) + entry(X, c, r);
-          if (r == c) x = x - hv2;
-          entry(Bi, r, c) = x;
-          if (r != c) entry(Bi, c, r) = x;
-        }
-      betaMu[i] = Vec6<T>{};
-      gammaMu[i] = Vec3<T>{};
+      worldInertia(jc, R[i], p[i], I[i], h[i]);
+      Iv[i] = applyInertia(jc.mass, h[i], I[i], v[i]);
+      momentumBlock(I[i], h[i], v[i], B[i]);
+      vS[i] = dq[i] * crossMotion(v[i], S[i]);
+      vIv[i] = crossForce(v[i], Iv[i]);
+      Ic[i] = I[i];
+      hc[i] = h[i];
+      beta[i] = Vec6<double>{};
     }
-
-    const Vec6<double> g{gravity, Vec3<double>{}};
     for (int k = n - 1; k >= 0; --k) {
-      // The subtree sums at k are complete (its descendants have larger indices).
-      const TreeJoint& jc = joints[k];
-      const Vec6<T>& Sk = S[k];
-      const double mk = jc.subtreeMass;
-      Vec6<T> vP, aPg, psiP;
-      if (jc.parent == kWorld) {
-        aPg = Vec6<T>{} - g;
-      } else {
-        vP = v[jc.parent];
-        aPg = a[jc.parent] - g;
-        psiP = psi[jc.parent];
-      }
-      const Vec6<T> IcS = applyInertia(mk, ch[k], cI[k], Sk);  // β_k
-      betaMu[k] += mu[k] * IcS;
-      gammaMu[k] += mu[k] * dPlusCrossAngular(H[k], B[k], Sk);
-      const Vec6<T> w = crossMotion(Sk, vP);
-      const Vec6<T> c = crossMotion(Sk, aPg) - crossMotion(w, vP);
-      const Vec6<T> dFq = crossForce(Sk, fin[k]) - applyInertia(mk, ch[k], cI[k], c) + dMinusCross(H[k], B[k], w);
-      const Vec6<T> dFv = -1.0 * dMinusCross(H[k], B[k], Sk) - 2.0 * applyInertia(mk, ch[k], cI[k], w);
-      gq[k] = dot(c, betaMu[k]) - dot(w.a, gammaMu[k]) - dot(psiP, dFq);
-      gv[k] = 2.0 * dot(w, betaMu[k]) + dot(Sk.a, gammaMu[k]) - dot(psiP, dFv);
-      mmu[k] = dot(Sk, applyInertia(mk, ch[k], cI[k], psiP) + betaMu[k]);
-      const int par = jc.parent;
+      beta[k] += mu[k] * applyInertia(joints[k].subtreeMass, hc[k], Ic[k], S[k]);
+      const int par = joints[k].parent;
       if (par == kWorld) continue;
-      ch[par] += ch[k];
-      cI[par] += cI[k];
-      fin[par] += fin[k];
-      H[par] += H[k];
-      B[par] += B[k];
-      betaMu[par] += betaMu[k];
-      gammaMu[par] += gammaMu[k];
+      Ic[par] += Ic[k];
+      hc[par] += hc[k];
+      beta[par] += beta[k];
     }
   }
 };
@@ -307,83 +306,301 @@ struct BlockIO {
   const Eigen::MatrixXd* Y = nullptr;  ///< n×N
   Eigen::MatrixXd* rows = nullptr;     ///< N×2n
   const std::vector<TreeJoint>* joints = nullptr;
+  const TreeValues* values = nullptr;  ///< the plain values (computed for this call)
   Vec3<double> gravity;
 };
 
-/// One block of L directions a0 … a0 + lanes − 1: seeds, the pass, then the block's rows
-/// ∇²φ e_a = −ġ_z + Yᵀ (d/dε M μ) (the u entries of ġ are zero: Q is affine in u here; M μ does
-/// not depend on q̇, so its tangents vanish in the q̇ lanes and a block of q̇ directions skips Yᵀ).
+/// The buffers of one block of L q directions (per joint, the lanes of every quantity the pass keeps).
 template <int L, int W>
-TRELLIS_LANES_INLINE void blockBody(TreePass<L, W>& P, const BlockIO& io) {
-  const int n = io.n, N = io.N, a0 = io.a0;
-  const Eigen::MatrixXd& Y = *io.Y;
-  for (int i = 0; i < n; ++i) {
-    P.q[i] = Lanes<L, W>(io.q[i]);
-    P.dq[i] = Lanes<L, W>(io.dq[i]);
-    P.qdd[i] = Lanes<L, W>(io.qdd[i]);
-    for (int l = 0; l < io.lanes; ++l) {
-      const int a = a0 + l;
-      P.q[i].d[l] = a == i ? 1.0 : 0.0;
-      P.dq[i].d[l] = a == n + i ? 1.0 : 0.0;
-      P.qdd[i].d[l] = Y(i, a);
-    }
-  }
-  P.run(*io.joints, io.gravity, io.mu);
-  Eigen::MatrixXd& rows = *io.rows;
-  for (int l = 0; l < io.lanes; ++l) {
-    double* col = rows.data() + static_cast<Eigen::Index>(a0 + l) * N;
-    for (int k = 0; k < n; ++k) {
-      col[k] = -P.gq[k].d[l];
-      col[n + k] = -P.gv[k].d[l];
-    }
-    for (int b = 2 * n; b < N; ++b) col[b] = 0.0;
-  }
-  if (a0 >= n) return;
-  for (int b = 0; b < N; ++b) {
-    LaneChunk<W> acc[L / W] = {};
-    const double* y = Y.data() + static_cast<Eigen::Index>(b) * n;
-    for (int k = 0; k < n; ++k) {
-      const double yk = y[k];
-      for (int c = 0; c < L / W; ++c) acc[c] += yk * TRELLIS_LANES_AT_C(W, P.mmu[k].d + c * W);
-    }
-    double sum[L];
-    for (int c = 0; c < L / W; ++c) TRELLIS_LANES_AT(W, sum + c * W) = (acc[c]);
-    for (int l = 0; l < io.lanes; ++l) rows(b, a0 + l) += sum[l];
-  }
-}
+struct TreePass {
+  using T = Lanes<L, W>;
+  std::vector<T> q, dq, qdd;
+  std::vector<Mat3<T>> R, cI, B;
+  std::vector<Vec3<T>> p, ch, gammaMu;
+  std::vector<Vec6<T>> S, v, a, psi, fin, H, betaMu;
+  std::vector<T> gq, gv, mmu;  ///< outputs: −∂φ̃/∂q_k, −∂φ̃/∂q̇_k, (M μ)_k
+  std::vector<char> moving;    ///< whether joint i or an ancestor is one of the block's directions
+  std::vector<char> busy;      ///< whether a joint of sub(k) moves
 
-/// The block, compiled for the baseline (W = 2) and, chosen when the workspace is built on a CPU
+  explicit TreePass(int n) {
+    moving.assign(n, 0);
+    busy.assign(n, 0);
+    for (auto* x : {&q, &dq, &qdd, &gq, &gv, &mmu}) x->assign(n, T{});
+    for (auto* x : {&R, &cI, &B}) x->assign(n, Mat3<T>{});
+    for (auto* x : {&p, &ch, &gammaMu}) x->assign(n, Vec3<T>{});
+    for (auto* x : {&S, &v, &a, &psi, &fin, &H, &betaMu}) x->assign(n, Vec6<T>{});
+  }
+
+  /// The gradient pass of the header at the seeded q, q̇, q̈: one sweep outwards (kinematics,
+  /// world inertias, per-body terms), one inwards (subtree sums and, as each joint's subtree is
+  /// complete, its two gradient entries and (M μ)_k).
+  TRELLIS_LANES_INLINE void run(const std::vector<TreeJoint>& joints, const Vec3<double>& gravity, const double* mu,
+                                const TreeValues& cv) {
+    const int n = static_cast<int>(joints.size());
+    for (int i = 0; i < n; ++i) {
+      const TreeJoint& jc = joints[i];
+      Vec6<T> aP;
+      if (jc.parent != kWorld) aP = a[jc.parent];
+      if (!moving[i]) {
+        // Nothing above joint i moves in these directions: its pose, twist, inertia and momenta
+        // are the plain values; only a (through q̈) and the force moving it carry tangents.
+        lift(cv.R[i], R[i]);
+        lift(cv.p[i], p[i]);
+        lift(cv.S[i], S[i]);
+        lift(cv.v[i], v[i]);
+        lift(cv.psi[i], psi[i]);
+        lift(cv.I[i], cI[i]);
+        lift(cv.h[i], ch[i]);
+        lift(cv.Iv[i], H[i]);
+        lift(cv.B[i], B[i]);
+        a[i] = aP + qdd[i] * cv.S[i] + cv.vS[i];
+        Vec6<T> ag = a[i];
+        ag.l = ag.l - gravity;
+        fin[i] = applyInertia(jc.mass, cv.h[i], cv.I[i], ag) + cv.vIv[i];
+        betaMu[i] = Vec6<T>{};
+        gammaMu[i] = Vec3<T>{};
+        continue;
+      }
+      placeJoint(jc, R.data(), p.data(), q[i], R[i], p[i], S[i]);
+      Vec6<T> vP, psiP;
+      if (jc.parent != kWorld) {
+        vP = v[jc.parent];
+        psiP = psi[jc.parent];
+      }
+      v[i] = vP + dq[i] * S[i];
+      a[i] = aP + qdd[i] * S[i] + dq[i] * crossMotion(v[i], S[i]);
+      psi[i] = psiP + mu[i] * S[i];
+      const Mat3<T>& I = cI[i];
+      const Vec3<T>& h = ch[i];
+      worldInertia(jc, R[i], p[i], cI[i], ch[i]);
+      const Vec6<T>& vi = v[i];
+      const Vec6<T> Iv = applyInertia(jc.mass, h, I, vi);
+      Vec6<T> ag = a[i];
+      ag.l = ag.l - gravity;
+      fin[i] = applyInertia(jc.mass, h, I, ag) + crossForce(vi, Iv);
+      H[i] = Iv;
+      momentumBlock(I, h, vi, B[i]);
+      betaMu[i] = Vec6<T>{};
+      gammaMu[i] = Vec3<T>{};
+    }
+
+    const Vec6<double> g{gravity, Vec3<double>{}};
+    for (int k = n - 1; k >= 0; --k) {
+      // The subtree sums at k are complete (its descendants have larger indices).
+      const TreeJoint& jc = joints[k];
+      const double mk = jc.subtreeMass;
+      Vec6<T> aPg = jc.parent == kWorld ? Vec6<T>{} - g : a[jc.parent] - g;
+      if (!busy[k]) {
+        // Nothing in sub(k) moves with the block's directions: S_k, the parent's v and ψ, and the
+        // subtree sums of I, I v, B, β and γ keep their plain values; only a and the inertial
+        // forces move (through q̈). So −∂φ̃/∂q̇_k and (M μ)_k have no tangents, and of −∂φ̃/∂q_k
+        // only c = S_k × (a_λ − g) and the S_k ×* F_k − Ic c part of δF_k move (tangents only:
+        // gq's value here is not −∂φ̃/∂q_k, and only tangents are read).
+        const Vec6<double>& S0 = cv.S[k];
+        Vec6<double> psiP0;
+        if (jc.parent != kWorld) psiP0 = cv.psi[jc.parent];
+        const Vec6<T> c = crossMotion(S0, aPg);
+        const Vec6<T> dFq = crossForce(S0, fin[k]) - applyInertia(mk, cv.hc[k], cv.Ic[k], c);
+        gq[k] = dot(c, cv.beta[k]) - dot(psiP0, dFq);
+        gv[k] = T(0.0);
+        mmu[k] = T(0.0);
+        // The value of β that the parent's sums read. (γ's is not needed: no joint above k moves,
+        // and at a joint that does not move, S and w have no tangents, so γ enters its rows
+        // only through γ's tangents.)
+        lift(cv.beta[k], betaMu[k]);
+      } else {
+        const Vec6<T>& Sk = S[k];
+        Vec6<T> vP, psiP;
+        if (jc.parent != kWorld) {
+          vP = v[jc.parent];
+          psiP = psi[jc.parent];
+        }
+        const Vec6<T> IcS = applyInertia(mk, ch[k], cI[k], Sk);  // β_k
+        betaMu[k] += mu[k] * IcS;
+        gammaMu[k] += mu[k] * dPlusCrossAngular(H[k], B[k], Sk);
+        const Vec6<T> w = crossMotion(Sk, vP);
+        const Vec6<T> c = crossMotion(Sk, aPg) - crossMotion(w, vP);
+        const Vec6<T> dFq = crossForce(Sk, fin[k]) - applyInertia(mk, ch[k], cI[k], c) + dMinusCross(H[k], B[k], w);
+        const Vec6<T> dFv = -1.0 * dMinusCross(H[k], B[k], Sk) - 2.0 * applyInertia(mk, ch[k], cI[k], w);
+        gq[k] = dot(c, betaMu[k]) - dot(w.a, gammaMu[k]) - dot(psiP, dFq);
+        gv[k] = 2.0 * dot(w, betaMu[k]) + dot(Sk.a, gammaMu[k]) - dot(psiP, dFv);
+        mmu[k] = dot(Sk, applyInertia(mk, ch[k], cI[k], psiP) + betaMu[k]);
+      }
+      const int par = jc.parent;
+      if (par == kWorld) continue;
+      ch[par] += ch[k];
+      cI[par] += cI[k];
+      fin[par] += fin[k];
+      H[par] += H[k];
+      B[par] += B[k];
+      betaMu[par] += betaMu[k];
+      gammaMu[par] += gammaMu[k];
+    }
+  }
+
+  /// The block of q directions a0 … a0 + lanes − 1 (< n): seeds (e_a, Y e_a), the pass, then the
+  /// rows ∇²φ e_a = −ġ_z + Yᵀ (d/dε M μ) (the u entries of ġ are zero: Q is affine in u here).
+  TRELLIS_LANES_INLINE void block(const BlockIO& io) {
+    const int n = io.n, N = io.N, a0 = io.a0;
+    const Eigen::MatrixXd& Y = *io.Y;
+    for (int i = 0; i < n; ++i) {
+      const int par = (*io.joints)[i].parent;
+      moving[i] = (i >= a0 && i < a0 + io.lanes) || (par != kWorld && moving[par]);
+      busy[i] = moving[i];
+      q[i] = T(io.q[i]);
+      dq[i] = T(io.dq[i]);
+      qdd[i] = T(io.qdd[i]);
+      for (int l = 0; l < io.lanes; ++l) {
+        q[i].d[l] = a0 + l == i ? 1.0 : 0.0;
+        qdd[i].d[l] = Y(i, a0 + l);
+      }
+    }
+    for (int k = n - 1; k >= 0; --k) {
+      const int par = (*io.joints)[k].parent;
+      if (par != kWorld && busy[k]) busy[par] = 1;
+    }
+    run(*io.joints, io.gravity, io.mu, *io.values);
+    Eigen::MatrixXd& rows = *io.rows;
+    for (int l = 0; l < io.lanes; ++l) {
+      double* col = rows.data() + static_cast<Eigen::Index>(a0 + l) * N;
+      for (int k = 0; k < n; ++k) {
+        col[k] = -gq[k].d[l];
+        col[n + k] = -gv[k].d[l];
+      }
+      for (int b = 2 * n; b < N; ++b) col[b] = 0.0;
+    }
+    for (int b = 0; b < N; ++b) {
+      LaneChunk<W> acc[L / W] = {};
+      const double* y = Y.data() + static_cast<Eigen::Index>(b) * n;
+      for (int k = 0; k < n; ++k) {
+        const double yk = y[k];
+        for (int c = 0; c < L / W; ++c) acc[c] += yk * TRELLIS_LANES_AT_C(W, mmu[k].d + c * W);
+      }
+      double sum[L];
+      for (int c = 0; c < L / W; ++c) TRELLIS_LANES_AT(W, sum + c * W) = (acc[c]);
+      for (int l = 0; l < io.lanes; ++l) rows(b, a0 + l) += sum[l];
+    }
+  }
+};
+
+/// The buffers of one block of L q̇ directions. Along e_a for a q̇ coordinate only twists and
+/// momenta move: kinematics, inertias, ψ and β are the constants of TreeValues; M μ does not
+/// move (so no Yᵀ term); and the q̇ rows of ∇²φ need no q̈ tangent (−∂r/∂q̇ holds no q̈), so no
+/// acceleration or force term is computed. The block gives the (q̇, q̇) rows; the (q, q̇) rows are
+/// the transpose of the q blocks' (q̇, q) rows (∇²φ is symmetric), the (u, q̇) rows are zero.
+template <int L, int W>
+struct VelocityPass {
+  using T = Lanes<L, W>;
+  std::vector<T> dq, gv;  ///< seeded q̇; output −∂φ̃/∂q̇_k
+  std::vector<Mat3<T>> B;
+  std::vector<Vec3<T>> gammaMu;
+  std::vector<Vec6<T>> v, H;
+
+  explicit VelocityPass(int n) {
+    for (auto* x : {&dq, &gv}) x->assign(n, T{});
+    B.assign(n, Mat3<T>{});
+    gammaMu.assign(n, Vec3<T>{});
+    for (auto* x : {&v, &H}) x->assign(n, Vec6<T>{});
+  }
+
+  /// TreePass::run's terms of −∂φ̃/∂q̇ with everything that does not depend on q̇ taken from c.
+  TRELLIS_LANES_INLINE void run(const std::vector<TreeJoint>& joints, const TreeValues& c, const double* mu) {
+    const int n = static_cast<int>(joints.size());
+    for (int i = 0; i < n; ++i) {
+      const TreeJoint& jc = joints[i];
+      v[i] = dq[i] * c.S[i];
+      if (jc.parent != kWorld) v[i] += v[jc.parent];
+      H[i] = applyInertia(jc.mass, c.h[i], c.I[i], v[i]);
+      momentumBlock(c.I[i], c.h[i], v[i], B[i]);
+      gammaMu[i] = Vec3<T>{};
+    }
+    for (int k = n - 1; k >= 0; --k) {
+      const TreeJoint& jc = joints[k];
+      const Vec6<double>& Sk = c.S[k];
+      Vec6<T> vP;
+      Vec6<double> psiP;
+      if (jc.parent != kWorld) {
+        vP = v[jc.parent];
+        psiP = c.psi[jc.parent];
+      }
+      gammaMu[k] += mu[k] * dPlusCrossAngular(H[k], B[k], Sk);
+      const Vec6<T> w = crossMotion(Sk, vP);
+      const Vec6<T> dFv = -1.0 * dMinusCross(H[k], B[k], Sk) - 2.0 * applyInertia(jc.subtreeMass, c.hc[k], c.Ic[k], w);
+      gv[k] = 2.0 * dot(w, c.beta[k]) + dot(Sk.a, gammaMu[k]) - dot(psiP, dFv);
+      const int par = jc.parent;
+      if (par == kWorld) continue;
+      H[par] += H[k];
+      B[par] += B[k];
+      gammaMu[par] += gammaMu[k];
+    }
+  }
+
+  /// The block of q̇ directions n + a0 … n + a0 + lanes − 1: their (q̇, q̇) rows, the (u, q̇) rows
+  /// zero (computeRows fills the (q, q̇) rows once the q blocks are done).
+  TRELLIS_LANES_INLINE void block(const BlockIO& io) {
+    const int n = io.n, N = io.N, a0 = io.a0;
+    for (int i = 0; i < n; ++i) {
+      dq[i] = T(io.dq[i]);
+      for (int l = 0; l < io.lanes; ++l) dq[i].d[l] = a0 + l == i ? 1.0 : 0.0;
+    }
+    run(*io.joints, *io.values, io.mu);
+    Eigen::MatrixXd& rows = *io.rows;
+    for (int l = 0; l < io.lanes; ++l) {
+      double* col = rows.data() + static_cast<Eigen::Index>(n + a0 + l) * N;
+      for (int k = 0; k < n; ++k) col[n + k] = -gv[k].d[l];
+      for (int b = 2 * n; b < N; ++b) col[b] = 0.0;
+    }
+  }
+};
+
+/// The passes of one kind for the block widths a model needs (L = 4, 8, 12 or 16).
+template <template <int, int> class P, int W>
+struct ByWidth {
+  std::unique_ptr<P<4, W>> w4;
+  std::unique_ptr<P<8, W>> w8;
+  std::unique_ptr<P<12, W>> w12;
+  std::unique_ptr<P<16, W>> w16;
+  void make(int L, int n) {
+    if (L == 4 && !w4) w4 = std::make_unique<P<4, W>>(n);
+    if (L == 8 && !w8) w8 = std::make_unique<P<8, W>>(n);
+    if (L == 12 && !w12) w12 = std::make_unique<P<12, W>>(n);
+    if (L == 16 && !w16) w16 = std::make_unique<P<16, W>>(n);
+  }
+  template <class F>
+  void with(int L, F&& f) {
+    if (L == 4) f(*w4);
+    else if (L == 8) f(*w8);
+    else if (L == 12) f(*w12);
+    else f(*w16);
+  }
+};
+
+/// A block, compiled for the baseline (W = 2) and, chosen when the workspace is built on a CPU
 /// with AVX2 and FMA (as the tape's sweeps are), for those (W = 4; the same source; FMA
 /// contraction changes results at rounding level only).
-template <int L>
-void blockGeneric(TreePass<L, 2>& P, const BlockIO& io) {
-  blockBody<L, 2>(P, io);
+template <class P>
+void blockGeneric(P& pass, const BlockIO& io) {
+  pass.block(io);
 }
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-template <int L>
-__attribute__((target("avx2,fma"), flatten)) void blockAvx2(TreePass<L, 4>& P, const BlockIO& io) {
-  blockBody<L, 4>(P, io);
+template <class P>
+__attribute__((target("avx2,fma"), flatten)) void blockAvx2(P& pass, const BlockIO& io) {
+  pass.block(io);
 }
 constexpr bool kHaveAvx2Build = true;
 #else
 constexpr bool kHaveAvx2Build = false;
 #endif
 
-/// The passes of one vector width, for the block widths the model's 2n directions need.
+/// The q passes and the q̇ passes of one vector width.
 template <int W>
 struct PassSet {
-  std::unique_ptr<TreePass<4, W>> p4;
-  std::unique_ptr<TreePass<8, W>> p8;
-  std::unique_ptr<TreePass<16, W>> p16;
-  void make(int L, int n) {
-    if (L == 4 && !p4) p4 = std::make_unique<TreePass<4, W>>(n);
-    if (L == 8 && !p8) p8 = std::make_unique<TreePass<8, W>>(n);
-    if (L == 16 && !p16) p16 = std::make_unique<TreePass<16, W>>(n);
-  }
+  ByWidth<TreePass, W> positions;
+  ByWidth<VelocityPass, W> velocities;
 };
 
-/// The block widths: 16 directions each, the last block 4, 8 or 16 wide.
-int blockWidth(int lanes) { return lanes <= 4 ? 4 : (lanes <= 8 ? 8 : 16); }
+/// The block widths: 16 directions each, the last block 4, 8, 12 or 16 wide.
+int blockWidth(int lanes) { return (lanes + 3) / 4 * 4; }
 
 }  // namespace
 
@@ -394,6 +611,7 @@ struct TreeSecondOrderImpl {
   bool avx2 = false;  ///< the W = 4 build (chosen at construction)
   PassSet<2> generic;
   PassSet<4> wide;
+  TreeValues values{0};
 };
 
 bool treeSecondOrderApplies(const Model& model) {
@@ -428,10 +646,16 @@ TreeSecondOrder::TreeSecondOrder(const Model& model) : impl_(std::make_unique<Tr
     if (s.joints[i].parent != kWorld) s.joints[s.joints[i].parent].subtreeMass += s.joints[i].subtreeMass;
   s.gravity = vec3(model.gravity());
   s.avx2 = kHaveAvx2Build && secondOrderSweepsUseAvx2();
-  for (int a0 = 0; a0 < 2 * s.n; a0 += 16) {
-    const int L = blockWidth(std::min(16, 2 * s.n - a0));
-    if (s.avx2) s.wide.make(L, s.n);
-    else s.generic.make(L, s.n);
+  s.values = TreeValues(s.n);
+  for (int a0 = 0; a0 < s.n; a0 += 16) {
+    const int L = blockWidth(std::min(16, s.n - a0));
+    if (s.avx2) {
+      s.wide.positions.make(L, s.n);
+      s.wide.velocities.make(L, s.n);
+    } else {
+      s.generic.positions.make(L, s.n);
+      s.generic.velocities.make(L, s.n);
+    }
   }
 }
 TreeSecondOrder::~TreeSecondOrder() = default;
@@ -442,8 +666,10 @@ void TreeSecondOrder::computeRows(const Model&, const Eigen::VectorXd& q, const 
                                   const Eigen::VectorXd& qdd, const Eigen::VectorXd& mu, const Eigen::MatrixXd& Y,
                                   Eigen::MatrixXd& rows) {
   TreeSecondOrderImpl& s = *impl_;
+  const int n = s.n;
+  s.values.compute(s.joints, q.data(), dq.data(), mu.data());
   BlockIO io;
-  io.n = s.n;
+  io.n = n;
   io.N = s.N;
   io.q = q.data();
   io.dq = dq.data();
@@ -452,23 +678,30 @@ void TreeSecondOrder::computeRows(const Model&, const Eigen::VectorXd& q, const 
   io.Y = &Y;
   io.rows = &rows;
   io.joints = &s.joints;
+  io.values = &s.values;
   io.gravity = s.gravity;
-  for (int a0 = 0; a0 < 2 * s.n; a0 += 16) {
-    io.a0 = a0;
-    io.lanes = std::min(16, 2 * s.n - a0);
-    const int L = blockWidth(io.lanes);
+  // The q directions (blocks of TreePass), then the q̇ directions (blocks of VelocityPass).
+  for (const bool velocity : {false, true})
+    for (int a0 = 0; a0 < n; a0 += 16) {
+      io.a0 = a0;
+      io.lanes = std::min(16, n - a0);
+      const int L = blockWidth(io.lanes);
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-    if (s.avx2) {
-      if (L == 4) blockAvx2<4>(*s.wide.p4, io);
-      else if (L == 8) blockAvx2<8>(*s.wide.p8, io);
-      else blockAvx2<16>(*s.wide.p16, io);
-      continue;
-    }
+      if (s.avx2) {
+        auto run = [&](auto& pass) { blockAvx2(pass, io); };
+        if (velocity) s.wide.velocities.with(L, run);
+        else s.wide.positions.with(L, run);
+        continue;
+      }
 #endif
-    if (L == 4) blockGeneric<4>(*s.generic.p4, io);
-    else if (L == 8) blockGeneric<8>(*s.generic.p8, io);
-    else blockGeneric<16>(*s.generic.p16, io);
-  }
+      auto run = [&](auto& pass) { blockGeneric(pass, io); };
+      if (velocity) s.generic.velocities.with(L, run);
+      else s.generic.positions.with(L, run);
+    }
+  // The (q, q̇) rows: ∇²φ is symmetric, so row k of the q̇ direction n + j is row n + j of the q
+  // direction k.
+  for (int j = 0; j < n; ++j)
+    for (int k = 0; k < n; ++k) rows(k, n + j) = rows(n + j, k);
 }
 
 }  // namespace trellis::detail

@@ -13,6 +13,14 @@
 //   ∇²φ e_a = −ġ_z + Yᵀ (d/dε M μ),  φ(z') = φ̃(z', y + Y (z' − z)),
 // exactly (no step), in O(n) per block of directions: O(n²) for all 2n, like one linearization.
 //
+// The q and the q̇ directions run in blocks of their own (16 lanes, the last 4, 8, 12 or 16). The
+// kinematics, inertias, ψ and M μ do not depend on q̇, and −∂r/∂q̇ holds no q̈, so a q̇ block carries
+// tangents only on twists and momenta and gives the (q̇, q̇) rows; the (q, q̇) rows are the
+// transpose of the q blocks' (q̇, q) rows (∇²φ is symmetric), the (u, q̇) rows are zero. In a q
+// block, a joint none of whose ancestors (nor itself) is one of the block's directions keeps the
+// plain values of its pose, twist and inertia (one plain pass per call computes them), and where
+// no joint of a subtree moves, only its inertial forces carry tangents (through q̈) inwards.
+//
 // It covers the models whose residual holds nothing but the tree's inertia, gravity and the
 // forces on coordinates (configuration springs, damping, configuration forces: affine in z, so
 // without second derivatives): no linear spring, tendon, body wrench or constraint row. Every
@@ -49,7 +57,8 @@ class TreeSecondOrder {
   TreeSecondOrder& operator=(TreeSecondOrder&&) noexcept;
 
   /// rows (N×2n, N = 2n + m) ← ∇²φ e_a for the q and q̇ directions a = 0 … 2n − 1, φ as in the file
-  /// comment, at (q, q̇, q̈) with the adjoint mu (n) and Y = ∂q̈/∂z (n×N).
+  /// comment, at (q, q̇, q̈) with the adjoint mu (n) and Y = ∂q̈/∂z (n×N); the (q, q̇) rows exactly
+  /// the transpose of the (q̇, q) rows.
   void computeRows(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& dq, const Eigen::VectorXd& qdd,
                    const Eigen::VectorXd& mu, const Eigen::MatrixXd& Y, Eigen::MatrixXd& rows);
 

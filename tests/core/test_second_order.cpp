@@ -338,30 +338,77 @@ TEST_CASE("The contraction in blocks of directions, in both builds of its sweeps
 
 /// A branched 3D tree of every joint kind that the tree pass covers, with full inertias, skewed
 /// gravity, a configuration spring, damping and configuration forces (no point-force element, no
-/// constraint): root rz → {arm: ry, tx (prismatic), r_axis; leg: rx, t_axis}, plus a second root tz.
-TestSystem branchedTree(std::uint32_t seed) {
+/// constraint): root rz → {arm: ry, tx (prismatic), r_axis; leg: rx, t_axis}, plus a second root tz;
+/// With `copies` > 1, that many such trees (8 coordinates each) hang from a hub of two joints
+/// (rz, then rx): 3 copies need two blocks of each kind, and a block of q directions holds whole
+/// subtrees that do not move with it but are coupled to it through the hub, below a hub joint
+/// that does not move with it either but is not a root.
+TestSystem branchedTree(std::uint32_t seed, int copies = 1) {
   std::mt19937 rng(seed);
   SystemBuilder s;
-  s.frame("hip", "world", Transform::rz("yaw"), Mass{1.2, randomInertia(rng)});
-  s.frame("arm_base", "hip", Transform::constSE3(se3(0.4, {1.0, 0.5, 0.2}, {0.3, 0.1, 0.2})));
-  s.frame("shoulder", "arm_base", Transform::ry("pitch"), Mass{0.7, randomInertia(rng)});
-  s.frame("upper", "shoulder", Transform::tz(0.5), Mass{0.4, randomInertia(rng)});
-  s.frame("slide", "upper", Transform::tx("ext"), Mass{0.3, randomInertia(rng)});
-  s.frame("wrist", "slide", Transform::rotAxis(Eigen::Vector3d(0.3, -0.5, 0.8).normalized(), "twist"), Mass{0.2, randomInertia(rng)});
-  s.frame("hand", "wrist", Transform::ty(0.2), Mass{0.15, randomInertia(rng)});
-  s.frame("leg", "hip", Transform::rx("knee"), Mass{0.6, randomInertia(rng)});
-  s.frame("shin", "leg", Transform::ty(-0.6), Mass{0.5, randomInertia(rng)});
-  s.frame("foot", "shin", Transform::transAxis(Eigen::Vector3d(0.2, 0.9, -0.4).normalized(), "reach"), Mass{0.25, randomInertia(rng)});
-  s.frame("other", "world", Transform::constSE3(se3(-0.3, {0.0, 1.0, 0.0}, {1.0, 0.0, 0.5})));
-  s.frame("lift", "other", Transform::tz("lift"), Mass{0.9, randomInertia(rng)});
-  s.frame("lift_arm", "lift", Transform::ry("tilt"), Mass{0.35, randomInertia(rng)});
-  s.frame("lift_tip", "lift_arm", Transform::tx(0.4), Mass{0.1, randomInertia(rng)});
+  std::string base = "world";
+  if (copies > 1) {
+    s.frame("hub", "world", Transform::rz("hub"), Mass{2.0, randomInertia(rng)});
+    s.frame("hub_offset", "hub", Transform::constSE3(se3(0.7, {0.3, 0.4, 1.0}, {0.2, 0.3, -0.1})));
+    s.frame("hub2", "hub_offset", Transform::rx("hub2"), Mass{1.5, randomInertia(rng)});
+    base = "hub2";
+  }
+  for (int k = 0; k < copies; ++k) {
+    const std::string x = k == 0 ? std::string() : std::string("_").append(std::to_string(k));
+    auto name = [&](const char* base) { return std::string(base).append(x); };
+    s.frame(name("hip"), base, Transform::rz(name("yaw")), Mass{1.2, randomInertia(rng)});
+    s.frame(name("arm_base"), name("hip"), Transform::constSE3(se3(0.4, {1.0, 0.5, 0.2}, {0.3, 0.1, 0.2})));
+    s.frame(name("shoulder"), name("arm_base"), Transform::ry(name("pitch")), Mass{0.7, randomInertia(rng)});
+    s.frame(name("upper"), name("shoulder"), Transform::tz(0.5), Mass{0.4, randomInertia(rng)});
+    s.frame(name("slide"), name("upper"), Transform::tx(name("ext")), Mass{0.3, randomInertia(rng)});
+    s.frame(name("wrist"), name("slide"), Transform::rotAxis(Eigen::Vector3d(0.3, -0.5, 0.8).normalized(), name("twist")),
+            Mass{0.2, randomInertia(rng)});
+    s.frame(name("hand"), name("wrist"), Transform::ty(0.2), Mass{0.15, randomInertia(rng)});
+    s.frame(name("leg"), name("hip"), Transform::rx(name("knee")), Mass{0.6, randomInertia(rng)});
+    s.frame(name("shin"), name("leg"), Transform::ty(-0.6), Mass{0.5, randomInertia(rng)});
+    s.frame(name("foot"), name("shin"), Transform::transAxis(Eigen::Vector3d(0.2, 0.9, -0.4).normalized(), name("reach")),
+            Mass{0.25, randomInertia(rng)});
+    s.frame(name("other"), base, Transform::constSE3(se3(-0.3, {0.0, 1.0, 0.0}, {1.0, 0.0, 0.5})));
+    s.frame(name("lift"), name("other"), Transform::tz(name("lift")), Mass{0.9, randomInertia(rng)});
+    s.frame(name("lift_arm"), name("lift"), Transform::ry(name("tilt")), Mass{0.35, randomInertia(rng)});
+    s.frame(name("lift_tip"), name("lift_arm"), Transform::tx(0.4), Mass{0.1, randomInertia(rng)});
+    s.b.addConfigSpring(name("knee"), 2.5, 0.3);
+    s.b.addDamping(0.05, {{name("ext"), 0.4}});
+    s.b.addConfigForce(name("yaw"), name("u_yaw"));
+    s.b.addConfigForce(name("ext"), name("u_ext"));
+    s.b.addConfigForce(name("tilt"), name("u_tilt"));
+  }
   s.b.addGravity(Eigen::Vector3d(0.6, -1.3, -9.5));
-  s.b.addConfigSpring("knee", 2.5, 0.3);
-  s.b.addDamping(0.05, {{"ext", 0.4}});
-  s.b.addConfigForce("yaw", "u_yaw");
-  s.b.addConfigForce("ext", "u_ext");
-  s.b.addConfigForce("tilt", "u_tilt");
+  return std::move(s).finish();
+}
+
+/// A 3D chain of `links` joints cycling through every driven kind (rz, ry, tx, r_axis, rx, t_axis),
+/// each body offset from its joint, with full inertias: past 16 joints, a block of q directions
+/// holds moving joints below ones that do not move with it.
+TestSystem spatialChain(int links, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  SystemBuilder s;
+  std::string parent = "world";
+  for (int k = 0; k < links; ++k) {
+    const std::string index = std::to_string(k);
+    const std::string joint = std::string("joint").append(index), body = std::string("body").append(index);
+    const std::string q = std::string("q").append(index);
+    Transform t = Transform::rz(q);
+    switch (k % 6) {
+      case 1: t = Transform::ry(q); break;
+      case 2: t = Transform::tx(q); break;
+      case 3: t = Transform::rotAxis(Eigen::Vector3d(0.3, -0.5, 0.8).normalized(), q); break;
+      case 4: t = Transform::rx(q); break;
+      case 5: t = Transform::transAxis(Eigen::Vector3d(0.2, 0.9, -0.4).normalized(), q); break;
+      default: break;
+    }
+    s.frame(joint, parent, t);
+    s.frame(body, joint, Transform::constSE3(se3(0.3, {0.2, 1.0, 0.4}, {0.1, -0.25, 0.2})), Mass{0.3, randomInertia(rng)});
+    parent = body;
+  }
+  s.b.addGravity(Eigen::Vector3d(0.4, -9.7, 1.1));
+  s.b.addDamping(0.05);
+  s.b.addConfigForce("q0", "u0");
   return std::move(s).finish();
 }
 
@@ -370,7 +417,8 @@ TEST_CASE("The contraction's tree pass against the recording and the tensors", "
   // the tree pass (second_order_tree.hpp); secondOrderForceTape makes it record the tape instead.
   // Both, and the sum of the hyper-dual tensors, agree to 1e-10 of the largest entry (three
   // computations that share no code beyond the KKT factor), at random states and weights, on
-  // every block shape (2n = 4, 6, 20 = 16 + 4, 26 = 16 + 10, 12, 8) and every joint kind, in the
+  // every block shape (the q and the q̇ directions in blocks of their own, 16 wide, the last 4, 8,
+  // 12 or 16: n = 2, 3, 10, 13, 18 = 16 + 2, 8, 26 = 16 + 10, 20 = 16 + 4) and every joint kind, in the
   // baseline build and (where the CPU has it) the AVX2+FMA build of the pass.
   struct ForceTape {  // restores the automatic choice even when a check fails
     explicit ForceTape(bool force) { detail::secondOrderForceTape(force); }
@@ -381,8 +429,10 @@ TEST_CASE("The contraction's tree pass against the recording and the tensors", "
     ~ForceGeneric() { detail::secondOrderSweepsForceGeneric(false); }
   };
   std::vector<TestSystem> systems;
-  for (const int links : {2, 3, 10, 13}) systems.push_back(planarChain(links, 0.5, 1.0));
+  for (const int links : {2, 3, 10, 13, 18}) systems.push_back(planarChain(links, 0.5, 1.0));
   systems.push_back(branchedTree(41));
+  systems.push_back(branchedTree(43, 3));
+  systems.push_back(spatialChain(20, 47));
   for (const TransformType t : {TransformType::kRx, TransformType::kTy, TransformType::kRotAxis, TransformType::kTransAxis})
     systems.push_back(transformChain(t));
   for (const bool generic : {false, true}) {

@@ -77,7 +77,8 @@ TEST_CASE("No allocation after warm-up: second derivatives with coordinate coupl
 }
 
 TEST_CASE("No allocation after warm-up: second derivatives on the tree pass", "[no_malloc][second_order]") {
-  // planarChain(13): blocks of 16 and 10 directions; transformChain: a 16-lane block alone.
-  checkNoAllocation(planarChain(13, 0.5, 1.0).model, 75);
+  // planarChain(18): q blocks and q̇ blocks of 16 and 4 lanes each (two of each pass, and the
+  // per-call values); transformChain: 4-lane blocks alone.
+  checkNoAllocation(planarChain(18, 0.5, 1.0).model, 75);
   checkNoAllocation(transformChain(TransformType::kRotAxis).model, 76);
 }
