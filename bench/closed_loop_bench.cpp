@@ -92,6 +92,17 @@ std::string readFile(const std::string& path) {
 /// The Panda arm (tests/data/robots/panda.urdf: 7 revolute joints and two prismatic fingers, a
 /// tree) free and with its tool centre point pinned (x, y, z on a world point placed where the
 /// point is at a seeded random q; q̇ projected onto the null space of the rows).
+/// dq ← its part in the null space of the constraint Jacobian A(q) of `closed` (the velocity
+/// the constraints allow; their rows at q must already hold).
+void removeConstraintVelocity(const trellis::Model& closed, const Eigen::VectorXd& q, Eigen::VectorXd& dq) {
+  trellis::Data cd(closed);
+  trellis::computeConstraints(closed, cd, q, dq);
+  const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(cd.constraintJacobian.transpose());
+  Eigen::VectorXd t = cod.householderQ().adjoint() * dq;
+  t.tail(dq.size() - cod.rank()).setZero();
+  dq -= cod.householderQ() * t;
+}
+
 std::pair<trellis::bench::BenchModel, trellis::bench::BenchModel> pandaPair() {
   const std::string path = std::string(TRELLIS_ROBOTS_DIR) + "/panda.urdf";
   trellis::UrdfImport robot = trellis::importUrdf(readFile(path), path);
@@ -111,12 +122,7 @@ std::pair<trellis::bench::BenchModel, trellis::bench::BenchModel> pandaPair() {
   for (int axis = 0; axis < 3; ++axis) robot.builder.addPointConstraint("panda_hand_tcp", "anchor", axis);
   trellis::Model closed = std::move(robot.builder).finalize();
   if (closed.configNames() != free.configNames()) throw std::runtime_error("panda: the constraint changed the configuration");
-  trellis::Data cd(closed);
-  trellis::computeConstraints(closed, cd, q, dq);
-  const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(cd.constraintJacobian.transpose());
-  Eigen::VectorXd t = cod.householderQ().adjoint() * dq;
-  t.tail(n - cod.rank()).setZero();
-  dq -= cod.householderQ() * t;
+  removeConstraintVelocity(closed, q, dq);
   return {trellis::bench::BenchModel{std::move(free), q, dq, u, "panda"},
           trellis::bench::BenchModel{std::move(closed), q, dq, u, "panda"}};
 }
@@ -196,12 +202,7 @@ std::pair<trellis::bench::BenchModel, trellis::bench::BenchModel> heldBoxPair(in
   for (int a = 0; a < arms; ++a)
     grips.push_back(fd.framePose[free.frameIndex("arm" + std::to_string(a) + "_" + std::to_string(links - 1) + "_end")].translation());
   trellis::Model closed = build(&grips);
-  trellis::Data cd(closed);
-  trellis::computeConstraints(closed, cd, q, dq);
-  const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(cd.constraintJacobian.transpose());
-  Eigen::VectorXd t = cod.householderQ().adjoint() * dq;
-  t.tail(n - cod.rank()).setZero();
-  dq -= cod.householderQ() * t;
+  removeConstraintVelocity(closed, q, dq);
   return {trellis::bench::BenchModel{std::move(free), q, dq, u, "held box"},
           trellis::bench::BenchModel{std::move(closed), q, dq, u, "held box"}};
 }

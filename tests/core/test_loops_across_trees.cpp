@@ -83,17 +83,11 @@ TEST_CASE("Loops across trees: rows in runs equal the hull path, a dense KKT sol
     REQUIRE(computeLinearization(model, hull, s.q, s.dq, s.u).ok());
 
     // q̈, λ of the dense KKT system, solved by full-pivoting LU; tolerance κ·eps.
-    Eigen::MatrixXd K = Eigen::MatrixXd::Zero(n + nc, n + nc);
-    K.topLeftCorner(n, n) = runs.M;
-    K.topRightCorner(n, nc) = runs.constraintJacobian.transpose();
-    K.bottomLeftCorner(nc, n) = runs.constraintJacobian;
-    Eigen::VectorXd rhs(n + nc);
-    rhs << -runs.bias, -runs.constraintDrift;
-    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(K);
-    const double kappa = svd.singularValues()(0) / svd.singularValues()(n + nc - 1);
+    const DenseKkt kkt = denseKktSolve(runs);
+    const double kappa = kkt.condition;
     const double tol = 100.0 * kappa * std::numeric_limits<double>::epsilon();
     INFO("cond(K) = " << kappa);
-    const Eigen::VectorXd ref = Eigen::FullPivLU<Eigen::MatrixXd>(K).solve(rhs);
+    const Eigen::VectorXd& ref = kkt.solution;
     TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(ref.head(n)), Eigen::MatrixXd(runs.qdd), tol, Scale::kMatrix);
     // The KKT solution carries λ with the sign of M q̈ + b = Aᵀ λ.
     TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(ref.tail(nc)), Eigen::MatrixXd(-runs.lambda), tol, Scale::kMatrix);

@@ -28,14 +28,11 @@ inline std::string spatialArm(SystemBuilder& s, std::mt19937& rng, const std::st
   return parent;
 }
 
-/// A free 6-DOF body (tx, ty, tz, then rz, ry, rx about its centre; 0.8 kg) held by `chains`
-/// spatial arms of `links` joints each, every arm's tip pinned to its own grip point on the
-/// body (3 point rows per arm): loops between each arm and the body, across the top-level
-/// trees (the arms' blocks come first, the body's last, so all but the last arm's rows skip the
-/// blocks between). Gravity, an input on each arm's first joint.
-inline TestSystem heldBody(int chains, int links, std::uint32_t seed = 41) {
-  std::mt19937 rng(seed);
-  SystemBuilder s;
+/// `chains` spatial arms of `links` joints on a circle of radius 0.4 m around the world's z axis
+/// (an input "tau<c>" on each arm's first joint), then a free 6-DOF body "body" (tx, ty, tz, then
+/// rz, ry, rx about its centre; 0.8 kg, random inertia): the common part of heldBody and
+/// bodyHeldByContacts. Returns the arms' tip frames.
+inline std::vector<std::string> armsAroundFreeBody(SystemBuilder& s, std::mt19937& rng, int chains, int links) {
   std::vector<std::string> tips;
   for (int c = 0; c < chains; ++c) {
     const std::string base = std::string("base").append(std::to_string(c));
@@ -50,6 +47,18 @@ inline TestSystem heldBody(int chains, int links, std::uint32_t seed = 41) {
   s.frame("body_yaw", "body_z", Transform::rz("body_yaw"));
   s.frame("body_pitch", "body_yaw", Transform::ry("body_pitch"));
   s.frame("body", "body_pitch", Transform::rx("body_roll"), Mass{0.8, randomInertia(rng, 0.002, 0.01)});
+  return tips;
+}
+
+/// A free 6-DOF body (tx, ty, tz, then rz, ry, rx about its centre; 0.8 kg) held by `chains`
+/// spatial arms of `links` joints each, every arm's tip pinned to its own grip point on the
+/// body (3 point rows per arm): loops between each arm and the body, across the top-level
+/// trees (the arms' blocks come first, the body's last, so all but the last arm's rows skip the
+/// blocks between). Gravity, an input on each arm's first joint.
+inline TestSystem heldBody(int chains, int links, std::uint32_t seed = 41) {
+  std::mt19937 rng(seed);
+  SystemBuilder s;
+  const std::vector<std::string> tips = armsAroundFreeBody(s, rng, chains, links);
   for (int c = 0; c < chains; ++c) {
     const double angle = 2.0 * 3.14159265358979 * c / chains;
     const std::string grip = std::string("grip").append(std::to_string(c));
@@ -70,20 +79,7 @@ inline TestSystem heldBody(int chains, int links, std::uint32_t seed = 41) {
 inline TestSystem bodyHeldByContacts(std::uint32_t seed = 47) {
   std::mt19937 rng(seed);
   SystemBuilder s;
-  std::vector<std::string> tips;
-  for (int c = 0; c < 3; ++c) {
-    const std::string base = std::string("base").append(std::to_string(c));
-    const double angle = 2.0 * 3.14159265358979 * c / 3;
-    s.frame(base, "world", Transform::constSE3(se3(angle, {0.0, 0.0, 1.0}, {0.4 * std::cos(angle), 0.4 * std::sin(angle), 0.0})));
-    tips.push_back(spatialArm(s, rng, std::string("arm").append(std::to_string(c)).append("_"), base, 4));
-    s.b.addConfigForce(std::string("arm").append(std::to_string(c)).append("_0"), std::string("tau").append(std::to_string(c)));
-  }
-  s.frame("body_x", "world", Transform::tx("body_x"));
-  s.frame("body_y", "body_x", Transform::ty("body_y"));
-  s.frame("body_z", "body_y", Transform::tz("body_z"));
-  s.frame("body_yaw", "body_z", Transform::rz("body_yaw"));
-  s.frame("body_pitch", "body_yaw", Transform::ry("body_pitch"));
-  s.frame("body", "body_pitch", Transform::rx("body_roll"), Mass{0.8, randomInertia(rng, 0.002, 0.01)});
+  const std::vector<std::string> tips = armsAroundFreeBody(s, rng, 3, 4);
   for (int c = 0; c < 3; ++c) {
     const double angle = 2.0 * 3.14159265358979 * c / 3;
     s.frame(std::string("grip").append(std::to_string(c)), "body",

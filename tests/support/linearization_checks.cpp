@@ -6,6 +6,9 @@
 
 #include <catch2/catch.hpp>
 
+#include <Eigen/LU>
+#include <Eigen/SVD>
+
 #include <sstream>
 
 namespace trellis::test {
@@ -70,6 +73,21 @@ void checkLinearizationAgainstFd(const Model& model, const State& s, double tole
     REQUIRE(data.dlambda_dx.cols() == 2 * n + m);
     TRELLIS_CHECK_MATRIX(fd.dlambda, data.dlambda_dx, tolerance, Scale::kColumn);
   }
+}
+
+DenseKkt denseKktSolve(const Data& data) {
+  const Eigen::Index n = data.M.rows(), nc = data.constraintJacobian.rows();
+  Eigen::MatrixXd K = Eigen::MatrixXd::Zero(n + nc, n + nc);
+  K.topLeftCorner(n, n) = data.M;
+  K.topRightCorner(n, nc) = data.constraintJacobian.transpose();
+  K.bottomLeftCorner(nc, n) = data.constraintJacobian;
+  Eigen::VectorXd rhs(n + nc);
+  rhs << -data.bias, -data.constraintDrift;
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(K);
+  DenseKkt out;
+  out.condition = svd.singularValues()(0) / svd.singularValues()(n + nc - 1);
+  out.solution = Eigen::FullPivLU<Eigen::MatrixXd>(K).solve(rhs);
+  return out;
 }
 
 }  // namespace trellis::test

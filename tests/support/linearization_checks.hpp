@@ -1,5 +1,6 @@
 // tests/support/linearization_checks.hpp — the checks several test files apply to a model at a
-// state: analytic linearization against central differences, and its block structure.
+// state: analytic linearization against central differences, its block structure, and the dense
+// KKT solve that is the independent reference for q̈ and λ.
 #pragma once
 
 #include <trellis/core.hpp>
@@ -27,5 +28,15 @@ inline constexpr double kFdTolerance = 1e-6;
 void checkLinearizationAgainstFd(const Model& model, const State& s,
                                  double tolerance = kFdTolerance, double stepScale = 1.0,
                                  Stencil stencil = Stencil::kSecondOrder);
+
+/// The dense KKT system of data's last dynamics evaluation, [[M, Aᵀ], [A, 0]] [q̈; ν] = [−b; −drift]
+/// (data.M, constraintJacobian, bias, constraintDrift), solved by full-pivoting LU: solution =
+/// [q̈; ν] with ν = −λ (M q̈ + b = Aᵀλ), and the system's 2-norm condition number (SVD), whose
+/// κ·eps bounds how far two correct solvers may differ.
+struct DenseKkt {
+  Eigen::VectorXd solution;  ///< [q̈; ν], n + nc
+  double condition = 0.0;    ///< κ₂ of the KKT matrix
+};
+DenseKkt denseKktSolve(const Data& data);
 
 }  // namespace trellis::test
