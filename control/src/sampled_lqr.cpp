@@ -669,7 +669,8 @@ class RadauIntegrator {
         // RADAU5's second estimate: f at Y_n + err_Y instead of Y_n (the filter applied twice).
         rY_ = e_[0] * stages_.topRows(nx_) + e_[1] * stages_.middleRows(nx_, nx_) + e_[2] * stages_.bottomRows(nx_);
         rY_ -= (e_[0] + e_[1] + e_[2]) * Y;
-        rY_.noalias() += (gamma0_ * d) * (f0_ + A0_ * errY_);
+        f0_.noalias() += A0_ * errY_;  // f(t_n, Y_n + err_Y) (f0_ is not read again this step)
+        rY_ += (gamma0_ * d) * f0_;
         errY_ = luErr_.solve(rY_);
         err = stepError(Y);
       }
@@ -728,12 +729,12 @@ class RadauIntegrator {
       if (j >= nx_) rate += R_[2](j - nx_, j - nx_);
       wPred_(j) = halfLength_ * std::min(wRate_(j), rate);
     }
-    const Eigen::VectorXd dd = Wn_.diagonal().cwiseMax(wPred_).cwiseMax(0.0).cwiseSqrt();
-    const double floor = std::sqrt(std::numeric_limits<double>::epsilon()) * dd.maxCoeff() + std::numeric_limits<double>::min();
+    dd_ = Wn_.diagonal().cwiseMax(wPred_).cwiseMax(0.0).cwiseSqrt();
+    const double floor = std::sqrt(std::numeric_limits<double>::epsilon()) * dd_.maxCoeff() + std::numeric_limits<double>::min();
     for (Eigen::Index j = 0; j < c_; ++j) {
       for (Eigen::Index i = 0; i <= j; ++i) {
         const double diff = std::abs(errW_(i, j));
-        if (diff > 0.0) err = std::max(err, diff / (rtol_ * std::max(dd(i) * dd(j), floor * floor)));
+        if (diff > 0.0) err = std::max(err, diff / (rtol_ * std::max(dd_(i) * dd_(j), floor * floor)));
       }
     }
     return std::isfinite(err) ? err : std::numeric_limits<double>::infinity();
@@ -799,6 +800,7 @@ class RadauIntegrator {
   double a_[3][3] = {}, nodes_[3] = {}, e_[3] = {}, gamma0_ = 0.0, d_ = 0.0;
   double firstStep_ = 0.0;        ///< the previous interval's first accepted step (0: none yet)
   Eigen::VectorXd wRate_, wPred_;  ///< its W_ii per unit time; this interval's W scale floor
+  Eigen::VectorXd dd_;             ///< √ of the W scale (stepError's buffer)
   double prevEnd_ = std::numeric_limits<double>::quiet_NaN(), halfLength_ = 0.0;
   double t0_ = std::numeric_limits<double>::quiet_NaN();  ///< where A0_.. were evaluated
   Eigen::MatrixXd A_[3], B_[3], Q_[3], R_[3], A0_, B0_, Q0_, R0_;
