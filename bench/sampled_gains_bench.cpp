@@ -8,13 +8,14 @@
 //  - `swing`: its free swing for 2 s from q_i = 0.3 rad (u = 0, simulated at rtol 1e-11, knots
 //    every 20 ms): a time-varying reference, every interval integrated.
 // Weights Q = I, R = I, Qf = I; solveTvlqr with its default tolerances (continuous: Riccati rtol
-// 1e-8, atol 1e-10; sampled: rtol 1e-10, atol 1e-12).
+// 1e-8, atol 1e-10; sampled: rtol kRadauRtol = 1e-6 for Radau, kRtol = 1e-10 for Magnus and BDF,
+// atol 1e-12).
 //
 // Benchmarks: `Continuous/<problem>`; `RiccatiTracking/<problem>/track:<0|1>` (the continuous
 // Riccati solve alone with S's per-step eigenvalue tracking off / on); and
 // `Sampled/<problem>/rate:<Hz>/integrator:<i>/rtol:<E>` (i: 0 Magnus, 1 Radau — the default —, 2
-// CVODES BDF; SampledIntegrator; rtol 10^−E, E = 0: the default 1e-10; the swing's Magnus rows at
-// E = 4, 6, 8 give time against error). Counter `max_rel_err`: max |K − K_ref| / max |K_ref|
+// CVODES BDF; SampledIntegrator; rtol 10^−E, E = 0: the integrator's default; the swing's Magnus
+// rows at E = 4, 6, 8 and Radau rows at E = 5, 7, 8 give time against error). Counter `max_rel_err`: max |K − K_ref| / max |K_ref|
 // against every interval integrated by CVODES at rtol 1e-12, atol 1e-14 (exactConstantIntervals
 // = false; computed once per problem and rate, outside the timing: ~15 s at 1000 Hz).
 //   build/bench/trellis_bench_sampled_gains --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
@@ -174,6 +175,7 @@ BENCHMARK(BM_Sampled)
     ->Args({0, 1000, 0, 0})
     ->ArgsProduct({{1}, {10, 100, 1000}, {1, 0}, {0}})
     ->ArgsProduct({{1}, {100}, {0}, {4, 6, 8}})
+    ->ArgsProduct({{1}, {100}, {1}, {5, 7, 8}})
     ->Args({1, 10, 2, 0})
     ->Args({1, 100, 2, 0})
     ->Unit(benchmark::kMillisecond);

@@ -25,9 +25,18 @@ void SampledDiscretizationOptions::validate() const {
     m << "SampledDiscretizationOptions." << field << " = " << v << " is invalid (must be > 0)";
     throw std::invalid_argument(m.str());
   };
-  if (!(rtol > 0.0) || !std::isfinite(rtol)) bad("rtol", rtol);
+  if (!(rtol >= 0.0) || !std::isfinite(rtol)) {
+    std::ostringstream m;
+    m << "SampledDiscretizationOptions.rtol = " << rtol << " is invalid (must be >= 0; 0: the integrator's default)";
+    throw std::invalid_argument(m.str());
+  }
   if (!(atol > 0.0) || !std::isfinite(atol)) bad("atol", atol);
   if (maxSteps <= 0) bad("maxSteps", static_cast<double>(maxSteps));
+}
+
+double SampledDiscretizationOptions::relativeTolerance() const {
+  if (rtol > 0.0) return rtol;
+  return integrator == SampledIntegrator::kRadau ? kRadauRtol : kRtol;
 }
 
 Eigen::VectorXd sampleTimes(double t0, double T, double rate) {
@@ -584,19 +593,31 @@ class MagnusIntegrator {
 
 /// The three-stage Radau IIA collocation (order 5, L-stable, stiffly accurate) of the variational
 /// equation Ẏ = A(t)Y + [0 B(t)], Y = [Φ Γ] (nx×c) from [I 0] at the interval's start, and the cost
-/// W = ∫ YᵀQY + blkdiag(0, R) by the method's own quadrature on its stage values (exact for
-/// polynomials of degree 4). The problem is linear, so each step is one linear solve: with
-/// A_j = A(t + c_j δ), the stages solve
+/// W = ∫ YᵀQY + blkdiag(0, R) by the method's own quadrature on its stages (W is one more
+/// component of the same Runge–Kutta system: exact for polynomials of degree 4). The problem is
+/// linear, so each step is one linear solve: with A_j = A(t + c_j δ), c = ((4−√6)/10, (4+√6)/10, 1),
+/// the stages solve
 ///   Y_i − δ Σ_j a_ij A_j Y_j = Y_n + δ Σ_j a_ij [0 B_j]     (3nx unknowns per column, one LU),
-/// and Y_{n+1} = Y_3. L-stability is what a stiff A needs (e^{λδ} → 0 is reproduced as R(λδ) → 0;
-/// Magnus' series and explicit schemes need |λ|δ ≲ 1 there). Error estimate: the step against two
-/// half steps (Richardson; the pair is kept), relative to each block's size as in stepError. Steps
+/// and Y_{n+1} = Y_3 (3 linearizations per step; the start's f_n is the previous step's last node).
+/// L-stability is what a stiff A needs (e^{λδ} → 0 is reproduced as R(λδ) → 0; Magnus' series and
+/// explicit schemes need |λ|δ ≲ 1 there). Error estimate: Hairer & Wanner's embedded one (RADAU5,
+/// Solving ODEs II §IV.8): with the stage increments Z_i = Y_i − Y_n, γ0 the real eigenvalue of
+/// the method's matrix a (1/γ0 = 30/(6 + 81^{1/3} − 9^{1/3})) and e = γ0·(−13 − 7√6, −13 + 7√6, −1)/3,
+///   err_Y = (I − γ0δA_n)⁻¹ (γ0δ f(t_n, Y_n) + Σ e_i Z_i),
+/// the difference to an embedded third-order solution, filtered by (I − γ0δA_n)⁻¹ so that the
+/// stiff components (which Radau damps correctly) do not count as error; the cost's row of the
+/// same system (J = [[A, 0], [∂g/∂Y, 0]], g = YᵀQY + blkdiag(0, R)) gives
+///   err_W = γ0δ g(t_n, Y_n) + Σ e_i Z^W_i + γ0δ (err_Yᵀ Q_n Y_n + Y_nᵀ Q_n err_Y).
+/// The estimate is O(δ⁴): the step factor is err^{−1/4}. Where the first estimate of a first or
+/// rejected step fails, it is refined once as RADAU5 does (f at Y_n + err_Y, one more nx×nx solve):
+/// the unfiltered part is what a stiff transient inflates. One 3nx LU and one nx×nx LU per step
+/// (the step-doubling estimate it replaces cost three of the first and 8 linearizations). Steps
 /// are carried across intervals (a one-step method restarts for free) and end on the breakpoints.
 class RadauIntegrator {
  public:
   RadauIntegrator(Discretizer& s, double rtol, long maxSteps)
       : s_(s), nx_(s.nx), nu_(s.nu), c_(s.nx + s.nu), rtol_(rtol),
-        M_(3 * s.nx, 3 * s.nx), rhs_(3 * s.nx, s.nx + s.nu), lu_(3 * s.nx) {
+        M_(3 * s.nx, 3 * s.nx), rhs_(3 * s.nx, s.nx + s.nu), lu_(3 * s.nx), luErr_(s.nx) {
     control.maxSteps = maxSteps;
     control.method = "Radau";
     const double r6 = std::sqrt(6.0);
@@ -608,6 +629,10 @@ class RadauIntegrator {
     nodes_[0] = (4.0 - r6) / 10.0;
     nodes_[1] = (4.0 + r6) / 10.0;
     nodes_[2] = 1.0;
+    gamma0_ = (6.0 + std::cbrt(81.0) - std::cbrt(9.0)) / 30.0;
+    e_[0] = gamma0_ * (-13.0 - 7.0 * r6) / 3.0;
+    e_[1] = gamma0_ * (-13.0 + 7.0 * r6) / 3.0;
+    e_[2] = gamma0_ * (-1.0 / 3.0);
     for (auto& x : A_) x.resize(nx_, nx_);
     for (auto& x : B_) x.resize(nx_, nu_);
     for (auto& x : Q_) x.resize(nx_, nx_);
@@ -635,24 +660,34 @@ class RadauIntegrator {
     if (wRate_.size() != c_ || !(a == prevEnd_)) wRate_ = Eigen::VectorXd::Zero(c_);
     halfLength_ = 0.5 * (b - a);
     wPred_.resize(c_);
+    bool rejected = false;
     const bool ok = control.run(a, b, breakpoints, [&](double t, double d, double& factor) {
-      // One step of d, and two of d/2 (kept). The halves first: the second ends on t + d, the
-      // full step's last node, whose A, B, Q, R it leaves in A_[2].. (8 linearizations, not 9).
-      Yh_ = Y;
-      Wh_ = W;
-      if (!step(t, 0.5 * d, t + 0.5 * d, false, Yh_, Wh_) || !step(t + 0.5 * d, 0.5 * d, t + d, false, Yh_, Wh_)) {
-        return StepOutcome::kFailed;
+      if (!start(t)) return StepOutcome::kFailed;
+      if (!step(t, d, Y, W)) return StepOutcome::kFailed;
+      double err = stepError(Y);
+      if (err > 1.0 && (first || rejected)) {
+        // RADAU5's second estimate: f at Y_n + err_Y instead of Y_n (the filter applied twice).
+        rY_ = e_[0] * stages_.topRows(nx_) + e_[1] * stages_.middleRows(nx_, nx_) + e_[2] * stages_.bottomRows(nx_);
+        rY_ -= (e_[0] + e_[1] + e_[2]) * Y;
+        f0_.noalias() += A0_ * errY_;  // f(t_n, Y_n + err_Y) (f0_ is not read again this step)
+        rY_ += (gamma0_ * d) * f0_;
+        errY_ = luErr_.solve(rY_);
+        err = stepError(Y);
       }
-      Yf_ = Y;
-      Wf_ = W;
-      if (!step(t, d, t + d, true, Yf_, Wf_)) return StepOutcome::kFailed;
-      // Richardson: the halves' error ≈ (halves − full)/(2⁵ − 1) for order 5; /15 keeps a margin
-      // for the cost quadrature's stage order.
-      const double err = stepError(Yh_ - Yf_, Wh_ - Wf_) / 15.0;
-      factor = std::isfinite(err) ? std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.2), 0.2, 4.0) : 0.2;
-      if (!(err <= 1.0 && Yh_.allFinite() && Wh_.allFinite())) return StepOutcome::kRejected;
-      Y.swap(Yh_);
-      W.swap(Wh_);
+      factor = std::isfinite(err) ? std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.25), 0.2, 6.0) : 0.2;
+      if (!(err <= 1.0 && Yn_.allFinite() && Wn_.allFinite())) {
+        rejected = true;
+        return StepOutcome::kRejected;
+      }
+      rejected = false;
+      Y.swap(Yn_);
+      W.swap(Wn_);
+      // The step's last node is the next step's start: its A, B, Q, R are kept.
+      t0_ = t + d;
+      A0_.swap(A_[2]);
+      B0_.swap(B_[2]);
+      Q0_.swap(Q_[2]);
+      R0_.swap(R_[2]);
       if (first) firstStep_ = d;
       first = false;
       return StepOutcome::kAccepted;
@@ -664,37 +699,53 @@ class RadauIntegrator {
   }
 
  private:
-  /// The halves' and the full step's difference (eY, eW) relative to rtol: Y's against max |Y|,
-  /// W's against √(D_ii D_jj), D_ii = max(W_ii so far, half the interval's predicted W_ii) — the
+  /// A, B, Q, R at the step's start t (kept from the previous step when it ended at t).
+  bool start(double t) {
+    if (t == t0_ && A0_.size() > 0) return true;
+    if (!s_.evaluate(t)) return false;
+    A0_ = s_.A;
+    B0_ = s_.B;
+    Q0_ = s_.Q;
+    R0_ = s_.R;
+    t0_ = t;
+    return true;
+  }
+
+  /// The embedded estimate (errY_, errW_) relative to rtol: Y's against max |Y_{n+1}|, W's against
+  /// √(D_ii D_jj), D_ii = max(W_ii at the step's end, half the interval's predicted W_ii) — the
   /// bound on |W_ij| of a PSD matrix, unit-invariant as stepError of the Magnus integrator.
-  double stepError(const Eigen::MatrixXd& eY, const Eigen::MatrixXd& eW) {
-    const double yScale = std::max(Yh_.cwiseAbs().maxCoeff(), std::numeric_limits<double>::min());
-    double err = eY.cwiseAbs().maxCoeff() / (rtol_ * yScale);
-    // The cost rate at t + d (Q_[2], R_[2]: the full step's last node, the halves' end Yh_).
-    QY_.noalias() = Q_[2] * Yh_;
+  double stepError(const Eigen::MatrixXd& Y) {
+    // The cost's row: the embedded difference of its quadrature, and err_Y through ∂g/∂Y at t_n.
+    QY_.noalias() = Q0_ * Y;
+    eW_.noalias() = errY_.transpose() * QY_;
+    errW_ = rW_;
+    errW_ += (gamma0_ * d_) * (eW_ + eW_.transpose());
+    const double yScale = std::max(Yn_.cwiseAbs().maxCoeff(), std::numeric_limits<double>::min());
+    double err = errY_.cwiseAbs().maxCoeff() / (rtol_ * yScale);
+    // The cost rate at t + d (Q_[2], R_[2]: the step's last node, Yn_ its end).
+    QY_.noalias() = Q_[2] * Yn_;
     for (Eigen::Index j = 0; j < c_; ++j) {
-      double rate = Yh_.col(j).dot(QY_.col(j));
+      double rate = Yn_.col(j).dot(QY_.col(j));
       if (j >= nx_) rate += R_[2](j - nx_, j - nx_);
       wPred_(j) = halfLength_ * std::min(wRate_(j), rate);
     }
-    const Eigen::VectorXd dd = Wh_.diagonal().cwiseMax(wPred_).cwiseMax(0.0).cwiseSqrt();
-    const double floor = std::sqrt(std::numeric_limits<double>::epsilon()) * dd.maxCoeff() + std::numeric_limits<double>::min();
+    dd_ = Wn_.diagonal().cwiseMax(wPred_).cwiseMax(0.0).cwiseSqrt();
+    const double floor = std::sqrt(std::numeric_limits<double>::epsilon()) * dd_.maxCoeff() + std::numeric_limits<double>::min();
     for (Eigen::Index j = 0; j < c_; ++j) {
       for (Eigen::Index i = 0; i <= j; ++i) {
-        const double diff = std::abs(eW(i, j));
-        if (diff > 0.0) err = std::max(err, diff / (rtol_ * std::max(dd(i) * dd(j), floor * floor)));
+        const double diff = std::abs(errW_(i, j));
+        if (diff > 0.0) err = std::max(err, diff / (rtol_ * std::max(dd_(i) * dd_(j), floor * floor)));
       }
     }
     return std::isfinite(err) ? err : std::numeric_limits<double>::infinity();
   }
 
-  /// One collocation step from t of length d, its last node (c₃ = 1) at exactly `end`; with
-  /// reuseEnd, A_[2].. already hold that node's matrices (the previous call ended there).
-  bool step(double t, double d, double end, bool reuseEnd, Eigen::MatrixXd& Y, Eigen::MatrixXd& W) {
+  /// One collocation step from t of length d (its last node, c₃ = 1, at exactly t + d) from
+  /// (Y, W): the result in (Yn_, Wn_), the embedded estimate's parts in errY_ and rW_.
+  bool step(double t, double d, const Eigen::MatrixXd& Y, const Eigen::MatrixXd& W) {
     const Eigen::Index n = nx_;
     for (int j = 0; j < 3; ++j) {
-      if (j == 2 && reuseEnd) break;
-      if (!s_.evaluate(j == 2 ? end : t + nodes_[j] * d)) return false;
+      if (!s_.evaluate(j == 2 ? t + d : t + nodes_[j] * d)) return false;
       A_[j] = s_.A;
       B_[j] = s_.B;
       Q_[j] = s_.Q;
@@ -710,27 +761,51 @@ class RadauIntegrator {
     }
     lu_.compute(M_);
     stages_.noalias() = lu_.solve(rhs_);
-    // W += d Σ b_i (Y_iᵀ Q_i Y_i + blkdiag(0, R_i)), b = the last row of a.
-    for (int i = 0; i < 3; ++i) {
-      const auto Yi = stages_.middleRows(i * n, n);
-      QY_.noalias() = Q_[i] * Yi;
-      W.noalias() += (d * a_[2][i]) * (Yi.transpose() * QY_);
-      W.bottomRightCorner(nu_, nu_) += (d * a_[2][i]) * R_[i];
+    // g_i = Y_iᵀ Q_i Y_i + blkdiag(0, R_i) at the stages; W_{n+1} = W_n + d Σ b_i g_i (b = a's last
+    // row), and the cost's stage increments Z^W_i = d Σ_j a_ij g_j for the estimate.
+    rW_.setZero(c_, c_);
+    Wn_ = W;
+    for (int j = 0; j < 3; ++j) {
+      const auto Yj = stages_.middleRows(j * n, n);
+      QY_.noalias() = Q_[j] * Yj;
+      g_.noalias() = Yj.transpose() * QY_;
+      g_.bottomRightCorner(nu_, nu_) += R_[j];
+      const double wj = d * (e_[0] * a_[0][j] + e_[1] * a_[1][j] + e_[2] * a_[2][j]);
+      rW_ += wj * g_;
+      Wn_ += (d * a_[2][j]) * g_;
     }
-    Y = stages_.bottomRows(n);
+    // The start's rate: f_n = A_n Y_n + [0 B_n], g_n = Y_nᵀ Q_n Y_n + blkdiag(0, R_n).
+    f0_.noalias() = A0_ * Y;
+    f0_.rightCols(nu_) += B0_;
+    QY_.noalias() = Q0_ * Y;
+    g_.noalias() = Y.transpose() * QY_;
+    g_.bottomRightCorner(nu_, nu_) += R0_;
+    rW_ += (gamma0_ * d) * g_;
+    // err_Y = (I − γ0 d A_n)⁻¹ (γ0 d f_n + Σ e_i (Y_i − Y_n)).
+    rY_ = e_[0] * stages_.topRows(n) + e_[1] * stages_.middleRows(n, n) + e_[2] * stages_.bottomRows(n);
+    rY_ -= (e_[0] + e_[1] + e_[2]) * Y;
+    rY_ += (gamma0_ * d) * f0_;
+    errM_ = (-gamma0_ * d) * A0_;
+    errM_.diagonal().array() += 1.0;
+    luErr_.compute(errM_);
+    errY_ = luErr_.solve(rY_);
+    Yn_ = stages_.bottomRows(n);
+    d_ = d;
     return true;
   }
 
   Discretizer& s_;
   Eigen::Index nx_, nu_, c_;
   double rtol_;
-  double a_[3][3] = {}, nodes_[3] = {};
+  double a_[3][3] = {}, nodes_[3] = {}, e_[3] = {}, gamma0_ = 0.0, d_ = 0.0;
   double firstStep_ = 0.0;        ///< the previous interval's first accepted step (0: none yet)
   Eigen::VectorXd wRate_, wPred_;  ///< its W_ii per unit time; this interval's W scale floor
+  Eigen::VectorXd dd_;             ///< √ of the W scale (stepError's buffer)
   double prevEnd_ = std::numeric_limits<double>::quiet_NaN(), halfLength_ = 0.0;
-  Eigen::MatrixXd A_[3], B_[3], Q_[3], R_[3];
-  Eigen::MatrixXd M_, rhs_, stages_, QY_, Yf_, Wf_, Yh_, Wh_;
-  Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
+  double t0_ = std::numeric_limits<double>::quiet_NaN();  ///< where A0_.. were evaluated
+  Eigen::MatrixXd A_[3], B_[3], Q_[3], R_[3], A0_, B0_, Q0_, R0_;
+  Eigen::MatrixXd M_, rhs_, stages_, QY_, Yn_, Wn_, g_, f0_, rY_, rW_, errY_, errW_, errM_, eW_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> lu_, luErr_;
 };
 
 }  // namespace
@@ -801,12 +876,13 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
   Eigen::Map<Eigen::MatrixXd>(y0.data(), nx, cols).leftCols(nx).setIdentity();
   Eigen::VectorXd wq(NQ);
 
+  const double rtol = options.relativeTolerance();
   detail::OdeOptions o = detail::makeOdeOptions(
       "sampled-data discretization", detail::OdeMethod::Bdf, detail::OdeLinearSolver::Gmres,
-      options.rtol, options.atol, options.maxSteps);
+      rtol, options.atol, options.maxSteps);
   o.quadratureSize = static_cast<int>(NQ);
   o.quadratureErrorControl = true;
-  o.quadratureRtol = options.rtol;
+  o.quadratureRtol = rtol;
   o.quadratureAtol = options.atol;
   // Made at the first interval that needs the integration (none on a held pose).
   std::optional<detail::OdeDriver> driver;
@@ -886,10 +962,10 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
       bool done = false;
       const bool byMagnus = options.integrator == SampledIntegrator::kMagnus;
       if (byMagnus) {
-        if (!magnus) magnus.emplace(s, options.rtol, options.maxSteps);
+        if (!magnus) magnus.emplace(s, rtol, options.maxSteps);
         done = magnus->integrate(a, b, structure.breakpoints, magnusE, magnusW);
       } else {
-        if (!radau) radau.emplace(s, options.rtol, options.maxSteps);
+        if (!radau) radau.emplace(s, rtol, options.maxSteps);
         done = radau->integrate(a, b, structure.breakpoints, magnusE, magnusW);
         magnusE.conservativeResize(nx + nu, nx + nu);  // [[Φ, Γ], [0, I]] from Y = [Φ Γ]
         magnusE.bottomRows(nu).setZero();
@@ -925,7 +1001,7 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
     if (!driver) driver.emplace(s, N, o);
     // Every interval starts from Y = [I 0], W = 0 (a restart: Φ, Γ are per interval).
     driver->start(a, y0);
-    driver->setQuadratureTolerances(options.rtol, options.atol * (b - a) * costScale);
+    driver->setQuadratureTolerances(rtol, options.atol * (b - a) * costScale);
     const detail::OdeStatus st = driver->advanceTo(b);
     if (!st.ok()) {
       const double at = s.failed ? s.failTime : st.t;

@@ -466,7 +466,9 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
     sol.feedforward = options.feedforward;
     Eigen::VectorXd xa(nx), xb(nx), ua(nu), ub(nu), dk(nx);
     SimulationOptions so;
-    so.rtol = options.sampled.rtol;
+    // The plant runs keep kRtol when rtol is left to the integrator's default (Radau's is looser
+    // because its estimate is; the plant's BDF estimate is not).
+    so.rtol = options.sampled.rtol > 0.0 ? options.sampled.rtol : SampledDiscretizationOptions::kRtol;
     so.atol = options.sampled.atol;
     so.maxSteps = options.sampled.maxSteps;  // per interval, as for the discretization
     // BDF with the exact Jacobian: a held input is a "sampled" policy (∂u/∂x = 0, so ∂f/∂x = A),

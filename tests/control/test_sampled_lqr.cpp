@@ -726,13 +726,18 @@ TEST_CASE("sampled LQR: the Radau and Magnus integrations agree with CVODES on t
   trellis::SampledDiscretizationOptions fast;
   fast.integrator = method;
   INFO(trellis::toString(method));
+  // The interval blocks are compared at 1e-9, below what Radau's default rtol (kRadauRtol, sized
+  // for the gains) leaves on them (~1e-9): those sections set 1e-10; the gains' sections keep
+  // each method's default.
+  trellis::SampledDiscretizationOptions blocks = fast;
+  blocks.rtol = trellis::SampledDiscretizationOptions::kRtol;
   SECTION("fast-changing 2-state system") {
     LqrWeights w;
     w.Q = (MatrixXd(2, 2) << 3.0, 0.5, 0.5, 1.0).finished();
     w.R = MatrixXd::Constant(1, 1, 0.7);
     w.Qf = w.Q;
     const VectorXd times = trellis::sampleTimes(0.0, 3.0, 10.0);
-    const auto magnus = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, fast);
+    const auto magnus = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, blocks);
     const auto ref = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, bdf);
     REQUIRE(magnus.ok());
     REQUIRE(ref.ok());
@@ -746,6 +751,12 @@ TEST_CASE("sampled LQR: the Radau and Magnus integrations agree with CVODES on t
     REQUIRE(b.ok());
     CHECK(gainDifference(b.K, a.K) < 1e-8);
     CHECK(magnus.steps < ref.steps);  // no restart per interval
+    // The gains at the method's default rtol.
+    const auto byDefault = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, fast);
+    REQUIRE(byDefault.ok());
+    const auto c = trellis::solveSampledRiccatiRecursion(byDefault.intervals, w.Qf);
+    REQUIRE(c.ok());
+    CHECK(gainDifference(b.K, c.K) < 1e-8);
   }
   SECTION("a state weight that drops 1e6-fold from one interval to the next") {
     // Radau measures the cost's error against (among others) the previous interval's cost rate:
@@ -758,7 +769,7 @@ TEST_CASE("sampled LQR: the Radau and Magnus integrations agree with CVODES on t
     w.R = MatrixXd::Constant(1, 1, 0.7);
     w.Qf = MatrixXd::Identity(2, 2);
     const VectorXd times = trellis::sampleTimes(0.0, 2.0, 10.0);
-    const auto fastOut = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, fast);
+    const auto fastOut = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, blocks);
     const auto ref = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, bdf);
     REQUIRE(fastOut.ok());
     REQUIRE(ref.ok());
@@ -870,5 +881,56 @@ TEST_CASE("sampled LQR: the Magnus exponential over whole intervals checks itsel
       REQUIRE(exact.ok());
       CHECK(gainDifference(exact.gains.gains(), got.gains.gains()) < 1e-8);
     }
+  }
+}
+
+TEST_CASE("sampled LQR: Radau's embedded estimate at its default rtol on the stiff chain at 10, 100, 1000 Hz",
+          "[sampled][radau]") {
+  // The 6-link chain's free swing (fast modes |λ| up to ~1.4e3: |λ|h ≈ 140 / 14 / 1.4): the default
+  // integrator at its default tolerance (SampledDiscretizationOptions::kRadauRtol) against every
+  // interval by CVODES at rtol 1e-12.
+  const Model model = trellis::ctest::makeDampedChain(6);
+  SimulationOptions so;
+  so.rtol = 1e-11;
+  so.atol = 1e-12;
+  so.outputStep = 0.02;
+  const trellis::Policy zero = [](double, const VectorXd&, VectorXd& u) { u.setZero(); };
+  const VectorXd x0 = (VectorXd(12) << VectorXd::Constant(6, 0.3), VectorXd::Zero(6)).finished();
+  // 0.3 s (3 and 30 intervals at 10 and 100 Hz), its first 60 ms at 1000 Hz (the reference costs
+  // ~10 ms per interval).
+  const SimulationResult swing = trellis::simulate(model, x0, 0.0, 0.3, zero, so);
+  const SimulationResult start = trellis::simulate(model, x0, 0.0, 0.06, zero, so);
+  REQUIRE(swing.ok());
+  REQUIRE(start.ok());
+  LqrWeights w;
+  w.Q = MatrixXd::Identity(12, 12);
+  w.R = MatrixXd::Identity(6, 6);
+  w.Qf = w.Q;
+  trellis::TvlqrOptions fast, exact;
+  exact.sampled.integrator = trellis::SampledIntegrator::kBdf;
+  exact.sampled.rtol = 1e-12;
+  exact.sampled.atol = 1e-14;
+  REQUIRE(fast.sampled.integrator == trellis::SampledIntegrator::kRadau);
+  CHECK(fast.sampled.relativeTolerance() == trellis::SampledDiscretizationOptions::kRadauRtol);
+  CHECK(exact.sampled.relativeTolerance() == 1e-12);
+  for (double rate : {10.0, 100.0, 1000.0}) {
+    INFO("rate " << rate);
+    fast.sampleRate = exact.sampleRate = rate;
+    const Trajectory& reference = rate > 100.0 ? start.trajectory : swing.trajectory;
+    const trellis::TvlqrSolution got = trellis::solveTvlqr(model, reference, w, fast);
+    const trellis::TvlqrSolution ref = trellis::solveTvlqr(model, reference, w, exact);
+    REQUIRE(got.ok());
+    REQUIRE(ref.ok());
+    CHECK(gainDifference(ref.gains.gains(), got.gains.gains()) < 1e-8);
+  }
+  SECTION("too few steps is the status, and a negative rtol is refused") {
+    trellis::TvlqrOptions tight;
+    tight.sampleRate = 10.0;
+    tight.sampled.maxSteps = 3;  // the restart transient alone needs more
+    const trellis::TvlqrSolution refused = trellis::solveTvlqr(model, swing.trajectory, w, tight);
+    CHECK(!refused.ok());
+    CHECK_THAT(refused.status.message, Catch::Contains("maxSteps = 3") && Catch::Contains("Radau"));
+    tight.sampled.rtol = -1e-6;
+    CHECK_THROWS_WITH(tight.sampled.validate(), Catch::Contains("rtol = -1e-06"));
   }
 }

@@ -14,8 +14,13 @@
 // (SampledIntegrator::kRadau), with the three-stage Radau IIA collocation of the variational
 // equation Ẏ = A(s)Y + [0 B(s)], Y = [Φ(s, t_k) Γ(s)], and the method's own quadrature of the
 // cost on its stages: one linear solve per step (the problem is linear), L-stable (a stiff A does
-// not limit the step), the error by step doubling, steps carried from one interval to the next (a
-// one-step method restarts for free) and ending on the reference's knots. SampledIntegrator::
+// not limit the step), A, B, Q, R at the three nodes only (the start's are the previous step's
+// end), the error by Hairer's embedded estimate (RADAU5: the difference to a third-order
+// companion, filtered by (I − γ0δA)⁻¹ so the damped stiff part does not count; one more nx×nx
+// solve), steps carried from one interval to the next (a one-step method restarts for free) and
+// ending on the reference's knots. The estimate bounds the companion's error, far above the
+// fifth-order result's: the default rtol is kRadauRtol = 1e-6, which leaves the gains ~1e-10 of
+// the exact recursion on the stiff 6-link swing (docs/performance.md). SampledIntegrator::
 // kMagnus integrates the Van Loan system Ẋ = V(s)X, V = [[−Mᵀ, Q̃], [0, M]] (M = [[A, B], [0, 0]],
 // Q̃ = blkdiag(Q, R)), whose solution holds [[Φ_k, Γ_k], [0, I]] and the cost blocks, by a
 // sixth-order Magnus step over the whole interval (between knots): A, B, Q, R at three Gauss
@@ -103,7 +108,7 @@ enum class SampledIntegrator {
   /// |λ|δ ≲ 1 there: on the 6-link chain's swing ~30 pieces per 10 ms, slower than Radau).
   kMagnus,
   /// Three-stage Radau IIA (order 5, L-stable) on the variational equation and its quadrature
-  /// of the cost, step doubling for the error, no restart (the default).
+  /// of the cost, Hairer's embedded error estimate, steps carried across intervals (the default).
   kRadau,
   kBdf,     ///< CVODES BDF on the variational equation and a cost quadrature, per interval
 };
@@ -119,8 +124,10 @@ inline EnumNameTable<SampledIntegrator> enumNames(SampledIntegrator) {
 /// Options of discretizeSampledData (the integration of Φ, Γ and the cost over each interval).
 struct SampledDiscretizationOptions {
   SampledIntegrator integrator = SampledIntegrator::kRadau;  ///< for the intervals not constant
-  double rtol = 1e-10;     ///< relative tolerance on Φ, Γ and the cost (> 0): CVODES's, or the
-                           ///< Magnus steps' local error relative to each block's size
+  /// Relative tolerance on Φ, Γ and the cost (≥ 0; 0: relativeTolerance()'s default for the
+  /// integrator): CVODES's, the Magnus check's, or the bound on Radau's embedded estimate of each
+  /// step's local error relative to each block's size.
+  double rtol = 0.0;
   double atol = 1e-12;     ///< kBdf: absolute tolerance on the entries of Φ, Γ (> 0); the cost's is
                            ///< atol·h·max(1, max|Q|, max|R|)
   long maxSteps = 100000;  ///< internal steps per interval (> 0); also bounds each plant run of
@@ -129,6 +136,14 @@ struct SampledDiscretizationOptions {
   /// comment); false integrates every interval (the reference path of the tests).
   bool exactConstantIntervals = true;
   void validate() const;   ///< throws std::invalid_argument naming the field
+  /// The tolerance used: rtol when set (> 0), else kRadauRtol for kRadau and kRtol otherwise.
+  double relativeTolerance() const;
+  /// kMagnus and kBdf's default rtol (and that of solveTvlqr's held plant runs).
+  static constexpr double kRtol = 1e-10;
+  /// kRadau's default rtol: its embedded estimate bounds a third-order companion's error, not the
+  /// fifth-order result's, which is ~1e-4 of it here (the gains ~1e-10 of the exact recursion on
+  /// the stiff 6-link swing: docs/performance.md).
+  static constexpr double kRadauRtol = 1e-6;
 };
 
 /// For a sample interval [a, b]: a time c at which A, B, Q and R take the values they keep on all
