@@ -131,7 +131,10 @@ options:
   --cost-to-go FILE   also write the Riccati solution S(t) at the gains' times (CSV, the upper
                       triangle; `trellis funnel` measures its level sets V = dx^T S dx)
   --json              print the summary as one JSON object
-  --rtol X, --atol X  CVODES tolerances on S (defaults 1e-8, 1e-10)
+  --rtol X, --atol X  CVODES tolerances on S (defaults 1e-8, 1e-10); with --rate, the tolerances
+                      of each sample interval's integration instead (defaults: rtol 1e-6 for the
+                      Radau integration along a moving reference, whose error estimate is
+                      conservative; atol 1e-12)
   --method M          bdf (default), adams (non-stiff problems only) or factored (Cholesky
                       factor of S; needs Qf positive definite); continuous gains only
   --max-steps N       limit on the integrator's internal steps (default 100000)
