@@ -59,6 +59,13 @@ Eigen::VectorXd sampleTimes(double t0, double T, double rate) {
 
 namespace {
 
+/// W ← (W + Wᵀ)/2 in place, without a temporary (W = 0.5 (W + Wᵀ) needs one: assigned lazily, it
+/// would read entries it has already overwritten).
+void symmetrize(Eigen::MatrixXd& W) {
+  for (Eigen::Index j = 1; j < W.cols(); ++j)
+    for (Eigen::Index i = 0; i < j; ++i) W(i, j) = W(j, i) = 0.5 * (W(i, j) + W(j, i));
+}
+
 /// The block exponential of a constant system over one unit of its own time: for Z (c×c, its last
 /// nu rows zero: the held input) and a symmetric P (c×c),
 ///   E = e^{Z},  W = ∫₀¹ e^{Zᵀs} P e^{Zs} ds,
@@ -75,8 +82,8 @@ namespace {
 /// upper triangular with corners (±(z^k)ᵀ, U_k, z^k) — the even powers' U_k antisymmetric —, so
 /// p(X) = V + U, q(X) = V − U need eight c×c products, and q F = p is solved for the two corners
 /// used, F₂₂ = R_q⁻¹R_p and F₁₂ = (R_pᵀ)⁻¹(U_p − U_q F₂₂) (q's top-left corner is R_pᵀ, as
-/// q(−zᵀ) = p(z)ᵀ). A workspace: its buffers are kept from call to call (the symmetrizations
-/// still evaluate one temporary each).
+/// q(−zᵀ) = p(z)ᵀ). A workspace: its buffers are kept from call to call (the symmetrizations work
+/// in place).
 class BlockExponential {
  public:
   void operator()(const Eigen::MatrixXd& Z, const Eigen::MatrixXd& P, Eigen::Index nu, Eigen::MatrixXd& E,
@@ -128,7 +135,7 @@ class BlockExponential {
     lup_.compute(rp_.transpose());
     t_ = lup_.solve(up_);  // F₁₂ = e^{−zᵀ}·W(z)/pScale
     W.noalias() = pScale * (E.transpose() * t_);
-    W = 0.5 * (W + W.transpose()).eval();
+    symmetrize(W);
     // The doublings on E = [[Φ, Γ], [0, I]]: W ← W + EᵀWE, E ← E² = [[Φ², ΦΓ + Γ], [0, I]].
     const Eigen::Index nx = c - nu;
     const auto Phi = E.topLeftCorner(nx, nx);
@@ -140,7 +147,7 @@ class BlockExponential {
       W.topRows(nx).noalias() += Phi.transpose() * t_.topRows(nx);
       W.bottomRows(nu) += t_.bottomRows(nu);
       W.bottomRows(nu).noalias() += Gamma.transpose() * t_.topRows(nx);
-      W = 0.5 * (W + W.transpose()).eval();
+      symmetrize(W);
       r2_.topRows(nx).noalias() = Phi * E.topRows(nx);
       r2_.topRightCorner(nx, nu) += Gamma;
       E.topRows(nx) = r2_.topRows(nx);
@@ -451,7 +458,7 @@ class MagnusIntegrator {
         tmp_.noalias() = W2_ * E1_;
         Wh_ = W1_;
         Wh_.noalias() += E1_.transpose() * tmp_;
-        Wh_ = 0.5 * (Wh_ + Wh_.transpose()).eval();
+        symmetrize(Wh_);
         if (segmentCheck) {
           // The stretch's cost scale: the smaller of its two first estimates (if they disagree,
           // the smaller is the stricter).
@@ -462,7 +469,7 @@ class MagnusIntegrator {
           // Accepted: the halves, composed onto the interval so far.
           tmp_.noalias() = Wh_ * E;
           W.noalias() += E.transpose() * tmp_;
-          W = 0.5 * (W + W.transpose()).eval();
+          symmetrize(W);
           tmp_.noalias() = Eh_ * E;
           E.swap(tmp_);
           steps += 2;
@@ -692,7 +699,7 @@ class RadauIntegrator {
       first = false;
       return StepOutcome::kAccepted;
     });
-    W = 0.5 * (W + W.transpose());
+    symmetrize(W);
     if (ok) wRate_ = W.diagonal().cwiseMax(0.0) / (b - a);
     prevEnd_ = ok ? b : std::numeric_limits<double>::quiet_NaN();
     return ok;
