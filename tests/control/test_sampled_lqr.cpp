@@ -402,6 +402,27 @@ trellis::RiccatiSolution solveWithOwnModel(std::vector<std::pair<double, MatrixX
   return sol;
 }
 
+/// The 6-link damped chain's free swing from q_i = 0.3 rad at rest, u = 0, over [0, T] (rtol 1e-11,
+/// knots every 20 ms): the stiff moving reference of the sampled tests.
+SimulationResult chainSwing(const Model& model, double T) {
+  SimulationOptions so;
+  so.rtol = 1e-11;
+  so.atol = 1e-12;
+  so.outputStep = 0.02;
+  const trellis::Policy zero = [](double, const VectorXd&, VectorXd& u) { u.setZero(); };
+  const VectorXd x0 = (VectorXd(12) << VectorXd::Constant(6, 0.3), VectorXd::Zero(6)).finished();
+  return trellis::simulate(model, x0, 0.0, T, zero, so);
+}
+
+/// Q = I (nx), R = I (nu), Qf = Q.
+LqrWeights unitWeights(int nx, int nu) {
+  LqrWeights w;
+  w.Q = MatrixXd::Identity(nx, nx);
+  w.R = MatrixXd::Identity(nu, nu);
+  w.Qf = w.Q;
+  return w;
+}
+
 }  // namespace
 
 TEST_CASE("riccati: a solution outlives its model (run under asan)", "[sampled][lifetime]") {
@@ -857,18 +878,9 @@ TEST_CASE("sampled LQR: the Magnus exponential over whole intervals checks itsel
   SECTION("the stiff 6-link chain's free swing at 10 and 100 Hz against CVODES at rtol 1e-12") {
     // |λ|h ≈ 140 / 14 for the fast modes; knots every 20 ms (at 10 Hz five pieces per interval).
     const Model model = trellis::ctest::makeDampedChain(6);
-    SimulationOptions so;
-    so.rtol = 1e-11;
-    so.atol = 1e-12;
-    so.outputStep = 0.02;
-    const trellis::Policy zero = [](double, const VectorXd&, VectorXd& u) { u.setZero(); };
-    const VectorXd x0 = (VectorXd(12) << VectorXd::Constant(6, 0.3), VectorXd::Zero(6)).finished();
-    const SimulationResult swing = trellis::simulate(model, x0, 0.0, 0.4, zero, so);
+    const SimulationResult swing = chainSwing(model, 0.4);
     REQUIRE(swing.ok());
-    LqrWeights w;
-    w.Q = MatrixXd::Identity(12, 12);
-    w.R = MatrixXd::Identity(6, 6);
-    w.Qf = w.Q;
+    const LqrWeights w = unitWeights(12, 6);
     for (double rate : {10.0, 100.0}) {
       INFO("rate " << rate);
       trellis::TvlqrOptions a, b;
@@ -890,22 +902,13 @@ TEST_CASE("sampled LQR: Radau's embedded estimate at its default rtol on the sti
   // integrator at its default tolerance (SampledDiscretizationOptions::kRadauRtol) against every
   // interval by CVODES at rtol 1e-12.
   const Model model = trellis::ctest::makeDampedChain(6);
-  SimulationOptions so;
-  so.rtol = 1e-11;
-  so.atol = 1e-12;
-  so.outputStep = 0.02;
-  const trellis::Policy zero = [](double, const VectorXd&, VectorXd& u) { u.setZero(); };
-  const VectorXd x0 = (VectorXd(12) << VectorXd::Constant(6, 0.3), VectorXd::Zero(6)).finished();
   // 0.3 s (3 and 30 intervals at 10 and 100 Hz), its first 60 ms at 1000 Hz (the reference costs
   // ~10 ms per interval).
-  const SimulationResult swing = trellis::simulate(model, x0, 0.0, 0.3, zero, so);
-  const SimulationResult start = trellis::simulate(model, x0, 0.0, 0.06, zero, so);
+  const SimulationResult swing = chainSwing(model, 0.3);
+  const SimulationResult start = chainSwing(model, 0.06);
   REQUIRE(swing.ok());
   REQUIRE(start.ok());
-  LqrWeights w;
-  w.Q = MatrixXd::Identity(12, 12);
-  w.R = MatrixXd::Identity(6, 6);
-  w.Qf = w.Q;
+  const LqrWeights w = unitWeights(12, 6);
   trellis::TvlqrOptions fast, exact;
   exact.sampled.integrator = trellis::SampledIntegrator::kBdf;
   exact.sampled.rtol = 1e-12;
