@@ -103,6 +103,14 @@ struct DataWorkspace {
   Eigen::MatrixXd schurNullBasis;        ///< nc×nc, first schurNullity columns: null space of Ŝ
   int schurNullity = 0;
   bool schurUsesPinv = false;
+  /// The last evaluation's degenerate row was an exact zero row that holds (h_r = 0, Ȧ_r q̇ = 0):
+  /// its message (below) names the row without the state, so computeDynamics appends none.
+  bool zeroRowHolds = false;
+  /// The message of that report for row zeroRowMessageRow, formatted at its first report and
+  /// copied (no formatting, no allocation) at every later one — the z row of a point on a planar
+  /// chain is reported at every call, and formatting it was a quarter of the call (issue 25).
+  std::string zeroRowMessage;
+  int zeroRowMessageRow = -1;
   Eigen::VectorXd tmpN, tmpC;            ///< n, nc: one right-hand side of solveKkt
   Eigen::MatrixXd tmpNX, tmpCX;          ///< n×(2n+m+1), nc×(2n+m+1): many right-hand sides
 

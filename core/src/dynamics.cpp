@@ -146,6 +146,7 @@ void factorizeKkt(const Model& model, Data& data) {
   st.constraintRank = nc;
   st.constraintConditioning = 1.0;
   ws.schurUsesPinv = false;
+  ws.zeroRowHolds = false;
   if (!std::isfinite(data.M.sum())) {  // NaN or ±Inf if any entry is
     st.code = DynamicsStatus::Code::kNonFinite;
     st.message = "mass matrix has non-finite entries";
@@ -187,6 +188,30 @@ void factorizeKkt(const Model& model, Data& data) {
   // κ = 1e-5 they may exceed 1e-6 and the row is reported as degenerate (finite results, no ok).
   const auto reportDegenerate = [&] {
     st.code = DynamicsStatus::Code::kSingularConstraints;
+    // An exactly zero row that holds (h_r = 0 and Ȧ_r q̇ = 0: it constrains nothing at this state,
+    // 0·q̈ = 0), when every zero row holds, is dropped exactly: q̈ and the linearization are the
+    // other rows', λ_r = 0. Its report does not depend on the state, so it is formatted once per
+    // row and copied afterwards.
+    const auto zeroRowsHold = [&] {
+      for (int r = 0; r < nc; ++r)
+        if (data.constraintJacobian.row(r).squaredNorm() == 0.0 &&
+            (data.constraintValue[r] != 0.0 || data.constraintDrift[r] != 0.0))
+          return false;
+      return true;
+    };
+    if (kinematic == 0.0 && data.constraintJacobian.row(worstRow).squaredNorm() == 0.0 && zeroRowsHold()) {
+      if (ws.zeroRowMessageRow != worstRow) {
+        ws.zeroRowMessage = "degenerate constraint row " + std::to_string(worstRow) + " (" +
+                            model.constraints()[worstRow].name +
+                            "): its gradient is zero and the row holds (h = 0, Ȧ q̇ = 0), so it constrains nothing "
+                            "here; it is dropped (its constraint force is undetermined, λ = 0 is reported) and q̈ "
+                            "and the linearization are those of the other rows";
+        ws.zeroRowMessageRow = worstRow;
+      }
+      st.message = ws.zeroRowMessage;
+      ws.zeroRowHolds = true;
+      return;
+    }
     st.message = "degenerate constraint row " + std::to_string(worstRow) + " (" + model.constraints()[worstRow].name +
                  "): |A_row| = " + formatNumber(data.constraintJacobian.row(worstRow).norm()) +
                  (ws.constraintScale[worstRow] > 0
@@ -776,7 +801,10 @@ DynamicsStatus computeDynamics(const Model& model, Data& data, const Eigen::Vect
     data.status.code = DynamicsStatus::Code::kNonFinite;
     data.status.message = "forward dynamics produced non-finite values";
   }
-  if (!data.status.ok()) appendState(model, q, dq, data.status.message);
+  // The state goes into every failure's message, except the report of a zero row that holds
+  // (factorizeKkt: the report is the same at every state, and such a row is met at every call).
+  const bool stateFree = ws.zeroRowHolds && data.status.code == DynamicsStatus::Code::kSingularConstraints;
+  if (!data.status.ok() && !stateFree) appendState(model, q, dq, data.status.message);
   return data.status;
 }
 

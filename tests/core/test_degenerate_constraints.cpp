@@ -31,8 +31,10 @@ Model twoTips(double s) {
   return std::move(b).finalize();
 }
 
+/// `rowHolds`: the degenerate row is exactly zero and holds (h = 0, Ȧ q̇ = 0), so it constrains nothing
+/// and the message says so without the state; otherwise the message names the state.
 void expectDegenerate(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
-                      const std::string& constraintName) {
+                      const std::string& constraintName, bool rowHolds = false) {
   Data data(model);
   const Eigen::VectorXd u = Eigen::VectorXd::Zero(model.nu());
   for (int pass = 0; pass < 2; ++pass) {
@@ -43,7 +45,11 @@ void expectDegenerate(const Model& model, const Eigen::VectorXd& q, const Eigen:
     CHECK(st.code == DynamicsStatus::Code::kSingularConstraints);
     CHECK_THAT(st.message, Contains("degenerate constraint row 0"));
     CHECK_THAT(st.message, Contains(constraintName));
-    CHECK_THAT(st.message, Contains("q = (" + model.configNames()[0] + "="));
+    if (rowHolds) {
+      CHECK_THAT(st.message, Contains("the row holds"));
+    } else {
+      CHECK_THAT(st.message, Contains("q = (" + model.configNames()[0] + "="));
+    }
     CHECK(st.constraintConditioning < 1e-5);
     // Not ok, but finite: the row is dropped, not turned into λ = ±1e16.
     CHECK(data.qdd.allFinite());
@@ -93,7 +99,7 @@ TEST_CASE("Degenerate rows: a row no motion can change", "[degenerate]") {
     b.addPointConstraint("T", "P", 2);  // z: holds everywhere, its row is identically zero
     const Model model = std::move(b).finalize();
     expectDegenerate(model, Eigen::VectorXd::Constant(1, 0.4), Eigen::VectorXd::Constant(1, 0.1),
-                     model.constraints()[0].name);
+                     model.constraints()[0].name, /*rowHolds=*/true);
   }
   SECTION("knife edge at the rotation axis (its point cannot move)") {
     ModelBuilder b;
@@ -191,7 +197,7 @@ namespace {
 
 /// A planar chain of `links` rz joints in gravity −y, its tip held on a world point by the rows
 /// x, y and, with `zRow`, also z (which holds everywhere: its row of A is identically zero).
-Model pinnedPlanarChain(int links, bool zRow) {
+Model pinnedPlanarChain(int links, bool zRow, double anchorZ = 0.0) {
   ModelBuilder b;
   std::string parent = "world";
   for (int k = 0; k < links; ++k) {
@@ -213,6 +219,7 @@ Model pinnedPlanarChain(int links, bool zRow) {
   Eigen::Matrix4d g = Eigen::Matrix4d::Identity();
   g(0, 3) = x;
   g(1, 3) = y;
+  g(2, 3) = anchorZ;  // ≠ 0: the z row cannot hold (h_z = −anchorZ at every state)
   b.addFrame("anchor", "world", Transform::constSE3(g));
   for (int axis = 0; axis < (zRow ? 3 : 2); ++axis) b.addPointConstraint(parent, "anchor", axis);
   return std::move(b).finalize();
@@ -257,5 +264,31 @@ TEST_CASE("Degenerate rows: a zero row is dropped, the rest is the model without
     CHECK(close(d3.dlambda_dx.topRows(2), dw.dlambda_dx));
     CHECK(d3.lambda[2] == 0.0);
     CHECK(d3.dlambda_dx.row(2).cwiseAbs().maxCoeff() == 0.0);
+    // The row holds (h_z = 0, Ȧ_z q̇ = 0): its report is the same at every state, without the state
+    // (formatted once, copied afterwards), through forward dynamics as through the linearization.
+    CHECK_THAT(st.message, Contains("the row holds"));
+    CHECK_THAT(st.message, !Contains("q = ("));
+    const Eigen::VectorXd q2 = q.array() + 0.1, dq2 = -dq;
+    const DynamicsStatus again = computeDynamics(with, d3, q2, dq2, u);
+    CHECK(again.code == DynamicsStatus::Code::kSingularConstraints);
+    CHECK(again.message == st.message);
+  }
+}
+
+// The same zero row where it cannot hold (the anchor off the chain's plane: h_z ≠ 0): reported
+// with the state, not as a row that constrains nothing.
+TEST_CASE("Degenerate rows: a zero row that does not hold is reported with the state", "[degenerate]") {
+  const Model off = pinnedPlanarChain(5, true, 0.01);
+  const int n = off.nq();
+  Data data(off);
+  const Eigen::VectorXd q = Eigen::VectorXd::Constant(n, 0.2), dq = Eigen::VectorXd::Zero(n),
+                        u = Eigen::VectorXd::Zero(n);
+  for (int pass = 0; pass < 2; ++pass) {
+    const DynamicsStatus st = pass == 0 ? computeDynamics(off, data, q, dq, u) : computeLinearization(off, data, q, dq, u);
+    INFO(st.message);
+    CHECK(st.code == DynamicsStatus::Code::kSingularConstraints);
+    CHECK_THAT(st.message, Contains("degenerate constraint row 2"));
+    CHECK_THAT(st.message, !Contains("the row holds"));
+    CHECK_THAT(st.message, Contains("q = (q0="));
   }
 }
