@@ -412,6 +412,46 @@ TestSystem spatialChain(int links, std::uint32_t seed) {
   return std::move(s).finish();
 }
 
+/// Three subtrees hanging from the world (frames added in turn): a 3D chain of 18 joints (two
+/// blocks of directions), a 3-joint chain and a 5-joint tree with two branches; every driven
+/// joint kind, full inertias, a spring, damping and forces on coordinates of each. The tree pass
+/// runs its blocks per subtree.
+TestSystem interleavedForest(std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  SystemBuilder s;
+  auto kind = [](int k, const std::string& q) {
+    switch (k % 6) {
+      case 1: return Transform::ry(q);
+      case 2: return Transform::tx(q);
+      case 3: return Transform::rotAxis(Eigen::Vector3d(0.3, -0.5, 0.8).normalized(), q);
+      case 4: return Transform::rx(q);
+      case 5: return Transform::transAxis(Eigen::Vector3d(0.2, 0.9, -0.4).normalized(), q);
+      default: return Transform::rz(q);
+    }
+  };
+  auto link = [&](const std::string& name, const std::string& parent, int k) {
+    s.frame(name, parent, kind(k, std::string("q_").append(name)));
+    s.frame(name + "_body", name, Transform::constSE3(se3(0.2 * k, {0.2, 0.8, 0.3}, {0.1, -0.2, 0.15})),
+            Mass{0.2 + 0.05 * (k % 4), randomInertia(rng)});
+    return name + "_body";
+  };
+  std::string a = "world", b = "world", cRoot;
+  for (int k = 0; k < 18; ++k) {
+    a = link(std::string("a").append(std::to_string(k)), a, k);
+    if (k < 3) b = link(std::string("b").append(std::to_string(k)), b, k + 2);
+    if (k == 0) cRoot = link("c0", "world", 3);
+    if (k == 1) link("c1", cRoot, 1);  // two branches on c0: c1, and c2 → c3 → c4
+    if (k == 2) link("c2", cRoot, 5);
+    if (k == 3) link("c3", "c2_body", 0);
+    if (k == 4) link("c4", "c3_body", 2);
+  }
+  s.b.addGravity(Eigen::Vector3d(0.3, -9.6, 1.2));
+  s.b.addDamping(0.05);
+  for (const char* q : {"q_a0", "q_a17", "q_b1", "q_c2", "q_c4"}) s.b.addConfigForce(q, std::string("u_").append(q));
+  s.b.addConfigSpring("q_c1", 3.0, 0.2);
+  return std::move(s).finish();
+}
+
 TEST_CASE("The contraction's tree pass against the recording and the tensors", "[second_order][tree]") {
   // Where the model holds only the tree, gravity and forces on coordinates, the workspace takes
   // the tree pass (second_order_tree.hpp); secondOrderForceTape makes it record the tape instead.
@@ -433,6 +473,14 @@ TEST_CASE("The contraction's tree pass against the recording and the tensors", "
   systems.push_back(branchedTree(41));
   systems.push_back(branchedTree(43, 3));
   systems.push_back(spatialChain(20, 47));
+  systems.push_back(interleavedForest(53));
+  {  // the forest: three subtrees from the world, of 18 (two blocks), 3 and 5 joints
+    const Model& forest = systems.back().model;
+    int roots = 0;
+    for (const Joint& j : forest.joints()) roots += j.parent == kWorld ? 1 : 0;
+    REQUIRE(roots == 3);
+    REQUIRE(forest.nq() == 26);
+  }
   for (const TransformType t : {TransformType::kRx, TransformType::kTy, TransformType::kRotAxis, TransformType::kTransAxis})
     systems.push_back(transformChain(t));
   for (const bool generic : {false, true}) {
