@@ -416,7 +416,7 @@ TestSystem spatialChain(int links, std::uint32_t seed) {
 /// blocks of directions), a 3-joint chain and a 5-joint tree with two branches; every driven
 /// joint kind, full inertias, a spring, damping and forces on coordinates of each. The tree pass
 /// runs its blocks per subtree.
-TestSystem interleavedForest(std::uint32_t seed) {
+TestSystem threeSubtrees(std::uint32_t seed) {
   std::mt19937 rng(seed);
   SystemBuilder s;
   auto kind = [](int k, const std::string& q) {
@@ -458,7 +458,8 @@ TEST_CASE("The contraction's tree pass against the recording and the tensors", "
   // Both, and the sum of the hyper-dual tensors, agree to 1e-10 of the largest entry (three
   // computations that share no code beyond the KKT factor), at random states and weights, on
   // every block shape (the q and the q̇ directions in blocks of their own, 16 wide, the last 4, 8,
-  // 12 or 16: n = 2, 3, 10, 13, 18 = 16 + 2, 8, 26 = 16 + 10, 20 = 16 + 4) and every joint kind, in the
+  // 12 or 16: n = 2, 3, 10, 13, 18 = 16 + 2, 8, 26 = 16 + 10, 20 = 16 + 4), blocks per subtree hanging
+  // from the world (branchedTree(41): two; threeSubtrees: 18 = 16 + 2, 3 and 5) and every joint kind, in the
   // baseline build and (where the CPU has it) the AVX2+FMA build of the pass.
   struct ForceTape {  // restores the automatic choice even when a check fails
     explicit ForceTape(bool force) { detail::secondOrderForceTape(force); }
@@ -473,7 +474,7 @@ TEST_CASE("The contraction's tree pass against the recording and the tensors", "
   systems.push_back(branchedTree(41));
   systems.push_back(branchedTree(43, 3));
   systems.push_back(spatialChain(20, 47));
-  systems.push_back(interleavedForest(53));
+  systems.push_back(threeSubtrees(53));
   {  // the forest: three subtrees from the world, of 18 (two blocks), 3 and 5 joints
     const Model& forest = systems.back().model;
     int roots = 0;
