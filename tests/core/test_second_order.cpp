@@ -385,6 +385,18 @@ TestSystem branchedTree(std::uint32_t seed, int copies = 1) {
 /// A 3D chain of `links` joints cycling through every driven kind (rz, ry, tx, r_axis, rx, t_axis),
 /// each body offset from its joint, with full inertias: past 16 joints, a block of q directions
 /// holds moving joints below ones that do not move with it.
+/// The driven joint kinds in turn: rz, ry, tx, r_axis, rx, t_axis (k mod 6) on coordinate q.
+Transform drivenKind(int k, const std::string& q) {
+  switch (k % 6) {
+    case 1: return Transform::ry(q);
+    case 2: return Transform::tx(q);
+    case 3: return Transform::rotAxis(Eigen::Vector3d(0.3, -0.5, 0.8).normalized(), q);
+    case 4: return Transform::rx(q);
+    case 5: return Transform::transAxis(Eigen::Vector3d(0.2, 0.9, -0.4).normalized(), q);
+    default: return Transform::rz(q);
+  }
+}
+
 TestSystem spatialChain(int links, std::uint32_t seed) {
   std::mt19937 rng(seed);
   SystemBuilder s;
@@ -393,16 +405,7 @@ TestSystem spatialChain(int links, std::uint32_t seed) {
     const std::string index = std::to_string(k);
     const std::string joint = std::string("joint").append(index), body = std::string("body").append(index);
     const std::string q = std::string("q").append(index);
-    Transform t = Transform::rz(q);
-    switch (k % 6) {
-      case 1: t = Transform::ry(q); break;
-      case 2: t = Transform::tx(q); break;
-      case 3: t = Transform::rotAxis(Eigen::Vector3d(0.3, -0.5, 0.8).normalized(), q); break;
-      case 4: t = Transform::rx(q); break;
-      case 5: t = Transform::transAxis(Eigen::Vector3d(0.2, 0.9, -0.4).normalized(), q); break;
-      default: break;
-    }
-    s.frame(joint, parent, t);
+    s.frame(joint, parent, drivenKind(k, q));
     s.frame(body, joint, Transform::constSE3(se3(0.3, {0.2, 1.0, 0.4}, {0.1, -0.25, 0.2})), Mass{0.3, randomInertia(rng)});
     parent = body;
   }
@@ -419,18 +422,8 @@ TestSystem spatialChain(int links, std::uint32_t seed) {
 TestSystem threeSubtrees(std::uint32_t seed) {
   std::mt19937 rng(seed);
   SystemBuilder s;
-  auto kind = [](int k, const std::string& q) {
-    switch (k % 6) {
-      case 1: return Transform::ry(q);
-      case 2: return Transform::tx(q);
-      case 3: return Transform::rotAxis(Eigen::Vector3d(0.3, -0.5, 0.8).normalized(), q);
-      case 4: return Transform::rx(q);
-      case 5: return Transform::transAxis(Eigen::Vector3d(0.2, 0.9, -0.4).normalized(), q);
-      default: return Transform::rz(q);
-    }
-  };
   auto link = [&](const std::string& name, const std::string& parent, int k) {
-    s.frame(name, parent, kind(k, std::string("q_").append(name)));
+    s.frame(name, parent, drivenKind(k, std::string("q_").append(name)));
     s.frame(name + "_body", name, Transform::constSE3(se3(0.2 * k, {0.2, 0.8, 0.3}, {0.1, -0.2, 0.15})),
             Mass{0.2 + 0.05 * (k % 4), randomInertia(rng)});
     return name + "_body";
