@@ -137,12 +137,9 @@ TRELLIS_LANES_INLINE auto applyInertia(const M& m, const Vec3<K>& h, const Mat3<
   const auto lin = m * x.l + cross(x.a, h);
   return Vec6<decltype(lin.x)>{lin, cross(h, x.l) + I * x.a};
 }
-/// D x − x ×* H and the angular part of D x + x ×* H (linearization.cpp: dMinusCross,
-/// dPlusCrossAngular), H = [p; L] the subtree momentum, B the 3×3 block of D.
-template <class T, class X>
-TRELLIS_LANES_INLINE Vec6<T> dMinusCross(const Vec6<T>& H, const Mat3<T>& B, const Vec6<X>& x) {
-  return {2.0 * cross(H.l, x.a), B * x.a + cross(H.a, x.a)};
-}
+/// The angular part of D x + x ×* H (linearization.cpp: dPlusCrossAngular), H = [p; L] the
+/// subtree momentum, B the 3×3 block of D. Its transpose partner D x − x ×* H (linearization.cpp:
+/// dMinusCross) enters here only contracted, as ψ · (D x − x ×* H) = x_ω · (this at ψ).
 template <class T, class X>
 TRELLIS_LANES_INLINE Vec3<T> dPlusCrossAngular(const Vec6<T>& H, const Mat3<T>& B, const Vec6<X>& x) {
   return 2.0 * cross(x.l, H.l) + B * x.a + cross(x.a, H.a);
@@ -156,6 +153,7 @@ TRELLIS_LANES_INLINE void sinCos(double x, double& s, double& c) {
 struct TreeJoint {
   int parent = kWorld, axis = 2;
   bool revolute = true;
+  bool R0identity = false;  ///< R0 = E exactly (the placement only translates)
   Mat3<double> R0, inertia;  ///< placement in the parent body; rotational inertia about the origin (body axes)
   Vec3<double> p0, firstMoment;
   double mass = 0.0, subtreeMass = 0.0;
@@ -165,6 +163,22 @@ Vec3<double> vec3(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 Mat3<double> mat3(const Eigen::Matrix3d& m) {
   Mat3<double> r;
   for (int j = 0; j < 3; ++j) r.c[j] = vec3(m.col(j));
+  return r;
+}
+
+/// R v for a constant v, with the terms of v's zero entries left out (placements along one axis,
+/// first moments on one axis and diagonal inertias are common: each zero saves a lane product).
+template <class T>
+TRELLIS_LANES_INLINE Vec3<T> timesConstant(const Mat3<T>& R, const Vec3<double>& v) {
+  const double e[3] = {v.x, v.y, v.z};
+  Vec3<T> r;
+  bool first = true;
+  for (int j = 0; j < 3; ++j) {
+    if (e[j] == 0.0) continue;
+    if (first) r = e[j] * R.c[j];
+    else r += e[j] * R.c[j];
+    first = false;
+  }
   return r;
 }
 
@@ -179,8 +193,12 @@ TRELLIS_LANES_INLINE void placeJoint(const TreeJoint& jc, const Mat3<T>* R, cons
     for (int c = 0; c < 3; ++c) Rpre.c[c] = {T(jc.R0.c[c].x), T(jc.R0.c[c].y), T(jc.R0.c[c].z)};
     ppre = {T(jc.p0.x), T(jc.p0.y), T(jc.p0.z)};
   } else {
-    Rpre = R[jc.parent] * jc.R0;
-    ppre = p[jc.parent] + R[jc.parent] * jc.p0;
+    if (jc.R0identity) {
+      Rpre = R[jc.parent];
+    } else {
+      for (int c = 0; c < 3; ++c) Rpre.c[c] = timesConstant(R[jc.parent], jc.R0.c[c]);
+    }
+    ppre = p[jc.parent] + timesConstant(R[jc.parent], jc.p0);
   }
   const Vec3<T> e = Rpre.c[jc.axis];
   if (jc.revolute) {
@@ -203,9 +221,9 @@ TRELLIS_LANES_INLINE void placeJoint(const TreeJoint& jc, const Mat3<T>* R, cons
 /// − p h_Bᵀ − h_B pᵀ, with h_B = R h_b and I_B = R I_b Rᵀ about the body origin.
 template <class T>
 TRELLIS_LANES_INLINE void worldInertia(const TreeJoint& jc, const Mat3<T>& Ri, const Vec3<T>& pi, Mat3<T>& I, Vec3<T>& h) {
-  const Vec3<T> hB = Ri * jc.firstMoment;
+  const Vec3<T> hB = timesConstant(Ri, jc.firstMoment);
   Mat3<T> RI;
-  for (int c = 0; c < 3; ++c) RI.c[c] = Ri * jc.inertia.c[c];
+  for (int c = 0; c < 3; ++c) RI.c[c] = timesConstant(Ri, jc.inertia.c[c]);
   const T shift = jc.mass * dot(pi, pi) + 2.0 * dot(pi, hB);
   for (int c = 0; c < 3; ++c)
     for (int r = c; r < 3; ++r) {
@@ -262,11 +280,12 @@ struct TreeValues {
   std::vector<Vec3<double>> p, h, hc;             ///< origin; body first moment; subtree sum
   std::vector<Vec6<double>> S, psi, beta, v, Iv;  ///< motion subspace; ψ; Σ_{j∈sub(k)} μ_j Ic_j S_j; twist; I v
   std::vector<Vec6<double>> vS, vIv;              ///< q̇_i v × S_i; v ×* I v
+  std::vector<Vec6<double>> betaX, Spsi;           ///< β_k + Ic_k ψ_P; S_k × ψ_P (ψ_P: the parent's ψ)
 
   explicit TreeValues(int n) {
     for (auto* x : {&R, &I, &Ic, &B}) x->assign(n, Mat3<double>{});
     for (auto* x : {&p, &h, &hc}) x->assign(n, Vec3<double>{});
-    for (auto* x : {&S, &psi, &beta, &v, &Iv, &vS, &vIv}) x->assign(n, Vec6<double>{});
+    for (auto* x : {&S, &psi, &beta, &v, &Iv, &vS, &vIv, &betaX, &Spsi}) x->assign(n, Vec6<double>{});
   }
   void compute(const std::vector<TreeJoint>& joints, const double* q, const double* dq, const double* mu) {
     const int n = static_cast<int>(joints.size());
@@ -291,6 +310,10 @@ struct TreeValues {
     for (int k = n - 1; k >= 0; --k) {
       beta[k] += mu[k] * applyInertia(joints[k].subtreeMass, hc[k], Ic[k], S[k]);
       const int par = joints[k].parent;
+      Vec6<double> psiP;
+      if (par != kWorld) psiP = psi[par];
+      betaX[k] = beta[k] + applyInertia(joints[k].subtreeMass, hc[k], Ic[k], psiP);
+      Spsi[k] = crossMotion(S[k], psiP);
       if (par == kWorld) continue;
       Ic[par] += Ic[k];
       hc[par] += hc[k];
@@ -301,7 +324,13 @@ struct TreeValues {
 
 /// What one block of directions reads and writes.
 struct BlockIO {
-  int a0 = 0, lanes = 0, n = 0, N = 0;
+  int lanes = 0, n = 0, N = 0;
+  /// The block's directions: joints dirs[0 … lanes − 1] (q or q̇ coordinates of the same index),
+  /// all in one component (a subtree hanging from the world), whose joints are members[0 … count − 1]
+  /// in increasing order (parents first) and whose z entries are zcols[0 … zcount − 1] (its q, its
+  /// q̇, every u). Seed position: dirs[l] = members[first + l].
+  const int *dirs = nullptr, *members = nullptr, *zcols = nullptr;
+  int first = 0, count = 0, zcount = 0;
   const double *q = nullptr, *dq = nullptr, *qdd = nullptr, *mu = nullptr;
   const Eigen::MatrixXd* Y = nullptr;  ///< n×N
   Eigen::MatrixXd* rows = nullptr;     ///< N×2n
@@ -331,24 +360,44 @@ struct TreePass {
     for (auto* x : {&S, &v, &a, &psi, &fin, &H, &betaMu}) x->assign(n, Vec6<T>{});
   }
 
+  /// Joint k's entries of the gradient, where a joint of sub(k) moves: −∂φ̃/∂q_k, −∂φ̃/∂q̇_k and
+  /// (M μ)_k from the subtree sums at k, and β, γ updated for the parent's sums. X: lanes where k
+  /// moves, plain values where only joints below it do (fewer lane products).
+  template <class X>
+  TRELLIS_LANES_INLINE void busyTerms(int k, double mk, double muk, const Vec6<X>& Sk, const Vec6<X>& vP,
+                                      const Vec6<X>& psiP, const Vec6<T>& aPg) {
+    const Vec6<T> IcS = applyInertia(mk, ch[k], cI[k], Sk);  // β_k
+    betaMu[k] += muk * IcS;
+    gammaMu[k] += muk * dPlusCrossAngular(H[k], B[k], Sk);
+    const Vec6<X> w = crossMotion(Sk, vP);
+    const Vec6<T> c = crossMotion(Sk, aPg) - crossMotion(w, vP);
+    // With δF_q = S ×* F − Ic c + (D w − w ×* H) and δF_v = −(D S − S ×* H) − 2 Ic w (the
+    // columns of linearization.cpp) contracted with ψ_P, moved onto the other factor: Ic is
+    // symmetric (6×6), (m ×* f)·x = −f·(m × x), and ψ_P · (D x − x ×* H) = x_ω · Z with
+    // Z = D ψ_P + ψ_P ×* H's angular part (dPlusCrossAngular; B symmetric). So one Ic ψ_P and
+    // one Z serve gq, gv and (M μ)_k.
+    const Vec6<T> Bm = betaMu[k] + applyInertia(mk, ch[k], cI[k], psiP);
+    const Vec3<T> Gm = gammaMu[k] + dPlusCrossAngular(H[k], B[k], psiP);
+    gq[k] = dot(c, Bm) - dot(w.a, Gm) + dot(crossMotion(Sk, psiP), fin[k]);
+    gv[k] = 2.0 * dot(w, Bm) + dot(Sk.a, Gm);
+    mmu[k] = dot(Sk, Bm);
+  }
+
   /// The gradient pass of the header at the seeded q, q̇, q̈: one sweep outwards (kinematics,
   /// world inertias, per-body terms), one inwards (subtree sums and, as each joint's subtree is
   /// complete, its two gradient entries and (M μ)_k).
   TRELLIS_LANES_INLINE void run(const std::vector<TreeJoint>& joints, const Vec3<double>& gravity, const double* mu,
-                                const TreeValues& cv) {
-    const int n = static_cast<int>(joints.size());
-    for (int i = 0; i < n; ++i) {
+                                const TreeValues& cv, const int* members, int count) {
+    for (int idx = 0; idx < count; ++idx) {
+      const int i = members[idx];
       const TreeJoint& jc = joints[i];
       Vec6<T> aP;
       if (jc.parent != kWorld) aP = a[jc.parent];
       if (!moving[i]) {
         // Nothing above joint i moves in these directions: its pose, twist, inertia and momenta
-        // are the plain values; only a (through q̈) and the force moving it carry tangents.
-        lift(cv.R[i], R[i]);
-        lift(cv.p[i], p[i]);
-        lift(cv.S[i], S[i]);
-        lift(cv.v[i], v[i]);
-        lift(cv.psi[i], psi[i]);
+        // are the plain values; only a (through q̈) and the force moving it carry tangents. (Its
+        // pose, twist and ψ are lifted below if a child moves; the sums start from its inertia,
+        // momentum and B.)
         lift(cv.I[i], cI[i]);
         lift(cv.h[i], ch[i]);
         lift(cv.Iv[i], H[i]);
@@ -360,6 +409,13 @@ struct TreePass {
         betaMu[i] = Vec6<T>{};
         gammaMu[i] = Vec3<T>{};
         continue;
+      }
+      if (jc.parent != kWorld && !moving[jc.parent]) {
+        const int par = jc.parent;
+        lift(cv.R[par], R[par]);
+        lift(cv.p[par], p[par]);
+        lift(cv.v[par], v[par]);
+        lift(cv.psi[par], psi[par]);
       }
       placeJoint(jc, R.data(), p.data(), q[i], R[i], p[i], S[i]);
       Vec6<T> vP, psiP;
@@ -385,10 +441,10 @@ struct TreePass {
     }
 
     const Vec6<double> g{gravity, Vec3<double>{}};
-    for (int k = n - 1; k >= 0; --k) {
+    for (int idx = count - 1; idx >= 0; --idx) {
       // The subtree sums at k are complete (its descendants have larger indices).
+      const int k = members[idx];
       const TreeJoint& jc = joints[k];
-      const double mk = jc.subtreeMass;
       Vec6<T> aPg = jc.parent == kWorld ? Vec6<T>{} - g : a[jc.parent] - g;
       if (!busy[k]) {
         // Nothing in sub(k) moves with the block's directions: S_k, the parent's v and ψ, and the
@@ -396,35 +452,30 @@ struct TreePass {
         // forces move (through q̈). So −∂φ̃/∂q̇_k and (M μ)_k have no tangents, and of −∂φ̃/∂q_k
         // only c = S_k × (a_λ − g) and the S_k ×* F_k − Ic c part of δF_k move (tangents only:
         // gq's value here is not −∂φ̃/∂q_k, and only tangents are read).
-        const Vec6<double>& S0 = cv.S[k];
-        Vec6<double> psiP0;
-        if (jc.parent != kWorld) psiP0 = cv.psi[jc.parent];
-        const Vec6<T> c = crossMotion(S0, aPg);
-        const Vec6<T> dFq = crossForce(S0, fin[k]) - applyInertia(mk, cv.hc[k], cv.Ic[k], c);
-        gq[k] = dot(c, cv.beta[k]) - dot(psiP0, dFq);
+        // (−ψ_P · (S ×* F − Ic c) = (S × ψ_P) · F + (Ic ψ_P) · c: TreeValues::Spsi, betaX.)
+        const Vec6<T> c = crossMotion(cv.S[k], aPg);
+        gq[k] = dot(c, cv.betaX[k]) + dot(cv.Spsi[k], fin[k]);
         gv[k] = T(0.0);
         mmu[k] = T(0.0);
         // The value of β that the parent's sums read. (γ's is not needed: no joint above k moves,
         // and at a joint that does not move, S and w have no tangents, so γ enters its rows
         // only through γ's tangents.)
         lift(cv.beta[k], betaMu[k]);
-      } else {
-        const Vec6<T>& Sk = S[k];
+      } else if (moving[k]) {
         Vec6<T> vP, psiP;
         if (jc.parent != kWorld) {
           vP = v[jc.parent];
           psiP = psi[jc.parent];
         }
-        const Vec6<T> IcS = applyInertia(mk, ch[k], cI[k], Sk);  // β_k
-        betaMu[k] += mu[k] * IcS;
-        gammaMu[k] += mu[k] * dPlusCrossAngular(H[k], B[k], Sk);
-        const Vec6<T> w = crossMotion(Sk, vP);
-        const Vec6<T> c = crossMotion(Sk, aPg) - crossMotion(w, vP);
-        const Vec6<T> dFq = crossForce(Sk, fin[k]) - applyInertia(mk, ch[k], cI[k], c) + dMinusCross(H[k], B[k], w);
-        const Vec6<T> dFv = -1.0 * dMinusCross(H[k], B[k], Sk) - 2.0 * applyInertia(mk, ch[k], cI[k], w);
-        gq[k] = dot(c, betaMu[k]) - dot(w.a, gammaMu[k]) - dot(psiP, dFq);
-        gv[k] = 2.0 * dot(w, betaMu[k]) + dot(Sk.a, gammaMu[k]) - dot(psiP, dFv);
-        mmu[k] = dot(Sk, applyInertia(mk, ch[k], cI[k], psiP) + betaMu[k]);
+        busyTerms(k, jc.subtreeMass, mu[k], S[k], vP, psiP, aPg);
+      } else {
+        // Joints below k move, k and its ancestors do not: S_k, v_P and ψ_P are plain values.
+        Vec6<double> vP, psiP;
+        if (jc.parent != kWorld) {
+          vP = cv.v[jc.parent];
+          psiP = cv.psi[jc.parent];
+        }
+        busyTerms(k, jc.subtreeMass, mu[k], cv.S[k], vP, psiP, aPg);
       }
       const int par = jc.parent;
       if (par == kWorld) continue;
@@ -438,47 +489,57 @@ struct TreePass {
     }
   }
 
-  /// The block of q directions a0 … a0 + lanes − 1 (< n): seeds (e_a, Y e_a), the pass, then the
-  /// rows ∇²φ e_a = −ġ_z + Yᵀ (d/dε M μ) (the u entries of ġ are zero: Q is affine in u here).
+  /// The block of q directions io.dirs (one component): seeds (e_a, Y e_a), the pass over the
+  /// component's joints, then the rows ∇²φ e_a = −ġ_z + Yᵀ (d/dε M μ) (the u entries of ġ are
+  /// zero: Q is affine in u here). Entries outside the component are zero: no joint of another
+  /// component moves along e_a, and q̈ of another component does not depend on the component's q,
+  /// q̇ (M is block diagonal by component, and the forces the tree pass covers act on one
+  /// coordinate each), so those rows of Y are zero and are not read.
   TRELLIS_LANES_INLINE void block(const BlockIO& io) {
-    const int n = io.n, N = io.N, a0 = io.a0;
+    const int n = io.n, N = io.N;
     const Eigen::MatrixXd& Y = *io.Y;
-    for (int i = 0; i < n; ++i) {
+    for (int idx = 0; idx < io.count; ++idx) {
+      const int i = io.members[idx];
       const int par = (*io.joints)[i].parent;
-      moving[i] = (i >= a0 && i < a0 + io.lanes) || (par != kWorld && moving[par]);
+      const int lane = idx - io.first;  // the lane seeded at joint i, if any
+      moving[i] = (lane >= 0 && lane < io.lanes) || (par != kWorld && moving[par]);
       busy[i] = moving[i];
       q[i] = T(io.q[i]);
       dq[i] = T(io.dq[i]);
       qdd[i] = T(io.qdd[i]);
       for (int l = 0; l < io.lanes; ++l) {
-        q[i].d[l] = a0 + l == i ? 1.0 : 0.0;
-        qdd[i].d[l] = Y(i, a0 + l);
+        q[i].d[l] = l == lane ? 1.0 : 0.0;
+        qdd[i].d[l] = Y(i, io.dirs[l]);
       }
     }
-    for (int k = n - 1; k >= 0; --k) {
+    for (int idx = io.count - 1; idx >= 0; --idx) {
+      const int k = io.members[idx];
       const int par = (*io.joints)[k].parent;
       if (par != kWorld && busy[k]) busy[par] = 1;
     }
-    run(*io.joints, io.gravity, io.mu, *io.values);
+    run(*io.joints, io.gravity, io.mu, *io.values, io.members, io.count);
     Eigen::MatrixXd& rows = *io.rows;
     for (int l = 0; l < io.lanes; ++l) {
-      double* col = rows.data() + static_cast<Eigen::Index>(a0 + l) * N;
-      for (int k = 0; k < n; ++k) {
+      double* col = rows.data() + static_cast<Eigen::Index>(io.dirs[l]) * N;
+      std::fill(col, col + N, 0.0);
+      for (int idx = 0; idx < io.count; ++idx) {
+        const int k = io.members[idx];
         col[k] = -gq[k].d[l];
         col[n + k] = -gv[k].d[l];
       }
-      for (int b = 2 * n; b < N; ++b) col[b] = 0.0;
     }
-    for (int b = 0; b < N; ++b) {
+    for (int zi = 0; zi < io.zcount; ++zi) {
+      const int b = io.zcols[zi];
       LaneChunk<W> acc[L / W] = {};
       const double* y = Y.data() + static_cast<Eigen::Index>(b) * n;
-      for (int k = 0; k < n; ++k) {
+      for (int idx = 0; idx < io.count; ++idx) {
+        const int k = io.members[idx];
         const double yk = y[k];
         for (int c = 0; c < L / W; ++c) acc[c] += yk * TRELLIS_LANES_AT_C(W, mmu[k].d + c * W);
       }
       double sum[L];
       for (int c = 0; c < L / W; ++c) TRELLIS_LANES_AT(W, sum + c * W) = (acc[c]);
-      for (int l = 0; l < io.lanes; ++l) rows(b, a0 + l) += sum[l];
+      for (int l = 0; l < io.lanes; ++l) rows(b, io.dirs[l]) += sum[l];
     }
   }
 };
@@ -495,38 +556,48 @@ struct VelocityPass {
   std::vector<Mat3<T>> B;
   std::vector<Vec3<T>> gammaMu;
   std::vector<Vec6<T>> v, H;
+  std::vector<char> moving;  ///< whether joint i or an ancestor is one of the block's directions
 
   explicit VelocityPass(int n) {
     for (auto* x : {&dq, &gv}) x->assign(n, T{});
     B.assign(n, Mat3<T>{});
     gammaMu.assign(n, Vec3<T>{});
     for (auto* x : {&v, &H}) x->assign(n, Vec6<T>{});
+    moving.assign(n, 0);
   }
 
   /// TreePass::run's terms of −∂φ̃/∂q̇ with everything that does not depend on q̇ taken from c.
-  TRELLIS_LANES_INLINE void run(const std::vector<TreeJoint>& joints, const TreeValues& c, const double* mu) {
-    const int n = static_cast<int>(joints.size());
-    for (int i = 0; i < n; ++i) {
+  /// Only tangents are read, and the twists, momenta, B and w are linear in q̇: where no joint at
+  /// or above i is one of the block's directions their tangents are zero, so they are set to
+  /// zero rather than computed (only their values would differ, and no value is read).
+  TRELLIS_LANES_INLINE void run(const std::vector<TreeJoint>& joints, const TreeValues& c, const double* mu,
+                                const int* members, int count) {
+    for (int idx = 0; idx < count; ++idx) {
+      const int i = members[idx];
       const TreeJoint& jc = joints[i];
+      gammaMu[i] = Vec3<T>{};
+      if (!moving[i]) {
+        v[i] = Vec6<T>{};
+        H[i] = Vec6<T>{};
+        B[i] = Mat3<T>{};
+        continue;
+      }
       v[i] = dq[i] * c.S[i];
       if (jc.parent != kWorld) v[i] += v[jc.parent];
       H[i] = applyInertia(jc.mass, c.h[i], c.I[i], v[i]);
       momentumBlock(c.I[i], c.h[i], v[i], B[i]);
-      gammaMu[i] = Vec3<T>{};
     }
-    for (int k = n - 1; k >= 0; --k) {
+    for (int idx = count - 1; idx >= 0; --idx) {
+      const int k = members[idx];
       const TreeJoint& jc = joints[k];
       const Vec6<double>& Sk = c.S[k];
-      Vec6<T> vP;
       Vec6<double> psiP;
-      if (jc.parent != kWorld) {
-        vP = v[jc.parent];
-        psiP = c.psi[jc.parent];
-      }
+      if (jc.parent != kWorld) psiP = c.psi[jc.parent];
       gammaMu[k] += mu[k] * dPlusCrossAngular(H[k], B[k], Sk);
-      const Vec6<T> w = crossMotion(Sk, vP);
-      const Vec6<T> dFv = -1.0 * dMinusCross(H[k], B[k], Sk) - 2.0 * applyInertia(jc.subtreeMass, c.hc[k], c.Ic[k], w);
-      gv[k] = 2.0 * dot(w, c.beta[k]) + dot(Sk.a, gammaMu[k]) - dot(psiP, dFv);
+      // TreePass::run's gv, with Ic ψ_P plain (in betaX); w = S_k × v_P has no tangents where the
+      // parent does not move.
+      gv[k] = dot(Sk.a, gammaMu[k] + dPlusCrossAngular(H[k], B[k], psiP));
+      if (jc.parent != kWorld && moving[jc.parent]) gv[k] += 2.0 * dot(crossMotion(Sk, v[jc.parent]), c.betaX[k]);
       const int par = jc.parent;
       if (par == kWorld) continue;
       H[par] += H[k];
@@ -535,20 +606,27 @@ struct VelocityPass {
     }
   }
 
-  /// The block of q̇ directions n + a0 … n + a0 + lanes − 1: their (q̇, q̇) rows, the (u, q̇) rows
-  /// zero (computeRows fills the (q, q̇) rows once the q blocks are done).
+  /// The block of q̇ directions n + io.dirs (one component): their (q̇, q̇) rows, zero outside the
+  /// component, the (u, q̇) rows zero (computeRows fills the (q, q̇) rows once the q blocks are done).
   TRELLIS_LANES_INLINE void block(const BlockIO& io) {
-    const int n = io.n, N = io.N, a0 = io.a0;
-    for (int i = 0; i < n; ++i) {
+    const int n = io.n, N = io.N;
+    for (int idx = 0; idx < io.count; ++idx) {
+      const int i = io.members[idx];
+      const int lane = idx - io.first;
+      const int par = (*io.joints)[i].parent;
+      moving[i] = (lane >= 0 && lane < io.lanes) || (par != kWorld && moving[par]);
       dq[i] = T(io.dq[i]);
-      for (int l = 0; l < io.lanes; ++l) dq[i].d[l] = a0 + l == i ? 1.0 : 0.0;
+      for (int l = 0; l < io.lanes; ++l) dq[i].d[l] = l == lane ? 1.0 : 0.0;
     }
-    run(*io.joints, *io.values, io.mu);
+    run(*io.joints, *io.values, io.mu, io.members, io.count);
     Eigen::MatrixXd& rows = *io.rows;
     for (int l = 0; l < io.lanes; ++l) {
-      double* col = rows.data() + static_cast<Eigen::Index>(n + a0 + l) * N;
-      for (int k = 0; k < n; ++k) col[n + k] = -gv[k].d[l];
-      for (int b = 2 * n; b < N; ++b) col[b] = 0.0;
+      double* col = rows.data() + static_cast<Eigen::Index>(n + io.dirs[l]) * N;
+      std::fill(col, col + N, 0.0);
+      for (int idx = 0; idx < io.count; ++idx) {
+        const int k = io.members[idx];
+        col[n + k] = -gv[k].d[l];
+      }
     }
   }
 };
@@ -612,6 +690,16 @@ struct TreeSecondOrderImpl {
   PassSet<2> generic;
   PassSet<4> wide;
   TreeValues values{0};
+  /// The components (subtrees hanging from the world): their joints in increasing order, their z
+  /// entries (q, q̇, then every u), and the blocks of up to 16 directions each, within one component.
+  struct Component {
+    std::vector<int> members, zcols;
+  };
+  struct Block {
+    int component = 0, first = 0, lanes = 0;
+  };
+  std::vector<Component> components;
+  std::vector<Block> blocks;
 };
 
 bool treeSecondOrderApplies(const Model& model) {
@@ -636,6 +724,7 @@ TreeSecondOrder::TreeSecondOrder(const Model& model) : impl_(std::make_unique<Tr
     jc.axis = j.axis;
     jc.revolute = j.revolute;
     jc.R0 = mat3(j.R0);
+    jc.R0identity = j.R0 == Eigen::Matrix3d::Identity();
     jc.p0 = vec3(j.p0);
     jc.inertia = mat3(j.inertiaAtOrigin);
     jc.firstMoment = vec3(j.firstMoment);
@@ -647,8 +736,27 @@ TreeSecondOrder::TreeSecondOrder(const Model& model) : impl_(std::make_unique<Tr
   s.gravity = vec3(model.gravity());
   s.avx2 = kHaveAvx2Build && secondOrderSweepsUseAvx2();
   s.values = TreeValues(s.n);
-  for (int a0 = 0; a0 < s.n; a0 += 16) {
-    const int L = blockWidth(std::min(16, s.n - a0));
+  std::vector<int> root(s.n);
+  for (int i = 0; i < s.n; ++i) {
+    const int par = s.joints[i].parent;
+    if (par == kWorld) {
+      root[i] = static_cast<int>(s.components.size());
+      s.components.emplace_back();
+    } else {
+      root[i] = root[par];
+    }
+    s.components[root[i]].members.push_back(i);
+  }
+  for (int c = 0; c < static_cast<int>(s.components.size()); ++c) {
+    TreeSecondOrderImpl::Component& comp = s.components[c];
+    comp.zcols = comp.members;
+    for (const int k : comp.members) comp.zcols.push_back(s.n + k);
+    for (int b = 2 * s.n; b < s.N; ++b) comp.zcols.push_back(b);
+    const int count = static_cast<int>(comp.members.size());
+    for (int first = 0; first < count; first += 16) s.blocks.push_back({c, first, std::min(16, count - first)});
+  }
+  for (const TreeSecondOrderImpl::Block& blk : s.blocks) {
+    const int L = blockWidth(blk.lanes);
     if (s.avx2) {
       s.wide.positions.make(L, s.n);
       s.wide.velocities.make(L, s.n);
@@ -680,11 +788,18 @@ void TreeSecondOrder::computeRows(const Model&, const Eigen::VectorXd& q, const 
   io.joints = &s.joints;
   io.values = &s.values;
   io.gravity = s.gravity;
-  // The q directions (blocks of TreePass), then the q̇ directions (blocks of VelocityPass).
+  // The q directions (blocks of TreePass), then the q̇ directions (blocks of VelocityPass), each
+  // block within one component.
   for (const bool velocity : {false, true})
-    for (int a0 = 0; a0 < n; a0 += 16) {
-      io.a0 = a0;
-      io.lanes = std::min(16, n - a0);
+    for (const TreeSecondOrderImpl::Block& blk : s.blocks) {
+      const TreeSecondOrderImpl::Component& comp = s.components[blk.component];
+      io.members = comp.members.data();
+      io.count = static_cast<int>(comp.members.size());
+      io.zcols = comp.zcols.data();
+      io.zcount = static_cast<int>(comp.zcols.size());
+      io.first = blk.first;
+      io.dirs = comp.members.data() + blk.first;
+      io.lanes = blk.lanes;
       const int L = blockWidth(io.lanes);
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
       if (s.avx2) {

@@ -13,6 +13,11 @@
 //   ∇²φ e_a = −ġ_z + Yᵀ (d/dε M μ),  φ(z') = φ̃(z', y + Y (z' − z)),
 // exactly (no step), in O(n) per block of directions: O(n²) for all 2n, like one linearization.
 //
+// The blocks never mix components (the subtrees hanging from the world): M is block diagonal by
+// component and the forces covered here act on one coordinate each, so a direction of one
+// component moves nothing in another (its Y entries there are zero), and a block runs over the
+// joints of its own component only (a hand of five fingers: five blocks of 4 lanes over 4 joints
+// each, not 16 lanes over all 20 joints).
 // The q and the q̇ directions run in blocks of their own (16 lanes, the last 4, 8, 12 or 16). The
 // kinematics, inertias, ψ and M μ do not depend on q̇, and −∂r/∂q̇ holds no q̈, so a q̇ block carries
 // tangents only on twists and momenta and gives the (q̇, q̇) rows; the (q, q̇) rows are the

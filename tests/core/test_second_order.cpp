@@ -385,6 +385,18 @@ TestSystem branchedTree(std::uint32_t seed, int copies = 1) {
 /// A 3D chain of `links` joints cycling through every driven kind (rz, ry, tx, r_axis, rx, t_axis),
 /// each body offset from its joint, with full inertias: past 16 joints, a block of q directions
 /// holds moving joints below ones that do not move with it.
+/// The driven joint kinds in turn: rz, ry, tx, r_axis, rx, t_axis (k mod 6) on coordinate q.
+Transform drivenKind(int k, const std::string& q) {
+  switch (k % 6) {
+    case 1: return Transform::ry(q);
+    case 2: return Transform::tx(q);
+    case 3: return Transform::rotAxis(Eigen::Vector3d(0.3, -0.5, 0.8).normalized(), q);
+    case 4: return Transform::rx(q);
+    case 5: return Transform::transAxis(Eigen::Vector3d(0.2, 0.9, -0.4).normalized(), q);
+    default: return Transform::rz(q);
+  }
+}
+
 TestSystem spatialChain(int links, std::uint32_t seed) {
   std::mt19937 rng(seed);
   SystemBuilder s;
@@ -393,16 +405,7 @@ TestSystem spatialChain(int links, std::uint32_t seed) {
     const std::string index = std::to_string(k);
     const std::string joint = std::string("joint").append(index), body = std::string("body").append(index);
     const std::string q = std::string("q").append(index);
-    Transform t = Transform::rz(q);
-    switch (k % 6) {
-      case 1: t = Transform::ry(q); break;
-      case 2: t = Transform::tx(q); break;
-      case 3: t = Transform::rotAxis(Eigen::Vector3d(0.3, -0.5, 0.8).normalized(), q); break;
-      case 4: t = Transform::rx(q); break;
-      case 5: t = Transform::transAxis(Eigen::Vector3d(0.2, 0.9, -0.4).normalized(), q); break;
-      default: break;
-    }
-    s.frame(joint, parent, t);
+    s.frame(joint, parent, drivenKind(k, q));
     s.frame(body, joint, Transform::constSE3(se3(0.3, {0.2, 1.0, 0.4}, {0.1, -0.25, 0.2})), Mass{0.3, randomInertia(rng)});
     parent = body;
   }
@@ -412,13 +415,44 @@ TestSystem spatialChain(int links, std::uint32_t seed) {
   return std::move(s).finish();
 }
 
+/// Three subtrees hanging from the world (frames added in turn): a 3D chain of 18 joints (two
+/// blocks of directions), a 3-joint chain and a 5-joint tree with two branches; every driven
+/// joint kind, full inertias, a spring, damping and forces on coordinates of each. The tree pass
+/// runs its blocks per subtree.
+TestSystem threeSubtrees(std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  SystemBuilder s;
+  auto link = [&](const std::string& name, const std::string& parent, int k) {
+    s.frame(name, parent, drivenKind(k, std::string("q_").append(name)));
+    s.frame(name + "_body", name, Transform::constSE3(se3(0.2 * k, {0.2, 0.8, 0.3}, {0.1, -0.2, 0.15})),
+            Mass{0.2 + 0.05 * (k % 4), randomInertia(rng)});
+    return name + "_body";
+  };
+  std::string a = "world", b = "world", cRoot;
+  for (int k = 0; k < 18; ++k) {
+    a = link(std::string("a").append(std::to_string(k)), a, k);
+    if (k < 3) b = link(std::string("b").append(std::to_string(k)), b, k + 2);
+    if (k == 0) cRoot = link("c0", "world", 3);
+    if (k == 1) link("c1", cRoot, 1);  // two branches on c0: c1, and c2 → c3 → c4
+    if (k == 2) link("c2", cRoot, 5);
+    if (k == 3) link("c3", "c2_body", 0);
+    if (k == 4) link("c4", "c3_body", 2);
+  }
+  s.b.addGravity(Eigen::Vector3d(0.3, -9.6, 1.2));
+  s.b.addDamping(0.05);
+  for (const char* q : {"q_a0", "q_a17", "q_b1", "q_c2", "q_c4"}) s.b.addConfigForce(q, std::string("u_").append(q));
+  s.b.addConfigSpring("q_c1", 3.0, 0.2);
+  return std::move(s).finish();
+}
+
 TEST_CASE("The contraction's tree pass against the recording and the tensors", "[second_order][tree]") {
   // Where the model holds only the tree, gravity and forces on coordinates, the workspace takes
   // the tree pass (second_order_tree.hpp); secondOrderForceTape makes it record the tape instead.
   // Both, and the sum of the hyper-dual tensors, agree to 1e-10 of the largest entry (three
   // computations that share no code beyond the KKT factor), at random states and weights, on
   // every block shape (the q and the q̇ directions in blocks of their own, 16 wide, the last 4, 8,
-  // 12 or 16: n = 2, 3, 10, 13, 18 = 16 + 2, 8, 26 = 16 + 10, 20 = 16 + 4) and every joint kind, in the
+  // 12 or 16: n = 2, 3, 10, 13, 18 = 16 + 2, 8, 26 = 16 + 10, 20 = 16 + 4), blocks per subtree hanging
+  // from the world (branchedTree(41): two; threeSubtrees: 18 = 16 + 2, 3 and 5) and every joint kind, in the
   // baseline build and (where the CPU has it) the AVX2+FMA build of the pass.
   struct ForceTape {  // restores the automatic choice even when a check fails
     explicit ForceTape(bool force) { detail::secondOrderForceTape(force); }
@@ -433,6 +467,14 @@ TEST_CASE("The contraction's tree pass against the recording and the tensors", "
   systems.push_back(branchedTree(41));
   systems.push_back(branchedTree(43, 3));
   systems.push_back(spatialChain(20, 47));
+  systems.push_back(threeSubtrees(53));
+  {  // the forest: three subtrees from the world, of 18 (two blocks), 3 and 5 joints
+    const Model& forest = systems.back().model;
+    int roots = 0;
+    for (const Joint& j : forest.joints()) roots += j.parent == kWorld ? 1 : 0;
+    REQUIRE(roots == 3);
+    REQUIRE(forest.nq() == 26);
+  }
   for (const TransformType t : {TransformType::kRx, TransformType::kTy, TransformType::kRotAxis, TransformType::kTransAxis})
     systems.push_back(transformChain(t));
   for (const bool generic : {false, true}) {

@@ -82,3 +82,22 @@ TEST_CASE("No allocation after warm-up: second derivatives on the tree pass", "[
   checkNoAllocation(planarChain(18, 0.5, 1.0).model, 75);
   checkNoAllocation(transformChain(TransformType::kRotAxis).model, 76);
 }
+
+TEST_CASE("No allocation after warm-up: second derivatives on the tree pass of a forest", "[no_malloc][second_order]") {
+  // Three chains hanging from the world (3, 5 and 18 joints): the tree pass's blocks per
+  // subtree, the 18-joint one in two blocks of each pass.
+  SystemBuilder s;
+  for (const int links : {3, 5, 18}) {
+    std::string parent = "world";
+    const std::string prefix = std::string("c").append(std::to_string(links)).append("_");
+    for (int k = 0; k < links; ++k) {
+      const std::string joint = std::string(prefix).append(std::to_string(k));
+      s.frame(joint, parent, k % 2 == 0 ? Transform::rz(std::string("q_").append(joint)) : Transform::rx(std::string("q_").append(joint)));
+      s.frame(std::string(joint).append("_bob"), joint, Transform::ty(-0.4), Mass{0.2, Eigen::Matrix3d::Identity() * 1e-3});
+      parent = std::string(joint).append("_bob");
+    }
+    s.b.addConfigForce(std::string("q_").append(prefix).append("0"), std::string("u_").append(prefix));
+  }
+  s.b.addGravity(Eigen::Vector3d(0.0, -9.81, 0.0));
+  checkNoAllocation(std::move(s).finish().model, 77);
+}

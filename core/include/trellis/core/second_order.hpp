@@ -36,14 +36,14 @@
 //    with μ give ∂φ/∂z in O(n), and ∂φ/∂q̈ = M μ also; that O(n) pass run on numbers that carry
 //    16 tangents (seeded with e_a and Y e_a) gives 16 rows ∇²φ e_a = ∂_a(∇_z φ) + Yᵀ ∂_a(M μ).
 //    O(n) per block of 16 directions over spatial quantities (6-vectors, 3×3 inertias), not
-//    scalar nodes (core/src/second_order_tree.hpp); q̇ directions carry tangents only on twists
-//    and momenta, and what a block of q directions does not move keeps its plain values.
-//    Callgrind, instructions per call against one exact linearization (bench/README.md): tree
-//    pass: planar 10-chain 3.7×, 3D 40-chain 4.2×, hand-like tree (n = 20) 4.8× (the recording on
-//    the same models: 5.8×, 14×, 15×); recording: hand-like tree with a fingertip point 13×, hand
-//    scene 10×. Issue 30's target of 4× is not reached on the last four: in a block of q
-//    directions every composite sum of a chain carries 16 tangents, and the constraint rows and
-//    point-force elements run the recording.
+//    scalar nodes (core/src/second_order_tree.hpp); a block holds directions of one subtree
+//    hanging from the world and runs over that subtree's joints only; q̇ directions carry tangents
+//    only on twists and momenta, and what a block of q directions does not move keeps its plain
+//    values. Callgrind, instructions per call against one exact linearization (bench/README.md):
+//    tree pass: planar 10-chain 3.55×, 3D 40-chain 3.86×, hand-like tree (n = 20) 2.54× (the
+//    recording on the same models: 5.8×, 14×, 15×); recording: hand-like tree with a fingertip
+//    point 13×, hand scene 10×. Issue 30's target of 4× is not reached on the last two: the
+//    constraint rows and point-force elements run the recording.
 // Every input enters F linearly (configuration forces, body wrench entries, tendon tensions) and K
 // does not depend on u, so G[e_uj, e_uk] = 0 and ∂²q̈/∂u∂u = 0 exactly: those pairs (and, in the
 // contraction, the u directions, which follow by symmetry) are not evaluated.
