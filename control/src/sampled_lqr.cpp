@@ -7,10 +7,12 @@
 #include "trellis/core/detail/report_json.hpp"
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 
 #include <algorithm>
 #include <cmath>
+#include <complex>
 #include <cstdlib>
 #include <limits>
 #include <optional>
@@ -620,11 +622,27 @@ class MagnusIntegrator {
 /// the unfiltered part is what a stiff transient inflates. One 3nx LU and one nx×nx LU per step
 /// (the step-doubling estimate it replaces cost three of the first and 8 linearizations). Steps
 /// are carried across intervals (a one-step method restarts for free) and end on the breakpoints.
+///
+/// The restart transient, split off exactly: Y restarts from [I 0] in every interval, which
+/// brings the fast modes of a stiff A back in full (|λ| ~ 1.4e3 on the 6-link chain: steps of
+/// ~2e-5 s growing ~13 % per step, ~40 per 10 ms interval). The twin Ẏ_f = A_f Y_f + [0 B_f],
+/// frozen at the interval's start (A_f = A(t_k), and Q_f, R_f for its cost), has the same
+/// transient and exact blocks E_f = e^{M_f h}, W_f (BlockExponential, once per interval). The
+/// same steps integrate both systems; the result is
+///   Y = E_f [I 0] + (Y_Radau − Y_f,Radau),  W = W_f + (W_Radau − W_f,Radau),
+/// and the step control measures the error of the difference (the embedded estimate of the pair,
+/// linear in the stages: err_Y − err_Y,f with their own filters (I − γ0δA_n)⁻¹, (I − γ0δA_f)⁻¹).
+/// Near t_k, where the transient lives, A − A_f = O(τ): the two solutions' errors cancel to that
+/// order and the difference is smooth, so the first steps may be long; where A(t) does not move,
+/// the difference is zero and one step per interval is exact. The twin's step costs no
+/// linearization: with its constant A_f the stage system decouples on a = T diag(γ0, μ, μ̄) T⁻¹
+/// into one real and one complex nx×nx solve (the real one is the estimate's I − γ0δA_f).
 class RadauIntegrator {
  public:
   RadauIntegrator(Discretizer& s, double rtol, long maxSteps)
       : s_(s), nx_(s.nx), nu_(s.nu), c_(s.nx + s.nu), rtol_(rtol),
-        M_(3 * s.nx, 3 * s.nx), rhs_(3 * s.nx, s.nx + s.nu), lu_(3 * s.nx), luErr_(s.nx) {
+        M_(3 * s.nx, 3 * s.nx), rhs_(3 * s.nx, s.nx + s.nu), lu_(3 * s.nx), luErr_(s.nx),
+        rhsF_(3 * s.nx, s.nx + s.nu), luErrF_(s.nx) {
     control.maxSteps = maxSteps;
     control.method = "Radau";
     const double r6 = std::sqrt(6.0);
@@ -637,6 +655,21 @@ class RadauIntegrator {
     nodes_[1] = (4.0 + r6) / 10.0;
     nodes_[2] = 1.0;
     gamma0_ = (6.0 + std::cbrt(81.0) - std::cbrt(9.0)) / 30.0;
+    // a = T diag(γ0, μ, μ̄) T⁻¹: the twin's stage system decouples on it (twinStep).
+    Eigen::Matrix3d am;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) am(i, j) = a_[i][j];
+    const Eigen::EigenSolver<Eigen::Matrix3d> eig(am);
+    int real = 0;
+    for (int k = 1; k < 3; ++k)
+      if (std::abs(eig.eigenvalues()(k).imag()) < std::abs(eig.eigenvalues()(real).imag())) real = k;
+    const int pos = eig.eigenvalues()((real + 1) % 3).imag() > 0.0 ? (real + 1) % 3 : (real + 2) % 3;
+    mu_ = eig.eigenvalues()(pos);
+    T_.col(0) = eig.eigenvectors().col(real).real().cast<std::complex<double>>();
+    T_.col(1) = eig.eigenvectors().col(pos);
+    T_.col(2) = eig.eigenvectors().col(pos).conjugate();
+    Tinv_ = T_.inverse();
+    stagesF_.resize(3 * nx_, c_);
     e_[0] = gamma0_ * (-13.0 - 7.0 * r6) / 3.0;
     e_[1] = gamma0_ * (-13.0 + 7.0 * r6) / 3.0;
     e_[2] = gamma0_ * (-1.0 / 3.0);
@@ -667,43 +700,82 @@ class RadauIntegrator {
     if (wRate_.size() != c_ || !(a == prevEnd_)) wRate_ = Eigen::VectorXd::Zero(c_);
     halfLength_ = 0.5 * (b - a);
     wPred_.resize(c_);
+    // The twin: the system frozen at the interval's start, its exact blocks by the exponential and
+    // its Radau solution on the same steps (class comment).
+    if (!start(a)) {
+      control.failTime = a;
+      return false;
+    }
+    Af_ = A0_;
+    Bf_ = B0_;
+    Qf_ = Q0_;
+    Rf_ = R0_;
+    Y0_ = Y;
+    W0_ = W;
+    ++exponentials;
+    zf_.setZero(c_, c_);
+    zf_.topLeftCorner(nx_, nx_) = (b - a) * Af_;
+    zf_.topRightCorner(nx_, nu_) = (b - a) * Bf_;
+    pf_.setZero(c_, c_);
+    pf_.topLeftCorner(nx_, nx_) = (0.5 * (b - a)) * (Qf_ + Qf_.transpose());
+    pf_.bottomRightCorner(nu_, nu_) = (0.5 * (b - a)) * (Rf_ + Rf_.transpose());
+    blockExponential_(zf_, pf_, nu_, Ef_, Wf_);
     bool rejected = false;
     const bool ok = control.run(a, b, breakpoints, [&](double t, double d, double& factor) {
       if (!start(t)) return StepOutcome::kFailed;
       if (!step(t, d, Y, W)) return StepOutcome::kFailed;
+      twinStep(d);
       double err = stepError(Y);
       if (err > 1.0 && (first || rejected)) {
-        // RADAU5's second estimate: f at Y_n + err_Y instead of Y_n (the filter applied twice).
+        // RADAU5's second estimate: f at Y_n + err_Y instead of Y_n (the filter applied twice),
+        // for both systems (f0_, f0f_ are not read again this step).
         rY_ = e_[0] * stages_.topRows(nx_) + e_[1] * stages_.middleRows(nx_, nx_) + e_[2] * stages_.bottomRows(nx_);
         rY_ -= (e_[0] + e_[1] + e_[2]) * Y;
-        f0_.noalias() += A0_ * errY_;  // f(t_n, Y_n + err_Y) (f0_ is not read again this step)
+        f0_.noalias() += A0_ * errY_;
         rY_ += (gamma0_ * d) * f0_;
         errY_ = luErr_.solve(rY_);
+        rY_ = e_[0] * stagesF_.topRows(nx_) + e_[1] * stagesF_.middleRows(nx_, nx_) + e_[2] * stagesF_.bottomRows(nx_);
+        rY_ -= (e_[0] + e_[1] + e_[2]) * Y0_;
+        f0f_.noalias() += Af_ * errYf_;
+        rY_ += (gamma0_ * d) * f0f_;
+        errYf_ = luErrF_.solve(rY_);
         err = stepError(Y);
       }
       factor = std::isfinite(err) ? std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.25), 0.2, 6.0) : 0.2;
-      if (!(err <= 1.0 && Yn_.allFinite() && Wn_.allFinite())) {
+      if (!(err <= 1.0 && Yn_.allFinite() && Wn_.allFinite() && YnF_.allFinite() && WnF_.allFinite())) {
         rejected = true;
-        return StepOutcome::kRejected;
+          return StepOutcome::kRejected;
       }
       rejected = false;
       Y.swap(Yn_);
       W.swap(Wn_);
+      Y0_.swap(YnF_);
+      W0_.swap(WnF_);
       // The step's last node is the next step's start: its A, B, Q, R are kept.
       t0_ = t + d;
       A0_.swap(A_[2]);
       B0_.swap(B_[2]);
       Q0_.swap(Q_[2]);
       R0_.swap(R_[2]);
-      if (first) firstStep_ = d;
+      if (first) firstStep_ = d * factor;  // the size its estimate asks for
       first = false;
       return StepOutcome::kAccepted;
     });
+    if (ok) {
+      // The exact frozen blocks plus the integrated difference: Y = E_f [I 0] + (Y − Y_f),
+      // W = W_f + (W − W_f,Radau).
+      Y -= Y0_;
+      Y += Ef_.topRows(nx_);
+      W -= W0_;
+      W += Wf_;
+    }
     symmetrize(W);
     if (ok) wRate_ = W.diagonal().cwiseMax(0.0) / (b - a);
     prevEnd_ = ok ? b : std::numeric_limits<double>::quiet_NaN();
     return ok;
   }
+
+  long exponentials = 0;  ///< the frozen systems' block exponentials (one per interval)
 
  private:
   /// A, B, Q, R at the step's start t (kept from the previous step when it ended at t).
@@ -727,8 +799,15 @@ class RadauIntegrator {
     eW_.noalias() = errY_.transpose() * QY_;
     errW_ = rW_;
     errW_ += (gamma0_ * d_) * (eW_ + eW_.transpose());
+    // The twin's estimate, subtracted: what is estimated is the error of the difference Y − Y_f
+    // (the estimate is linear in the stages: that of the pair, its Jacobian blkdiag(A_n, A_f)).
+    QY_.noalias() = Qf_ * Y0_;
+    eW_.noalias() = errYf_.transpose() * QY_;
+    errW_ -= rWf_;
+    errW_ -= (gamma0_ * d_) * (eW_ + eW_.transpose());
+    errYd_ = errY_ - errYf_;
     const double yScale = std::max(Yn_.cwiseAbs().maxCoeff(), std::numeric_limits<double>::min());
-    double err = errY_.cwiseAbs().maxCoeff() / (rtol_ * yScale);
+    double err = errYd_.cwiseAbs().maxCoeff() / (rtol_ * yScale);
     // The cost rate at t + d (Q_[2], R_[2]: the step's last node, Yn_ its end).
     QY_.noalias() = Q_[2] * Yn_;
     for (Eigen::Index j = 0; j < c_; ++j) {
@@ -801,6 +880,57 @@ class RadauIntegrator {
     return true;
   }
 
+  /// The same step of the frozen twin Ẏ_f = A_f Y_f + [0 B_f] (from Y0_, W0_ with Q_f, R_f): its
+  /// result in (YnF_, WnF_), its estimate's parts in errYf_ and rWf_. A_f is constant, so the
+  /// stage matrix is I − δ (a ⊗ A_f) and the forcing's stage sums are δ c_i [0 B_f].
+  void twinStep(double d) {
+    const Eigen::Index n = nx_;
+    for (int i = 0; i < 3; ++i) {
+      rhsF_.middleRows(i * n, n) = Y0_;
+      rhsF_.block(i * n, n, n, nu_) += (d * nodes_[i]) * Bf_;
+    }
+    // (I − δ a⊗A_f) U = r with a = T Λ T⁻¹: V = (T⁻¹⊗I) U solves (I − δλ_k A_f) V_k = Σ_i T⁻¹_ki r_i,
+    // one real nx×nx system (λ = γ0: the estimate's matrix, factored here for both) and one
+    // complex (μ; μ̄'s solution is its conjugate), U_i = T_i0 V_0 + 2 Re(T_i1 V_1).
+    errM_ = (-gamma0_ * d) * Af_;  // γ0: a's real eigenvalue
+    errM_.diagonal().array() += 1.0;
+    luErrF_.compute(errM_);
+    cM_ = (-mu_ * d) * Af_.cast<std::complex<double>>();
+    cM_.diagonal().array() += 1.0;
+    luC_.compute(cM_);
+    rY_ = Tinv_(0, 0).real() * rhsF_.topRows(n) + Tinv_(0, 1).real() * rhsF_.middleRows(n, n) +
+          Tinv_(0, 2).real() * rhsF_.bottomRows(n);
+    v0_ = luErrF_.solve(rY_);
+    cR_ = Tinv_(1, 0) * rhsF_.topRows(n).cast<std::complex<double>>();
+    cR_ += Tinv_(1, 1) * rhsF_.middleRows(n, n).cast<std::complex<double>>();
+    cR_ += Tinv_(1, 2) * rhsF_.bottomRows(n).cast<std::complex<double>>();
+    cV_ = luC_.solve(cR_);
+    for (int i = 0; i < 3; ++i) {
+      stagesF_.middleRows(i * n, n) = T_(i, 0).real() * v0_ + 2.0 * (T_(i, 1) * cV_).real();
+    }
+    rWf_.setZero(c_, c_);
+    WnF_ = W0_;
+    for (int j = 0; j < 3; ++j) {
+      const auto Yj = stagesF_.middleRows(j * n, n);
+      QY_.noalias() = Qf_ * Yj;
+      g_.noalias() = Yj.transpose() * QY_;
+      g_.bottomRightCorner(nu_, nu_) += Rf_;
+      rWf_ += (d * (e_[0] * a_[0][j] + e_[1] * a_[1][j] + e_[2] * a_[2][j])) * g_;
+      WnF_ += (d * a_[2][j]) * g_;
+    }
+    f0f_.noalias() = Af_ * Y0_;
+    f0f_.rightCols(nu_) += Bf_;
+    QY_.noalias() = Qf_ * Y0_;
+    g_.noalias() = Y0_.transpose() * QY_;
+    g_.bottomRightCorner(nu_, nu_) += Rf_;
+    rWf_ += (gamma0_ * d) * g_;
+    rY_ = e_[0] * stagesF_.topRows(n) + e_[1] * stagesF_.middleRows(n, n) + e_[2] * stagesF_.bottomRows(n);
+    rY_ -= (e_[0] + e_[1] + e_[2]) * Y0_;
+    rY_ += (gamma0_ * d) * f0f_;
+    errYf_ = luErrF_.solve(rY_);  // I − γ0δA_f, factored above
+    YnF_ = stagesF_.bottomRows(n);
+  }
+
   Discretizer& s_;
   Eigen::Index nx_, nu_, c_;
   double rtol_;
@@ -813,6 +943,17 @@ class RadauIntegrator {
   Eigen::MatrixXd A_[3], B_[3], Q_[3], R_[3], A0_, B0_, Q0_, R0_;
   Eigen::MatrixXd M_, rhs_, stages_, QY_, Yn_, Wn_, g_, f0_, rY_, rW_, errY_, errW_, errM_, eW_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_, luErr_;
+  // The frozen twin: A, B, Q, R at the interval's start, its exact blocks (Ef_, Wf_), its Radau
+  // state and step (as above).
+  Eigen::MatrixXd Af_, Bf_, Qf_, Rf_, zf_, pf_, Ef_, Wf_, Y0_, W0_, YnF_, WnF_, rhsF_, stagesF_, f0f_, errYf_,
+      rWf_, errYd_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> luErrF_;
+  Eigen::Matrix3cd T_, Tinv_;  ///< a's eigenvectors (columns: γ0, μ, μ̄) and their inverse
+  std::complex<double> mu_;
+  Eigen::MatrixXd v0_;
+  Eigen::MatrixXcd cM_, cR_, cV_;
+  Eigen::PartialPivLU<Eigen::MatrixXcd> luC_;
+  BlockExponential blockExponential_;
 };
 
 }  // namespace
@@ -1051,7 +1192,10 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
     out.steps += magnus->steps;
     out.bisections = magnus->bisections;
   }
-  if (radau) out.steps += radau->control.steps;
+  if (radau) {
+    out.steps += radau->control.steps;
+    out.exponentials += radau->exponentials;
+  }
   out.linearizations = s.linearizations;
   return out;
 }

@@ -678,6 +678,20 @@ TEST_CASE("sampled LQR: constant intervals by the exact block exponential agree 
   REQUIRE(recExp.ok());
   REQUIRE(recOde.ok());
   CHECK(gainDifference(recOde.K, recExp.K) < 1e-8);
+  // Radau (the default) integrates only the difference to the system frozen at each interval's
+  // start, whose blocks are the exact exponential: on a constant system the difference is zero to
+  // rounding, so one step per interval is exact however stiff A is (λh ≈ 139 here; integrating Y
+  // itself took hundreds of steps to resolve the fast mode's restart in every interval).
+  SampledInterval exact;
+  trellis::discretizeConstantInterval(A, B, w.Q, w.R, 0.1, exact);
+  const auto byRadau = trellis::discretizeSampledData(times, 4, 2, lin, w);
+  REQUIRE(byRadau.ok());
+  CHECK(byRadau.steps == 20);
+  CHECK(byRadau.exponentials == 20);
+  for (std::size_t k = 0; k < byRadau.intervals.size(); ++k) {
+    INFO("interval " << k);
+    CHECK(intervalDifference(byRadau.intervals[k], exact) < 1e-12);
+  }
   // exactConstantIntervals = false ignores the callback.
   trellis::SampledDiscretizationOptions off;
   off.exactConstantIntervals = false;

@@ -18,9 +18,17 @@
 // end), the error by Hairer's embedded estimate (RADAU5: the difference to a third-order
 // companion, filtered by (I − γ0δA)⁻¹ so the damped stiff part does not count; one more nx×nx
 // solve), steps carried from one interval to the next (a one-step method restarts for free) and
-// ending on the reference's knots. The estimate bounds the companion's error, far above the
-// fifth-order result's: the default rtol is kRadauRtol = 1e-6, which leaves the gains ~1e-10 of
-// the exact recursion on the stiff 6-link swing (docs/performance.md). SampledIntegrator::
+// ending on the reference's knots. The restart transient (each interval starts from [I 0], which
+// brings a stiff A's fast modes back in full) is split off exactly: the twin system frozen at the
+// interval's start (A, B, Q, R at t_k) has exact blocks by the block exponential below, and the
+// same Radau steps integrate it alongside; the result is the twin's exact blocks plus the
+// difference of the two Radau solutions, and the step control measures the error of that
+// difference (the pair's embedded estimate), which has no transient to resolve where A(t) moves
+// little over the fast modes' decay. The twin's stage system, with its constant A, decouples on
+// the eigenvectors of the method's matrix into one real and one complex nx×nx solve. The estimate
+// bounds the companion's error, far above the fifth-order result's: the default rtol is
+// kRadauRtol = 1e-6, which leaves the gains ~5e-10 of the exact recursion on the stiff 6-link
+// swing (docs/performance.md). SampledIntegrator::
 // kMagnus integrates the Van Loan system Ẋ = V(s)X, V = [[−Mᵀ, Q̃], [0, M]] (M = [[A, B], [0, 0]],
 // Q̃ = blkdiag(Q, R)), whose solution holds [[Φ_k, Γ_k], [0, I]] and the cost blocks, by a
 // sixth-order Magnus step over the whole interval (between knots): A, B, Q, R at three Gauss
@@ -108,7 +116,8 @@ enum class SampledIntegrator {
   /// |λ|δ ≲ 1 there: on the 6-link chain's swing ~30 pieces per 10 ms, slower than Radau).
   kMagnus,
   /// Three-stage Radau IIA (order 5, L-stable) on the variational equation and its quadrature
-  /// of the cost, Hairer's embedded error estimate, steps carried across intervals (the default).
+  /// of the cost, as the difference to the system frozen at each interval's start (whose blocks
+  /// are exact), Hairer's embedded error estimate, steps carried across intervals (the default).
   kRadau,
   kBdf,     ///< CVODES BDF on the variational equation and a cost quadrature, per interval
 };
@@ -170,7 +179,9 @@ struct SampledDiscretization {
   long rhsEvaluations = 0;   ///< right-hand sides evaluated by CVODES
   long linearizations = 0;   ///< calls of the linearization callback
   long constantIntervals = 0;  ///< intervals discretized by the exact exponential (no integration)
-  long exponentials = 0;       ///< block exponentials computed for them (shared where equal)
+  /// Block exponentials computed: for the constant intervals (shared where equal) and, with
+  /// kRadau, one per integrated interval (its frozen twin).
+  long exponentials = 0;
   /// kMagnus: pieces whose check (one step against two half steps) failed, each then split in two.
   long bisections = 0;
   bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
