@@ -17,6 +17,7 @@
 #include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <numbers>
 #include <iostream>
 #include <sstream>
 #include <string>
@@ -25,11 +26,13 @@ using namespace trellis;
 
 int main(int argc, char** argv) {
   std::string scene = "hand_ball", out;
+  bool diagnose = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if ((a == "--scene" || a == "--out") && i + 1 < argc) (a == "--scene" ? scene : out) = argv[++i];
+    else if (a == "--diagnose") diagnose = true;
     else if (a == "--help") {
-      std::cout << "usage: hand_ball_grasp [--scene NAME] [--out FILE]\n";
+      std::cout << "usage: hand_ball_grasp [--scene NAME] [--out FILE] [--diagnose]\n";
       return 0;
     } else {
       std::cerr << "hand_ball_grasp: unknown option or missing value '" << a << "' (--help)\n";
@@ -56,13 +59,39 @@ int main(int argc, char** argv) {
     std::cerr << "hand_ball_grasp: " << e.what() << "\n";
     return 2;
   }
+  if (diagnose) {
+    // The stored posture's hold, whole and by parts (grasp.hpp, diagnoseHold), at the issue's
+    // margin and the facets' full friction.
+    const Scene s = parseScene(text, scene);
+    const double facetMu = limits.friction * std::cos(std::numbers::pi / 8);
+    const hand::HoldDiagnosis dg = hand::diagnoseHold(s.model, q0, limits.digits, limits.normalMin, facetMu, 8);
+    std::printf("stored posture, f_min %.2f N, mu' %.3f: whole hold residual %.4f\n", limits.normalMin, facetMu,
+                dg.whole.relativeResidual);
+    std::printf("  ball rows alone: residual %.4f, worst %s\n", dg.ballResidual, dg.ballWorst.c_str());
+    for (std::size_t d = 0; d < limits.digits.size(); ++d)
+      std::printf("  %-7s rows alone: residual %.4f, worst %s; whole hold: lambda (%.3f, %.3f, %.3f) N\n",
+                  limits.digits[d].c_str(), dg.digitResidual[d], dg.digitWorst[d].c_str(), dg.whole.lambda(3 * d),
+                  dg.whole.lambda(3 * d + 1), dg.whole.lambda(3 * d + 2));
+    Eigen::Index worst = 0;
+    dg.whole.residual.cwiseAbs().maxCoeff(&worst);
+    std::printf("  whole hold: worst row %s (%.4f); tensions at 0:", s.model.configNames()[worst].c_str(),
+                dg.whole.residual(worst));
+    for (int k = 0; k < s.model.nu(); ++k)
+      if (dg.whole.tension(k) == 0.0) std::printf(" %s", s.model.inputNames()[k].c_str());
+    std::printf("\n");
+    return 0;
+  }
   const hand::FreeBallGrasp g = hand::findFreeBallGrasp(text, limits);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("grasp search: %d evaluations, %.2f s; target f_min %.2f N, mu' %.3f\n", g.evaluations, seconds,
               g.targetNormal, g.targetFriction);
-  if (g.ok) {
+  if (g.margins.minNormalContact >= 0) {  // a target was reached: the polished point's figures
     std::printf("ball centre (%.5f, %.5f, %.5f) m; |qdd| %.3g; pad normals within %.3g rad of the centre\n",
                 g.centre(0), g.centre(1), g.centre(2), g.accelerationResidual, g.alignment);
+    std::printf("residual force %.3g of the rest load\n", g.relativeAcceleration);
+    std::printf("thumb base turned by omega = (%.4f, %.4f, %.4f) rad (|omega| %.4f), CMC site moved by (%.4f, %.4f, %.4f) m\n",
+                g.thumbTurn(0), g.thumbTurn(1), g.thumbTurn(2), g.thumbTurn.norm(), g.thumbShift(0), g.thumbShift(1),
+                g.thumbShift(2));
     std::printf("min normal force %.4f N (%s), worst friction ratio %.4f (%s), max tension %.3f N\n",
                 g.margins.minNormal, limits.digits[g.margins.minNormalContact].c_str(), g.margins.worstFrictionRatio,
                 limits.digits[g.margins.worstFrictionContact].c_str(), g.u.maxCoeff());
@@ -79,6 +108,8 @@ int main(int argc, char** argv) {
   j["description"] = "A grasp of the free ball held by pushing pads (issue 26), found by hand_ball_grasp --scene " +
                      scene + " (examples/hand/grasp.hpp).";
   j["centre"] = {g.centre(0), g.centre(1), g.centre(2)};
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 4; ++k) j["thumb_base"][i][k] = g.thumbBase.matrix()(i, k);
   for (std::size_t d = 0; d < limits.digits.size(); ++d)
     j["contacts"][limits.digits[d]] = {g.contacts[d](0), g.contacts[d](1), g.contacts[d](2)};
   for (int i = 0; i < s.model.nq(); ++i) j["q"][s.model.configNames()[i]] = g.q(i);

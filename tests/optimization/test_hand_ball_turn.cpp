@@ -236,4 +236,126 @@ TEST_CASE("hand ball: the grasp search never reports success it does not have", 
   }
   CHECK(g.evaluations > 0);
 }
+
+TEST_CASE("hand ball: the stored free-ball grasp is a static hold by pushing pads", "[hand_ball][grasp]") {
+  // examples/scenes/hand_ball.json's state (q, u) is the hold hand_ball_grasp found: checked here
+  // directly on the core's forward dynamics at (q, 0, u), independently of checkGrasp.
+  const Scene s = loadScene(kScenes + "hand_ball.json");
+  const Model& m = s.model;
+  REQUIRE(m.nq() == 26);
+  REQUIRE(m.nu() == 23);
+  REQUIRE(m.nc() == 15);
+  const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_limits.json", m);
+  REQUIRE(l.digits.size() == 5);
+  Data data(m);
+  const VectorXd zero = VectorXd::Zero(m.nq());
+  // The rest load's scale: the generalized forces of gravity and springs (rows of angles ÷ 2 cm).
+  REQUIRE(computeDynamics(m, data, s.q, zero, VectorXd::Zero(m.nu())).ok());
+  computeMassMatrix(m, data, s.q);
+  VectorXd w = VectorXd::Ones(m.nq());
+  for (int i = 0; i < m.nq(); ++i)
+    if (m.joints()[i].revolute) w(i) = 1.0 / 0.02;
+  const double load = (w.asDiagonal() * (data.M * data.qdd - data.constraintJacobian.transpose() * data.lambda)).norm();
+  REQUIRE(load > 0.5);  // at least the ball's weight (0.78 N)
+  REQUIRE(computeDynamics(m, data, s.q, zero, s.u).ok());
+  computeMassMatrix(m, data, s.q);
+  const double residualForce = (w.asDiagonal() * (data.M * data.qdd)).norm();
+  INFO("residual force " << residualForce / load << " of the rest load " << load << ", |qdd| " << data.qdd.cwiseAbs().maxCoeff());
+  CHECK(residualForce <= 1e-8 * load);
+  computeConstraints(m, data, s.q, zero);
+  CHECK(data.constraintValue.cwiseAbs().maxCoeff() <= 1e-12);
+  // Every pad presses by the margin, inside the 8-facet pyramid inscribed in the cone μ = 0.8.
+  const double facetMu = l.friction * std::cos(std::numbers::pi / 8);
+  for (std::size_t d = 0; d < 5; ++d) {
+    const double ln = data.lambda(3 * d), t1 = data.lambda(3 * d + 1), t2 = data.lambda(3 * d + 2);
+    INFO(l.digits[d] << ": lambda = (" << ln << ", " << t1 << ", " << t2 << ") N");
+    CHECK(ln >= l.normalMin);
+    for (int k = 0; k < 8; ++k) {
+      const double th = 2.0 * std::numbers::pi * k / 8;
+      CHECK(std::cos(th) * t1 + std::sin(th) * t2 <= facetMu * ln);
+    }
+  }
+  CHECK(s.u.minCoeff() >= 0.0);
+  CHECK((l.uMax - s.u).minCoeff() >= 0.0);
+  for (int i = 0; i < m.nq(); ++i) {
+    INFO(m.configNames()[i] << " = " << s.q(i));
+    CHECK(s.q(i) >= l.qLower(i));
+    CHECK(s.q(i) <= l.qUpper(i));
+  }
+  // The same verdict from checkGrasp, the check behind the search's ok.
+  const hand::GraspCheck c = hand::checkGrasp(m, s.q, s.u, l);
+  INFO(c.message);
+  CHECK(c.ok);
+}
+
+TEST_CASE("hand ball: checkGrasp (the search's ok) fails on each broken condition", "[hand_ball][grasp]") {
+  const Scene s = loadScene(kScenes + "hand_ball.json");
+  const Model& m = s.model;
+  const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_limits.json", m);
+  REQUIRE(hand::checkGrasp(m, s.q, s.u, l).ok);
+  SECTION("tensions off the hold: not at rest") {
+    VectorXd u = s.u;
+    u(m.inputIndex("FPL")) *= 1.01;
+    const hand::GraspCheck c = hand::checkGrasp(m, s.q, u, l);
+    CHECK_FALSE(c.ok);
+    CHECK_THAT(c.message, Catch::Contains("not at rest"));
+  }
+  SECTION("a margin above the weakest pad") {
+    hand::BallLimits k = l;
+    k.normalMin = 1e3;
+    const hand::GraspCheck c = hand::checkGrasp(m, s.q, s.u, k);
+    CHECK_FALSE(c.ok);
+    CHECK_THAT(c.message, Catch::Contains("presses by"));
+  }
+  SECTION("less friction than the hold uses") {
+    hand::BallLimits k = l;
+    k.friction = 1e-3;
+    const hand::GraspCheck c = hand::checkGrasp(m, s.q, s.u, k);
+    CHECK_FALSE(c.ok);
+    CHECK_THAT(c.message, Catch::Contains("friction pyramid"));
+  }
+  SECTION("a joint range that excludes the grasp") {
+    hand::BallLimits k = l;
+    const int i = m.configIndex("index_pip");
+    k.qUpper(i) = s.q(i) - 0.01;
+    const hand::GraspCheck c = hand::checkGrasp(m, s.q, s.u, k);
+    CHECK_FALSE(c.ok);
+    CHECK_THAT(c.message, Catch::Contains("index_pip"));
+  }
+  SECTION("a tension above its maximum") {
+    hand::BallLimits k = l;
+    Eigen::Index j = 0;
+    s.u.maxCoeff(&j);
+    k.uMax(j) = 0.5 * s.u(j);
+    const hand::GraspCheck c = hand::checkGrasp(m, s.q, s.u, k);
+    CHECK_FALSE(c.ok);
+    CHECK_THAT(c.message, Catch::Contains(m.inputNames()[j]));
+  }
+  SECTION("pads off their contact points") {
+    VectorXd q = s.q;
+    q(m.configIndex("index_dip")) += 1e-3;
+    const hand::GraspCheck c = hand::checkGrasp(m, q, s.u, l);
+    CHECK_FALSE(c.ok);
+    CHECK_THAT(c.message, Catch::Contains("leave their contact points"));
+  }
+}
+
+TEST_CASE("hand ball: the grasp search from the stored hold reports it held", "[hand_ball][grasp]") {
+  // Started at a hold, the search reaches its first target at once and its ok is checkGrasp's.
+  const Scene s = loadScene(kScenes + "hand_ball.json");
+  const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_limits.json", s.model);
+  std::ifstream in(kScenes + "hand_ball.json");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  hand::GraspSearchOptions o;
+  o.maxEvaluations = 40;
+  o.targets = {{0.1, 0.9}};
+  const hand::FreeBallGrasp g = hand::findFreeBallGrasp(text, l, o);
+  INFO(g.message);
+  REQUIRE(g.ok);
+  CHECK(g.margins.minNormal >= 0.1 - 1e-6);
+  CHECK(g.relativeAcceleration <= 1e-8);
+  const Scene placed = parseScene(hand::placeBall(hand::placeThumbBase(text, g.thumbBase), l.digits, g.centre,
+                                                  g.contacts, s.model), "<grasp>");
+  CHECK(hand::checkGrasp(placed.model, g.q, g.u, l).ok);
+}
 #endif
