@@ -349,16 +349,16 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
   }
   for (int i = 0; i < 3; ++i) c0(i) += tmpl.q(tmpl.model.configIndex(std::string("ball_") + "xyz"[i]));
   const bool moveThumb = hasThumb && options.thumbBaseRotation > 0.0;
-  const int np = 3 + nd + (moveThumb ? 6 : 0);
+  const int np = 3 + 2 * nd + (moveThumb ? 6 : 0);
 
   // Parameters p = [c − c0; drivers; ω; δ]: the thumb base R0·exp([ω]×) (ω in base axes) at the
   // CMC site t0 + δ (palm axes), when the thumb base is searched.
-  const auto thumbBase = [&](const Eigen::VectorXd& p) {
+  const auto thumbBase = [&](const Eigen::VectorXd& p) {  // p = [c − c0; drivers; φ; ω; δ]
     Eigen::Isometry3d b = thumb0;
     if (!moveThumb) return b;
-    const Eigen::Vector3d w = p.segment<3>(3 + nd);
+    const Eigen::Vector3d w = p.segment<3>(3 + 2 * nd);
     if (w.norm() > 0.0) b.linear() = thumb0.linear() * Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
-    b.translation() = thumb0.translation() + p.segment<3>(6 + nd);
+    b.translation() = thumb0.translation() + p.segment<3>(6 + 2 * nd);
     return b;
   };
 
@@ -387,19 +387,35 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
       const Digit& g = digits[d];
       q(g.coords[1]) = p(3 + d);
       const int free[3] = {g.coords[0], g.coords[2], g.coords[3]};
+      // The pad's normal tilted by φ_d about the phalanx's lateral axis ŷ (the contact on the
+      // rounded pad proximal (φ > 0) or distal of its centre): −ẑ' with ẑ' = (sin φ, 0, cos φ).
+      const Eigen::Vector3d padAxis(std::sin(p(3 + nd + d)), 0.0, std::cos(p(3 + nd + d)));
       // Gauss–Newton: the distance row exactly (minimum-norm), the two alignment rows in least
       // squares within its null space — the pad on the sphere, its normal as close to the
       // centre as the digit allows (a finger's pad normal stays in its flexion plane).
+      // Gauss–Newton: the distance row exactly (minimum-norm), the alignment in least squares
+      // within its null space — the pad on the sphere, its normal −ẑ as close to the direction v̂
+      // to the centre as the digit allows. The alignment residual is ẑ + v̂ (zero only when the
+      // pad faces the centre; the rows x̂ᵀv, ŷᵀv would vanish also with the pad facing away, where
+      // the little finger's side-on start of the fixed-ball grasp used to end).
+      const auto rows = [&](const Eigen::VectorXd& qq) {
+        computeKinematics(fk, fkData, qq, zero);
+        const Eigen::Isometry3d& pose = fkData.framePose[g.tip];
+        const Eigen::Vector3d v = c - pose.translation();
+        Eigen::Vector4d e;
+        e << v.norm() - r, pose.linear() * padAxis + v / v.norm();
+        return e;
+      };
       bool converged = false;
-      for (int it = 0; it < 60 && !converged; ++it) {
-        const Eigen::Vector3d e = padResidual(fk, fkData, g, q, c).head<3>();
-        Eigen::Matrix3d J;
+      for (int it = 0; it < 80 && !converged; ++it) {
+        const Eigen::Vector4d e = rows(q);
+        Eigen::Matrix<double, 4, 3> J;
         for (int k = 0; k < 3; ++k) {
           const double h = 1e-7, keep = q(free[k]);
           q(free[k]) = keep + h;
-          const Eigen::Vector3d plus = padResidual(fk, fkData, g, q, c).head<3>();
+          const Eigen::Vector4d plus = rows(q);
           q(free[k]) = keep - h;
-          const Eigen::Vector3d minus = padResidual(fk, fkData, g, q, c).head<3>();
+          const Eigen::Vector4d minus = rows(q);
           q(free[k]) = keep;
           J.col(k) = (plus - minus) / (2.0 * h);
         }
@@ -408,8 +424,8 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
         if (!(jj > 0.0)) break;
         const Eigen::Vector3d base = -Jd.transpose() * e(0) / jj;
         const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - Jd.transpose() * Jd / jj;
-        const Eigen::Matrix<double, 2, 3> Ja = J.bottomRows<2>() * P;
-        const Eigen::Vector2d ra = -(e.tail<2>() + J.bottomRows<2>() * base);
+        const Eigen::Matrix3d Ja = J.bottomRows<3>() * P;
+        const Eigen::Vector3d ra = -(e.tail<3>() + J.bottomRows<3>() * base);
         Eigen::Vector3d step = base + P * Ja.completeOrthogonalDecomposition().solve(ra);
         if (!step.allFinite()) break;
         step *= std::min(1.0, 0.2 / std::max(step.cwiseAbs().maxCoeff(), 1e-300));
@@ -442,8 +458,8 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
     std::string withThumb = sceneJson;
     if (moveThumb) {
       withThumb = placeThumbBase(sceneJson, thumbBase(p));
-      penalty += std::max(0.0, p.segment<3>(3 + nd).norm() - options.thumbBaseRotation);
-      penalty += std::max(0.0, p.segment<3>(6 + nd).cwiseAbs().maxCoeff() - options.thumbBaseShift) / kLength;
+      penalty += std::max(0.0, p.segment<3>(3 + 2 * nd).norm() - options.thumbBaseRotation);
+      penalty += std::max(0.0, p.segment<3>(6 + 2 * nd).cwiseAbs().maxCoeff() - options.thumbBaseShift) / kLength;
     }
     const Scene fkScene = parseScene(withThumb, "<candidate>");
     const double miss = posture(fkScene.model, p, h.q, h.contacts, tilt);
@@ -470,10 +486,11 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
   for (int d = 0; d < nd; ++d) {
     p(3 + d) = tmpl.q(digits[d].coords[1]);
     step(3 + d) = 0.08;
+    step(3 + nd + d) = 0.1;
   }
   if (moveThumb) {
-    step.segment<3>(3 + nd).setConstant(0.1);
-    step.segment<3>(6 + nd).setConstant(0.003);
+    step.segment<3>(3 + 2 * nd).setConstant(0.1);
+    step.segment<3>(6 + 2 * nd).setConstant(0.003);
   }
   const double facetMu = limits.friction * std::cos(std::numbers::pi / F);
   // Continuation over the targets: the first must be reached (else no grasp); each further one is
@@ -483,10 +500,17 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
     const double muPrime = muFactor * facetMu;
     const auto objective = [&](const Eigen::VectorXd& x) { return hold(x, fMin, muPrime, 0.0).objective; };
     const int budget = reachedAt.size() == 0 ? options.maxEvaluations : options.strengthenEvaluations;
-    int used = 0;
-    const Eigen::VectorXd x = nelderMead(objective, p, step, budget, 1e-12, used);
-    out.evaluations += used;
-    if (hold(x, fMin, muPrime, 0.0).objective <= 1e-12) {
+    // Nelder–Mead restarted from its best point with the first steps while the budget lasts: a
+    // collapsed simplex is a local stop of this non-smooth objective, not a certificate.
+    Eigen::VectorXd x = p;
+    for (int spent = 0, round = 0; spent < budget && round <= options.restarts; ++round) {
+      int used = 0;
+      x = nelderMead(objective, x, step, budget - spent, options.holdTolerance, used);
+      spent += used;
+      out.evaluations += used;
+      if (objective(x) <= options.holdTolerance) break;
+    }
+    if (hold(x, fMin, muPrime, 0.0).objective <= options.holdTolerance) {
       out.targetNormal = fMin;
       out.targetFriction = muPrime;
       reachedAt = p = x;
@@ -507,6 +531,11 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
       ph.residual.cwiseAbs().maxCoeff(&worst);
       where = "relative residual " + std::to_string(ph.relativeResidual) + ", largest on " +
               sc.model.configNames()[worst] + " (" + std::to_string(ph.residual(worst)) + ")";
+      // By parts (diagnoseHold): which of the ball and the digits cannot be balanced on its own.
+      const HoldDiagnosis dg = diagnoseHold(sc.model, best.q, limits.digits, options.targets.front().first,
+                                            options.targets.front().second * facetMu, F);
+      where += "; alone: ball " + std::to_string(dg.ballResidual);
+      for (int d = 0; d < nd; ++d) where += ", " + limits.digits[d] + " " + std::to_string(dg.digitResidual[d]);
       out.q = best.q;
       out.u = ph.tension;
       out.lambda = ph.lambda;
@@ -519,7 +548,7 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
   // Small tensions among the holds of this posture, then the polish.
   const Hold best = hold(p, out.targetNormal, out.targetFriction, options.tensionWeight);
   out.thumbBase = thumbBase(p);
-  if (moveThumb) out.thumbTurn = p.segment<3>(3 + nd), out.thumbShift = p.segment<3>(6 + nd);
+  if (moveThumb) out.thumbTurn = p.segment<3>(3 + 2 * nd), out.thumbShift = p.segment<3>(6 + 2 * nd);
   const std::string withThumb = moveThumb ? placeThumbBase(sceneJson, out.thumbBase) : sceneJson;
   out.centre = c0 + p.head<3>();
   out.contacts = best.contacts;

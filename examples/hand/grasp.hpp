@@ -49,9 +49,14 @@ struct GraspSearchOptions {
   /// Targets (f_min [N], μ'/(μ cos π/F)) tried in turn, weakest first: the first must be reached
   /// (else there is no grasp), each further one is tried from the last posture that holds, and the
   /// strongest reached is kept.
-  std::vector<std::pair<double, double>> targets = {{0.1, 0.9}, {0.3, 0.8}, {0.5, 0.7}, {1.0, 0.6}};
+  std::vector<std::pair<double, double>> targets = {{0.05, 1.0}, {0.1, 0.9}, {0.3, 0.8}, {0.5, 0.7}, {1.0, 0.6}};
   int maxEvaluations = 3000;       ///< Nelder–Mead objective evaluations for the first target
   int strengthenEvaluations = 600; ///< ... and for each further target
+  int restarts = 4;                ///< Nelder–Mead restarts from its best point within a budget
+  /// A target counts as reached when the hold's relative residual (+ penalties) is below this: the
+  /// NNLS residual of a near-hold posture; the polish (findEquilibrium) then makes q̈ = 0 and
+  /// checkGrasp decides ok with the exact conditions.
+  double holdTolerance = 1e-6;
   /// Largest turn of the thumb base (thumb_cmc_site) from the scene's, |ω| [rad]; 0 keeps it. The
   /// base was designed for the fixed ball (make_hand_scene.py); the real trapeziometacarpal joint
   /// moves the metacarpal through ~±40° in both of its planes, so a turn of the base within 0.6 rad

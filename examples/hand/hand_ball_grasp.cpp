@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include <chrono>
+#include <cstdlib>
 #include <cstdio>
 #include <fstream>
 #include <numbers>
@@ -27,12 +28,16 @@ using namespace trellis;
 int main(int argc, char** argv) {
   std::string scene = "hand_ball", out;
   bool diagnose = false;
+  int evaluations = 0;
+  bool thumbBase = true;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if ((a == "--scene" || a == "--out") && i + 1 < argc) (a == "--scene" ? scene : out) = argv[++i];
     else if (a == "--diagnose") diagnose = true;
+    else if (a == "--evaluations" && i + 1 < argc) evaluations = std::atoi(argv[++i]);
+    else if (a == "--no-thumb-base") thumbBase = false;
     else if (a == "--help") {
-      std::cout << "usage: hand_ball_grasp [--scene NAME] [--out FILE] [--diagnose]\n";
+      std::cout << "usage: hand_ball_grasp [--scene NAME] [--out FILE] [--diagnose] [--evaluations N] [--no-thumb-base]\n";
       return 0;
     } else {
       std::cerr << "hand_ball_grasp: unknown option or missing value '" << a << "' (--help)\n";
@@ -81,7 +86,10 @@ int main(int argc, char** argv) {
     std::printf("\n");
     return 0;
   }
-  const hand::FreeBallGrasp g = hand::findFreeBallGrasp(text, limits);
+  hand::GraspSearchOptions options;
+  if (evaluations > 0) options.maxEvaluations = evaluations;
+  if (!thumbBase) options.thumbBaseRotation = 0.0;
+  const hand::FreeBallGrasp g = hand::findFreeBallGrasp(text, limits, options);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("grasp search: %d evaluations, %.2f s; target f_min %.2f N, mu' %.3f\n", g.evaluations, seconds,
               g.targetNormal, g.targetFriction);
