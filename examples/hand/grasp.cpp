@@ -450,6 +450,7 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
     Eigen::VectorXd q, u;
     std::vector<Eigen::Vector3d> contacts;
     std::string text;  ///< the candidate scene (thumb base and ball placed)
+    std::string penalties;  ///< which bounds the posture exceeds, and by how much
   };
   const auto hold = [&](const Eigen::VectorXd& p, double fMin, double muPrime, double tensionWeight) {
     Hold h;
@@ -460,6 +461,7 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
       withThumb = placeThumbBase(sceneJson, thumbBase(p));
       penalty += std::max(0.0, p.segment<3>(3 + 2 * nd).norm() - options.thumbBaseRotation);
       penalty += std::max(0.0, p.segment<3>(6 + 2 * nd).cwiseAbs().maxCoeff() - options.thumbBaseShift) / kLength;
+      if (penalty > 0.0) h.penalties += " thumb base beyond its bounds;";
     }
     const Scene fkScene = parseScene(withThumb, "<candidate>");
     const double miss = posture(fkScene.model, p, h.q, h.contacts, tilt);
@@ -469,25 +471,39 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
       return h;
     }
     penalty += std::max(0.0, tilt - options.maxTilt);
-    for (int i = 0; i < n; ++i) penalty += std::max({0.0, limits.qLower(i) - h.q(i), h.q(i) - limits.qUpper(i)});
+    if (tilt > options.maxTilt) h.penalties += " pad tilt " + std::to_string(tilt) + " rad;";
+    for (int i = 0; i < n; ++i) {
+      const double e = std::max({0.0, limits.qLower(i) - h.q(i), h.q(i) - limits.qUpper(i)});
+      penalty += e;
+      if (e > 0.0) h.penalties += " " + fkScene.model.configNames()[i] + " out of range by " + std::to_string(e) + ";";
+    }
     h.text = placeBall(withThumb, limits.digits, c0 + p.head<3>(), h.contacts, fkScene.model);
     const Scene s = parseScene(h.text, "<candidate>");
     const PyramidHold ph = pyramidHold(s.model, h.q, fMin, muPrime, F, tensionWeight);
     if (!ph.ok) return h;
     h.u = ph.tension;
-    for (int k = 0; k < m; ++k) penalty += std::max(0.0, h.u(k) - limits.uMax(k)) / limits.uMax(k);
+    for (int k = 0; k < m; ++k) {
+      const double e = std::max(0.0, h.u(k) - limits.uMax(k)) / limits.uMax(k);
+      penalty += e;
+      if (e > 0.0) h.penalties += " " + s.model.inputNames()[k] + " over its maximum by " + std::to_string(e) + ";";
+    }
     h.objective = ph.relativeResidual + penalty;
     return h;
   };
 
   FreeBallGrasp out;
   Eigen::VectorXd p = Eigen::VectorXd::Zero(np), step(np);
+  const bool given = options.start.size() == np;
+  if (options.start.size() != 0 && !given)
+    throw std::invalid_argument("findFreeBallGrasp: options.start has " + std::to_string(options.start.size()) +
+                                " entries, " + std::to_string(np) + " expected");
   step.head<3>().setConstant(0.004);
   for (int d = 0; d < nd; ++d) {
     p(3 + d) = tmpl.q(digits[d].coords[1]);
     step(3 + d) = 0.08;
     step(3 + nd + d) = 0.1;
   }
+  if (given) p = options.start;
   if (moveThumb) {
     step.segment<3>(3 + 2 * nd).setConstant(0.1);
     step.segment<3>(6 + 2 * nd).setConstant(0.003);
@@ -534,12 +550,14 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
       // By parts (diagnoseHold): which of the ball and the digits cannot be balanced on its own.
       const HoldDiagnosis dg = diagnoseHold(sc.model, best.q, limits.digits, options.targets.front().first,
                                             options.targets.front().second * facetMu, F);
+      where += "; bounds exceeded:" + (best.penalties.empty() ? std::string(" none") : best.penalties);
       where += "; alone: ball " + std::to_string(dg.ballResidual);
       for (int d = 0; d < nd; ++d) where += ", " + limits.digits[d] + " " + std::to_string(dg.digitResidual[d]);
       out.q = best.q;
       out.u = ph.tension;
       out.lambda = ph.lambda;
     }
+    out.parameters = p;
     out.message = "no posture holds the ball with the first target (f_min " +
                   std::to_string(options.targets.front().first) + " N) within " +
                   std::to_string(out.evaluations) + " evaluations: best " + where;
@@ -547,6 +565,7 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
   }
   // Small tensions among the holds of this posture, then the polish.
   const Hold best = hold(p, out.targetNormal, out.targetFriction, options.tensionWeight);
+  out.parameters = p;
   out.thumbBase = thumbBase(p);
   if (moveThumb) out.thumbTurn = p.segment<3>(3 + 2 * nd), out.thumbShift = p.segment<3>(6 + 2 * nd);
   const std::string withThumb = moveThumb ? placeThumbBase(sceneJson, out.thumbBase) : sceneJson;

@@ -57,6 +57,9 @@ struct GraspSearchOptions {
   /// NNLS residual of a near-hold posture; the polish (findEquilibrium) then makes q̈ = 0 and
   /// checkGrasp decides ok with the exact conditions.
   double holdTolerance = 1e-6;
+  /// The search's start p = [c − c0; drivers; pad tilts φ; thumb ω; δ] (FreeBallGrasp::parameters
+  /// of an earlier search); empty: the scene's stored grasp, no tilt, the scene's thumb base.
+  Eigen::VectorXd start;
   /// Largest turn of the thumb base (thumb_cmc_site) from the scene's, |ω| [rad]; 0 keeps it. The
   /// base was designed for the fixed ball (make_hand_scene.py); the real trapeziometacarpal joint
   /// moves the metacarpal through ~±40° in both of its planes, so a turn of the base within 0.6 rad
@@ -83,6 +86,7 @@ struct FreeBallGrasp {
   double alignment = 0.0;          ///< max angle between a pad normal and the direction to c [rad]
   ContactMargins margins;
   int evaluations = 0;             ///< objective evaluations of the whole search
+  Eigen::VectorXd parameters;      ///< p of the result (or of the best posture when not ok)
   bool ok = false;
   std::string message;             ///< what failed, when not ok
 };

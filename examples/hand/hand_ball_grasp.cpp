@@ -22,6 +22,7 @@
 #include <iostream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 using namespace trellis;
 
@@ -30,14 +31,16 @@ int main(int argc, char** argv) {
   bool diagnose = false;
   int evaluations = 0;
   bool thumbBase = true;
+  std::string startFile;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if ((a == "--scene" || a == "--out") && i + 1 < argc) (a == "--scene" ? scene : out) = argv[++i];
     else if (a == "--diagnose") diagnose = true;
     else if (a == "--evaluations" && i + 1 < argc) evaluations = std::atoi(argv[++i]);
     else if (a == "--no-thumb-base") thumbBase = false;
+    else if (a == "--start" && i + 1 < argc) startFile = argv[++i];
     else if (a == "--help") {
-      std::cout << "usage: hand_ball_grasp [--scene NAME] [--out FILE] [--diagnose] [--evaluations N] [--no-thumb-base]\n";
+      std::cout << "usage: hand_ball_grasp [--scene NAME] [--out FILE] [--diagnose] [--evaluations N] [--no-thumb-base] [--start FILE]\n";
       return 0;
     } else {
       std::cerr << "hand_ball_grasp: unknown option or missing value '" << a << "' (--help)\n";
@@ -89,6 +92,16 @@ int main(int argc, char** argv) {
   hand::GraspSearchOptions options;
   if (evaluations > 0) options.maxEvaluations = evaluations;
   if (!thumbBase) options.thumbBaseRotation = 0.0;
+  if (!startFile.empty()) {  // the numbers of a "parameters:" line of an earlier run
+    std::ifstream in(startFile);
+    std::vector<double> v;
+    for (double x; in >> x;) v.push_back(x);
+    if (v.empty()) {
+      std::cerr << "hand_ball_grasp: " << startFile << ": no numbers\n";
+      return 2;
+    }
+    options.start = Eigen::Map<Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
+  }
   const hand::FreeBallGrasp g = hand::findFreeBallGrasp(text, limits, options);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("grasp search: %d evaluations, %.2f s; target f_min %.2f N, mu' %.3f\n", g.evaluations, seconds,
@@ -107,6 +120,9 @@ int main(int argc, char** argv) {
       std::printf("  %-7s lambda (n, t1, t2) = (%.4f, %.4f, %.4f) N\n", limits.digits[d].c_str(), g.lambda(3 * d),
                   g.lambda(3 * d + 1), g.lambda(3 * d + 2));
   }
+  std::printf("parameters:");
+  for (Eigen::Index i = 0; i < g.parameters.size(); ++i) std::printf(" %.17g", g.parameters(i));
+  std::printf("\n");
   if (!g.ok) {
     std::printf("FAILED: %s\n", g.message.c_str());
     return 1;

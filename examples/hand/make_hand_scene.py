@@ -87,7 +87,25 @@ Limits (hand_ball_limits.json, read by the ball-turning job):
   friction coefficient of human skin, Tribol Lett 45:1-27), used with the conservative inscribed
   8-facet pyramid by the job.
 
-The grasp: from a guessed, loosely flexed posture, the ball (fixed radius) is fitted to the four
+The free ball's grasp (full hand; not the fixed ball's hand.json nor the --digits reductions) is meant
+to be the hold that `hand_ball_grasp` (examples/hand/grasp.hpp) found, read from examples/hand/hand_ball_grasp.json
+(read_hold): a state with qdd(q, 0, u) = 0 in which every pad pushes (lambda_n >= 0.05 N) inside the
+8-facet pyramid, 0 <= u <= u_max and the joints in range. Its design freedoms, all modelling choices:
+  - the thumb base (thumb_cmc_site): the fixed ball's opposition_rotation turned by at most 0.6 rad and
+    its CMC site moved by at most 1 cm per axis. Reason: the base below was designed so the thumb's
+    guessed curl ends on a fixed ball, with no regard to forces; the trapeziometacarpal joint of a real
+    thumb moves the metacarpal through about +-40 deg in flexion-extension and abduction-adduction
+    (its range is the largest of the hand), so a base turned within that range is still a thumb;
+  - the ball's centre (any point the pads reach) and the contact points on the ball (where the pads
+    touch it);
+  - each pad's tilt: the contact normal may lean from the distal phalanx's palmar axis by up to 0.5 rad
+    in the flexion plane (the pad is rounded; a fingertip touches with the pad, not the nail).
+The tensions and the polished q come from the core's dynamics, so they are read from that file rather
+than recomputed here; this script checks that every pad lies on its contact point. While no such file
+exists (2026-12-02: no hold within the joint ranges was found, examples/hand/README.md), the free ball
+keeps the fixed ball's grasp below and no tensions.
+
+The grasp (fixed ball): from a guessed, loosely flexed posture, the ball (fixed radius) is fitted to the four
 finger pads by least squares, each finger's contact is its pad projected radially onto the ball,
 the thumb base is oriented so its guessed curl ends on the far side of the ball (opposition), and
 each digit's four coordinates are solved by Gauss-Newton (minimum-norm steps) until its pad is on
@@ -576,7 +594,7 @@ def main():
     cmc = THUMB_CMC
     # The free ball's grasp (full hand only): the hold hand_ball_grasp found (see HOLD_FILE).
     hold = None
-    if free_ball and kept is None:
+    if free_ball and kept is None and os.path.exists(HOLD_FILE):
         hold = read_hold(digit_configs)
         cmc = [hold["thumb_base"][i][3] for i in range(3)]
         rot = [hold["thumb_base"][i][:3] + [0.0] for i in range(3)] + [[0.0, 0.0, 0.0, 1.0]]
