@@ -2,12 +2,13 @@
 // step 1): the digits' posture, the ball's centre and tensions 0 ≤ u ≤ u_max in static
 // equilibrium with every contact pressing and inside the friction pyramid.
 //
-// Posture. The search variables are the ball's centre c (palm axes) and each digit's driver (a
-// finger's MCP flexion, the thumb's CMC flexion). The digit's other three coordinates solve
-//   |p − c| = r,   x̂ᵀ(c − p) = 0,   ŷᵀ(c − p) = 0
-// (p the pad point, x̂, ŷ the distal phalanx's long and lateral axes) by Newton's method: the pad
-// lies on the sphere and its normal, the phalanx's palmar axis −ẑ, passes through the centre, as
-// the scene's contact frame (inward normal n = (c − p)/r) assumes. The ball's contact points are
+// Posture. The search variables are the ball's centre c (palm axes), each digit's driver (a
+// finger's MCP flexion, the thumb's CMC flexion), each pad's tilt φ_d and the thumb base's turn ω
+// and shift δ (GraspSearchOptions). The digit's other three coordinates solve
+//   |p − c| = r  exactly,   ẑ' + (c − p)/|c − p| = 0  in least squares
+// (p the pad point, ẑ' the distal phalanx's dorsal axis turned by φ_d about its lateral axis) by
+// Gauss–Newton: the pad lies on the sphere and its normal −ẑ' points to the centre as closely as
+// the digit allows (the scene's contact frame has the inward normal n = (c − p)/r). The ball's contact points are
 // the pads, the ball at zero orientation; a candidate's model is the scene with its ball moved
 // there (ball_grasp_centre = c, ball_contact_<digit> = p − c, the rows' n, t1, t2 recomputed as
 // make_hand_scene.py's contact_directions does).
