@@ -1,13 +1,17 @@
 // examples/hand/hand_ball_grasp.cpp — finds a grasp of the free ball that the pads hold by pushing
 // (issue 26, step 1; grasp.hpp) and writes it for make_hand_scene.py.
 //
-//   hand_ball_grasp [--scene NAME] [--out FILE]
+//   hand_ball_grasp [--scene NAME] [--out FILE] [--diagnose] [--evaluations N] [--no-thumb-base] [--start FILE]
+//
+// --diagnose: the stored posture's hold by parts (grasp.hpp, diagnoseHold) instead of a search;
+// --evaluations: Nelder–Mead's budget for the first target; --no-thumb-base: keep the scene's thumb
+// base; --start: the numbers of a "parameters:" line of an earlier run as the start.
 //
 // NAME: a free-ball scene of examples/scenes (default hand_ball; hand_ball_pinch the thumb-and-index
 // reduction), read with examples/hand/NAME_limits.json; its hand is used and its stored grasp is the
 // start. Writes FILE (default examples/hand/NAME_grasp.json): the ball's centre, the contact points,
-// q and u of the polished equilibrium (make_hand_scene.py does not read it yet: no grasp has been
-// found, examples/hand/README.md). Exit status 0 only when the grasp holds (grasp.hpp: q̈ = 0 polished,
+// q and u of the polished equilibrium, and the thumb base (make_hand_scene.py --free-ball reads it
+// when it exists; no grasp within the joint ranges has been found yet, examples/hand/README.md). Exit status 0 only when the grasp holds (grasp.hpp: q̈ = 0 polished,
 // every contact pressing by the margin and inside the pyramid, tensions and joints in range); 1
 // otherwise (nothing written); 2 on bad arguments.
 #include "grasp.hpp"
