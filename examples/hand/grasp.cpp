@@ -132,13 +132,23 @@ std::string placeBall(const std::string& sceneJson, const std::vector<std::strin
   return j.dump();
 }
 
-PyramidHold pyramidHold(const Model& model, const Eigen::VectorXd& q, double fMin,
-                        double muPrime, int facets, double tensionWeight) {
+namespace {
+
+/// The hold's linear system at a posture (grasp.hpp): columns [u; α], rows the nq weighted
+/// coordinates, right-hand side −W (Q₀ + Aᵀλ_min); λ = λ_min + E α.
+struct HoldSystem {
+  Eigen::MatrixXd C, E;
+  Eigen::VectorXd rhs, lambdaMin;
+  double load = 0.0;  ///< ‖W Q₀‖
+  bool ok = false;
+};
+
+HoldSystem holdSystem(const Model& model, const Eigen::VectorXd& q, double fMin, double muPrime, int facets) {
   const int n = model.nq(), m = model.nu(), nd = model.nc() / 3, F = facets;
-  PyramidHold h;
+  HoldSystem s;
   Data data(model);
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
-  if (!computeDynamics(model, data, q, zero, Eigen::VectorXd::Zero(m)).ok()) return h;
+  if (!computeDynamics(model, data, q, zero, Eigen::VectorXd::Zero(m)).ok()) return s;
   computeMassMatrix(model, data, q);
   computeConstraints(model, data, q, zero);
   computeInputMatrix(model, data, q);
@@ -148,77 +158,227 @@ PyramidHold pyramidHold(const Model& model, const Eigen::VectorXd& q, double fMi
   for (int i = 0; i < n; ++i)
     if (model.joints()[i].revolute) w(i) = 1.0 / kLength;
   // λ = λ_min + E α: E's column (d, k) is n + μ'(cos θ_k t1 + sin θ_k t2) in contact coordinates.
-  Eigen::MatrixXd E = Eigen::MatrixXd::Zero(model.nc(), nd * F);
-  Eigen::VectorXd lambdaMin = Eigen::VectorXd::Zero(model.nc());
+  s.E = Eigen::MatrixXd::Zero(model.nc(), nd * F);
+  s.lambdaMin = Eigen::VectorXd::Zero(model.nc());
   for (int d = 0; d < nd; ++d) {
-    lambdaMin(3 * d) = fMin;
+    s.lambdaMin(3 * d) = fMin;
     for (int k = 0; k < F; ++k) {
       const double th = 2.0 * std::numbers::pi * k / F;
-      E(3 * d, d * F + k) = 1.0;
-      E(3 * d + 1, d * F + k) = muPrime * std::cos(th);
-      E(3 * d + 2, d * F + k) = muPrime * std::sin(th);
+      s.E(3 * d, d * F + k) = 1.0;
+      s.E(3 * d + 1, d * F + k) = muPrime * std::cos(th);
+      s.E(3 * d + 2, d * F + k) = muPrime * std::sin(th);
     }
   }
+  s.C.resize(n, m + nd * F);
+  s.C.leftCols(m) = w.asDiagonal() * data.inputMatrix;
+  s.C.rightCols(nd * F) = w.asDiagonal() * (A.transpose() * s.E);
+  s.rhs = -(w.asDiagonal() * (Q0 + A.transpose() * s.lambdaMin));
+  s.load = (w.asDiagonal() * Q0).norm();
+  s.ok = s.C.allFinite() && s.rhs.allFinite();
+  return s;
+}
+
+}  // namespace
+
+PyramidHold pyramidHold(const Model& model, const Eigen::VectorXd& q, double fMin,
+                        double muPrime, int facets, double tensionWeight) {
+  const int n = model.nq(), m = model.nu(), nd = model.nc() / 3, F = facets;
+  PyramidHold h;
+  const HoldSystem s = holdSystem(model, q, fMin, muPrime, facets);
+  if (!s.ok) return h;
   const int cols = m + nd * F, rows = n + (tensionWeight > 0.0 ? m : 0);
   Eigen::MatrixXd C = Eigen::MatrixXd::Zero(rows, cols);
   Eigen::VectorXd rhs = Eigen::VectorXd::Zero(rows);
-  C.topLeftCorner(n, m) = w.asDiagonal() * data.inputMatrix;
-  C.topRightCorner(n, nd * F) = w.asDiagonal() * (A.transpose() * E);
-  rhs.head(n) = -(w.asDiagonal() * (Q0 + A.transpose() * lambdaMin));
-  const double load = (w.asDiagonal() * Q0).norm();
+  C.topRows(n) = s.C;
+  rhs.head(n) = s.rhs;
   // The weight on ‖u‖ in the load's units: √w·load per newton of tension.
-  if (tensionWeight > 0.0) C.bottomLeftCorner(m, m).diagonal().setConstant(std::sqrt(tensionWeight) * load);
+  if (tensionWeight > 0.0) C.bottomLeftCorner(m, m).diagonal().setConstant(std::sqrt(tensionWeight) * s.load);
   const NnlsResult x = solveNonNegativeLeastSquares(C, rhs);
   h.tension = x.x.head(m);
-  h.lambda = lambdaMin + E * x.x.tail(nd * F);
-  h.residual = (C.topRows(n) * x.x - rhs.head(n)) / std::max(load, 1e-300);
+  h.lambda = s.lambdaMin + s.E * x.x.tail(nd * F);
+  h.residual = (C.topRows(n) * x.x - rhs.head(n)) / std::max(s.load, 1e-300);
   h.relativeResidual = h.residual.norm();
   h.ok = x.x.allFinite();
   return h;
 }
 
+HoldDiagnosis diagnoseHold(const Model& model, const Eigen::VectorXd& q, const std::vector<std::string>& digits,
+                           double fMin, double muPrime, int facets) {
+  HoldDiagnosis out;
+  out.whole = pyramidHold(model, q, fMin, muPrime, facets);
+  const HoldSystem s = holdSystem(model, q, fMin, muPrime, facets);
+  if (!s.ok || !out.whole.ok) return out;
+  const auto& names = model.configNames();
+  // The same NNLS on a subset of the rows: the other rows' balance is not asked for, so a
+  // residual there is that subset's own shortfall (columns of other digits vanish on a digit's rows).
+  const auto subset = [&](const std::vector<int>& rows, std::string& worst) {
+    Eigen::MatrixXd C(rows.size(), s.C.cols());
+    Eigen::VectorXd d(rows.size());
+    for (std::size_t i = 0; i < rows.size(); ++i) C.row(i) = s.C.row(rows[i]), d(i) = s.rhs(rows[i]);
+    const NnlsResult x = solveNonNegativeLeastSquares(C, d);
+    const Eigen::VectorXd r = (C * x.x - d) / std::max(s.load, 1e-300);
+    Eigen::Index k = 0;
+    r.cwiseAbs().maxCoeff(&k);
+    worst = names[rows[k]] + " (" + std::to_string(r(k)) + ")";
+    return r.norm();
+  };
+  std::vector<int> ball;
+  for (int i = 0; i < model.nq(); ++i)
+    if (names[i].rfind("ball_", 0) == 0) ball.push_back(i);
+  out.ballResidual = subset(ball, out.ballWorst);
+  for (const std::string& dg : digits) {
+    std::vector<int> rows;
+    for (int i = 0; i < model.nq(); ++i)
+      if (names[i].rfind(dg + "_", 0) == 0) rows.push_back(i);
+    std::string worst;
+    out.digitResidual.push_back(subset(rows, worst));
+    out.digitWorst.push_back(worst);
+  }
+  return out;
+}
+
+GraspCheck checkGrasp(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& u,
+                      const BallLimits& limits, int facets, double accelerationTolerance) {
+  GraspCheck c;
+  const int n = model.nq();
+  if (q.size() != n || u.size() != model.nu())
+    throw std::invalid_argument("checkGrasp: q has " + std::to_string(q.size()) + " entries (" + std::to_string(n) +
+                                " expected), u " + std::to_string(u.size()) + " (" + std::to_string(model.nu()) + ")");
+  Data data(model);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
+  if (!computeDynamics(model, data, q, zero, Eigen::VectorXd::Zero(model.nu())).ok()) {
+    c.message = "the dynamics failed at rest: " + data.status.message;
+    return c;
+  }
+  computeMassMatrix(model, data, q);
+  Eigen::VectorXd w = Eigen::VectorXd::Ones(n);
+  for (int i = 0; i < n; ++i)
+    if (model.joints()[i].revolute) w(i) = 1.0 / kLength;
+  const double load = (w.asDiagonal() * (data.M * data.qdd - data.constraintJacobian.transpose() * data.lambda)).norm();
+  if (!computeDynamics(model, data, q, zero, u).ok()) {
+    c.message = "the dynamics failed under the tensions: " + data.status.message;
+    return c;
+  }
+  computeMassMatrix(model, data, q);
+  computeConstraints(model, data, q, zero);
+  c.constraintResidual = data.constraintValue.cwiseAbs().maxCoeff();
+  c.accelerationResidual = data.qdd.cwiseAbs().maxCoeff();
+  c.relativeAcceleration = (w.asDiagonal() * (data.M * data.qdd)).norm() / std::max(load, 1e-300);
+  c.margins = contactMargins(data.lambda, limits);
+  const int nd = static_cast<int>(limits.digits.size());
+  const double facetMu = limits.friction * std::cos(std::numbers::pi / facets);
+  int worstFacet = 0;
+  c.facetRatio = -std::numeric_limits<double>::infinity();
+  for (int d = 0; d < nd; ++d)
+    for (int k = 0; k < facets; ++k) {
+      const double th = 2.0 * std::numbers::pi * k / facets;
+      const double use = (std::cos(th) * data.lambda(3 * d + 1) + std::sin(th) * data.lambda(3 * d + 2)) /
+                         (facetMu * std::max(data.lambda(3 * d), 1e-300));
+      if (use > c.facetRatio) c.facetRatio = use, worstFacet = d;
+    }
+  c.rangeExcess = -std::numeric_limits<double>::infinity();
+  int worstJoint = 0;
+  for (int i = 0; i < n; ++i) {
+    const double e = std::max(limits.qLower(i) - q(i), q(i) - limits.qUpper(i));
+    if (e > c.rangeExcess) c.rangeExcess = e, worstJoint = i;
+  }
+  Eigen::Index worstTendon = 0;
+  c.tensionExcess = (u - limits.uMax).cwiseMax(-u).maxCoeff(&worstTendon);
+  const auto num = [](double v) { return std::to_string(v); };
+  if (!(c.constraintResidual <= 1e-10)) c.message = "the pads leave their contact points by " + num(c.constraintResidual) + " m";
+  else if (!(c.relativeAcceleration <= accelerationTolerance))
+    c.message = "not at rest: the residual force is " + num(c.relativeAcceleration) + " of the rest load (|qdd| " +
+                num(c.accelerationResidual) + ")";
+  else if (!(c.margins.minNormal >= limits.normalMin))
+    c.message = limits.digits[c.margins.minNormalContact] + " presses by " + num(c.margins.minNormal) + " N only (margin " +
+                num(limits.normalMin) + " N)";
+  else if (!(c.facetRatio <= 1.0))
+    c.message = limits.digits[worstFacet] + " leaves the friction pyramid (facet ratio " + num(c.facetRatio) + ")";
+  else if (!(c.rangeExcess <= 0.0))
+    c.message = model.configNames()[worstJoint] + " = " + num(q(worstJoint)) + " leaves its range by " + num(c.rangeExcess) + " rad";
+  else if (!(c.tensionExcess <= 0.0))
+    c.message = "tension " + model.inputNames()[worstTendon] + " = " + num(u(worstTendon)) + " N leaves [0, " +
+                num(limits.uMax(worstTendon)) + "]";
+  c.ok = c.message.empty();
+  return c;
+}
+
+std::string placeThumbBase(const std::string& sceneJson, const Eigen::Isometry3d& base) {
+  nlohmann::json j = nlohmann::json::parse(sceneJson);
+  nlohmann::json* f = findFrame(j["frames"], "thumb_cmc_site");
+  if (!f) throw std::runtime_error("placeThumbBase: the scene has no frame 'thumb_cmc_site'");
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 4; ++k) (*f)["matrix"][i][k] = base.matrix()(i, k);
+  return j.dump();
+}
+
 FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& limits,
                                 const GraspSearchOptions& options) {
   const Scene tmpl = parseScene(sceneJson, "<free-ball scene>");
-  const Model& fk = tmpl.model;  // kinematics of the pads (the contact rows play no part there)
-  const int n = fk.nq(), m = fk.nu(), nd = static_cast<int>(limits.digits.size()), F = options.facets;
+  const int n = tmpl.model.nq(), m = tmpl.model.nu(), nd = static_cast<int>(limits.digits.size()), F = options.facets;
   const double r = options.ballRadius;
   std::vector<Digit> digits;
+  bool hasThumb = false;
   for (const std::string& d : limits.digits) {
     Digit g;
     g.name = d;
     const bool thumb = d == "thumb";
+    hasThumb = hasThumb || thumb;
     const char* parts[4] = {thumb ? "cmc_abd" : "mcp_abd", thumb ? "cmc_flex" : "mcp_flex", thumb ? "mcp" : "pip",
                             thumb ? "ip" : "dip"};
-    for (int k = 0; k < 4; ++k) g.coords[k] = fk.configIndex(d + "_" + parts[k]);
-    g.tip = fk.frameIndex(d + "_tip");
+    for (int k = 0; k < 4; ++k) g.coords[k] = tmpl.model.configIndex(d + "_" + parts[k]);
+    g.tip = tmpl.model.frameIndex(d + "_tip");
     digits.push_back(g);
   }
-  Data fkData(fk);
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
-  // The start: the stored grasp's ball centre (ball_grasp_centre + the stored ball offset).
+  // The start: the stored grasp's ball centre (ball_grasp_centre + the stored ball offset) and
+  // thumb base (thumb_cmc_site).
   Eigen::Vector3d c0;
+  Eigen::Isometry3d thumb0 = Eigen::Isometry3d::Identity();
   {
     nlohmann::json j = nlohmann::json::parse(sceneJson);
     nlohmann::json* base = findFrame(j["frames"], "ball_grasp_centre");
     if (!base) throw std::runtime_error("findFreeBallGrasp: the scene has no frame 'ball_grasp_centre'");
     for (int i = 0; i < 3; ++i) c0(i) = (*base)["matrix"][i][3].get<double>();
+    if (hasThumb) {
+      nlohmann::json* t = findFrame(j["frames"], "thumb_cmc_site");
+      if (!t) throw std::runtime_error("findFreeBallGrasp: the scene has no frame 'thumb_cmc_site'");
+      for (int i = 0; i < 3; ++i)
+        for (int k = 0; k < 4; ++k) thumb0.matrix()(i, k) = (*t)["matrix"][i][k].get<double>();
+    }
   }
-  for (int i = 0; i < 3; ++i) c0(i) += tmpl.q(fk.configIndex(std::string("ball_") + "xyz"[i]));
+  for (int i = 0; i < 3; ++i) c0(i) += tmpl.q(tmpl.model.configIndex(std::string("ball_") + "xyz"[i]));
+  const bool moveThumb = hasThumb && options.thumbBaseRotation > 0.0;
+  const int np = 3 + 2 * nd + (moveThumb ? 6 : 0);
 
-  // The posture of parameters p = [c − c0; drivers]: each digit's other three coordinates by
+  // Parameters p = [c − c0; drivers; ω; δ]: the thumb base R0·exp([ω]×) (ω in base axes) at the
+  // CMC site t0 + δ (palm axes), when the thumb base is searched.
+  const auto thumbBase = [&](const Eigen::VectorXd& p) {  // p = [c − c0; drivers; φ; ω; δ]
+    Eigen::Isometry3d b = thumb0;
+    if (!moveThumb) return b;
+    const Eigen::Vector3d w = p.segment<3>(3 + 2 * nd);
+    if (w.norm() > 0.0) b.linear() = thumb0.linear() * Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
+    b.translation() = thumb0.translation() + p.segment<3>(6 + 2 * nd);
+    return b;
+  };
+
+  // The posture at parameters p on the hand `fk`: each digit's other three coordinates by
   // Newton's method on e = [|p − c| − r; x̂ᵀ(c − p); ŷᵀ(c − p)] from the stored grasp (difference
-  // Jacobian: it only sets the rate; the residual is exact). False when a digit cannot.
-  const auto padResidual = [&](const Digit& g, const Eigen::VectorXd& q, const Eigen::Vector3d& c) {
+  // Jacobian: it only sets the rate; the residual is exact). Returns the distance left from the
+  // sphere, summed over the digits (0: every pad is on it).
+  const auto padResidual = [&](const Model& fk, Data& fkData, const Digit& g, const Eigen::VectorXd& q,
+                               const Eigen::Vector3d& c) {
     computeKinematics(fk, fkData, q, zero);
     const Eigen::Isometry3d& pose = fkData.framePose[g.tip];
     const Eigen::Vector3d v = c - pose.translation();
     return Eigen::Vector4d(v.norm() - r, pose.linear().col(0).dot(v), pose.linear().col(1).dot(v),
                            pose.linear().col(2).dot(v));
   };
-  const auto posture = [&](const Eigen::VectorXd& p, Eigen::VectorXd& q, std::vector<Eigen::Vector3d>& contacts,
-                           double& tilt) {
+  const auto posture = [&](const Model& fk, const Eigen::VectorXd& p, Eigen::VectorXd& q,
+                           std::vector<Eigen::Vector3d>& contacts, double& tilt) {
+    Data fkData(fk);
     tilt = 0.0;
+    double miss = 0.0;
     const Eigen::Vector3d c = c0 + p.head<3>();
     q = tmpl.q;
     for (const char* b : {"ball_x", "ball_y", "ball_z", "ball_yaw", "ball_pitch", "ball_roll"}) q(fk.configIndex(b)) = 0.0;
@@ -227,42 +387,60 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
       const Digit& g = digits[d];
       q(g.coords[1]) = p(3 + d);
       const int free[3] = {g.coords[0], g.coords[2], g.coords[3]};
+      // The pad's normal tilted by φ_d about the phalanx's lateral axis ŷ (the contact on the
+      // rounded pad proximal (φ > 0) or distal of its centre): −ẑ' with ẑ' = (sin φ, 0, cos φ).
+      const Eigen::Vector3d padAxis(std::sin(p(3 + nd + d)), 0.0, std::cos(p(3 + nd + d)));
       // Gauss–Newton: the distance row exactly (minimum-norm), the two alignment rows in least
       // squares within its null space — the pad on the sphere, its normal as close to the
       // centre as the digit allows (a finger's pad normal stays in its flexion plane).
+      // Gauss–Newton: the distance row exactly (minimum-norm), the alignment in least squares
+      // within its null space — the pad on the sphere, its normal −ẑ as close to the direction v̂
+      // to the centre as the digit allows. The alignment residual is ẑ + v̂ (zero only when the
+      // pad faces the centre; the rows x̂ᵀv, ŷᵀv would vanish also with the pad facing away, where
+      // the little finger's side-on start of the fixed-ball grasp used to end).
+      const auto rows = [&](const Eigen::VectorXd& qq) {
+        computeKinematics(fk, fkData, qq, zero);
+        const Eigen::Isometry3d& pose = fkData.framePose[g.tip];
+        const Eigen::Vector3d v = c - pose.translation();
+        Eigen::Vector4d e;
+        e << v.norm() - r, pose.linear() * padAxis + v / v.norm();
+        return e;
+      };
       bool converged = false;
-      for (int it = 0; it < 60 && !converged; ++it) {
-        const Eigen::Vector3d e = padResidual(g, q, c).head<3>();
-        Eigen::Matrix3d J;
+      for (int it = 0; it < 80 && !converged; ++it) {
+        const Eigen::Vector4d e = rows(q);
+        Eigen::Matrix<double, 4, 3> J;
         for (int k = 0; k < 3; ++k) {
           const double h = 1e-7, keep = q(free[k]);
           q(free[k]) = keep + h;
-          const Eigen::Vector3d plus = padResidual(g, q, c).head<3>();
+          const Eigen::Vector4d plus = rows(q);
           q(free[k]) = keep - h;
-          const Eigen::Vector3d minus = padResidual(g, q, c).head<3>();
+          const Eigen::Vector4d minus = rows(q);
           q(free[k]) = keep;
           J.col(k) = (plus - minus) / (2.0 * h);
         }
         const Eigen::RowVector3d Jd = J.row(0);
         const double jj = Jd.squaredNorm();
-        if (!(jj > 0.0)) return false;
+        if (!(jj > 0.0)) break;
         const Eigen::Vector3d base = -Jd.transpose() * e(0) / jj;
         const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - Jd.transpose() * Jd / jj;
-        const Eigen::Matrix<double, 2, 3> Ja = J.bottomRows<2>() * P;
-        const Eigen::Vector2d ra = -(e.tail<2>() + J.bottomRows<2>() * base);
+        const Eigen::Matrix3d Ja = J.bottomRows<3>() * P;
+        const Eigen::Vector3d ra = -(e.tail<3>() + J.bottomRows<3>() * base);
         Eigen::Vector3d step = base + P * Ja.completeOrthogonalDecomposition().solve(ra);
-        if (!step.allFinite()) return false;
+        if (!step.allFinite()) break;
         step *= std::min(1.0, 0.2 / std::max(step.cwiseAbs().maxCoeff(), 1e-300));
         for (int k = 0; k < 3; ++k) q(free[k]) += step(k);
         converged = std::abs(e(0)) < 1e-14 && step.cwiseAbs().maxCoeff() < 1e-10;
       }
-      const Eigen::Vector4d e = padResidual(g, q, c);
-      if (!(std::abs(e(0)) < 1e-12)) return false;
-      if (!(e(3) < 0.0)) return false;  // the pad faces away from the centre
+      const Eigen::Vector4d e = padResidual(fk, fkData, g, q, c);
+      if (!e.allFinite()) return std::numeric_limits<double>::infinity();
+      if (std::abs(e(0)) >= 1e-12) miss += std::abs(e(0));
+      // The pad must face the centre: a pad facing away counts as a miss of its distance.
+      if (!(e(3) < 0.0)) miss += e(3);
       tilt = std::max(tilt, std::atan2(e.segment<2>(1).norm(), -e(3)));
       contacts[d] = fkData.framePose[g.tip].translation() - c;
     }
-    return true;
+    return miss;
   };
 
   // The hold's margins at a posture: the NNLS of the file comment. Returns the relative residual
@@ -271,74 +449,130 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
     double objective = 1e3;
     Eigen::VectorXd q, u;
     std::vector<Eigen::Vector3d> contacts;
+    std::string text;  ///< the candidate scene (thumb base and ball placed)
+    std::string penalties;  ///< which bounds the posture exceeds, and by how much
   };
   const auto hold = [&](const Eigen::VectorXd& p, double fMin, double muPrime, double tensionWeight) {
     Hold h;
     double tilt = 0.0;
-    if (!posture(p, h.q, h.contacts, tilt)) return h;
-    double penalty = std::max(0.0, tilt - options.maxTilt);
-    for (int i = 0; i < n; ++i) penalty += std::max({0.0, limits.qLower(i) - h.q(i), h.q(i) - limits.qUpper(i)});
-    const Scene s = parseScene(placeBall(sceneJson, limits.digits, c0 + p.head<3>(), h.contacts, fk), "<candidate>");
+    double penalty = 0.0;
+    std::string withThumb = sceneJson;
+    if (moveThumb) {
+      withThumb = placeThumbBase(sceneJson, thumbBase(p));
+      penalty += std::max(0.0, p.segment<3>(3 + 2 * nd).norm() - options.thumbBaseRotation);
+      penalty += std::max(0.0, p.segment<3>(6 + 2 * nd).cwiseAbs().maxCoeff() - options.thumbBaseShift) / kLength;
+      if (penalty > 0.0) h.penalties += " thumb base beyond its bounds;";
+    }
+    const Scene fkScene = parseScene(withThumb, "<candidate>");
+    const double miss = posture(fkScene.model, p, h.q, h.contacts, tilt);
+    if (!(miss == 0.0)) {
+      // Graded, so the simplex can walk towards postures whose pads reach the sphere.
+      h.objective = 10.0 + std::min(miss / r, 1e2) + penalty;
+      return h;
+    }
+    penalty += std::max(0.0, tilt - options.maxTilt);
+    if (tilt > options.maxTilt) h.penalties += " pad tilt " + std::to_string(tilt) + " rad;";
+    for (int i = 0; i < n; ++i) {
+      const double e = std::max({0.0, limits.qLower(i) - h.q(i), h.q(i) - limits.qUpper(i)});
+      penalty += e;
+      if (e > 0.0) h.penalties += " " + fkScene.model.configNames()[i] + " out of range by " + std::to_string(e) + ";";
+    }
+    h.text = placeBall(withThumb, limits.digits, c0 + p.head<3>(), h.contacts, fkScene.model);
+    const Scene s = parseScene(h.text, "<candidate>");
     const PyramidHold ph = pyramidHold(s.model, h.q, fMin, muPrime, F, tensionWeight);
     if (!ph.ok) return h;
     h.u = ph.tension;
-    for (int k = 0; k < m; ++k) penalty += std::max(0.0, h.u(k) - limits.uMax(k)) / limits.uMax(k);
-    const double residual = ph.relativeResidual;
-    h.objective = residual + penalty;
+    for (int k = 0; k < m; ++k) {
+      const double e = std::max(0.0, h.u(k) - limits.uMax(k)) / limits.uMax(k);
+      penalty += e;
+      if (e > 0.0) h.penalties += " " + s.model.inputNames()[k] + " over its maximum by " + std::to_string(e) + ";";
+    }
+    h.objective = ph.relativeResidual + penalty;
     return h;
   };
 
   FreeBallGrasp out;
-  Eigen::VectorXd p(3 + nd), step(3 + nd);
-  p.head<3>().setZero();
+  Eigen::VectorXd p = Eigen::VectorXd::Zero(np), step(np);
+  const bool given = options.start.size() == np;
+  if (options.start.size() != 0 && !given)
+    throw std::invalid_argument("findFreeBallGrasp: options.start has " + std::to_string(options.start.size()) +
+                                " entries, " + std::to_string(np) + " expected");
   step.head<3>().setConstant(0.004);
   for (int d = 0; d < nd; ++d) {
     p(3 + d) = tmpl.q(digits[d].coords[1]);
     step(3 + d) = 0.08;
+    step(3 + nd + d) = 0.1;
+  }
+  if (given) p = options.start;
+  if (moveThumb) {
+    step.segment<3>(3 + 2 * nd).setConstant(0.1);
+    step.segment<3>(6 + 2 * nd).setConstant(0.003);
   }
   const double facetMu = limits.friction * std::cos(std::numbers::pi / F);
-  bool reached = false;
+  // Continuation over the targets: the first must be reached (else no grasp); each further one is
+  // tried from the last posture that holds, and the strongest reached is kept.
+  Eigen::VectorXd reachedAt;
   for (const auto& [fMin, muFactor] : options.targets) {
     const double muPrime = muFactor * facetMu;
     const auto objective = [&](const Eigen::VectorXd& x) { return hold(x, fMin, muPrime, 0.0).objective; };
-    p = nelderMead(objective, p, step, options.maxEvaluations, 1e-12, out.evaluations);
-    if (hold(p, fMin, muPrime, 0.0).objective <= 1e-12) {
+    const int budget = reachedAt.size() == 0 ? options.maxEvaluations : options.strengthenEvaluations;
+    // Nelder–Mead restarted from its best point with the first steps while the budget lasts: a
+    // collapsed simplex is a local stop of this non-smooth objective, not a certificate.
+    Eigen::VectorXd x = p;
+    for (int spent = 0, round = 0; spent < budget && round <= options.restarts; ++round) {
+      int used = 0;
+      x = nelderMead(objective, x, step, budget - spent, options.holdTolerance, used);
+      spent += used;
+      out.evaluations += used;
+      if (objective(x) <= options.holdTolerance) break;
+    }
+    if (hold(x, fMin, muPrime, 0.0).objective <= options.holdTolerance) {
       out.targetNormal = fMin;
       out.targetFriction = muPrime;
-      reached = true;
+      reachedAt = p = x;
+    } else {
+      if (reachedAt.size() == 0) p = x;
       break;
     }
   }
-  if (!reached) {
+  if (reachedAt.size() == 0) {
     // Say where the best posture falls short: the least balanced coordinate of its hold.
-    Eigen::VectorXd qd;
-    std::vector<Eigen::Vector3d> cts;
-    double tilt = 0.0;
-    std::string where = "its posture cannot be built";
-    if (posture(p, qd, cts, tilt)) {
-      const Scene sc = parseScene(placeBall(sceneJson, limits.digits, c0 + p.head<3>(), cts, fk), "<candidate>");
-      const PyramidHold ph = pyramidHold(sc.model, qd, options.targets.back().first,
-                                         options.targets.back().second * facetMu, F);
+    const Hold best = hold(p, options.targets.front().first, options.targets.front().second * facetMu, 0.0);
+    std::string where = "its posture cannot be built (objective " + std::to_string(best.objective) + ")";
+    if (!best.text.empty()) {
+      const Scene sc = parseScene(best.text, "<candidate>");
+      const PyramidHold ph = pyramidHold(sc.model, best.q, options.targets.front().first,
+                                         options.targets.front().second * facetMu, F);
       Eigen::Index worst = 0;
       ph.residual.cwiseAbs().maxCoeff(&worst);
       where = "relative residual " + std::to_string(ph.relativeResidual) + ", largest on " +
-              fk.configNames()[worst] + " (" + std::to_string(ph.residual(worst)) + "), pad tilt " +
-              std::to_string(tilt) + " rad";
-      out.q = qd;
+              sc.model.configNames()[worst] + " (" + std::to_string(ph.residual(worst)) + ")";
+      // By parts (diagnoseHold): which of the ball and the digits cannot be balanced on its own.
+      const HoldDiagnosis dg = diagnoseHold(sc.model, best.q, limits.digits, options.targets.front().first,
+                                            options.targets.front().second * facetMu, F);
+      where += "; bounds exceeded:" + (best.penalties.empty() ? std::string(" none") : best.penalties);
+      where += "; alone: ball " + std::to_string(dg.ballResidual);
+      for (int d = 0; d < nd; ++d) where += ", " + limits.digits[d] + " " + std::to_string(dg.digitResidual[d]);
+      out.q = best.q;
       out.u = ph.tension;
       out.lambda = ph.lambda;
     }
-    out.message = "no posture holds the ball with the weakest target (f_min " +
-                  std::to_string(options.targets.back().first) + " N) within " +
+    out.parameters = p;
+    out.message = "no posture holds the ball with the first target (f_min " +
+                  std::to_string(options.targets.front().first) + " N) within " +
                   std::to_string(out.evaluations) + " evaluations: best " + where;
     return out;
   }
   // Small tensions among the holds of this posture, then the polish.
   const Hold best = hold(p, out.targetNormal, out.targetFriction, options.tensionWeight);
+  out.parameters = p;
+  out.thumbBase = thumbBase(p);
+  if (moveThumb) out.thumbTurn = p.segment<3>(3 + 2 * nd), out.thumbShift = p.segment<3>(6 + 2 * nd);
+  const std::string withThumb = moveThumb ? placeThumbBase(sceneJson, out.thumbBase) : sceneJson;
   out.centre = c0 + p.head<3>();
   out.contacts = best.contacts;
   out.u = best.u.cwiseMax(0.0);
-  const Scene s = parseScene(placeBall(sceneJson, limits.digits, out.centre, out.contacts, fk), "<grasp>");
+  const Scene s = parseScene(best.text, "<grasp>");
   Data data(s.model);
   const EquilibriumResult eq = findEquilibrium(s.model, data, best.q, out.u);
   // The ball is a uniform sphere: its orientation changes nothing, so the polished ball pose is
@@ -349,8 +583,8 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
   computeKinematics(s.model, data, out.q, zero);
   out.centre = data.framePose[s.model.frameIndex("ball")].translation();
   for (int d = 0; d < nd; ++d) out.contacts[d] = data.framePose[digits[d].tip].translation() - out.centre;
-  for (const char* b : {"ball_x", "ball_y", "ball_z", "ball_yaw", "ball_pitch", "ball_roll"}) out.q(fk.configIndex(b)) = 0.0;
-  const Scene placed = parseScene(placeBall(sceneJson, limits.digits, out.centre, out.contacts, fk), "<grasp>");
+  for (const char* b : {"ball_x", "ball_y", "ball_z", "ball_yaw", "ball_pitch", "ball_roll"}) out.q(s.model.configIndex(b)) = 0.0;
+  const Scene placed = parseScene(placeBall(withThumb, limits.digits, out.centre, out.contacts, s.model), "<grasp>");
   Data pd(placed.model);
   if (!computeDynamics(placed.model, pd, out.q, zero, out.u).ok()) {
     out.message = "the dynamics failed at the polished grasp: " + pd.status.message;
@@ -365,17 +599,10 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
     const Eigen::Vector3d v = (out.centre - pose.translation()).normalized();
     out.alignment = std::max(out.alignment, std::acos(std::clamp(-pose.linear().col(2).dot(v), -1.0, 1.0)));
   }
-  double rangeExcess = 0.0;
-  for (int i = 0; i < n; ++i) rangeExcess = std::max({rangeExcess, limits.qLower(i) - out.q(i), out.q(i) - limits.qUpper(i)});
-  const double tensionExcess = (out.u - limits.uMax).maxCoeff();
-  const double facetRatio = out.margins.worstFrictionRatio / std::cos(std::numbers::pi / F);
+  const GraspCheck check = checkGrasp(placed.model, out.q, out.u, limits, F);
+  out.relativeAcceleration = check.relativeAcceleration;
   if (!eq.ok()) out.message = "the equilibrium polish did not converge: " + eq.describe();
-  else if (out.margins.minNormal < limits.normalMin)
-    out.message = limits.digits[out.margins.minNormalContact] + " presses by " + std::to_string(out.margins.minNormal) + " N only";
-  else if (facetRatio > 1.0)
-    out.message = limits.digits[out.margins.worstFrictionContact] + " leaves the pyramid (ratio " + std::to_string(facetRatio) + ")";
-  else if (rangeExcess > 0.0) out.message = "a joint leaves its range by " + std::to_string(rangeExcess) + " rad";
-  else if (tensionExcess > 0.0) out.message = "a tension exceeds its maximum by " + std::to_string(tensionExcess) + " N";
+  else out.message = check.message;
   out.ok = out.message.empty();
   return out;
 }

@@ -2,12 +2,13 @@
 // step 1): the digits' posture, the ball's centre and tensions 0 ≤ u ≤ u_max in static
 // equilibrium with every contact pressing and inside the friction pyramid.
 //
-// Posture. The search variables are the ball's centre c (palm axes) and each digit's driver (a
-// finger's MCP flexion, the thumb's CMC flexion). The digit's other three coordinates solve
-//   |p − c| = r,   x̂ᵀ(c − p) = 0,   ŷᵀ(c − p) = 0
-// (p the pad point, x̂, ŷ the distal phalanx's long and lateral axes) by Newton's method: the pad
-// lies on the sphere and its normal, the phalanx's palmar axis −ẑ, passes through the centre, as
-// the scene's contact frame (inward normal n = (c − p)/r) assumes. The ball's contact points are
+// Posture. The search variables are the ball's centre c (palm axes), each digit's driver (a
+// finger's MCP flexion, the thumb's CMC flexion), each pad's tilt φ_d and the thumb base's turn ω
+// and shift δ (GraspSearchOptions). The digit's other three coordinates solve
+//   |p − c| = r  exactly,   ẑ' + (c − p)/|c − p| = 0  in least squares
+// (p the pad point, ẑ' the distal phalanx's dorsal axis turned by φ_d about its lateral axis) by
+// Gauss–Newton: the pad lies on the sphere and its normal −ẑ' points to the centre as closely as
+// the digit allows (the scene's contact frame has the inward normal n = (c − p)/r). The ball's contact points are
 // the pads, the ball at zero orientation; a candidate's model is the scene with its ball moved
 // there (ball_grasp_centre = c, ball_contact_<digit> = p − c, the rows' n, t1, t2 recomputed as
 // make_hand_scene.py's contact_directions does).
@@ -46,9 +47,26 @@ struct GraspSearchOptions {
   /// normal stays in its flexion plane (no axial rotation in the model), so the pads cannot all
   /// face the centre exactly; the fingertip's rounded pad allows some tilt (modelling choice).
   double maxTilt = 0.5;
-  /// Targets (f_min [N], μ'/(μ cos π/F)) tried in turn, strongest first; the first reached wins.
-  std::vector<std::pair<double, double>> targets = {{1.0, 0.5}, {0.5, 0.6}, {0.3, 0.8}, {0.1, 0.95}};
-  int maxEvaluations = 3000;       ///< Nelder–Mead objective evaluations per target
+  /// Targets (f_min [N], μ'/(μ cos π/F)) tried in turn, weakest first: the first must be reached
+  /// (else there is no grasp), each further one is tried from the last posture that holds, and the
+  /// strongest reached is kept.
+  std::vector<std::pair<double, double>> targets = {{0.05, 1.0}, {0.1, 0.9}, {0.3, 0.8}, {0.5, 0.7}, {1.0, 0.6}};
+  int maxEvaluations = 3000;       ///< Nelder–Mead objective evaluations for the first target
+  int strengthenEvaluations = 600; ///< ... and for each further target
+  int restarts = 4;                ///< Nelder–Mead restarts from its best point within a budget
+  /// A target counts as reached when the hold's relative residual (+ penalties) is below this: the
+  /// NNLS residual of a near-hold posture; the polish (findEquilibrium) then makes q̈ = 0 and
+  /// checkGrasp decides ok with the exact conditions.
+  double holdTolerance = 1e-6;
+  /// The search's start p = [c − c0; drivers; pad tilts φ; thumb ω; δ] (FreeBallGrasp::parameters
+  /// of an earlier search); empty: the scene's stored grasp, no tilt, the scene's thumb base.
+  Eigen::VectorXd start;
+  /// Largest turn of the thumb base (thumb_cmc_site) from the scene's, |ω| [rad]; 0 keeps it. The
+  /// base was designed for the fixed ball (make_hand_scene.py); the real trapeziometacarpal joint
+  /// moves the metacarpal through ~±40° in both of its planes, so a turn of the base within 0.6 rad
+  /// stays within what a thumb does (modelling choice).
+  double thumbBaseRotation = 0.6;
+  double thumbBaseShift = 0.01;    ///< largest shift of the CMC site per palm axis [m] (with the turn)
   double tensionWeight = 1e-4;     ///< weight of ‖u‖² against the squared force residual [1]
 };
 
@@ -58,13 +76,18 @@ struct FreeBallGrasp {
   Eigen::VectorXd u;               ///< nu: tensions, 0 ≤ u ≤ u_max
   Eigen::VectorXd lambda;          ///< nc: contact forces in contact frames
   Eigen::Vector3d centre;          ///< c: the ball's centre [m], palm axes
+  Eigen::Isometry3d thumbBase = Eigen::Isometry3d::Identity();  ///< thumb_cmc_site in palm axes
+  Eigen::Vector3d thumbTurn = Eigen::Vector3d::Zero();   ///< ω: the base turned by exp([ω]×) in its axes [rad]
+  Eigen::Vector3d thumbShift = Eigen::Vector3d::Zero();  ///< δ: the CMC site moved by δ [m], palm axes
   std::vector<Eigen::Vector3d> contacts;  ///< per digit, the contact point relative to c [m]
   double targetNormal = 0.0;       ///< f_min of the target reached [N]
   double targetFriction = 0.0;     ///< μ' of the target reached
   double accelerationResidual = 0.0;  ///< ‖q̈(q, 0, u)‖∞ at the polished point
+  double relativeAcceleration = 0.0;  ///< ‖W M q̈‖ / ‖W Q₀‖ there (checkGrasp)
   double alignment = 0.0;          ///< max angle between a pad normal and the direction to c [rad]
   ContactMargins margins;
   int evaluations = 0;             ///< objective evaluations of the whole search
+  Eigen::VectorXd parameters;      ///< p of the result (or of the best posture when not ok)
   bool ok = false;
   std::string message;             ///< what failed, when not ok
 };
@@ -88,6 +111,44 @@ struct PyramidHold {
 };
 PyramidHold pyramidHold(const Model& model, const Eigen::VectorXd& q, double fMin,
                         double muPrime, int facets, double tensionWeight = 0.0);
+
+/// The scene text with the thumb base (frame thumb_cmc_site, relative to the palm) set to `base`.
+std::string placeThumbBase(const std::string& sceneJson, const Eigen::Isometry3d& base);
+
+/// Whether (q, q̇ = 0, u) is a static hold of the ball by pushing pads: the one check behind the
+/// search's `ok` and the stored scene's tests. With the core's forward dynamics at (q, 0, u):
+///   ‖h(q)‖∞ ≤ 1e-10 m (on the manifold), ‖W M q̈‖ ≤ accelerationTolerance · ‖W Q₀‖ (W as pyramidHold:
+///   the residual force relative to the rest load Q₀ = gravity + springs), every λ_n ≥ normalMin,
+///   every contact inside the F-facet pyramid inscribed in the cone (|cos θ_k λ_t1 + sin θ_k λ_t2| ≤
+///   μ cos(π/F) λ_n), 0 ≤ u ≤ u_max, the digits' joints in range. `message` names the first
+///   condition that fails (empty when ok).
+struct GraspCheck {
+  ContactMargins margins;
+  double relativeAcceleration = 0.0;   ///< ‖W M q̈‖ / ‖W Q₀‖
+  double accelerationResidual = 0.0;   ///< ‖q̈‖∞ [rad/s², m/s²]
+  double constraintResidual = 0.0;     ///< ‖h(q)‖∞
+  double facetRatio = 0.0;             ///< max over contacts and facets of the facet's use (≤ 1 inside)
+  double rangeExcess = 0.0;            ///< largest excursion outside a joint range [rad] (≤ 0 inside)
+  double tensionExcess = 0.0;          ///< max(u − u_max, −u) [N] (≤ 0 inside)
+  bool ok = false;
+  std::string message;
+};
+GraspCheck checkGrasp(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& u,
+                      const BallLimits& limits, int facets = 8, double accelerationTolerance = 1e-8);
+
+/// Where a posture's hold falls short (hand_ball_grasp --diagnose): the NNLS of pyramidHold on
+/// all rows, on the ball's 6 rows alone (can forces inside the pyramids balance the ball?) and on
+/// each digit's 4 rows alone (can its tendons press its pad with such a force, against its springs
+/// and weight?). Relative residuals (÷ ‖W Q₀‖); 0 means that part can be balanced on its own.
+struct HoldDiagnosis {
+  PyramidHold whole;
+  double ballResidual = 0.0;
+  std::string ballWorst;                 ///< its least balanced coordinate and residual
+  std::vector<double> digitResidual;     ///< per digit (order of `digits`)
+  std::vector<std::string> digitWorst;   ///< per digit, its least balanced coordinate and residual
+};
+HoldDiagnosis diagnoseHold(const Model& model, const Eigen::VectorXd& q, const std::vector<std::string>& digits,
+                           double fMin, double muPrime, int facets);
 
 /// Searches the grasp of the file comment for the scene text `sceneJson` (its hand; its stored
 /// grasp is the start). Throws std::runtime_error when the scene is not a free-ball scene.

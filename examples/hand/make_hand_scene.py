@@ -87,7 +87,25 @@ Limits (hand_ball_limits.json, read by the ball-turning job):
   friction coefficient of human skin, Tribol Lett 45:1-27), used with the conservative inscribed
   8-facet pyramid by the job.
 
-The grasp: from a guessed, loosely flexed posture, the ball (fixed radius) is fitted to the four
+The free ball's grasp (full hand; not the fixed ball's hand.json nor the --digits reductions) is meant
+to be the hold that `hand_ball_grasp` (examples/hand/grasp.hpp) found, read from examples/hand/hand_ball_grasp.json
+(read_hold): a state with qdd(q, 0, u) = 0 in which every pad pushes (lambda_n >= 0.05 N) inside the
+8-facet pyramid, 0 <= u <= u_max and the joints in range. Its design freedoms, all modelling choices:
+  - the thumb base (thumb_cmc_site): the fixed ball's opposition_rotation turned by at most 0.6 rad and
+    its CMC site moved by at most 1 cm per axis. Reason: the base below was designed so the thumb's
+    guessed curl ends on a fixed ball, with no regard to forces; the trapeziometacarpal joint of a real
+    thumb moves the metacarpal through about +-40 deg in flexion-extension and abduction-adduction
+    (its range is the largest of the hand), so a base turned within that range is still a thumb;
+  - the ball's centre (any point the pads reach) and the contact points on the ball (where the pads
+    touch it);
+  - each pad's tilt: the contact normal may lean from the distal phalanx's palmar axis by up to 0.5 rad
+    in the flexion plane (the pad is rounded; a fingertip touches with the pad, not the nail).
+The tensions and the polished q come from the core's dynamics, so they are read from that file rather
+than recomputed here; this script checks that every pad lies on its contact point. While no such file
+exists (2026-12-02: no hold within the joint ranges was found, examples/hand/README.md), the free ball
+keeps the fixed ball's grasp below and no tensions.
+
+The grasp (fixed ball): from a guessed, loosely flexed posture, the ball (fixed radius) is fitted to the four
 finger pads by least squares, each finger's contact is its pad projected radially onto the ball,
 the thumb base is oriented so its guessed curl ends on the far side of the ball (opposition), and
 each digit's four coordinates are solved by Gauss-Newton (minimum-norm steps) until its pad is on
@@ -321,7 +339,7 @@ THUMB_CMC = [THUMB_RATIOS[0] * HAND_LENGTH * math.cos(THUMB_BASE_DIRECTION),
              THUMB_RATIOS[0] * HAND_LENGTH * math.sin(THUMB_BASE_DIRECTION), -0.01]
 
 
-def thumb(tendons, rot):
+def thumb(tendons, rot, cmc=THUMB_CMC):
     trap, meta, l1, l2 = (r * HAND_LENGTH for r in THUMB_RATIOS)
     dm, d1, d2 = THUMB_DIAMETERS
     n = lambda part: f"thumb_{part}"
@@ -364,7 +382,7 @@ def thumb(tendons, rot):
                   const_frame(n("mcp_site"), meta, 0.0, 0.0, children=[mcp])] + meta_vias
     flex = joint_frame(n("cmc_flexion"), "ry", n("cmc_flex"), metacarpal)
     abd = joint_frame(n("cmc_abduction"), "rz", n("cmc_abd"), [flex])
-    base = const_frame(n("cmc_site"), *THUMB_CMC, children=[abd] + base_vias, rot=rot)
+    base = const_frame(n("cmc_site"), *cmc, children=[abd] + base_vias, rot=rot)
     return base
 
 
@@ -502,6 +520,31 @@ def contact_directions(r):
     return n, t1, t2
 
 
+HOLD_FILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "hand_ball_grasp.json")
+
+
+def read_hold(digit_configs):
+    """The free ball's grasp from HOLD_FILE, written by `hand_ball_grasp` (examples/hand/grasp.hpp):
+    the thumb base (thumb_cmc_site, a 3x4 [R | t] in palm axes), the ball centre and the contact
+    points relative to it, q of the digits and the 23 tensions u. A file and not constants here:
+    the tensions and the polished q come from the core's dynamics (a non-negative least squares of
+    the static balance and Newton's method on qdd(q, 0, u) = 0), which this standard-library script
+    cannot reproduce; it checks instead that the pads lie on their contact points (below)."""
+    try:
+        with open(HOLD_FILE) as fh:
+            hold = json.load(fh)
+    except OSError as e:
+        raise SystemExit(f"{HOLD_FILE}: cannot be read ({e}); run build/examples/hand/hand_ball_grasp")
+    for key in ("thumb_base", "centre", "contacts", "q", "u"):
+        if key not in hold:
+            raise SystemExit(f"{HOLD_FILE}: no field '{key}'")
+    missing = [n for names in digit_configs.values() for n in names if n not in hold["q"]]
+    missing += [d for d in digit_configs if d not in hold["contacts"]]
+    if missing:
+        raise SystemExit(f"{HOLD_FILE}: missing entries {missing}")
+    return hold
+
+
 def main():
     args = sys.argv[1:]
     free_ball = "--free-ball" in args
@@ -548,7 +591,17 @@ def main():
     beta = math.atan2(-chord[2], chord[0])
     contacts["thumb"] = thumb_contact(centre, lc)
     rot = opposition_rotation(centre, contacts["thumb"], beta)
-    frames = [thumb(tendons, rot)] + fingers
+    cmc = THUMB_CMC
+    # The free ball's grasp (full hand only): the hold hand_ball_grasp found (see HOLD_FILE).
+    hold = None
+    if free_ball and kept is None and os.path.exists(HOLD_FILE):
+        hold = read_hold(digit_configs)
+        cmc = [hold["thumb_base"][i][3] for i in range(3)]
+        rot = [hold["thumb_base"][i][:3] + [0.0] for i in range(3)] + [[0.0, 0.0, 0.0, 1.0]]
+        centre = hold["centre"]
+        contacts = {d: [centre[i] + hold["contacts"][d][i] for i in range(3)] for d in digit_configs}
+        q.update({name: hold["q"][name] for names in digit_configs.values() for name in names})
+    frames = [thumb(tendons, rot, cmc)] + fingers
 
     # Inputs in scene order: group the tendons as the README lists them.
     order = ([f"{m}_{f}" for f in FINGERS for m in ("FDP", "FDS", "EDC")] +
@@ -562,7 +615,10 @@ def main():
 
     residuals = {}
     for d, names in digit_configs.items():
-        residuals[d] = solve_digit(frames, q, d, names, contacts[d])
+        if hold is None:
+            residuals[d] = solve_digit(frames, q, d, names, contacts[d])
+        else:  # the hold's q is stored as found: check that its pads are on their contacts
+            residuals[d] = math.dist(frame_positions(frames, q)[f"{d}_tip"], contacts[d])
     for d, r in residuals.items():
         print(f"  {d:7s} contact residual {r:.2e} m, q = " +
               ", ".join(f"{n}={q[n]:+.4f}" for n in digit_configs[d]))
@@ -647,6 +703,7 @@ def main():
         "examples/hand/make_hand_scene.py (sources and choices documented there); the stored q "
         "solves h(q) = 0 by Newton's method.")
     state_q = {n: q[n] for names in digit_configs.values() for n in names}
+    state_u = {} if hold is None else {name: hold["u"][name] for name in order}
     if free_ball:
         description = (
             "A right human hand holding a FREE ball (issue 26): the hand of hand.json (20 joint "
@@ -672,7 +729,7 @@ def main():
         "potentials": potentials,
         "forces": forces,
         "constraints": constraints,
-        "state": {"q": state_q, "dq": {}, "u": {}},
+        "state": {"q": state_q, "dq": {}, "u": state_u},
     }
     with open(out_path, "w") as fh:
         json.dump(scene, fh, indent=1)

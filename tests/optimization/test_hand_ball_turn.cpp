@@ -236,4 +236,72 @@ TEST_CASE("hand ball: the grasp search never reports success it does not have", 
   }
   CHECK(g.evaluations > 0);
 }
+
+TEST_CASE("hand ball: checkGrasp (the search's ok) fails on each broken condition", "[hand_ball][grasp]") {
+  // A point at rest by construction: at the stored full-hand grasp, tensions of either sign that
+  // balance it exactly with the contact forces (the least-norm solution of B u + Aᵀλ = −Q₀, Q₀ the
+  // rest load; 38 unknowns for 26 rows), so q̈(q, 0, u) = 0. With limits that ask nothing else only
+  // the sign of u can fail (the last condition checkGrasp tests); each earlier condition is then
+  // broken alone and must be the one named. (Joint ranges and tensions are checked after the contacts,
+  // so this point, which pulls, cannot exercise them; no hold is stored yet, README.)
+  const Scene s = loadScene(kScenes + "hand_ball.json");
+  const Model& m = s.model;
+  const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_limits.json", m);
+  Data data(m);
+  const VectorXd zero = VectorXd::Zero(m.nq());
+  REQUIRE(computeDynamics(m, data, s.q, zero, VectorXd::Zero(m.nu())).ok());
+  computeMassMatrix(m, data, s.q);
+  computeInputMatrix(m, data, s.q);
+  const VectorXd restLoad = data.M * data.qdd - data.constraintJacobian.transpose() * data.lambda;
+  MatrixXd K(m.nq(), m.nu() + m.nc());
+  K << data.inputMatrix, data.constraintJacobian.transpose();
+  const VectorXd x = K.completeOrthogonalDecomposition().solve(-restLoad);
+  REQUIRE((K * x + restLoad).norm() <= 1e-10 * restLoad.norm());
+  const VectorXd& q = s.q;
+  const VectorXd u = x.head(m.nu());
+  hand::BallLimits lax = l;
+  const double inf = std::numeric_limits<double>::infinity();
+  lax.normalMin = -inf;
+  lax.friction = 1e12;
+  lax.qLower.setConstant(-inf);
+  lax.qUpper.setConstant(inf);
+  lax.uMax.setConstant(1e6);
+  const hand::GraspCheck ok = hand::checkGrasp(m, q, u, lax);
+  INFO(ok.message);
+  CHECK(ok.relativeAcceleration <= 1e-8);
+  CHECK(ok.constraintResidual <= 1e-10);
+  // Some pads pull here (this is no grasp): with the margin at −∞ the first condition that fails is
+  // the pyramid (a pulling pad is outside it whatever μ), never the rest or the contact points.
+  CHECK_FALSE(ok.ok);
+  CHECK_THAT(ok.message, Catch::Contains("friction pyramid"));
+  SECTION("tensions off the equilibrium: not at rest") {
+    VectorXd v = u;
+    v(m.inputIndex("FPL")) += 0.05;
+    const hand::GraspCheck c = hand::checkGrasp(m, q, v, lax);
+    CHECK_FALSE(c.ok);
+    CHECK_THAT(c.message, Catch::Contains("not at rest"));
+  }
+  SECTION("a margin above the weakest pad") {
+    hand::BallLimits k = lax;
+    k.normalMin = 1e3;
+    const hand::GraspCheck c = hand::checkGrasp(m, q, u, k);
+    CHECK_FALSE(c.ok);
+    CHECK_THAT(c.message, Catch::Contains("presses by"));
+  }
+  SECTION("pads off their contact points") {
+    VectorXd r = q;
+    r(m.configIndex("index_dip")) += 1e-3;
+    const hand::GraspCheck c = hand::checkGrasp(m, r, u, lax);
+    CHECK_FALSE(c.ok);
+    CHECK_THAT(c.message, Catch::Contains("leave their contact points"));
+  }
+  SECTION("the issue's limits at this point") {
+    // With the real limits: a pad pulls, and checkGrasp names it.
+    const hand::GraspCheck c = hand::checkGrasp(m, q, u, l);
+    INFO(c.message);
+    CHECK_FALSE(c.ok);
+    CHECK_THAT(c.message, Catch::Contains("presses by"));
+  }
+}
+
 #endif
