@@ -105,6 +105,14 @@ TRELLIS_LANES_INLINE Lanes<L, W>& operator+=(Lanes<L, W>& a, const Lanes<L, W>& 
   for (int c = 0; c < L; c += W) TRELLIS_LANES_AT(W, a.d + c) = (TRELLIS_LANES_AT_C(W, a.d + c) + TRELLIS_LANES_AT_C(W, b.d + c));
   return a;
 }
+/// 1/√x.
+template <int L, int W>
+TRELLIS_LANES_INLINE Lanes<L, W> invSqrt(const Lanes<L, W>& x) {
+  const double v = 1.0 / std::sqrt(x.v), dv = -0.5 * v * v * v;
+  Lanes<L, W> r(v, NoTangents{});
+  TRELLIS_LANES_MAP(dv * TRELLIS_LANES_AT_C(W, x.d + c));
+  return r;
+}
 /// sin x and cos x together.
 template <int L, int W>
 TRELLIS_LANES_INLINE void sinCos(const Lanes<L, W>& x, Lanes<L, W>& s, Lanes<L, W>& c) {
@@ -167,6 +175,12 @@ struct PointSite {
   int axis[3] = {0, 0, 0};
   double sign = 1.0;
   Vec3<double> local;
+};
+
+/// One straight segment of a tendon between points on two different bodies (header: tendons).
+struct TendonSegment {
+  int a = kWorld, b = kWorld, input = 0;  ///< the bodies (kWorld: the world); the tension's input
+  Vec3<double> localA, localB;
 };
 
 /// The world axis k (0, 1, 2) entry of x, writable.
@@ -375,6 +389,12 @@ struct BlockIO {
   int crowCount = 0, siteCount = 0, cmemberCount = 0;
   const PointSite* sites = nullptr;
   const double *lambda = nullptr, *muC = nullptr;
+  /// The component's tendon segments segIdx[0 … segCount − 1] (into segments), the inputs they
+  /// use inputs[0 … inputCount − 1], and u.
+  const int *segIdx = nullptr, *inputs = nullptr;
+  int segCount = 0, inputCount = 0;
+  const TendonSegment* segments = nullptr;
+  const double* u = nullptr;
   const Eigen::MatrixXd* Y = nullptr;  ///< (n + nc)×N
   Eigen::MatrixXd* rows = nullptr;     ///< N×2n
   const std::vector<TreeJoint>* joints = nullptr;
@@ -394,9 +414,11 @@ struct TreePass {
   std::vector<char> moving;    ///< whether joint i or an ancestor is one of the block's directions
   std::vector<char> busy;      ///< whether a joint of sub(k) moves
   std::vector<T> lam, glam;    ///< per constraint row: seeded λ; ∂φ̃/∂λ_r
+  std::vector<T> gu;           ///< per input: ∂φ̃/∂u (tendon tensions)
   std::vector<Vec6<T>> cOmega, cTheta, cTPsi, cTA;  ///< the header's subtree sums over the sites
 
-  TreePass(int n, int nc) {
+  TreePass(int n, int nc, int m) {
+    gu.assign(m, T{});
     moving.assign(n, 0);
     busy.assign(n, 0);
     for (auto* x : {&q, &dq, &qdd, &gq, &gv, &mmu}) x->assign(n, T{});
@@ -451,6 +473,47 @@ struct TreePass {
       cTheta[j] += TV + crossForce(V, TA);
       cTPsi[j] += TPsi;
       cTA[j] += TA;
+    }
+    // Tendon segments (header): the point P's ψ(P) = Ψ_l + Ψ_ω × P, lanes where its body moves.
+    auto pointOf = [&](int j, const Vec3<double>& local, Vec3<T>& P, Vec6<T>& Psi) {
+      if (j == kWorld) {
+        lift(local, P);
+        Psi = Vec6<T>{};
+      } else if (moving[j]) {
+        P = p[j] + timesConstant(R[j], local);
+        Psi = psi[j];
+      } else {
+        lift(cv.p[j] + cv.R[j] * local, P);
+        lift(cv.psi[j], Psi);
+      }
+    };
+    for (int ii = 0; ii < io.inputCount; ++ii) gu[io.inputs[ii]] = T(0.0);
+    for (int si = 0; si < io.segCount; ++si) {
+      const TendonSegment& seg = io.segments[io.segIdx[si]];
+      Vec3<T> PA, PB;
+      Vec6<T> PsiA, PsiB;
+      pointOf(seg.a, seg.localA, PA, PsiA);
+      pointOf(seg.b, seg.localB, PB, PsiB);
+      const Vec3<T> d = PB - PA;
+      const T invL = invSqrt(dot(d, d));
+      const Vec3<T> nd = invL * d;
+      const Vec3<T> E = (PsiA.l + cross(PsiA.a, PA)) - (PsiB.l + cross(PsiB.a, PB));
+      const T nE = dot(nd, E);
+      gu[seg.input] = gu[seg.input] - nE;
+      const double tau = io.u[seg.input];
+      const Vec3<T> tPE = (tau * invL) * (E - nE * nd);  // τ ∂(n·E)/∂d
+      if (seg.a != kWorld) {
+        const Vec3<T> F = (-tau) * nd;
+        const Vec6<T> TPsi = forceAt(PA, F);
+        cOmega[seg.a] += forceAt(PA, tPE + cross(F, PsiA.a)) + crossForce(PsiA, TPsi);
+        cTPsi[seg.a] += TPsi;
+      }
+      if (seg.b != kWorld) {
+        const Vec3<T> F = tau * nd;
+        const Vec6<T> TPsi = forceAt(PB, F);
+        cOmega[seg.b] += forceAt(PB, cross(F, PsiB.a) - tPE) + crossForce(PsiB, TPsi);
+        cTPsi[seg.b] += TPsi;
+      }
     }
     for (int idx = io.cmemberCount - 1; idx >= 0; --idx) {
       const int k = io.cmembers[idx];
@@ -615,11 +678,11 @@ struct TreePass {
   }
 
   /// The block of q directions io.dirs (one component): seeds (e_a, Y e_a), the pass over the
-  /// component's joints, then the rows ∇²φ e_a = −ġ_z + Yᵀ (d/dε M μ) (the u entries of ġ are
-  /// zero: Q is affine in u here). Entries outside the component are zero: no joint of another
-  /// component moves along e_a, and q̈ of another component does not depend on the component's q,
-  /// q̇ (M is block diagonal by component, and the forces the tree pass covers act on one
-  /// coordinate each), so those rows of Y are zero and are not read.
+  /// component's joints and sites, then the rows ∇²φ e_a = −ġ_z + Yᵀ (d/dε ∂φ̃/∂y) (the u entries
+  /// of ġ: the tendons' d/dε ∂φ̃/∂u; Q is otherwise affine in u). Entries outside the component are
+  /// zero: no joint of another component moves along e_a, and q̈, λ of another component do not
+  /// depend on the component's q, q̇ (M and A are block diagonal by component, and the other
+  /// forces the tree pass covers act on one coordinate each), so those rows of Y are not read.
   TRELLIS_LANES_INLINE void block(const BlockIO& io) {
     const int n = io.n, N = io.N;
     const Eigen::MatrixXd& Y = *io.Y;
@@ -648,7 +711,7 @@ struct TreePass {
       for (int l = 0; l < io.lanes; ++l) lam[r].d[l] = Y(n + r, io.dirs[l]);
     }
     run(*io.joints, io.gravity, io.mu, *io.values, io.members, io.count);
-    if (io.siteCount > 0) constraintTerms(io);
+    if (io.siteCount > 0 || io.segCount > 0) constraintTerms(io);
     Eigen::MatrixXd& rows = *io.rows;
     for (int l = 0; l < io.lanes; ++l) {
       double* col = rows.data() + static_cast<Eigen::Index>(io.dirs[l]) * N;
@@ -677,6 +740,10 @@ struct TreePass {
       for (int c = 0; c < L / W; ++c) TRELLIS_LANES_AT(W, sum + c * W) = (acc[c]);
       for (int l = 0; l < io.lanes; ++l) rows(b, io.dirs[l]) += sum[l];
     }
+    for (int ii = 0; ii < io.inputCount; ++ii) {  // the tendons' d/dε ∂φ̃/∂u
+      const int k = io.inputs[ii];
+      for (int l = 0; l < io.lanes; ++l) rows(2 * n + k, io.dirs[l]) += gu[k].d[l];
+    }
   }
 };
 
@@ -694,7 +761,7 @@ struct VelocityPass {
   std::vector<Vec6<T>> v, H, cTheta;  ///< cTheta: the header's Θ (tangents only)
   std::vector<char> moving;  ///< whether joint i or an ancestor is one of the block's directions
 
-  VelocityPass(int n, int) {
+  VelocityPass(int n, int, int) {
     for (auto* x : {&dq, &gv}) x->assign(n, T{});
     B.assign(n, Mat3<T>{});
     gammaMu.assign(n, Vec3<T>{});
@@ -805,11 +872,11 @@ struct ByWidth {
   std::unique_ptr<P<8, W>> w8;
   std::unique_ptr<P<12, W>> w12;
   std::unique_ptr<P<16, W>> w16;
-  void make(int L, int n, int nc) {
-    if (L == 4 && !w4) w4 = std::make_unique<P<4, W>>(n, nc);
-    if (L == 8 && !w8) w8 = std::make_unique<P<8, W>>(n, nc);
-    if (L == 12 && !w12) w12 = std::make_unique<P<12, W>>(n, nc);
-    if (L == 16 && !w16) w16 = std::make_unique<P<16, W>>(n, nc);
+  void make(int L, int n, int nc, int m) {
+    if (L == 4 && !w4) w4 = std::make_unique<P<4, W>>(n, nc, m);
+    if (L == 8 && !w8) w8 = std::make_unique<P<8, W>>(n, nc, m);
+    if (L == 12 && !w12) w12 = std::make_unique<P<12, W>>(n, nc, m);
+    if (L == 16 && !w16) w16 = std::make_unique<P<16, W>>(n, nc, m);
   }
   template <class F>
   void with(int L, F&& f) {
@@ -853,6 +920,7 @@ struct TreeSecondOrderImpl {
   int n = 0, N = 0, nc = 0;
   std::vector<TreeJoint> joints;
   std::vector<PointSite> sites;  ///< the point constraint rows' points on bodies (pairs in row order)
+  std::vector<TendonSegment> segments;  ///< the tendons' segments between two bodies
   Vec3<double> gravity;
   bool avx2 = false;  ///< the W = 4 build (chosen at construction)
   PassSet<2> generic;
@@ -863,7 +931,7 @@ struct TreeSecondOrderImpl {
   /// rows, sites and the members with a site below them, and the blocks of up to 16 directions
   /// each, within one component.
   struct Component {
-    std::vector<int> members, zcols, crows, sites, cmembers;
+    std::vector<int> members, zcols, crows, sites, cmembers, segments, inputs;
   };
   struct Block {
     int component = 0, first = 0, lanes = 0;
@@ -875,7 +943,7 @@ struct TreeSecondOrderImpl {
 bool treeSecondOrderApplies(const Model& model) {
   for (const Constraint& c : model.constraints())
     if (c.type != ConstraintType::kPoint) return false;
-  return model.linearSprings().empty() && model.tendons().empty() && model.bodyWrenches().empty();
+  return model.linearSprings().empty() && model.bodyWrenches().empty();
 }
 
 namespace {
@@ -931,6 +999,11 @@ TreeSecondOrder::TreeSecondOrder(const Model& model) : impl_(std::make_unique<Tr
     r = e;
   }
   s.values = TreeValues(s.n, static_cast<int>(s.sites.size()));
+  for (const Tendon& t : model.tendons())
+    for (size_t k = 0; k + 1 < t.path.size(); ++k) {
+      if (t.path[k].joint == t.path[k + 1].joint) continue;  // within one body: no net wrench
+      s.segments.push_back({t.path[k].joint, t.path[k + 1].joint, t.input, vec3(t.path[k].local), vec3(t.path[k + 1].local)});
+    }
   // Components: the subtrees from the world (by their root joint), joined (union-find on the
   // roots) where a row links two of them.
   std::vector<int> root(s.n), link(s.n);
@@ -943,11 +1016,13 @@ TreeSecondOrder::TreeSecondOrder(const Model& model) : impl_(std::make_unique<Tr
     while (link[x] != x) x = link[x] = link[link[x]];
     return x;
   };
-  for (const Constraint& c : cs)
-    if (c.a.joint != kWorld && c.b.joint != kWorld) {
-      const int x = find(root[c.a.joint]), y = find(root[c.b.joint]);
-      if (x != y) link[std::max(x, y)] = std::min(x, y);
-    }
+  auto join = [&](int a, int b) {
+    if (a == kWorld || b == kWorld) return;
+    const int x = find(root[a]), y = find(root[b]);
+    if (x != y) link[std::max(x, y)] = std::min(x, y);
+  };
+  for (const Constraint& c : cs) join(c.a.joint, c.b.joint);
+  for (const TendonSegment& seg : s.segments) join(seg.a, seg.b);
   std::vector<int> componentOf(s.n, -1);
   for (int i = 0; i < s.n; ++i) {
     const int rep = find(root[i]);
@@ -968,6 +1043,14 @@ TreeSecondOrder::TreeSecondOrder(const Model& model) : impl_(std::make_unique<Tr
     s.components[componentOfJoint(j)].sites.push_back(si);
     for (int k = j; k != kWorld; k = s.joints[k].parent) hasSite[k] = 1;
   }
+  for (int si = 0; si < static_cast<int>(s.segments.size()); ++si) {
+    const TendonSegment& seg = s.segments[si];
+    TreeSecondOrderImpl::Component& comp = s.components[componentOfJoint(seg.a != kWorld ? seg.a : seg.b)];
+    comp.segments.push_back(si);
+    if (std::find(comp.inputs.begin(), comp.inputs.end(), seg.input) == comp.inputs.end()) comp.inputs.push_back(seg.input);
+    for (const int j : {seg.a, seg.b})
+      for (int k = j; k != kWorld; k = s.joints[k].parent) hasSite[k] = 1;
+  }
   for (int c = 0; c < static_cast<int>(s.components.size()); ++c) {
     TreeSecondOrderImpl::Component& comp = s.components[c];
     for (const int k : comp.members)
@@ -981,11 +1064,11 @@ TreeSecondOrder::TreeSecondOrder(const Model& model) : impl_(std::make_unique<Tr
   for (const TreeSecondOrderImpl::Block& blk : s.blocks) {
     const int L = blockWidth(blk.lanes);
     if (s.avx2) {
-      s.wide.positions.make(L, s.n, s.nc);
-      s.wide.velocities.make(L, s.n, s.nc);
+      s.wide.positions.make(L, s.n, s.nc, s.N - 2 * s.n);
+      s.wide.velocities.make(L, s.n, s.nc, s.N - 2 * s.n);
     } else {
-      s.generic.positions.make(L, s.n, s.nc);
-      s.generic.velocities.make(L, s.n, s.nc);
+      s.generic.positions.make(L, s.n, s.nc, s.N - 2 * s.n);
+      s.generic.velocities.make(L, s.n, s.nc, s.N - 2 * s.n);
     }
   }
 }
@@ -994,7 +1077,8 @@ TreeSecondOrder::TreeSecondOrder(TreeSecondOrder&&) noexcept = default;
 TreeSecondOrder& TreeSecondOrder::operator=(TreeSecondOrder&&) noexcept = default;
 
 void TreeSecondOrder::computeRows(const Model&, const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
-                                  const Eigen::VectorXd& qdd, const Eigen::VectorXd& lambda, const Eigen::VectorXd& mu,
+                                  const Eigen::VectorXd& qdd, const Eigen::VectorXd& u, const Eigen::VectorXd& lambda,
+                                  const Eigen::VectorXd& mu,
                                   const Eigen::VectorXd& muC, const Eigen::MatrixXd& Y, Eigen::MatrixXd& rows) {
   TreeSecondOrderImpl& s = *impl_;
   const int n = s.n;
@@ -1010,6 +1094,8 @@ void TreeSecondOrder::computeRows(const Model&, const Eigen::VectorXd& q, const 
   io.lambda = lambda.data();
   io.muC = muC.data();
   io.sites = s.sites.data();
+  io.segments = s.segments.data();
+  io.u = u.data();
   io.Y = &Y;
   io.rows = &rows;
   io.joints = &s.joints;
@@ -1030,6 +1116,10 @@ void TreeSecondOrder::computeRows(const Model&, const Eigen::VectorXd& q, const 
       io.siteCount = static_cast<int>(comp.sites.size());
       io.cmembers = comp.cmembers.data();
       io.cmemberCount = static_cast<int>(comp.cmembers.size());
+      io.segIdx = comp.segments.data();
+      io.segCount = static_cast<int>(comp.segments.size());
+      io.inputs = comp.inputs.data();
+      io.inputCount = static_cast<int>(comp.inputs.size());
       io.first = blk.first;
       io.dirs = comp.members.data() + blk.first;
       io.lanes = blk.lanes;

@@ -41,12 +41,16 @@
 //   ∂/∂q_k = S_k·Ω − w·Θ − (S_k × ψ_λ(k))·ΣT_Ψ − (S_k × a_λ(k))·ΣT_A + (w × v_λ(k))·ΣT_A,
 //   ∂/∂q̇_k = S_k·Θ − 2 w·ΣT_A,   ∂/∂q̈_k = S_k·ΣT_A,   ∂/∂λ_r = −(±) e_r·ψ(P),
 // O(1) per site and joint, and the same forward mode gives their tangents (λ seeded with the
-// rows of Y = ∂[q̈; λ]/∂z). Subtrees joined by a constraint row form one component (their q̈ and
-// λ move together); rows to the world do not join anything.
+// rows of Y = ∂[q̈; λ]/∂z). Subtrees joined by a constraint row or a tendon segment form one
+// component (their q̈ and λ move together); rows to the world do not join anything.
+// A tendon segment between points A, B on different bodies (tension τ = u_t, d = p_B − p_A,
+// n = d/|d|) adds −τ n·E, E = ψ(A) − ψ(B): two sites with F = ∓τ n and no G, whose T_p gains
+// ±τ ∂(n·E)/∂d = ±τ (E − n (n·E))/|d|; it holds no q̇, q̈ or λ, and its u gradient −n·E gives the
+// (u, q) rows (the u directions themselves follow by symmetry, as before).
 //
 // It covers the models whose residual holds nothing but the tree's inertia, gravity, the forces
 // on coordinates (configuration springs, damping, configuration forces: affine in z, so without
-// second derivatives) and point constraint rows: no linear spring, tendon, body wrench or other
+// second derivatives), tendons and point constraint rows: no linear spring, body wrench or other
 // constraint kind. Every other model runs the recorded tape (second_order.cpp).
 #pragma once
 
@@ -80,10 +84,10 @@ class TreeSecondOrder {
   TreeSecondOrder& operator=(TreeSecondOrder&&) noexcept;
 
   /// rows (N×2n, N = 2n + m) ← ∇²φ e_a for the q and q̇ directions a = 0 … 2n − 1, φ as in the file
-  /// comment, at (q, q̇, q̈, λ) with the adjoints mu (n) and muC (nc) and Y = ∂[q̈; λ]/∂z ((n + nc)×N);
+  /// comment, at (q, q̇, q̈, u, λ) with the adjoints mu (n) and muC (nc) and Y = ∂[q̈; λ]/∂z ((n + nc)×N);
   /// the (q, q̇) rows exactly the transpose of the (q̇, q) rows.
   void computeRows(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& dq, const Eigen::VectorXd& qdd,
-                   const Eigen::VectorXd& lambda, const Eigen::VectorXd& mu, const Eigen::VectorXd& muC,
+                   const Eigen::VectorXd& u, const Eigen::VectorXd& lambda, const Eigen::VectorXd& mu, const Eigen::VectorXd& muC,
                    const Eigen::MatrixXd& Y, Eigen::MatrixXd& rows);
 
  private:

@@ -102,11 +102,11 @@ TEST_CASE("No allocation after warm-up: second derivatives on the tree pass of a
   checkNoAllocation(std::move(s).finish().model, 77);
 }
 
-TEST_CASE("No allocation after warm-up: second derivatives on the tree pass with point constraint rows",
+TEST_CASE("No allocation after warm-up: second derivatives on the tree pass with point rows and a tendon",
           "[no_malloc][second_order]") {
   // Two chains (4 and 18 joints) whose tips are held together by two point rows (one component,
-  // two blocks of each pass) and a 3-joint chain with its tip pinned to the world (three rows):
-  // only point rows, so the contraction runs the tree pass with its constraint terms.
+  // two blocks of each pass), a 3-joint chain with its tip pinned to the world (three rows), and a
+  // tendon from the world across the 3- and 4-joint chains: the tree pass with its site terms.
   SystemBuilder s;
   for (const int links : {3, 4, 18}) {
     std::string parent = "world";
@@ -123,6 +123,7 @@ TEST_CASE("No allocation after warm-up: second derivatives on the tree pass with
   for (int axis = 0; axis < 3; ++axis) s.b.addPointConstraint("c3_2_bob", "anchor", axis);
   s.b.addPointConstraint("c4_3_bob", "c18_17_bob", 0);
   s.b.addPointConstraint("c4_3_bob", "c18_17_bob", 2);
+  s.b.addTendon({"anchor", "c3_0_bob", "c3_1_bob", "c4_2_bob"}, "u_tendon");  // joins the 3- and 4-chains
   s.b.addGravity(Eigen::Vector3d(0.0, -9.81, 0.0));
   checkNoAllocation(std::move(s).finish().model, 78);
 }
