@@ -607,7 +607,7 @@ DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, Sec
   // depend on u).
   if (s.tree) {
     // The tree pass: the same rows by forward mode over the closed-form gradient (second_order_tree.hpp).
-    s.tree->computeRows(model, q, dq, data.qdd, s.muR, s.Y, s.rows);
+    s.tree->computeRows(model, q, dq, data.qdd, u, data.lambda, s.muR, s.muC, s.Y, s.rows);
   } else {
     s.record(model);
     if (s.tape.size != s.recordedNodes)  // a folding rule that depended on the state would overrun the buffers

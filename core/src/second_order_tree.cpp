@@ -105,6 +105,14 @@ TRELLIS_LANES_INLINE Lanes<L, W>& operator+=(Lanes<L, W>& a, const Lanes<L, W>& 
   for (int c = 0; c < L; c += W) TRELLIS_LANES_AT(W, a.d + c) = (TRELLIS_LANES_AT_C(W, a.d + c) + TRELLIS_LANES_AT_C(W, b.d + c));
   return a;
 }
+/// 1/√x.
+template <int L, int W>
+TRELLIS_LANES_INLINE Lanes<L, W> invSqrt(const Lanes<L, W>& x) {
+  const double v = 1.0 / std::sqrt(x.v), dv = -0.5 * v * v * v;
+  Lanes<L, W> r(v, NoTangents{});
+  TRELLIS_LANES_MAP(dv * TRELLIS_LANES_AT_C(W, x.d + c));
+  return r;
+}
 /// sin x and cos x together.
 template <int L, int W>
 TRELLIS_LANES_INLINE void sinCos(const Lanes<L, W>& x, Lanes<L, W>& s, Lanes<L, W>& c) {
@@ -158,6 +166,28 @@ struct TreeJoint {
   Vec3<double> p0, firstMoment;
   double mass = 0.0, subtreeMass = 0.0;
 };
+
+/// One point of a point constraint pair (the header's sites): on body `joint` at `local` (body
+/// axes), entering its rows first … first + count − 1 with sign +1 (point a) or −1 (point b), the
+/// rows along the world axes axis[0 … count − 1].
+struct PointSite {
+  int joint = kWorld, first = 0, count = 0;
+  int axis[3] = {0, 0, 0};
+  double sign = 1.0;
+  Vec3<double> local;
+};
+
+/// One straight segment of a tendon between points on two different bodies (header: tendons).
+struct TendonSegment {
+  int a = kWorld, b = kWorld, input = 0;  ///< the bodies (kWorld: the world); the tension's input
+  Vec3<double> localA, localB;
+};
+
+/// The world axis k (0, 1, 2) entry of x, writable.
+template <class T>
+TRELLIS_LANES_INLINE T& axisEntry(Vec3<T>& x, int k) {
+  return k == 0 ? x.x : (k == 1 ? x.y : x.z);
+}
 
 Vec3<double> vec3(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 Mat3<double> mat3(const Eigen::Matrix3d& m) {
@@ -281,11 +311,31 @@ struct TreeValues {
   std::vector<Vec6<double>> S, psi, beta, v, Iv;  ///< motion subspace; ψ; Σ_{j∈sub(k)} μ_j Ic_j S_j; twist; I v
   std::vector<Vec6<double>> vS, vIv;              ///< q̇_i v × S_i; v ×* I v
   std::vector<Vec6<double>> betaX, Spsi;           ///< β_k + Ic_k ψ_P; S_k × ψ_P (ψ_P: the parent's ψ)
+  std::vector<Vec3<double>> siteP, siteG;         ///< per site: its world position; G = ±Σ μ_c,r e_r
+  std::vector<Vec6<double>> sumTA;                ///< per joint: Σ T_A = Σ [G; p × G] over the sites below it
 
-  explicit TreeValues(int n) {
+  TreeValues(int n, int sites) {
     for (auto* x : {&R, &I, &Ic, &B}) x->assign(n, Mat3<double>{});
     for (auto* x : {&p, &h, &hc}) x->assign(n, Vec3<double>{});
-    for (auto* x : {&S, &psi, &beta, &v, &Iv, &vS, &vIv, &betaX, &Spsi}) x->assign(n, Vec6<double>{});
+    for (auto* x : {&S, &psi, &beta, &v, &Iv, &vS, &vIv, &betaX, &Spsi, &sumTA}) x->assign(n, Vec6<double>{});
+    for (auto* x : {&siteP, &siteG}) x->assign(sites, Vec3<double>{});
+  }
+  /// The sites' positions and G, and ΣT_A per joint (after compute: the poses).
+  void computeSites(const std::vector<TreeJoint>& joints, const std::vector<PointSite>& sites, const double* muC) {
+    const int n = static_cast<int>(joints.size());
+    if (sites.empty()) return;
+    for (int i = 0; i < n; ++i) sumTA[i] = Vec6<double>{};
+    for (size_t s = 0; s < sites.size(); ++s) {
+      const PointSite& site = sites[s];
+      const int j = site.joint;
+      siteP[s] = p[j] + R[j] * site.local;
+      Vec3<double> G;
+      for (int r = 0; r < site.count; ++r) axisEntry(G, site.axis[r]) += site.sign * muC[site.first + r];
+      siteG[s] = G;
+      sumTA[j] += forceAt(siteP[s], G);
+    }
+    for (int k = n - 1; k >= 0; --k)
+      if (joints[k].parent != kWorld) sumTA[joints[k].parent] += sumTA[k];
   }
   void compute(const std::vector<TreeJoint>& joints, const double* q, const double* dq, const double* mu) {
     const int n = static_cast<int>(joints.size());
@@ -332,7 +382,20 @@ struct BlockIO {
   const int *dirs = nullptr, *members = nullptr, *zcols = nullptr;
   int first = 0, count = 0, zcount = 0;
   const double *q = nullptr, *dq = nullptr, *qdd = nullptr, *mu = nullptr;
-  const Eigen::MatrixXd* Y = nullptr;  ///< n×N
+  /// The component's point constraint rows crows[0 … crowCount − 1], its sites siteIdx[0 …
+  /// siteCount − 1] (into sites) and the members cmembers[0 … cmemberCount − 1] that have a site
+  /// in their subtree (increasing order); λ and μ_c of all rows.
+  const int *crows = nullptr, *siteIdx = nullptr, *cmembers = nullptr;
+  int crowCount = 0, siteCount = 0, cmemberCount = 0;
+  const PointSite* sites = nullptr;
+  const double *lambda = nullptr, *muC = nullptr;
+  /// The component's tendon segments segIdx[0 … segCount − 1] (into segments), the inputs they
+  /// use inputs[0 … inputCount − 1], and u.
+  const int *segIdx = nullptr, *inputs = nullptr;
+  int segCount = 0, inputCount = 0;
+  const TendonSegment* segments = nullptr;
+  const double* u = nullptr;
+  const Eigen::MatrixXd* Y = nullptr;  ///< (n + nc)×N
   Eigen::MatrixXd* rows = nullptr;     ///< N×2n
   const std::vector<TreeJoint>* joints = nullptr;
   const TreeValues* values = nullptr;  ///< the plain values (computed for this call)
@@ -350,14 +413,139 @@ struct TreePass {
   std::vector<T> gq, gv, mmu;  ///< outputs: −∂φ̃/∂q_k, −∂φ̃/∂q̇_k, (M μ)_k
   std::vector<char> moving;    ///< whether joint i or an ancestor is one of the block's directions
   std::vector<char> busy;      ///< whether a joint of sub(k) moves
+  std::vector<T> lam, glam;    ///< per constraint row: seeded λ; ∂φ̃/∂λ_r
+  std::vector<T> gu;           ///< per input: ∂φ̃/∂u (tendon tensions)
+  std::vector<Vec6<T>> cOmega, cTheta, cTPsi, cTA;  ///< the header's subtree sums over the sites
 
-  explicit TreePass(int n) {
+  TreePass(int n, int nc, int m) {
+    gu.assign(m, T{});
     moving.assign(n, 0);
     busy.assign(n, 0);
     for (auto* x : {&q, &dq, &qdd, &gq, &gv, &mmu}) x->assign(n, T{});
+    for (auto* x : {&lam, &glam}) x->assign(nc, T{});
     for (auto* x : {&R, &cI, &B}) x->assign(n, Mat3<T>{});
     for (auto* x : {&p, &ch, &gammaMu}) x->assign(n, Vec3<T>{});
-    for (auto* x : {&S, &v, &a, &psi, &fin, &H, &betaMu}) x->assign(n, Vec6<T>{});
+    for (auto* x : {&S, &v, &a, &psi, &fin, &H, &betaMu, &cOmega, &cTheta, &cTPsi, &cTA}) x->assign(n, Vec6<T>{});
+  }
+
+  /// The point constraint terms of the header after run: each site's adjoints from its body's
+  /// pose, twist, ψ and acceleration (lanes where the body moves, lifted plain values where it
+  /// does not; a carries q̈'s tangents everywhere, λ its own), summed inwards over the members
+  /// with a site below them, and added to −∂φ̃/∂q_k, −∂φ̃/∂q̇_k and (M μ + Aᵀ μ_c)_k; ∂φ̃/∂λ_r
+  /// into glam.
+  TRELLIS_LANES_INLINE void constraintTerms(const BlockIO& io) {
+    const TreeValues& cv = *io.values;
+    const std::vector<TreeJoint>& joints = *io.joints;
+    for (int idx = 0; idx < io.cmemberCount; ++idx) {
+      const int k = io.cmembers[idx];
+      cOmega[k] = cTheta[k] = cTPsi[k] = cTA[k] = Vec6<T>{};
+    }
+    for (int r = 0; r < io.crowCount; ++r) glam[io.crows[r]] = T(0.0);
+    for (int si = 0; si < io.siteCount; ++si) {
+      const int sIndex = io.siteIdx[si];
+      const PointSite& site = io.sites[sIndex];
+      const int j = site.joint;
+      Vec3<T> P;
+      Vec6<T> V, Psi;
+      if (moving[j]) {
+        P = p[j] + timesConstant(R[j], site.local);
+        V = v[j];
+        Psi = psi[j];
+      } else {
+        lift(cv.siteP[sIndex], P);
+        lift(cv.v[j], V);
+        lift(cv.psi[j], Psi);
+      }
+      const Vec6<T>& A = a[j];
+      const Vec3<double>& G = cv.siteG[sIndex];
+      Vec3<T> F;
+      for (int r = 0; r < site.count; ++r) axisEntry(F, site.axis[r]) = axisEntry(F, site.axis[r]) - site.sign * lam[site.first + r];
+      const Vec3<T> vpsi = Psi.l + cross(Psi.a, P);  // ψ(P)
+      for (int r = 0; r < site.count; ++r) glam[site.first + r] = glam[site.first + r] - site.sign * component(vpsi, site.axis[r]);
+      const Vec3<T>& w = V.a;
+      const Vec3<T> pdot = V.l + cross(w, P);
+      const Vec3<T> Gw = cross(G, w);
+      const Vec6<T> TV{Gw, cross(pdot, G) + cross(P, Gw)};
+      const Vec6<T> TA = forceAt(P, G);
+      const Vec6<T> TPsi = forceAt(P, F);
+      const Vec3<T> Tp = cross(F, Psi.a) + cross(G, A.a) + cross(Gw, w);
+      cOmega[j] += forceAt(P, Tp) + crossForce(V, TV) + crossForce(Psi, TPsi) + crossForce(A, TA);
+      cTheta[j] += TV + crossForce(V, TA);
+      cTPsi[j] += TPsi;
+      cTA[j] += TA;
+    }
+    // Tendon segments (header): the point P's ψ(P) = Ψ_l + Ψ_ω × P, lanes where its body moves.
+    auto pointOf = [&](int j, const Vec3<double>& local, Vec3<T>& P, Vec6<T>& Psi) {
+      if (j == kWorld) {
+        lift(local, P);
+        Psi = Vec6<T>{};
+      } else if (moving[j]) {
+        P = p[j] + timesConstant(R[j], local);
+        Psi = psi[j];
+      } else {
+        lift(cv.p[j] + cv.R[j] * local, P);
+        lift(cv.psi[j], Psi);
+      }
+    };
+    for (int ii = 0; ii < io.inputCount; ++ii) gu[io.inputs[ii]] = T(0.0);
+    for (int si = 0; si < io.segCount; ++si) {
+      const TendonSegment& seg = io.segments[io.segIdx[si]];
+      Vec3<T> PA, PB;
+      Vec6<T> PsiA, PsiB;
+      pointOf(seg.a, seg.localA, PA, PsiA);
+      pointOf(seg.b, seg.localB, PB, PsiB);
+      const Vec3<T> d = PB - PA;
+      const T invL = invSqrt(dot(d, d));
+      const Vec3<T> nd = invL * d;
+      const Vec3<T> E = (PsiA.l + cross(PsiA.a, PA)) - (PsiB.l + cross(PsiB.a, PB));
+      const T nE = dot(nd, E);
+      gu[seg.input] = gu[seg.input] - nE;
+      const double tau = io.u[seg.input];
+      const Vec3<T> tPE = (tau * invL) * (E - nE * nd);  // τ ∂(n·E)/∂d
+      if (seg.a != kWorld) {
+        const Vec3<T> F = (-tau) * nd;
+        const Vec6<T> TPsi = forceAt(PA, F);
+        cOmega[seg.a] += forceAt(PA, tPE + cross(F, PsiA.a)) + crossForce(PsiA, TPsi);
+        cTPsi[seg.a] += TPsi;
+      }
+      if (seg.b != kWorld) {
+        const Vec3<T> F = tau * nd;
+        const Vec6<T> TPsi = forceAt(PB, F);
+        cOmega[seg.b] += forceAt(PB, cross(F, PsiB.a) - tPE) + crossForce(PsiB, TPsi);
+        cTPsi[seg.b] += TPsi;
+      }
+    }
+    for (int idx = io.cmemberCount - 1; idx >= 0; --idx) {
+      const int k = io.cmembers[idx];
+      const int par = joints[k].parent;
+      Vec6<T> Sk, vP, psiP, aP;
+      if (moving[k]) {
+        Sk = S[k];
+        if (par != kWorld) {
+          vP = v[par];
+          psiP = psi[par];
+        }
+      } else {
+        lift(cv.S[k], Sk);
+        if (par != kWorld) {
+          lift(cv.v[par], vP);
+          lift(cv.psi[par], psiP);
+        }
+      }
+      if (par != kWorld) aP = a[par];
+      const Vec6<T> w = crossMotion(Sk, vP);
+      const T dq = dot(Sk, cOmega[k]) - dot(w, cTheta[k]) - dot(crossMotion(Sk, psiP), cTPsi[k]) -
+                   dot(crossMotion(Sk, aP), cTA[k]) + dot(crossMotion(w, vP), cTA[k]);
+      const T ddq = dot(Sk, cTheta[k]) - 2.0 * dot(w, cTA[k]);
+      gq[k] = gq[k] - dq;
+      gv[k] = gv[k] - ddq;
+      mmu[k] += dot(Sk, cTA[k]);
+      if (par == kWorld) continue;
+      cOmega[par] += cOmega[k];
+      cTheta[par] += cTheta[k];
+      cTPsi[par] += cTPsi[k];
+      cTA[par] += cTA[k];
+    }
   }
 
   /// Joint k's entries of the gradient, where a joint of sub(k) moves: −∂φ̃/∂q_k, −∂φ̃/∂q̇_k and
@@ -490,11 +678,11 @@ struct TreePass {
   }
 
   /// The block of q directions io.dirs (one component): seeds (e_a, Y e_a), the pass over the
-  /// component's joints, then the rows ∇²φ e_a = −ġ_z + Yᵀ (d/dε M μ) (the u entries of ġ are
-  /// zero: Q is affine in u here). Entries outside the component are zero: no joint of another
-  /// component moves along e_a, and q̈ of another component does not depend on the component's q,
-  /// q̇ (M is block diagonal by component, and the forces the tree pass covers act on one
-  /// coordinate each), so those rows of Y are zero and are not read.
+  /// component's joints and sites, then the rows ∇²φ e_a = −ġ_z + Yᵀ (d/dε ∂φ̃/∂y) (the u entries
+  /// of ġ: the tendons' d/dε ∂φ̃/∂u; Q is otherwise affine in u). Entries outside the component are
+  /// zero: no joint of another component moves along e_a, and q̈, λ of another component do not
+  /// depend on the component's q, q̇ (M and A are block diagonal by component, and the other
+  /// forces the tree pass covers act on one coordinate each), so those rows of Y are not read.
   TRELLIS_LANES_INLINE void block(const BlockIO& io) {
     const int n = io.n, N = io.N;
     const Eigen::MatrixXd& Y = *io.Y;
@@ -517,7 +705,13 @@ struct TreePass {
       const int par = (*io.joints)[k].parent;
       if (par != kWorld && busy[k]) busy[par] = 1;
     }
+    for (int ri = 0; ri < io.crowCount; ++ri) {
+      const int r = io.crows[ri];
+      lam[r] = T(io.lambda[r]);
+      for (int l = 0; l < io.lanes; ++l) lam[r].d[l] = Y(n + r, io.dirs[l]);
+    }
     run(*io.joints, io.gravity, io.mu, *io.values, io.members, io.count);
+    if (io.siteCount > 0 || io.segCount > 0) constraintTerms(io);
     Eigen::MatrixXd& rows = *io.rows;
     for (int l = 0; l < io.lanes; ++l) {
       double* col = rows.data() + static_cast<Eigen::Index>(io.dirs[l]) * N;
@@ -531,15 +725,24 @@ struct TreePass {
     for (int zi = 0; zi < io.zcount; ++zi) {
       const int b = io.zcols[zi];
       LaneChunk<W> acc[L / W] = {};
-      const double* y = Y.data() + static_cast<Eigen::Index>(b) * n;
+      const double* y = Y.data() + static_cast<Eigen::Index>(b) * Y.rows();
       for (int idx = 0; idx < io.count; ++idx) {
         const int k = io.members[idx];
         const double yk = y[k];
         for (int c = 0; c < L / W; ++c) acc[c] += yk * TRELLIS_LANES_AT_C(W, mmu[k].d + c * W);
       }
+      for (int ri = 0; ri < io.crowCount; ++ri) {  // the λ part of Yᵀ (d/dε ∂φ̃/∂y)
+        const int r = io.crows[ri];
+        const double yr = y[n + r];
+        for (int c = 0; c < L / W; ++c) acc[c] += yr * TRELLIS_LANES_AT_C(W, glam[r].d + c * W);
+      }
       double sum[L];
       for (int c = 0; c < L / W; ++c) TRELLIS_LANES_AT(W, sum + c * W) = (acc[c]);
       for (int l = 0; l < io.lanes; ++l) rows(b, io.dirs[l]) += sum[l];
+    }
+    for (int ii = 0; ii < io.inputCount; ++ii) {  // the tendons' d/dε ∂φ̃/∂u
+      const int k = io.inputs[ii];
+      for (int l = 0; l < io.lanes; ++l) rows(2 * n + k, io.dirs[l]) += gu[k].d[l];
     }
   }
 };
@@ -555,15 +758,45 @@ struct VelocityPass {
   std::vector<T> dq, gv;  ///< seeded q̇; output −∂φ̃/∂q̇_k
   std::vector<Mat3<T>> B;
   std::vector<Vec3<T>> gammaMu;
-  std::vector<Vec6<T>> v, H;
+  std::vector<Vec6<T>> v, H, cTheta;  ///< cTheta: the header's Θ (tangents only)
   std::vector<char> moving;  ///< whether joint i or an ancestor is one of the block's directions
 
-  explicit VelocityPass(int n) {
+  VelocityPass(int n, int, int) {
     for (auto* x : {&dq, &gv}) x->assign(n, T{});
     B.assign(n, Mat3<T>{});
     gammaMu.assign(n, Vec3<T>{});
-    for (auto* x : {&v, &H}) x->assign(n, Vec6<T>{});
+    for (auto* x : {&v, &H, &cTheta}) x->assign(n, Vec6<T>{});
     moving.assign(n, 0);
+  }
+
+  /// The point constraint terms of −∂φ̃/∂q̇_k = −(S_k·Θ − 2 w·ΣT_A) (header): T_A and S_k do not
+  /// depend on q̇, T_V and w are linear in the twists (zero lanes where nothing moves: only
+  /// tangents are read, as in run).
+  TRELLIS_LANES_INLINE void constraintTerms(const BlockIO& io) {
+    const TreeValues& cv = *io.values;
+    const std::vector<TreeJoint>& joints = *io.joints;
+    for (int idx = 0; idx < io.cmemberCount; ++idx) cTheta[io.cmembers[idx]] = Vec6<T>{};
+    for (int si = 0; si < io.siteCount; ++si) {
+      const int sIndex = io.siteIdx[si];
+      const int j = io.sites[sIndex].joint;
+      if (!moving[j]) continue;
+      const Vec3<double>& P = cv.siteP[sIndex];
+      const Vec3<double>& G = cv.siteG[sIndex];
+      const Vec6<T>& V = v[j];
+      const Vec3<T>& w = V.a;
+      const Vec3<T> pdot = V.l + cross(w, P);
+      const Vec3<T> Gw = cross(G, w);
+      cTheta[j] += Vec6<T>{Gw, cross(pdot, G) + cross(P, Gw)} + crossForce(V, forceAt(P, G));
+    }
+    for (int idx = io.cmemberCount - 1; idx >= 0; --idx) {
+      const int k = io.cmembers[idx];
+      const int par = joints[k].parent;
+      const Vec6<double>& Sk = cv.S[k];
+      T ddq = dot(Sk, cTheta[k]);
+      if (par != kWorld && moving[par]) ddq = ddq - 2.0 * dot(crossMotion(Sk, v[par]), cv.sumTA[k]);
+      gv[k] = gv[k] - ddq;
+      if (par != kWorld) cTheta[par] += cTheta[k];
+    }
   }
 
   /// TreePass::run's terms of −∂φ̃/∂q̇ with everything that does not depend on q̇ taken from c.
@@ -619,6 +852,7 @@ struct VelocityPass {
       for (int l = 0; l < io.lanes; ++l) dq[i].d[l] = l == lane ? 1.0 : 0.0;
     }
     run(*io.joints, *io.values, io.mu, io.members, io.count);
+    if (io.siteCount > 0) constraintTerms(io);
     Eigen::MatrixXd& rows = *io.rows;
     for (int l = 0; l < io.lanes; ++l) {
       double* col = rows.data() + static_cast<Eigen::Index>(n + io.dirs[l]) * N;
@@ -638,11 +872,11 @@ struct ByWidth {
   std::unique_ptr<P<8, W>> w8;
   std::unique_ptr<P<12, W>> w12;
   std::unique_ptr<P<16, W>> w16;
-  void make(int L, int n) {
-    if (L == 4 && !w4) w4 = std::make_unique<P<4, W>>(n);
-    if (L == 8 && !w8) w8 = std::make_unique<P<8, W>>(n);
-    if (L == 12 && !w12) w12 = std::make_unique<P<12, W>>(n);
-    if (L == 16 && !w16) w16 = std::make_unique<P<16, W>>(n);
+  void make(int L, int n, int nc, int m) {
+    if (L == 4 && !w4) w4 = std::make_unique<P<4, W>>(n, nc, m);
+    if (L == 8 && !w8) w8 = std::make_unique<P<8, W>>(n, nc, m);
+    if (L == 12 && !w12) w12 = std::make_unique<P<12, W>>(n, nc, m);
+    if (L == 16 && !w16) w16 = std::make_unique<P<16, W>>(n, nc, m);
   }
   template <class F>
   void with(int L, F&& f) {
@@ -683,17 +917,21 @@ int blockWidth(int lanes) { return (lanes + 3) / 4 * 4; }
 }  // namespace
 
 struct TreeSecondOrderImpl {
-  int n = 0, N = 0;
+  int n = 0, N = 0, nc = 0;
   std::vector<TreeJoint> joints;
+  std::vector<PointSite> sites;  ///< the point constraint rows' points on bodies (pairs in row order)
+  std::vector<TendonSegment> segments;  ///< the tendons' segments between two bodies
   Vec3<double> gravity;
   bool avx2 = false;  ///< the W = 4 build (chosen at construction)
   PassSet<2> generic;
   PassSet<4> wide;
-  TreeValues values{0};
-  /// The components (subtrees hanging from the world): their joints in increasing order, their z
-  /// entries (q, q̇, then every u), and the blocks of up to 16 directions each, within one component.
+  TreeValues values{0, 0};
+  /// The components (subtrees hanging from the world, joined where a constraint row links two):
+  /// their joints in increasing order, their z entries (q, q̇, then every u), their constraint
+  /// rows, sites and the members with a site below them, and the blocks of up to 16 directions
+  /// each, within one component.
   struct Component {
-    std::vector<int> members, zcols;
+    std::vector<int> members, zcols, crows, sites, cmembers, segments, inputs;
   };
   struct Block {
     int component = 0, first = 0, lanes = 0;
@@ -703,7 +941,9 @@ struct TreeSecondOrderImpl {
 };
 
 bool treeSecondOrderApplies(const Model& model) {
-  return model.nc() == 0 && model.linearSprings().empty() && model.tendons().empty() && model.bodyWrenches().empty();
+  for (const Constraint& c : model.constraints())
+    if (c.type != ConstraintType::kPoint) return false;
+  return model.linearSprings().empty() && model.bodyWrenches().empty();
 }
 
 namespace {
@@ -716,6 +956,7 @@ TreeSecondOrder::TreeSecondOrder(const Model& model) : impl_(std::make_unique<Tr
   TreeSecondOrderImpl& s = *impl_;
   s.n = model.nq();
   s.N = 2 * model.nq() + model.nu();
+  s.nc = model.nc();
   s.joints.resize(s.n);
   for (int i = 0; i < s.n; ++i) {
     const Joint& j = model.joints()[i];
@@ -735,20 +976,85 @@ TreeSecondOrder::TreeSecondOrder(const Model& model) : impl_(std::make_unique<Tr
     if (s.joints[i].parent != kWorld) s.joints[s.joints[i].parent].subtreeMass += s.joints[i].subtreeMass;
   s.gravity = vec3(model.gravity());
   s.avx2 = kHaveAvx2Build && secondOrderSweepsUseAvx2();
-  s.values = TreeValues(s.n);
-  std::vector<int> root(s.n);
+  // The sites: per pair of points (consecutive rows on the same two points), one site per point
+  // on a body.
+  const auto& cs = model.constraints();
+  for (int r = 0; r < s.nc;) {
+    int e = r + 1;
+    while (e < s.nc && e - r < 3 && cs[e].a.joint == cs[r].a.joint && cs[e].b.joint == cs[r].b.joint &&
+           cs[e].a.local == cs[r].a.local && cs[e].b.local == cs[r].b.local)
+      ++e;
+    for (const bool first : {true, false}) {
+      const BodyPoint& bp = first ? cs[r].a : cs[r].b;
+      if (bp.joint == kWorld) continue;
+      PointSite site;
+      site.joint = bp.joint;
+      site.local = vec3(bp.local);
+      site.sign = first ? 1.0 : -1.0;
+      site.first = r;
+      site.count = e - r;
+      for (int k = r; k < e; ++k) site.axis[k - r] = cs[k].axis;
+      s.sites.push_back(site);
+    }
+    r = e;
+  }
+  s.values = TreeValues(s.n, static_cast<int>(s.sites.size()));
+  for (const Tendon& t : model.tendons())
+    for (size_t k = 0; k + 1 < t.path.size(); ++k) {
+      if (t.path[k].joint == t.path[k + 1].joint) continue;  // within one body: no net wrench
+      s.segments.push_back({t.path[k].joint, t.path[k + 1].joint, t.input, vec3(t.path[k].local), vec3(t.path[k + 1].local)});
+    }
+  // Components: the subtrees from the world (by their root joint), joined (union-find on the
+  // roots) where a row links two of them.
+  std::vector<int> root(s.n), link(s.n);
   for (int i = 0; i < s.n; ++i) {
     const int par = s.joints[i].parent;
-    if (par == kWorld) {
-      root[i] = static_cast<int>(s.components.size());
+    root[i] = par == kWorld ? i : root[par];
+    link[i] = i;
+  }
+  auto find = [&](int x) {
+    while (link[x] != x) x = link[x] = link[link[x]];
+    return x;
+  };
+  auto join = [&](int a, int b) {
+    if (a == kWorld || b == kWorld) return;
+    const int x = find(root[a]), y = find(root[b]);
+    if (x != y) link[std::max(x, y)] = std::min(x, y);
+  };
+  for (const Constraint& c : cs) join(c.a.joint, c.b.joint);
+  for (const TendonSegment& seg : s.segments) join(seg.a, seg.b);
+  std::vector<int> componentOf(s.n, -1);
+  for (int i = 0; i < s.n; ++i) {
+    const int rep = find(root[i]);
+    if (componentOf[rep] < 0) {
+      componentOf[rep] = static_cast<int>(s.components.size());
       s.components.emplace_back();
-    } else {
-      root[i] = root[par];
     }
-    s.components[root[i]].members.push_back(i);
+    s.components[componentOf[rep]].members.push_back(i);
+  }
+  auto componentOfJoint = [&](int j) { return componentOf[find(root[j])]; };
+  for (int r = 0; r < s.nc; ++r) {
+    const int j = cs[r].a.joint != kWorld ? cs[r].a.joint : cs[r].b.joint;
+    if (j != kWorld) s.components[componentOfJoint(j)].crows.push_back(r);
+  }
+  std::vector<char> hasSite(s.n, 0);
+  for (int si = 0; si < static_cast<int>(s.sites.size()); ++si) {
+    const int j = s.sites[si].joint;
+    s.components[componentOfJoint(j)].sites.push_back(si);
+    for (int k = j; k != kWorld; k = s.joints[k].parent) hasSite[k] = 1;
+  }
+  for (int si = 0; si < static_cast<int>(s.segments.size()); ++si) {
+    const TendonSegment& seg = s.segments[si];
+    TreeSecondOrderImpl::Component& comp = s.components[componentOfJoint(seg.a != kWorld ? seg.a : seg.b)];
+    comp.segments.push_back(si);
+    if (std::find(comp.inputs.begin(), comp.inputs.end(), seg.input) == comp.inputs.end()) comp.inputs.push_back(seg.input);
+    for (const int j : {seg.a, seg.b})
+      for (int k = j; k != kWorld; k = s.joints[k].parent) hasSite[k] = 1;
   }
   for (int c = 0; c < static_cast<int>(s.components.size()); ++c) {
     TreeSecondOrderImpl::Component& comp = s.components[c];
+    for (const int k : comp.members)
+      if (hasSite[k]) comp.cmembers.push_back(k);
     comp.zcols = comp.members;
     for (const int k : comp.members) comp.zcols.push_back(s.n + k);
     for (int b = 2 * s.n; b < s.N; ++b) comp.zcols.push_back(b);
@@ -758,11 +1064,11 @@ TreeSecondOrder::TreeSecondOrder(const Model& model) : impl_(std::make_unique<Tr
   for (const TreeSecondOrderImpl::Block& blk : s.blocks) {
     const int L = blockWidth(blk.lanes);
     if (s.avx2) {
-      s.wide.positions.make(L, s.n);
-      s.wide.velocities.make(L, s.n);
+      s.wide.positions.make(L, s.n, s.nc, s.N - 2 * s.n);
+      s.wide.velocities.make(L, s.n, s.nc, s.N - 2 * s.n);
     } else {
-      s.generic.positions.make(L, s.n);
-      s.generic.velocities.make(L, s.n);
+      s.generic.positions.make(L, s.n, s.nc, s.N - 2 * s.n);
+      s.generic.velocities.make(L, s.n, s.nc, s.N - 2 * s.n);
     }
   }
 }
@@ -771,11 +1077,13 @@ TreeSecondOrder::TreeSecondOrder(TreeSecondOrder&&) noexcept = default;
 TreeSecondOrder& TreeSecondOrder::operator=(TreeSecondOrder&&) noexcept = default;
 
 void TreeSecondOrder::computeRows(const Model&, const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
-                                  const Eigen::VectorXd& qdd, const Eigen::VectorXd& mu, const Eigen::MatrixXd& Y,
-                                  Eigen::MatrixXd& rows) {
+                                  const Eigen::VectorXd& qdd, const Eigen::VectorXd& u, const Eigen::VectorXd& lambda,
+                                  const Eigen::VectorXd& mu,
+                                  const Eigen::VectorXd& muC, const Eigen::MatrixXd& Y, Eigen::MatrixXd& rows) {
   TreeSecondOrderImpl& s = *impl_;
   const int n = s.n;
   s.values.compute(s.joints, q.data(), dq.data(), mu.data());
+  s.values.computeSites(s.joints, s.sites, muC.data());
   BlockIO io;
   io.n = n;
   io.N = s.N;
@@ -783,6 +1091,11 @@ void TreeSecondOrder::computeRows(const Model&, const Eigen::VectorXd& q, const 
   io.dq = dq.data();
   io.qdd = qdd.data();
   io.mu = mu.data();
+  io.lambda = lambda.data();
+  io.muC = muC.data();
+  io.sites = s.sites.data();
+  io.segments = s.segments.data();
+  io.u = u.data();
   io.Y = &Y;
   io.rows = &rows;
   io.joints = &s.joints;
@@ -797,6 +1110,16 @@ void TreeSecondOrder::computeRows(const Model&, const Eigen::VectorXd& q, const 
       io.count = static_cast<int>(comp.members.size());
       io.zcols = comp.zcols.data();
       io.zcount = static_cast<int>(comp.zcols.size());
+      io.crows = comp.crows.data();
+      io.crowCount = static_cast<int>(comp.crows.size());
+      io.siteIdx = comp.sites.data();
+      io.siteCount = static_cast<int>(comp.sites.size());
+      io.cmembers = comp.cmembers.data();
+      io.cmemberCount = static_cast<int>(comp.cmembers.size());
+      io.segIdx = comp.segments.data();
+      io.segCount = static_cast<int>(comp.segments.size());
+      io.inputs = comp.inputs.data();
+      io.inputCount = static_cast<int>(comp.inputs.size());
       io.first = blk.first;
       io.dirs = comp.members.data() + blk.first;
       io.lanes = blk.lanes;

@@ -31,6 +31,7 @@
 #include "second_order_tree.hpp"  // core/src: the tree pass's switch
 
 #include <cmath>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -47,8 +48,8 @@ struct Tensors {
 };
 
 /// Central differences of the exact Jacobians: out[i](b, a) = ∂/∂z_a of ∂yᵢ/∂z_b. The matrices
-/// are not symmetrized (their symmetry is checked).
-Tensors differenceOfJacobians(const Model& model, const State& s) {
+/// are not symmetrized (their symmetry is checked). stepScale multiplies the step.
+Tensors differenceOfJacobians(const Model& model, const State& s, double stepScale = 1.0) {
   const int n = model.nq(), m = model.nu(), nc = model.nc(), N = 2 * n + m;
   Data data(model);
   Tensors out;
@@ -59,7 +60,7 @@ Tensors differenceOfJacobians(const Model& model, const State& s) {
   Eigen::MatrixXd Jp(n + nc, N), Jm(n + nc, N);
   const NumDiffOptions options;  // central, h = eps^(1/3) max(1, |z|)
   for (int a = 0; a < N; ++a) {
-    const double h = options.step(z[a]);
+    const double h = stepScale * options.step(z[a]);
     for (int sign = 0; sign < 2; ++sign) {
       Eigen::VectorXd zz = z;
       zz[a] += sign == 0 ? h : -h;
@@ -343,7 +344,10 @@ TEST_CASE("The contraction in blocks of directions, in both builds of its sweeps
 /// (rz, then rx): 3 copies need two blocks of each kind, and a block of q directions holds whole
 /// subtrees that do not move with it but are coupled to it through the hub, below a hub joint
 /// that does not move with it either but is not a root.
-TestSystem branchedTree(std::uint32_t seed, int copies = 1) {
+/// `extra` adds elements (constraint rows) before the model is finished.
+using Extra = std::function<void(SystemBuilder&)>;
+
+TestSystem branchedTree(std::uint32_t seed, int copies = 1, const Extra& extra = {}) {
   std::mt19937 rng(seed);
   SystemBuilder s;
   std::string base = "world";
@@ -379,6 +383,7 @@ TestSystem branchedTree(std::uint32_t seed, int copies = 1) {
     s.b.addConfigForce(name("tilt"), name("u_tilt"));
   }
   s.b.addGravity(Eigen::Vector3d(0.6, -1.3, -9.5));
+  if (extra) extra(s);
   return std::move(s).finish();
 }
 
@@ -397,7 +402,7 @@ Transform drivenKind(int k, const std::string& q) {
   }
 }
 
-TestSystem spatialChain(int links, std::uint32_t seed) {
+TestSystem spatialChain(int links, std::uint32_t seed, const Extra& extra = {}) {
   std::mt19937 rng(seed);
   SystemBuilder s;
   std::string parent = "world";
@@ -412,6 +417,7 @@ TestSystem spatialChain(int links, std::uint32_t seed) {
   s.b.addGravity(Eigen::Vector3d(0.4, -9.7, 1.1));
   s.b.addDamping(0.05);
   s.b.addConfigForce("q0", "u0");
+  if (extra) extra(s);
   return std::move(s).finish();
 }
 
@@ -419,7 +425,7 @@ TestSystem spatialChain(int links, std::uint32_t seed) {
 /// blocks of directions), a 3-joint chain and a 5-joint tree with two branches; every driven
 /// joint kind, full inertias, a spring, damping and forces on coordinates of each. The tree pass
 /// runs its blocks per subtree.
-TestSystem threeSubtrees(std::uint32_t seed) {
+TestSystem threeSubtrees(std::uint32_t seed, const Extra& extra = {}) {
   std::mt19937 rng(seed);
   SystemBuilder s;
   auto link = [&](const std::string& name, const std::string& parent, int k) {
@@ -442,6 +448,7 @@ TestSystem threeSubtrees(std::uint32_t seed) {
   s.b.addDamping(0.05);
   for (const char* q : {"q_a0", "q_a17", "q_b1", "q_c2", "q_c4"}) s.b.addConfigForce(q, std::string("u_").append(q));
   s.b.addConfigSpring("q_c1", 3.0, 0.2);
+  if (extra) extra(s);
   return std::move(s).finish();
 }
 
@@ -510,13 +517,128 @@ TEST_CASE("The contraction's tree pass against the recording and the tensors", "
   }
 }
 
+TEST_CASE("The contraction's tree pass with point constraint rows and tendons", "[second_order][tree][constraints]") {
+  // Point rows (second_order_tree.hpp: sites) on three trees: a branched tree with one point
+  // pinned to the world (three rows) and two points of one subtree held together along y; a
+  // forest whose 18-joint chain and 5-joint tree are joined by two rows (one component of 23
+  // joints, two blocks of directions) and whose 3-joint chain has one row to the world; a 20-joint
+  // 3D chain with its tip pinned (moving joints below ones that do not move with a block). At
+  // random states (off the constraint manifold, where q̈ and λ are still defined) and random
+  // weights w, ρ, the tree pass against the recording (1e-10 of the largest entry: the same
+  // quantity by two computations sharing only the KKT factor), against the sum of the hyper-dual
+  // tensors (1e-10), and against central differences of the exact Jacobians (1e-6 of each
+  // column's scale, the file comment's tolerance), in both builds of the pass. Then tendons
+  // (header: segments between two bodies): on the branched tree, one from a world anchor across
+  // both subtrees (joining them) with two points on one body, and one within the hip's subtree
+  // beside the point rows; and the hand scene (examples/scenes/hand.json: 23 tendons, 15 point
+  // rows, configuration springs, damping) at random states near its initial one.
+  struct ForceTape {
+    explicit ForceTape(bool force) { detail::secondOrderForceTape(force); }
+    ~ForceTape() { detail::secondOrderForceTape(false); }
+  };
+  struct ForceGeneric {
+    explicit ForceGeneric(bool force) { detail::secondOrderSweepsForceGeneric(force); }
+    ~ForceGeneric() { detail::secondOrderSweepsForceGeneric(false); }
+  };
+  std::vector<TestSystem> systems;
+  systems.push_back(branchedTree(61, 1, [](SystemBuilder& s) {
+    s.frame("anchor", "world", Transform::constSE3(se3(0.3, {0.1, 0.2, 1.0}, {0.9, 0.4, 0.3})));
+    for (int axis = 0; axis < 3; ++axis) s.b.addPointConstraint("hand", "anchor", axis);
+    s.b.addPointConstraint("lift_tip", "foot", 1);
+  }));
+  systems.push_back(threeSubtrees(67, [](SystemBuilder& s) {
+    s.frame("anchor", "world", Transform::constSE3(se3(-0.2, {1.0, 0.0, 0.3}, {0.2, -0.8, 0.5})));
+    s.b.addPointConstraint("a5_body", "c4_body", 0);
+    s.b.addPointConstraint("a5_body", "c4_body", 2);
+    s.b.addPointConstraint("anchor", "b2_body", 1);
+  }));
+  systems.push_back(spatialChain(20, 71, [](SystemBuilder& s) {
+    s.frame("anchor", "world", Transform::constSE3(se3(0.0, {0.0, 0.0, 1.0}, {0.5, 2.0, -0.3})));
+    for (int axis = 0; axis < 3; ++axis) s.b.addPointConstraint("body19", "anchor", axis);
+  }));
+  systems.push_back(branchedTree(79, 1, [](SystemBuilder& s) {
+    s.frame("origin", "world", Transform::constSE3(se3(0.2, {0.3, 1.0, 0.1}, {-0.4, 0.6, 0.9})));
+    s.frame("via_upper", "upper", Transform::constSE3(se3(0.0, {0.0, 0.0, 1.0}, {0.1, -0.05, 0.2})));
+    s.frame("via_upper2", "upper", Transform::constSE3(se3(0.0, {0.0, 0.0, 1.0}, {-0.1, 0.15, 0.3})));
+    s.frame("via_tip", "lift_tip", Transform::constSE3(se3(0.0, {0.0, 0.0, 1.0}, {0.05, 0.1, -0.1})));
+    s.b.addTendon({"origin", "via_upper", "via_upper2", "hand", "via_tip"}, "u_t1");
+    s.b.addTendon({"shin", "foot", "leg"}, "u_t2");
+    s.b.addPointConstraint("hand", "origin", 0);
+    s.b.addPointConstraint("hand", "origin", 2);
+  }));
+  const Scene hand = loadScene(std::string(TRELLIS_SOURCE_DIR) + "/examples/scenes/hand.json");
+  REQUIRE(!hand.model.tendons().empty());
+  REQUIRE(hand.model.nc() == 15);
+  systems.push_back(TestSystem{hand.model, {}});
+  for (const bool generic : {false, true}) {
+    const ForceGeneric build(generic);
+    INFO((detail::secondOrderSweepsUseAvx2() ? "AVX2+FMA build" : "baseline build"));
+    std::mt19937 rng(4343);
+    for (const TestSystem& sys : systems) {
+      const Model& model = sys.model;
+      const int n = model.nq(), nc = model.nc(), N = 2 * n + model.nu();
+      INFO("n = " << n << ", m = " << model.nu() << ", nc = " << nc);
+      REQUIRE(detail::treeSecondOrderApplies(model));
+      Data data(model);
+      SecondOrderWorkspace fast(model, true);
+      REQUIRE(detail::secondOrderUsesTreePath(fast));
+      std::optional<SecondOrderWorkspace> tape;
+      {
+        const ForceTape force(true);
+        tape.emplace(model, false);
+      }
+      REQUIRE_FALSE(detail::secondOrderUsesTreePath(*tape));
+      const bool isHand = model.nc() == hand.model.nc() && model.nq() == hand.model.nq();
+      for (int k = 0; k < 2; ++k) {
+        State s = randomState(model, rng);
+        if (isHand) {  // near the scene's grasp: ±0.1 rad, ±0.5 rad/s, tensions 0 … 20 N
+          s = randomState(model, rng, 0.1, 0.5, 10.0);
+          s.q += hand.q;
+          s.u.array() += 10.0;
+        }
+        REQUIRE(computeSecondOrderTensors(model, data, fast, s.q, s.dq, s.u).ok());
+        const Eigen::VectorXd w = uniformVector(rng, n, -1.0, 1.0), rho = uniformVector(rng, nc, -1.0, 1.0);
+        Eigen::MatrixXd expected = Eigen::MatrixXd::Zero(N, N), Hfast(N, N), Htape(N, N);
+        for (int i = 0; i < n; ++i) expected += w[i] * fast.qddHessian[i];
+        for (int r = 0; r < nc; ++r) expected += rho[r] * fast.lambdaHessian[r];
+        REQUIRE(computeSecondOrderContraction(model, data, fast, s.q, s.dq, s.u, w, rho, Hfast).ok());
+        REQUIRE(computeSecondOrderContraction(model, data, *tape, s.q, s.dq, s.u, w, rho, Htape).ok());
+        TRELLIS_CHECK_MATRIX(Htape, Hfast, 1e-10, Scale::kMatrix);
+        TRELLIS_CHECK_MATRIX(expected, Hfast, 1e-10, Scale::kMatrix);
+        if (generic || k > 0) continue;  // the differences once per model (2N linearizations)
+        auto contracted = [&](double stepScale) {
+          const Tensors fd = differenceOfJacobians(model, s, stepScale);
+          Eigen::MatrixXd sum = Eigen::MatrixXd::Zero(N, N);
+          for (int i = 0; i < n; ++i) sum += w[i] * fd.qdd[i];
+          for (int r = 0; r < nc; ++r) sum += rho[r] * fd.lambda[r];
+          return sum;
+        };
+        Eigen::MatrixXd fromDifferences = contracted(1.0);
+        // The hand (light phalanges, contacts on a ball: a KKT solve of large amplification) is
+        // rounding-limited at the default step: its central differences miss by up to 5e-5 of a
+        // column, and the miss falls as the step grows (Richardson's extrapolation over (h, 2h)
+        // at 4h: 1.7e-5, at 32h: 2.3e-6; measured on branch h-tree3). So there it is the
+        // extrapolation (4 D(h) − D(2h))/3 at h = 128 eps^(1/3) ≈ 8e-4 (truncation O(h⁴)).
+        if (isHand) fromDifferences = (4.0 * contracted(128.0) - contracted(256.0)) / 3.0;
+        TRELLIS_CHECK_MATRIX(fromDifferences, Hfast, kFdTolerance, Scale::kColumn);
+      }
+    }
+  }
+}
+
 TEST_CASE("The contraction's tree pass stays off where the model has more than the tree", "[second_order][tree]") {
-  // Springs between points, tendons, body wrenches and constraint rows: the recording.
+  // Springs between points, tendons, body wrenches and constraint rows of other kinds than point
+  // rows (alone or beside point rows): the recording.
   std::vector<TestSystem> systems;
   systems.push_back(kitchenSink(3, false));
   systems.push_back(kitchenSink(3, true));
   systems.push_back(planarSkate(0.3));
   systems.push_back(paperPendulum());
+  systems.push_back(spatialChain(6, 73, [](SystemBuilder& s) {  // point rows and a distance row
+    s.frame("anchor", "world", Transform::ty(1.0));
+    s.b.addPointConstraint("body5", "anchor", 0);
+    s.b.addDistanceConstraint("body2", "anchor", 1.2);
+  }));
   for (const TestSystem& sys : systems) {
     CHECK_FALSE(detail::treeSecondOrderApplies(sys.model));
     const SecondOrderWorkspace ws(sys.model, false);

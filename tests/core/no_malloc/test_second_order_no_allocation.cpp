@@ -101,3 +101,29 @@ TEST_CASE("No allocation after warm-up: second derivatives on the tree pass of a
   s.b.addGravity(Eigen::Vector3d(0.0, -9.81, 0.0));
   checkNoAllocation(std::move(s).finish().model, 77);
 }
+
+TEST_CASE("No allocation after warm-up: second derivatives on the tree pass with point rows and a tendon",
+          "[no_malloc][second_order]") {
+  // Two chains (4 and 18 joints) whose tips are held together by two point rows (one component,
+  // two blocks of each pass), a 3-joint chain with its tip pinned to the world (three rows), and a
+  // tendon from the world across the 3- and 4-joint chains: the tree pass with its site terms.
+  SystemBuilder s;
+  for (const int links : {3, 4, 18}) {
+    std::string parent = "world";
+    const std::string prefix = std::string("c").append(std::to_string(links)).append("_");
+    for (int k = 0; k < links; ++k) {
+      const std::string joint = std::string(prefix).append(std::to_string(k));
+      s.frame(joint, parent, k % 2 == 0 ? Transform::rz(std::string("q_").append(joint)) : Transform::rx(std::string("q_").append(joint)));
+      s.frame(std::string(joint).append("_bob"), joint, Transform::ty(-0.4), Mass{0.2, Eigen::Matrix3d::Identity() * 1e-3});
+      parent = std::string(joint).append("_bob");
+    }
+    s.b.addConfigForce(std::string("q_").append(prefix).append("0"), std::string("u_").append(prefix));
+  }
+  s.frame("anchor", "world", Transform::ty(-1.0));
+  for (int axis = 0; axis < 3; ++axis) s.b.addPointConstraint("c3_2_bob", "anchor", axis);
+  s.b.addPointConstraint("c4_3_bob", "c18_17_bob", 0);
+  s.b.addPointConstraint("c4_3_bob", "c18_17_bob", 2);
+  s.b.addTendon({"anchor", "c3_0_bob", "c3_1_bob", "c4_2_bob"}, "u_tendon");  // joins the 3- and 4-chains
+  s.b.addGravity(Eigen::Vector3d(0.0, -9.81, 0.0));
+  checkNoAllocation(std::move(s).finish().model, 78);
+}

@@ -29,8 +29,9 @@
 //    and 2 sweeps per block of 16 directions, each over every node of the recording (some 330
 //    per joint of a 3D chain), plus the linearization it needs for Y.
 //  - Contraction on a joint tree (chosen per model when the workspace is built, where the residual
-//    holds only the tree's inertia, gravity and forces on coordinates — configuration springs,
-//    damping, configuration forces: no linear spring, tendon, body wrench or constraint row):
+//    holds only the tree's inertia, gravity, forces on coordinates — configuration springs,
+//    damping, configuration forces — tendons and point constraint rows: no linear spring, body
+//    wrench or other constraint kind):
 //    the same rows, by forward mode over the closed-form gradient of φ instead of the recording.
 //    The linearization's tangents (O(1) per joint pair with composite subtree sums) contracted
 //    with μ give ∂φ/∂z in O(n), and ∂φ/∂q̈ = M μ also; that O(n) pass run on numbers that carry
@@ -39,11 +40,12 @@
 //    scalar nodes (core/src/second_order_tree.hpp); a block holds directions of one subtree
 //    hanging from the world and runs over that subtree's joints only; q̇ directions carry tangents
 //    only on twists and momenta, and what a block of q directions does not move keeps its plain
-//    values. Callgrind, instructions per call against one exact linearization (bench/README.md):
-//    tree pass: planar 10-chain 3.55×, 3D 40-chain 3.86×, hand-like tree (n = 20) 2.54× (the
-//    recording on the same models: 5.8×, 14×, 15×); recording: hand-like tree with a fingertip
-//    point 13×, hand scene 10×. Issue 30's target of 4× is not reached on the last two: the
-//    constraint rows and point-force elements run the recording.
+//    values; point rows and tendon segments enter as sites on their bodies, summed inwards.
+//    Callgrind, instructions per call against one exact linearization (docs/performance.md,
+//    2026-12-03): tree pass: planar 10-chain 3.54×, 3D 40-chain 3.84×, hand-like tree (n = 20)
+//    2.53×, the same with a fingertip pinned (3 point rows) 2.31×, hand scene (23 tendons, 15
+//    point rows) 1.79× (the recording on the same models: 5.8×, 14×, 15×, 12.9×, 10.0×). Models
+//    with linear springs, body wrenches or other constraint kinds run the recording.
 // Every input enters F linearly (configuration forces, body wrench entries, tendon tensions) and K
 // does not depend on u, so G[e_uj, e_uk] = 0 and ∂²q̈/∂u∂u = 0 exactly: those pairs (and, in the
 // contraction, the u directions, which follow by symmetry) are not evaluated.
