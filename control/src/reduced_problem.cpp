@@ -35,6 +35,14 @@ ReducedProblem makeReducedProblem(const Model& model, const TangentBasisTrajecto
   struct Scratch {
     Eigen::MatrixXd Q, QT;
   };
+  if (basis.isIdentity() && !weights.Qfun) {
+    // No constraints: T = I, so Qr = Q, constant — said as such (no callback per t; the sampled
+    // integrators see that Q does not move). Exactly symmetric, as the callback's.
+    p.weights.Q = weights.Q;
+    for (Eigen::Index j = 0; j < nx; ++j)
+      for (Eigen::Index i = j + 1; i < nx; ++i) p.weights.Q(i, j) = p.weights.Q(j, i);
+    return p;
+  }
   auto scratch = std::make_shared<Scratch>();
   p.weights.Qfun = [lin, scratch, Qconst = weights.Q, Qfull = weights.Qfun, nx](double t, Eigen::MatrixXd& Qr) {
     // The solvers ask for Q(t) only after the linearization at the same t succeeded: cached on

@@ -15,7 +15,8 @@ namespace trellis::detail {
 
 struct ReducedProblem {
   LinearizationCallback linearization;  ///< (Ar, Br) at t
-  LqrWeights weights;                   ///< Qfun = TᵀQT (exactly symmetric), R / Rfun as given; no Qf
+  LqrWeights weights;                   ///< Qfun = TᵀQT (exactly symmetric; a constant Q when T = I
+                                        ///< and Q is), R / Rfun as given; no Qf
   std::shared_ptr<ReducedLinearization> evaluator;  ///< the callbacks' evaluator (T(t), counts)
   /// Qfr = Tᵀ Qf T at t (symmetrized), from the evaluator; a failure of the reduced linearization
   /// at t is the returned status (Qfr then untouched).

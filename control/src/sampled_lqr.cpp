@@ -637,6 +637,12 @@ class MagnusIntegrator {
 /// the difference is zero and one step per interval is exact. The twin's step costs no
 /// linearization: with its constant A_f the stage system decouples on a = T diag(γ0, μ, μ̄) T⁻¹
 /// into one real and one complex nx×nx solve (the real one is the estimate's I − γ0δA_f).
+/// Where the time goes (callgrind, the 6-link swing at 100 Hz, docs/performance.md 2026-12-03):
+/// of the steps' instructions ~15 % the three linearizations, ~42 % the stage solve and
+/// quadrature, ~36 % the twin, ~5 % the estimate (and one block exponential per interval, ~9 % of
+/// the whole); the step size is set by the embedded estimate (mostly its cost row), not by the
+/// growth limit.
+/// Q Y and g = YᵀQY + blkdiag(0, R) at a step's last stage are the next step's start's: kept.
 class RadauIntegrator {
  public:
   RadauIntegrator(Discretizer& s, double rtol, long maxSteps)
@@ -712,6 +718,7 @@ class RadauIntegrator {
     Rf_ = R0_;
     Y0_ = Y;
     W0_ = W;
+    startCached_ = startCachedF_ = false;  // Y restarted at [I 0]
     ++exponentials;
     zf_.setZero(c_, c_);
     zf_.topLeftCorner(nx_, nx_) = (b - a) * Af_;
@@ -725,7 +732,7 @@ class RadauIntegrator {
       if (!start(t)) return StepOutcome::kFailed;
       if (!step(t, d, Y, W)) return StepOutcome::kFailed;
       twinStep(d);
-      double err = stepError(Y);
+      double err = stepError();
       if (err > 1.0 && (first || rejected)) {
         // RADAU5's second estimate: f at Y_n + err_Y instead of Y_n (the filter applied twice),
         // for both systems (f0_, f0f_ are not read again this step).
@@ -739,7 +746,7 @@ class RadauIntegrator {
         f0f_.noalias() += Af_ * errYf_;
         rY_ += (gamma0_ * d) * f0f_;
         errYf_ = luErrF_.solve(rY_);
-        err = stepError(Y);
+        err = stepError();
       }
       factor = std::isfinite(err) ? std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.25), 0.2, 6.0) : 0.2;
       if (!(err <= 1.0 && Yn_.allFinite() && Wn_.allFinite() && YnF_.allFinite() && WnF_.allFinite())) {
@@ -751,6 +758,12 @@ class RadauIntegrator {
       W.swap(Wn_);
       Y0_.swap(YnF_);
       W0_.swap(WnF_);
+      // The last stage's Q Y and g are the next step's start's (both systems).
+      QY0_.swap(QYn_);
+      g0_.swap(gn_);
+      QY0F_.swap(QYnF_);
+      g0F_.swap(gnF_);
+      startCached_ = startCachedF_ = true;
       // The step's last node is the next step's start: its A, B, Q, R are kept.
       t0_ = t + d;
       A0_.swap(A_[2]);
@@ -782,6 +795,7 @@ class RadauIntegrator {
   bool start(double t) {
     if (t == t0_ && A0_.size() > 0) return true;
     if (!s_.evaluate(t)) return false;
+    startCached_ = false;  // Q_n Y_n, g_n: of another start
     A0_ = s_.A;
     B0_ = s_.B;
     Q0_ = s_.Q;
@@ -793,28 +807,21 @@ class RadauIntegrator {
   /// The embedded estimate (errY_, errW_) relative to rtol: Y's against max |Y_{n+1}|, W's against
   /// √(D_ii D_jj), D_ii = max(W_ii at the step's end, half the interval's predicted W_ii) — the
   /// bound on |W_ij| of a PSD matrix, unit-invariant as stepError of the Magnus integrator.
-  double stepError(const Eigen::MatrixXd& Y) {
+  double stepError() {
     // The cost's row: the embedded difference of its quadrature, and err_Y through ∂g/∂Y at t_n.
-    QY_.noalias() = Q0_ * Y;
-    eW_.noalias() = errY_.transpose() * QY_;
+    eW_.noalias() = errY_.transpose() * QY0_;  // Q_n Y_n (step())
     errW_ = rW_;
     errW_ += (gamma0_ * d_) * (eW_ + eW_.transpose());
     // The twin's estimate, subtracted: what is estimated is the error of the difference Y − Y_f
     // (the estimate is linear in the stages: that of the pair, its Jacobian blkdiag(A_n, A_f)).
-    QY_.noalias() = Qf_ * Y0_;
-    eW_.noalias() = errYf_.transpose() * QY_;
+    eW_.noalias() = errYf_.transpose() * QY0F_;
     errW_ -= rWf_;
     errW_ -= (gamma0_ * d_) * (eW_ + eW_.transpose());
     errYd_ = errY_ - errYf_;
     const double yScale = std::max(Yn_.cwiseAbs().maxCoeff(), std::numeric_limits<double>::min());
     double err = errYd_.cwiseAbs().maxCoeff() / (rtol_ * yScale);
-    // The cost rate at t + d (Q_[2], R_[2]: the step's last node, Yn_ its end).
-    QY_.noalias() = Q_[2] * Yn_;
-    for (Eigen::Index j = 0; j < c_; ++j) {
-      double rate = Yn_.col(j).dot(QY_.col(j));
-      if (j >= nx_) rate += R_[2](j - nx_, j - nx_);
-      wPred_(j) = halfLength_ * std::min(wRate_(j), rate);
-    }
+    // The cost rate at t + d: g at the step's last node (Y_{n+1}ᵀ Q Y_{n+1} + blkdiag(0, R)).
+    for (Eigen::Index j = 0; j < c_; ++j) wPred_(j) = halfLength_ * std::min(wRate_(j), gn_(j, j));
     dd_ = Wn_.diagonal().cwiseMax(wPred_).cwiseMax(0.0).cwiseSqrt();
     const double floor = std::sqrt(std::numeric_limits<double>::epsilon()) * dd_.maxCoeff() + std::numeric_limits<double>::min();
     for (Eigen::Index j = 0; j < c_; ++j) {
@@ -853,20 +860,28 @@ class RadauIntegrator {
     Wn_ = W;
     for (int j = 0; j < 3; ++j) {
       const auto Yj = stages_.middleRows(j * n, n);
-      QY_.noalias() = Q_[j] * Yj;
-      g_.noalias() = Yj.transpose() * QY_;
-      g_.bottomRightCorner(nu_, nu_) += R_[j];
+      // The last stage is Y_{n+1}: its Q Y and g are kept (stepError's cost rate; the next
+      // step's start when this one is accepted).
+      Eigen::MatrixXd& qy = j == 2 ? QYn_ : QY_;
+      Eigen::MatrixXd& gj = j == 2 ? gn_ : g_;
+      qy.noalias() = Q_[j] * Yj;
+      gj.noalias() = Yj.transpose() * qy;
+      gj.bottomRightCorner(nu_, nu_) += R_[j];
       const double wj = d * (e_[0] * a_[0][j] + e_[1] * a_[1][j] + e_[2] * a_[2][j]);
-      rW_ += wj * g_;
-      Wn_ += (d * a_[2][j]) * g_;
+      rW_ += wj * gj;
+      Wn_ += (d * a_[2][j]) * gj;
     }
-    // The start's rate: f_n = A_n Y_n + [0 B_n], g_n = Y_nᵀ Q_n Y_n + blkdiag(0, R_n).
+    // The start's rate: f_n = A_n Y_n + [0 B_n], g_n = Y_nᵀ Q_n Y_n + blkdiag(0, R_n) (Q_n Y_n and
+    // g_n: the previous step's last stage's, or computed once for all attempts from Y_n).
     f0_.noalias() = A0_ * Y;
     f0_.rightCols(nu_) += B0_;
-    QY_.noalias() = Q0_ * Y;
-    g_.noalias() = Y.transpose() * QY_;
-    g_.bottomRightCorner(nu_, nu_) += R0_;
-    rW_ += (gamma0_ * d) * g_;
+    if (!startCached_) {
+      QY0_.noalias() = Q0_ * Y;
+      g0_.noalias() = Y.transpose() * QY0_;
+      g0_.bottomRightCorner(nu_, nu_) += R0_;
+      startCached_ = true;
+    }
+    rW_ += (gamma0_ * d) * g0_;
     // err_Y = (I − γ0 d A_n)⁻¹ (γ0 d f_n + Σ e_i (Y_i − Y_n)).
     rY_ = e_[0] * stages_.topRows(n) + e_[1] * stages_.middleRows(n, n) + e_[2] * stages_.bottomRows(n);
     rY_ -= (e_[0] + e_[1] + e_[2]) * Y;
@@ -912,18 +927,23 @@ class RadauIntegrator {
     WnF_ = W0_;
     for (int j = 0; j < 3; ++j) {
       const auto Yj = stagesF_.middleRows(j * n, n);
-      QY_.noalias() = Qf_ * Yj;
-      g_.noalias() = Yj.transpose() * QY_;
-      g_.bottomRightCorner(nu_, nu_) += Rf_;
-      rWf_ += (d * (e_[0] * a_[0][j] + e_[1] * a_[1][j] + e_[2] * a_[2][j])) * g_;
-      WnF_ += (d * a_[2][j]) * g_;
+      Eigen::MatrixXd& qy = j == 2 ? QYnF_ : QY_;
+      Eigen::MatrixXd& gj = j == 2 ? gnF_ : g_;
+      qy.noalias() = Qf_ * Yj;
+      gj.noalias() = Yj.transpose() * qy;
+      gj.bottomRightCorner(nu_, nu_) += Rf_;
+      rWf_ += (d * (e_[0] * a_[0][j] + e_[1] * a_[1][j] + e_[2] * a_[2][j])) * gj;
+      WnF_ += (d * a_[2][j]) * gj;
     }
     f0f_.noalias() = Af_ * Y0_;
     f0f_.rightCols(nu_) += Bf_;
-    QY_.noalias() = Qf_ * Y0_;
-    g_.noalias() = Y0_.transpose() * QY_;
-    g_.bottomRightCorner(nu_, nu_) += Rf_;
-    rWf_ += (gamma0_ * d) * g_;
+    if (!startCachedF_) {
+      QY0F_.noalias() = Qf_ * Y0_;
+      g0F_.noalias() = Y0_.transpose() * QY0F_;
+      g0F_.bottomRightCorner(nu_, nu_) += Rf_;
+      startCachedF_ = true;
+    }
+    rWf_ += (gamma0_ * d) * g0F_;
     rY_ = e_[0] * stagesF_.topRows(n) + e_[1] * stagesF_.middleRows(n, n) + e_[2] * stagesF_.bottomRows(n);
     rY_ -= (e_[0] + e_[1] + e_[2]) * Y0_;
     rY_ += (gamma0_ * d) * f0f_;
@@ -947,6 +967,9 @@ class RadauIntegrator {
   // state and step (as above).
   Eigen::MatrixXd Af_, Bf_, Qf_, Rf_, zf_, pf_, Ef_, Wf_, Y0_, W0_, YnF_, WnF_, rhsF_, stagesF_, f0f_, errYf_,
       rWf_, errYd_;
+  // Q Y and g = YᵀQY + blkdiag(0, R) at the step's start (…0_) and end (…n_), both systems.
+  Eigen::MatrixXd QY0_, g0_, QYn_, gn_, QY0F_, g0F_, QYnF_, gnF_;
+  bool startCached_ = false, startCachedF_ = false;
   Eigen::PartialPivLU<Eigen::MatrixXd> luErrF_;
   Eigen::Matrix3cd T_, Tinv_;  ///< a's eigenvectors (columns: γ0, μ, μ̄) and their inverse
   std::complex<double> mu_;

@@ -146,6 +146,8 @@ class TangentBasisTrajectory {
   std::string json() const;
   /// True when T(t) is available somewhere (on [startTime(), validUntil()]).
   bool hasBasis() const { return nx_ > 0 && (identity_ || !nodeTimes_.empty()); }
+  /// True when the scene has no constraints: T(t) = I (d = 2n) at every t.
+  bool isIdentity() const { return identity_; }
   double validUntil() const { return validUntil_; }         ///< T is available on [startTime(), validUntil()]
   long steps() const { return steps_; }  ///< CVODES internal steps (kProjected: transport steps)
   /// Right-hand sides spent on difference-quotient Jacobian products (0: the exact ones were used).

@@ -28,7 +28,7 @@
 // the eigenvectors of the method's matrix into one real and one complex nx×nx solve. The estimate
 // bounds the companion's error, far above the fifth-order result's: the default rtol is
 // kRadauRtol = 1e-6, which leaves the gains ~5e-10 of the exact recursion on the stiff 6-link
-// swing (docs/performance.md). SampledIntegrator::
+// swing (docs/performance.md; its 2026-12-03 note: where the time goes). SampledIntegrator::
 // kMagnus integrates the Van Loan system Ẋ = V(s)X, V = [[−Mᵀ, Q̃], [0, M]] (M = [[A, B], [0, 0]],
 // Q̃ = blkdiag(Q, R)), whose solution holds [[Φ_k, Γ_k], [0, I]] and the cost blocks, by a
 // sixth-order Magnus step over the whole interval (between knots): A, B, Q, R at three Gauss
