@@ -14,7 +14,7 @@
 // reduction), read with examples/hand/NAME_limits.json; its hand is used and its stored grasp is the
 // start. Writes FILE (default examples/hand/NAME_grasp.json): the ball's centre, the contact points,
 // q and u of the polished equilibrium, and the thumb base (make_hand_scene.py --free-ball reads it
-// when it exists; no grasp within the joint ranges has been found yet, examples/hand/README.md). Exit status 0 only when the grasp holds (grasp.hpp: q̈ = 0 polished,
+// when it exists; the stored one is --nlp's, examples/hand/README.md). Exit status 0 only when the grasp holds (grasp.hpp: q̈ = 0 polished,
 // every contact pressing by the margin and inside the pyramid, tensions and joints in range); 1
 // otherwise (nothing written); 2 on bad arguments.
 #include "grasp.hpp"

@@ -247,7 +247,7 @@ TEST_CASE("hand ball: checkGrasp (the search's ok) fails on each broken conditio
   // rest load; 38 unknowns for 26 rows), so q̈(q, 0, u) = 0. With limits that ask nothing else only
   // the sign of u can fail (the last condition checkGrasp tests); each earlier condition is then
   // broken alone and must be the one named. (Joint ranges and tensions are checked after the contacts,
-  // so this point, which pulls, cannot exercise them; no hold is stored yet, README.)
+  // so this point, which pulls, cannot exercise them; the stored hold itself is the next test case.)
   const Scene s = loadScene(kScenes + "hand_ball.json");
   const Model& m = s.model;
   const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_limits.json", m);
