@@ -8,9 +8,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <functional>
 #include <limits>
 #include <numbers>
+#include <sstream>
 #include <stdexcept>
 
 namespace trellis::hand {
@@ -303,6 +305,18 @@ GraspCheck checkGrasp(const Model& model, const Eigen::VectorXd& q, const Eigen:
   return c;
 }
 
+std::string foldBallPose(const std::string& sceneJson, const Model& model, const std::vector<std::string>& digits,
+                         Eigen::VectorXd& q, Eigen::Vector3d& centre, std::vector<Eigen::Vector3d>& contacts) {
+  Data data(model);
+  computeKinematics(model, data, q, Eigen::VectorXd::Zero(model.nq()));
+  centre = data.framePose[model.frameIndex("ball")].translation();
+  contacts.assign(digits.size(), Eigen::Vector3d::Zero());
+  for (std::size_t d = 0; d < digits.size(); ++d)
+    contacts[d] = data.framePose[model.frameIndex(digits[d] + "_tip")].translation() - centre;
+  for (const char* b : {"ball_x", "ball_y", "ball_z", "ball_yaw", "ball_pitch", "ball_roll"}) q(model.configIndex(b)) = 0.0;
+  return placeBall(sceneJson, digits, centre, contacts, model);
+}
+
 std::string placeThumbBase(const std::string& sceneJson, const Eigen::Isometry3d& base) {
   nlohmann::json j = nlohmann::json::parse(sceneJson);
   nlohmann::json* f = findFrame(j["frames"], "thumb_cmc_site");
@@ -556,6 +570,11 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
       out.q = best.q;
       out.u = ph.tension;
       out.lambda = ph.lambda;
+      out.scene = best.text;
+      out.thumbBase = thumbBase(p);
+      if (moveThumb) out.thumbTurn = p.segment<3>(3 + 2 * nd), out.thumbShift = p.segment<3>(6 + 2 * nd);
+      out.centre = c0 + p.head<3>();
+      out.contacts = best.contacts;
     }
     out.parameters = p;
     out.message = "no posture holds the ball with the first target (f_min " +
@@ -580,11 +599,8 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
   // relative to it in palm axes, ball coordinates 0) — the stored grasp then has h(q) = 0 exactly
   // at ball coordinates 0, and the hold is checked again on that model.
   out.q = eq.q;
-  computeKinematics(s.model, data, out.q, zero);
-  out.centre = data.framePose[s.model.frameIndex("ball")].translation();
-  for (int d = 0; d < nd; ++d) out.contacts[d] = data.framePose[digits[d].tip].translation() - out.centre;
-  for (const char* b : {"ball_x", "ball_y", "ball_z", "ball_yaw", "ball_pitch", "ball_roll"}) out.q(s.model.configIndex(b)) = 0.0;
-  const Scene placed = parseScene(placeBall(withThumb, limits.digits, out.centre, out.contacts, s.model), "<grasp>");
+  out.scene = foldBallPose(withThumb, s.model, limits.digits, out.q, out.centre, out.contacts);
+  const Scene placed = parseScene(out.scene, "<grasp>");
   Data pd(placed.model);
   if (!computeDynamics(placed.model, pd, out.q, zero, out.u).ok()) {
     out.message = "the dynamics failed at the polished grasp: " + pd.status.message;
@@ -604,6 +620,320 @@ FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& 
   if (!eq.ok()) out.message = "the equilibrium polish did not converge: " + eq.describe();
   else out.message = check.message;
   out.ok = out.message.empty();
+  return out;
+}
+
+GraspProgram makeGraspProgram(const std::string& sceneJson, const Eigen::VectorXd& q0, const Eigen::VectorXd& u0,
+                              const BallLimits& limits, const GraspNlpOptions& options) {
+  const Scene full = parseScene(sceneJson, "<free-ball scene>");
+  const Model& fm = full.model;
+  const int n = fm.nq(), m = fm.nu(), nd = static_cast<int>(limits.digits.size());
+  if (q0.size() != n || u0.size() != m || fm.nc() != 3 * nd)
+    throw std::invalid_argument("solveGraspNlp: q0 has " + std::to_string(q0.size()) + " entries (" + std::to_string(n) +
+                                "), u0 " + std::to_string(u0.size()) + " (" + std::to_string(m) + "), constraints " +
+                                std::to_string(fm.nc()) + " (3 per digit: " + std::to_string(3 * nd) + ")");
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
+  // The hand alone: no contact rows, a wrench input (f_x, f_y, f_z in tip axes) at each pad.
+  nlohmann::json hj = nlohmann::json::parse(sceneJson);
+  hj["constraints"] = nlohmann::json::array();
+  hj.erase("state");
+  for (const std::string& d : limits.digits)
+    hj["forces"].push_back({{"type", "body_wrench"},
+                            {"frame", d + "_tip"},
+                            {"wrench", {"pad_" + d + "_x", "pad_" + d + "_y", "pad_" + d + "_z", 0.0, 0.0, 0.0}}});
+  const auto handScene = std::make_shared<const Scene>(parseScene(hj.dump(), "<hand alone>"));
+  const Model& hm = handScene->model;
+  std::vector<int> hand, ballTranslation, inputOf(m), padInput(3 * nd);  // indices into the hand model
+  for (int i = 0; i < n; ++i) {
+    const std::string& name = fm.configNames()[i];
+    if (hm.configIndex(name) != i) throw std::runtime_error("solveGraspNlp: the hand model orders '" + name + "' differently");
+    if (name.rfind("ball_", 0) != 0) hand.push_back(i);
+  }
+  for (const char* b : {"ball_x", "ball_y", "ball_z"}) ballTranslation.push_back(fm.configIndex(b));
+  for (int k = 0; k < m; ++k) inputOf[k] = hm.inputIndex(fm.inputNames()[k]);
+  for (int d = 0; d < nd; ++d)
+    for (int a = 0; a < 3; ++a) padInput[3 * d + a] = hm.inputIndex("pad_" + limits.digits[d] + "_" + "xyz"[a]);
+  const int nh = static_cast<int>(hand.size()), mh = hm.nu();
+  std::vector<int> tips;
+  for (const std::string& d : limits.digits) {
+    tips.push_back(fm.frameIndex(d + "_tip"));
+    if (hm.frameIndex(d + "_tip") != tips.back()) throw std::runtime_error("solveGraspNlp: the hand model orders the frames differently");
+  }
+  const int ballFrame = fm.frameIndex("ball");
+  const double muPrime = limits.friction * std::cos(std::numbers::pi / options.facets);
+  const double r = options.ballRadius, cosTilt = std::cos(options.maxTilt);
+
+  // Scales and constants at the start: ‖W Q₀‖ (checkGrasp's rest load), S = W M_hh(q₀) / ‖W Q₀‖,
+  // the ball's weight m_b g (the free body's q̈ without contacts is g), its centre c₀ and the pad
+  // forces of the start's λ (contact frames as placeBall writes them, ball at zero orientation).
+  Data fd(fm), hd(hm);
+  if (!computeDynamics(fm, fd, q0, zero, Eigen::VectorXd::Zero(m)).ok())
+    throw std::runtime_error("solveGraspNlp: the dynamics failed at the start: " + fd.status.message);
+  computeMassMatrix(fm, fd, q0);
+  Eigen::VectorXd w = Eigen::VectorXd::Ones(n);
+  for (int i = 0; i < n; ++i)
+    if (fm.joints()[i].revolute) w(i) = 1.0 / kLength;
+  const double load = (w.asDiagonal() * (fd.M * fd.qdd - fd.constraintJacobian.transpose() * fd.lambda)).norm();
+  Eigen::VectorXd uh0 = Eigen::VectorXd::Zero(mh);
+  if (!computeDynamics(hm, hd, q0, zero, uh0).ok())
+    throw std::runtime_error("solveGraspNlp: the hand's dynamics failed at the start: " + hd.status.message);
+  computeMassMatrix(hm, hd, q0);
+  Eigen::MatrixXd S(nh, nh);
+  for (int a = 0; a < nh; ++a)
+    for (int b = 0; b < nh; ++b) S(a, b) = w(hand[a]) * hd.M(hand[a], hand[b]) / load;
+  Eigen::Vector3d weight;
+  for (int a = 0; a < 3; ++a) weight(a) = hd.M(ballTranslation[a], ballTranslation[a]) * hd.qdd(ballTranslation[a]);
+  computeKinematics(fm, fd, q0, zero);
+  const Eigen::Vector3d c0 = fd.framePose[ballFrame].translation();
+  if (!computeDynamics(fm, fd, q0, zero, u0).ok())
+    throw std::runtime_error("solveGraspNlp: the dynamics failed at the start under u0: " + fd.status.message);
+  Eigen::VectorXd f0(3 * nd);
+  double s0 = std::numeric_limits<double>::infinity();
+  computeKinematics(fm, fd, q0, zero);
+  for (int d = 0; d < nd; ++d) {
+    const Eigen::Isometry3d& tp = fd.framePose[tips[d]];
+    const Eigen::Vector3d F = contactFrame(tp.translation() - c0) * fd.lambda.segment<3>(3 * d);
+    f0.segment<3>(3 * d) = -tp.linear().transpose() * F;
+    s0 = std::min(s0, fd.lambda(3 * d));
+  }
+
+  // x = [q_h; c; u; f; s]; rows [hand rest (nh); ball force (3); ball moment (3); sphere (nd);
+  // per digit normal, cone, facing (3 nd)].
+  const int ic = nh, iu = nh + 3, iF = iu + m, is = iF + 3 * nd, nx = is + 1;
+  const int rRest = 0, rForce = nh, rMoment = nh + 3, rSphere = nh + 6, rDigit = nh + 6 + nd, rows = rDigit + 3 * nd;
+  const double inf = std::numeric_limits<double>::infinity();
+  NlpProblem p;
+  p.lower = Eigen::VectorXd::Constant(nx, -inf);
+  p.upper = Eigen::VectorXd::Constant(nx, inf);
+  for (int a = 0; a < nh; ++a) p.lower(a) = limits.qLower(hand[a]), p.upper(a) = limits.qUpper(hand[a]);
+  p.lower.segment(iu, m).setZero();
+  p.upper.segment(iu, m) = limits.uMax;
+  p.upper(is) = options.marginCap;
+  p.constraintLower = Eigen::VectorXd::Zero(rows);
+  p.constraintUpper = Eigen::VectorXd::Zero(rows);
+  for (int d = 0; d < nd; ++d) {
+    p.constraintUpper.segment(rDigit + 3 * d, 3).setConstant(inf);
+    p.constraintLower(rDigit + 3 * d + 2) = cosTilt;
+  }
+  p.objective = [uMax = limits.uMax, weightU = options.tensionWeight, iu, m, is](const Eigen::VectorXd& x, double& f, Eigen::VectorXd& g) {
+    const Eigen::ArrayXd ur = x.segment(iu, m).array() / uMax.array();
+    f = -x(is) + weightU * ur.square().sum();
+    g.setZero();
+    g.segment(iu, m) = (2.0 * weightU * ur / uMax.array()).matrix();
+    g(is) = -1.0;
+    return true;
+  };
+  const auto fullQ = [=](const Eigen::VectorXd& x) {
+    Eigen::VectorXd q = Eigen::VectorXd::Zero(n);
+    for (int a = 0; a < nh; ++a) q(hand[a]) = x(a);
+    return q;
+  };
+  // The workspace of the constraint callback (the program may outlive this function: tests).
+  struct Work {
+    Data lin;
+    std::vector<Eigen::Matrix<double, 6, Eigen::Dynamic>> Jb;
+  };
+  const auto work = std::make_shared<Work>(Work{Data(hm), std::vector<Eigen::Matrix<double, 6, Eigen::Dynamic>>(
+                                                              nd, Eigen::Matrix<double, 6, Eigen::Dynamic>(6, nh))});
+  p.constraints = [=](const Eigen::VectorXd& x, Eigen::VectorXd& g, Eigen::MatrixXd& J) {
+    const Model& hm = handScene->model;
+    Data& lin = work->lin;
+    auto& Jb = work->Jb;
+    const Eigen::VectorXd q = fullQ(x);
+    const Eigen::Vector3d c = x.segment<3>(ic);
+    const double s = x(is);
+    Eigen::VectorXd uh = Eigen::VectorXd::Zero(mh);
+    for (int k = 0; k < m; ++k) uh(inputOf[k]) = x(iu + k);
+    for (int k = 0; k < 3 * nd; ++k) uh(padInput[k]) = x(iF + k);
+    if (!computeLinearization(hm, lin, q, zero, uh).ok()) return false;
+    J.setZero();
+    g.setZero();
+    for (int a = 0; a < nh; ++a) {
+      for (int b = 0; b < nh; ++b) {
+        const double S_ab = S(a, b);
+        g(rRest + a) += S_ab * lin.qdd(hand[b]);
+        for (int k = 0; k < nh; ++k) J(rRest + a, k) += S_ab * lin.dqdd_dq(hand[b], hand[k]);
+        for (int k = 0; k < m; ++k) J(rRest + a, iu + k) += S_ab * lin.dqdd_du(hand[b], inputOf[k]);
+        for (int k = 0; k < 3 * nd; ++k) J(rRest + a, iF + k) += S_ab * lin.dqdd_du(hand[b], padInput[k]);
+      }
+    }
+    // Body Jacobians of the tips: [v_b; ω_b] at q̇ = e_i (tip axes).
+    Eigen::VectorXd e = Eigen::VectorXd::Zero(n);
+    for (int a = 0; a < nh; ++a) {
+      e.setZero();
+      e(hand[a]) = 1.0;
+      computeKinematics(hm, lin, q, e);
+      for (int d = 0; d < nd; ++d) Jb[d].col(a) = lin.frameVelocity[tips[d]];
+    }
+    computeKinematics(hm, lin, q, zero);
+    g.segment<3>(rForce) = weight;
+    for (int d = 0; d < nd; ++d) {
+      const Eigen::Isometry3d& tp = lin.framePose[tips[d]];
+      const Eigen::Matrix3d& R = tp.linear();
+      const Eigen::Vector3d fb = x.segment<3>(iF + 3 * d), F = -R * fb, pd = tp.translation(), rd = pd - c;
+      Eigen::MatrixXd Jp = R * Jb[d].topRows(3), dF(3, nh), dv(3, nh);  // ∂p/∂q_h, ∂F/∂q_h, ∂v/∂q_h
+      for (int a = 0; a < nh; ++a) {
+        const Eigen::Vector3d om = Jb[d].col(a).tail<3>();
+        dF.col(a) = -R * om.cross(fb);
+        dv.col(a) = -R * om.cross(Eigen::Vector3d::UnitZ());
+      }
+      const Eigen::Matrix3d dFdf = -R;
+      const auto cross = [](const Eigen::Vector3d& v) {
+        Eigen::Matrix3d X;
+        X << 0, -v(2), v(1), v(2), 0, -v(0), -v(1), v(0), 0;
+        return X;
+      };
+      // Ball force and moment.
+      g.segment<3>(rForce) += F;
+      J.block(rForce, 0, 3, nh) += dF;
+      J.block(rForce, iF + 3 * d, 3, 3) += dFdf;
+      g.segment<3>(rMoment) += rd.cross(F) / kLength;
+      J.block(rMoment, 0, 3, nh) += (-cross(F) * Jp + cross(rd) * dF) / kLength;
+      J.block(rMoment, ic, 3, 3) += cross(F) / kLength;
+      J.block(rMoment, iF + 3 * d, 3, 3) += cross(rd) * dFdf / kLength;
+      // On the sphere.
+      const double dist = rd.norm();
+      g(rSphere + d) = (rd.squaredNorm() - r * r) / (2.0 * r);
+      J.block(rSphere + d, 0, 1, nh) = rd.transpose() * Jp / r;
+      J.block(rSphere + d, ic, 1, 3) = -rd.transpose() / r;
+      // Normal force, cone, facing.
+      const Eigen::Vector3d nh3 = -rd / dist;
+      const Eigen::Matrix3d P = (Eigen::Matrix3d::Identity() - nh3 * nh3.transpose()) / dist;
+      const Eigen::MatrixXd dn_dq = -P * Jp;  // n = (c − p)/|c − p|
+      const Eigen::Matrix3d dn_dc = P;
+      const double ln = nh3.dot(F);
+      Eigen::RowVectorXd dln = Eigen::RowVectorXd::Zero(nx);
+      dln.head(nh) = F.transpose() * dn_dq + nh3.transpose() * dF;
+      dln.segment<3>(ic) = F.transpose() * dn_dc;
+      dln.segment<3>(iF + 3 * d) = nh3.transpose() * dFdf;
+      const int r0 = rDigit + 3 * d;
+      g(r0) = ln - s;
+      J.row(r0) = dln;
+      J(r0, is) = -1.0;
+      const double a = ln - s;
+      g(r0 + 1) = muPrime * muPrime * a * a - F.squaredNorm() + ln * ln;
+      Eigen::RowVectorXd dFF = Eigen::RowVectorXd::Zero(nx);  // ∂|F|²
+      dFF.head(nh) = 2.0 * F.transpose() * dF;
+      dFF.segment<3>(iF + 3 * d) = 2.0 * F.transpose() * dFdf;
+      J.row(r0 + 1) = 2.0 * (muPrime * muPrime * a + ln) * dln - dFF;
+      J(r0 + 1, is) = -2.0 * muPrime * muPrime * a;
+      const Eigen::Vector3d v = -R.col(2);
+      g(r0 + 2) = v.dot(nh3);
+      J.block(r0 + 2, 0, 1, nh) = nh3.transpose() * dv + v.transpose() * dn_dq;
+      J.block(r0 + 2, ic, 1, 3) = v.transpose() * dn_dc;
+    }
+    return true;
+  };
+  p.start.resize(nx);
+  for (int a = 0; a < nh; ++a) p.start(a) = q0(hand[a]);
+  p.start.segment<3>(ic) = c0;
+  p.start.segment(iu, m) = u0;
+  p.start.segment(iF, 3 * nd) = f0;
+  p.start(is) = std::min(s0, options.marginCap);
+
+  GraspProgram prog;
+  prog.problem = std::move(p);
+  prog.hand = hand;
+  prog.centre = ic, prog.tensions = iu, prog.forces = iF, prog.margin = is;
+  prog.rest = rRest, prog.ballForce = rForce, prog.ballMoment = rMoment, prog.sphere = rSphere, prog.digitRows = rDigit;
+  prog.state = std::make_shared<std::pair<std::shared_ptr<const Scene>, std::shared_ptr<Work>>>(handScene, work);
+  return prog;
+}
+
+GraspNlpResult solveGraspNlp(const std::string& sceneJson, const Eigen::VectorXd& q0, const Eigen::VectorXd& u0,
+                             const BallLimits& limits, const GraspNlpOptions& options) {
+  const GraspProgram prog = makeGraspProgram(sceneJson, q0, u0, limits, options);
+  const NlpProblem& p = prog.problem;
+  const Scene full = parseScene(sceneJson, "<free-ball scene>");
+  const Model& fm = full.model;
+  const int n = fm.nq(), m = fm.nu(), nd = static_cast<int>(limits.digits.size()), nh = static_cast<int>(prog.hand.size());
+  const std::vector<int>& hand = prog.hand;
+  const int ic = prog.centre, iu = prog.tensions, iF = prog.forces, is = prog.margin, nx = is + 1;
+  const int rRest = prog.rest, rForce = prog.ballForce, rMoment = prog.ballMoment, rSphere = prog.sphere,
+            rDigit = prog.digitRows;
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
+  const auto fullQ = [&](const Eigen::VectorXd& x) {
+    Eigen::VectorXd q = Eigen::VectorXd::Zero(n);
+    for (int a = 0; a < nh; ++a) q(hand[a]) = x(a);
+    return q;
+  };
+  GraspNlpResult out;
+  out.nlp = solveNlp(p, options.ipopt);
+  // The second solve: from the first's result, with the bounds and equalities exact (no
+  // relaxation; Ipopt's default start push), so that they hold to constr_viol_tol.
+  if (out.nlp.x.allFinite()) {
+    NlpOptions exact = options.ipopt;
+    exact.boundRelaxFactor = 0.0;
+    out.relaxedViolation = out.nlp.constraintViolation;
+    out.firstIterations = out.nlp.iterations;
+    NlpProblem again = p;
+    again.start = out.nlp.x.cwiseMax(p.lower).cwiseMin(p.upper);
+    NlpResult second = solveNlp(again, exact);
+    second.iterations += out.nlp.iterations;
+    second.evaluations += out.nlp.evaluations;
+    second.solveTime += out.nlp.solveTime;
+    out.nlp = std::move(second);
+  }
+  const Eigen::VectorXd& x = out.nlp.x;
+  out.q = fullQ(x);
+  out.u = x.segment(iu, m).cwiseMax(0.0).cwiseMin(limits.uMax);
+  out.margin = x(is);
+  out.centre = x.segment<3>(ic);
+  Data lin(fm);
+  computeKinematics(fm, lin, out.q, zero);
+  for (int d = 0; d < nd; ++d) {
+    out.contacts.push_back(lin.framePose[fm.frameIndex(limits.digits[d] + "_tip")].translation() - out.centre);
+    if (out.nlp.g.allFinite())
+      out.alignment = std::max(out.alignment, std::acos(std::clamp(out.nlp.g(rDigit + 3 * d + 2), -1.0, 1.0)));
+  }
+  // The free-ball scene placed at the result: the pads on the sphere to the program's tolerance;
+  // the contact points are the pads, so h(q) = 0 there exactly, and the core's λ are the f's.
+  out.scene = placeBall(sceneJson, limits.digits, out.centre, out.contacts, fm);
+  const Scene placed = parseScene(out.scene, "<grasp>");
+  Data pd(placed.model);
+  if (computeDynamics(placed.model, pd, out.q, zero, out.u).ok()) out.lambda = pd.lambda;
+  out.check = checkGrasp(placed.model, out.q, out.u, limits, options.facets);
+  // ok is the hold, checked: Ipopt's status speaks of the margin's optimality, not of the hold.
+  out.ok = out.check.ok;
+
+  // The report: each group's worst violation, and the bounds that limit s most (their multipliers).
+  std::ostringstream rep;
+  const auto worstOf = [&](int first, int count, int stride, const std::string& what, bool perDigit) {
+    double worst = 0.0;
+    int at = -1;
+    for (int k = 0; k < count; ++k) {
+      const int i = first + k * stride;
+      const double v = std::max(p.constraintLower(i) - out.nlp.g(i), out.nlp.g(i) - p.constraintUpper(i));
+      if (v > worst) worst = v, at = k;
+    }
+    if (at >= 0)
+      rep << what << " violated by " << worst << " ("
+          << (perDigit ? limits.digits[at] : (stride == 1 && first == rRest ? fm.configNames()[hand[at]] : std::to_string(at)))
+          << "); ";
+  };
+  if (out.nlp.g.allFinite()) {
+    worstOf(rRest, nh, 1, "hand rest [rel]", false);
+    worstOf(rForce, 3, 1, "ball force [N]", false);
+    worstOf(rMoment, 3, 1, "ball moment / l [N]", false);
+    worstOf(rSphere, nd, 1, "pad on sphere [m]", true);
+    worstOf(rDigit, nd, 3, "normal force >= s [N]", true);
+    worstOf(rDigit + 1, nd, 3, "friction cone [N^2]", true);
+    worstOf(rDigit + 2, nd, 3, "pad facing [cos]", true);
+  }
+  rep << "s = " << out.margin << " N; bounds limiting s (multiplier, value):";
+  std::vector<std::pair<double, int>> active;
+  for (int i = 0; i < nx - 1; ++i) {
+    const double z = std::max(out.nlp.lowerBoundMultipliers(i), out.nlp.upperBoundMultipliers(i));
+    if (z > 1e-6 && (i < nh || (i >= iu && i < iF))) active.emplace_back(z, i);
+  }
+  std::sort(active.rbegin(), active.rend());
+  for (std::size_t k = 0; k < active.size() && k < 8; ++k) {
+    const int i = active[k].second;
+    const bool upper = out.nlp.upperBoundMultipliers(i) > out.nlp.lowerBoundMultipliers(i);
+    rep << " " << (i < nh ? fm.configNames()[hand[i]] : fm.inputNames()[i - iu]) << (upper ? " at upper " : " at lower ")
+        << (upper ? p.upper(i) : p.lower(i)) << " (" << active[k].first << ")";
+  }
+  out.report = rep.str();
   return out;
 }
 

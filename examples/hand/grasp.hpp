@@ -34,6 +34,7 @@
 
 #include <Eigen/Core>
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -51,7 +52,8 @@ struct GraspSearchOptions {
   /// (else there is no grasp), each further one is tried from the last posture that holds, and the
   /// strongest reached is kept.
   std::vector<std::pair<double, double>> targets = {{0.05, 1.0}, {0.1, 0.9}, {0.3, 0.8}, {0.5, 0.7}, {1.0, 0.6}};
-  int maxEvaluations = 3000;       ///< Nelder–Mead objective evaluations for the first target
+  int maxEvaluations = 3000;       ///< Nelder–Mead objective evaluations for the first target (0: only
+                                   ///< evaluate the start, e.g. to build the start of solveGraspNlp)
   int strengthenEvaluations = 600; ///< ... and for each further target
   int restarts = 4;                ///< Nelder–Mead restarts from its best point within a budget
   /// A target counts as reached when the hold's relative residual (+ penalties) is below this: the
@@ -88,6 +90,7 @@ struct FreeBallGrasp {
   ContactMargins margins;
   int evaluations = 0;             ///< objective evaluations of the whole search
   Eigen::VectorXd parameters;      ///< p of the result (or of the best posture when not ok)
+  std::string scene;               ///< the scene text of that posture (thumb base and ball placed)
   bool ok = false;
   std::string message;             ///< what failed, when not ok
 };
@@ -111,6 +114,13 @@ struct PyramidHold {
 };
 PyramidHold pyramidHold(const Model& model, const Eigen::VectorXd& q, double fMin,
                         double muPrime, int facets, double tensionWeight = 0.0);
+
+/// The ball pose of q folded into the placement: the ball's centre c (palm axes) and the contact
+/// points (each digit's pad relative to c) where q puts them, the ball coordinates of q set to 0,
+/// and the scene text placed there (placeBall). The ball is a uniform sphere, so its orientation
+/// changes nothing; the placed scene has h(q) = 0 at ball coordinates 0 where q had h = 0.
+std::string foldBallPose(const std::string& sceneJson, const Model& model, const std::vector<std::string>& digits,
+                         Eigen::VectorXd& q, Eigen::Vector3d& centre, std::vector<Eigen::Vector3d>& contacts);
 
 /// The scene text with the thumb base (frame thumb_cmc_site, relative to the palm) set to `base`.
 std::string placeThumbBase(const std::string& sceneJson, const Eigen::Isometry3d& base);
@@ -154,5 +164,80 @@ HoldDiagnosis diagnoseHold(const Model& model, const Eigen::VectorXd& q, const s
 /// grasp is the start). Throws std::runtime_error when the scene is not a free-ball scene.
 FreeBallGrasp findFreeBallGrasp(const std::string& sceneJson, const BallLimits& limits,
                                 const GraspSearchOptions& options = {});
+
+/// Options of solveGraspNlp.
+struct GraspNlpOptions {
+  double ballRadius = 0.035;   ///< r [m] (the scene's ball)
+  int facets = 8;              ///< F: the cone of friction μ cos(π/F) is inscribed in the F-facet pyramid
+  double maxTilt = 0.5;        ///< largest angle between a pad's normal and the contact normal [rad]
+  double marginCap = 1.0;      ///< s ≤ this [N]: above it only the effort term is minimized
+  double tensionWeight = 1e-3; ///< w of w Σ (u_k / u_max,k)² beside −s [N]
+  /// Ipopt's settings of the first solve, with Ipopt's default bound relaxation 1e-8 (from the
+  /// search's point its iterates reach a better local maximum of s than without; measured, README).
+  /// The equalities are then met to ~1e-8 only; a second solve from its result without relaxation
+  /// meets them to constr_viol_tol.
+  NlpOptions ipopt = [] {
+    NlpOptions o;
+    o.boundRelaxFactor = 1e-8;
+    return o;
+  }();
+};
+
+/// The hold as a smooth program (issue 26, step 1), solved by Ipopt with exact first derivatives
+/// and a quasi-Newton Hessian. The contact sites are free: the program works on the hand alone
+/// (the scene without its 15 contact rows) with a force f_d on each pad as an input (a body
+/// wrench at the tip frame, f_d in tip axes), and the ball as a sphere of centre c. Variables
+/// x = [q_h (the hand's coordinates); c; u; f; s]:
+///   max s − w Σ (u_k/u_max,k)²   subject to
+///   S q̈_h(q_h, 0, [u; f]) = 0,  S = W M_hh(q₀) / ‖W Q₀‖    (the hand at rest under u and the pad forces),
+///   Σ_d F_d + m_b g = 0,  Σ_d (p_d − c) × F_d / ℓ = 0      (the ball at rest; F_d = −R_d f_d, the
+///                                                          pad's force on the ball, palm axes),
+///   (|p_d − c|² − r²) / 2r = 0                             (each pad on the sphere),
+///   λ_n,d − s ≥ 0,  λ_n,d = n_d · F_d,  n_d = (c − p_d)/|c − p_d|   (every pad presses by s),
+///   μ'² (λ_n,d − s)² − (|F_d|² − λ_n,d²) ≥ 0                (inside the cone μ' = μ cos(π/F), apex
+///                                                          at λ_n = s: inside the F-facet pyramid for
+///                                                          any turn of t1 about n),
+///   v_d · n_d ≥ cos(maxTilt),  v_d = −R_d ẑ                 (the pad faces the centre: pad tilt),
+///   hand joints in their ranges, 0 ≤ u ≤ u_max, s ≤ marginCap.
+/// q̈_h and ∂q̈_h/∂q, ∂q̈_h/∂[u; f] from the core's computeLinearization; p_d, R_d and their
+/// derivatives from the frames' body velocities at q̇ = e_i (exact). The thumb base is that of
+/// `sceneJson` (fixed here; the grasp search varies it). A hold with the issue's margin exists at
+/// the result iff s ≥ normalMin; `check` is checkGrasp on the free-ball scene placed there (ball
+/// at c, contact points the pads, ball coordinates 0), where the core's λ are the f's.
+struct GraspNlpResult {
+  Eigen::VectorXd q, u, lambda;   ///< the result on the placed free-ball scene (nq, nu, nc)
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();  ///< c [m], palm axes
+  std::vector<Eigen::Vector3d> contacts;  ///< per digit, p_d − c [m]
+  std::string scene;              ///< the free-ball scene text placed there
+  double margin = 0.0;            ///< s: the smallest normal force the program reached [N]
+  double alignment = 0.0;         ///< max angle between a pad's normal and its contact normal [rad]
+  NlpResult nlp;                  ///< Ipopt's status, iterations, multipliers, time
+  double relaxedViolation = 0.0;  ///< the first (relaxed) solve's constraint violation
+  int firstIterations = 0;        ///< the first solve's iterations (nlp.iterations: both)
+  GraspCheck check;               ///< checkGrasp at (q, u) on `scene`
+  /// The constraint groups still violated at the last iterate and by how much, and the bounds
+  /// with the largest multipliers (∂(−s + effort)/∂bound: which range limits s most), named.
+  std::string report;
+  /// check.ok: (q, u) is a static hold by the project's one check. Ipopt's status (nlp) says
+  /// whether s is also certified as a local maximum; a hold can be found without that.
+  bool ok = false;
+};
+/// The program of solveGraspNlp and its layout (x = [q_h; c; u; f; s], rows [hand rest; ball
+/// force; ball moment; sphere; per digit normal, cone, facing]); its callbacks own their workspace.
+struct GraspProgram {
+  NlpProblem problem;
+  std::vector<int> hand;   ///< x[0..nh): these coordinates of the scene's q (the others, the ball's, are 0)
+  int centre = 0, tensions = 0, forces = 0, margin = 0;                  ///< offsets of c, u, f, s in x
+  int rest = 0, ballForce = 0, ballMoment = 0, sphere = 0, digitRows = 0;  ///< first row of each group
+  std::shared_ptr<const void> state;  ///< the hand model and workspace the callbacks use
+};
+GraspProgram makeGraspProgram(const std::string& sceneJson, const Eigen::VectorXd& q0, const Eigen::VectorXd& u0,
+                              const BallLimits& limits, const GraspNlpOptions& options = {});
+
+/// From the posture q0 (nq, on the manifold of `sceneJson`, a free-ball scene) and tensions u0.
+/// Throws std::invalid_argument on sizes that do not match, std::runtime_error when the scene is
+/// not a free-ball scene or the dynamics fail at the start.
+GraspNlpResult solveGraspNlp(const std::string& sceneJson, const Eigen::VectorXd& q0, const Eigen::VectorXd& u0,
+                             const BallLimits& limits, const GraspNlpOptions& options = {});
 
 }  // namespace trellis::hand

@@ -10,6 +10,8 @@
 #include <IpIpoptData.hpp>
 #include <IpTNLP.hpp>
 
+#include "ipopt_status.hpp"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -55,43 +57,6 @@ using Ipopt::Number;
 
 // Ipopt reads bounds beyond ±1e19 (nlp_lower/upper_bound_inf) as no bound.
 constexpr double kIpoptInfinity = 1e20;
-
-std::string applicationStatusName(Ipopt::ApplicationReturnStatus s) {
-  switch (s) {
-    case Ipopt::Solve_Succeeded: return "Solve_Succeeded";
-    case Ipopt::Solved_To_Acceptable_Level: return "Solved_To_Acceptable_Level";
-    case Ipopt::Infeasible_Problem_Detected: return "Infeasible_Problem_Detected";
-    case Ipopt::Search_Direction_Becomes_Too_Small: return "Search_Direction_Becomes_Too_Small";
-    case Ipopt::Diverging_Iterates: return "Diverging_Iterates";
-    case Ipopt::User_Requested_Stop: return "User_Requested_Stop";
-    case Ipopt::Feasible_Point_Found: return "Feasible_Point_Found";
-    case Ipopt::Maximum_Iterations_Exceeded: return "Maximum_Iterations_Exceeded";
-    case Ipopt::Restoration_Failed: return "Restoration_Failed";
-    case Ipopt::Error_In_Step_Computation: return "Error_In_Step_Computation";
-    case Ipopt::Maximum_CpuTime_Exceeded: return "Maximum_CpuTime_Exceeded";
-    case Ipopt::Not_Enough_Degrees_Of_Freedom: return "Not_Enough_Degrees_Of_Freedom";
-    case Ipopt::Invalid_Problem_Definition: return "Invalid_Problem_Definition";
-    case Ipopt::Invalid_Option: return "Invalid_Option";
-    case Ipopt::Invalid_Number_Detected: return "Invalid_Number_Detected";
-    case Ipopt::Unrecoverable_Exception: return "Unrecoverable_Exception";
-    case Ipopt::NonIpopt_Exception_Thrown: return "NonIpopt_Exception_Thrown";
-    case Ipopt::Insufficient_Memory: return "Insufficient_Memory";
-    case Ipopt::Internal_Error: return "Internal_Error";
-  }
-  return "Unknown_Status";
-}
-
-OptimizationCode classify(Ipopt::ApplicationReturnStatus s) {
-  switch (s) {
-    case Ipopt::Solve_Succeeded: return OptimizationCode::kSolved;
-    case Ipopt::Solved_To_Acceptable_Level: return OptimizationCode::kSolvedAcceptable;
-    case Ipopt::Infeasible_Problem_Detected: return OptimizationCode::kInfeasible;
-    case Ipopt::Maximum_Iterations_Exceeded:
-    case Ipopt::Maximum_CpuTime_Exceeded: return OptimizationCode::kIterationLimit;
-    case Ipopt::User_Requested_Stop: return OptimizationCode::kStopped;
-    default: return OptimizationCode::kFailed;
-  }
-}
 
 /// Where Ipopt starts: the primal point, and with `multipliers` the constraint multipliers and
 /// the bound multipliers z_L, z_U (Ipopt's warm_start_init_point).
@@ -432,8 +397,8 @@ OptimizationResult solveOnce(const OptimalControlProblem& problem, const Optimiz
   Ipopt::ApplicationReturnStatus status = app->Initialize("");
   if (status == Ipopt::Solve_Succeeded) status = app->OptimizeTNLP(nlp);
 
-  result.ipoptStatus = applicationStatusName(status);
-  result.status.code = classify(status);
+  result.ipoptStatus = detail::applicationStatusName(status);
+  result.status.code = detail::classify(status);
   result.iterations = nlp->iterations();
   result.variables = nlp->finalVariables();
   result.constraintMultipliers = nlp->finalLambda();

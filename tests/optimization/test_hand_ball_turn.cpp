@@ -12,12 +12,16 @@
 
 #include <catch2/catch.hpp>
 
+#include "support/finite_difference.hpp"
+#include "support/matrix_compare.hpp"
+
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <iterator>
 #include <limits>
 #include <numbers>
+#include <random>
 #include <string>
 
 using Eigen::MatrixXd;
@@ -243,7 +247,7 @@ TEST_CASE("hand ball: checkGrasp (the search's ok) fails on each broken conditio
   // rest load; 38 unknowns for 26 rows), so q̈(q, 0, u) = 0. With limits that ask nothing else only
   // the sign of u can fail (the last condition checkGrasp tests); each earlier condition is then
   // broken alone and must be the one named. (Joint ranges and tensions are checked after the contacts,
-  // so this point, which pulls, cannot exercise them; no hold is stored yet, README.)
+  // so this point, which pulls, cannot exercise them; the stored hold itself is the next test case.)
   const Scene s = loadScene(kScenes + "hand_ball.json");
   const Model& m = s.model;
   const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_limits.json", m);
@@ -302,6 +306,83 @@ TEST_CASE("hand ball: checkGrasp (the search's ok) fails on each broken conditio
     CHECK_FALSE(c.ok);
     CHECK_THAT(c.message, Catch::Contains("presses by"));
   }
+}
+
+namespace {
+
+std::string readText(const std::string& path) {
+  std::ifstream in(path);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+}  // namespace
+
+TEST_CASE("hand ball: the grasp program's constraint Jacobian is exact", "[hand_ball][grasp]") {
+  // makeGraspProgram (grasp.hpp) at the stored grasp (no search: 0 evaluations) and at a seeded
+  // perturbation of it (every variable moved: off the sphere, off rest, the pad forces turned), its
+  // dense Jacobian against central differences of its own constraint values. Column-scaled error
+  // (max(1, ‖column‖∞)): the difference error is ~eps^(2/3) ≈ 4e-11 times the third derivative, and
+  // the rest rows go through the KKT solve of the dynamics (cond ~1e6 for the light phalanges), so
+  // 1e-6 leaves a margin and still catches a wrong term (a missing cross product is O(1)).
+  const std::string text = readText(kScenes + "hand_ball.json");
+  const Scene s = parseScene(text, "hand_ball");
+  const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_limits.json", s.model);
+  hand::GraspSearchOptions o;
+  o.maxEvaluations = 0;
+  const hand::FreeBallGrasp g = hand::findFreeBallGrasp(text, l, o);
+  REQUIRE_FALSE(g.scene.empty());
+  const hand::GraspProgram prog = hand::makeGraspProgram(g.scene, g.q, g.u, l);
+  const NlpProblem& p = prog.problem;
+  const int nx = static_cast<int>(p.start.size()), rows = static_cast<int>(p.constraintLower.size());
+  std::mt19937 rng(26);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  for (const bool perturbed : {false, true}) {
+    VectorXd x = p.start;
+    if (perturbed)
+      for (int i = 0; i < nx; ++i) x(i) += (i >= prog.centre && i < prog.tensions ? 2e-3 : 0.05) * unit(rng);
+    VectorXd gv(rows);
+    MatrixXd J(rows, nx);
+    REQUIRE(p.constraints(x, gv, J));
+    const auto values = [&](const VectorXd& y) {
+      VectorXd v(rows);
+      MatrixXd unused(rows, nx);
+      REQUIRE(p.constraints(y, v, unused));
+      return v;
+    };
+    const MatrixXd fd = test::centralDifferenceJacobian(values, x);
+    const test::MatrixComparison c = test::compareMatrices(fd, J, 1e-6, test::Scale::kColumn,
+                                                           perturbed ? "perturbed" : "stored grasp");
+    INFO(c.message);
+    CHECK(c.ok);
+  }
+  // The objective's gradient, exactly: −1 on s, 2 w u/u_max² on u.
+  double f = 0.0;
+  VectorXd grad(nx);
+  REQUIRE(p.objective(p.start, f, grad));
+  const auto objective = [&](const VectorXd& y) {
+    double v = 0.0;
+    VectorXd gg(nx);
+    p.objective(y, v, gg);
+    return VectorXd::Constant(1, v);
+  };
+  const MatrixXd fdg = test::centralDifferenceJacobian(objective, p.start);
+  CHECK((fdg.row(0).transpose() - grad).cwiseAbs().maxCoeff() <= 1e-8);
+}
+
+TEST_CASE("hand ball: the stored free-ball grasp is a static hold within the ranges", "[hand_ball][grasp]") {
+  // examples/scenes/hand_ball.json stores the hold of hand_ball_grasp --nlp (examples/hand/
+  // hand_ball_grasp.json, read by make_hand_scene.py --free-ball): at (q, q̇ = 0, u) checkGrasp — on
+  // the manifold, the residual force ≤ 1e-8 of the rest load, every λ_n ≥ 0.05 N, inside the
+  // 8-facet pyramid, 0 ≤ u ≤ u_max, the digits' joints in their ranges.
+  const Scene s = loadScene(kScenes + "hand_ball.json");
+  const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_limits.json", s.model);
+  const hand::GraspCheck c = hand::checkGrasp(s.model, s.q, s.u, l);
+  INFO(c.message << "; min normal " << c.margins.minNormal << " N, facet ratio " << c.facetRatio << ", residual "
+                 << c.relativeAcceleration << ", range excess " << c.rangeExcess);
+  CHECK(c.ok);
+  CHECK(c.margins.minNormal >= l.normalMin);
+  CHECK(c.facetRatio <= 1.0);
+  CHECK(c.rangeExcess <= 0.0);
 }
 
 #endif

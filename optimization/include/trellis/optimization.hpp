@@ -2,5 +2,6 @@
 #pragma once
 
 #include "trellis/optimization/optimizer.hpp"
+#include "trellis/optimization/nlp.hpp"
 #include "trellis/optimization/problem.hpp"
 #include "trellis/optimization/transcription.hpp"
