@@ -298,15 +298,37 @@ TEST_CASE("Second derivatives with redundant constraints equal those without the
   }
 }
 
+namespace {
+
+/// Forces the recording (the tape) instead of the tree pass while alive; restores the automatic
+/// choice even when a check fails.
+struct ForceTape {
+  explicit ForceTape(bool force) { detail::secondOrderForceTape(force); }
+  ~ForceTape() { detail::secondOrderForceTape(false); }
+};
+/// Forces the generic (non-AVX2) sweeps of the tree pass while alive.
+struct ForceGeneric {
+  explicit ForceGeneric(bool force) { detail::secondOrderSweepsForceGeneric(force); }
+  ~ForceGeneric() { detail::secondOrderSweepsForceGeneric(false); }
+};
+/// One model's second-order workspaces both ways: `fast` by the automatic choice, `tape` with the
+/// recording forced.
+struct TreeAndTape {
+  SecondOrderWorkspace fast;
+  std::optional<SecondOrderWorkspace> tape;
+  explicit TreeAndTape(const Model& model) : fast(model, true) {
+    const ForceTape force(true);
+    tape.emplace(model, false);
+  }
+};
+
+}  // namespace
+
 TEST_CASE("The contraction in blocks of directions, in both builds of its sweeps", "[second_order]") {
   // The sweeps run the 2n q and q̇ directions in blocks of 16 (the last one of 4, 8 or 16, partly
   // unused), in the baseline build or, when the CPU has AVX2 and FMA, in that one. Every block
   // shape (2n = 4, 6, 12, 20 = 16 + 4, 26 = 16 + 10) and both builds against the sum of the
   // tensors: 1e-10 of the largest entry, as in checkSecondOrderAt.
-  struct ForceGeneric {  // restores the automatic choice even when a check fails
-    explicit ForceGeneric(bool force) { detail::secondOrderSweepsForceGeneric(force); }
-    ~ForceGeneric() { detail::secondOrderSweepsForceGeneric(false); }
-  };
   std::vector<TestSystem> systems;
   for (const int links : {2, 3, 10, 13}) systems.push_back(planarChain(links, 0.5, 1.0));
   systems.push_back(kitchenSink(3, true));
@@ -461,14 +483,6 @@ TEST_CASE("The contraction's tree pass against the recording and the tensors", "
   // 12 or 16: n = 2, 3, 10, 13, 18 = 16 + 2, 8, 26 = 16 + 10, 20 = 16 + 4), blocks per subtree hanging
   // from the world (branchedTree(41): two; threeSubtrees: 18 = 16 + 2, 3 and 5) and every joint kind, in the
   // baseline build and (where the CPU has it) the AVX2+FMA build of the pass.
-  struct ForceTape {  // restores the automatic choice even when a check fails
-    explicit ForceTape(bool force) { detail::secondOrderForceTape(force); }
-    ~ForceTape() { detail::secondOrderForceTape(false); }
-  };
-  struct ForceGeneric {
-    explicit ForceGeneric(bool force) { detail::secondOrderSweepsForceGeneric(force); }
-    ~ForceGeneric() { detail::secondOrderSweepsForceGeneric(false); }
-  };
   std::vector<TestSystem> systems;
   for (const int links : {2, 3, 10, 13, 18}) systems.push_back(planarChain(links, 0.5, 1.0));
   systems.push_back(branchedTree(41));
@@ -494,14 +508,10 @@ TEST_CASE("The contraction's tree pass against the recording and the tensors", "
       INFO("n = " << n << ", m = " << model.nu());
       REQUIRE(detail::treeSecondOrderApplies(model));
       Data data(model);
-      SecondOrderWorkspace fast(model, true);
+      TreeAndTape both(model);
+      SecondOrderWorkspace &fast = both.fast, &tape = *both.tape;
       CHECK(detail::secondOrderUsesTreePath(fast));
-      std::optional<SecondOrderWorkspace> tape;
-      {
-        const ForceTape force(true);
-        tape.emplace(model, false);
-      }
-      CHECK_FALSE(detail::secondOrderUsesTreePath(*tape));
+      CHECK_FALSE(detail::secondOrderUsesTreePath(tape));
       for (int k = 0; k < 3; ++k) {
         const State s = randomState(model, rng);
         REQUIRE(computeSecondOrderTensors(model, data, fast, s.q, s.dq, s.u).ok());
@@ -509,7 +519,7 @@ TEST_CASE("The contraction's tree pass against the recording and the tensors", "
         Eigen::MatrixXd expected = Eigen::MatrixXd::Zero(N, N), Hfast(N, N), Htape(N, N);
         for (int i = 0; i < n; ++i) expected += w[i] * fast.qddHessian[i];
         REQUIRE(computeSecondOrderContraction(model, data, fast, s.q, s.dq, s.u, w, Eigen::VectorXd(), Hfast).ok());
-        REQUIRE(computeSecondOrderContraction(model, data, *tape, s.q, s.dq, s.u, w, Eigen::VectorXd(), Htape).ok());
+        REQUIRE(computeSecondOrderContraction(model, data, tape, s.q, s.dq, s.u, w, Eigen::VectorXd(), Htape).ok());
         TRELLIS_CHECK_MATRIX(expected, Hfast, 1e-10, Scale::kMatrix);
         TRELLIS_CHECK_MATRIX(Htape, Hfast, 1e-10, Scale::kMatrix);
       }
@@ -532,14 +542,6 @@ TEST_CASE("The contraction's tree pass with point constraint rows and tendons", 
   // both subtrees (joining them) with two points on one body, and one within the hip's subtree
   // beside the point rows; and the hand scene (examples/scenes/hand.json: 23 tendons, 15 point
   // rows, configuration springs, damping) at random states near its initial one.
-  struct ForceTape {
-    explicit ForceTape(bool force) { detail::secondOrderForceTape(force); }
-    ~ForceTape() { detail::secondOrderForceTape(false); }
-  };
-  struct ForceGeneric {
-    explicit ForceGeneric(bool force) { detail::secondOrderSweepsForceGeneric(force); }
-    ~ForceGeneric() { detail::secondOrderSweepsForceGeneric(false); }
-  };
   std::vector<TestSystem> systems;
   systems.push_back(branchedTree(61, 1, [](SystemBuilder& s) {
     s.frame("anchor", "world", Transform::constSE3(se3(0.3, {0.1, 0.2, 1.0}, {0.9, 0.4, 0.3})));
@@ -580,14 +582,10 @@ TEST_CASE("The contraction's tree pass with point constraint rows and tendons", 
       INFO("n = " << n << ", m = " << model.nu() << ", nc = " << nc);
       REQUIRE(detail::treeSecondOrderApplies(model));
       Data data(model);
-      SecondOrderWorkspace fast(model, true);
+      TreeAndTape both(model);
+      SecondOrderWorkspace &fast = both.fast, &tape = *both.tape;
       REQUIRE(detail::secondOrderUsesTreePath(fast));
-      std::optional<SecondOrderWorkspace> tape;
-      {
-        const ForceTape force(true);
-        tape.emplace(model, false);
-      }
-      REQUIRE_FALSE(detail::secondOrderUsesTreePath(*tape));
+      REQUIRE_FALSE(detail::secondOrderUsesTreePath(tape));
       const bool isHand = model.nc() == hand.model.nc() && model.nq() == hand.model.nq();
       for (int k = 0; k < 2; ++k) {
         State s = randomState(model, rng);
@@ -602,7 +600,7 @@ TEST_CASE("The contraction's tree pass with point constraint rows and tendons", 
         for (int i = 0; i < n; ++i) expected += w[i] * fast.qddHessian[i];
         for (int r = 0; r < nc; ++r) expected += rho[r] * fast.lambdaHessian[r];
         REQUIRE(computeSecondOrderContraction(model, data, fast, s.q, s.dq, s.u, w, rho, Hfast).ok());
-        REQUIRE(computeSecondOrderContraction(model, data, *tape, s.q, s.dq, s.u, w, rho, Htape).ok());
+        REQUIRE(computeSecondOrderContraction(model, data, tape, s.q, s.dq, s.u, w, rho, Htape).ok());
         TRELLIS_CHECK_MATRIX(Htape, Hfast, 1e-10, Scale::kMatrix);
         TRELLIS_CHECK_MATRIX(expected, Hfast, 1e-10, Scale::kMatrix);
         if (generic || k > 0) continue;  // the differences once per model (2N linearizations)
