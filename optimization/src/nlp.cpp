@@ -25,9 +25,7 @@ constexpr double kIpoptInfinity = 1e20;  // Ipopt reads bounds beyond ±1e19 as 
 /// asks f, ∇f, g and ∂g at the same point in separate calls). Nothing throws through Ipopt.
 class DenseNlp : public Ipopt::TNLP {
  public:
-  explicit DenseNlp(const NlpProblem& p) : p_(p), n_(p.lower.size()), m_(p.constraintLower.size()) {
-    x_ = p.start;
-  }
+  explicit DenseNlp(const NlpProblem& p) : p_(p), n_(p.lower.size()), m_(p.constraintLower.size()) {}
 
   bool get_nlp_info(Index& n, Index& m, Index& nnz_jac_g, Index& nnz_h_lag, IndexStyleEnum& style) override {
     n = static_cast<Index>(n_);
@@ -136,7 +134,7 @@ class DenseNlp : public Ipopt::TNLP {
 
   const NlpProblem& p_;
   Eigen::Index n_, m_;
-  Eigen::VectorXd x_, fAt_, gAt_, grad_, g_;
+  Eigen::VectorXd fAt_, gAt_, grad_, g_;
   Eigen::MatrixXd jac_;
   double f_ = 0.0;
   bool fValid_ = false, fOk_ = false, gValid_ = false, gOk_ = false;
@@ -209,6 +207,32 @@ NlpResult solveNlp(const NlpProblem& problem, const NlpOptions& options) {
   if (!evaluated) r.constraintViolation = std::numeric_limits<double>::quiet_NaN();
   r.boundViolation = std::max(0.0, std::max((problem.lower - r.x).maxCoeff(), (r.x - problem.upper).maxCoeff()));
   r.solveTime = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  // Ipopt's success is checked here, at the returned x: f and g evaluate, and every row and bound
+  // holds to constraintTolerance plus the relaxation Ipopt was allowed (bound_relax_factor ·
+  // max(1, |bound|), as Ipopt relaxes). Otherwise the result is not ok, whatever Ipopt said.
+  if (r.ok()) {
+    const auto excess = [&](const Eigen::VectorXd& v, const Eigen::VectorXd& lo, const Eigen::VectorXd& hi) {
+      double worst = 0.0;
+      for (Eigen::Index i = 0; i < v.size(); ++i) {
+        const auto allowed = [&](double b) {
+          return options.constraintTolerance + options.boundRelaxFactor * std::max(1.0, std::abs(b));
+        };
+        worst = std::max({worst, lo(i) - v(i) - allowed(lo(i)), v(i) - hi(i) - allowed(hi(i))});
+      }
+      return worst;
+    };
+    if (!evaluated || !std::isfinite(r.objective)) {
+      r.status.code = OptimizationCode::kFailed;
+      r.status.message = "Ipopt: " + r.ipoptStatus + ", but the objective or the constraints do not evaluate at its x";
+    } else if (const double e = std::max(excess(r.g, problem.constraintLower, problem.constraintUpper),
+                                         excess(r.x, problem.lower, problem.upper));
+               e > 0.0) {
+      r.status.code = OptimizationCode::kFailed;
+      r.status.message = "Ipopt: " + r.ipoptStatus + ", but its x violates a constraint or bound by " +
+                         std::to_string(e) + " beyond the tolerance";
+    }
+    if (!r.ok()) return r;
+  }
   if (!r.ok()) {
     r.status.message = "Ipopt: " + r.ipoptStatus + " after " + std::to_string(r.iterations) +
                        " iterations; constraint violation " + std::to_string(r.constraintViolation);

@@ -70,6 +70,42 @@ TEST_CASE("solveNlp: an infeasible program is a status, not a success", "[nlp]")
   CHECK_THAT(r.status.message, Catch::Contains("Infeasible"));
 }
 
+TEST_CASE("solveNlp: a success Ipopt reports is checked again at the returned x", "[nlp]") {
+  // Ipopt's iterates are deterministic: the first run counts the constraint calls, the second
+  // answers differently only at the call after them (solveNlp's own evaluation at the returned x),
+  // as a model that is not a function of x would. Either way the result must not be ok.
+  const NlpResult clean = solveNlp(projection(1.0, -10.0));
+  REQUIRE(clean.ok());
+  const long calls = clean.evaluations;
+  SECTION("the constraints do not evaluate there") {
+    NlpProblem p = projection(1.0, -10.0);
+    long n = 0;
+    auto inner = p.constraints;
+    p.constraints = [&n, calls, inner](const VectorXd& x, VectorXd& g, MatrixXd& J) {
+      return ++n <= calls && inner(x, g, J);
+    };
+    const NlpResult r = solveNlp(p);
+    CHECK_FALSE(r.ok());
+    CHECK(r.status.code == OptimizationCode::kFailed);
+    CHECK_THAT(r.status.message, Catch::Contains("do not evaluate"));
+  }
+  SECTION("a row is violated there beyond the tolerance") {
+    NlpProblem p = projection(1.0, -10.0);
+    long n = 0;
+    auto inner = p.constraints;
+    p.constraints = [&n, calls, inner](const VectorXd& x, VectorXd& g, MatrixXd& J) {
+      const bool ok = inner(x, g, J);
+      if (++n > calls) g(0) += 1e-6;
+      return ok;
+    };
+    const NlpResult r = solveNlp(p);
+    CHECK_FALSE(r.ok());
+    CHECK(r.status.code == OptimizationCode::kFailed);
+    CHECK_THAT(r.status.message, Catch::Contains("violates a constraint"));
+    CHECK(r.constraintViolation == Approx(1e-6).epsilon(1e-3));
+  }
+}
+
 TEST_CASE("solveNlp: bad problems throw, naming the field", "[nlp]") {
   NlpProblem p = projection(1.0, 0.0);
   p.upper(0) = -1.0;
