@@ -37,6 +37,8 @@ void OptimizerOptions::validate() const {
   }
   if (maxRefinements < 0) bad("maxRefinements = " + std::to_string(maxRefinements) + " must be >= 0");
   if (maxKnots < 2) bad("maxKnots = " + std::to_string(maxKnots) + " must be >= 2");
+  if (!(initialBarrier > 0.0) || !std::isfinite(initialBarrier)) bad("initialBarrier = " + std::to_string(initialBarrier) + " must be > 0 and finite");
+  if (!(initialBoundPush > 0.0) || !(initialBoundPush < 1.0)) bad("initialBoundPush = " + std::to_string(initialBoundPush) + " must be in (0, 1)");
   if (!(warmStartBarrier > 0.0) || !std::isfinite(warmStartBarrier)) {
     bad("warmStartBarrier must be > 0 and finite");
   }
@@ -378,6 +380,11 @@ OptimizationResult solveOnce(const OptimalControlProblem& problem, const Optimiz
     o.SetStringValue("limited_memory_aug_solver", "extended");
   }
   o.SetStringValue("linear_solver", "mumps");
+  if (!warm) {
+    o.SetNumericValue("mu_init", options.initialBarrier);
+    o.SetNumericValue("bound_push", options.initialBoundPush);
+    o.SetNumericValue("bound_frac", std::min(0.5, options.initialBoundPush));
+  }
   if (warm && start.multipliers) {
     // The carried point is close to the refined problem's solution: start there with the
     // multipliers, pushed only slightly off the bounds, and a small barrier parameter (a large

@@ -278,6 +278,31 @@ TEST_CASE("optimizer: bad problems and files name the field", "[optimizer][error
   trellis::OptimizerOptions options;
   options.tolerance = -1.0;
   CHECK_THROWS_WITH(trellis::optimizeTrajectory(p, options), Catch::Contains("OptimizerOptions.tolerance"));
+  options = {};
+  options.initialBarrier = 0.0;
+  CHECK_THROWS_WITH(trellis::optimizeTrajectory(p, options), Catch::Contains("initialBarrier = 0"));
+  options = {};
+  options.initialBoundPush = 1.0;
+  CHECK_THROWS_WITH(trellis::optimizeTrajectory(p, options), Catch::Contains("initialBoundPush = 1"));
+}
+
+TEST_CASE("optimizer: a guess at a solution, started with a small barrier and bound push", "[optimizer]") {
+  // Ipopt's default first barrier (0.1) and bound push (0.01) move a guess that is already a
+  // solution back towards the centre of its bounds; with small ones the solve stays there.
+  OptimalControlProblem p = trellis::loadProblem(problemPath("cart_pole_swingup"));
+  const OptimizationResult first = trellis::optimizeTrajectory(p, singleSolve());
+  REQUIRE(first.ok());
+  p.initialGuess = first.trajectory;
+  const OptimizationResult plain = trellis::optimizeTrajectory(p, singleSolve());
+  trellis::OptimizerOptions close = singleSolve();
+  close.initialBarrier = 1e-7;
+  close.initialBoundPush = 1e-9;
+  const OptimizationResult near = trellis::optimizeTrajectory(p, close);
+  INFO(plain.describe() << "\n" << near.describe());
+  REQUIRE(plain.ok());
+  REQUIRE(near.ok());
+  CHECK(near.iterations < plain.iterations);
+  CHECK(std::abs(near.cost - first.cost) <= 1e-6 * std::abs(first.cost));
 }
 
 TEST_CASE("optimizer: problem-file horizon bounds and a CSV initial guess", "[optimizer][file]") {

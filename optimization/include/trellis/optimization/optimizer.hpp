@@ -75,6 +75,12 @@ struct OptimizerOptions {
   /// refined mesh) with Ipopt's warm_start_init_point and μ_init = warmStartBarrier.
   bool warmStart = true;
   double warmStartBarrier = 1e-6;  ///< Ipopt's mu_init in warm-started rounds
+  /// The first round's start: Ipopt's mu_init and its bound_push = bound_frac (how far the guess
+  /// is moved off its bounds; Ipopt's defaults 0.1 and 0.01). A guess that is nearly a solution
+  /// wants both small: on a stiff model a push of 0.01 in an input at its bound can cost more
+  /// defect than the whole guess has (a hand's tendon at 0 N moves a phalanx by ~10² rad/s²).
+  double initialBarrier = 0.1;
+  double initialBoundPush = 1e-2;
   /// The a-posteriori check (file comment): "solved" requires the worst relative defect, and
   /// the slack's relative share, ≤ consistencyTolerance.
   double consistencyTolerance = 1e-3;
