@@ -16,8 +16,10 @@
 // Motion. Rest to rest in T: x(0) = the stored grasp at rest; at T the ball's yaw (the first of
 // its Z-Y-X angles, a turn about the palm normal z) is `angle`, every velocity is zero, the other
 // coordinates are free (the knot constraints h = 0 keep the pads on the ball). Tensions in
-// [0, u_max], digit joints in their ranges. Cost ∫ uᵀ u + w_v ‖q̇‖² dt: effort, plus a small weight
-// on the velocities that keeps the motion smooth.
+// [0, u_max], digit joints in their ranges. Cost c ∫ uᵀ u + w_v ‖q̇‖² dt: effort, plus a small weight
+// on the velocities that keeps the motion smooth. Rest at the ends fixes only the independent
+// coordinates' rates (and, with a fixed start, configuration): the knot rows A q̇ = 0 and h = 0
+// then fix the rest, and no row is left with a zero Jacobian (makeBallTurnProblem).
 #pragma once
 
 #include <trellis/optimization.hpp>
@@ -50,6 +52,11 @@ struct BallTurnOptions {
   int knots = 11;             ///< Hermite–Simpson knots
   int facets = 8;             ///< F ≥ 3, facets of the friction pyramid
   double velocityWeight = 1e-2;  ///< w_v [N² s²/rad²]
+  /// c: the cost is c ∫ uᵀu + w_v ‖q̇‖² dt (the same minimizer for any c > 0). Ipopt's filter
+  /// weighs the objective against the constraint violation on their raw scales: at c = 1 the
+  /// hand's cost (~7·10³ N² s) outweighs defects of ~1 and its first steps trade feasibility for
+  /// cost (measured: inf_pr 4 → 10⁴ in 10 iterations); at 1e-3 the same start stays near feasible.
+  double effortScale = 1e-3;
   /// The start's configuration free except the yaw (at rest): the stored grasp is not an
   /// equilibrium under u ≥ 0, so the optimizer chooses the grasp it starts from.
   bool freeInitialConfiguration = true;
@@ -69,6 +76,81 @@ OptimalControlProblem makeBallTurnProblem(std::shared_ptr<const Model> model, co
 /// dynamics fail.
 Trajectory quasiStaticTurn(const Model& model, const Eigen::VectorXd& q0, const BallLimits& limits,
                            const BallTurnOptions& options);
+
+/// A static hold of the free-ball scene at a fixed ball yaw ψ (the quasi-static turn's knots):
+///   max s − w_u Σ (u_k/u_max,k)² − w_q ‖q − q_prev‖²/ℓ²   over x = [q; u; s]
+///   subject to  h(q) = 0,  q̈_I(q, 0, u) = 0,  λ_n,d − s ≥ 0,  μ' λ_n,d − (cos θ_k λ_t1,d + sin θ_k λ_t2,d) ≥ 0,
+///   q_yaw = ψ, joint ranges, 0 ≤ u ≤ u_max, s ≤ marginCap,
+/// q̈ and λ the core's constrained dynamics at rest and their exact first derivatives
+/// (computeLinearization). At rest A q̈ ≡ 0 for every q, so of the n rows q̈ = 0 only n − nc are
+/// independent: q̈_I are the coordinates left when a column-pivoted QR of A(q_prev) picks nc
+/// dependent ones (A_D invertible ⇒ q̈_D = −A_D⁻¹ A_I q̈_I = 0). μ' = μ cos(π/F)·frictionUse (the
+/// pyramid inscribed in the cone, less a reserve for the motion), ℓ = 2 cm. Ipopt, exact first
+/// derivatives, L-BFGS Hessian (solveNlp).
+struct RestHoldOptions {
+  int facets = 8;
+  double frictionUse = 0.8;     ///< fraction of the facets' friction a hold may use
+  double marginCap = 1.0;       ///< s ≤ this [N]
+  double tensionWeight = 1e-3;  ///< w_u [N]
+  double stayWeight = 1e-2;     ///< w_q [N]: keeps the hold near the previous one (continuation)
+  /// Ipopt: rows to 1e-9 (h in m, the scaled q̈ rows in N or N m, λ in N); the KKT tolerance
+  /// 1e-6 (the hold's feasibility is what is used, and checked; L-BFGS needs ~10³ iterations for
+  /// the last digits of optimality near a margin cap).
+  NlpOptions ipopt = [] {
+    NlpOptions o;
+    o.constraintTolerance = 1e-9;
+    o.tolerance = 1e-6;
+    o.maxIterations = 1000;
+    return o;
+  }();
+};
+struct RestHold {
+  Eigen::VectorXd q, u, lambda;  ///< nq, nu, nc
+  double margin = 0.0;           ///< s: the smallest normal force [N]
+  NlpResult nlp;
+  bool ok = false;               ///< Ipopt solved and s ≥ normalMin
+  std::string message;
+};
+/// `velocity` (nq, or empty for rest): the rows are q̈_I(q, q̇, u) = 0 at that q̇ (a steady
+/// motion's tensions, the dampers included).
+RestHold solveRestHold(const Model& model, const BallLimits& limits, const Eigen::VectorXd& qPrev,
+                       const Eigen::VectorXd& uPrev, double yaw, const RestHoldOptions& options = {},
+                       const Eigen::VectorXd& velocity = {});
+
+/// The quasi-static turn by holds: solveRestHold at each knot's yaw ψ_k = angle (3s² − 2s³) of
+/// `knots` uniform knots over `horizon`, from the hold (q0, u0), each from the previous; between
+/// knots a failed solve is retried from halfway (continuation, at most 6 halvings). The knots'
+/// velocities are the chord rates of the hold path projected onto A q̇ = 0 (zero at both ends):
+/// a warm start for the collocation, not a solution of the dynamics. `reached` is the largest yaw
+/// held; the path stops there when a yaw cannot be held.
+struct HoldPath {
+  Trajectory guess;              ///< knots × [q; q̇], tensions of each hold (complete only)
+  std::vector<RestHold> holds;   ///< one per knot reached
+  double reached = 0.0;          ///< largest yaw held [rad]
+  int solves = 0;                ///< solveRestHold calls (continuation included)
+  bool complete = false;
+  std::string message;
+};
+HoldPath quasiStaticHolds(const Model& model, const Eigen::VectorXd& q0, const Eigen::VectorXd& u0,
+                          const BallLimits& limits, const BallTurnOptions& options,
+                          const RestHoldOptions& holdOptions = {});
+
+/// The kinematic reach of the turn: whether some configuration keeps every pad on its point of
+/// the ball, the digits' joints in their ranges, with the ball's yaw at ψ — forces aside (no
+/// hold can turn the ball further than this). Solves
+///   min ‖q − q_prev‖²   subject to   h(q) = 0,  q_yaw = ψ,  joint ranges
+/// (Ipopt, exact first derivatives) for ψ = step, 2 step, … from q0, halving the step where a
+/// solve fails, until the step falls below `resolution`. `reached` is the largest ψ with a
+/// configuration; `limit` the first ψ Ipopt declared locally infeasible (or where it stopped).
+struct KinematicReach {
+  double reached = 0.0, limit = 0.0;   ///< [rad]
+  Eigen::VectorXd q;                   ///< the configuration at `reached`
+  std::string stop;                    ///< Ipopt's status at `limit`
+  std::vector<std::string> atRangeEnds;  ///< coordinates of q within 1e-4 of a range end
+  int solves = 0;
+};
+KinematicReach kinematicReach(const Model& model, const BallLimits& limits, const Eigen::VectorXd& q0,
+                              double maxYaw, double step, double resolution);
 
 /// Contact quality of a λ (nc): the smallest normal force and the largest ‖λ_t‖ / (μ λ_n) (+inf
 /// where λ_n ≤ 0) over the contacts, and the contact where each occurs.

@@ -2,11 +2,16 @@
 // turn of ball_turn.hpp on a free-ball hand scene and checks the contacts along the result.
 //
 //   hand_ball_turn [--scene NAME] [--angle DEG] [--horizon S] [--knots N] [--facets F] [--print-level L]
-//                  [--lbfgs]
+//                  [--lbfgs] [--holds] [--diagnose] [--max-iterations N] [--barrier MU] [--bound-push P]
 //
 // The turn starts at rest near the scene's stored grasp (the start's configuration is free: the
 // stored grasp is no hold with pushing pads; the program prints how far it is from one).
 // --lbfgs: Ipopt's limited-memory Hessian instead of the exact one.
+// --holds: the warm start is the path of holds (quasiStaticHolds at every collocation point, the
+// dampers' load included) and the motion starts at its first hold; Ipopt then starts there with
+// μ_init 1e-2 and bound_push 1e-8 (--barrier, --bound-push override). --diagnose: the guess's
+// worst rows and each point's |q̈|. --max-iterations: Ipopt's limit (500). --friction-use F: the
+// share of the pyramid the holds may use (0.8). --reach: only the kinematic reach (kinematicReach).
 // NAME: a scene of examples/scenes written by make_hand_scene.py --free-ball (default hand_ball;
 // hand_ball_pinch is the thumb-and-index reduction), read with examples/hand/NAME_limits.json. Prints the
 // optimizer's one-line result, its time split, and the contact margins at every collocation point:
@@ -24,6 +29,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <vector>
 #include <iostream>
 #include <numbers>
 #include <string>
@@ -34,7 +40,10 @@ int main(int argc, char** argv) {
   std::string scene = "hand_ball";
   hand::BallTurnOptions options;
   int printLevel = 0;
-  bool lbfgs = false;
+  bool lbfgs = false, holds = false, diagnose = false, reach = false;
+  hand::RestHoldOptions holdOptions;
+  int maxIterations = 500;
+  double barrier = 0.0, boundPush = 0.0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const auto value = [&]() -> std::string {
@@ -52,9 +61,17 @@ int main(int argc, char** argv) {
       else if (a == "--facets") options.facets = std::stoi(value());
       else if (a == "--print-level") printLevel = std::stoi(value());
       else if (a == "--lbfgs") lbfgs = true;
+      else if (a == "--holds") holds = true;
+      else if (a == "--diagnose") diagnose = true;
+      else if (a == "--reach") reach = true;
+      else if (a == "--friction-use") holdOptions.frictionUse = std::stod(value());
+      else if (a == "--max-iterations") maxIterations = std::stoi(value());
+      else if (a == "--barrier") barrier = std::stod(value());
+      else if (a == "--bound-push") boundPush = std::stod(value());
       else if (a == "--help") {
         std::cout << "usage: hand_ball_turn [--scene NAME] [--angle DEG] [--horizon S] [--knots N] "
-                     "[--facets F] [--print-level L] [--lbfgs]\n";
+                     "[--facets F] [--print-level L] [--lbfgs] [--holds] [--diagnose] [--max-iterations N] "
+                     "[--barrier MU] [--bound-push P]\n";
         return 0;
       } else {
         std::cerr << "hand_ball_turn: unknown option '" << a << "' (--help lists them)\n";
@@ -74,7 +91,57 @@ int main(int argc, char** argv) {
     s = loadScene(dir + "/" + scene + ".json");
     auto model = std::make_shared<const Model>(s.model);
     limits = hand::loadBallLimits(std::string(TRELLIS_HAND_DIR) + "/" + scene + "_limits.json", *model);
+    if (reach) {
+      const auto tk = std::chrono::steady_clock::now();
+      const hand::KinematicReach k = hand::kinematicReach(s.model, limits, s.q, options.angle, 1.0 * std::numbers::pi / 180.0,
+                                                          0.01 * std::numbers::pi / 180.0);
+      std::printf("kinematic reach: yaw %.3f deg held with the pads on the ball and the joints in range; "
+                  "%.3f deg: %s (%d solves, %.2f s); at range ends:",
+                  k.reached * 180.0 / std::numbers::pi, k.limit * 180.0 / std::numbers::pi, k.stop.c_str(), k.solves,
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - tk).count());
+      for (const auto& c : k.atRangeEnds) std::printf(" %s", c.c_str());
+      std::printf("\n");
+      return k.reached >= options.angle ? 0 : 1;
+    }
+    if (holds) options.freeInitialConfiguration = false;
     problem = hand::makeBallTurnProblem(model, s.q, limits, options);
+    if (holds) {
+      const auto th = std::chrono::steady_clock::now();
+      // Holds at every collocation point (knots and midpoints): the midpoints' dynamics then start
+      // near rest too (a light phalanx's q̈ is ~10⁴ times its force imbalance).
+      hand::BallTurnOptions points = options;
+      points.knots = 2 * options.knots - 1;
+      const hand::HoldPath path = hand::quasiStaticHolds(*model, s.q, s.u, limits, points, holdOptions);
+      std::printf("holds: %s, %d solves, largest yaw held %.3f deg, %.3f s\n", path.complete ? "complete" : path.message.c_str(),
+                  path.solves, path.reached * 180.0 / std::numbers::pi,
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - th).count());
+      for (const auto& h : path.holds)
+        std::printf("  hold: margin %.4f N, %d iterations, max u %.2f N\n", h.margin, h.nlp.iterations, h.u.maxCoeff());
+      if (!path.holds.empty()) {
+        // Where the last hold meets the joint ranges (what limits the turn).
+        const Eigen::VectorXd& q = path.holds.back().q;
+        std::printf("  last hold at its range ends:");
+        for (int i = 0; i < model->nq(); ++i)
+          if (std::min(q(i) - limits.qLower(i), limits.qUpper(i) - q(i)) < 1e-4)
+            std::printf(" %s", model->configNames()[i].c_str());
+        std::printf("\n");
+      }
+      if (!path.complete) return 1;
+      if (diagnose) {
+        Data dd(*model);
+        const int n = model->nq();
+        for (int k = 0; k < path.guess.size(); ++k) {
+          const Eigen::VectorXd x = path.guess.states().col(k);
+          computeDynamics(*model, dd, x.head(n), Eigen::VectorXd::Zero(n), path.guess.inputs().col(k));
+          const double a0 = dd.qdd.cwiseAbs().maxCoeff();
+          computeDynamics(*model, dd, x.head(n), x.tail(n), path.guess.inputs().col(k));
+          std::printf("point %d: |qdd| at rest %.3g, with the guess velocity %.3g, |qd| %.3g\n", k, a0,
+                      dd.qdd.cwiseAbs().maxCoeff(), x.tail(n).cwiseAbs().maxCoeff());
+        }
+      }
+      problem.initialGuess = path.guess;
+      problem.initialState.head(model->nq()) = path.holds.front().q;
+    }
   } catch (const std::exception& e) {
     std::cerr << "hand_ball_turn: " << e.what() << "\n";
     return 2;
@@ -94,10 +161,33 @@ int main(int argc, char** argv) {
                 "static load unbalanced (0: an equilibrium), most on %s\n",
                 h.ok ? h.relativeResidual : NAN, s.model.configNames()[worst].c_str());
   }
+  if (diagnose) {
+    Transcription tr(problem);
+    Eigen::VectorXd z = tr.initialGuess(), g(tr.numConstraints()), lo, hi;
+    tr.constraintBounds(lo, hi);
+    tr.evalConstraints(z.data(), g.data());
+    const Eigen::VectorXd v = (lo - g).cwiseMax(g - hi).cwiseMax(0.0);
+    std::vector<int> idx(v.size());
+    for (int i = 0; i < v.size(); ++i) idx[i] = i;
+    std::sort(idx.begin(), idx.end(), [&](int a, int b) { return v(a) > v(b); });
+    const int n = s.model.nq(), m = s.model.nu();
+    const int perInterval = 4 * n + m;
+    for (int k = 0; k < 15; ++k) {
+      const int r = idx[k];
+      std::printf("row %d: violation %.3g (interval %d, offset %d of %d)\n", r, v(r), r / perInterval, r % perInterval, perInterval);
+    }
+  }
   OptimizerOptions oo;
   oo.printLevel = printLevel;
-  oo.maxIterations = 500;
   if (lbfgs) oo.hessian = HessianMode::kLimitedMemory;
+  if (holds) {
+    // The path of holds is nearly a solution: start there (tensions at 0 stay near 0).
+    oo.initialBarrier = 1e-2;
+    oo.initialBoundPush = 1e-8;
+  }
+  if (barrier > 0.0) oo.initialBarrier = barrier;
+  if (boundPush > 0.0) oo.initialBoundPush = boundPush;
+  oo.maxIterations = maxIterations;
   const OptimizationResult r = optimizeTrajectory(problem, oo);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("optimizer: %s\n", r.describe().c_str());

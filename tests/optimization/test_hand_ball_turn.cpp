@@ -12,9 +12,12 @@
 
 #include <catch2/catch.hpp>
 
+#include <Eigen/Dense>
+
 #include "support/finite_difference.hpp"
 #include "support/matrix_compare.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -383,6 +386,123 @@ TEST_CASE("hand ball: the stored free-ball grasp is a static hold within the ran
   CHECK(c.margins.minNormal >= l.normalMin);
   CHECK(c.facetRatio <= 1.0);
   CHECK(c.rangeExcess <= 0.0);
+}
+
+TEST_CASE("hand ball: a hold at a turned yaw is a static hold by checkGrasp", "[hand_ball][holds]") {
+  // solveRestHold from the stored hold to a yaw of 1°: the program's own rows are h, q̈_I and the
+  // contact rows; checkGrasp (all n accelerations relative to the rest load, the pyramid, the
+  // ranges, the tensions) is the independent check.
+  const Scene s = loadScene(kScenes + "hand_ball.json");
+  const Model& m = s.model;
+  const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_limits.json", m);
+  const int yaw = m.configIndex("ball_yaw");
+  const double psi = std::numbers::pi / 180.0;
+  const hand::RestHold h = hand::solveRestHold(m, l, s.q, s.u, psi);
+  INFO(h.message);
+  REQUIRE(h.ok);
+  CHECK(h.q(yaw) == psi);
+  CHECK(h.margin >= l.normalMin);
+  const hand::GraspCheck c = hand::checkGrasp(m, h.q, h.u, l, 8, 1e-7);
+  INFO(c.message << "; residual " << c.relativeAcceleration << ", facet ratio " << c.facetRatio);
+  CHECK(c.ok);
+  CHECK(c.margins.minNormal >= h.margin - 1e-6);
+  CHECK(c.facetRatio <= 0.8 + 1e-6);  // frictionUse: the hold uses at most 80 % of each facet
+
+  SECTION("with a velocity, the tensions balance the dampers too") {
+    // A tangent velocity of ~0.05 rad/s: at the hold's tensions the phalanges accelerate (the
+    // dampers' load). The steady hold's tensions leave the independent accelerations q̈_I (the
+    // header's: not the nc a column-pivoted QR of A picks) at ≤ 1e-6 of that load, as forces
+    // M_ii q̈_i; the others are what A q̈ = −Ȧ q̇ makes them (the pads follow the moving ball).
+    Data data(m);
+    const VectorXd zero = VectorXd::Zero(m.nq());
+    computeConstraints(m, data, h.q, zero);
+    const Eigen::FullPivLU<MatrixXd> lu(data.constraintJacobian);
+    const MatrixXd N = lu.kernel();
+    VectorXd v = N * VectorXd::LinSpaced(N.cols(), -1.0, 1.0);
+    v *= 0.05 / v.cwiseAbs().maxCoeff();
+    REQUIRE(computeDynamics(m, data, h.q, v, h.u).ok());
+    const double load = (data.M * data.qdd).norm();
+    REQUIRE(load > 1e-6);
+    const hand::RestHold moving = hand::solveRestHold(m, l, h.q, h.u, psi, {}, v);
+    INFO(moving.message);
+    REQUIRE(moving.ok);
+    CHECK(moving.q == h.q);  // the configuration is fixed with a velocity
+    REQUIRE(computeDynamics(m, data, moving.q, v, moving.u).ok());
+    const Eigen::ColPivHouseholderQR<MatrixXd> qr(data.constraintJacobian);
+    double worst = 0.0;
+    for (int j = m.nc(); j < m.nq(); ++j) {
+      const int i = qr.colsPermutation().indices()(j);
+      worst = std::max(worst, std::abs(data.M(i, i) * data.qdd(i)));
+    }
+    CHECK(worst <= 1e-6 * load);
+    CHECK(moving.u.minCoeff() >= 0.0);
+    CHECK((moving.u - l.uMax).maxCoeff() <= 0.0);
+    CHECK(hand::contactMargins(data.lambda, l).minNormal >= l.normalMin);
+  }
+  SECTION("bad sizes throw, naming them") {
+    CHECK_THROWS_WITH(hand::solveRestHold(m, l, s.q.head(3), s.u, psi), Catch::Contains("qPrev has 3 entries"));
+    CHECK_THROWS_WITH(hand::solveRestHold(m, l, s.q, s.u, psi, {}, VectorXd::Zero(2)),
+                      Catch::Contains("velocity has 2 entries"));
+  }
+}
+
+TEST_CASE("hand ball: rest at the ends of the turn leaves no constraint row without a free variable",
+          "[hand_ball]") {
+  // The transcription imposes h = 0 and A q̇ = 0 at every knot; fixing every rate at an end (or
+  // every coordinate at the start) would leave those rows constant in the free variables — a
+  // rank-deficient NLP. makeBallTurnProblem fixes only the independent coordinates.
+  const Scene s = loadScene(kScenes + "hand_ball.json");
+  auto model = std::make_shared<const Model>(s.model);
+  const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_limits.json", *model);
+  hand::BallTurnOptions o;
+  o.knots = 3;
+  o.freeInitialConfiguration = false;
+  const auto emptyRows = [](const OptimalControlProblem& p) {
+    Transcription t(p);
+    VectorXd lo, hi;
+    t.variableBounds(lo, hi);
+    const VectorXd z = t.initialGuess();
+    std::vector<double> values(t.jacobianRows().size());
+    REQUIRE(t.evalJacobian(z.data(), values.data()));
+    std::vector<bool> touched(t.numConstraints(), false);
+    for (std::size_t e = 0; e < values.size(); ++e)
+      if (values[e] != 0.0 && lo(t.jacobianCols()[e]) < hi(t.jacobianCols()[e])) touched[t.jacobianRows()[e]] = true;
+    return static_cast<int>(std::count(touched.begin(), touched.end(), false));
+  };
+  OptimalControlProblem p = hand::makeBallTurnProblem(model, s.q, l, o);
+  CHECK(emptyRows(p) == 0);
+  const int n = model->nq();
+  // The control: every rate fixed at the end gives the nc rows A q̇_N = 0 nothing to move.
+  for (int i = 0; i < n; ++i) p.finalFixed[n + i] = true;
+  CHECK(emptyRows(p) == model->nc());
+}
+
+TEST_CASE("hand ball: the kinematic reach of the turn", "[hand_ball]") {
+  // The pads stay on their points of the ball within the joint ranges while the ball's yaw turns:
+  // every configuration the search returns is on the manifold, in range, at its yaw.
+  const Scene s = loadScene(kScenes + "hand_ball.json");
+  const Model& m = s.model;
+  const hand::BallLimits l = hand::loadBallLimits(kLimits + "hand_ball_limits.json", m);
+  const double deg = std::numbers::pi / 180.0;
+  const hand::KinematicReach k = hand::kinematicReach(m, l, s.q, 5.0 * deg, 1.0 * deg, 0.1 * deg);
+  CHECK(k.reached == Approx(5.0 * deg).epsilon(1e-12));
+  CHECK(k.solves == 5);
+  Data data(m);
+  computeConstraints(m, data, k.q, VectorXd::Zero(m.nq()));
+  CHECK(data.constraintValue.cwiseAbs().maxCoeff() <= 1e-10);
+  CHECK(k.q(m.configIndex("ball_yaw")) == k.reached);
+  for (int i = 0; i < m.nq(); ++i) {
+    CHECK(k.q(i) >= l.qLower(i));
+    CHECK(k.q(i) <= l.qUpper(i));
+  }
+  // Ranges that forbid any turn: every hand joint pinned where it is (five fixed points hold the
+  // ball).
+  hand::BallLimits pinned = l;
+  for (int i = 0; i < m.nq(); ++i)
+    if (m.configNames()[i].rfind("ball_", 0) != 0) pinned.qLower(i) = pinned.qUpper(i) = s.q(i);
+  const hand::KinematicReach none = hand::kinematicReach(m, pinned, s.q, 5.0 * deg, 1.0 * deg, 0.1 * deg);
+  CHECK(none.reached < 0.1 * deg);
+  CHECK_FALSE(none.stop.empty());
 }
 
 #endif
