@@ -52,7 +52,7 @@ void bindSimulation(py::module_& m) {
       .value("BDF", IntegrationMethod::kBDF);
   bindStatus<SimulationCode>(m, "SimulationStatus",
       "Status of a simulation (code: ok, integrator_failure, dynamics_failure, non_finite, "
-      "policy_failure, constraint_drift); t: the time of the failure.");
+      "policy_failure, constraint_drift, check_failed); t: the time of the failure.");
 
   py::class_<SimulationOptions> simulationOptions(m, "SimulationOptions",
       "Options of the CVODES simulation (keywords): rtol, atol, max_steps, sample_rate (0: "
