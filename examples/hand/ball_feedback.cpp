@@ -75,12 +75,14 @@ std::string ContactCheck::operator()(double t, const Eigen::VectorXd& lambda) {
   const std::string where = "contact " + l.digits[d] + " (rows " + std::to_string(3 * d) + ".." +
                             std::to_string(3 * d + 2) + ")";
   if (normal) {
-    return where + format(": normal force lambda_n = %.6g N below the margin %.6g N (lambda_t = (%.6g, %.6g) N)", ln,
-                          l.normalMin, lt1, lt2);
+    violationText = where + format(": normal force lambda_n = %.6g N below the margin %.6g N (lambda_t = (%.6g, %.6g) N)",
+                                   ln, l.normalMin, lt1, lt2);
+  } else {
+    violationText = where + format(": outside the friction cone, |lambda_t| = %.6g N > mu lambda_n = %.6g N (ratio "
+                                   "%.6g, lambda_n = %.6g N)",
+                                   lt, l.friction * ln, c.worstFrictionRatio, ln);
   }
-  return where + format(": outside the friction cone, |lambda_t| = %.6g N > mu lambda_n = %.6g N (ratio %.6g, "
-                        "lambda_n = %.6g N)",
-                        lt, l.friction * ln, c.worstFrictionRatio, ln);
+  return violationText;
 }
 
 double ballOrientationError(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
@@ -195,6 +197,7 @@ BallFeedbackResult runBallFeedback(const Model& model, const BallLimits& limits,
     run.worstFrictionRatio = contacts.worstFrictionRatio;
     run.worstFrictionContact = contacts.worstFrictionContact;
     const Eigen::Index rows = sim.trackingError.size();
+    run.initialError = run.finalError = run.errorRatio = run.orientationError = NAN;
     if (rows > 0) {
       run.initialError = sim.trackingError(0);
       run.finalError = sim.trackingError(rows - 1);
@@ -206,7 +209,7 @@ BallFeedbackResult runBallFeedback(const Model& model, const BallLimits& limits,
           ballOrientationError(xr.segment<3>(yaw), sim.trajectory.states().col(rows - 1).segment<3>(yaw));
     }
     if (sim.status.code == SimulationCode::kCheckFailed && contacts.violation != BallRunCode::kOk) {
-      run.status.set(contacts.violation, sim.status.message, contacts.violationTime, contacts.violationContact);
+      run.status.set(contacts.violation, contacts.violationText, contacts.violationTime, contacts.violationContact);
     } else if (!sim.ok()) {
       run.status.set(BallRunCode::kSimulationFailure, sim.status.describe(), sim.status.t);
     } else if (!(run.errorRatio <= options.maxErrorRatio)) {
@@ -238,6 +241,7 @@ BallFeedbackResult runBallFeedback(const Model& model, const BallLimits& limits,
       ++result.contactFailures;
     result.minNormal = std::min(result.minNormal, run.minNormal);
     result.worstFrictionRatio = std::max(result.worstFrictionRatio, run.worstFrictionRatio);
+    if (std::isnan(run.finalError)) continue;  // no output reached
     result.worstErrorRatio = std::max(result.worstErrorRatio, run.errorRatio);
     result.worstFinalError = std::max(result.worstFinalError, run.finalError);
     result.worstOrientationError = std::max(result.worstOrientationError, run.orientationError);

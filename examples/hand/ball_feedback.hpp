@@ -79,10 +79,9 @@ struct BallRun {
   int minNormalContact = -1;       ///< its digit
   double worstFrictionRatio = 0.0; ///< largest ‖λ_t‖ / (μ λ_n) over the checked points
   int worstFrictionContact = -1;   ///< its digit
-  double initialError = 0.0;       ///< ‖x − x_ref‖₂ at t0 (after the start's projection)
-  double finalError = 0.0;         ///< … at the last output reached
-  double errorRatio = 0.0;         ///< finalError / initialError
-  double orientationError = 0.0;   ///< ball orientation error at the last output reached [rad]
+  /// ‖x − x_ref‖₂ at t0 (after the start's projection), at the last output reached, their ratio,
+  /// and the ball's orientation error there [rad]; NaN when the run stopped before its first output.
+  double initialError = 0.0, finalError = 0.0, errorRatio = 0.0, orientationError = 0.0;
   double seconds = 0.0;            ///< wall time of the run
   bool ok() const { return status.ok(); }
   std::string describe() const;    ///< one line: status, contact figures, errors, time, work
@@ -96,11 +95,13 @@ struct BallFeedbackResult {
   double closedLoopSeconds = 0.0;  ///< wall time of all runs (threads at once)
   int failed = 0;                  ///< runs not ok
   int contactFailures = 0;         ///< runs that broke a contact condition
-  double minNormal = 0.0;          ///< worst over the runs
-  double worstFrictionRatio = 0.0; ///< worst over the runs
-  double worstErrorRatio = 0.0;    ///< worst final / initial over the runs
-  double worstFinalError = 0.0;    ///< worst final tracking error
-  double worstOrientationError = 0.0;  ///< [rad]
+  double minNormal = 0.0;          ///< worst over the runs' checked points [N]
+  double worstFrictionRatio = 0.0; ///< worst over the runs' checked points
+  ///@{
+  /// Worst final / initial, final tracking error and ball orientation error [rad] over the runs
+  /// that reached an output.
+  double worstErrorRatio = 0.0, worstFinalError = 0.0, worstOrientationError = 0.0;
+  ///@}
   /// The gains solved and every run ok.
   bool ok() const { return lqr.ok() && failed == 0; }
   /// A few lines: the gains, each failed run, the aggregate.
@@ -125,6 +126,7 @@ class ContactCheck {
   BallRunCode violation = BallRunCode::kOk;  ///< kNormalForce, kFrictionCone or kOk
   int violationContact = -1;
   double violationTime = 0.0;
+  std::string violationText;  ///< what the check returned for the violation
 
  private:
   const BallLimits* limits_;
