@@ -50,6 +50,9 @@ void BallFeedbackOptions::validate() const {
   if (!(perturbation > 0.0) || !std::isfinite(perturbation)) bad("perturbation", perturbation, "> 0 and finite");
   if (!(maxErrorRatio > 0.0) || !std::isfinite(maxErrorRatio)) bad("maxErrorRatio", maxErrorRatio, "> 0 and finite");
   if (threads < 1) bad("threads", threads, ">= 1");
+  if (!(rtol > 0.0) || !std::isfinite(rtol)) bad("rtol", rtol, "> 0 and finite");
+  if (!(atol > 0.0) || !std::isfinite(atol)) bad("atol", atol, "> 0 and finite");
+  if (!(driftTolerance > 0.0) || !std::isfinite(driftTolerance)) bad("driftTolerance", driftTolerance, "> 0 and finite");
 }
 
 std::string ContactCheck::operator()(double t, const Eigen::VectorXd& lambda) {
@@ -114,8 +117,8 @@ std::string BallRun::describe() const {
   line += format(" | min lambda_n %.4g N, worst friction ratio %.4g", minNormal, worstFrictionRatio);
   line += format(" | error %.3g -> %.3g (ratio %.3g), ball orientation %.3g deg", initialError, finalError, errorRatio,
                  orientationError * 180.0 / std::numbers::pi);
-  line += format(" | %.3f s, %.0f steps, %.0f checks", seconds, static_cast<double>(simulation.steps),
-                 static_cast<double>(simulation.checks));
+  line += format(" | %.3f s, %.0f steps, %.0f checks, %.0f Jacobians", seconds, static_cast<double>(simulation.steps),
+                 static_cast<double>(simulation.checks), static_cast<double>(simulation.jacobianEvaluations));
   return line;
 }
 
@@ -181,6 +184,9 @@ BallFeedbackResult runBallFeedback(const Model& model, const BallLimits& limits,
   SimulationOptions base = closedLoopOptions(m);
   base.sampleRate = options.sampleRate;
   base.inputUpper = limits.uMax;
+  base.rtol = options.rtol;
+  base.atol = options.atol;
+  base.driftTolerance = options.driftTolerance;
   result.runs.resize(starts.size());
   const auto runOne = [&](std::size_t r) {
     const auto start = std::chrono::steady_clock::now();

@@ -3,12 +3,14 @@
 //
 //   hand_ball_feedback [--reference CSV] [--scene NAME] [--runs N] [--seed S] [--perturbation Z]
 //                      [--rate HZ] [--horizon T] [--threads N] [--max-ratio R] [--gains CSV]
+//                      [--rtol R] [--atol A] [--drift D]
 //
 // --reference: a trajectory CSV of the scene (Trajectory::writeCsv; e.g. the optimized turn);
 // without it the provisional reference: the scene's stored hold (q = s.q, q̇ = 0, u = s.u, a
 // certified static equilibrium) held for T (default 2 s), knots every 0.1 s. NAME: a free-ball
 // scene of examples/scenes (default hand_ball) with examples/hand/NAME_limits.json. --gains writes
-// the gain schedule (with its feed-forward). Prints the gains' solve and time, one line per run,
+// the gain schedule (with its feed-forward); --rtol, --atol, --drift: the closed loops' integrator
+// tolerances and projection threshold (BallFeedbackOptions). Prints the gains' solve and time, one line per run,
 // the aggregate; exit 0 only when the gains are solved and every closed loop kept every contact
 // at every integrator step and converged (final / initial tracking error ≤ R, default 0.5);
 // 1 otherwise; 2 on bad arguments or files.
@@ -47,9 +49,13 @@ int main(int argc, char** argv) {
       else if (a == "--horizon") horizon = std::stod(value());
       else if (a == "--threads") options.threads = std::stoi(value());
       else if (a == "--max-ratio") options.maxErrorRatio = std::stod(value());
+      else if (a == "--rtol") options.rtol = std::stod(value());
+      else if (a == "--atol") options.atol = std::stod(value());
+      else if (a == "--drift") options.driftTolerance = std::stod(value());
       else if (a == "--help") {
         std::cout << "usage: hand_ball_feedback [--reference CSV] [--scene NAME] [--runs N] [--seed S] "
-                     "[--perturbation Z] [--rate HZ] [--horizon T] [--threads N] [--max-ratio R] [--gains CSV]\n";
+                     "[--perturbation Z] [--rate HZ] [--horizon T] [--threads N] [--max-ratio R] [--gains CSV] "
+                     "[--rtol R] [--atol A] [--drift D]\n";
         return 0;
       } else {
         std::cerr << "hand_ball_feedback: unknown option '" << a << "' (--help lists them)\n";
