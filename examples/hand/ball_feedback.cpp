@@ -50,6 +50,7 @@ void BallFeedbackOptions::validate() const {
   if (!(perturbation > 0.0) || !std::isfinite(perturbation)) bad("perturbation", perturbation, "> 0 and finite");
   if (!(maxErrorRatio > 0.0) || !std::isfinite(maxErrorRatio)) bad("maxErrorRatio", maxErrorRatio, "> 0 and finite");
   if (threads < 1) bad("threads", threads, ">= 1");
+  if (transportSubsteps < 1) bad("transportSubsteps", transportSubsteps, ">= 1");
   if (!(rtol > 0.0) || !std::isfinite(rtol)) bad("rtol", rtol, "> 0 and finite");
   if (!(atol > 0.0) || !std::isfinite(atol)) bad("atol", atol, "> 0 and finite");
   if (!(driftTolerance > 0.0) || !std::isfinite(driftTolerance)) bad("driftTolerance", driftTolerance, "> 0 and finite");
@@ -154,11 +155,33 @@ BallFeedbackResult runBallFeedback(const Model& model, const BallLimits& limits,
                                 std::to_string(limits.digits.size()) + " contacts) do not match the model (nu = " +
                                 std::to_string(m) + ", nc = " + std::to_string(model.nc()) + ")");
   }
+  // The tangent space keeps its dimension along the reference (the transport cannot follow a
+  // change): checked at the knots.
+  {
+    int d0 = -1;
+    const Eigen::MatrixXd& X = reference.states();
+    for (int k = 0; k < reference.size(); ++k) {
+      const Eigen::VectorXd x = X.col(k), u = reference.inputs().col(k);
+      if (!computeLinearization(model, data, x.head(n), x.tail(n), u).ok()) {
+        throw std::invalid_argument("runBallFeedback: the dynamics fail at the reference's knot " + std::to_string(k) +
+                                    " (t = " + format("%.17g", reference.times()(k)) + "): " + data.status.message);
+      }
+      const int d = computeConstraintTangentBasis(model, data);
+      if (d0 < 0) d0 = d;
+      if (d != d0) {
+        throw std::invalid_argument("runBallFeedback: the tangent space has dimension " + std::to_string(d) +
+                                    " at the reference's knot " + std::to_string(k) + " (t = " +
+                                    format("%.17g", reference.times()(k)) + "), " + std::to_string(d0) +
+                                    " at its start");
+      }
+    }
+  }
   BallFeedbackResult result;
   // Gains.
   TvlqrOptions to;
   to.sampleRate = options.sampleRate;
   to.transport = feedbackTransport();
+  to.transport.substeps = options.transportSubsteps;
   to.riccati = feedbackRiccatiOptions();
   const auto gainStart = std::chrono::steady_clock::now();
   result.lqr = solveTvlqr(model, reference, feedbackWeights(model), to);
@@ -240,7 +263,7 @@ BallFeedbackResult runBallFeedback(const Model& model, const BallLimits& limits,
   for (std::thread& t : pool) t.join();
   result.closedLoopSeconds = secondsSince(loopStart);
 
-  result.minNormal = INFINITY;
+  result.minNormal = result.runs.empty() ? NAN : INFINITY;
   for (const BallRun& run : result.runs) {
     if (!run.ok()) ++result.failed;
     if (run.status.code == BallRunCode::kNormalForce || run.status.code == BallRunCode::kFrictionCone)

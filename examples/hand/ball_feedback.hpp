@@ -21,6 +21,15 @@
 // manifold it is the tangent-space error to first order) has decayed: final/initial ≤
 // maxErrorRatio; else not_converged. A simulation failure of any other kind is simulation_failure.
 //
+// The reference must satisfy the dynamics between its knots (a collocation solution does, to its
+// accuracy): the basis T(t) between transport nodes is the cubic Hermite interpolant with the
+// slopes Ṫ_i = (I − P_i) A_i T_i (manifold_lqr.hpp), which are the tangent space's turning rate
+// along the plant's vector field f(x_ref, u_ref), not along ẋ_ref. On the quasi-static turn of
+// ball_turn.hpp (tensions that hold each pose at rest while the ball moves) the slopes are far
+// off and the sampled solve stops with "the interpolated basis … is far from orthonormal"
+// (measured with 1, 2 and 20 substeps, projected and integrated transport): reported as the gains'
+// status, no closed loop runs.
+//
 // Per run: the smallest λ_n and the largest ‖λ_t‖ / (μ λ_n) over every checked point (and the
 // digit), initial and final tracking error, and the ball's orientation error at the end: the angle
 // of R_refᵀ R, R = Rz(yaw) Ry(pitch) Rx(roll) from the ball's Z-Y-X angles (ball_yaw, ball_pitch,
@@ -35,6 +44,7 @@
 
 #include <Eigen/Core>
 
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -48,6 +58,9 @@ struct BallFeedbackOptions {
   double perturbation = 1e-3;  ///< ‖z‖ of each start's tangent deviation (> 0) [rad, m, rad/s, m/s]
   double maxErrorRatio = 0.5;  ///< converged: final / initial tracking error at most this (> 0)
   int threads = 1;             ///< closed loops at once (≥ 1); each run is the same on any count
+  /// Tangent-basis transport steps per reference interval (≥ 1; TangentTransportOptions::substeps,
+  /// the hand's 2 by default).
+  int transportSubsteps = 2;
   ///@{
   /// The closed loops' integrator tolerances and projection threshold (> 0). Defaults: the hand's
   /// (closedLoopOptions of hand_feedback.hpp). Measured on the 2 s hold (3 runs, perturbation
@@ -103,7 +116,7 @@ struct BallFeedbackResult {
   double closedLoopSeconds = 0.0;  ///< wall time of all runs (threads at once)
   int failed = 0;                  ///< runs not ok
   int contactFailures = 0;         ///< runs that broke a contact condition
-  double minNormal = 0.0;          ///< worst over the runs' checked points [N]
+  double minNormal = NAN;          ///< worst over the runs' checked points [N] (NaN: no run)
   double worstFrictionRatio = 0.0; ///< worst over the runs' checked points
   ///@{
   /// Worst final / initial, final tracking error and ball orientation error [rad] over the runs

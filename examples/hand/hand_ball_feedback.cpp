@@ -3,14 +3,20 @@
 //
 //   hand_ball_feedback [--reference CSV] [--scene NAME] [--runs N] [--seed S] [--perturbation Z]
 //                      [--rate HZ] [--horizon T] [--threads N] [--max-ratio R] [--gains CSV]
-//                      [--rtol R] [--atol A] [--drift D]
+//                      [--rtol R] [--atol A] [--drift D] [--transport-substeps S]
+//                      [--quasi-static DEG [--knots N]] [--write-reference CSV]
 //
 // --reference: a trajectory CSV of the scene (Trajectory::writeCsv; e.g. the optimized turn);
 // without it the provisional reference: the scene's stored hold (q = s.q, q̇ = 0, u = s.u, a
-// certified static equilibrium) held for T (default 2 s), knots every 0.1 s. NAME: a free-ball
+// certified static equilibrium) held for T (default 2 s), knots every 0.1 s; with --quasi-static
+// DEG the quasi-static turn of ball_turn.hpp by DEG degrees in T on N knots (default 21): a motion
+// whose tensions hold each pose at rest, NOT a solution of the dynamics (the optimizer's warm
+// start) — a stand-in that moves until the optimized turn exists; --write-reference writes the
+// reference used. NAME: a free-ball
 // scene of examples/scenes (default hand_ball) with examples/hand/NAME_limits.json. --gains writes
 // the gain schedule (with its feed-forward); --rtol, --atol, --drift: the closed loops' integrator
-// tolerances and projection threshold (BallFeedbackOptions). Prints the gains' solve and time, one line per run,
+// tolerances and projection threshold, --transport-substeps the tangent basis's steps per knot
+// interval (BallFeedbackOptions). Prints the gains' solve and time, one line per run,
 // the aggregate; exit 0 only when the gains are solved and every closed loop kept every contact
 // at every integrator step and converged (final / initial tracking error ≤ R, default 0.5);
 // 1 otherwise; 2 on bad arguments or files.
@@ -21,14 +27,16 @@
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
+#include <numbers>
 #include <string>
 
 using namespace trellis;
 
 int main(int argc, char** argv) {
-  std::string scene = "hand_ball", referencePath, gainsPath;
+  std::string scene = "hand_ball", referencePath, gainsPath, writeReference;
   hand::BallFeedbackOptions options;
-  double horizon = 2.0;
+  double horizon = 2.0, quasiStaticDegrees = 0.0;
+  int quasiStaticKnots = 21;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const auto value = [&]() -> std::string {
@@ -42,6 +50,7 @@ int main(int argc, char** argv) {
       if (a == "--reference") referencePath = value();
       else if (a == "--scene") scene = value();
       else if (a == "--gains") gainsPath = value();
+      else if (a == "--write-reference") writeReference = value();
       else if (a == "--runs") options.runs = std::stoi(value());
       else if (a == "--seed") options.seed = static_cast<unsigned>(std::stoul(value()));
       else if (a == "--perturbation") options.perturbation = std::stod(value());
@@ -49,13 +58,17 @@ int main(int argc, char** argv) {
       else if (a == "--horizon") horizon = std::stod(value());
       else if (a == "--threads") options.threads = std::stoi(value());
       else if (a == "--max-ratio") options.maxErrorRatio = std::stod(value());
+      else if (a == "--quasi-static") quasiStaticDegrees = std::stod(value());
+      else if (a == "--knots") quasiStaticKnots = std::stoi(value());
+      else if (a == "--transport-substeps") options.transportSubsteps = std::stoi(value());
       else if (a == "--rtol") options.rtol = std::stod(value());
       else if (a == "--atol") options.atol = std::stod(value());
       else if (a == "--drift") options.driftTolerance = std::stod(value());
       else if (a == "--help") {
         std::cout << "usage: hand_ball_feedback [--reference CSV] [--scene NAME] [--runs N] [--seed S] "
                      "[--perturbation Z] [--rate HZ] [--horizon T] [--threads N] [--max-ratio R] [--gains CSV] "
-                     "[--rtol R] [--atol A] [--drift D]\n";
+                     "[--rtol R] [--atol A] [--drift D] [--transport-substeps S] [--quasi-static DEG [--knots N]] "
+                     "[--write-reference CSV]\n";
         return 0;
       } else {
         std::cerr << "hand_ball_feedback: unknown option '" << a << "' (--help lists them)\n";
@@ -72,17 +85,30 @@ int main(int argc, char** argv) {
   try {
     s = loadScene(std::string(TRELLIS_EXAMPLE_SCENES_DIR) + "/" + scene + ".json");
     limits = hand::loadBallLimits(std::string(TRELLIS_HAND_DIR) + "/" + scene + "_limits.json", s.model);
-    reference = referencePath.empty() ? hand::holdReference(s.model, s.q, s.u, horizon, 0.1)
-                                      : Trajectory::readCsvFile(referencePath);
+    if (!referencePath.empty()) {
+      reference = Trajectory::readCsvFile(referencePath);
+    } else if (quasiStaticDegrees != 0.0) {
+      hand::BallTurnOptions turn;
+      turn.angle = quasiStaticDegrees * std::numbers::pi / 180.0;
+      turn.horizon = horizon;
+      turn.knots = quasiStaticKnots;
+      reference = hand::quasiStaticTurn(s.model, s.q, limits, turn);
+    } else {
+      reference = hand::holdReference(s.model, s.q, s.u, horizon, 0.1);
+    }
     reference.checkCompatible(s.model);
     options.validate();
+    if (!writeReference.empty()) reference.writeCsvFile(writeReference);
   } catch (const std::exception& e) {
     std::cerr << "hand_ball_feedback: " << e.what() << "\n";
     return 2;
   }
   std::printf("scene %s: %d coordinates, %d tendons, %d contact rows; reference %s: %d knots on [%g, %g] s\n",
               scene.c_str(), s.model.nq(), s.model.nu(), s.model.nc(),
-              referencePath.empty() ? "the stored hold" : referencePath.c_str(), reference.size(),
+              !referencePath.empty() ? referencePath.c_str()
+              : quasiStaticDegrees != 0.0 ? "the quasi-static turn (ball_turn.hpp, not a solution of the dynamics)"
+                                          : "the stored hold",
+              reference.size(),
               reference.startTime(), reference.endTime());
   std::printf("controller %g Hz, %d runs (seed %u, tangent perturbation %g), contacts: lambda_n >= %g N, "
               "|lambda_t| <= %g lambda_n (smooth cone) at every integrator step\n",
