@@ -124,7 +124,11 @@ std::string BallRun::describe() const {
 }
 
 std::string BallFeedbackResult::summary() const {
-  std::string s = "gains: " + lqr.describe() + format(" (%.3f s)\n", gainSeconds);
+  std::string s = format("reference at its knots: min normal force %.4g N (knot %.0f), worst friction ratio %.4g "
+                         "(knot %.0f)\n",
+                         referenceMinNormal, referenceMinNormalKnot, referenceWorstFrictionRatio,
+                         referenceWorstFrictionKnot);
+  s += "gains: " + lqr.describe() + format(" (%.3f s)\n", gainSeconds);
   for (std::size_t r = 0; r < runs.size(); ++r) {
     if (!runs[r].ok()) s += "run " + std::to_string(r) + ": " + runs[r].describe() + "\n";
   }
@@ -156,7 +160,9 @@ BallFeedbackResult runBallFeedback(const Model& model, const BallLimits& limits,
                                 std::to_string(m) + ", nc = " + std::to_string(model.nc()) + ")");
   }
   // The tangent space keeps its dimension along the reference (the transport cannot follow a
-  // change): checked at the knots.
+  // change): checked at the knots, where the reference's own contact forces are measured too.
+  BallFeedbackResult result;
+  result.referenceMinNormal = INFINITY;
   {
     int d0 = -1;
     const Eigen::MatrixXd& X = reference.states();
@@ -165,6 +171,15 @@ BallFeedbackResult runBallFeedback(const Model& model, const BallLimits& limits,
       if (!computeLinearization(model, data, x.head(n), x.tail(n), u).ok()) {
         throw std::invalid_argument("runBallFeedback: the dynamics fail at the reference's knot " + std::to_string(k) +
                                     " (t = " + format("%.17g", reference.times()(k)) + "): " + data.status.message);
+      }
+      const ContactMargins c = contactMargins(data.lambda, limits);
+      if (c.minNormal < result.referenceMinNormal) {
+        result.referenceMinNormal = c.minNormal;
+        result.referenceMinNormalKnot = k;
+      }
+      if (c.worstFrictionRatio > result.referenceWorstFrictionRatio || result.referenceWorstFrictionKnot < 0) {
+        result.referenceWorstFrictionRatio = c.worstFrictionRatio;
+        result.referenceWorstFrictionKnot = k;
       }
       const int d = computeConstraintTangentBasis(model, data);
       if (d0 < 0) d0 = d;
@@ -176,12 +191,12 @@ BallFeedbackResult runBallFeedback(const Model& model, const BallLimits& limits,
       }
     }
   }
-  BallFeedbackResult result;
   // Gains.
   TvlqrOptions to;
   to.sampleRate = options.sampleRate;
   to.transport = feedbackTransport();
   to.transport.substeps = options.transportSubsteps;
+  to.feedforward = options.feedforward;
   to.riccati = feedbackRiccatiOptions();
   const auto gainStart = std::chrono::steady_clock::now();
   result.lqr = solveTvlqr(model, reference, feedbackWeights(model), to);

@@ -58,6 +58,9 @@ struct BallFeedbackOptions {
   double perturbation = 1e-3;  ///< ‖z‖ of each start's tangent deviation (> 0) [rad, m, rad/s, m/s]
   double maxErrorRatio = 0.5;  ///< converged: final / initial tracking error at most this (> 0)
   int threads = 1;             ///< closed loops at once (≥ 1); each run is the same on any count
+  /// The held feed-forward written with the gains (tvlqr.hpp): kConsistent, the default, runs the
+  /// plant over each sample interval (Gauss–Newton, a few runs per interval).
+  SampledFeedforward feedforward = SampledFeedforward::kConsistent;
   /// Tangent-basis transport steps per reference interval (≥ 1; TangentTransportOptions::substeps,
   /// the hand's 2 by default).
   int transportSubsteps = 2;
@@ -110,6 +113,13 @@ struct BallRun {
 
 /// Gains, runs and their aggregate.
 struct BallFeedbackResult {
+  ///@{
+  /// The reference's own contacts at its knots (λ of computeDynamics at x_ref, u_ref): the smallest
+  /// λ_n and the largest ‖λ_t‖ / (μ λ_n), and the knots where they occur. Reported, not judged
+  /// (the reference is the caller's).
+  double referenceMinNormal = NAN, referenceWorstFrictionRatio = NAN;
+  int referenceMinNormalKnot = -1, referenceWorstFrictionKnot = -1;
+  ///@}
   TvlqrSolution lqr;               ///< the sampled gains (lqr.gains, with the feed-forward)
   double gainSeconds = 0.0;        ///< wall time of solveTvlqr
   std::vector<BallRun> runs;
