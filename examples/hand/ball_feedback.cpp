@@ -4,6 +4,7 @@
 #include "hand_feedback.hpp"
 
 #include <trellis/core/data.hpp>
+#include <trellis/core/dynamics.hpp>
 #include <trellis/core/linearization.hpp>
 #include <trellis/core/model.hpp>
 
@@ -87,6 +88,30 @@ std::string ContactCheck::operator()(double t, const Eigen::VectorXd& lambda) {
                                    lt, l.friction * ln, c.worstFrictionRatio, ln);
   }
   return violationText;
+}
+
+ContactForces contactForces(const Model& model, const BallLimits& limits, const Trajectory& trajectory) {
+  trajectory.checkCompatible(model);
+  if (static_cast<int>(limits.digits.size()) * 3 != model.nc()) {
+    throw std::invalid_argument("contactForces: " + std::to_string(limits.digits.size()) + " contacts in the limits, " +
+                                std::to_string(model.nc()) + " constraint rows in the model");
+  }
+  ContactForces out;
+  for (const std::string& d : limits.digits) {
+    for (const char* axis : {"_n", "_t1", "_t2"}) out.names.push_back("lambda_" + d + axis);
+  }
+  const int n = model.nq();
+  Data data(model);
+  out.lambda.resize(model.nc(), trajectory.size());
+  for (int k = 0; k < trajectory.size(); ++k) {
+    const Eigen::VectorXd x = trajectory.states().col(k), u = trajectory.inputs().col(k);
+    if (!computeDynamics(model, data, x.head(n), x.tail(n), u).ok()) {
+      throw std::runtime_error("contactForces: the dynamics fail at row " + std::to_string(k) + " (t = " +
+                               format("%.17g", trajectory.times()(k)) + "): " + data.status.message);
+    }
+    out.lambda.col(k) = data.lambda;
+  }
+  return out;
 }
 
 double ballOrientationError(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {

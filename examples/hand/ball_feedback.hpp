@@ -163,6 +163,16 @@ class ContactCheck {
   const BallLimits* limits_;
 };
 
+/// The contact forces along a trajectory, for its CSV: λ (nc × N) from computeDynamics at each
+/// row's state and input (for a closed loop, the input applied there), and the column names
+/// lambda_<digit>_n, lambda_<digit>_t1, lambda_<digit>_t2 in row order (λ is in contact frames).
+struct ContactForces {
+  std::vector<std::string> names;  ///< nc
+  Eigen::MatrixXd lambda;          ///< nc × N
+};
+/// Throws std::runtime_error naming the row and time where the dynamics fail.
+ContactForces contactForces(const Model& model, const BallLimits& limits, const Trajectory& trajectory);
+
 /// The ball's orientation error: the angle of R(a)ᵀ R(b) for Z-Y-X angles a, b (yaw, pitch, roll).
 double ballOrientationError(const Eigen::Vector3d& a, const Eigen::Vector3d& b);
 

@@ -83,6 +83,16 @@ TEST_CASE("hand ball feedback: orientation error and the hold reference", "[hand
   CHECK(ref.states().bottomRows(h.s.model.nq()).cwiseAbs().maxCoeff() == 0.0);
   CHECK_THROWS_WITH(hand::holdReference(h.s.model, h.s.q, h.s.u, -1.0),
                     Catch::Contains("horizon = -1"));
+  // Contact forces for the CSV: named by digit and axis, equal to the core's λ at each row.
+  const hand::ContactForces f = hand::contactForces(h.s.model, h.limits, ref);
+  REQUIRE(f.names.size() == 15);
+  CHECK(f.names[0] == "lambda_index_n");
+  CHECK(f.names[1] == "lambda_index_t1");
+  CHECK(f.names[14] == "lambda_" + h.limits.digits[4] + "_t2");
+  REQUIRE(f.lambda.cols() == 4);
+  Data data(h.s.model);
+  REQUIRE(computeDynamics(h.s.model, data, h.s.q, VectorXd::Zero(h.s.model.nq()), h.s.u).ok());
+  for (int k = 0; k < 4; ++k) CHECK(f.lambda.col(k) == data.lambda);
   hand::BallFeedbackOptions bad;
   bad.perturbation = 0.0;
   CHECK_THROWS_WITH(bad.validate(), Catch::Contains("BallFeedbackOptions.perturbation = 0"));
