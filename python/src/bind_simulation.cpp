@@ -102,6 +102,8 @@ void bindSimulation(py::module_& m) {
       .def_readonly("jacobian_evaluations", &SimulationResult::jacobianEvaluations)
       .def_readonly("restarts", &SimulationResult::restarts)
       .def_readonly("projections", &SimulationResult::projections)
+      .def_readonly("checks", &SimulationResult::checks,
+                    "points where the C++ SimulationOptions.stepCheck ran (not bound in Python: 0)")
       .def_property_readonly("ok", &SimulationResult::ok)
       .def("describe", &SimulationResult::describe)
       .def("json", &SimulationResult::json)
