@@ -1,11 +1,14 @@
 // simulation_loop.cpp — the simulator's event loop: integrate from event to event with the one
 // CVODES driver (exactly to the stop events, dense output elsewhere), measure the drift and
-// project above the tolerance, sample the held input, record the outputs (see simulation.hpp).
+// project above the tolerance, sample the held input, run the step check, record the outputs (see
+// simulation.hpp).
 #include "constraint_drift.hpp"
 #include "trellis/analysis/detail/ode_driver.hpp"
 #include "simulation_events.hpp"
 #include "simulation_run.hpp"
 
+#include "trellis/core/data.hpp"
+#include "trellis/core/dynamics.hpp"
 #include "trellis/core/model.hpp"
 
 #include <memory>
@@ -23,6 +26,60 @@ OdeOptions integratorOptions(const SimulationOptions& options) {
   ode.exactJacobian = options.exactJacobian;
   return ode;
 }
+
+/// SimulationOptions::stepCheck at one point (simulation.hpp, "Step check"): the input applied
+/// there, the dynamics at (x, u) in a Data of its own (the right-hand side's stays untouched), then
+/// the check. Allocates only in the constructor (and for a failure's text).
+class StepChecker {
+ public:
+  StepChecker(const Model& model, const SimulationOptions& options)
+      : model_(model), check_(options.stepCheck), data_(model), n_(model.nq()), sampled_(options.sampleRate > 0.0),
+        q_(n_), dq_(n_), u_(model.nu()), noLambda_() {}
+
+  /// Checks (t, x) of `system`'s loop; false with code and what set on a violation or failure.
+  bool check(double t, const Eigen::VectorXd& x, ClosedLoopSystem& system, SimulationCode& code,
+             std::string& what) {
+    ++count;
+    bool clipped = false;
+    if (sampled_) {
+      u_ = system.heldInput();
+    } else if (!system.control(t, x, u_, clipped)) {
+      code = system.failStatus;
+      what = system.failMessage;
+      return false;
+    }
+    q_ = x.head(n_);
+    dq_ = x.tail(n_);
+    const DynamicsStatus st = computeDynamics(model_, data_, q_, dq_, u_);
+    if (!st.ok()) {
+      code = st.code == DynamicsStatus::Code::kNonFinite ? SimulationCode::kNonFinite
+                                                          : SimulationCode::kDynamicsFailure;
+      what = "computeDynamics failed at the step check: " + st.message;
+      return false;
+    }
+    try {
+      what = check_(t, x, u_, model_.nc() > 0 ? data_.lambda : noLambda_);
+    } catch (const std::exception& e) {
+      what = std::string("the step check threw: ") + e.what();
+    } catch (...) {
+      what = "the step check threw an unknown exception";
+    }
+    if (what.empty()) return true;
+    code = SimulationCode::kCheckFailed;
+    what = "step check: " + what;
+    return false;
+  }
+
+  long count = 0;  ///< points checked
+
+ private:
+  const Model& model_;
+  const StepCheck& check_;
+  Data data_;
+  int n_;
+  bool sampled_;
+  Eigen::VectorXd q_, dq_, u_, noLambda_;
+};
 
 }  // namespace
 
@@ -52,6 +109,10 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
   OdeDriver driver(system, nx, integratorOptions(options));
   std::unique_ptr<ConstraintDrift> monitor;
   if (constrained) monitor = std::make_unique<ConstraintDrift>(model, options.projectionIterations);
+  std::unique_ptr<StepChecker> checker;
+  if (options.stepCheck) checker = std::make_unique<StepChecker>(model, options);
+  std::string checkMessage;
+  SimulationCode checkCode = SimulationCode::kOk;
 
   auto setFailure = [&](SimulationCode s, double t, const Eigen::VectorXd& state,
                         const std::string& what) {
@@ -59,7 +120,7 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
     result.failureState = state;
   };
 
-  Eigen::VectorXd x = x0, xr(nx), ur(m), u(m), y(nx);
+  Eigen::VectorXd x = x0, xr(nx), ur(m), u(m), y(nx), xs(nx);
   // The state x at the integrator's current time (the integrator holds x or x − x_ref, see
   // closed_loop_system.hpp).
   auto integratorState = [&]() {
@@ -103,6 +164,14 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
           break;
         }
         ++steps;
+        if (checker) {  // every accepted step's end (file comment of simulation.hpp)
+          system.toState(driver.time(), driver.state(), xs);
+          if (!checker->check(driver.time(), xs, system, checkCode, checkMessage)) {
+            setFailure(checkCode, driver.time(), xs, checkMessage);
+            failed = true;
+            break;
+          }
+        }
       }
       if (failed) break;
       if (driver.time() == te) {
@@ -154,6 +223,14 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
       ++result.controlSamples;
       if (clipped) ++result.saturatedSamples;
     }
+    // 3b. the step check where the integration (re)starts: t0, and after a new sample or a
+    // projection (u or x jumped; the last step's end was checked before the jump)
+    if (checker && (e == 0 || projected || (ev.stop && e + 1 < events.size()))) {
+      if (!checker->check(te, x, system, checkCode, checkMessage)) {
+        setFailure(checkCode, te, x, checkMessage);
+        break;
+      }
+    }
     // 4. output
     if (ev.output) {
       const auto k = static_cast<Eigen::Index>(record.times.size());
@@ -194,6 +271,7 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
   result.linearRhsEvaluations = s.linearRhsEvaluations;
   result.jacobianEvaluations = s.jacobianEvaluations;
   result.restarts = s.restarts;
+  result.checks = checker ? checker->count : 0;
   assembleResult(model, record, reference != nullptr, result);
   return result;
 }

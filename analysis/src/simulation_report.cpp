@@ -54,6 +54,7 @@ std::string SimulationResult::json() const {
   j["jacobian_evaluations"] = r.jacobianEvaluations;
   j["restarts"] = r.restarts;
   j["projections"] = r.projections;
+  j["checks"] = r.checks;
   return j.dump();
 }
 

@@ -52,7 +52,7 @@ void bindSimulation(py::module_& m) {
       .value("BDF", IntegrationMethod::kBDF);
   bindStatus<SimulationCode>(m, "SimulationStatus",
       "Status of a simulation (code: ok, integrator_failure, dynamics_failure, non_finite, "
-      "policy_failure, constraint_drift); t: the time of the failure.");
+      "policy_failure, constraint_drift, check_failed); t: the time of the failure.");
 
   py::class_<SimulationOptions> simulationOptions(m, "SimulationOptions",
       "Options of the CVODES simulation (keywords): rtol, atol, max_steps, sample_rate (0: "
@@ -102,6 +102,8 @@ void bindSimulation(py::module_& m) {
       .def_readonly("jacobian_evaluations", &SimulationResult::jacobianEvaluations)
       .def_readonly("restarts", &SimulationResult::restarts)
       .def_readonly("projections", &SimulationResult::projections)
+      .def_readonly("checks", &SimulationResult::checks,
+                    "points where the C++ SimulationOptions.stepCheck ran (not bound in Python: 0)")
       .def_property_readonly("ok", &SimulationResult::ok)
       .def("describe", &SimulationResult::describe)
       .def("json", &SimulationResult::json)

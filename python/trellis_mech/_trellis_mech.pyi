@@ -1198,6 +1198,9 @@ class SimulationResult:
     """The simulated trajectory (x, applied u at the output times) with status and diagnostics."""
     def __repr__(self: SimulationResult) -> str: ...
     @property
+    def checks(self) -> int:
+        """points where the C++ SimulationOptions.stepCheck ran (not bound in Python: 0)"""
+    @property
     def constraint_drift(self) -> numpy.typing.NDArray[numpy.float64]: ...
     @property
     def control_samples(self) -> int: ...
@@ -1235,7 +1238,7 @@ class SimulationResult:
     def trajectory(self) -> Trajectory: ...
 
 class SimulationStatus:
-    """Status of a simulation (code: ok, integrator_failure, dynamics_failure, non_finite, policy_failure, constraint_drift); t: the time of the failure."""
+    """Status of a simulation (code: ok, integrator_failure, dynamics_failure, non_finite, policy_failure, constraint_drift, check_failed); t: the time of the failure."""
     def __repr__(self: SimulationStatus) -> str: ...
     @property
     def code(self) -> str:

@@ -1,6 +1,7 @@
 // Tests for trellis/analysis/simulation.hpp: open loop against closed forms (pendulum period and
 // energy, spring–mass), constraint drift with and without projection, closed-loop stabilization
-// (cart-pole, TV-LQR tracking of a swinging pendulum), sampled feedback, saturation, failures.
+// (cart-pole, TV-LQR tracking of a swinging pendulum), sampled feedback, saturation, failures, the
+// per-step check.
 #include "control_test_support.hpp"
 
 #include <trellis/core/gain_schedule.hpp>
@@ -491,6 +492,124 @@ TEST_CASE("simulation: failures carry the time and the state", "[simulation]") {
     CHECK(r.status.t > 0.35);
     CHECK(r.status.t < 0.4);
     CHECK_THAT(r.status.message, Catch::Contains("actuator offline"));
+  }
+}
+
+TEST_CASE("simulation: the step check sees every integrator step and stops at a violation",
+          "[simulation]") {
+  // The paper pendulum (one constraint; λ its rod force) swinging from its projected start.
+  const trellis::Scene scene =
+      trellis::loadScene(TRELLIS_SOURCE_DIR "/examples/scenes/paper_pendulum.json");
+  const Model& model = scene.model;
+  const int n = model.nq();
+  VectorXd x0(2 * n);
+  x0 << scene.q, scene.dq;
+  trellis::projectOntoConstraints(model, x0);
+  const double T = 2.0;
+  SimulationOptions plain;
+  plain.outputStep = 0.02;
+  const SimulationResult free = trellis::simulate(model, x0, 0.0, T, zeroInput, plain);
+  REQUIRE(free.ok());
+  CHECK(free.checks == 0);
+  // λ along the unchecked run at its outputs (an independent computeDynamics).
+  trellis::Data data(model);
+  VectorXd lambdaAt(free.trajectory.size());
+  for (int k = 0; k < free.trajectory.size(); ++k) {
+    const VectorXd x = free.trajectory.states().col(k);
+    REQUIRE(trellis::computeDynamics(model, data, x.head(n), x.tail(n), VectorXd::Zero(model.nu())).ok());
+    lambdaAt(k) = data.lambda(0);
+  }
+  REQUIRE(lambdaAt.maxCoeff() - lambdaAt.minCoeff() > 1e-3);  // λ really varies over the swing
+
+  SECTION("a check that always passes: called at t0 and every step end with the core's λ, run unchanged") {
+    long calls = 0;
+    double worstLambdaError = 0.0;
+    trellis::Data own(model);
+    SimulationOptions opt = plain;
+    opt.stepCheck = [&](double, const VectorXd& x, const VectorXd& u, const VectorXd& lambda) {
+      ++calls;
+      trellis::computeDynamics(model, own, x.head(n), x.tail(n), u);
+      worstLambdaError = std::max(worstLambdaError, (lambda - own.lambda).cwiseAbs().maxCoeff());
+      return std::string();
+    };
+    const SimulationResult r = trellis::simulate(model, x0, 0.0, T, zeroInput, opt);
+    REQUIRE(r.ok());
+    CHECK(r.checks == calls);
+    // t0, every accepted step, and every restart after a projection (the start is projected).
+    CHECK(r.checks == r.steps + 1 + r.projections);
+    CHECK(worstLambdaError == 0.0);  // the same computeDynamics at the same (x, u)
+    // The check does not touch the integration: the same outputs to the bit.
+    CHECK(r.trajectory.states() == free.trajectory.states());
+    CHECK_THAT(r.json(), Catch::Contains("\"checks\":" + std::to_string(r.checks)));
+  }
+  SECTION("a bound that λ crosses mid-swing: check_failed at the first step end beyond it") {
+    const double bound = 0.5 * (lambdaAt.maxCoeff() + lambdaAt.minCoeff());
+    Eigen::Index first = 0;
+    while (lambdaAt(first) <= bound) ++first;  // the first output beyond the bound (λ(0) below it)
+    REQUIRE(first > 0);
+    SimulationOptions opt = plain;
+    opt.stepCheck = [bound](double, const VectorXd&, const VectorXd&, const VectorXd& lambda) {
+      return lambda(0) > bound ? "lambda " + std::to_string(lambda(0)) + " > " + std::to_string(bound)
+                               : std::string();
+    };
+    const SimulationResult r = trellis::simulate(model, x0, 0.0, T, zeroInput, opt);
+    CHECK_FALSE(r.ok());
+    CHECK(r.status.code == SimulationCode::kCheckFailed);
+    CHECK(std::string(r.status.name()) == "check_failed");
+    CHECK_THAT(r.status.message, Catch::Contains("step check: lambda ") && Catch::Contains("t = "));
+    // Between the last output below the bound and one output interval after the first beyond it
+    // (step ends are checked, the integrator's steps here are far shorter than 0.02 s).
+    const double tFirst = free.trajectory.times()(first);
+    CHECK(r.status.t > tFirst - plain.outputStep);
+    CHECK(r.status.t < tFirst + plain.outputStep);
+    // The failure state really violates the bound, and the outputs before it are the free run's.
+    REQUIRE(r.failureState.size() == 2 * n);
+    REQUIRE(trellis::computeDynamics(model, data, r.failureState.head(n), r.failureState.tail(n),
+                                     VectorXd::Zero(model.nu())).ok());
+    CHECK(data.lambda(0) > bound);
+    REQUIRE(r.trajectory.size() >= 1);
+    CHECK(r.trajectory.endTime() <= r.status.t);
+    const int rows = r.trajectory.size();
+    CHECK(r.trajectory.states() == free.trajectory.states().leftCols(rows));
+  }
+  SECTION("a check that throws: check_failed with the exception's text") {
+    SimulationOptions opt = plain;
+    opt.stepCheck = [](double t, const VectorXd&, const VectorXd&, const VectorXd&) -> std::string {
+      if (t > 0.3) throw std::runtime_error("sensor lost");
+      return {};
+    };
+    const SimulationResult r = trellis::simulate(model, x0, 0.0, T, zeroInput, opt);
+    CHECK(r.status.code == SimulationCode::kCheckFailed);
+    CHECK(r.status.t > 0.3);
+    CHECK_THAT(r.status.message, Catch::Contains("sensor lost"));
+  }
+  SECTION("sampled feedback: the held input, checked again after each new sample; no λ unconstrained") {
+    const UprightCartPole cp(1.0);
+    const VectorXd start = (VectorXd(4) << 0.1, 0.2, 0.0, 0.0).finished();
+    SimulationOptions opt;
+    opt.outputStep = 0.01;
+    opt.sampleRate = 50.0;
+    const SimulationResult unchecked = trellis::simulateClosedLoop(cp.model, cp.reference, cp.gains, start, opt);
+    bool noLambda = true;
+    int newSamples = 0;
+    const MatrixXd K = cp.gains.gains()[0];
+    opt.stepCheck = [&](double t, const VectorXd& x, const VectorXd& u, const VectorXd& lambda) {
+      noLambda = noLambda && lambda.size() == 0;
+      // At a sample time t_k the step ending there is checked with the old held input, then the
+      // restart with the new sample −K x(t_k): count the latter.
+      const double k = std::round(t * 50.0);
+      if (std::abs(t - k / 50.0) < 1e-12 && t < 1.0 && std::abs(u(0) + (K * x)(0)) < 1e-12) ++newSamples;
+      return std::string();
+    };
+    const SimulationResult r = trellis::simulateClosedLoop(cp.model, cp.reference, cp.gains, start, opt);
+    REQUIRE(r.ok());
+    REQUIRE(unchecked.ok());
+    CHECK(noLambda);
+    CHECK(newSamples == 50);
+    CHECK(r.controlSamples == 50);
+    // Every step end, t0, and each of the 49 samples after t0.
+    CHECK(r.checks == r.steps + 1 + 49);
+    CHECK(r.trajectory.states() == unchecked.trajectory.states());
   }
 }
 

@@ -52,6 +52,18 @@
 // state. A drift still above δ after projection ends the run with kConstraintDrift (time, drift).
 // kNone never changes the state (the drift is still reported).
 //
+// Step check (SimulationOptions::stepCheck). A condition the plant must keep along the whole run,
+// such as unilateral contact inside a friction cone, is checked on the integrator's own steps,
+// not only at the outputs: at t0, at the end of EVERY accepted internal step, and again at every
+// restart point after a new sample or a projection (where u or x jumps). At each such point the
+// simulator evaluates computeDynamics at (x, u) — u the input applied there (the held sample, or
+// sat(π(t, x))) — and passes t, x, u and the constraint forces λ to the check: one dynamics
+// evaluation per step beyond the integrator's own (none without a check). A violation ends the run
+// with kCheckFailed, the check's text, the time and the state; the outputs reached are kept.
+// Between step ends the state is the integrator's interpolant and is not checked. Times may repeat
+// or go back: a restart at a sample time checks te again with the new input, and a projection at
+// an output time restarts there, behind the last step's end.
+//
 // Threads. simulate* read the Model, the reference and the gain schedule only (const methods);
 // each call owns its Data, its CVODES memory and its buffers. Calls on distinct threads may share
 // one Model, Trajectory and GainSchedule as long as nobody modifies them meanwhile; a Policy
@@ -96,6 +108,14 @@ inline EnumNameTable<IntegrationMethod> enumNames(IntegrationMethod) {
 /// "integration method 'TEXT' is not one of adams, bdf".
 IntegrationMethod parseIntegrationMethod(const std::string& text);
 
+/// The step check of SimulationOptions (file comment): t, x (2n), the applied u (m) and the
+/// constraint forces λ (nc; empty without constraints) of computeDynamics at (x, u). Returns an
+/// empty string where the condition holds, else what is violated and by how much (it ends the run
+/// as kCheckFailed; a throw does too, with the exception's text). Called on the simulating thread;
+/// a check shared by simulateBatch's threads must be safe to call concurrently.
+using StepCheck = std::function<std::string(double t, const Eigen::VectorXd& x, const Eigen::VectorXd& u,
+                                            const Eigen::VectorXd& lambda)>;
+
 /// Options of simulate / simulateBatch: integrator tolerances and method, sampled or continuous
 /// feedback, input limits, output times, constraint projection.
 struct SimulationOptions {
@@ -126,6 +146,9 @@ struct SimulationOptions {
   /// (false; the fallback, 2n extra right-hand sides per Jacobian). A generic Policy always uses
   /// the difference quotient unless sampled (then ∂f/∂x = A).
   bool exactJacobian = true;
+  /// Empty: none; else checked at t0, after every accepted integrator step and at every restart
+  /// (file comment, "Step check").
+  StepCheck stepCheck;
 
   /// Throws std::invalid_argument naming the field and its value (sizes against the model are
   /// checked by simulate).
@@ -143,9 +166,11 @@ enum class SimulationCode {
   kNonFinite,          ///< the state, the input or q̈ became NaN/Inf
   kPolicyFailure,      ///< the policy threw (e.g. a time outside the reference)
   kConstraintDrift,    ///< the drift stayed above driftTolerance after a projection
+  kCheckFailed,        ///< SimulationOptions::stepCheck reported a violation (its text in the message)
 };
 
-/// Names: ok, integrator_failure, dynamics_failure, non_finite, policy_failure, constraint_drift.
+/// Names: ok, integrator_failure, dynamics_failure, non_finite, policy_failure, constraint_drift,
+/// check_failed.
 inline EnumNameTable<SimulationCode> enumNames(SimulationCode) {
   static constexpr EnumName<SimulationCode> table[] = {
       {SimulationCode::kOk, "ok"},
@@ -153,7 +178,8 @@ inline EnumNameTable<SimulationCode> enumNames(SimulationCode) {
       {SimulationCode::kDynamicsFailure, "dynamics_failure"},
       {SimulationCode::kNonFinite, "non_finite"},
       {SimulationCode::kPolicyFailure, "policy_failure"},
-      {SimulationCode::kConstraintDrift, "constraint_drift"}};
+      {SimulationCode::kConstraintDrift, "constraint_drift"},
+      {SimulationCode::kCheckFailed, "check_failed"}};
   return table;
 }
 
@@ -189,6 +215,7 @@ struct SimulationResult {
   long jacobianEvaluations = 0;    ///< Newton-matrix Jacobians formed (exact or difference quotient)
   long restarts = 0;               ///< restarts after t0: samples, breakpoints, projections
   long projections = 0;            ///< projections that were applied
+  long checks = 0;                 ///< points where SimulationOptions::stepCheck was evaluated
   bool ok() const { return status.ok(); }  ///< status.ok(): the result is complete and right
   /// One line: the status, rows, final and max tracking error, drift, steps.
   std::string describe() const;
