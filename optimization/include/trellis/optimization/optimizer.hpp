@@ -79,8 +79,8 @@ struct OptimizerOptions {
   /// is moved off its bounds; Ipopt's defaults 0.1 and 0.01). A guess that is nearly a solution
   /// wants both small: on a stiff model a push of 0.01 in an input at its bound can cost more
   /// defect than the whole guess has (a hand's tendon at 0 N moves a phalanx by ~10² rad/s²).
-  double initialBarrier = 0.1;
-  double initialBoundPush = 1e-2;
+  double initialBarrier = 0.1;     ///< mu_init of the first round
+  double initialBoundPush = 1e-2;  ///< bound_push and bound_frac of the first round
   /// The a-posteriori check (file comment): "solved" requires the worst relative defect, and
   /// the slack's relative share, ≤ consistencyTolerance.
   double consistencyTolerance = 1e-3;
