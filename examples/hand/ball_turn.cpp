@@ -324,11 +324,24 @@ RestHold solveRestHold(const Model& model, const BallLimits& limits, const Eigen
   r.u = r.nlp.x.segment(n, m);
   r.margin = r.nlp.x(n + m);
   if (computeDynamics(model, *data, r.q, dq, r.u).ok()) r.lambda = data->lambda;
-  r.ok = r.nlp.ok() && r.margin >= limits.normalMin && r.lambda.size() == nc;
+  // A hold is a feasible point: Ipopt's optimum, or its last iterate at the iteration limit when
+  // every row and bound holds there (solveNlp evaluates them again at x). The margin is then the
+  // contacts' own smallest normal force, not the variable s.
+  r.certified = r.nlp.ok();
+  const bool feasible = r.nlp.constraintViolation <= options.ipopt.constraintTolerance &&
+                        r.nlp.boundViolation <= options.ipopt.constraintTolerance;
+  if (r.lambda.size() == nc) {
+    double smallest = kInf;
+    for (int d = 0; d < nd; ++d) smallest = std::min(smallest, r.lambda(3 * d));
+    r.margin = std::min(r.margin, smallest);
+  }
+  r.ok = (r.certified || (r.nlp.status.code == OptimizationCode::kIterationLimit && feasible)) &&
+         r.margin >= limits.normalMin && r.lambda.size() == nc;
   if (!r.ok)
-    r.message = !r.nlp.ok() ? r.nlp.status.message
-                            : "the smallest normal force " + std::to_string(r.margin) + " N is below the margin " +
-                                  std::to_string(limits.normalMin) + " N";
+    r.message = !(r.certified || r.nlp.status.code == OptimizationCode::kIterationLimit) || !feasible
+                    ? r.nlp.status.message
+                    : "the smallest normal force " + std::to_string(r.margin) + " N is below the margin " +
+                          std::to_string(limits.normalMin) + " N";
   return r;
 }
 

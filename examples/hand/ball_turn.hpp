@@ -94,8 +94,9 @@ struct RestHoldOptions {
   double tensionWeight = 1e-3;  ///< w_u [N]
   double stayWeight = 1e-2;     ///< w_q [N]: keeps the hold near the previous one (continuation)
   /// Ipopt: rows to 1e-9 (h in m, the scaled q̈ rows in N or N m, λ in N); the KKT tolerance
-  /// 1e-6 (the hold's feasibility is what is used, and checked; L-BFGS needs ~10³ iterations for
-  /// the last digits of optimality near a margin cap).
+  /// 1e-6; at most 1000 iterations (the hold's feasibility is what is used, and checked; L-BFGS
+  /// needs ~10³ iterations for the last digits of optimality near a margin cap, and a path from
+  /// such a point was measured to fail where the converged one passes).
   NlpOptions ipopt = [] {
     NlpOptions o;
     o.constraintTolerance = 1e-9;
@@ -106,9 +107,12 @@ struct RestHoldOptions {
 };
 struct RestHold {
   Eigen::VectorXd q, u, lambda;  ///< nq, nu, nc
-  double margin = 0.0;           ///< s: the smallest normal force [N]
+  double margin = 0.0;           ///< min(s, the smallest λ_n at the result) [N]
   NlpResult nlp;
-  bool ok = false;               ///< Ipopt solved and s ≥ normalMin
+  /// A hold: Ipopt solved, or stopped at its iteration limit at a point where every row and bound
+  /// holds to the tolerance (a feasible point, not certified optimal), and every λ_n ≥ normalMin.
+  bool ok = false;
+  bool certified = false;        ///< Ipopt's status was solved (the margin a local optimum)
   std::string message;
 };
 /// `velocity` (nq, or empty for rest): the rows are q̈_I(q, q̇, u) = 0 at that q̇ (a steady

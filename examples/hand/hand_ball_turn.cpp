@@ -11,7 +11,8 @@
 // dampers' load included) and the motion starts at its first hold; Ipopt then starts there with
 // μ_init 1e-2 and bound_push 1e-8 (--barrier, --bound-push override). --diagnose: the guess's
 // worst rows and each point's |q̈|. --max-iterations: Ipopt's limit (500). --friction-use F: the
-// share of the pyramid the holds may use (0.8). --reach: only the kinematic reach (kinematicReach).
+// share of the pyramid the holds may use (0.8); --hold-margin N: their margin cap (1 N; above it
+// they minimize effort). --reach: only the kinematic reach (kinematicReach).
 // NAME: a scene of examples/scenes written by make_hand_scene.py --free-ball (default hand_ball;
 // hand_ball_pinch is the thumb-and-index reduction), read with examples/hand/NAME_limits.json. Prints the
 // optimizer's one-line result, its time split, and the contact margins at every collocation point:
@@ -65,6 +66,7 @@ int main(int argc, char** argv) {
       else if (a == "--diagnose") diagnose = true;
       else if (a == "--reach") reach = true;
       else if (a == "--friction-use") holdOptions.frictionUse = std::stod(value());
+      else if (a == "--hold-margin") holdOptions.marginCap = std::stod(value());
       else if (a == "--max-iterations") maxIterations = std::stoi(value());
       else if (a == "--barrier") barrier = std::stod(value());
       else if (a == "--bound-push") boundPush = std::stod(value());
