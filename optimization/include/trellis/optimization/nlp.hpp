@@ -23,8 +23,10 @@ namespace trellis {
 /// returns false when it cannot evaluate at x (Ipopt then shortens its step); it must not throw
 /// (solveNlp catches and stops the solve with the exception's text as the message).
 struct NlpProblem {
-  Eigen::VectorXd lower, upper;                    ///< n: x_L, x_U
-  Eigen::VectorXd constraintLower, constraintUpper;///< m: g_L, g_U (equal for an equality)
+  Eigen::VectorXd lower;            ///< n: x_L (−infinity: none)
+  Eigen::VectorXd upper;            ///< n: x_U (+infinity: none)
+  Eigen::VectorXd constraintLower;  ///< m: g_L (equal to g_U for an equality)
+  Eigen::VectorXd constraintUpper;  ///< m: g_U
   Eigen::VectorXd start;                           ///< n: x₀ (Ipopt moves it inside the bounds)
   /// f(x) and ∇f(x) (n).
   std::function<bool(const Eigen::VectorXd& x, double& f, Eigen::VectorXd& gradient)> objective;
@@ -50,16 +52,18 @@ struct NlpOptions {
 struct NlpResult {
   Status<OptimizationCode> status{OptimizationCode::kFailed, {}};  ///< message: why, when not ok
   std::string ipoptStatus;          ///< Ipopt's ApplicationReturnStatus name
-  int iterations = 0;
+  int iterations = 0;               ///< Ipopt's iterations
   Eigen::VectorXd x;                ///< n: the last iterate
   Eigen::VectorXd g;                ///< m: g(x) there (NaN when it could not be evaluated)
   double objective = 0.0;           ///< f(x)
-  /// max over rows of the violation of g_L ≤ g ≤ g_U, and of the bounds (unscaled)
-  double constraintViolation = 0.0, boundViolation = 0.0;
-  Eigen::VectorXd constraintMultipliers, lowerBoundMultipliers, upperBoundMultipliers;  ///< m, n, n
+  double constraintViolation = 0.0;  ///< max over rows of the violation of g_L ≤ g ≤ g_U at x (unscaled)
+  double boundViolation = 0.0;       ///< max violation of x_L ≤ x ≤ x_U (unscaled)
+  Eigen::VectorXd constraintMultipliers;  ///< m: Ipopt's multipliers of the rows
+  Eigen::VectorXd lowerBoundMultipliers;  ///< n: z_L
+  Eigen::VectorXd upperBoundMultipliers;  ///< n: z_U
   long evaluations = 0;             ///< calls of the constraint callback
   double solveTime = 0.0;           ///< wall-clock seconds
-  bool ok() const { return status.ok(); }
+  bool ok() const { return status.ok(); }  ///< solved, and checked again at x (solveNlp)
 };
 
 /// Solves the program with Ipopt (file comment). Throws std::invalid_argument for sizes that do
