@@ -87,6 +87,7 @@ BallLimits loadBallLimits(const std::string& path, const Model& model) {
 OptimalControlProblem makeBallTurnProblem(std::shared_ptr<const Model> model, const Eigen::VectorXd& q0,
                                           const BallLimits& limits, const BallTurnOptions& options) {
   if (options.facets < 3) throw std::invalid_argument("BallTurnOptions::facets = " + std::to_string(options.facets) + " must be >= 3");
+  if (options.knots < 2) throw std::invalid_argument("BallTurnOptions::knots = " + std::to_string(options.knots) + " must be >= 2");
   if (!(options.horizon > 0.0)) throw std::invalid_argument("BallTurnOptions::horizon must be > 0");
   const Model& m = *model;
   const int n = m.nq(), nc = m.nc();
@@ -418,6 +419,9 @@ KinematicReach kinematicReach(const Model& model, const BallLimits& limits, cons
   const int n = model.nq(), nc = model.nc(), yaw = model.configIndex("ball_yaw");
   if (q0.size() != n) throw std::invalid_argument("kinematicReach: q0 has " + std::to_string(q0.size()) + " entries, not " + std::to_string(n));
   if (!(step > 0.0) || !(resolution > 0.0)) throw std::invalid_argument("kinematicReach: step and resolution must be > 0");
+  if (!(maxYaw > q0(yaw)))
+    throw std::invalid_argument("kinematicReach: maxYaw = " + std::to_string(maxYaw) + " rad must exceed the start's yaw " +
+                                std::to_string(q0(yaw)) + " rad (the search turns the ball in the positive sense)");
   KinematicReach r;
   r.q = q0;
   r.reached = q0(yaw);

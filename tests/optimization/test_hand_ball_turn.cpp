@@ -503,6 +503,8 @@ TEST_CASE("hand ball: the kinematic reach of the turn", "[hand_ball]") {
   const hand::KinematicReach none = hand::kinematicReach(m, pinned, s.q, 5.0 * deg, 1.0 * deg, 0.1 * deg);
   CHECK(none.reached < 0.1 * deg);
   CHECK_FALSE(none.stop.empty());
+  // A turn in the other sense is refused, not reported as reached.
+  CHECK_THROWS_WITH(hand::kinematicReach(m, l, s.q, -5.0 * deg, 1.0 * deg, 0.1 * deg), Catch::Contains("maxYaw = -0.08"));
 }
 
 #endif
