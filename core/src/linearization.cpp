@@ -9,6 +9,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 namespace trellis {
 namespace detail {
@@ -263,6 +265,74 @@ DynamicsStatus computeLinearization(const Model& model, Data& data, const Eigen:
   data.A.bottomRightCorner(n, n) = data.dqdd_ddq;
   // No inputs: B is 2n×0 with no storage, and a block of it would offset a null pointer (UB).
   if (m > 0) data.B.bottomRows(n) = data.dqdd_du;
+  return data.status;
+}
+
+ImplicitDynamics::ImplicitDynamics(const Model& model)
+    : r(Eigen::VectorXd::Zero(model.nq())),
+      c(Eigen::VectorXd::Zero(model.nc())),
+      dr_dx(Eigen::MatrixXd::Zero(model.nq(), 2 * model.nq())),
+      dc_dx(Eigen::MatrixXd::Zero(model.nc(), 2 * model.nq())) {}
+
+DynamicsStatus computeImplicitDynamics(const Model& model, Data& data, const Eigen::VectorXd& q,
+                                       const Eigen::VectorXd& dq, const Eigen::VectorXd& qdd,
+                                       const Eigen::VectorXd& u, const Eigen::VectorXd& lambda,
+                                       ImplicitDynamics& out) {
+  auto& ws = detail::workspace(data);
+  using namespace detail;
+  const int n = model.nq(), nc = model.nc();
+  checkSize(q, n, "computeImplicitDynamics: q");
+  checkSize(dq, n, "computeImplicitDynamics: dq");
+  checkSize(qdd, n, "computeImplicitDynamics: qdd");
+  checkSize(u, model.nu(), "computeImplicitDynamics: u");
+  checkSize(lambda, nc, "computeImplicitDynamics: lambda");
+  if (out.r.size() != n || out.c.size() != nc || out.dr_dx.rows() != n || out.dr_dx.cols() != 2 * n ||
+      out.dc_dx.rows() != nc || out.dc_dx.cols() != 2 * n)
+    throw std::invalid_argument("computeImplicitDynamics: out is not sized for this model (ImplicitDynamics(model))");
+  data.status = DynamicsStatus{};
+  if (!inputsAreFinite(model, data, q, dq, u)) return data.status;
+  if (!qdd.allFinite() || !lambda.allFinite()) {
+    data.status.code = DynamicsStatus::Code::kNonFinite;
+    data.status.message = std::string("computeImplicitDynamics: non-finite ") + (qdd.allFinite() ? "lambda" : "qdd");
+    return data.status;
+  }
+  // The data members at (q, q̇, u), as computeDynamics leaves them (b and Ȧ q̇ at q̈ = 0).
+  updateJoints(model, data, q, dq);
+  massMatrixPass(model, data);
+  ws.qddZero.setZero();
+  updateAccelerations(model, data, dq, ws.qddZero);
+  accumulateExternalWrenches(model, data, u, true, true, nullptr);
+  inverseDynamicsPass(model, data, data.bias);
+  ws.tmpN.setZero();
+  addConfigurationForces(model, q, dq, u, ws.tmpN);
+  data.bias -= ws.tmpN;
+  evaluateConstraints(model, data, &data.constraintValue, nullptr, &data.constraintDrift, &data.constraintJacobian);
+  // The nominal pass at the given q̈ and λ: r = ID(q, q̇, q̈) − Q_wrenches − Aᵀλ − Q_config.
+  data.qdd = qdd;
+  data.lambda = lambda;
+  updateAccelerations(model, data, dq, data.qdd);
+  accumulateExternalWrenches(model, data, u, true, true, nc > 0 ? &data.lambda : nullptr);
+  inverseDynamicsPass(model, data, out.r);
+  ws.tmpN.setZero();  // (the passes above use it as scratch)
+  addConfigurationForces(model, q, dq, u, ws.tmpN);
+  out.r -= ws.tmpN;
+  inputMatrixPass(model, data);
+  out.c = data.constraintDrift;
+  if (nc > 0) out.c.noalias() += data.constraintJacobian * qdd;
+  compositePass(model, data);
+  for (int k = 0; k < n; ++k) {
+    tangentPass(model, data, u, makeDirection(model, data, k, false), ws.rhsX.col(k), ws.crhsX.col(k),
+                data.constraintVelocityJacobian.col(k));
+    tangentPass(model, data, u, makeDirection(model, data, k, true), ws.rhsX.col(n + k), ws.crhsX.col(n + k),
+                data.constraintVelocityJacobian.col(k));
+  }
+  out.dr_dx = -ws.rhsX.leftCols(2 * n);
+  if (nc > 0) out.dc_dx = -ws.crhsX.leftCols(2 * n);
+  if (!(std::isfinite(out.r.sum() + out.dr_dx.sum()) && std::isfinite(out.c.sum() + out.dc_dx.sum()))) {
+    data.status.code = DynamicsStatus::Code::kNonFinite;
+    data.status.message = "computeImplicitDynamics: non-finite residual or derivatives";
+    appendState(model, q, dq, data.status.message);
+  }
   return data.status;
 }
 

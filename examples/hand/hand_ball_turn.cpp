@@ -41,7 +41,7 @@ int main(int argc, char** argv) {
   std::string scene = "hand_ball";
   hand::BallTurnOptions options;
   int printLevel = 0;
-  bool lbfgs = false, holds = false, diagnose = false, reach = false;
+  bool lbfgs = false, holds = false, diagnose = false, reach = false, implicitForm = false;
   hand::RestHoldOptions holdOptions;
   int maxIterations = 500;
   double barrier = 0.0, boundPush = 0.0;
@@ -62,6 +62,8 @@ int main(int argc, char** argv) {
       else if (a == "--facets") options.facets = std::stoi(value());
       else if (a == "--print-level") printLevel = std::stoi(value());
       else if (a == "--lbfgs") lbfgs = true;
+      else if (a == "--implicit") implicitForm = true;
+      else if (a == "--effort-scale") options.effortScale = std::stod(value());
       else if (a == "--holds") holds = true;
       else if (a == "--diagnose") diagnose = true;
       else if (a == "--reach") reach = true;
@@ -107,6 +109,7 @@ int main(int argc, char** argv) {
     }
     if (holds) options.freeInitialConfiguration = false;
     problem = hand::makeBallTurnProblem(model, s.q, limits, options);
+    if (implicitForm) problem.dynamics = DynamicsForm::kImplicit;
     if (holds) {
       const auto th = std::chrono::steady_clock::now();
       // Holds at every collocation point (knots and midpoints): the midpoints' dynamics then start

@@ -265,6 +265,9 @@ StartPoint carryOver(const Transcription& now, const OptimalControlProblem& befo
   StartPoint start;
   start.z = now.initialGuess();
   const OptimalControlProblem& p = now.problem();
+  // The implicit form's layout (q̈, λ per point, its rows) is not carried: a cold start from the
+  // previous solution's trajectory (the refined problem's initial guess).
+  if (p.dynamics == DynamicsForm::kImplicit || before.dynamics == DynamicsForm::kImplicit) return start;
   const bool hs = p.method == CollocationMethod::kHermiteSimpson;
   const int nx = p.nx(), m = p.nu(), nc = p.model->nc();
   const int rowsPer = hs ? 2 * nx + m : nx;

@@ -383,7 +383,7 @@ class FileParser {
     if (!root.is_object()) fail(source_ + ": expected a JSON object at the top level");
     checkKeys(root, "", {"description", "scene", "method", "knots", "horizon", "initial_state",
                          "final_state", "free_initial", "free_final", "state_bounds",
-                         "input_bounds", "constraint_force_bounds", "cost", "initial_guess", "hessian"});
+                         "input_bounds", "constraint_force_bounds", "cost", "initial_guess", "hessian", "dynamics"});
     if (!root.contains("scene")) bad("scene", "missing (the path of a scene file)");
     const std::string scenePath = resolve(string(root["scene"], "scene"));
     Scene scene = loadScene(scenePath);
@@ -405,6 +405,14 @@ class FileParser {
       const std::string mode = string(root["hessian"], "hessian");
       try {
         problem.hessian = parseEnum<HessianMode>(mode, "hessian");
+      } catch (const std::invalid_argument& e) {
+        fail(source_ + ": " + e.what());
+      }
+    }
+    if (root.contains("dynamics")) {
+      const std::string form = string(root["dynamics"], "dynamics");
+      try {
+        problem.dynamics = parseEnum<DynamicsForm>(form, "dynamics");
       } catch (const std::invalid_argument& e) {
         fail(source_ + ": " + e.what());
       }

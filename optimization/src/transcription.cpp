@@ -41,6 +41,7 @@ struct TripletWriter {
 struct Transcription::Impl {
   OptimalControlProblem problem;
   DerivativeMode derivatives;
+  bool implicit;           // DynamicsForm::kImplicit: per point [x; u; q̈; λ] and the rows r = 0, c = 0
   const Model& model;
   int n, nx, m, nc, N, P;
   int ncH;                 // holonomic rows (h rows and γ slack); all nc rows get A q̇ rows and μ
@@ -53,6 +54,7 @@ struct Transcription::Impl {
   int slackStart;     // first slack variable
   int horizonIdx;     // −1 when fixed
   int numVars, numCons, defectRows;
+  int dynStart = 0, dynRows = 0;  // implicit: rows [r; c] (n + nc) per point from dynStart on
   std::vector<int> forceRows;  // constraint rows r with a finite bound on λ_r (nF of them)
   int nF = 0, forceStart = 0;  // nF rows per point, from row forceStart on (point by point)
   // Every force row j at a point is c_jᵀλ: unit rows for forceRows, then the problem's
@@ -78,6 +80,12 @@ struct Transcription::Impl {
   std::vector<Eigen::MatrixXd> hessian;
   Eigen::MatrixXd slackTop, slackBottom;    // n×n: Σ γ_r ∇²h_r, Σ μ_r ∇²h_r (scratch)
   Eigen::VectorXd q, dq, u, qp, dqp;
+  // Implicit form: the point's q̈ and λ, the core's residuals and derivatives, per point the
+  // residuals R (n + nc)×P and their Jacobian DR (n + nc)×stride.
+  Eigen::VectorXd acc, lam;
+  ImplicitDynamics idyn;
+  Eigen::MatrixXd R;
+  std::vector<Eigen::MatrixXd> DR;
   NumDiffWorkspace numdiff;
   Eigen::MatrixXd fdJ;  // n×(2n + m)
   std::string error;
@@ -100,6 +108,7 @@ struct Transcription::Impl {
   Impl(OptimalControlProblem p, DerivativeMode mode)
       : problem((p.validate(), std::move(p))),
         derivatives(mode),
+        implicit(problem.dynamics == DynamicsForm::kImplicit),
         model(*problem.model),
         n(model.nq()),
         nx(2 * n),
@@ -109,7 +118,7 @@ struct Transcription::Impl {
         P(problem.method == CollocationMethod::kHermiteSimpson ? 2 * problem.knots - 1 : problem.knots),
         hermiteSimpson(problem.method == CollocationMethod::kHermiteSimpson),
         freeT(problem.freeHorizon()),
-        stride(2 * model.nq() + model.nu()),
+        stride(2 * model.nq() + model.nu() + (implicit ? model.nq() + model.nc() : 0)),
         data(model),
         constraintData(model),
         numdiff(model),
@@ -153,6 +162,18 @@ struct Transcription::Impl {
     forceValues = Eigen::VectorXd::Zero(nF);
     forceStart = defectRows + N * (ncH + nc);
     numCons = forceStart + P * nF;
+    if (implicit) {
+      if (derivatives == DerivativeMode::kFiniteDifference)
+        throw ProblemError("dynamics: the implicit form has exact derivatives only (no finite-difference mode)");
+      dynStart = numCons;
+      dynRows = n + nc;
+      numCons += P * dynRows;
+      acc = Eigen::VectorXd::Zero(n);
+      lam = Eigen::VectorXd::Zero(nc);
+      idyn = ImplicitDynamics(model);
+      R = Eigen::MatrixXd::Zero(dynRows, P);
+      DR.assign(P, Eigen::MatrixXd::Zero(dynRows, stride));
+    }
 
     cachedZ = Eigen::VectorXd::Constant(numVars, std::numeric_limits<double>::quiet_NaN());
     F = Eigen::MatrixXd::Zero(nx, P);
@@ -204,6 +225,7 @@ struct Transcription::Impl {
   Eigen::VectorXd initialGuessVector() const {
     Eigen::VectorXd z = Eigen::VectorXd::Zero(numVars);
     const double T = problem.horizon;
+    Data guessData(model);  // implicit form: q̈, λ of the guess from the forward dynamics
     for (int p = 0; p < P; ++p) {
       const double s = pointFraction(p);
       Eigen::VectorXd x(nx), uu(m);
@@ -233,6 +255,14 @@ struct Transcription::Impl {
       uu = uu.cwiseMax(problem.inputLower).cwiseMin(problem.inputUpper);
       z.segment(p * stride, nx) = x;
       z.segment(p * stride + nx, m) = uu;
+      if (implicit) {
+        // Where the forward dynamics fail at the guess, q̈ = 0 and λ = 0 (Ipopt starts there).
+        const DynamicsStatus st = computeDynamics(model, guessData, x.head(n), x.tail(n), uu);
+        if (st.ok() && guessData.qdd.allFinite() && guessData.lambda.allFinite()) {
+          z.segment(p * stride + nx + m, n) = guessData.qdd;
+          z.segment(p * stride + nx + m + n, nc) = guessData.lambda;
+        }
+      }
     }
     // Fixed boundary entries exactly at their values.
     const int last = knotPoint(N - 1) * stride;
@@ -352,6 +382,10 @@ struct Transcription::Impl {
       u = Eigen::Map<const Eigen::VectorXd>(x + nx, m);
       const bool isKnot = !hermiteSimpson || p % 2 == 0;
       const int k = hermiteSimpson ? p / 2 : p;
+      if (implicit) {
+        if (!evaluateImplicit(x, p, k, isKnot, linearize, T)) return false;
+        continue;
+      }
       if (linearize && (derivatives == DerivativeMode::kExact || (isKnot && nc > 0) || nF > 0)) {
         ++linearizationCount;
         if (!statusOk(computeLinearization(model, data, q, dq, u), p, T)) return false;
@@ -383,6 +417,43 @@ struct Transcription::Impl {
     }
     haveDynamics = true;
     haveLinearization = haveLinearization || linearize;
+    return true;
+  }
+
+  /// The implicit form at point p: r, c (and their Jacobian over the point's variables) at the
+  /// point's own q̈ and λ; f = [q̇; q̈] and λ are read from z.
+  bool evaluateImplicit(const double* x, int p, int k, bool isKnot, bool linearize, double T) {
+    acc = Eigen::Map<const Eigen::VectorXd>(x + nx + m, n);
+    lam = Eigen::Map<const Eigen::VectorXd>(x + nx + m + n, nc);
+    ++linearizationCount;
+    const DynamicsStatus status = computeImplicitDynamics(model, data, q, dq, acc, u, lam, idyn);
+    if (!status.ok()) {
+      error = "the implicit dynamics failed at " + describePoint(p, T) + ": " + status.message;
+      return false;
+    }
+    F.col(p).head(n) = dq;
+    F.col(p).tail(n) = acc;
+    if (nc > 0) Lam.col(p) = lam;
+    R.col(p).head(n) = idyn.r;
+    R.col(p).tail(nc) = idyn.c;
+    if (linearize) {
+      // Columns [x (2n) | u (m) | q̈ (n) | λ (nc)]: ∂r = [∂r/∂x, −B_u, M, −Aᵀ], ∂c = [∂c/∂x, 0, A, 0].
+      Eigen::MatrixXd& D = DR[p];
+      D.topLeftCorner(n, nx) = idyn.dr_dx;
+      D.block(0, nx, n, m) = -data.inputMatrix;
+      D.block(0, nx + m, n, n) = data.M;
+      if (nc > 0) {
+        D.block(0, nx + m + n, n, nc) = -data.constraintJacobian.transpose();
+        D.bottomLeftCorner(nc, nx) = idyn.dc_dx;
+        D.block(n, nx + m, nc, n) = data.constraintJacobian;
+      }
+    }
+    if (isKnot && nc > 0) {
+      hValue.col(k) = data.constraintValue;
+      Ac[k] = data.constraintJacobian;
+      Avq[k] = data.constraintVelocityJacobian;
+      if (linearize && !constraintHessians(k, T)) return false;
+    }
     return true;
   }
 
@@ -470,6 +541,7 @@ struct Transcription::Impl {
       forceValues.noalias() = CF * Lam.col(p);
       for (int j = 0; j < nF; ++j) g[forceStart + p * nF + j] = forceValues(j);
     }
+    for (int p = 0; p < P && implicit; ++p) Eigen::Map<Eigen::VectorXd>(g + dynStart + p * dynRows, dynRows) = R.col(p);
   }
 
   // ---- Constraint Jacobian ---------------------------------------------------------------------
@@ -506,6 +578,33 @@ struct Transcription::Impl {
       for (int j = 0; j < m; ++j) w.put(row0 + i, col0 + j, c * B(i, j));
   }
 
+  /// A defect's block on point p: d·I on x_p and c·∂f_p/∂[x_p; u_p] (plus top/bottom as in
+  /// stateBlock). Explicit: stateBlock and inputBlock. Implicit: f_p = [q̇_p; q̈_p] is linear in the
+  /// point's variables, so c sits on q̇_p (q rows) and on q̈_p (q̇ rows).
+  void pointBlock(TripletWriter& w, int row0, int p, double d, double c, const Eigen::MatrixXd* top,
+                  const Eigen::MatrixXd* bottom) const {
+    const int col0 = p * stride;
+    if (!implicit) {
+      stateBlock(w, row0, col0, d, c, Ap[p], top, bottom);
+      if (c != 0.0) inputBlock(w, row0, col0 + nx, c, Bp[p]);
+      return;
+    }
+    for (int i = 0; i < n; ++i) {
+      if (top) {
+        for (int j = 0; j < n; ++j) w.put(row0 + i, col0 + j, (i == j ? d : 0.0) + (*top)(i, j));
+      } else if (d != 0.0) {
+        w.put(row0 + i, col0 + i, d);
+      }
+      if (c != 0.0) w.put(row0 + i, col0 + n + i, c);
+    }
+    for (int i = 0; i < n; ++i) {
+      if (bottom)
+        for (int j = 0; j < n; ++j) w.put(row0 + n + i, col0 + j, (*bottom)(i, j));
+      if (d != 0.0) w.put(row0 + n + i, col0 + n + i, d);
+      if (c != 0.0) w.put(row0 + n + i, col0 + nx + m + i, c);
+    }
+  }
+
   template <typename Vector>
   void horizonColumn(TripletWriter& w, int row0, const Vector& v) const {
     if (!freeT) return;
@@ -535,14 +634,9 @@ struct Transcription::Impl {
         bottom = &slackBottom;
       }
       const double ws = hermiteSimpson ? h / 6.0 : h / 2.0;  // weight of f_a and f_b
-      stateBlock(w, row0, a * stride, -1.0, -ws, Ap[a], nullptr, nullptr);
-      inputBlock(w, row0, a * stride + nx, -ws, Bp[a]);
-      if (hermiteSimpson) {
-        stateBlock(w, row0, (a + 1) * stride, 0.0, -4.0 * ws, Ap[a + 1], nullptr, nullptr);
-        inputBlock(w, row0, (a + 1) * stride + nx, -4.0 * ws, Bp[a + 1]);
-      }
-      stateBlock(w, row0, b * stride, 1.0, -ws, Ap[b], top, bottom);
-      inputBlock(w, row0, b * stride + nx, -ws, Bp[b]);
+      pointBlock(w, row0, a, -1.0, -ws, nullptr, nullptr);
+      if (hermiteSimpson) pointBlock(w, row0, a + 1, 0.0, -4.0 * ws, nullptr, nullptr);
+      pointBlock(w, row0, b, 1.0, -ws, top, bottom);
       if (hermiteSimpson) {
         horizonColumn(w, row0, -dhdT / 6.0 * (F.col(a) + 4.0 * F.col(a + 1) + F.col(b)));
       } else {
@@ -557,11 +651,9 @@ struct Transcription::Impl {
       }
       if (hermiteSimpson) {
         const int row1 = row0 + nx;
-        stateBlock(w, row1, a * stride, -0.5, -h / 8.0, Ap[a], nullptr, nullptr);
-        inputBlock(w, row1, a * stride + nx, -h / 8.0, Bp[a]);
-        stateBlock(w, row1, (a + 1) * stride, 1.0, 0.0, Ap[a + 1], nullptr, nullptr);
-        stateBlock(w, row1, b * stride, -0.5, h / 8.0, Ap[b], nullptr, nullptr);
-        inputBlock(w, row1, b * stride + nx, h / 8.0, Bp[b]);
+        pointBlock(w, row1, a, -0.5, -h / 8.0, nullptr, nullptr);
+        pointBlock(w, row1, a + 1, 1.0, 0.0, nullptr, nullptr);
+        pointBlock(w, row1, b, -0.5, h / 8.0, nullptr, nullptr);
         horizonColumn(w, row1, -dhdT / 8.0 * (F.col(a) - F.col(b)));
         const int row2 = row1 + nx;  // u_m − (u_a + u_b)/2
         for (int j = 0; j < m; ++j) {
@@ -583,9 +675,26 @@ struct Transcription::Impl {
     }
     // c_jᵀλ at point p: c_jᵀ ∂λ/∂[x_p; u_p] (the core's dlambda_dx).
     for (int p = 0; p < P && nF > 0; ++p) {
+      if (implicit) {  // c_jᵀλ_p: linear in the point's λ (CF is constant, so are its zeros)
+        for (int j = 0; j < nF; ++j)
+          for (int r = 0; r < nc; ++r)
+            if (CF(j, r) != 0.0) w.put(forceStart + p * nF + j, p * stride + nx + m + n + r, CF(j, r));
+        continue;
+      }
       if (!w.structure) CDL.noalias() = CF * DL[p];
       for (int j = 0; j < nF; ++j)
         for (int c = 0; c < stride; ++c) w.put(forceStart + p * nF + j, p * stride + c, CDL(j, c));
+    }
+    // Implicit rows [r; c] at point p over its variables (c has no u or λ columns).
+    for (int p = 0; p < P && implicit; ++p) {
+      const int row0 = dynStart + p * dynRows;
+      for (int i = 0; i < dynRows; ++i) {
+        const int cols = i < n ? stride : nx + m + n;
+        for (int c = 0; c < cols; ++c) {
+          if (i >= n && c >= nx && c < nx + m) continue;
+          w.put(row0 + i, p * stride + c, DR[p](i, c));
+        }
+      }
     }
   }
 
@@ -608,6 +717,12 @@ struct Transcription::Impl {
   //    Σ ν'_r S_r(i, a), with T_r[v](a, b) = Σ_i v_i ∂³h_r/∂q_i∂q_a∂q_b (addThirdDerivative).
 
   void setUpHessian() {
+    if (implicit) {
+      hessianOk = false;
+      hessianWhy = "the implicit dynamics form has exact first derivatives only; its Lagrangian Hessian "
+                   "(second derivatives of M q̈ + b − Aᵀλ) is not built";
+      return;
+    }
     if (nonholonomic) {
       hessianOk = false;
       hessianWhy = "the exact Hessian needs ∂²(A(q) v)/∂q² of every constraint row, which the core "

@@ -27,6 +27,12 @@ void bindOptimization(py::module_& m) {
   py::enum_<DerivativeMode>(m, "DerivativeMode")
       .value("EXACT", DerivativeMode::kExact)
       .value("FINITE_DIFFERENCE", DerivativeMode::kFiniteDifference);
+  py::enum_<DynamicsForm>(m, "DynamicsForm",
+                          "How the transcription imposes the dynamics: EXPLICIT (f(x, u) from the "
+                          "forward dynamics) or IMPLICIT (q'' and lambda as variables, the equations of "
+                          "motion M q'' + b - A^T lambda = 0 and A q'' + Adot q' = 0 as rows; L-BFGS Hessian).")
+      .value("EXPLICIT", DynamicsForm::kExplicit)
+      .value("IMPLICIT", DynamicsForm::kImplicit);
   py::enum_<HessianMode>(m, "HessianMode",
                          "The Lagrangian Hessian Ipopt uses: EXACT (the transcription's exact second "
                          "derivatives) or LBFGS (limited-memory quasi-Newton).")
@@ -55,6 +61,7 @@ void bindOptimization(py::module_& m) {
       .def_property_readonly("model",
                              [](const Problem& p) { return std::const_pointer_cast<Model>(p.model); })
       .def_readwrite("method", &Problem::method)
+      .def_readwrite("dynamics", &Problem::dynamics, "DynamicsForm (file key \"dynamics\")")
       .def_readwrite("knots", &Problem::knots, "N >= 2 knots t_k = k T / (N - 1)")
       .def_readwrite("horizon", &Problem::horizon, "T (the initial guess when free)")
       .def_readwrite("min_horizon", &Problem::minHorizon)

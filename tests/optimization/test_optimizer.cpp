@@ -193,6 +193,30 @@ TEST_CASE("optimizer: the closed chain keeps h = 0 and A q' = 0 at the knots", "
   CHECK(maxLocalError(*p.model, r, true) < 1e-3);
 }
 
+TEST_CASE("optimizer: the implicit dynamics form reaches the explicit form's optimum", "[optimizer][implicit]") {
+  // The two forms are the same NLP in (x, u) once q̈ and λ are eliminated: the same local optimum
+  // from the same guess (the implicit form runs L-BFGS, the explicit one the exact Hessian, so
+  // the iterates differ but not the point they converge to). The knots must also pass the
+  // independent checks: the forward dynamics between knots (local error) and, on the closed
+  // chain, h = 0 at the knots.
+  for (const char* name : {"cart_pole_swingup", "paper_pendulum_transfer"}) {
+    DYNAMIC_SECTION(name) {
+      OptimalControlProblem p = trellis::loadProblem(problemPath(name));
+      const OptimizationResult explicitForm = trellis::optimizeTrajectory(p, singleSolve());
+      checkSolved(p, explicitForm);
+      p.dynamics = trellis::DynamicsForm::kImplicit;
+      const OptimizationResult implicitForm = trellis::optimizeTrajectory(p, singleSolve());
+      checkSolved(p, implicitForm);
+      CHECK(implicitForm.hessian == trellis::HessianMode::kLimitedMemory);
+      CHECK(implicitForm.cost == Approx(explicitForm.cost).epsilon(1e-5));
+      const double dx = (implicitForm.trajectory.states() - explicitForm.trajectory.states()).cwiseAbs().maxCoeff();
+      INFO("max |x_implicit − x_explicit| at the knots " << dx);
+      CHECK(dx < 1e-3);
+      CHECK(maxLocalError(*p.model, implicitForm, true) < 2.0 * maxLocalError(*p.model, explicitForm, true) + 1e-6);
+    }
+  }
+}
+
 TEST_CASE("optimizer: minimum time of a double integrator matches bang-bang", "[optimizer][closed_form]") {
   // m ẍ = u, |u| ≤ u_max, rest to rest over distance d: T* = 2 √(m d / u_max) (accelerate half
   // way, brake half way). Minimize T (time weight 1, a tiny input weight for regularity).

@@ -221,6 +221,24 @@ TEST_CASE("swingups: the problem file's hessian key", "[optimizer][file][hessian
   CHECK(trellis::optimizeTrajectory(lbfgs, options).hessian == HessianMode::kExact);
 }
 
+TEST_CASE("swingups: the problem file's dynamics key", "[optimizer][file][implicit]") {
+  std::ifstream in(problemPath("cart_pole_swingup"));
+  std::stringstream text;
+  text << in.rdbuf();
+  const std::string base = std::string(TRELLIS_SOURCE_DIR) + "/examples/problems";
+  auto with = [&](const std::string& value) {
+    std::string s = text.str();
+    s.insert(s.find("\"knots\""), "\"dynamics\": " + value + ", ");
+    return s;
+  };
+  CHECK(trellis::parseProblem(text.str(), "p.json", base).dynamics == trellis::DynamicsForm::kExplicit);
+  CHECK(trellis::parseProblem(with("\"implicit\""), "p.json", base).dynamics == trellis::DynamicsForm::kImplicit);
+  CHECK(trellis::parseProblem(with("\"explicit\""), "p.json", base).dynamics == trellis::DynamicsForm::kExplicit);
+  CHECK_THROWS_WITH(trellis::parseProblem(with("\"inverse\""), "p.json", base),
+                    "p.json: dynamics 'inverse' is not one of explicit, implicit");
+  CHECK_THROWS_WITH(trellis::parseProblem(with("1"), "p.json", base), Catch::Contains("dynamics"));
+}
+
 TEST_CASE("swingups: a bound on the constraint force is active and held at every collocation point",
           "[optimizer][force_bounds][hessian]") {
   // The paper's closed chain (a distance constraint, one λ): solve free, then bound |λ| to 80 %

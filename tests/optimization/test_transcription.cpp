@@ -203,6 +203,54 @@ TEST_CASE("transcription: knife edge and non-uniform mesh derivatives agree with
   }
 }
 
+TEST_CASE("transcription: the implicit dynamics form's derivatives agree with central differences",
+          "[transcription][derivatives][implicit]") {
+  // q̈ and λ as variables, the rows M q̈ + b − Aᵀλ = 0 and A q̈ + Ȧ q̇ = 0 at every point: every
+  // example problem (the paper's pendulum has a closed chain), both rules, fixed and free T, with
+  // bounds on the constraint forces where there are constraints (linear rows in λ).
+  std::mt19937 rng(777);
+  for (const char* name : {"cart_pole_swingup", "acrobot_swingup", "paper_pendulum_transfer"}) {
+    const OptimalControlProblem file = trellis::loadProblem(problemPath(name));
+    for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
+      for (const bool freeHorizon : {false, true}) {
+        OptimalControlProblem p = smaller(file, 4);
+        p.dynamics = trellis::DynamicsForm::kImplicit;
+        p.method = method;
+        if (freeHorizon) {
+          p.minHorizon = 0.5 * p.horizon;
+          p.maxHorizon = 2.0 * p.horizon;
+          p.timeWeight = 0.3;
+        }
+        p.Q = MatrixXd::Identity(p.nx(), p.nx()) * 0.7;
+        p.goalState = VectorXd::LinSpaced(p.nx(), 0.1, 0.9);
+        const int nc = p.model->nc();
+        if (nc > 0) {
+          p.forceLower(0) = -5.0;
+          OptimalControlProblem::ForceCombination c;
+          c.name = "sum";
+          c.coefficients = VectorXd::Ones(nc);
+          c.upper = 4.0;
+          p.forceCombinations.push_back(c);
+        }
+        DYNAMIC_SECTION(name << (method == CollocationMethod::kHermiteSimpson ? " hermite_simpson" : " trapezoidal")
+                             << (freeHorizon ? " free T" : " fixed T")) {
+          Transcription t(p);
+          const int n = p.nq(), P = t.numPoints();
+          // Per point 2n + m + n + nc variables and n + nc implicit rows.
+          CHECK(t.stateIndex(1) - t.stateIndex(0) == 3 * n + p.nu() + nc);
+          CHECK_FALSE(t.hessianAvailable());
+          checkDerivatives(t, randomPoint(t, rng));
+          // At the guess the implicit rows vanish (q̈, λ from the forward dynamics there).
+          const VectorXd z = t.initialGuess();
+          VectorXd g(t.numConstraints());
+          REQUIRE(t.evalConstraints(z.data(), g.data()));
+          CHECK(g.tail(P * (n + nc)).cwiseAbs().maxCoeff() < 1e-9);
+        }
+      }
+    }
+  }
+}
+
 TEST_CASE("transcription: finite-difference mode matches the exact Jacobian to FD accuracy",
           "[transcription][derivatives]") {
   const OptimalControlProblem p = smaller(trellis::loadProblem(problemPath("acrobot_swingup")), 4);

@@ -43,6 +43,25 @@ enum class CollocationMethod {
   kTrapezoidal,     ///< trapezoidal rule (O(h²)), the cheap option
 };
 
+/// How the transcription imposes the dynamics at each collocation point (transcription.hpp).
+enum class DynamicsForm {
+  /// f(x, u) = [q̇; q̈(q, q̇, u)] from the core's constrained forward dynamics (λ eliminated).
+  kExplicit,
+  /// q̈ and λ are variables at every point and the equations of motion are rows,
+  /// M(q) q̈ + b(q, q̇, u) − A(q)ᵀλ = 0 and A(q) q̈ + Ȧ q̇ = 0 (computeImplicitDynamics): rows in
+  /// force units, linear in (q̈, u, λ), where the explicit form divides by light inertias
+  /// (|∂q̈/∂q| ~ 10⁵ on the hand) and eliminates λ; force bounds are then linear in the variables.
+  /// Exact first derivatives; the Lagrangian Hessian is L-BFGS (the exact one is not built).
+  kImplicit,
+};
+
+/// Names: explicit, implicit.
+inline EnumNameTable<DynamicsForm> enumNames(DynamicsForm) {
+  static constexpr EnumName<DynamicsForm> table[] = {{DynamicsForm::kExplicit, "explicit"},
+                                                     {DynamicsForm::kImplicit, "implicit"}};
+  return table;
+}
+
 /// The Hessian of the Lagrangian Ipopt works with (problem file "hessian", OptimizerOptions,
 /// CLI --hessian).
 enum class HessianMode {
@@ -65,6 +84,7 @@ struct OptimalControlProblem {
   std::shared_ptr<const Model> model;
 
   CollocationMethod method = CollocationMethod::kHermiteSimpson;  ///< the collocation rule
+  DynamicsForm dynamics = DynamicsForm::kExplicit;  ///< dynamics as f(x, u) or as implicit rows
   int knots = 41;  ///< N ≥ 2 knots t_k = T·τ_k
   /// The mesh τ_0 = 0 < τ_1 < … < τ_{N−1} = 1 (N entries, knot k at t_k = T·τ_k); empty for the
   /// uniform mesh τ_k = k/(N − 1). Mesh refinement (optimizer.hpp) produces non-uniform ones.

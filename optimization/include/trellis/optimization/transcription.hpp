@@ -48,6 +48,12 @@
 // constraints r, with Jacobian ∂λ/∂[x; u] (the core's dlambda_dx): inequalities, whose bounds
 // constraintBounds() gives (every other row is an equality g = 0).
 //
+// Implicit dynamics form (problem.dynamics = kImplicit): each point's block is [x_p; u_p; q̈_p; λ_p]
+// (stride 3n + m + nc), f_p = [q̇_p; q̈_p] is read from z (the defects are linear in the point
+// variables), the force rows are C λ_p (linear), and after the force rows come, point by point,
+// the rows [r; c] = [M q̈ + b − Aᵀλ; A q̈ + Ȧ q̇] (n + nc, equalities; computeImplicitDynamics).
+// The guess's q̈, λ are the forward dynamics at the guess. No exact Hessian (hessianAvailable()).
+//
 // Evaluations are cached: f (and A, B for derivatives) are computed once per distinct z, whatever
 // the order of the calls: z is compared with the cached copy (a memcmp), which covers Ipopt's
 // new_x flag and also callers that do not pass one (the tests' checker).
