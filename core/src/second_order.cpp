@@ -376,11 +376,14 @@ struct SecondOrderImpl {
   int lastStride = 0;                  ///< lanes of the last block swept (its layout of xdot)
   Eigen::VectorXd laneRows;            ///< N rows × kTapeLanesMax lanes: one block's rows of ∇²φ
   Eigen::MatrixXd rows;                ///< N×2n: ∇²φ e_a for the q and q̇ directions a
+  // computeImplicitSecondOrder: two first-order residual evaluations and their inputs.
+  ImplicitDynamics implicitA, implicitB;
+  Eigen::VectorXd zeroN, zeroC, negEta;
   /// The contraction's tree pass (second_order_tree.hpp) where it covers the model, chosen here
   /// once; null: the contraction runs the recording.
   std::unique_ptr<TreeSecondOrder> tree;
 
-  SecondOrderImpl(const Model& model)
+  SecondOrderImpl(const Model& model, bool forceRecording)
       : n(model.nq()),
         m(model.nu()),
         nc(model.nc()),
@@ -413,7 +416,12 @@ struct SecondOrderImpl {
     muC = Eigen::VectorXd::Zero(nc);
     tmpC = Eigen::VectorXd::Zero(nc);
     rows = Eigen::MatrixXd::Zero(N, 2 * n);
-    if (treeSecondOrderApplies(model) && !secondOrderTapeForced()) {
+    implicitA = ImplicitDynamics(model);
+    implicitB = ImplicitDynamics(model);
+    zeroN = Eigen::VectorXd::Zero(n);
+    zeroC = Eigen::VectorXd::Zero(nc);
+    negEta = Eigen::VectorXd::Zero(nc);
+    if (treeSecondOrderApplies(model) && !secondOrderTapeForced() && !forceRecording) {
       tree = std::make_unique<TreeSecondOrder>(model);
       return;
     }
@@ -505,9 +513,9 @@ bool usable(const DynamicsStatus& s) {
 
 }  // namespace
 
-SecondOrderWorkspace::SecondOrderWorkspace(const Model& model, bool withTensors)
+SecondOrderWorkspace::SecondOrderWorkspace(const Model& model, bool withTensors, bool recording)
     : n_(model.nq()), m_(model.nu()), nc_(model.nc()), withTensors_(withTensors),
-      impl_(std::make_unique<detail::SecondOrderImpl>(model)) {
+      impl_(std::make_unique<detail::SecondOrderImpl>(model, recording)) {
   const int N = 2 * n_ + m_;
   if (withTensors) {
     qddHessian.assign(n_, Eigen::MatrixXd::Zero(N, N));
@@ -648,6 +656,86 @@ DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, Sec
   H.bottomLeftCorner(N - 2 * n, 2 * n) = -s.rows.bottomRows(N - 2 * n);
   H.topRightCorner(2 * n, N - 2 * n) = -s.rows.bottomRows(N - 2 * n).transpose();
   H.bottomRightCorner(N - 2 * n, N - 2 * n).setZero();
+  return status;
+}
+
+DynamicsStatus computeImplicitSecondOrder(const Model& model, Data& data, SecondOrderWorkspace& ws,
+                                          const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
+                                          const Eigen::VectorXd& qdd, const Eigen::VectorXd& u,
+                                          const Eigen::VectorXd& lambda, const Eigen::VectorXd& nu,
+                                          const Eigen::VectorXd& eta, Eigen::Ref<Eigen::MatrixXd> Hzz,
+                                          Eigen::Ref<Eigen::MatrixXd> Hyz) {
+  checkWorkspace(model, ws, "computeImplicitSecondOrder");
+  detail::SecondOrderImpl& s = *ws.impl_;
+  const int n = s.n, m = s.m, nc = s.nc, N = s.N;
+  if (s.tree)
+    throw std::invalid_argument("computeImplicitSecondOrder: the workspace runs the tree pass; build it with "
+                                "SecondOrderWorkspace(model, withTensors, /*recording=*/true)");
+  const auto size = [](const char* what, Eigen::Index got, int expected) {
+    if (got != expected)
+      throw std::invalid_argument(std::string("computeImplicitSecondOrder: ") + what + ": expected " +
+                                  std::to_string(expected) + " entries, got " + std::to_string(got));
+  };
+  size("nu", nu.size(), n);
+  size("eta", eta.size(), nc);
+  if (Hzz.rows() != N || Hzz.cols() != N || Hyz.rows() != n + nc || Hyz.cols() != 2 * n)
+    throw std::invalid_argument("computeImplicitSecondOrder: Hzz must be " + std::to_string(N) + "×" + std::to_string(N) +
+                                " and Hyz " + std::to_string(n + nc) + "×" + std::to_string(2 * n));
+  // (The first-order call checks q, q̇, q̈, u, λ and their finiteness.) Hyz from r, c being affine
+  // in (q̈, λ): ∂φ/∂q̈ = M ν + Aᵀη, ∂φ/∂λ = −A ν, so with q̇ = 0 (no velocity terms),
+  //   ∂(M ν + Aᵀη)/∂q = ∂r/∂q (q̈ = ν, λ = −η) − ∂r/∂q (q̈ = 0, λ = 0),   ∂(A ν)/∂q = ∂c/∂q (q̈ = ν),
+  // and neither depends on q̇ or u (b's u-part cancels in the difference).
+  s.negEta = -eta;
+  DynamicsStatus status = computeImplicitDynamics(model, data, q, s.zeroN, nu, u, s.negEta, s.implicitA);
+  if (!status.ok()) return status;
+  status = computeImplicitDynamics(model, data, q, s.zeroN, s.zeroN, u, s.zeroC, s.implicitB);
+  if (!status.ok()) return status;
+  Hyz.setZero();
+  Hyz.topLeftCorner(n, n) = s.implicitA.dr_dx.leftCols(n) - s.implicitB.dr_dx.leftCols(n);
+  if (nc > 0) Hyz.bottomLeftCorner(nc, n) = -s.implicitA.dc_dx.leftCols(n);
+  size("dq", dq.size(), n);
+  size("qdd", qdd.size(), n);
+  size("lambda", lambda.size(), nc);
+  if (!dq.allFinite() || !qdd.allFinite() || !lambda.allFinite()) {
+    data.status.code = DynamicsStatus::Code::kNonFinite;
+    data.status.message = "computeImplicitSecondOrder: non-finite dq, qdd or lambda";
+    return data.status;
+  }
+  // Hzz: φ(z) = νᵀ r(z, y) + ηᵀ c(z, y) at the fixed y = [q̈; λ], by forward-over-reverse on the
+  // recorded residual pass (as computeSecondOrderContraction with Y = 0 and μ = [ν; η]).
+  s.z.head(n) = q;
+  s.z.segment(n, n) = dq;
+  s.z.tail(m) = u;
+  s.y.head(n) = qdd;
+  s.y.tail(nc) = lambda;
+  s.Y.setZero();
+  s.record(model);
+  if (s.tape.size != s.recordedNodes)
+    throw std::logic_error("computeImplicitSecondOrder: internal error: the recording has " + std::to_string(s.tape.size) +
+                           " nodes at this state, " + std::to_string(s.recordedNodes) + " when the workspace was sized");
+  const int inputs = s.inputs, tapeSize = s.tape.size;
+  s.xbar.head(tapeSize).setZero();
+  for (int i = 0; i < n; ++i) s.xbar[s.recorded.r[i].idx] += nu[i];
+  for (int k = 0; k < nc; ++k) s.xbar[s.recorded.c[k].idx] += eta[k];
+  s.xbar[0] = 0.0;
+  detail::reverseSweep(s.tape, s.xbar.data());
+  double* xdot = s.xdot.data();
+  double* xdotbar = s.xdotbar.data();
+  for (int a0 = 0, L = 0; a0 < 2 * n; a0 += L) {
+    const int lanes = std::min(detail::kTapeLanesMax, 2 * n - a0);
+    L = lanes <= 4 ? 4 : (lanes <= 8 ? 8 : 16);
+    if (s.lastStride != L) std::fill(xdot, xdot + static_cast<size_t>(inputs + 1) * L, 0.0);
+    s.lastStride = L;
+    for (int l = 0; l < lanes; ++l) xdot[static_cast<size_t>(1 + a0 + l) * L + l] = 1.0;
+    detail::sweepBlock(L, {&s.tape, inputs, N, n + nc, s.xbar.data(), s.Y.data(), xdot, xdotbar, s.laneRows.data()});
+    for (int l = 0; l < lanes; ++l)
+      for (int b = 0; b < N; ++b) s.rows(b, a0 + l) = s.laneRows[static_cast<Eigen::Index>(b) * L + l];
+    for (int l = 0; l < lanes; ++l) xdot[static_cast<size_t>(1 + a0 + l) * L + l] = 0.0;
+  }
+  Hzz.topLeftCorner(2 * n, 2 * n) = 0.5 * (s.rows.topRows(2 * n) + s.rows.topRows(2 * n).transpose());
+  Hzz.bottomLeftCorner(m, 2 * n) = s.rows.bottomRows(m);
+  Hzz.topRightCorner(2 * n, m) = s.rows.bottomRows(m).transpose();
+  Hzz.bottomRightCorner(m, m).setZero();
   return status;
 }
 

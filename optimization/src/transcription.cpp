@@ -7,6 +7,8 @@
 #include "trellis/core/numdiff.hpp"
 #include "trellis/core/second_order.hpp"
 
+#include <Eigen/QR>
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -99,11 +101,14 @@ struct Transcription::Impl {
   SecondOrderWorkspace secondOrder;
   std::vector<Eigen::MatrixXd> Hp;          // P blocks stride×stride: ∇² w.r.t. [x_p; u_p]
   Eigen::MatrixXd C;                        // nx×P: Σ_d (coefficient of f_p in defect d) μ_d
-  Eigen::MatrixXd Hz;                       // stride×stride: one contraction
+  Eigen::MatrixXd Hz;                       // (2n + m)×(2n + m): one contraction
   Eigen::MatrixXd slackCross;               // (ncH + nc)×n per interval, stacked: ∂²L/∂s∂q_b
   Eigen::VectorXd horizonRow;               // P·stride: ∂²L/∂T∂z_p
   Eigen::VectorXd hq, hdq, hu, hw, hwScaled, stateError, noRho, rhoScratch, rhoPoint;
   Eigen::MatrixXd sumS, third, scratchNN;   // n×n
+  // Implicit form: per point ∇²_z (νᵀr + ηᵀc) (N×N) and ∂²/∂y∂[q; q̇] ((n + nc)×2n), their weights.
+  Eigen::MatrixXd HzzI, HyzI;
+  Eigen::VectorXd nuP, etaP;
 
   Impl(OptimalControlProblem p, DerivativeMode mode)
       : problem((p.validate(), std::move(p))),
@@ -123,7 +128,7 @@ struct Transcription::Impl {
         constraintData(model),
         numdiff(model),
         hessData(model),
-        secondOrder(model, false) {
+        secondOrder(model, false, problem.dynamics == DynamicsForm::kImplicit) {
     for (int r = 0; r < nc; ++r) {
       if (model.constraints()[r].holonomic()) {
         holonomicRows.push_back(r);
@@ -255,14 +260,6 @@ struct Transcription::Impl {
       uu = uu.cwiseMax(problem.inputLower).cwiseMin(problem.inputUpper);
       z.segment(p * stride, nx) = x;
       z.segment(p * stride + nx, m) = uu;
-      if (implicit) {
-        // Where the forward dynamics fail at the guess, q̈ = 0 and λ = 0 (Ipopt starts there).
-        const DynamicsStatus st = computeDynamics(model, guessData, x.head(n), x.tail(n), uu);
-        if (st.ok() && guessData.qdd.allFinite() && guessData.lambda.allFinite()) {
-          z.segment(p * stride + nx + m, n) = guessData.qdd;
-          z.segment(p * stride + nx + m + n, nc) = guessData.lambda;
-        }
-      }
     }
     // Fixed boundary entries exactly at their values.
     const int last = knotPoint(N - 1) * stride;
@@ -271,6 +268,28 @@ struct Transcription::Impl {
       if (problem.finalFixed[i]) z(last + i) = problem.finalState(i);
     }
     if (freeT) z(horizonIdx) = T;
+    if (implicit) {
+      // q̈ of the guess: the slope of its velocities between the neighbouring points (so the
+      // velocity defects start near zero), and λ the least-squares balance Aᵀλ ≈ M q̈ + b at the
+      // guess's u: what the guess leaves unbalanced starts in the equations of motion, in force
+      // units, not in the defects. (The forward dynamics' q̈ of a guess that is no equilibrium is
+      // ~10⁴ rad/s² on a light phalanx: defects of that size.) Where the dynamics cannot be
+      // evaluated at the guess, λ = 0.
+      for (int p = 0; p < P; ++p) {
+        const int a = std::max(0, p - 1), b = std::min(P - 1, p + 1);
+        const double dt = T * (pointFraction(b) - pointFraction(a));
+        const Eigen::VectorXd qdd = (z.segment(b * stride + n, n) - z.segment(a * stride + n, n)) / dt;
+        z.segment(p * stride + nx + m, n) = qdd;
+        const Eigen::VectorXd x = z.segment(p * stride, nx), uu = z.segment(p * stride + nx, m);
+        const DynamicsStatus st = computeDynamics(model, guessData, x.head(n), x.tail(n), uu);
+        if (nc > 0 && st.ok()) {
+          const Eigen::VectorXd rhs = guessData.M * qdd + guessData.bias;
+          const Eigen::VectorXd lambda =
+              guessData.constraintJacobian.transpose().completeOrthogonalDecomposition().solve(rhs);
+          if (lambda.allFinite()) z.segment(p * stride + nx + m + n, nc) = lambda;
+        }
+      }
+    }
     return z;
   }
 
@@ -717,12 +736,6 @@ struct Transcription::Impl {
   //    Σ ν'_r S_r(i, a), with T_r[v](a, b) = Σ_i v_i ∂³h_r/∂q_i∂q_a∂q_b (addThirdDerivative).
 
   void setUpHessian() {
-    if (implicit) {
-      hessianOk = false;
-      hessianWhy = "the implicit dynamics form has exact first derivatives only; its Lagrangian Hessian "
-                   "(second derivatives of M q̈ + b − Aᵀλ) is not built";
-      return;
-    }
     if (nonholonomic) {
       hessianOk = false;
       hessianWhy = "the exact Hessian needs ∂²(A(q) v)/∂q² of every constraint row, which the core "
@@ -732,7 +745,7 @@ struct Transcription::Impl {
     const int blockRows = ncH + nc;
     Hp.assign(P, Eigen::MatrixXd::Zero(stride, stride));
     C = Eigen::MatrixXd::Zero(nx, P);
-    Hz = Eigen::MatrixXd::Zero(stride, stride);
+    Hz = Eigen::MatrixXd::Zero(nx + m, nx + m);
     slackCross = Eigen::MatrixXd::Zero(std::max(0, (N - 1) * blockRows), n);
     horizonRow = Eigen::VectorXd::Zero(P * stride);
     hq = Eigen::VectorXd::Zero(n);
@@ -745,6 +758,12 @@ struct Transcription::Impl {
     rhoScratch = Eigen::VectorXd::Zero(nc);
     rhoPoint = Eigen::VectorXd::Zero(nc);
     sumS = third = scratchNN = Eigen::MatrixXd::Zero(n, n);
+    if (implicit) {
+      HzzI = Eigen::MatrixXd::Zero(nx + m, nx + m);
+      HyzI = Eigen::MatrixXd::Zero(n + nc, nx);
+      nuP = Eigen::VectorXd::Zero(n);
+      etaP = Eigen::VectorXd::Zero(nc);
+    }
     // Structure, lower triangle (row ≥ column): each point's [x; u] block whole, the slack rows
     // against the end knot's q, and the T row against every point variable.
     for (int p = 0; p < P; ++p)
@@ -767,8 +786,8 @@ struct Transcription::Impl {
     }
   }
 
-  bool secondOrderOk(const DynamicsStatus& status, int p, double T) {
-    if ((status.ok() || status.code == DynamicsCode::kRedundantConstraints) && Hz.allFinite()) return true;
+  bool secondOrderOk(const DynamicsStatus& status, int p, double T, const Eigen::MatrixXd& result) {
+    if ((status.ok() || status.code == DynamicsCode::kRedundantConstraints) && result.allFinite()) return true;
     error = "the second derivatives of the dynamics failed at " + describePoint(p, T) + ": " +
             (status.message.empty() ? std::string("non-finite values") : status.message);
     return false;
@@ -794,7 +813,7 @@ struct Transcription::Impl {
     const DynamicsStatus status =
         computeSecondOrderContraction(model, hessData, secondOrder, hq, hdq, hu, hw, noRho, Hz);
     ++secondOrderCount;
-    if (!secondOrderOk(status, p, horizonOf(cachedZ.data()))) return false;
+    if (!secondOrderOk(status, p, horizonOf(cachedZ.data()), Hz)) return false;
     third.noalias() = sumS.transpose() * hessData.dqdd_ddq;
     third += Hz.block(0, n, n, n);
     scratchNN = third.transpose();
@@ -832,30 +851,53 @@ struct Transcription::Impl {
       const double wT = weightOverT(p);
       const Eigen::Map<const Eigen::VectorXd> x = state(z, p), uu = input(z, p);
       H.topLeftCorner(nx, nx) += (2.0 * sigma * wT * T) * problem.Q;
-      H.bottomRightCorner(m, m) += (2.0 * sigma * wT * T) * problem.R;
+      H.block(nx, nx, m, m) += (2.0 * sigma * wT * T) * problem.R;
       if (p == lastPoint) H.topLeftCorner(nx, nx) += (2.0 * sigma) * problem.Qf;
-      hw = C.col(p).tail(n);
-      // The force rows' multipliers weigh ∇²λ_r at this point (ρ of the contraction).
-      rhoPoint.setZero();
-      // Σ_j ρ_j c_jᵀλ = (CFᵀρ)ᵀλ: the contraction weighs ∇²λ by CFᵀρ.
-      if (nF > 0) rhoPoint.noalias() = CF.transpose() * Eigen::Map<const Eigen::VectorXd>(mult + forceStart + p * nF, nF);
-      const bool forces = nF > 0 && !rhoPoint.isZero(0.0);
-      const bool dynamics = !hw.isZero(0.0) || forces;
-      if (dynamics) {
-        hq = x.head(n);
-        hdq = x.tail(n);
-        hu = uu;
-        const DynamicsStatus status = computeSecondOrderContraction(model, hessData, secondOrder, hq, hdq, hu,
-                                                                    hw, forces ? rhoPoint : noRho, Hz);
-        ++secondOrderCount;
-        if (!secondOrderOk(status, p, T)) return false;
-        H += Hz;
+      bool dynamics = false;
+      if (implicit) {
+        // The implicit rows' multipliers (ν, η) weigh ∇²(νᵀr + ηᵀc) over [x; u; q̈; λ]; the defects
+        // and the force rows are linear in the point's variables.
+        nuP = Eigen::Map<const Eigen::VectorXd>(mult + dynStart + p * dynRows, n);
+        etaP = Eigen::Map<const Eigen::VectorXd>(mult + dynStart + p * dynRows + n, nc);
+        if (!nuP.isZero(0.0) || !etaP.isZero(0.0)) {
+          hq = x.head(n);
+          hdq = x.tail(n);
+          hu = uu;
+          acc = Eigen::Map<const Eigen::VectorXd>(z + p * stride + nx + m, n);
+          lam = Eigen::Map<const Eigen::VectorXd>(z + p * stride + nx + m + n, nc);
+          const DynamicsStatus status =
+              computeImplicitSecondOrder(model, hessData, secondOrder, hq, hdq, acc, hu, lam, nuP, etaP, HzzI, HyzI);
+          ++secondOrderCount;
+          if (!secondOrderOk(status, p, T, HzzI) || !secondOrderOk(status, p, T, HyzI)) return false;
+          H.topLeftCorner(nx + m, nx + m) += HzzI;
+          H.block(nx + m, 0, n + nc, nx) += HyzI;
+          H.block(0, nx + m, nx, n + nc) += HyzI.transpose();
+        }
+      } else {
+        hw = C.col(p).tail(n);
+        // The force rows' multipliers weigh ∇²λ_r at this point (ρ of the contraction).
+        rhoPoint.setZero();
+        // Σ_j ρ_j c_jᵀλ = (CFᵀρ)ᵀλ: the contraction weighs ∇²λ by CFᵀρ.
+        if (nF > 0) rhoPoint.noalias() = CF.transpose() * Eigen::Map<const Eigen::VectorXd>(mult + forceStart + p * nF, nF);
+        const bool forces = nF > 0 && !rhoPoint.isZero(0.0);
+        dynamics = !hw.isZero(0.0) || forces;
+        if (dynamics) {
+          hq = x.head(n);
+          hdq = x.tail(n);
+          hu = uu;
+          const DynamicsStatus status = computeSecondOrderContraction(model, hessData, secondOrder, hq, hdq, hu,
+                                                                      hw, forces ? rhoPoint : noRho, Hz);
+          ++secondOrderCount;
+          if (!secondOrderOk(status, p, T, Hz)) return false;
+          H += Hz;
+        }
       }
       if (freeT) {
         // c_pᵀ ∂f_p/∂z_p / T (f = [q̇; q̈]) and σ ∂²J/∂T∂z_p = 2σ w/T (Q e, R u).
         Eigen::Map<Eigen::VectorXd> row(horizonRow.data() + p * stride, stride);
         row.setZero();
         row.segment(n, n) = C.col(p).head(n) / T;
+        if (implicit) row.segment(nx + m, n) = C.col(p).tail(n) / T;  // f = [q̇; q̈] read from z
         if (dynamics) {
           hwScaled = hw / T;  // the products below then need no temporary
           row.segment(0, n).noalias() += hessData.dqdd_dq.transpose() * hwScaled;

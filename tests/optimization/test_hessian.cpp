@@ -144,6 +144,41 @@ TEST_CASE("hessian: the Lagrangian Hessian agrees with differences of the exact 
   }
 }
 
+TEST_CASE("hessian: the implicit dynamics form's Lagrangian Hessian agrees with differences of the exact gradient",
+          "[transcription][hessian][implicit]") {
+  // q̈ and λ as variables (computeImplicitSecondOrder per point), with force rows on the closed
+  // chain (linear in λ: no second derivatives of their own), both rules, fixed and free T.
+  std::mt19937 rng(2031);
+  for (const char* name : {"cart_pole_swingup", "acrobot_swingup", "paper_pendulum_transfer"}) {
+    const OptimalControlProblem file = trellis::loadProblem(problemPath(name));
+    for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
+      for (const bool freeHorizon : {false, true}) {
+        OptimalControlProblem p = file;
+        p.dynamics = trellis::DynamicsForm::kImplicit;
+        p.knots = 4;
+        p.mesh.resize(4);
+        p.mesh << 0.0, 0.2, 0.65, 1.0;
+        p.method = method;
+        if (freeHorizon) {
+          p.minHorizon = 0.5 * p.horizon;
+          p.maxHorizon = 2.0 * p.horizon;
+          p.timeWeight = 0.3;
+        }
+        p.Q = MatrixXd::Identity(p.nx(), p.nx()) * 0.7;
+        p.Qf = MatrixXd::Identity(p.nx(), p.nx()) * 3.0;
+        p.R = MatrixXd::Identity(p.nu(), p.nu()) * 0.4;
+        p.goalState = VectorXd::LinSpaced(p.nx(), 0.1, 0.9);
+        if (p.model->nc() > 0) p.forceUpper(0) = 50.0;
+        DYNAMIC_SECTION(name << (method == CollocationMethod::kHermiteSimpson ? " hermite_simpson" : " trapezoidal")
+                             << (freeHorizon ? " free T" : " fixed T")) {
+          Transcription t(p);
+          checkHessian(t, randomPoint(t, rng), 0.7, randomMultipliers(t, rng));
+        }
+      }
+    }
+  }
+}
+
 TEST_CASE("hessian: objective only and constraints only", "[transcription][hessian]") {
   const OptimalControlProblem p = [] {
     OptimalControlProblem q = trellis::loadProblem(problemPath("paper_pendulum_transfer"));

@@ -28,38 +28,41 @@ class MallocGuard {
 TEST_CASE("no_malloc: the Lagrangian Hessian's values allocate nothing", "[no_malloc][hessian]") {
   for (const char* name : {"acrobot_swingup", "paper_pendulum_transfer"}) {
     for (const bool freeHorizon : {false, true}) {
-      DYNAMIC_SECTION(name << (freeHorizon ? " free T" : " fixed T")) {
-        trellis::OptimalControlProblem p =
-            trellis::loadProblem(std::string(TRELLIS_SOURCE_DIR) + "/examples/problems/" + name + ".json");
-        p.knots = 5;
-        if (p.model->nc() > 0) {
-          p.forceUpper(0) = 100.0;  // the constraint-force rows (ρ) too
-          trellis::OptimalControlProblem::ForceCombination c;  // and a combination (ρ = Cᵀ·multipliers)
-          c.name = "combination";
-          c.coefficients = Eigen::VectorXd::Constant(p.model->nc(), -0.5);
-          c.upper = 1.0;
-          p.forceCombinations.push_back(c);
+      for (const bool implicitForm : {false, true}) {
+        DYNAMIC_SECTION(name << (freeHorizon ? " free T" : " fixed T") << (implicitForm ? " implicit" : " explicit")) {
+          trellis::OptimalControlProblem p =
+              trellis::loadProblem(std::string(TRELLIS_SOURCE_DIR) + "/examples/problems/" + name + ".json");
+          p.knots = 5;
+          if (p.model->nc() > 0) {
+            p.forceUpper(0) = 100.0;  // the constraint-force rows (ρ) too
+            trellis::OptimalControlProblem::ForceCombination c;  // and a combination (ρ = Cᵀ·multipliers)
+            c.name = "combination";
+            c.coefficients = Eigen::VectorXd::Constant(p.model->nc(), -0.5);
+            c.upper = 1.0;
+            p.forceCombinations.push_back(c);
+          }
+          if (freeHorizon) {
+            p.minHorizon = 0.5 * p.horizon;
+            p.maxHorizon = 2.0 * p.horizon;
+          }
+          if (implicitForm) p.dynamics = trellis::DynamicsForm::kImplicit;
+          trellis::Transcription t(p);
+          std::mt19937 rng(11);
+          std::uniform_real_distribution<double> d(-0.2, 0.2);
+          Eigen::VectorXd z = t.initialGuess(), z2 = z, mu(t.numConstraints());
+          for (int i = 0; i < z.size(); ++i) z2(i) += d(rng);
+          for (int i = 0; i < mu.size(); ++i) mu(i) = d(rng);
+          Eigen::VectorXd values(t.hessianRows().size());
+          REQUIRE(t.evalHessian(z.data(), 1.0, mu.data(), values.data()));  // warm-up
+          bool ok = false;
+          {
+            const MallocGuard guard;
+            ok = t.evalHessian(z2.data(), 0.5, mu.data(), values.data());  // new iterate: dynamics too
+            ok = ok && t.evalHessian(z2.data(), 1.0, mu.data(), values.data());  // cached dynamics
+          }
+          CHECK(ok);
+          CHECK(values.allFinite());
         }
-        if (freeHorizon) {
-          p.minHorizon = 0.5 * p.horizon;
-          p.maxHorizon = 2.0 * p.horizon;
-        }
-        trellis::Transcription t(p);
-        std::mt19937 rng(11);
-        std::uniform_real_distribution<double> d(-0.2, 0.2);
-        Eigen::VectorXd z = t.initialGuess(), z2 = z, mu(t.numConstraints());
-        for (int i = 0; i < z.size(); ++i) z2(i) += d(rng);
-        for (int i = 0; i < mu.size(); ++i) mu(i) = d(rng);
-        Eigen::VectorXd values(t.hessianRows().size());
-        REQUIRE(t.evalHessian(z.data(), 1.0, mu.data(), values.data()));  // warm-up
-        bool ok = false;
-        {
-          const MallocGuard guard;
-          ok = t.evalHessian(z2.data(), 0.5, mu.data(), values.data());  // new iterate: dynamics too
-          ok = ok && t.evalHessian(z2.data(), 1.0, mu.data(), values.data());  // cached dynamics
-        }
-        CHECK(ok);
-        CHECK(values.allFinite());
       }
     }
   }

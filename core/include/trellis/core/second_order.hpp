@@ -70,8 +70,10 @@ struct SecondOrderImpl;  // hyper-dual buffers and the KKT factors (core/src/sec
 /// thread, beside a Data of the same model).
 class SecondOrderWorkspace {
  public:
-  /// Sizes every buffer; `withTensors` also allocates the full tensors (n + nc matrices N×N).
-  explicit SecondOrderWorkspace(const Model& model, bool withTensors = true);
+  /// Sizes every buffer; `withTensors` also allocates the full tensors (n + nc matrices N×N);
+  /// `recording` builds the recorded residual pass even where the tree pass applies
+  /// (computeImplicitSecondOrder needs it).
+  explicit SecondOrderWorkspace(const Model& model, bool withTensors = true, bool recording = false);
   ~SecondOrderWorkspace();
   ///@{
   /// Movable (the buffers move with it), not copyable.
@@ -104,6 +106,11 @@ class SecondOrderWorkspace {
   friend DynamicsStatus computeSecondOrderTensors(const Model&, Data&, SecondOrderWorkspace&,
                                                   const Eigen::VectorXd&, const Eigen::VectorXd&,
                                                   const Eigen::VectorXd&);
+  friend DynamicsStatus computeImplicitSecondOrder(const Model&, Data&, SecondOrderWorkspace&, const Eigen::VectorXd&,
+                                                   const Eigen::VectorXd&, const Eigen::VectorXd&,
+                                                   const Eigen::VectorXd&, const Eigen::VectorXd&,
+                                                   const Eigen::VectorXd&, const Eigen::VectorXd&,
+                                                   Eigen::Ref<Eigen::MatrixXd>, Eigen::Ref<Eigen::MatrixXd>);
   friend DynamicsStatus computeSecondOrderContraction(const Model&, Data&, SecondOrderWorkspace&,
                                                       const Eigen::VectorXd&, const Eigen::VectorXd&,
                                                       const Eigen::VectorXd&, const Eigen::VectorXd&,
@@ -122,6 +129,23 @@ class SecondOrderWorkspace {
 DynamicsStatus computeSecondOrderTensors(const Model& model, Data& data, SecondOrderWorkspace& ws,
                                          const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
                                          const Eigen::VectorXd& u);
+
+/// The implicit form's second derivatives (linearization.hpp's computeImplicitDynamics, for a
+/// transcription whose variables include q̈ and λ): for φ(z, y) = νᵀ r(z, y) + ηᵀ c(z, y) at the
+/// GIVEN y = [q̈; λ] (not the forward solution), z = [q; q̇; u],
+///   Hzz = ∇²_z φ (N×N, symmetric; the (u, u) block 0),
+///   Hyz = ∂²φ/∂y∂[q; q̇] ((n + nc)×2n; its q̇ columns are 0: ∂φ/∂q̈ = M ν + Aᵀη and ∂φ/∂λ = −A ν
+///         depend on q only), and ∂²φ/∂y∂u = ∂²φ/∂y² = 0 (r, c are affine in y and in u).
+/// Hzz by forward-over-reverse on the recorded residual pass (the workspace must be built with
+/// recording = true), Hyz from two first-order evaluations (computeImplicitDynamics at q̇ = 0 with
+/// q̈ = ν, λ = −η and with q̈ = λ = 0: r, c are affine in them, so the difference is exact).
+/// `data` is scratch. Allocation-free. Throws std::invalid_argument on sizes or a tree-pass workspace.
+DynamicsStatus computeImplicitSecondOrder(const Model& model, Data& data, SecondOrderWorkspace& ws,
+                                          const Eigen::VectorXd& q, const Eigen::VectorXd& dq,
+                                          const Eigen::VectorXd& qdd, const Eigen::VectorXd& u,
+                                          const Eigen::VectorXd& lambda, const Eigen::VectorXd& nu,
+                                          const Eigen::VectorXd& eta, Eigen::Ref<Eigen::MatrixXd> Hzz,
+                                          Eigen::Ref<Eigen::MatrixXd> Hyz);
 
 /// H = Σᵢ wᵢ ∇²_z q̈ᵢ + Σ_r ρ_r ∇²_z λ_r (N×N, symmetric; z = [q; q̇; u]) without forming the
 /// tensors: one transposed KKT solve, then forward mode over the closed-form gradient on a joint

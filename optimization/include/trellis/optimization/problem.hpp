@@ -51,7 +51,7 @@ enum class DynamicsForm {
   /// M(q) q̈ + b(q, q̇, u) − A(q)ᵀλ = 0 and A(q) q̈ + Ȧ q̇ = 0 (computeImplicitDynamics): rows in
   /// force units, linear in (q̈, u, λ), where the explicit form divides by light inertias
   /// (|∂q̈/∂q| ~ 10⁵ on the hand) and eliminates λ; force bounds are then linear in the variables.
-  /// Exact first derivatives; the Lagrangian Hessian is L-BFGS (the exact one is not built).
+  /// Exact first and second derivatives (computeImplicitDynamics, computeImplicitSecondOrder).
   kImplicit,
 };
 

@@ -52,7 +52,8 @@
 // (stride 3n + m + nc), f_p = [q̇_p; q̈_p] is read from z (the defects are linear in the point
 // variables), the force rows are C λ_p (linear), and after the force rows come, point by point,
 // the rows [r; c] = [M q̈ + b − Aᵀλ; A q̈ + Ȧ q̇] (n + nc, equalities; computeImplicitDynamics).
-// The guess's q̈, λ are the forward dynamics at the guess. No exact Hessian (hessianAvailable()).
+// The guess's q̈ is the slope of its velocities between neighbouring points, λ the least-squares
+// balance Aᵀλ ≈ M q̈ + b. Hessian: per point ∇²(νᵀr + ηᵀc) by computeImplicitSecondOrder.
 //
 // Evaluations are cached: f (and A, B for derivatives) are computed once per distinct z, whatever
 // the order of the calls: z is compared with the cached copy (a memcmp), which covers Ipopt's
