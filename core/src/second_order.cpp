@@ -438,6 +438,50 @@ struct SecondOrderImpl {
     laneRows = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(N) * kTapeLanesMax);
   }
 
+  /// record() at (z, y), checked against the size the buffers were made for (a folding rule that
+  /// depended on the state would overrun them).
+  void recordChecked(const Model& model, const char* what) {
+    record(model);
+    if (tape.size != recordedNodes)
+      throw std::logic_error(std::string(what) + ": internal error: the recording has " + std::to_string(tape.size) +
+                             " nodes at this state, " + std::to_string(recordedNodes) + " when the workspace was sized");
+  }
+
+  /// rows(:, a) = ∇²φ e_a for the 2n q and q̇ directions a, φ(z') = wrᵀ r + wcᵀ c on the recording
+  /// at (z, y) with y' = y + Y (z' − z): one reverse sweep gives φ's adjoints; per block of up to
+  /// 16 directions a tangent sweep (z' = z + s e_a, y + s Y e_a) and a second reverse sweep give
+  /// ∇²φ e_a = x̄̇_z + Yᵀ x̄̇_y (blocks of L = 16, the last one of 4, 8 or 16).
+  void sweepRows(const Eigen::VectorXd& wr, const Eigen::VectorXd& wc) {
+    const int size = tape.size;
+    xbar.head(size).setZero();
+    for (int i = 0; i < n; ++i) xbar[recorded.r[i].idx] += wr[i];
+    for (int k = 0; k < nc; ++k) xbar[recorded.c[k].idx] += wc[k];
+    xbar[0] = 0.0;  // a constant output (index 0) has no adjoint
+    reverseSweep(tape, xbar.data());
+    double* xd = xdot.data();
+    double* xdb = xdotbar.data();
+    for (int a0 = 0, L = 0; a0 < 2 * n; a0 += L) {
+      const int lanes = std::min(kTapeLanesMax, 2 * n - a0);
+      L = lanes <= 4 ? 4 : (lanes <= 8 ? 8 : 16);
+      // Seeds: lane l is the direction a0 + l (unused lanes and all other input rows zero: the
+      // seeds of the previous block are reset below; after a block of another stride, the input
+      // rows of this one may hold its tangents).
+      if (lastStride != L) std::fill(xd, xd + static_cast<size_t>(inputs + 1) * L, 0.0);
+      lastStride = L;
+      auto seed = [&](bool set) {
+        for (int l = 0; l < lanes; ++l) {
+          xd[static_cast<size_t>(1 + a0 + l) * L + l] = set ? 1.0 : 0.0;
+          for (int i = 0; i < n + nc; ++i) xd[static_cast<size_t>(1 + N + i) * L + l] = set ? Y(i, a0 + l) : 0.0;
+        }
+      };
+      seed(true);
+      sweepBlock(L, {&tape, inputs, N, n + nc, xbar.data(), Y.data(), xd, xdb, laneRows.data()});
+      for (int l = 0; l < lanes; ++l)
+        for (int b = 0; b < N; ++b) rows(b, a0 + l) = laneRows[static_cast<Eigen::Index>(b) * L + l];
+      seed(false);
+    }
+  }
+
   static bool usesTree(const SecondOrderWorkspace& ws) { return ws.impl_->tree != nullptr; }
 
   /// Records the residual pass at (z, y) on the tape.
@@ -617,39 +661,8 @@ DynamicsStatus computeSecondOrderContraction(const Model& model, Data& data, Sec
     // The tree pass: the same rows by forward mode over the closed-form gradient (second_order_tree.hpp).
     s.tree->computeRows(model, q, dq, data.qdd, u, data.lambda, s.muR, s.muC, s.Y, s.rows);
   } else {
-    s.record(model);
-    if (s.tape.size != s.recordedNodes)  // a folding rule that depended on the state would overrun the buffers
-      throw std::logic_error("computeSecondOrderContraction: internal error: the recording has " +
-                             std::to_string(s.tape.size) + " nodes at this state, " + std::to_string(s.recordedNodes) +
-                             " when the workspace was sized");
-    const int inputs = s.inputs, size = s.tape.size;
-    s.xbar.head(size).setZero();
-    for (int i = 0; i < n; ++i) s.xbar[s.recorded.r[i].idx] += s.muR[i];
-    for (int k = 0; k < nc; ++k) s.xbar[s.recorded.c[k].idx] += s.muC[k];
-    s.xbar[0] = 0.0;  // a constant output (index 0) has no adjoint
-    detail::reverseSweep(s.tape, s.xbar.data());
-    double* xdot = s.xdot.data();
-    double* xdotbar = s.xdotbar.data();
-    for (int a0 = 0, L = 0; a0 < 2 * n; a0 += L) {
-      const int lanes = std::min(detail::kTapeLanesMax, 2 * n - a0);
-      L = lanes <= 4 ? 4 : (lanes <= 8 ? 8 : 16);
-      // Seeds: lane l is the direction a0 + l (unused lanes and all other input rows zero: the
-      // seeds of the previous block are reset below; after a block of another stride, the input
-      // rows of this one may hold its tangents).
-      if (s.lastStride != L) std::fill(xdot, xdot + static_cast<size_t>(inputs + 1) * L, 0.0);
-      s.lastStride = L;
-      auto seed = [&](bool set) {
-        for (int l = 0; l < lanes; ++l) {
-          xdot[static_cast<size_t>(1 + a0 + l) * L + l] = set ? 1.0 : 0.0;
-          for (int i = 0; i < n + nc; ++i) xdot[static_cast<size_t>(1 + N + i) * L + l] = set ? s.Y(i, a0 + l) : 0.0;
-        }
-      };
-      seed(true);
-      detail::sweepBlock(L, {&s.tape, inputs, N, n + nc, s.xbar.data(), s.Y.data(), xdot, xdotbar, s.laneRows.data()});
-      for (int l = 0; l < lanes; ++l)
-        for (int b = 0; b < N; ++b) s.rows(b, a0 + l) = s.laneRows[static_cast<Eigen::Index>(b) * L + l];
-      seed(false);
-    }
+    s.recordChecked(model, "computeSecondOrderContraction");
+    s.sweepRows(s.muR, s.muC);
   }
   // H = −∇²φ; the (q, q̇) block symmetrized (its two halves agree to rounding).
   H.topLeftCorner(2 * n, 2 * n) = -0.5 * (s.rows.topRows(2 * n) + s.rows.topRows(2 * n).transpose());
@@ -709,29 +722,8 @@ DynamicsStatus computeImplicitSecondOrder(const Model& model, Data& data, Second
   s.y.head(n) = qdd;
   s.y.tail(nc) = lambda;
   s.Y.setZero();
-  s.record(model);
-  if (s.tape.size != s.recordedNodes)
-    throw std::logic_error("computeImplicitSecondOrder: internal error: the recording has " + std::to_string(s.tape.size) +
-                           " nodes at this state, " + std::to_string(s.recordedNodes) + " when the workspace was sized");
-  const int inputs = s.inputs, tapeSize = s.tape.size;
-  s.xbar.head(tapeSize).setZero();
-  for (int i = 0; i < n; ++i) s.xbar[s.recorded.r[i].idx] += nu[i];
-  for (int k = 0; k < nc; ++k) s.xbar[s.recorded.c[k].idx] += eta[k];
-  s.xbar[0] = 0.0;
-  detail::reverseSweep(s.tape, s.xbar.data());
-  double* xdot = s.xdot.data();
-  double* xdotbar = s.xdotbar.data();
-  for (int a0 = 0, L = 0; a0 < 2 * n; a0 += L) {
-    const int lanes = std::min(detail::kTapeLanesMax, 2 * n - a0);
-    L = lanes <= 4 ? 4 : (lanes <= 8 ? 8 : 16);
-    if (s.lastStride != L) std::fill(xdot, xdot + static_cast<size_t>(inputs + 1) * L, 0.0);
-    s.lastStride = L;
-    for (int l = 0; l < lanes; ++l) xdot[static_cast<size_t>(1 + a0 + l) * L + l] = 1.0;
-    detail::sweepBlock(L, {&s.tape, inputs, N, n + nc, s.xbar.data(), s.Y.data(), xdot, xdotbar, s.laneRows.data()});
-    for (int l = 0; l < lanes; ++l)
-      for (int b = 0; b < N; ++b) s.rows(b, a0 + l) = s.laneRows[static_cast<Eigen::Index>(b) * L + l];
-    for (int l = 0; l < lanes; ++l) xdot[static_cast<size_t>(1 + a0 + l) * L + l] = 0.0;
-  }
+  s.recordChecked(model, "computeImplicitSecondOrder");
+  s.sweepRows(nu, eta);
   Hzz.topLeftCorner(2 * n, 2 * n) = 0.5 * (s.rows.topRows(2 * n) + s.rows.topRows(2 * n).transpose());
   Hzz.bottomLeftCorner(m, 2 * n) = s.rows.bottomRows(m);
   Hzz.topRightCorner(2 * n, m) = s.rows.bottomRows(m).transpose();
