@@ -3,13 +3,14 @@
 //
 //   hand_ball_turn [--scene NAME] [--angle DEG] [--horizon S] [--knots N] [--facets F] [--print-level L]
 //                  [--lbfgs] [--holds] [--diagnose] [--max-iterations N] [--barrier MU] [--bound-push P]
-//                  [--implicit] [--effort-scale C]
+//                  [--implicit] [--effort-scale C] [--fixed-start]
 //
 // The turn starts at rest near the scene's stored grasp (the start's configuration is free: the
 // stored grasp is no hold with pushing pads; the program prints how far it is from one).
 // --lbfgs: Ipopt's limited-memory Hessian instead of the exact one. --implicit: the transcription's
 // implicit dynamics form (q̈ and λ as variables, the equations of motion as rows in force units;
-// problem.hpp DynamicsForm). --effort-scale C: BallTurnOptions::effortScale (1e-3).
+// problem.hpp DynamicsForm). --effort-scale C: BallTurnOptions::effortScale (1e-3). --fixed-start:
+// the turn starts at the stored grasp itself (BallTurnOptions::freeInitialConfiguration false).
 // --holds: the warm start is the path of holds (quasiStaticHolds at every collocation point, the
 // dampers' load included) and the motion starts at its first hold; Ipopt then starts there with
 // μ_init 1e-2 and bound_push 1e-8 (--barrier, --bound-push override). --diagnose: the guess's
@@ -67,6 +68,7 @@ int main(int argc, char** argv) {
       else if (a == "--lbfgs") lbfgs = true;
       else if (a == "--implicit") implicitForm = true;
       else if (a == "--effort-scale") options.effortScale = std::stod(value());
+      else if (a == "--fixed-start") options.freeInitialConfiguration = false;
       else if (a == "--holds") holds = true;
       else if (a == "--diagnose") diagnose = true;
       else if (a == "--reach") reach = true;
@@ -78,7 +80,7 @@ int main(int argc, char** argv) {
       else if (a == "--help") {
         std::cout << "usage: hand_ball_turn [--scene NAME] [--angle DEG] [--horizon S] [--knots N] "
                      "[--facets F] [--print-level L] [--lbfgs] [--holds] [--diagnose] [--max-iterations N] "
-                     "[--barrier MU] [--bound-push P] [--implicit] [--effort-scale C] [--friction-use F] "
+                     "[--barrier MU] [--bound-push P] [--implicit] [--effort-scale C] [--fixed-start] [--friction-use F] "
                      "[--hold-margin N] [--reach]\n";
         return 0;
       } else {
