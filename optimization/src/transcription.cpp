@@ -230,7 +230,6 @@ struct Transcription::Impl {
   Eigen::VectorXd initialGuessVector() const {
     Eigen::VectorXd z = Eigen::VectorXd::Zero(numVars);
     const double T = problem.horizon;
-    Data guessData(model);  // implicit form: q̈, λ of the guess from the forward dynamics
     for (int p = 0; p < P; ++p) {
       const double s = pointFraction(p);
       Eigen::VectorXd x(nx), uu(m);
@@ -275,6 +274,7 @@ struct Transcription::Impl {
       // units, not in the defects. (The forward dynamics' q̈ of a guess that is no equilibrium is
       // ~10⁴ rad/s² on a light phalanx: defects of that size.) Where the dynamics cannot be
       // evaluated at the guess, λ = 0.
+      Data guessData(model);
       for (int p = 0; p < P; ++p) {
         const int a = std::max(0, p - 1), b = std::min(P - 1, p + 1);
         const double dt = T * (pointFraction(b) - pointFraction(a));
