@@ -18,6 +18,7 @@
 #include <limits>
 #include <set>
 #include <sstream>
+#include <type_traits>
 
 namespace trellis {
 
@@ -401,22 +402,18 @@ class FileParser {
         bad("method", "'" + method + "' (expected \"hermite_simpson\" or \"trapezoidal\")");
       }
     }
-    if (root.contains("hessian")) {
-      const std::string mode = string(root["hessian"], "hessian");
+    // An enumerated key: one of its names, else an error naming the file, the key and the choices.
+    const auto enumKey = [&](const char* key, auto& field) {
+      if (!root.contains(key)) return;
+      const std::string name = string(root[key], key);
       try {
-        problem.hessian = parseEnum<HessianMode>(mode, "hessian");
+        field = parseEnum<std::decay_t<decltype(field)>>(name, key);
       } catch (const std::invalid_argument& e) {
         fail(source_ + ": " + e.what());
       }
-    }
-    if (root.contains("dynamics")) {
-      const std::string form = string(root["dynamics"], "dynamics");
-      try {
-        problem.dynamics = parseEnum<DynamicsForm>(form, "dynamics");
-      } catch (const std::invalid_argument& e) {
-        fail(source_ + ": " + e.what());
-      }
-    }
+    };
+    enumKey("hessian", problem.hessian);
+    enumKey("dynamics", problem.dynamics);
     if (root.contains("knots")) {
       problem.knots = integer(root["knots"], "knots", 2, kMaxKnots);
     }
