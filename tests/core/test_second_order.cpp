@@ -30,9 +30,11 @@
 #include "adjoint_tape.hpp"        // core/src: the sweeps' build switch
 #include "second_order_tree.hpp"  // core/src: the tree pass's switch
 
+#include <array>
 #include <cmath>
 #include <functional>
 #include <optional>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -719,6 +721,143 @@ TEST_CASE("Second derivatives: closed form of the cart-pole", "[second_order][cl
     const auto uq = ws.qddBlock(SecondOrderWorkspace::Block::kUQ);
     REQUIRE(uq.size() == 2);
     CHECK(uq[1](0, 1) == ws.qddHessian[1](4, 1));
+  }
+}
+
+namespace {
+
+// A second-order jet in the paper example's five variables z = [θ1, θ2, θ̇1, θ̇2, u]: a value with
+// its exact gradient and Hessian, carried through + − × ÷ sin cos by the product and chain rules
+// (forward-mode differentiation of the hand-written equations below, no tree and no differences).
+struct Jet {
+  double v = 0.0;
+  Eigen::Matrix<double, 5, 1> g = Eigen::Matrix<double, 5, 1>::Zero();
+  Eigen::Matrix<double, 5, 5> H = Eigen::Matrix<double, 5, 5>::Zero();
+  static Jet variable(double value, int i) {
+    Jet j;
+    j.v = value;
+    j.g(i) = 1.0;
+    return j;
+  }
+};
+Jet operator+(Jet a, const Jet& b) { a.v += b.v; a.g += b.g; a.H += b.H; return a; }
+Jet operator-(Jet a, const Jet& b) { a.v -= b.v; a.g -= b.g; a.H -= b.H; return a; }
+Jet operator+(Jet a, double c) { a.v += c; return a; }
+Jet operator*(double c, Jet a) { a.v *= c; a.g *= c; a.H *= c; return a; }
+Jet operator-(const Jet& a) { return -1.0 * a; }
+Jet operator*(const Jet& a, const Jet& b) {
+  Jet r;
+  r.v = a.v * b.v;
+  r.g = a.v * b.g + b.v * a.g;
+  r.H = a.v * b.H + b.v * a.H + a.g * b.g.transpose() + b.g * a.g.transpose();
+  return r;
+}
+Jet reciprocal(const Jet& b) {  // 1/b: −b'/b², −b''/b² + 2 b' b'ᵀ/b³
+  Jet r;
+  r.v = 1.0 / b.v;
+  r.g = -b.g / (b.v * b.v);
+  r.H = -b.H / (b.v * b.v) + 2.0 * b.g * b.g.transpose() / (b.v * b.v * b.v);
+  return r;
+}
+Jet operator/(const Jet& a, const Jet& b) { return a * reciprocal(b); }
+Jet sin(const Jet& a) {
+  Jet r;
+  r.v = std::sin(a.v);
+  r.g = std::cos(a.v) * a.g;
+  r.H = std::cos(a.v) * a.H - std::sin(a.v) * a.g * a.g.transpose();
+  return r;
+}
+Jet cos(const Jet& a) {
+  Jet r;
+  r.v = std::cos(a.v);
+  r.g = -std::sin(a.v) * a.g;
+  r.H = -std::sin(a.v) * a.H - std::cos(a.v) * a.g * a.g.transpose();
+  return r;
+}
+
+}  // namespace
+
+TEST_CASE("Second derivatives: closed form of the paper's constrained double pendulum (Sec. IV)",
+          "[second_order][closed_form][constraints]") {
+  // Worked out by hand for support/test_models.hpp paperPendulum(): unit masses at A and B, unit
+  // links, g = 9.8, u on θ1, anchor C = (2, 0), h = ‖p_B − p_C‖² − 1 (the core's distance form).
+  //   p_A = (s1, −c1),  p_B = p_A + (s12, −c12)           (s12 = sin(θ1 + θ2), ω = θ̇1 + θ̇2)
+  //   T = ½ θ̇1² + ½ (θ̇1² + ω² + 2 θ̇1 ω c2),  V = −g (2 c1 + c12)
+  //   M = [3 + 2 c2, 1 + c2; 1 + c2, 1],
+  //   F = τ − (Ṁ q̇ − ∂T/∂q) − ∂V/∂q = [u + s2 (2 θ̇1 θ̇2 + θ̇2²) − g (2 s1 + s12), −s2 θ̇1² − g s12]
+  //   d = p_B − p_C,  J = ∂p_B/∂q = [c1 + c12, c12; s1 + s12, s12],  A = 2 dᵀ J,
+  //   Ȧ q̇ = q̇ᵀ ∇²h q̇ = 2 (‖J q̇‖² + dᵀ p̈_B|q̈=0),  p̈_B|q̈=0 = (−s1 θ̇1² − s12 ω², c1 θ̇1² + c12 ω²)
+  //   M q̈ = F + Aᵀ λ,  A q̈ = −Ȧ q̇   ⇒   λ = −(Ȧ q̇ + A M⁻¹ F) / (A M⁻¹ Aᵀ),  q̈ = M⁻¹ (F + Aᵀ λ).
+  // Its second derivatives here come from carrying these formulas in second-order jets (exact
+  // forward differentiation: an independent route from the tree's passes and the KKT sweeps).
+  const double g = 9.8;
+  const TestSystem sys = paperPendulum();
+  const Model& model = sys.model;
+  REQUIRE(model.nq() == 2);
+  REQUIRE(model.nu() == 1);
+  REQUIRE(model.nc() == 1);
+  Data data(model);
+  SecondOrderWorkspace ws(model);
+  const double pi = std::acos(-1.0);
+  std::mt19937 rng(4242);
+  std::uniform_real_distribution<double> angle(-pi, pi), rate(-3.0, 3.0), torque(-5.0, 5.0);
+  std::vector<std::array<double, 5>> states = {
+      // On the manifold: (π/6, π/3) has h = 0 exactly (ERRATA); the rate spans A's null space.
+      {pi / 6, pi / 3, 1.0, 0.0, 2.0},
+      // The paper's printed state (slightly off the constraint), with the errata's velocity.
+      {0.5246, 1.0472, 1.0, -2.00116, 2.0}};
+  for (int k = 0; k < 6; ++k) states.push_back({angle(rng), angle(rng), rate(rng), rate(rng), torque(rng)});
+  {
+    // Make the first state's velocity tangent: q̇ ∝ (A2, −A1) at (π/6, π/3).
+    const double t1 = pi / 6, t2 = pi / 3, s1 = std::sin(t1), c1 = std::cos(t1);
+    const double s12 = std::sin(t1 + t2), c12 = std::cos(t1 + t2);
+    const double dx = s1 + s12 - 2.0, dy = -c1 - c12;
+    const double A1 = 2.0 * (dx * (c1 + c12) + dy * (s1 + s12)), A2 = 2.0 * (dx * c12 + dy * s12);
+    states[0][2] = A2;
+    states[0][3] = -A1;
+  }
+  for (std::size_t k = 0; k < states.size(); ++k) {
+    const auto& st = states[k];
+    const Jet t1 = Jet::variable(st[0], 0), t2 = Jet::variable(st[1], 1);
+    const Jet w1 = Jet::variable(st[2], 2), w2 = Jet::variable(st[3], 3), u = Jet::variable(st[4], 4);
+    const Jet s1 = sin(t1), c1 = cos(t1), s2 = sin(t2), c2 = cos(t2);
+    const Jet s12 = sin(t1 + t2), c12 = cos(t1 + t2), w = w1 + w2;
+    const Jet M11 = 2.0 * c2 + 3.0, M12 = c2 + 1.0;  // M22 = 1
+    const Jet F1 = u + s2 * (2.0 * (w1 * w2) + w2 * w2) - g * (2.0 * s1 + s12);
+    const Jet F2 = -(s2 * (w1 * w1)) - g * s12;
+    const Jet dx = s1 + s12 + (-2.0), dy = -(c1 + c12);
+    const Jet J11 = c1 + c12, J12 = c12, J21 = s1 + s12, J22 = s12;
+    const Jet A1 = 2.0 * (dx * J11 + dy * J21), A2 = 2.0 * (dx * J12 + dy * J22);
+    const Jet vx = J11 * w1 + J12 * w2, vy = J21 * w1 + J22 * w2;
+    const Jet ax = -(s1 * (w1 * w1) + s12 * (w * w)), ay = c1 * (w1 * w1) + c12 * (w * w);
+    const Jet gamma = 2.0 * (vx * vx + vy * vy + dx * ax + dy * ay);
+    // M⁻¹ = [1, −M12; −M12, M11] / det,  det = M11 − M12².
+    const Jet det = M11 - M12 * M12;
+    const Jet a1 = (F1 - M12 * F2) / det, a2 = (M11 * F2 - M12 * F1) / det;  // M⁻¹ F
+    const Jet b1 = (A1 - M12 * A2) / det, b2 = (M11 * A2 - M12 * A1) / det;  // M⁻¹ Aᵀ
+    const Jet lambda = -((gamma + A1 * a1 + A2 * a2) / (A1 * b1 + A2 * b2));
+    const Jet qdd1 = a1 + b1 * lambda, qdd2 = a2 + b2 * lambda;
+
+    const Eigen::VectorXd q = Eigen::Vector2d(st[0], st[1]), dq = Eigen::Vector2d(st[2], st[3]);
+    const Eigen::VectorXd uu = Eigen::VectorXd::Constant(1, st[4]);
+    REQUIRE(computeSecondOrderTensors(model, data, ws, q, dq, uu).ok());
+    INFO("state #" << k << ": q = (" << st[0] << ", " << st[1] << "), dq = (" << st[2] << ", " << st[3]
+                   << "), u = " << st[4] << ", h = " << dx.v * dx.v + dy.v * dy.v - 1.0);
+    // The values and first derivatives the same route gives (a check of the hand-written model).
+    CHECK(data.qdd(0) == Approx(qdd1.v).epsilon(1e-12).margin(1e-12));
+    CHECK(data.qdd(1) == Approx(qdd2.v).epsilon(1e-12).margin(1e-12));
+    CHECK(data.lambda(0) == Approx(lambda.v).epsilon(1e-12).margin(1e-12));
+    Eigen::MatrixXd jac(2, 5);
+    jac.row(0) = qdd1.g.transpose();
+    jac.row(1) = qdd2.g.transpose();
+    Eigen::MatrixXd core(2, 5);
+    core << data.dqdd_dq, data.dqdd_ddq, data.dqdd_du;
+    TRELLIS_CHECK_MATRIX(jac, core, 1e-12, Scale::kMatrix);
+    TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(lambda.g.transpose()), data.dlambda_dx, 1e-12, Scale::kMatrix);
+    // The second derivatives.
+    TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(qdd1.H), ws.qddHessian[0], 1e-12, Scale::kMatrix);
+    TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(qdd2.H), ws.qddHessian[1], 1e-12, Scale::kMatrix);
+    TRELLIS_CHECK_MATRIX(Eigen::MatrixXd(lambda.H), ws.lambdaHessian[0], 1e-12, Scale::kMatrix);
   }
 }
 
