@@ -38,6 +38,14 @@ struct TripletWriter {
   }
 };
 
+/// Whether some constraint row of `model` is nonholonomic (a knife edge): its third-derivative
+/// terms then come from the recorded implicit residual (Impl::addThirdDerivative).
+bool anyNonholonomic(const Model& model) {
+  for (const auto& c : model.constraints())
+    if (!c.holonomic()) return true;
+  return false;
+}
+
 }  // namespace
 
 struct Transcription::Impl {
@@ -94,7 +102,7 @@ struct Transcription::Impl {
   long dynamicsCount = 0, linearizationCount = 0, secondOrderCount = 0;
 
   // ---- Lagrangian Hessian (lower triangle, structure fixed at construction) -------------------
-  bool hessianOk = true;         // false with nonholonomic rows (hessianUnavailable says why)
+  bool hessianOk = true;         // evalHessian can run (hessianWhy says why not); true today
   std::string hessianWhy;
   std::vector<int> hessRows, hessCols;
   Data hessData;
@@ -108,6 +116,7 @@ struct Transcription::Impl {
   Eigen::MatrixXd sumS, third, scratchNN;   // n×n
   // Implicit form: per point ∇²_z (νᵀr + ηᵀc) (N×N) and ∂²/∂y∂[q; q̇] ((n + nc)×2n), their weights.
   Eigen::MatrixXd HzzI, HyzI;
+  Eigen::VectorXd zeroN, zeroNc, thirdV;  // nonholonomic: q̇ = 0, λ = 0, ν = 0 and v of addThirdDerivative
   Eigen::VectorXd nuP, etaP;
 
   Impl(OptimalControlProblem p, DerivativeMode mode)
@@ -128,7 +137,7 @@ struct Transcription::Impl {
         constraintData(model),
         numdiff(model),
         hessData(model),
-        secondOrder(model, false, problem.dynamics == DynamicsForm::kImplicit) {
+        secondOrder(model, false, problem.dynamics == DynamicsForm::kImplicit || anyNonholonomic(model)) {
     for (int r = 0; r < nc; ++r) {
       if (model.constraints()[r].holonomic()) {
         holonomicRows.push_back(r);
@@ -736,12 +745,6 @@ struct Transcription::Impl {
   //    Σ ν'_r S_r(i, a), with T_r[v](a, b) = Σ_i v_i ∂³h_r/∂q_i∂q_a∂q_b (addThirdDerivative).
 
   void setUpHessian() {
-    if (nonholonomic) {
-      hessianOk = false;
-      hessianWhy = "the exact Hessian needs ∂²(A(q) v)/∂q² of every constraint row, which the core "
-                   "gives for holonomic rows only; this model has nonholonomic (knife-edge) rows";
-      return;
-    }
     const int blockRows = ncH + nc;
     Hp.assign(P, Eigen::MatrixXd::Zero(stride, stride));
     C = Eigen::MatrixXd::Zero(nx, P);
@@ -758,9 +761,15 @@ struct Transcription::Impl {
     rhoScratch = Eigen::VectorXd::Zero(nc);
     rhoPoint = Eigen::VectorXd::Zero(nc);
     sumS = third = scratchNN = Eigen::MatrixXd::Zero(n, n);
-    if (implicit) {
+    if (nonholonomic) {
+      zeroN = thirdV = Eigen::VectorXd::Zero(n);
+      zeroNc = Eigen::VectorXd::Zero(nc);
+    }
+    if (implicit || nonholonomic) {
       HzzI = Eigen::MatrixXd::Zero(nx + m, nx + m);
       HyzI = Eigen::MatrixXd::Zero(n + nc, nx);
+    }
+    if (implicit) {
       nuP = Eigen::VectorXd::Zero(n);
       etaP = Eigen::VectorXd::Zero(nc);
     }
@@ -798,12 +807,29 @@ struct Transcription::Impl {
   /// zero: S_rᵀ ∂q̈/∂q̇ + Σ_i A_{r,i} ∇²_{qq̇} q̈_i + 2 T_r[q̇] = 0. At q̇ = v/‖v‖ and the contraction
   /// w = A(q)ᵀ ρ this gives Σ_r ρ_r T_r[v] = −‖v‖/2 ((Σ ρ_r S_r)ᵀ ∂q̈/∂q̇ + H_{qq̇}) — exact, from
   /// one more contraction (T_r[v] is linear in v; the unit velocity keeps the dynamics' scale).
+  ///
+  /// With nonholonomic rows that identity does not hold (A_r is no gradient, so ∂A_r,b/∂q_i ≠
+  /// ∂A_r,i/∂q_b). Then Σ_r ρ_r T_r[v] = ∇²_q (ρᵀ A(q) v) with T_r[v](a, b) = Σ_i v_i ∂²A_r,i/∂q_a∂q_b
+  /// comes from the implicit residual c = A(q) q̈ + Ȧ q̇ at q̇ = 0 (the drift and all its
+  /// q-derivatives vanish there), q̈ = v: the (q, q) block of ∇²(ηᵀc) with η = ρ, ν = 0
+  /// (computeImplicitSecondOrder on the recorded pass) — for every row kind alike.
   bool addThirdDerivative(int k, const double* v, const Eigen::VectorXd& rho, double scale,
                           Eigen::Ref<Eigen::MatrixXd> out) {
     const Eigen::Map<const Eigen::VectorXd> vel(v, n);
     const double norm = vel.norm();
     if (norm == 0.0 || rho.isZero(0.0)) return true;
     const int p = knotPoint(k);
+    if (nonholonomic) {
+      hq = state(cachedZ.data(), p).head(n);
+      hu = input(cachedZ.data(), p);
+      thirdV = vel;
+      const DynamicsStatus status = computeImplicitSecondOrder(model, hessData, secondOrder, hq, zeroN, thirdV, hu,
+                                                               zeroNc, zeroN, rho, HzzI, HyzI);
+      ++secondOrderCount;
+      if (!secondOrderOk(status, p, horizonOf(cachedZ.data()), HzzI)) return false;
+      out.noalias() += scale * HzzI.topLeftCorner(n, n);
+      return true;
+    }
     hq = state(cachedZ.data(), p).head(n);
     hdq = vel / norm;
     hu = input(cachedZ.data(), p);

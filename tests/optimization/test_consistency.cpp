@@ -261,10 +261,18 @@ TEST_CASE("consistency: a knife edge in the optimizer keeps A q' = 0", "[consist
   CHECK(recheck(p, r, 1e-3).ok());
   // The skate turned (a straight push cannot reach y = 0.5).
   CHECK(r.trajectory.states().row(2).cwiseAbs().maxCoeff() > 0.1);
-  // A knife edge has no exact Hessian (transcription.hpp): L-BFGS, and the result says why.
-  CHECK(r.hessian == trellis::HessianMode::kLimitedMemory);
-  CHECK_THAT(r.hessianNote, Catch::Contains("nonholonomic"));
-  CHECK_THAT(r.describe(), Catch::Contains("lbfgs Hessian") && Catch::Contains("nonholonomic"));
+  // The exact Hessian (the knife edge's third-derivative terms from the recorded implicit
+  // residual, transcription.cpp) reaches L-BFGS's optimum.
+  CHECK(r.hessian == trellis::HessianMode::kExact);
+  CHECK(r.hessianNote.empty());
+  trellis::OptimizerOptions lbfgs;
+  lbfgs.hessian = trellis::HessianMode::kLimitedMemory;
+  const OptimizationResult rl = trellis::optimizeTrajectory(p, lbfgs);
+  INFO(rl.describe());
+  REQUIRE(rl.status.code == OptimizationCode::kSolved);
+  CHECK(r.cost == Approx(rl.cost).epsilon(1e-6));
+  // Measured 15 against 31 iterations: the margin is wide enough for another platform's rounding.
+  CHECK(r.iterations < rl.iterations);
 }
 
 TEST_CASE("consistency: checkConsistency on a hand-made trajectory file names a corrupted knot",

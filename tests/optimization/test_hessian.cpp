@@ -192,20 +192,67 @@ TEST_CASE("hessian: objective only and constraints only", "[transcription][hessi
   SECTION("σ = 0, μ random") { checkHessian(t, z, 0.0, randomMultipliers(t, rng)); }
 }
 
-TEST_CASE("hessian: a knife edge says the exact Hessian is not available", "[transcription][hessian]") {
+TEST_CASE("hessian: knife edges, alone and beside a holonomic row, on both forms",
+          "[transcription][hessian][knife_edge]") {
+  // A skate whose blade sits off the centre of mass (the knife-edge row's ∂A/∂q is then not
+  // symmetric: the holonomic rows' third-derivative identity does not hold and the recorded
+  // implicit residual gives ∇²_q(ρᵀA(q)v)); with `arm`, a link on the skate whose tip keeps its
+  // distance to a world point (a holonomic row with h, γ and its own third derivatives) beside it.
   using trellis::Transform;
-  trellis::ModelBuilder b("skate");
-  b.addFrame("sx", "world", Transform::tx("x"));
-  b.addFrame("sy", "sx", Transform::ty("y"));
-  b.addFrame("body", "sy", Transform::rz("theta"), trellis::Mass{1.2, Eigen::Matrix3d::Identity() * 0.1});
-  b.addKnifeEdgeConstraint("body", Eigen::Vector3d(0.0, 1.0, 0.0));
-  b.addConfigForce("theta", "steer");
-  const auto model = std::make_shared<const trellis::Model>(std::move(b).finalize());
-  OptimalControlProblem p(model);
-  p.knots = 3;
-  Transcription t(p);
-  CHECK_FALSE(t.hessianAvailable());
-  CHECK(t.hessianUnavailableReason().find("nonholonomic") != std::string::npos);
+  for (const bool arm : {false, true}) {
+    trellis::ModelBuilder b("skate");
+    b.addFrame("sx", "world", Transform::tx("x"));
+    b.addFrame("sy", "sx", Transform::ty("y"));
+    b.addFrame("body", "sy", Transform::rz("theta"), trellis::Mass{1.2, Eigen::Matrix3d::Identity() * 0.1});
+    b.addFrame("blade", "body", Transform::tx(0.3));
+    b.addKnifeEdgeConstraint("blade", Eigen::Vector3d(0.0, 1.0, 0.0));
+    b.addConfigForce("theta", "steer");
+    b.addBodyWrench("body", {trellis::WrenchEntry{std::string("thrust")}, trellis::WrenchEntry{0.0},
+                             trellis::WrenchEntry{0.0}, trellis::WrenchEntry{0.0},
+                             trellis::WrenchEntry{0.0}, trellis::WrenchEntry{0.0}});
+    if (arm) {
+      b.addFrame("arm", "body", Transform::rz("phi"));
+      b.addFrame("tip", "arm", Transform::tx(0.5), trellis::Mass{0.4, Eigen::Matrix3d::Identity() * 0.01});
+      b.addFrame("anchor", "world", Transform::tx(1.0));
+      b.addDistanceConstraint("tip", "anchor", 0.8);
+      b.addConfigForce("phi", "elbow");
+    }
+    const auto model = std::make_shared<const trellis::Model>(std::move(b).finalize());
+    std::mt19937 rng(arm ? 31 : 13);
+    for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
+      for (const auto form : {trellis::DynamicsForm::kExplicit, trellis::DynamicsForm::kImplicit}) {
+        for (const bool freeHorizon : {false, true}) {
+          OptimalControlProblem p(model);
+          p.method = method;
+          p.dynamics = form;
+          p.knots = 4;
+          p.mesh.resize(4);
+          p.mesh << 0.0, 0.3, 0.45, 1.0;
+          p.setFixedHorizon(2.0);
+          if (freeHorizon) {
+            p.minHorizon = 1.0;
+            p.maxHorizon = 3.0;
+            p.timeWeight = 0.2;
+          }
+          p.Q = MatrixXd::Identity(p.nx(), p.nx()) * 0.4;
+          p.R = MatrixXd::Identity(p.nu(), p.nu()) * 0.3;
+          p.initialFixed.assign(p.nx(), false);  // zero boundary states are off the distance row
+          p.finalFixed.assign(p.nx(), false);
+          DYNAMIC_SECTION((arm ? "knife edge + distance, " : "knife edge, ")
+                          << (method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : "trapezoidal")
+                          << (form == trellis::DynamicsForm::kImplicit ? ", implicit" : ", explicit")
+                          << (freeHorizon ? ", free T" : ", fixed T")) {
+            Transcription t(p);
+            REQUIRE(t.hessianAvailable());
+            CHECK(t.hessianUnavailableReason().empty());
+            const VectorXd z = randomPoint(t, rng);
+            checkHessian(t, z, 0.7, randomMultipliers(t, rng));
+            checkHessian(t, z, 0.0, randomMultipliers(t, rng));
+          }
+        }
+      }
+    }
+  }
 }
 
 TEST_CASE("hessian: constraint-force bounds add rows λ_r(x_p, u_p) with exact first and second derivatives",

@@ -8,6 +8,7 @@
 
 #include <catch2/catch.hpp>
 
+#include <trellis/core/model_builder.hpp>
 #include <trellis/optimization/transcription.hpp>
 
 #include <random>
@@ -64,6 +65,54 @@ TEST_CASE("no_malloc: the Lagrangian Hessian's values allocate nothing", "[no_ma
           CHECK(values.allFinite());
         }
       }
+    }
+  }
+}
+
+TEST_CASE("no_malloc: the Hessian with a knife edge beside a distance row allocates nothing",
+          "[no_malloc][hessian][knife_edge]") {
+  // The nonholonomic row's third-derivative terms come from the recorded implicit residual.
+  using trellis::Transform;
+  trellis::ModelBuilder b("skate");
+  b.addFrame("sx", "world", Transform::tx("x"));
+  b.addFrame("sy", "sx", Transform::ty("y"));
+  b.addFrame("body", "sy", Transform::rz("theta"), trellis::Mass{1.2, Eigen::Matrix3d::Identity() * 0.1});
+  b.addFrame("blade", "body", Transform::tx(0.3));
+  b.addKnifeEdgeConstraint("blade", Eigen::Vector3d(0.0, 1.0, 0.0));
+  b.addConfigForce("theta", "steer");
+  b.addFrame("arm", "body", Transform::rz("phi"));
+  b.addFrame("tip", "arm", Transform::tx(0.5), trellis::Mass{0.4, Eigen::Matrix3d::Identity() * 0.01});
+  b.addFrame("anchor", "world", Transform::tx(1.0));
+  b.addDistanceConstraint("tip", "anchor", 0.8);
+  b.addConfigForce("phi", "elbow");
+  const auto model = std::make_shared<const trellis::Model>(std::move(b).finalize());
+  for (const bool implicitForm : {false, true}) {
+    DYNAMIC_SECTION((implicitForm ? "implicit" : "explicit")) {
+      trellis::OptimalControlProblem p(model);
+      p.knots = 4;
+      p.setFixedHorizon(2.0);
+      p.initialFixed.assign(p.nx(), false);
+      p.finalFixed.assign(p.nx(), false);
+      if (implicitForm) p.dynamics = trellis::DynamicsForm::kImplicit;
+      trellis::Transcription t(p);
+      std::mt19937 rng(5);
+      std::uniform_real_distribution<double> d(-0.3, 0.3);
+      Eigen::VectorXd z = t.initialGuess(), z2 = z, mu(t.numConstraints());
+      for (int i = 0; i < z.size(); ++i) {
+        z(i) += d(rng);
+        z2(i) = z(i) + d(rng);
+      }
+      for (int i = 0; i < mu.size(); ++i) mu(i) = d(rng);
+      Eigen::VectorXd values(t.hessianRows().size());
+      REQUIRE(t.evalHessian(z.data(), 1.0, mu.data(), values.data()));  // warm-up
+      bool ok = false;
+      {
+        const MallocGuard guard;
+        ok = t.evalHessian(z2.data(), 0.5, mu.data(), values.data());
+        ok = ok && t.evalHessian(z2.data(), 1.0, mu.data(), values.data());
+      }
+      CHECK(ok);
+      CHECK(values.allFinite());
     }
   }
 }

@@ -2,8 +2,8 @@
 //
 // The transcription (transcription.hpp) is handed to Ipopt 3.11 through its TNLP interface (kept
 // in src/, Ipopt appears in no public header): exact sparse constraint Jacobian, analytic cost
-// gradient, and the exact Hessian of the Lagrangian (Transcription::evalHessian; or, by choice or
-// with knife-edge constraints, Ipopt's limited-memory quasi-Newton (L-BFGS) update). Linear
+// gradient, and the exact Hessian of the Lagrangian (Transcription::evalHessian, every constraint
+// kind; or, by choice, Ipopt's limited-memory quasi-Newton (L-BFGS) update). Linear
 // solver: MUMPS (Debian's build).
 //
 // "solved" means the plant can follow the result: after Ipopt converges, the knots are checked a
@@ -68,8 +68,8 @@ struct OptimizerOptions {
   int limitedMemorySize = 6;       ///< limited_memory_max_history
   DerivativeMode derivatives = DerivativeMode::kExact;  ///< exact linearizations (or differences, for comparison)
   /// The Lagrangian Hessian; unset: the problem's (OptimalControlProblem::hessian, default exact).
-  /// With nonholonomic constraints the exact Hessian is not available and L-BFGS is used (the
-  /// result's `hessian` and message say so).
+  /// Should the transcription not give the exact one, L-BFGS is used (the result's `hessian` and
+  /// message say so; no model the transcription accepts does that today).
   std::optional<HessianMode> hessian;
   /// Refinement rounds start from the previous round's primal and multipliers (carried onto the
   /// refined mesh) with Ipopt's warm_start_init_point and μ_init = warmStartBarrier.
@@ -155,8 +155,8 @@ struct OptimizationResult {
   /// inconsistent, t and index are the worst interval's start time and index (else NaN, −1).
   Status<OptimizationCode> status{OptimizationCode::kFailed};
   std::string ipoptStatus;     ///< Ipopt's ApplicationReturnStatus name, e.g. "Solve_Succeeded"
-  /// Non-empty when the exact Hessian was asked for but not available (knife edges): why, and
-  /// that L-BFGS was used.
+  /// Non-empty when the exact Hessian was asked for but not available
+  /// (Transcription::hessianAvailable): why, and that L-BFGS was used.
   std::string hessianNote;
   int iterations = 0;          ///< Ipopt iterations, summed over the rounds
   double cost = 0.0;           ///< J at the returned iterate

@@ -140,8 +140,9 @@ class Transcription {
   // ---- Lagrangian Hessian: σ ∇²J + Σ_c μ_c ∇²g_c, exact (the core's second derivatives of the
   // dynamics, computeSecondOrderContraction, one per point per evaluation). Lower triangle
   // (row ≥ column) in a pattern fixed at construction; values allocation-free.
-  /// False with nonholonomic (knife-edge) rows, whose ∂²(A(q) v)/∂q² the core does not give;
-  /// hessianUnavailableReason() says so and evalHessian returns false.
+  /// Whether evalHessian can give the exact Hessian (else hessianUnavailableReason() says why and
+  /// evalHessian returns false). True for every problem the constructor accepts: knife-edge rows
+  /// included, whose third-derivative terms ∇²_q(ρᵀA(q)v) come from the recorded implicit residual.
   bool hessianAvailable() const;
   const std::string& hessianUnavailableReason() const;  ///< empty when hessianAvailable()
   ///@{
