@@ -14,7 +14,8 @@
 // --holds: the warm start is the path of holds (quasiStaticHolds at every collocation point, the
 // dampers' load included) and the motion starts at its first hold; Ipopt then starts there with
 // μ_init 1e-2 and bound_push 1e-8 (--barrier, --bound-push override). --diagnose: the guess's
-// worst rows and each point's |q̈|. --max-iterations: Ipopt's limit (500). --friction-use F: the
+// worst rows, each point's |q̈|, and the rank of the equality rows over the variables inside their
+// bounds there (reportActiveRank: where active bounds leave rows dependent, LICQ fails). --max-iterations: Ipopt's limit (500). --friction-use F: the
 // share of the pyramid the holds may use (0.8); --hold-margin N: their margin cap (1 N; above it
 // they minimize effort). --reach: only the kinematic reach (kinematicReach).
 // NAME: a scene of examples/scenes written by make_hand_scene.py --free-ball (default hand_ball;
@@ -27,6 +28,7 @@
 #include "grasp.hpp"
 
 #include <trellis/core.hpp>
+#include <Eigen/SVD>
 #include <trellis/core/second_order.hpp>
 
 #include <algorithm>
@@ -40,6 +42,90 @@
 #include <string>
 
 using namespace trellis;
+
+namespace {
+
+/// --diagnose: the rank of the equality rows' Jacobian over the variables strictly inside their
+/// bounds at z (bounds within 1e-6 of z count as active). A combination of rows that loses every
+/// free variable with the active bounds makes the active constraints' gradients dependent (LICQ
+/// fails at z), where an interior-point method's multipliers and steps grow without limit. Rows
+/// are scaled to unit largest entry; singular values below 1e-10 of the largest count as zero;
+/// for the first three null vectors the rows with the largest weights are named.
+void reportActiveRank(Transcription& tr, const Eigen::VectorXd& z, const Model& model) {
+  Eigen::VectorXd zl, zu, gl, gu;
+  tr.variableBounds(zl, zu);
+  tr.constraintBounds(gl, gu);
+  std::vector<double> values(tr.jacobianRows().size());
+  if (!tr.evalJacobian(z.data(), values.data())) {
+    std::printf("active rank: the Jacobian failed: %s\n", tr.lastError().c_str());
+    return;
+  }
+  std::vector<int> column(tr.numVariables(), -1), row(tr.numConstraints(), -1), rowOf;
+  int free = 0, active = 0;
+  for (int i = 0; i < tr.numVariables(); ++i) {
+    if (!(zl(i) < zu(i))) continue;  // fixed by the problem
+    if (z(i) - zl(i) > 1e-6 && zu(i) - z(i) > 1e-6) column[i] = free++;
+    else ++active;
+  }
+  for (int i = 0; i < tr.numConstraints(); ++i)
+    if (gl(i) == gu(i)) {
+      row[i] = static_cast<int>(rowOf.size());
+      rowOf.push_back(i);
+    }
+  const int eq = static_cast<int>(rowOf.size());
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(eq, free);
+  for (std::size_t e = 0; e < values.size(); ++e) {
+    const int r = row[tr.jacobianRows()[e]], c = column[tr.jacobianCols()[e]];
+    if (r >= 0 && c >= 0) J(r, c) += values[e];
+  }
+  for (int i = 0; i < eq; ++i) {
+    const double largest = J.row(i).cwiseAbs().maxCoeff();
+    if (largest > 0.0) J.row(i) /= largest;
+  }
+  const Eigen::BDCSVD<Eigen::MatrixXd> svd(J, Eigen::ComputeThinU);
+  const Eigen::VectorXd& sv = svd.singularValues();
+  int zeros = 0;
+  for (Eigen::Index i = 0; i < sv.size(); ++i) zeros += sv(i) < 1e-10 * sv(0) ? 1 : 0;
+  zeros += std::max(0, eq - free);
+  std::printf("active rank: %d equality rows over %d free variables (%d bounds active within 1e-6): "
+              "%d dependent row combinations; smallest nonzero singular value %.3g of %.3g\n",
+              eq, free, active, zeros, sv(sv.size() - 1 - std::min<Eigen::Index>(zeros, sv.size() - 1)), sv(0));
+  const int n = model.nq(), nc = model.nc(), P = tr.numPoints(), N = tr.numKnots();
+  const int defectRows = tr.knotConstraintRow(0) >= 0 ? tr.knotConstraintRow(0) : tr.numConstraints();
+  const int perInterval = defectRows / std::max(1, N - 1);
+  const int dynRows = n + nc, dynStart = tr.problem().dynamics == DynamicsForm::kImplicit ? tr.numConstraints() - P * dynRows : tr.numConstraints();
+  const auto& names = model.configNames();
+  auto describe = [&](int r) {
+    char b[160];
+    if (r < defectRows) {
+      const int o = r % perInterval;
+      const int nx = 2 * n;
+      std::snprintf(b, sizeof b, "interval %d %s %s", r / perInterval, o < nx ? "simpson" : o < 2 * nx ? "hermite" : "input-average",
+                    o < 2 * nx ? (o % nx < n ? names[o % n].c_str() : ("d" + names[o % n]).c_str()) : std::to_string(o - 2 * nx).c_str());
+    } else if (r < defectRows + N * 2 * nc) {
+      const int o = (r - defectRows) % (2 * nc);
+      std::snprintf(b, sizeof b, "knot %d %s row %d", (r - defectRows) / (2 * nc), o < nc ? "h" : "A q'", o % nc);
+    } else if (r >= dynStart) {
+      const int o = (r - dynStart) % dynRows;
+      std::snprintf(b, sizeof b, "point %d %s %s", (r - dynStart) / dynRows, o < n ? "r" : "c",
+                    o < n ? names[o].c_str() : std::to_string(o - n).c_str());
+    } else {
+      std::snprintf(b, sizeof b, "row %d", r);
+    }
+    return std::string(b);
+  };
+  for (int j = 0; j < std::min<int>(3, zeros) && j < sv.size(); ++j) {
+    const Eigen::VectorXd w = svd.matrixU().col(sv.size() - 1 - j);
+    std::vector<int> order(eq);
+    for (int i = 0; i < eq; ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](int a, int b) { return std::abs(w(a)) > std::abs(w(b)); });
+    std::printf("  dependent combination %d:", j + 1);
+    for (int k = 0; k < std::min(6, eq); ++k) std::printf(" [%s %.2f]", describe(rowOf[order[k]]).c_str(), w(order[k]));
+    std::printf("\n");
+  }
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   std::string scene = "hand_ball";
@@ -182,6 +268,7 @@ int main(int argc, char** argv) {
     for (int i = 0; i < v.size(); ++i) idx[i] = i;
     std::sort(idx.begin(), idx.end(), [&](int a, int b) { return v(a) > v(b); });
     const int n = s.model.nq(), m = s.model.nu();
+    reportActiveRank(tr, z, s.model);
     const int perInterval = 4 * n + m;
     for (int k = 0; k < 15; ++k) {
       const int r = idx[k];
