@@ -8,7 +8,7 @@
 #      (and once without feedback: the same perturbation with zero gains, to show what feedback buys)
 #   4. scripts/plot_run.py → states.png, inputs.png, gains.png, tracking_error.png
 #   5. trellis view      SCENE --trajectory reference.csv --trajectory closed_loop_k.csv → view.html (3D)
-# NAME: cart_pole_swingup, acrobot_swingup or paper_pendulum_transfer (any examples/problems/*.json
+# NAME: cart_pole_swingup, acrobot_swingup, paper_pendulum_transfer or skate_lane_change (any examples/problems/*.json
 # works with the default weights). Edit the problem file and run again to explore.
 # Needs a built tree (cmake --build --preset default); TRELLIS=path overrides the program.
 set -euo pipefail
@@ -31,6 +31,7 @@ case "$name" in
   cart_pole_swingup)       Q=10,10,1,1;  R=0.1; Qf=100; sigma=0.05 ;;
   acrobot_swingup)         Q=10,10,1,1;  R=0.1; Qf=100; sigma=0.02 ;;
   paper_pendulum_transfer) Q=10,10,1,1;  R=0.1; Qf=100; sigma=0.05 ;;
+  skate_lane_change)       Q=10;         R=1;   Qf=100; sigma=0.05 ;;
   *)                       Q=10;         R=1;   Qf=100; sigma=0.02 ;;
 esac
 
