@@ -7,6 +7,8 @@
 
 #include <catch2/catch.hpp>
 
+#include "skate_model.hpp"
+
 #include <cmath>
 #include <limits>
 #include <random>
@@ -198,26 +200,8 @@ TEST_CASE("hessian: knife edges, alone and beside a holonomic row, on both forms
   // symmetric: the holonomic rows' third-derivative identity does not hold and the recorded
   // implicit residual gives ∇²_q(ρᵀA(q)v)); with `arm`, a link on the skate whose tip keeps its
   // distance to a world point (a holonomic row with h, γ and its own third derivatives) beside it.
-  using trellis::Transform;
   for (const bool arm : {false, true}) {
-    trellis::ModelBuilder b("skate");
-    b.addFrame("sx", "world", Transform::tx("x"));
-    b.addFrame("sy", "sx", Transform::ty("y"));
-    b.addFrame("body", "sy", Transform::rz("theta"), trellis::Mass{1.2, Eigen::Matrix3d::Identity() * 0.1});
-    b.addFrame("blade", "body", Transform::tx(0.3));
-    b.addKnifeEdgeConstraint("blade", Eigen::Vector3d(0.0, 1.0, 0.0));
-    b.addConfigForce("theta", "steer");
-    b.addBodyWrench("body", {trellis::WrenchEntry{std::string("thrust")}, trellis::WrenchEntry{0.0},
-                             trellis::WrenchEntry{0.0}, trellis::WrenchEntry{0.0},
-                             trellis::WrenchEntry{0.0}, trellis::WrenchEntry{0.0}});
-    if (arm) {
-      b.addFrame("arm", "body", Transform::rz("phi"));
-      b.addFrame("tip", "arm", Transform::tx(0.5), trellis::Mass{0.4, Eigen::Matrix3d::Identity() * 0.01});
-      b.addFrame("anchor", "world", Transform::tx(1.0));
-      b.addDistanceConstraint("tip", "anchor", 0.8);
-      b.addConfigForce("phi", "elbow");
-    }
-    const auto model = std::make_shared<const trellis::Model>(std::move(b).finalize());
+    const auto model = trellis::test::skateModel(arm);
     std::mt19937 rng(arm ? 31 : 13);
     for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
       for (const auto form : {trellis::DynamicsForm::kExplicit, trellis::DynamicsForm::kImplicit}) {

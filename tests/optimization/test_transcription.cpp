@@ -6,6 +6,8 @@
 
 #include <catch2/catch.hpp>
 
+#include "skate_model.hpp"
+
 #include <cmath>
 #include <limits>
 #include <random>
@@ -158,18 +160,7 @@ TEST_CASE("transcription: knife edge and non-uniform mesh derivatives agree with
           "[transcription][derivatives][knife_edge]") {
   // A skate whose blade sits off the centre of mass (the knife-edge row's ∂A/∂q is then not
   // symmetric, unlike a Hessian), both methods, fixed and free T, on a non-uniform mesh.
-  using trellis::Transform;
-  trellis::ModelBuilder b("skate");
-  b.addFrame("sx", "world", Transform::tx("x"));
-  b.addFrame("sy", "sx", Transform::ty("y"));
-  b.addFrame("body", "sy", Transform::rz("theta"), trellis::Mass{1.2, Eigen::Matrix3d::Identity() * 0.1});
-  b.addFrame("blade", "body", Transform::tx(0.3));
-  b.addKnifeEdgeConstraint("blade", Eigen::Vector3d(0.0, 1.0, 0.0));
-  b.addConfigForce("theta", "steer");
-  b.addBodyWrench("body", {trellis::WrenchEntry{std::string("thrust")}, trellis::WrenchEntry{0.0},
-                           trellis::WrenchEntry{0.0}, trellis::WrenchEntry{0.0},
-                           trellis::WrenchEntry{0.0}, trellis::WrenchEntry{0.0}});
-  const auto model = std::make_shared<const trellis::Model>(std::move(b).finalize());
+  const auto model = trellis::test::skateModel();
   std::mt19937 rng(77);
   for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
     for (const bool freeHorizon : {false, true}) {

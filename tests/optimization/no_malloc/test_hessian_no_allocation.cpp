@@ -8,7 +8,7 @@
 
 #include <catch2/catch.hpp>
 
-#include <trellis/core/model_builder.hpp>
+#include "../skate_model.hpp"
 #include <trellis/optimization/transcription.hpp>
 
 #include <random>
@@ -72,20 +72,7 @@ TEST_CASE("no_malloc: the Lagrangian Hessian's values allocate nothing", "[no_ma
 TEST_CASE("no_malloc: the Hessian with a knife edge beside a distance row allocates nothing",
           "[no_malloc][hessian][knife_edge]") {
   // The nonholonomic row's third-derivative terms come from the recorded implicit residual.
-  using trellis::Transform;
-  trellis::ModelBuilder b("skate");
-  b.addFrame("sx", "world", Transform::tx("x"));
-  b.addFrame("sy", "sx", Transform::ty("y"));
-  b.addFrame("body", "sy", Transform::rz("theta"), trellis::Mass{1.2, Eigen::Matrix3d::Identity() * 0.1});
-  b.addFrame("blade", "body", Transform::tx(0.3));
-  b.addKnifeEdgeConstraint("blade", Eigen::Vector3d(0.0, 1.0, 0.0));
-  b.addConfigForce("theta", "steer");
-  b.addFrame("arm", "body", Transform::rz("phi"));
-  b.addFrame("tip", "arm", Transform::tx(0.5), trellis::Mass{0.4, Eigen::Matrix3d::Identity() * 0.01});
-  b.addFrame("anchor", "world", Transform::tx(1.0));
-  b.addDistanceConstraint("tip", "anchor", 0.8);
-  b.addConfigForce("phi", "elbow");
-  const auto model = std::make_shared<const trellis::Model>(std::move(b).finalize());
+  const auto model = trellis::test::skateModel(true);
   for (const bool implicitForm : {false, true}) {
     DYNAMIC_SECTION((implicitForm ? "implicit" : "explicit")) {
       trellis::OptimalControlProblem p(model);
