@@ -51,10 +51,11 @@ namespace {
 /// fails at z), where an interior-point method's multipliers and steps grow without limit. Rows
 /// are scaled to unit largest entry; singular values below 1e-10 of the largest count as zero;
 /// for the first three null vectors the rows with the largest weights are named.
-void reportActiveRank(Transcription& tr, const Eigen::VectorXd& z, const Model& model) {
-  Eigen::VectorXd zl, zu, gl, gu;
+void reportActiveRank(Transcription& tr, const Eigen::VectorXd& z, const Model& model, double tol = 1e-6) {
+  Eigen::VectorXd zl, zu, gl, gu, g(tr.numConstraints());
   tr.variableBounds(zl, zu);
   tr.constraintBounds(gl, gu);
+  if (!tr.evalConstraints(z.data(), g.data())) return;
   std::vector<double> values(tr.jacobianRows().size());
   if (!tr.evalJacobian(z.data(), values.data())) {
     std::printf("active rank: the Jacobian failed: %s\n", tr.lastError().c_str());
@@ -64,11 +65,13 @@ void reportActiveRank(Transcription& tr, const Eigen::VectorXd& z, const Model& 
   int free = 0, active = 0;
   for (int i = 0; i < tr.numVariables(); ++i) {
     if (!(zl(i) < zu(i))) continue;  // fixed by the problem
-    if (z(i) - zl(i) > 1e-6 && zu(i) - z(i) > 1e-6) column[i] = free++;
+    if (z(i) - zl(i) > tol && zu(i) - z(i) > tol) column[i] = free++;
     else ++active;
   }
+  int nearInequalities = 0;
   for (int i = 0; i < tr.numConstraints(); ++i)
-    if (gl(i) == gu(i)) {
+    if (gl(i) == gu(i) || std::min(g(i) - gl(i), gu(i) - g(i)) <= tol) {
+      nearInequalities += gl(i) == gu(i) ? 0 : 1;
       row[i] = static_cast<int>(rowOf.size());
       rowOf.push_back(i);
     }
@@ -87,9 +90,10 @@ void reportActiveRank(Transcription& tr, const Eigen::VectorXd& z, const Model& 
   int zeros = 0;
   for (Eigen::Index i = 0; i < sv.size(); ++i) zeros += sv(i) < 1e-10 * sv(0) ? 1 : 0;
   zeros += std::max(0, eq - free);
-  std::printf("active rank: %d equality rows over %d free variables (%d bounds active within 1e-6): "
-              "%d dependent row combinations; smallest nonzero singular value %.3g of %.3g\n",
-              eq, free, active, zeros, sv(sv.size() - 1 - std::min<Eigen::Index>(zeros, sv.size() - 1)), sv(0));
+  std::printf("active rank (tolerance %g): %d equality and %d active inequality rows over %d free variables (%d "
+              "bounds active): %d dependent row combinations; smallest nonzero singular value %.3g of %.3g\n",
+              tol, eq - nearInequalities, nearInequalities, free, active, zeros,
+              sv(sv.size() - 1 - std::min<Eigen::Index>(zeros, sv.size() - 1)), sv(0));
   const int n = model.nq(), nc = model.nc(), P = tr.numPoints(), N = tr.numKnots();
   const int defectRows = tr.knotConstraintRow(0) >= 0 ? tr.knotConstraintRow(0) : tr.numConstraints();
   const int perInterval = defectRows / std::max(1, N - 1);
@@ -110,7 +114,15 @@ void reportActiveRank(Transcription& tr, const Eigen::VectorXd& z, const Model& 
       std::snprintf(b, sizeof b, "point %d %s %s", (r - dynStart) / dynRows, o < n ? "r" : "c",
                     o < n ? names[o].c_str() : std::to_string(o - n).c_str());
     } else {
-      std::snprintf(b, sizeof b, "row %d", r);
+      const int f0 = tr.forceRow(0), nF = tr.forceRowsPerPoint();
+      if (f0 >= 0 && r >= f0 && nF > 0) {
+        const int j = (r - f0) % nF, nBox = nF - static_cast<int>(tr.problem().forceCombinations.size());
+        std::snprintf(b, sizeof b, "point %d %s", (r - f0) / nF,
+                      j < nBox ? ("lambda bound " + std::to_string(j)).c_str()
+                               : tr.problem().forceCombinations[j - nBox].name.c_str());
+      } else {
+        std::snprintf(b, sizeof b, "row %d", r);
+      }
     }
     return std::string(b);
   };
@@ -289,6 +301,19 @@ int main(int argc, char** argv) {
   const OptimizationResult r = optimizeTrajectory(problem, oo);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("optimizer: %s\n", r.describe().c_str());
+  if (diagnose && !r.ok() && r.variables.size() > 0) {
+    // Where the solve stopped: the same rank report at the returned iterate (its own mesh).
+    OptimalControlProblem last = problem;
+    last.knots = r.trajectory.size();
+    last.mesh = r.trajectory.size() > 1 ? Eigen::VectorXd(r.trajectory.times() / r.trajectory.times()(r.trajectory.size() - 1)) : Eigen::VectorXd();
+    Transcription tr(last);
+    if (tr.numVariables() == r.variables.size()) {
+      for (const double tol : {1e-6, 1e-3, 1e-2}) {
+        std::printf("at the returned iterate: ");
+        reportActiveRank(tr, r.variables, s.model, tol);
+      }
+    }
+  }
   std::printf("evaluations: %ld dynamics, %ld linearizations, %ld second-order; solve %.3f s wall, %.3f s CPU\n",
               r.dynamicsEvaluations, r.linearizationEvaluations, r.secondOrderEvaluations, r.solveTime,
               r.solveCpuTime);
