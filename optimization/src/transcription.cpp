@@ -102,8 +102,6 @@ struct Transcription::Impl {
   long dynamicsCount = 0, linearizationCount = 0, secondOrderCount = 0;
 
   // ---- Lagrangian Hessian (lower triangle, structure fixed at construction) -------------------
-  bool hessianOk = true;         // evalHessian can run (hessianWhy says why not); true today
-  std::string hessianWhy;
   std::vector<int> hessRows, hessCols;
   Data hessData;
   SecondOrderWorkspace secondOrder;
@@ -849,10 +847,6 @@ struct Transcription::Impl {
   }
 
   bool hessianValues(const double* z, double sigma, const double* mult, double* values) {
-    if (!hessianOk) {
-      error = hessianWhy;
-      return false;
-    }
     if (!evaluate(z, true)) return false;  // f, and S_r at the knots
     const double T = horizonOf(z);
     C.setZero();
@@ -1049,8 +1043,12 @@ void Transcription::constraintBounds(Eigen::VectorXd& lower, Eigen::VectorXd& up
 int Transcription::forceRowsPerPoint() const { return impl_->nF; }
 int Transcription::forceRow(int point) const { return impl_->nF > 0 ? impl_->forceStart + point * impl_->nF : -1; }
 
-bool Transcription::hessianAvailable() const { return impl_->hessianOk; }
-const std::string& Transcription::hessianUnavailableReason() const { return impl_->hessianWhy; }
+// Every model and form the constructor accepts has its exact Hessian (knife edges included).
+bool Transcription::hessianAvailable() const { return true; }
+const std::string& Transcription::hessianUnavailableReason() const {
+  static const std::string none;
+  return none;
+}
 const std::vector<int>& Transcription::hessianRows() const { return impl_->hessRows; }
 const std::vector<int>& Transcription::hessianCols() const { return impl_->hessCols; }
 

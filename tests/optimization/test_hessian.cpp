@@ -112,6 +112,25 @@ VectorXd randomMultipliers(const Transcription& t, std::mt19937& rng) {
   return mu;
 }
 
+/// One example problem as the Hessian checks take it: 4 knots on a non-uniform mesh (every interval
+/// its own h), the given rule, a free horizon with a time weight if asked, and every cost term.
+OptimalControlProblem hessianCase(const OptimalControlProblem& file, CollocationMethod method, bool freeHorizon) {
+  OptimalControlProblem p = file;
+  p.knots = 4;
+  p.mesh.resize(4);
+  p.mesh << 0.0, 0.2, 0.65, 1.0;
+  p.method = method;
+  if (freeHorizon) {
+    p.minHorizon = 0.5 * p.horizon;
+    p.maxHorizon = 2.0 * p.horizon;
+    p.timeWeight = 0.3;
+  }
+  p.Q = MatrixXd::Identity(p.nx(), p.nx()) * 0.7;
+  p.Qf = MatrixXd::Identity(p.nx(), p.nx()) * 3.0;
+  p.goalState = VectorXd::LinSpaced(p.nx(), 0.1, 0.9);
+  return p;
+}
+
 }  // namespace
 
 TEST_CASE("hessian: the Lagrangian Hessian agrees with differences of the exact gradient",
@@ -121,20 +140,8 @@ TEST_CASE("hessian: the Lagrangian Hessian agrees with differences of the exact 
     const OptimalControlProblem file = trellis::loadProblem(problemPath(name));
     for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
       for (const bool freeHorizon : {false, true}) {
-        OptimalControlProblem p = file;
-        p.knots = 4;
-        p.mesh.resize(4);
-        p.mesh << 0.0, 0.2, 0.65, 1.0;  // non-uniform: every interval its own h
-        p.method = method;
-        if (freeHorizon) {
-          p.minHorizon = 0.5 * p.horizon;
-          p.maxHorizon = 2.0 * p.horizon;
-          p.timeWeight = 0.3;
-        }
-        p.Q = MatrixXd::Identity(p.nx(), p.nx()) * 0.7;
+        OptimalControlProblem p = hessianCase(file, method, freeHorizon);
         p.Q(0, 1) = p.Q(1, 0) = 0.2;
-        p.Qf = MatrixXd::Identity(p.nx(), p.nx()) * 3.0;
-        p.goalState = VectorXd::LinSpaced(p.nx(), 0.1, 0.9);
         DYNAMIC_SECTION(name << (method == CollocationMethod::kHermiteSimpson ? " hermite_simpson"
                                                                              : " trapezoidal")
                              << (freeHorizon ? " free T" : " fixed T")) {
@@ -155,21 +162,9 @@ TEST_CASE("hessian: the implicit dynamics form's Lagrangian Hessian agrees with 
     const OptimalControlProblem file = trellis::loadProblem(problemPath(name));
     for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
       for (const bool freeHorizon : {false, true}) {
-        OptimalControlProblem p = file;
+        OptimalControlProblem p = hessianCase(file, method, freeHorizon);
         p.dynamics = trellis::DynamicsForm::kImplicit;
-        p.knots = 4;
-        p.mesh.resize(4);
-        p.mesh << 0.0, 0.2, 0.65, 1.0;
-        p.method = method;
-        if (freeHorizon) {
-          p.minHorizon = 0.5 * p.horizon;
-          p.maxHorizon = 2.0 * p.horizon;
-          p.timeWeight = 0.3;
-        }
-        p.Q = MatrixXd::Identity(p.nx(), p.nx()) * 0.7;
-        p.Qf = MatrixXd::Identity(p.nx(), p.nx()) * 3.0;
         p.R = MatrixXd::Identity(p.nu(), p.nu()) * 0.4;
-        p.goalState = VectorXd::LinSpaced(p.nx(), 0.1, 0.9);
         if (p.model->nc() > 0) p.forceUpper(0) = 50.0;
         DYNAMIC_SECTION(name << (method == CollocationMethod::kHermiteSimpson ? " hermite_simpson" : " trapezoidal")
                              << (freeHorizon ? " free T" : " fixed T")) {
