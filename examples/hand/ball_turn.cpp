@@ -146,6 +146,11 @@ OptimalControlProblem makeBallTurnProblem(std::shared_ptr<const Model> model, co
   p.Q = Eigen::MatrixXd::Zero(2 * n, 2 * n);
   p.Q.bottomRightCorner(n, n).diagonal().setConstant(options.effortScale * options.velocityWeight);
   p.goalState = Eigen::VectorXd::Zero(2 * n);
+  if (options.implicitForm) {
+    p.dynamics = DynamicsForm::kImplicit;
+    if (options.accelerationWeight > 0.0)
+      p.accelerationWeights = Eigen::VectorXd::Constant(n, options.effortScale * options.accelerationWeight);
+  }
   const double facet = limits.friction * std::cos(std::numbers::pi / options.facets);
   for (std::size_t d = 0; d < limits.digits.size(); ++d) {
     const int r = 3 * static_cast<int>(d);

@@ -16,8 +16,8 @@
 // Motion. Rest to rest in T: x(0) = the stored grasp at rest; at T the ball's yaw (the first of
 // its Z-Y-X angles, a turn about the palm normal z) is `angle`, every velocity is zero, the other
 // coordinates are free (the knot constraints h = 0 keep the pads on the ball). Tensions in
-// [0, u_max], digit joints in their ranges. Cost c ∫ uᵀ u + w_v ‖q̇‖² dt: effort, plus a small weight
-// on the velocities that keeps the motion smooth. Rest at the ends fixes only the independent
+// [0, u_max], digit joints in their ranges. Cost c ∫ uᵀ u + w_v ‖q̇‖² [+ w_a ‖q̈‖², implicit form] dt:
+// effort, plus small weights on the velocities (and accelerations) that keep the motion smooth. Rest at the ends fixes only the independent
 // coordinates' rates (and, with a fixed start, configuration): the knot rows A q̇ = 0 and h = 0
 // then fix the rest, and no row is left with a zero Jacobian (makeBallTurnProblem).
 #pragma once
@@ -57,6 +57,14 @@ struct BallTurnOptions {
   /// hand's cost (~7·10³ N² s) outweighs defects of ~1 and its first steps trade feasibility for
   /// cost (measured: inf_pr 4 → 10⁴ in 10 iterations); at 1e-3 the same start stays near feasible.
   double effortScale = 1e-3;
+  /// The transcription's implicit dynamics form (q̈, λ variables, the equations of motion as rows
+  /// in force units; problem.hpp DynamicsForm): measured to converge where the explicit form's
+  /// velocity defects (~10² rad/s off equilibrium on the light phalanges) stall (README).
+  bool implicitForm = false;
+  /// w_a: with the implicit form, c w_a ∫ ‖q̈‖² dt joins the cost (OptimalControlProblem::
+  /// accelerationWeights): the smoothness term that pins Hermite–Simpson's free q̈ direction
+  /// (knots +a, midpoints −a/2) on the light phalanges. [N² s⁴/rad²]
+  double accelerationWeight = 10.0;
   /// The start's configuration free except the yaw (at rest): the stored grasp is not an
   /// equilibrium under u ≥ 0, so the optimizer chooses the grasp it starts from.
   bool freeInitialConfiguration = true;

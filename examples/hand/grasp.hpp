@@ -172,6 +172,12 @@ struct GraspNlpOptions {
   double maxTilt = 0.5;        ///< largest angle between a pad's normal and the contact normal [rad]
   double marginCap = 1.0;      ///< s ≤ this [N]: above it only the effort term is minimized
   double tensionWeight = 1e-3; ///< w of w Σ (u_k / u_max,k)² beside −s [N]
+  /// Every tension in [reserve, u_max − reserve] [N]. Tendons only pull and are clipped to
+  /// [0, u_max] in the closed loops: a hold with tensions at 0 N (the effort term's pull) leaves
+  /// the feedback no authority one way on those tendons. Measured on the hold after the tendon
+  /// geometry change: with 5 tendons at 0 N the 200 Hz closed loops diverged (error 1e-3 → 5 in
+  /// 0.9 s); with the reserve, examples/hand/README.md.
+  double tensionReserve = 1.0;
   /// Ipopt's settings of the first solve, with Ipopt's default bound relaxation 1e-8 (from the
   /// search's point its iterates reach a better local maximum of s than without; measured, README).
   /// The equalities are then met to ~1e-8 only; a second solve from its result without relaxation
@@ -214,6 +220,8 @@ struct GraspNlpResult {
   NlpResult nlp;                  ///< Ipopt's status, iterations, multipliers, time
   double relaxedViolation = 0.0;  ///< the first (relaxed) solve's constraint violation
   int firstIterations = 0;        ///< the first solve's iterations (nlp.iterations: both)
+  bool keptRelaxed = false;       ///< the exact solve ended farther from feasible: the relaxed point was kept
+  bool polished = false;          ///< findEquilibrium made q̈ = 0 at the result's tensions
   GraspCheck check;               ///< checkGrasp at (q, u) on `scene`
   /// The constraint groups still violated at the last iterate and by how much, and the bounds
   /// with the largest multipliers (∂(−s + effort)/∂bound: which range limits s most), named.

@@ -2,10 +2,11 @@
 // (issue 26, step 1; grasp.hpp) and writes it for make_hand_scene.py.
 //
 //   hand_ball_grasp [--scene NAME] [--out FILE] [--diagnose] [--evaluations N] [--no-thumb-base] [--start FILE]
-//                   [--nlp]
+//                   [--nlp] [--max-iterations N]
 //
 // --nlp: the hold as a smooth program (grasp.hpp, solveGraspNlp: Ipopt over q, u and the margin s,
 // exact first derivatives) from the posture of --start (or the stored grasp), no search;
+// --max-iterations N: Ipopt's limit for each of --nlp's two solves (3000; the stored hold: 8000);
 // --diagnose: the stored posture's hold by parts (grasp.hpp, diagnoseHold) instead of a search;
 // --evaluations: Nelder–Mead's budget for the first target; --no-thumb-base: keep the scene's thumb
 // base; --start: the numbers of a "parameters:" line of an earlier run as the start.
@@ -37,6 +38,7 @@ int main(int argc, char** argv) {
   std::string scene = "hand_ball", out;
   bool diagnose = false;
   int evaluations = 0;
+  int nlpIterations = 0;  // --max-iterations: each Ipopt solve of --nlp (0: GraspNlpOptions' default)
   bool thumbBase = true;
   std::string startFile;
   bool nlp = false;
@@ -45,11 +47,12 @@ int main(int argc, char** argv) {
     if ((a == "--scene" || a == "--out") && i + 1 < argc) (a == "--scene" ? scene : out) = argv[++i];
     else if (a == "--diagnose") diagnose = true;
     else if (a == "--evaluations" && i + 1 < argc) evaluations = std::atoi(argv[++i]);
+    else if (a == "--max-iterations" && i + 1 < argc) nlpIterations = std::atoi(argv[++i]);  // ≤ 0: the default
     else if (a == "--no-thumb-base") thumbBase = false;
     else if (a == "--nlp") nlp = true;
     else if (a == "--start" && i + 1 < argc) startFile = argv[++i];
     else if (a == "--help") {
-      std::cout << "usage: hand_ball_grasp [--scene NAME] [--out FILE] [--diagnose] [--evaluations N] [--no-thumb-base] [--start FILE] [--nlp]\n";
+      std::cout << "usage: hand_ball_grasp [--scene NAME] [--out FILE] [--diagnose] [--evaluations N] [--no-thumb-base] [--start FILE] [--nlp] [--max-iterations N]\n";
       return 0;
     } else {
       std::cerr << "hand_ball_grasp: unknown option or missing value '" << a << "' (--help)\n";
@@ -145,7 +148,9 @@ int main(int argc, char** argv) {
       return 1;
     }
     const Scene start = parseScene(g.scene, "<start>");
-    const hand::GraspNlpResult r = hand::solveGraspNlp(g.scene, g.q, g.u, limits);
+    hand::GraspNlpOptions nlpOptions;
+    if (nlpIterations > 0) nlpOptions.ipopt.maxIterations = nlpIterations;
+    const hand::GraspNlpResult r = hand::solveGraspNlp(g.scene, g.q, g.u, limits, nlpOptions);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const hand::GraspCheck& c = r.check;
     std::printf("grasp nlp: %s, %d iterations, %ld evaluations, Ipopt %.2f s, whole %.2f s\n", r.nlp.ipoptStatus.c_str(),

@@ -9,13 +9,15 @@
 // stored grasp is no hold with pushing pads; the program prints how far it is from one).
 // --lbfgs: Ipopt's limited-memory Hessian instead of the exact one. --implicit: the transcription's
 // implicit dynamics form (q̈ and λ as variables, the equations of motion as rows in force units;
-// problem.hpp DynamicsForm). --effort-scale C: BallTurnOptions::effortScale (1e-3). --fixed-start:
+// problem.hpp DynamicsForm). --acceleration-weight W: with --implicit, BallTurnOptions::
+// accelerationWeight (10; 0: none). --effort-scale C: BallTurnOptions::effortScale (1e-3). --fixed-start:
 // the turn starts at the stored grasp itself (BallTurnOptions::freeInitialConfiguration false).
 // --holds: the warm start is the path of holds (quasiStaticHolds at every collocation point, the
 // dampers' load included) and the motion starts at its first hold; Ipopt then starts there with
 // μ_init 1e-2 and bound_push 1e-8 (--barrier, --bound-push override). --diagnose: the guess's
 // worst rows, each point's |q̈|, and the rank of the equality rows over the variables inside their
-// bounds there (reportActiveRank: where active bounds leave rows dependent, LICQ fails). --max-iterations: Ipopt's limit (500). --friction-use F: the
+// bounds there (reportActiveRank: where active bounds leave rows dependent, LICQ fails). --max-iterations: Ipopt's limit (500);
+// --refinements R: rounds of mesh refinement after the first solve (OptimizerOptions::maxRefinements; 0: check only). --friction-use F: the
 // share of the pyramid the holds may use (0.8); --hold-margin N: their margin cap (1 N; above it
 // they minimize effort). --reach: only the kinematic reach (kinematicReach).
 // NAME: a scene of examples/scenes written by make_hand_scene.py --free-ball (default hand_ball;
@@ -143,9 +145,10 @@ int main(int argc, char** argv) {
   std::string scene = "hand_ball";
   hand::BallTurnOptions options;
   int printLevel = 0;
-  bool lbfgs = false, holds = false, diagnose = false, reach = false, implicitForm = false;
+  bool lbfgs = false, holds = false, diagnose = false, reach = false;
   hand::RestHoldOptions holdOptions;
   int maxIterations = 500;
+  int refinements = -1;  // --refinements: OptimizerOptions::maxRefinements (-1: its default)
   double barrier = 0.0, boundPush = 0.0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -164,7 +167,8 @@ int main(int argc, char** argv) {
       else if (a == "--facets") options.facets = std::stoi(value());
       else if (a == "--print-level") printLevel = std::stoi(value());
       else if (a == "--lbfgs") lbfgs = true;
-      else if (a == "--implicit") implicitForm = true;
+      else if (a == "--implicit") options.implicitForm = true;
+      else if (a == "--acceleration-weight") options.accelerationWeight = std::stod(value());
       else if (a == "--effort-scale") options.effortScale = std::stod(value());
       else if (a == "--fixed-start") options.freeInitialConfiguration = false;
       else if (a == "--holds") holds = true;
@@ -173,12 +177,13 @@ int main(int argc, char** argv) {
       else if (a == "--friction-use") holdOptions.frictionUse = std::stod(value());
       else if (a == "--hold-margin") holdOptions.marginCap = std::stod(value());
       else if (a == "--max-iterations") maxIterations = std::stoi(value());
+      else if (a == "--refinements") refinements = std::stoi(value());
       else if (a == "--barrier") barrier = std::stod(value());
       else if (a == "--bound-push") boundPush = std::stod(value());
       else if (a == "--help") {
         std::cout << "usage: hand_ball_turn [--scene NAME] [--angle DEG] [--horizon S] [--knots N] "
-                     "[--facets F] [--print-level L] [--lbfgs] [--holds] [--diagnose] [--max-iterations N] "
-                     "[--barrier MU] [--bound-push P] [--implicit] [--effort-scale C] [--fixed-start] [--friction-use F] "
+                     "[--facets F] [--print-level L] [--lbfgs] [--holds] [--diagnose] [--max-iterations N] [--refinements R] "
+                     "[--barrier MU] [--bound-push P] [--implicit] [--acceleration-weight W] [--effort-scale C] [--fixed-start] [--friction-use F] "
                      "[--hold-margin N] [--reach]\n";
         return 0;
       } else {
@@ -213,7 +218,6 @@ int main(int argc, char** argv) {
     }
     if (holds) options.freeInitialConfiguration = false;
     problem = hand::makeBallTurnProblem(model, s.q, limits, options);
-    if (implicitForm) problem.dynamics = DynamicsForm::kImplicit;
     if (holds) {
       const auto th = std::chrono::steady_clock::now();
       // Holds at every collocation point (knots and midpoints): the midpoints' dynamics then start
@@ -298,6 +302,7 @@ int main(int argc, char** argv) {
   if (barrier > 0.0) oo.initialBarrier = barrier;
   if (boundPush > 0.0) oo.initialBoundPush = boundPush;
   oo.maxIterations = maxIterations;
+  if (refinements >= 0) oo.maxRefinements = refinements;
   const OptimizationResult r = optimizeTrajectory(problem, oo);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("optimizer: %s\n", r.describe().c_str());

@@ -44,9 +44,14 @@ Modelling choices (no single published value; chosen so the model is physically 
    posture, and damping 0.002-0.005 N m s/rad: the order of magnitude of passive finger joint
    moments (about 0.05 N m over the middle of the range); they keep the unloaded digits from
    drifting in the simulations, and do not decide controllability;
- - via points are placed at half a moment arm along the bone from each joint centre, at the moment
-   arm from it, so the cable's moment arm equals the cited value in extension and grows (flexors)
-   or shrinks (extensors) smoothly with flexion, as pulleys and extensor hoods do;
+ - via points straddle each joint at the cited moment arm from its centre, so the cable's moment
+   arm equals the cited value in extension and grows (flexors) or shrinks (extensors) smoothly
+   with flexion, as pulleys and extensor hoods do. Their offset along the bone is s =
+   arm tan(theta_c / 2), theta_c = the joint's range towards their side + 10 deg: two via points
+   on the side a joint closes towards meet at theta_c, and beyond it the cable between them points
+   the other way (the moment arm jumps from +r to -r). The first choice, s = arm / 2, put theta_c
+   at 53 deg, inside every flexion range; the cost of the later crossing is a flexor arm that grows
+   by up to ~1.6-1.9x at full flexion (arm sin(beta + theta/2) / sin(beta), beta = atan(arm / s));
  - the ball (radius 35 mm, about a tennis ball) is fixed in space: the issue fixes the hand at
    20 coordinates and its gains at 23 x 40; a free ball would add 6 coordinates (Euler angles with
    their singularities) and make the gains 23 x 52.
@@ -265,6 +270,24 @@ def via(name, x, y, z):
     return const_frame(name, x, y, z)
 
 
+# Via points straddling a joint on the side the joint closes towards (flexors on the palmar side,
+# a dorsal pair under extension) lie at distance `arm` from the axis and `s` along the bone on each
+# side. Turning the joint by theta brings them together: they meet at theta_c = 2 atan(s / arm),
+# where the segment between them has zero length and beyond which it points the other way -- the
+# tendon's moment arm jumps from +r to -r there (a flexor turned extensor: the dynamics become
+# discontinuous). Before theta_c the moment arm is arm sin(beta + theta/2) / sin(beta),
+# beta = atan(arm / s): arm in extension, growing with flexion. So s is chosen per joint to put
+# theta_c CROSSING_MARGIN beyond the end of the joint's range: s = arm tan(theta_c / 2). (Half a
+# moment arm, the first choice, put theta_c at 53 deg, inside every flexion range.)
+CROSSING_MARGIN = math.radians(10.0)
+
+
+def straddle(arm, closing_range):
+    """Offset along the bone of a via pair at `arm` from a joint that closes by up to
+    `closing_range` rad towards their side: their meeting angle is closing_range + CROSSING_MARGIN."""
+    return arm * math.tan(0.5 * (closing_range + CROSSING_MARGIN))
+
+
 def finger(f, tendons):
     """Frames of one finger under its MCP site, and its tendons (appended to `tendons`)."""
     meta, l1, l2, l3 = (r * HAND_LENGTH for r in RATIOS[f])
@@ -273,24 +296,29 @@ def finger(f, tendons):
     e_mcp, e_pip, e_dip = EXTENSOR_ARMS
     s = INTEROSSEUS_LATERAL
     n = lambda part: f"{f}_{part}"
-    # Via points straddling a joint: at -arm/2 on the proximal body, +arm/2 on the distal body.
+    # Via points straddling a joint: at -s on the proximal body, +s on the distal body, the flexors'
+    # s from straddle() (their meeting angle beyond the flexion range), the extensors' arm/2 (the
+    # dorsal pair parts under flexion; the ranges start at 0, no hyperextension).
+    r_mcp, r_pip, r_dip = JOINT_RANGE["mcp_flex"][1], JOINT_RANGE["pip"][1], JOINT_RANGE["dip"][1]
+    m_fdp, m_fds = straddle(mcp_fdp, r_mcp), straddle(mcp_fds, r_mcp)
+    p_fdp, p_fds, d_fdp = straddle(pip_fdp, r_pip), straddle(pip_fds, r_pip), straddle(dip_fdp, r_dip)
     site_vias = [
-        via(n("fdp_origin"), -0.06, 0.0, -mcp_fdp), via(n("fdp_mcp_in"), -mcp_fdp / 2, 0.0, -mcp_fdp),
-        via(n("fds_origin"), -0.06, 0.0, -mcp_fds), via(n("fds_mcp_in"), -mcp_fds / 2, 0.0, -mcp_fds),
+        via(n("fdp_origin"), -0.06, 0.0, -mcp_fdp), via(n("fdp_mcp_in"), -m_fdp, 0.0, -mcp_fdp),
+        via(n("fds_origin"), -0.06, 0.0, -mcp_fds), via(n("fds_mcp_in"), -m_fds, 0.0, -mcp_fds),
         via(n("edc_origin"), -0.06, 0.0, e_mcp), via(n("edc_mcp_in"), -e_mcp / 2, 0.0, e_mcp),
     ]
     prox_vias = [
-        via(n("fdp_mcp_out"), mcp_fdp / 2, 0.0, -mcp_fdp), via(n("fdp_pip_in"), l1 - pip_fdp / 2, 0.0, -pip_fdp),
-        via(n("fds_mcp_out"), mcp_fds / 2, 0.0, -mcp_fds), via(n("fds_pip_in"), l1 - pip_fds / 2, 0.0, -pip_fds),
+        via(n("fdp_mcp_out"), m_fdp, 0.0, -mcp_fdp), via(n("fdp_pip_in"), l1 - p_fdp, 0.0, -pip_fdp),
+        via(n("fds_mcp_out"), m_fds, 0.0, -mcp_fds), via(n("fds_pip_in"), l1 - p_fds, 0.0, -pip_fds),
         via(n("edc_mcp_out"), e_mcp / 2, 0.0, e_mcp), via(n("edc_pip_in"), l1 - e_pip / 2, 0.0, e_pip),
     ]
     mid_vias = [
-        via(n("fdp_pip_out"), pip_fdp / 2, 0.0, -pip_fdp), via(n("fdp_dip_in"), l2 - dip_fdp / 2, 0.0, -dip_fdp),
-        via(n("fds_insertion"), pip_fds / 2, 0.0, -pip_fds),
+        via(n("fdp_pip_out"), p_fdp, 0.0, -pip_fdp), via(n("fdp_dip_in"), l2 - d_fdp, 0.0, -dip_fdp),
+        via(n("fds_insertion"), p_fds, 0.0, -pip_fds),
         via(n("edc_pip_out"), e_pip / 2, 0.0, e_pip), via(n("edc_dip_in"), l2 - e_dip / 2, 0.0, e_dip),
     ]
     dist_vias = [
-        via(n("fdp_insertion"), dip_fdp / 2, 0.0, -dip_fdp),
+        via(n("fdp_insertion"), d_fdp, 0.0, -dip_fdp),
         via(n("edc_insertion"), e_dip / 2, 0.0, e_dip),
     ]
     # Interossei on each side that has one: radial (+y) and/or ulnar (-y). [A83]
@@ -300,9 +328,10 @@ def finger(f, tendons):
     for side, muscle in sides.items():
         sy = s if side == "radial" else -s
         tag = muscle.lower()
+        i_mcp = straddle(INTEROSSEUS_PALMAR, r_mcp)  # palmar at the MCP: a flexor pair
         site_vias += [via(n(f"{tag}_origin"), -0.04, sy, -INTEROSSEUS_PALMAR / 2),
-                      via(n(f"{tag}_mcp_in"), -INTEROSSEUS_PALMAR / 2, sy, -INTEROSSEUS_PALMAR)]
-        prox_vias += [via(n(f"{tag}_mcp_out"), INTEROSSEUS_PALMAR / 2, sy, -INTEROSSEUS_PALMAR),
+                      via(n(f"{tag}_mcp_in"), -i_mcp, sy, -INTEROSSEUS_PALMAR)]
+        prox_vias += [via(n(f"{tag}_mcp_out"), i_mcp, sy, -INTEROSSEUS_PALMAR),
                       via(n(f"{tag}_pip_in"), l1 - INTEROSSEUS_PIP / 2, sy / 2, INTEROSSEUS_PIP)]
         mid_vias += [via(n(f"{tag}_pip_out"), INTEROSSEUS_PIP / 2, sy / 2, INTEROSSEUS_PIP),
                      via(n(f"{tag}_dip_in"), l2 - INTEROSSEUS_DIP / 2, 0.0, INTEROSSEUS_DIP)]
@@ -346,23 +375,30 @@ def thumb(tendons, rot, cmc=THUMB_CMC):
     fc, fm, fi = THUMB_FPL
     ec, em, ei = THUMB_EPL
     a = THUMB_ABD_ARM
+    # Straddling pairs as in finger(): the palmar pairs (FPL, ADP) from straddle() over each
+    # joint's flexion range, the dorsal ones (EPL) over its extension range (CMC and IP extend).
+    c_lo, c_hi = JOINT_RANGE["cmc_flex"]
+    r_mcp, (i_lo, i_hi) = JOINT_RANGE["mcp"][1], JOINT_RANGE["ip"]
+    s_fc, s_fm, s_fi = straddle(fc, c_hi), straddle(fm, r_mcp), straddle(fi, i_hi)
+    s_ec, s_em, s_ei = straddle(ec, -c_lo), em / 2, straddle(ei, -i_lo)
+    s_adp = straddle(THUMB_ADP_MCP, r_mcp)
     base_vias = [
-        via(n("fpl_origin"), -0.05, 0.0, -fc), via(n("fpl_cmc_in"), -fc / 2, 0.0, -fc),
-        via(n("epl_origin"), -0.05, -a / 2, ec), via(n("epl_cmc_in"), -ec / 2, -a / 2, ec),
+        via(n("fpl_origin"), -0.05, 0.0, -fc), via(n("fpl_cmc_in"), -s_fc, 0.0, -fc),
+        via(n("epl_origin"), -0.05, -a / 2, ec), via(n("epl_cmc_in"), -s_ec, -a / 2, ec),
         via(n("apl_origin"), -0.05, a, 0.002), via(n("apl_cmc_in"), -a / 2, a, 0.002),
     ]
     meta_vias = [
-        via(n("fpl_cmc_out"), fc / 2, 0.0, -fc), via(n("fpl_mcp_in"), meta - fm / 2, 0.0, -fm),
-        via(n("epl_cmc_out"), ec / 2, -a / 2, ec), via(n("epl_mcp_in"), meta - em / 2, 0.0, em),
+        via(n("fpl_cmc_out"), s_fc, 0.0, -fc), via(n("fpl_mcp_in"), meta - s_fm, 0.0, -fm),
+        via(n("epl_cmc_out"), s_ec, -a / 2, ec), via(n("epl_mcp_in"), meta - s_em, 0.0, em),
         via(n("apl_insertion"), a / 2, a, 0.002),
-        via(n("adp_mcp_in"), meta - THUMB_ADP_MCP / 2, -a, -THUMB_ADP_MCP),
+        via(n("adp_mcp_in"), meta - s_adp, -a, -THUMB_ADP_MCP),
     ]
     prox_vias = [
-        via(n("fpl_mcp_out"), fm / 2, 0.0, -fm), via(n("fpl_ip_in"), l1 - fi / 2, 0.0, -fi),
-        via(n("epl_mcp_out"), em / 2, 0.0, em), via(n("epl_ip_in"), l1 - ei / 2, 0.0, ei),
-        via(n("adp_insertion"), THUMB_ADP_MCP / 2, -a, -THUMB_ADP_MCP),
+        via(n("fpl_mcp_out"), s_fm, 0.0, -fm), via(n("fpl_ip_in"), l1 - s_fi, 0.0, -fi),
+        via(n("epl_mcp_out"), s_em, 0.0, em), via(n("epl_ip_in"), l1 - s_ei, 0.0, ei),
+        via(n("adp_insertion"), s_adp, -a, -THUMB_ADP_MCP),
     ]
-    dist_vias = [via(n("fpl_insertion"), fi / 2, 0.0, -fi), via(n("epl_insertion"), ei / 2, 0.0, ei)]
+    dist_vias = [via(n("fpl_insertion"), s_fi, 0.0, -fi), via(n("epl_insertion"), s_ei, 0.0, ei)]
     tendons.append(("FPL", [n(p) for p in ("fpl_origin", "fpl_cmc_in", "fpl_cmc_out", "fpl_mcp_in",
                                            "fpl_mcp_out", "fpl_ip_in", "fpl_insertion")]))
     tendons.append(("EPL", [n(p) for p in ("epl_origin", "epl_cmc_in", "epl_cmc_out", "epl_mcp_in",

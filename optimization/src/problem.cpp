@@ -227,6 +227,22 @@ void OptimalControlProblem::validate() const {
   if (!(timeWeight >= 0.0) || !std::isfinite(timeWeight)) {
     fail("problem: timeWeight = " + str(timeWeight) + " must be >= 0 and finite");
   }
+  if (accelerationWeights.size() > 0) {
+    const int n = nq();
+    if (accelerationWeights.size() != n) {
+      fail("problem: accelerationWeights has " + std::to_string(accelerationWeights.size()) + " entries, the model has " +
+           std::to_string(n) + " coordinates");
+    }
+    for (int i = 0; i < n; ++i) {
+      if (!(accelerationWeights(i) >= 0.0) || !std::isfinite(accelerationWeights(i))) {
+        fail("problem: accelerationWeights[" + std::to_string(i) + "] (" + model->configNames()[i] +
+             ") = " + str(accelerationWeights(i)) + " must be >= 0 and finite");
+      }
+    }
+    if (dynamics != DynamicsForm::kImplicit) {
+      fail("problem: accelerationWeights needs dynamics = implicit (q̈ is a variable only there)");
+    }
+  }
   if (initialGuess) {
     try {
       initialGuess->checkCompatible(*model);

@@ -52,6 +52,8 @@ struct Transcription::Impl {
   OptimalControlProblem problem;
   DerivativeMode derivatives;
   bool implicit;           // DynamicsForm::kImplicit: per point [x; u; q̈; λ] and the rows r = 0, c = 0
+  bool accelerationCost;   // problem.accelerationWeights given (implicit form only: validate())
+  mutable Eigen::VectorXd costError, costQe, costRu;  // cost(): x − x_g, Q e (or Qf e), R u (nx, nx, m)
   const Model& model;
   int n, nx, m, nc, N, P;
   int ncH;                 // holonomic rows (h rows and γ slack); all nc rows get A q̇ rows and μ
@@ -121,6 +123,7 @@ struct Transcription::Impl {
       : problem((p.validate(), std::move(p))),
         derivatives(mode),
         implicit(problem.dynamics == DynamicsForm::kImplicit),
+        accelerationCost(problem.accelerationWeights.size() > 0),
         model(*problem.model),
         n(model.nq()),
         nx(2 * n),
@@ -502,22 +505,31 @@ struct Transcription::Impl {
     const double T = horizonOf(z);
     double running = 0.0;
     if (gradient) std::fill(gradient, gradient + numVars, 0.0);
-    Eigen::VectorXd e(nx);
+    Eigen::VectorXd& e = costError;  // workspace: no allocation per evaluation
     for (int p = 0; p < P; ++p) {
       const Eigen::Map<const Eigen::VectorXd> x(z + p * stride, nx), uu(z + p * stride + nx, m);
       e = x - problem.goalState;
       const double w = weightOverT(p) * T;
-      running += w * (uu.dot(problem.R * uu) + e.dot(problem.Q * e));
+      costQe.noalias() = problem.Q * e;
+      costRu.noalias() = problem.R * uu;
+      running += w * (uu.dot(costRu) + e.dot(costQe));
       if (gradient) {
-        Eigen::Map<Eigen::VectorXd>(gradient + p * stride, nx) = 2.0 * w * (problem.Q * e);
-        Eigen::Map<Eigen::VectorXd>(gradient + p * stride + nx, m) = 2.0 * w * (problem.R * uu);
+        Eigen::Map<Eigen::VectorXd>(gradient + p * stride, nx) = 2.0 * w * costQe;
+        Eigen::Map<Eigen::VectorXd>(gradient + p * stride + nx, m) = 2.0 * w * costRu;
+      }
+      if (accelerationCost) {  // q̈ᵀ W_a q̈ (implicit form: q̈ follows u in the point's block)
+        const Eigen::Map<const Eigen::VectorXd> acc(z + p * stride + nx + m, n);
+        running += w * acc.dot(problem.accelerationWeights.cwiseProduct(acc));
+        if (gradient)
+          Eigen::Map<Eigen::VectorXd>(gradient + p * stride + nx + m, n) = 2.0 * w * problem.accelerationWeights.cwiseProduct(acc);
       }
     }
     const int last = knotPoint(N - 1) * stride;
     e = Eigen::Map<const Eigen::VectorXd>(z + last, nx) - problem.goalState;
-    const double terminal = e.dot(problem.Qf * e);
+    costQe.noalias() = problem.Qf * e;
+    const double terminal = e.dot(costQe);
     if (gradient) {
-      Eigen::Map<Eigen::VectorXd>(gradient + last, nx) += 2.0 * (problem.Qf * e);
+      Eigen::Map<Eigen::VectorXd>(gradient + last, nx) += 2.0 * costQe;
       // The running cost is proportional to T: ∂/∂T = running / T.
       if (freeT) gradient[horizonIdx] = running / T + problem.timeWeight;
     }
@@ -755,6 +767,9 @@ struct Transcription::Impl {
     hw = Eigen::VectorXd::Zero(n);
     hwScaled = Eigen::VectorXd::Zero(n);
     stateError = Eigen::VectorXd::Zero(nx);
+    costError = Eigen::VectorXd::Zero(nx);
+    costQe = Eigen::VectorXd::Zero(nx);
+    costRu = Eigen::VectorXd::Zero(m);
     noRho.resize(0);
     rhoScratch = Eigen::VectorXd::Zero(nc);
     rhoPoint = Eigen::VectorXd::Zero(nc);
@@ -872,6 +887,7 @@ struct Transcription::Impl {
       const Eigen::Map<const Eigen::VectorXd> x = state(z, p), uu = input(z, p);
       H.topLeftCorner(nx, nx) += (2.0 * sigma * wT * T) * problem.Q;
       H.block(nx, nx, m, m) += (2.0 * sigma * wT * T) * problem.R;
+      if (accelerationCost) H.block(nx + m, nx + m, n, n).diagonal() += (2.0 * sigma * wT * T) * problem.accelerationWeights;
       if (p == lastPoint) H.topLeftCorner(nx, nx) += (2.0 * sigma) * problem.Qf;
       bool dynamics = false;
       if (implicit) {
@@ -913,7 +929,7 @@ struct Transcription::Impl {
         }
       }
       if (freeT) {
-        // c_pᵀ ∂f_p/∂z_p / T (f = [q̇; q̈]) and σ ∂²J/∂T∂z_p = 2σ w/T (Q e, R u).
+        // c_pᵀ ∂f_p/∂z_p / T (f = [q̇; q̈]) and σ ∂²J/∂T∂z_p = 2σ w/T (Q e, R u, W_a q̈).
         Eigen::Map<Eigen::VectorXd> row(horizonRow.data() + p * stride, stride);
         row.setZero();
         row.segment(n, n) = C.col(p).head(n) / T;
@@ -927,6 +943,9 @@ struct Transcription::Impl {
         stateError = x - problem.goalState;
         row.head(nx).noalias() += (2.0 * sigma * wT) * problem.Q * stateError;
         row.segment(nx, m).noalias() += (2.0 * sigma * wT) * problem.R * uu;
+        if (accelerationCost)
+          row.segment(nx + m, n) += (2.0 * sigma * wT) * problem.accelerationWeights.cwiseProduct(
+                                        Eigen::Map<const Eigen::VectorXd>(z + p * stride + nx + m, n));
       }
     }
     if (nc > 0) {

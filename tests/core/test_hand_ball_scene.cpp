@@ -147,10 +147,12 @@ TEST_CASE("λ of the free-ball hand is each pad's force on the ball in its conta
     Eigen::Matrix3d frame;
     for (int k = 0; k < 3; ++k) frame.col(k) = R * m.constraints()[3 * d + k].direction;
     CHECK((frame.transpose() * frame - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() < 1e-14);
-    // The inward normal points from the contact point to the centre (ball radius 35 mm).
+    // The inward normal points from the contact point to the centre; the contact point lies on the
+    // ball (radius 35 mm) to the grasp program's tolerance (its pads on the sphere to ~1e-9 m).
     const Eigen::Vector3d r = data.framePose[m.frameIndex(std::string("ball_contact_") + kDigits[d])].translation() -
                               data.framePose[m.frameIndex("ball")].translation();
-    CHECK((frame.col(0) + r / 0.035).norm() < 1e-12);
+    CHECK(std::abs(r.norm() - 0.035) < 1e-9);
+    CHECK((frame.col(0) + r.normalized()).norm() < 1e-12);
     // λ_(n, t1, t2) are the components of the pad's force on the ball in that frame.
     const Eigen::Vector3d inFrame = frame.transpose() * onBall;
     INFO("lambda " << data.lambda.segment<3>(3 * d).transpose() << ", in frame " << inFrame.transpose());

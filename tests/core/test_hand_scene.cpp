@@ -13,8 +13,10 @@
 #include <trellis/core.hpp>
 
 #include <Eigen/SVD>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <fstream>
 #include <random>
 #include <string>
 #include <vector>
@@ -204,4 +206,57 @@ TEST_CASE("The hand's tendon input matrix is -dl/dq with moment arms of anatomic
     collocated += nonzero <= 1;
   }
   CHECK(collocated == 0);
+}
+
+// A via pair straddling a joint on the side it closes towards meets when the joint turns far
+// enough; past that angle the segment between them points the other way and the tendon's moment
+// arm jumps from +r to −r (a flexor turned extensor): the generator first put that angle at 53°,
+// inside every flexion range (the free-ball turn's optimizer stalled on the jump at the thumb MCP).
+// Every entry of B(q) must be Lipschitz in each joint over its whole range (plus 0.05 rad), at the
+// stored grasp and at random postures inside the ranges: |ΔB| ≤ 0.1 m/rad · Δq. The cable's arm
+// changes by ≲ 0.01 m per rad; the jump was 0.02 m within one 0.005 rad step (4 m/rad).
+TEST_CASE("The hand's tendon moment arms are continuous over every joint's range", "[hand][tendons]") {
+  std::ifstream in(std::string(TRELLIS_SOURCE_DIR) + "/examples/hand/hand_ball_limits.json");
+  REQUIRE(in.good());
+  const nlohmann::json ranges = nlohmann::json::parse(in).at("joint_range");
+  for (const char* file : {"hand.json", "hand_ball.json", "hand_ball_pinch.json"}) {
+    INFO(file);
+    const Scene s = loadScene(std::string(TRELLIS_SOURCE_DIR) + "/examples/scenes/" + file);
+    const Model& m = s.model;
+    const auto& names = m.configNames();
+    const auto has = [&](const std::string& n) { return std::find(names.begin(), names.end(), n) != names.end(); };
+    Data data(m);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    int joints = 0;
+    for (int posture = 0; posture < 4; ++posture) {
+      Eigen::VectorXd q0 = s.q;
+      if (posture > 0)
+        for (auto it = ranges.begin(); it != ranges.end(); ++it)
+          if (has(it.key())) {
+            const double lo = it.value()[0], hi = it.value()[1];
+            q0(m.configIndex(it.key())) = lo + (hi - lo) * unit(rng);
+          }
+      for (auto it = ranges.begin(); it != ranges.end(); ++it) {
+        if (!has(it.key())) continue;
+        ++joints;
+        const int j = m.configIndex(it.key());
+        const double lo = double(it.value()[0]) - 0.05, hi = double(it.value()[1]) + 0.05, step = 0.005;
+        Eigen::VectorXd q = q0;
+        q(j) = lo;
+        computeInputMatrix(m, data, q);
+        Eigen::MatrixXd previous = data.inputMatrix;
+        double worst = 0.0;
+        for (double t = lo + step; t <= hi + 1e-12; t += step) {
+          q(j) = t;
+          computeInputMatrix(m, data, q);
+          worst = std::max(worst, (data.inputMatrix - previous).cwiseAbs().maxCoeff() / step);
+          previous = data.inputMatrix;
+        }
+        INFO("posture " << posture << ", joint " << it.key());
+        CHECK(worst < 0.1);
+      }
+    }
+    CHECK(joints >= 4 * 8);  // the pinch scene has thumb and index only
+  }
 }

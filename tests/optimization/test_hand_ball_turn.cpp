@@ -386,6 +386,11 @@ TEST_CASE("hand ball: the stored free-ball grasp is a static hold within the ran
   CHECK(c.margins.minNormal >= l.normalMin);
   CHECK(c.facetRatio <= 1.0);
   CHECK(c.rangeExcess <= 0.0);
+  // The tension reserve (GraspNlpOptions::tensionReserve, 1 N): every tendon can still be eased
+  // and tightened by the feedback (the polish moves the tensions by ~1e-8 N).
+  const hand::GraspNlpOptions nlp;
+  CHECK(s.u.minCoeff() >= nlp.tensionReserve - 1e-6);
+  CHECK((l.uMax - s.u).minCoeff() >= nlp.tensionReserve - 1e-6);
 }
 
 TEST_CASE("hand ball: a hold at a turned yaw is a static hold by checkGrasp", "[hand_ball][holds]") {

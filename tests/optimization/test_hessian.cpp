@@ -165,6 +165,7 @@ TEST_CASE("hessian: the implicit dynamics form's Lagrangian Hessian agrees with 
         OptimalControlProblem p = hessianCase(file, method, freeHorizon);
         p.dynamics = trellis::DynamicsForm::kImplicit;
         p.R = MatrixXd::Identity(p.nu(), p.nu()) * 0.4;
+        p.accelerationWeights = VectorXd::LinSpaced(p.nq(), 0.3, 1.1);  // its diagonal block
         if (p.model->nc() > 0) p.forceUpper(0) = 50.0;
         DYNAMIC_SECTION(name << (method == CollocationMethod::kHermiteSimpson ? " hermite_simpson" : " trapezoidal")
                              << (freeHorizon ? " free T" : " fixed T")) {

@@ -214,6 +214,7 @@ TEST_CASE("transcription: the implicit dynamics form's derivatives agree with ce
         }
         p.Q = MatrixXd::Identity(p.nx(), p.nx()) * 0.7;
         p.goalState = VectorXd::LinSpaced(p.nx(), 0.1, 0.9);
+        p.accelerationWeights = VectorXd::LinSpaced(p.nq(), 0.2, 0.9);  // ∫ q̈ᵀ W_a q̈ dt
         const int nc = p.model->nc();
         if (nc > 0) {
           p.forceLower(0) = -5.0;
@@ -344,4 +345,46 @@ TEST_CASE("transcription: default guess interpolates the boundary states inside 
     CHECK(guess.times()(k) == Approx(s * p.horizon).margin(1e-14));
   }
   CHECK(guess.inputs().cwiseAbs().maxCoeff() == 0.0);
+}
+
+TEST_CASE("transcription: the acceleration weights add the quadrature of q̈ᵀ W_a q̈, implicit form only",
+          "[transcription][implicit]") {
+  // The cost with W_a minus the cost without, at the same point, is Σ_p w_p q̈_pᵀ W_a q̈_p with
+  // Simpson's weights (h/6 at the end knots, 2h/6 inside, 4h/6 at the midpoints) — computed here
+  // from the layout, not from the transcription's own weights.
+  const OptimalControlProblem file = trellis::loadProblem(problemPath("acrobot_swingup"));
+  OptimalControlProblem p = smaller(file, 5);
+  p.dynamics = trellis::DynamicsForm::kImplicit;
+  p.method = CollocationMethod::kHermiteSimpson;
+  const int n = p.nq(), m = p.nu();
+  std::mt19937 rng(99);
+  Transcription plain(p);
+  const VectorXd z = randomPoint(plain, rng);
+  double without = 0.0, with = 0.0;
+  REQUIRE(plain.evalCost(z.data(), without));
+  p.accelerationWeights = VectorXd::LinSpaced(n, 0.5, 2.0);
+  Transcription weighted(p);
+  REQUIRE(weighted.evalCost(z.data(), with));
+  const int N = weighted.numKnots(), P = weighted.numPoints();
+  REQUIRE(P == 2 * N - 1);
+  const double h = p.horizon / (N - 1);
+  double expected = 0.0;
+  for (int q = 0; q < P; ++q) {
+    const double w = q % 2 == 1 ? 4.0 * h / 6.0 : (q == 0 || q == P - 1 ? h / 6.0 : 2.0 * h / 6.0);
+    const VectorXd acc = z.segment(weighted.stateIndex(q) + 2 * n + m, n);
+    expected += w * acc.dot(p.accelerationWeights.cwiseProduct(acc));
+  }
+  CHECK(expected > 1e-3);  // the random point's q̈ are not zero: the comparison is not vacuous
+  CHECK(std::abs((with - without) - expected) <= 1e-12 * std::max(1.0, std::abs(with)));
+
+  // Refused: with the explicit form (q̈ is no variable there), the wrong size, a negative entry.
+  OptimalControlProblem explicitForm = p;
+  explicitForm.dynamics = trellis::DynamicsForm::kExplicit;
+  CHECK_THROWS_WITH(explicitForm.validate(), Catch::Contains("accelerationWeights needs dynamics = implicit"));
+  OptimalControlProblem wrongSize = p;
+  wrongSize.accelerationWeights = VectorXd::Ones(n + 1);
+  CHECK_THROWS_WITH(wrongSize.validate(), Catch::Contains("accelerationWeights has " + std::to_string(n + 1)));
+  OptimalControlProblem negative = p;
+  negative.accelerationWeights(1) = -0.1;
+  CHECK_THROWS_WITH(negative.validate(), Catch::Contains("accelerationWeights[1] (" + p.model->configNames()[1] + ") = -0.1"));
 }

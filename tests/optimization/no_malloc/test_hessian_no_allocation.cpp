@@ -46,20 +46,25 @@ TEST_CASE("no_malloc: the Lagrangian Hessian's values allocate nothing", "[no_ma
             p.minHorizon = 0.5 * p.horizon;
             p.maxHorizon = 2.0 * p.horizon;
           }
-          if (implicitForm) p.dynamics = trellis::DynamicsForm::kImplicit;
+          if (implicitForm) {
+            p.dynamics = trellis::DynamicsForm::kImplicit;
+            p.accelerationWeights = Eigen::VectorXd::Constant(p.nq(), 0.01);  // the smoothness term
+          }
           trellis::Transcription t(p);
           std::mt19937 rng(11);
           std::uniform_real_distribution<double> d(-0.2, 0.2);
           Eigen::VectorXd z = t.initialGuess(), z2 = z, mu(t.numConstraints());
           for (int i = 0; i < z.size(); ++i) z2(i) += d(rng);
           for (int i = 0; i < mu.size(); ++i) mu(i) = d(rng);
-          Eigen::VectorXd values(t.hessianRows().size());
+          Eigen::VectorXd values(t.hessianRows().size()), gradient(t.numVariables());
           REQUIRE(t.evalHessian(z.data(), 1.0, mu.data(), values.data()));  // warm-up
           bool ok = false;
+          double cost = 0.0;
           {
             const MallocGuard guard;
             ok = t.evalHessian(z2.data(), 0.5, mu.data(), values.data());  // new iterate: dynamics too
             ok = ok && t.evalHessian(z2.data(), 1.0, mu.data(), values.data());  // cached dynamics
+            ok = ok && t.evalCost(z2.data(), cost) && t.evalCostGradient(z2.data(), gradient.data());
           }
           CHECK(ok);
           CHECK(values.allFinite());

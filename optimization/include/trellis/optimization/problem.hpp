@@ -76,7 +76,7 @@ inline EnumNameTable<HessianMode> enumNames(HessianMode) {
   return table;
 }
 
-/// A trajectory optimization problem: minimize J = ∫ uᵀRu + (x − x_g)ᵀQ(x − x_g) dt +
+/// A trajectory optimization problem: minimize J = ∫ uᵀRu + (x − x_g)ᵀQ(x − x_g) [+ q̈ᵀW_a q̈] dt +
 /// (x(T) − x_g)ᵀQf(x(T) − x_g) + w_T·T subject to the model's dynamics, boundary states, state and
 /// input bounds, over a fixed or free horizon T, transcribed by collocation on a mesh of N knots.
 struct OptimalControlProblem {
@@ -144,6 +144,15 @@ struct OptimalControlProblem {
   ///@}
   Eigen::VectorXd goalState;   ///< x_g (2n), the state Q and Qf pull toward
   double timeWeight = 0.0;     ///< w_T ≥ 0 [cost per second of horizon]
+  /// W_a: adds ∫ q̈ᵀ diag(W_a) q̈ dt, quadrature-weighted at every collocation point (n entries ≥ 0;
+  /// empty: none). Implicit dynamics form only (q̈ is a variable there; validate() refuses it
+  /// with the explicit form). Why: separated Hermite–Simpson leaves one direction free of the
+  /// defects — q̈ alternating +a at the knots and −a/2 at the midpoints integrates to zero —,
+  /// which the equations of motion pin only through the inertia; on light bodies (the hand's
+  /// phalanges, M ~ 1e-6 kg m²) Ipopt's steps run along it (measured: |Δq̈| 30–60 rad/s² in the
+  /// first two steps of the free-ball turn, ‖d‖ 144). A small weight gives it curvature (‖d‖ 7).
+  /// C++ only (not in the problem file).
+  Eigen::VectorXd accelerationWeights;
 
   /// The Hessian the solver uses unless OptimizerOptions::hessian overrides it (problem file
   /// "hessian": "exact" | "lbfgs"; default exact).
