@@ -17,7 +17,8 @@
 // μ_init 1e-2 and bound_push 1e-8 (--barrier, --bound-push override). --diagnose: the guess's
 // worst rows, each point's |q̈|, and the rank of the equality rows over the variables inside their
 // bounds there (reportActiveRank: where active bounds leave rows dependent, LICQ fails). --max-iterations: Ipopt's limit (500);
-// --refinements R: rounds of mesh refinement after the first solve (OptimizerOptions::maxRefinements; 0: check only). --friction-use F: the
+// --refinements R: rounds of mesh refinement after the first solve (OptimizerOptions::maxRefinements; 0: check only).
+// --out CSV: the returned trajectory (written whatever the status; the line says whether it is a solution). --friction-use F: the
 // share of the pyramid the holds may use (0.8); --hold-margin N: their margin cap (1 N; above it
 // they minimize effort). --reach: only the kinematic reach (kinematicReach).
 // NAME: a scene of examples/scenes written by make_hand_scene.py --free-ball (default hand_ball;
@@ -148,6 +149,7 @@ int main(int argc, char** argv) {
   bool lbfgs = false, holds = false, diagnose = false, reach = false;
   hand::RestHoldOptions holdOptions;
   int maxIterations = 500;
+  std::string outFile;   // --out: the optimizer's trajectory as CSV (trajectory.hpp), whatever its status
   int refinements = -1;  // --refinements: OptimizerOptions::maxRefinements (-1: its default)
   double barrier = 0.0, boundPush = 0.0;
   for (int i = 1; i < argc; ++i) {
@@ -178,11 +180,12 @@ int main(int argc, char** argv) {
       else if (a == "--hold-margin") holdOptions.marginCap = std::stod(value());
       else if (a == "--max-iterations") maxIterations = std::stoi(value());
       else if (a == "--refinements") refinements = std::stoi(value());
+      else if (a == "--out") outFile = value();
       else if (a == "--barrier") barrier = std::stod(value());
       else if (a == "--bound-push") boundPush = std::stod(value());
       else if (a == "--help") {
         std::cout << "usage: hand_ball_turn [--scene NAME] [--angle DEG] [--horizon S] [--knots N] "
-                     "[--facets F] [--print-level L] [--lbfgs] [--holds] [--diagnose] [--max-iterations N] [--refinements R] "
+                     "[--facets F] [--print-level L] [--lbfgs] [--holds] [--diagnose] [--max-iterations N] [--refinements R] [--out CSV] "
                      "[--barrier MU] [--bound-push P] [--implicit] [--acceleration-weight W] [--effort-scale C] [--fixed-start] [--friction-use F] "
                      "[--hold-margin N] [--reach]\n";
         return 0;
@@ -354,6 +357,15 @@ int main(int argc, char** argv) {
   if (!r.trajectory.size()) {
     std::printf("no trajectory\n");
     return 1;
+  }
+  if (!outFile.empty()) {
+    try {
+      r.trajectory.writeCsvFile(outFile);
+      std::printf("wrote %s (%s)\n", outFile.c_str(), r.ok() ? "ok" : "NOT a solution: see the optimizer line");
+    } catch (const std::exception& e) {
+      std::printf("%s\n", e.what());
+      return 1;
+    }
   }
   // Contacts at the knots (the collocation points the bounds hold at, evaluated again here).
   Data data(s.model);
