@@ -92,6 +92,8 @@ void bindOptimization(py::module_& m) {
   realArrayProperty(problem, "R", &Problem::R, "(nu, nu) symmetric PSD");
   realArrayProperty(problem, "Q", &Problem::Q, "(nx, nx) symmetric PSD");
   realArrayProperty(problem, "Qf", &Problem::Qf, "(nx, nx) symmetric PSD");
+  realArrayProperty(problem, "acceleration_weights", &Problem::accelerationWeights,
+                    "(nq,) or empty: adds the integral of qdd^T diag(w) qdd (implicit dynamics form only)");
 
   m.def("load_problem", &loadProblem, py::arg("path"),
         "Reads a problem file (JSON, optimization/README.md); paths inside are relative to it. "

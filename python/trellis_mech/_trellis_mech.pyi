@@ -640,6 +640,11 @@ class OptimalControlProblem:
     def R(self, value: numpy.typing.NDArray[numpy.float64]) -> None: ...
     def __init__(self: OptimalControlProblem, model: Model) -> None: ...
     @property
+    def acceleration_weights(self) -> numpy.typing.NDArray[numpy.float64]:
+        """(nq,) or empty: adds the integral of qdd^T diag(w) qdd (implicit dynamics form only)"""
+    @acceleration_weights.setter
+    def acceleration_weights(self, value: numpy.typing.NDArray[numpy.float64]) -> None: ...
+    @property
     def dynamics(self) -> DynamicsForm:
         """DynamicsForm (file key "dynamics")"""
     @dynamics.setter

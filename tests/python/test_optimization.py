@@ -166,3 +166,25 @@ def test_constraint_force_bounds(tm):
     assert result.ok, result.describe()
     problem.force_upper = np.array([np.inf])
     assert np.isinf(problem.force_upper[0])
+
+
+def test_acceleration_weights(tm):
+    # OptimalControlProblem::accelerationWeights: implicit form only, one weight per coordinate;
+    # both solves succeed, and the weighted optimum costs more (its cost includes the term).
+    p = tm.load_problem(str(PROBLEMS / "cart_pole_swingup.json"))
+    assert p.acceleration_weights.shape == (0,)
+    p.acceleration_weights = np.full(p.nq, 0.1)
+    with pytest.raises(tm.ProblemError, match="needs dynamics = implicit"):
+        p.validate()
+    p.dynamics = tm.DynamicsForm.IMPLICIT
+    p.acceleration_weights = np.full(p.nq + 1, 0.1)
+    with pytest.raises(tm.ProblemError, match="accelerationWeights has"):
+        p.validate()
+    p.acceleration_weights = np.full(p.nq, 0.1)
+    p.validate()
+    plain = tm.load_problem(str(PROBLEMS / "cart_pole_swingup.json"))
+    plain.dynamics = tm.DynamicsForm.IMPLICIT
+    a, b = tm.optimize_trajectory(plain), tm.optimize_trajectory(p)
+    assert a.ok, a.message
+    assert b.ok, b.message
+    assert b.cost > a.cost
