@@ -17,8 +17,8 @@ namespace {
 constexpr std::string_view kHelp = R"(usage: trellis optimize PROBLEM.json [--out TRAJ.csv] [options]
 
 Reads an optimal control problem file (optimization/README.md: a scene file, the horizon, knots,
-boundary states, bounds and cost weights), transcribes it by direct collocation (Hermite-Simpson
-or trapezoidal) with the exact first and second derivatives of the dynamics, and solves it with
+boundary states, bounds and cost weights), transcribes it by direct collocation (Hermite-Simpson,
+trapezoidal or Radau IIA) with the exact first and second derivatives of the dynamics, and solves it with
 Ipopt (MUMPS, exact Lagrangian Hessian by default). The solution is then checked a posteriori: the exact
 dynamics are integrated (CVODES, rtol 1e-10) over every interval from every knot under the input
 as every trellis tool reads the CSV (linear between knots), and the worst miss of the next knot
@@ -45,7 +45,7 @@ constrained to the knot average), the state the cubic Hermite spline of the knot
 options:
   --out FILE            write the optimized trajectory (the last iterate if the solve failed)
   --knots N             override the problem's number of knots (N >= 2)
-  --method NAME         override the method: hermite_simpson or trapezoidal
+  --method NAME         override the method: hermite_simpson, trapezoidal or radau
   --max-iter N          Ipopt's max_iter (default 1000)
   --tol X               Ipopt's tol (default 1e-8)
   --print-level N       Ipopt's own log at print_level N (0-12) on standard output, in place of
@@ -92,8 +92,10 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
       problem.method = CollocationMethod::kHermiteSimpson;
     } else if (*v == "trapezoidal") {
       problem.method = CollocationMethod::kTrapezoidal;
+    } else if (*v == "radau") {
+      problem.method = CollocationMethod::kRadau;
     } else {
-      throw UsageError("optimize: --method: '" + *v + "' (expected hermite_simpson or trapezoidal)");
+      throw UsageError("optimize: --method: '" + *v + "' (expected hermite_simpson, trapezoidal or radau)");
     }
   }
   OptimizerOptions solver;
@@ -154,7 +156,9 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
   if (outPath) result.trajectory.writeCsvFile(*outPath);
 
   const char* methodName =
-      problem.method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : "trapezoidal";
+      problem.method == CollocationMethod::kHermiteSimpson ? "hermite_simpson"
+      : problem.method == CollocationMethod::kRadau        ? "radau"
+                                                           : "trapezoidal";
   const char* derivativesName =
       solver.derivatives == DerivativeMode::kExact ? "exact" : "finite_difference";
   if (options.flag("--json")) {

@@ -18,7 +18,8 @@
 // worst rows, each point's |q̈|, and the rank of the equality rows over the variables inside their
 // bounds there (reportActiveRank: where active bounds leave rows dependent, LICQ fails). --max-iterations: Ipopt's limit (500);
 // --refinements R: rounds of mesh refinement after the first solve (OptimizerOptions::maxRefinements; 0: check only).
-// --out CSV: the returned trajectory (written whatever the status; the line says whether it is a solution). --friction-use F: the
+// --out CSV: the returned trajectory (written whatever the status; the line says whether it is a solution).
+// --method hermite_simpson|trapezoidal|radau: the collocation rule (problem.hpp CollocationMethod). --friction-use F: the
 // share of the pyramid the holds may use (0.8); --hold-margin N: their margin cap (1 N; above it
 // they minimize effort). --reach: only the kinematic reach (kinematicReach).
 // NAME: a scene of examples/scenes written by make_hand_scene.py --free-ball (default hand_ball;
@@ -149,6 +150,7 @@ int main(int argc, char** argv) {
   bool lbfgs = false, holds = false, diagnose = false, reach = false;
   hand::RestHoldOptions holdOptions;
   int maxIterations = 500;
+  CollocationMethod method = CollocationMethod::kHermiteSimpson;  // --method
   std::string outFile;   // --out: the optimizer's trajectory as CSV (trajectory.hpp), whatever its status
   int refinements = -1;  // --refinements: OptimizerOptions::maxRefinements (-1: its default)
   double barrier = 0.0, boundPush = 0.0;
@@ -181,11 +183,21 @@ int main(int argc, char** argv) {
       else if (a == "--max-iterations") maxIterations = std::stoi(value());
       else if (a == "--refinements") refinements = std::stoi(value());
       else if (a == "--out") outFile = value();
+      else if (a == "--method") {
+        const std::string v = value();
+        if (v == "hermite_simpson") method = CollocationMethod::kHermiteSimpson;
+        else if (v == "trapezoidal") method = CollocationMethod::kTrapezoidal;
+        else if (v == "radau") method = CollocationMethod::kRadau;
+        else {
+          std::cerr << "hand_ball_turn: --method: '" << v << "' (expected hermite_simpson, trapezoidal or radau)\n";
+          return 2;
+        }
+      }
       else if (a == "--barrier") barrier = std::stod(value());
       else if (a == "--bound-push") boundPush = std::stod(value());
       else if (a == "--help") {
         std::cout << "usage: hand_ball_turn [--scene NAME] [--angle DEG] [--horizon S] [--knots N] "
-                     "[--facets F] [--print-level L] [--lbfgs] [--holds] [--diagnose] [--max-iterations N] [--refinements R] [--out CSV] "
+                     "[--facets F] [--print-level L] [--lbfgs] [--holds] [--diagnose] [--max-iterations N] [--refinements R] [--out CSV] [--method M] "
                      "[--barrier MU] [--bound-push P] [--implicit] [--acceleration-weight W] [--effort-scale C] [--fixed-start] [--friction-use F] "
                      "[--hold-margin N] [--reach]\n";
         return 0;
@@ -221,6 +233,7 @@ int main(int argc, char** argv) {
     }
     if (holds) options.freeInitialConfiguration = false;
     problem = hand::makeBallTurnProblem(model, s.q, limits, options);
+    problem.method = method;
     if (holds) {
       const auto th = std::chrono::steady_clock::now();
       // Holds at every collocation point (knots and midpoints): the midpoints' dynamics then start

@@ -268,6 +268,8 @@ StartPoint carryOver(const Transcription& now, const OptimalControlProblem& befo
   // The implicit form's layout (q̈, λ per point, its rows) is not carried: a cold start from the
   // previous solution's trajectory (the refined problem's initial guess).
   if (p.dynamics == DynamicsForm::kImplicit || before.dynamics == DynamicsForm::kImplicit) return start;
+  // Radau's layout (3 points and 3nx + 2m rows per interval) is not carried either: a cold start.
+  if (p.method == CollocationMethod::kRadau || before.method == CollocationMethod::kRadau) return start;
   const bool hs = p.method == CollocationMethod::kHermiteSimpson;
   const int nx = p.nx(), m = p.nu(), nc = p.model->nc();
   const int rowsPer = hs ? 2 * nx + m : nx;
@@ -549,7 +551,7 @@ std::vector<int> refinementSplits(const Eigen::VectorXd& mesh, const Eigen::Vect
     }
   }
   const double tol = options.consistencyTolerance;
-  const double order = method == CollocationMethod::kHermiteSimpson ? 5.0 : 3.0;  // p + 1
+  const double order = method == CollocationMethod::kTrapezoidal ? 3.0 : 5.0;  // p + 1 (Radau IIA: 6, taken as 5)
   std::vector<int> parts(n, 1);
   // 1. By the defect's order: ε ∝ h^(p+1), so M parts bring ε to ε / M^(p+1) ≤ tol/2.
   for (int k = 0; k < n; ++k) {

@@ -414,8 +414,10 @@ class FileParser {
         problem.method = CollocationMethod::kHermiteSimpson;
       } else if (method == "trapezoidal") {
         problem.method = CollocationMethod::kTrapezoidal;
+      } else if (method == "radau") {
+        problem.method = CollocationMethod::kRadau;
       } else {
-        bad("method", "'" + method + "' (expected \"hermite_simpson\" or \"trapezoidal\")");
+        bad("method", "'" + method + "' (expected \"hermite_simpson\", \"trapezoidal\" or \"radau\")");
       }
     }
     // An enumerated key: one of its names, else an error naming the file, the key and the choices.

@@ -48,6 +48,17 @@ bool anyNonholonomic(const Model& model) {
 
 }  // namespace
 
+namespace {
+// Radau IIA, 3 stages (Hairer & Wanner, Solving ODEs II, Table IV.5.6): nodes c and matrix A; the
+// weights b are A's last row (stiffly accurate: the last stage is the step's end).
+const double kSqrt6 = std::sqrt(6.0);
+const double kRadauC[3] = {(4.0 - kSqrt6) / 10.0, (4.0 + kSqrt6) / 10.0, 1.0};
+const double kRadauA[3][3] = {
+    {(88.0 - 7.0 * kSqrt6) / 360.0, (296.0 - 169.0 * kSqrt6) / 1800.0, (-2.0 + 3.0 * kSqrt6) / 225.0},
+    {(296.0 + 169.0 * kSqrt6) / 1800.0, (88.0 + 7.0 * kSqrt6) / 360.0, (-2.0 - 3.0 * kSqrt6) / 225.0},
+    {(16.0 - kSqrt6) / 36.0, (16.0 + kSqrt6) / 36.0, 1.0 / 9.0}};
+}  // namespace
+
 struct Transcription::Impl {
   OptimalControlProblem problem;
   DerivativeMode derivatives;
@@ -60,8 +71,10 @@ struct Transcription::Impl {
   std::vector<int> holonomicRows;
   bool nonholonomic = false;
   Eigen::VectorXd tau;     // mesh τ_k (N)
-  int intervalRows;        // rows per interval block: nx (trapezoidal) or 2nx + m (Hermite–Simpson)
-  bool hermiteSimpson, freeT;
+  int intervalRows;        // rows per interval block: nx (trapezoidal), 2nx + m (Hermite–Simpson),
+                           // 3nx + 2m (Radau: the end stage's defect first, then stages 1, 2, the inputs)
+  bool hermiteSimpson, radau, freeT;
+  int perInterval;         // points per interval after its first knot: 1, 2 (HS), 3 (Radau)
   int stride;         // nx + m: one point's variables
   int slackStart;     // first slack variable
   int horizonIdx;     // −1 when fixed
@@ -130,9 +143,13 @@ struct Transcription::Impl {
         m(model.nu()),
         nc(model.nc()),
         N(problem.knots),
-        P(problem.method == CollocationMethod::kHermiteSimpson ? 2 * problem.knots - 1 : problem.knots),
+        P(problem.method == CollocationMethod::kHermiteSimpson ? 2 * problem.knots - 1
+          : problem.method == CollocationMethod::kRadau      ? 3 * problem.knots - 2
+                                                             : problem.knots),
         hermiteSimpson(problem.method == CollocationMethod::kHermiteSimpson),
+        radau(problem.method == CollocationMethod::kRadau),
         freeT(problem.freeHorizon()),
+        perInterval(hermiteSimpson ? 2 : radau ? 3 : 1),
         stride(2 * model.nq() + model.nu() + (implicit ? model.nq() + model.nc() : 0)),
         data(model),
         constraintData(model),
@@ -152,7 +169,7 @@ struct Transcription::Impl {
     const int slackVars = (N - 1) * (ncH + nc);
     horizonIdx = freeT ? slackStart + slackVars : -1;
     numVars = slackStart + slackVars + (freeT ? 1 : 0);
-    intervalRows = hermiteSimpson ? 2 * nx + m : nx;
+    intervalRows = hermiteSimpson ? 2 * nx + m : radau ? 3 * nx + 2 * m : nx;
     defectRows = (N - 1) * intervalRows;
     for (int r = 0; r < nc; ++r) {
       if (std::isfinite(problem.forceLower(r)) || std::isfinite(problem.forceUpper(r))) forceRows.push_back(r);
@@ -216,10 +233,11 @@ struct Transcription::Impl {
   }
 
   double horizonOf(const double* z) const { return freeT ? z[horizonIdx] : problem.horizon; }
-  int knotPoint(int k) const { return hermiteSimpson ? 2 * k : k; }
+  int knotPoint(int k) const { return perInterval * k; }
   double pointFraction(int p) const {
-    if (!hermiteSimpson) return tau(p);
-    return p % 2 == 0 ? tau(p / 2) : 0.5 * (tau(p / 2) + tau(p / 2 + 1));
+    const int k = p / perInterval, i = p % perInterval;
+    if (i == 0) return tau(k);
+    return tau(k) + (radau ? kRadauC[i - 1] : 0.5) * intervalFraction(k);
   }
   double pointTime(int p, double T) const { return T * pointFraction(p); }
   double intervalFraction(int k) const { return tau(k + 1) - tau(k); }  // h_k / T
@@ -228,10 +246,11 @@ struct Transcription::Impl {
 
   std::string describePoint(int p, double T) const {
     std::ostringstream s;
-    if (hermiteSimpson && p % 2 == 1) {
-      s << "midpoint of interval " << p / 2;
+    if (p % perInterval != 0) {
+      if (radau) s << "stage " << p % perInterval << " of interval " << p / perInterval;
+      else s << "midpoint of interval " << p / 2;
     } else {
-      s << "knot " << (hermiteSimpson ? p / 2 : p);
+      s << "knot " << p / perInterval;
     }
     s << " (t = " << pointTime(p, T) << ")";
     return s.str();
@@ -409,8 +428,8 @@ struct Transcription::Impl {
       q = Eigen::Map<const Eigen::VectorXd>(x, n);
       dq = Eigen::Map<const Eigen::VectorXd>(x + n, n);
       u = Eigen::Map<const Eigen::VectorXd>(x + nx, m);
-      const bool isKnot = !hermiteSimpson || p % 2 == 0;
-      const int k = hermiteSimpson ? p / 2 : p;
+      const bool isKnot = p % perInterval == 0;
+      const int k = p / perInterval;
       if (implicit) {
         if (!evaluateImplicit(x, p, k, isKnot, linearize, T)) return false;
         continue;
@@ -492,6 +511,10 @@ struct Transcription::Impl {
   /// Quadrature weight of point p divided by T (Simpson Δτ/6, 4Δτ/6, Δτ/6 per interval;
   /// trapezoid Δτ/2, Δτ/2), Δτ_k = τ_{k+1} − τ_k.
   double weightOverT(int p) const {
+    if (radau) {  // the stages' weights b_i = a_3i of the interval they close (the first knot: 0)
+      const int i = p % 3, k = p / 3;
+      return i == 0 ? (k > 0 ? kRadauA[2][2] * intervalFraction(k - 1) : 0.0) : kRadauA[2][i - 1] * intervalFraction(k);
+    }
     if (hermiteSimpson && p % 2 == 1) return 4.0 / 6.0 * intervalFraction(p / 2);
     const int k = hermiteSimpson ? p / 2 : p;
     const double c = hermiteSimpson ? 1.0 / 6.0 : 0.5;
@@ -560,6 +583,17 @@ struct Transcription::Impl {
         // The input is linear between knots (the rule every trajectory reader applies).
         Eigen::Map<Eigen::VectorXd>(g + k * intervalRows + 2 * nx, m) =
             input(z, mid) - 0.5 * (input(z, a) + input(z, b));
+      } else if (radau) {
+        // Stage i: x_{a+i} − x_a − h Σ_j a_ij f_{a+j}; the end stage (x_b) first, where the slacks go.
+        for (int i = 0; i < 3; ++i) {
+          Eigen::Map<Eigen::VectorXd> d(g + k * intervalRows + (i == 2 ? 0 : (i + 1) * nx), nx);
+          d = state(z, a + i + 1) - state(z, a) -
+              h * (kRadauA[i][0] * F.col(a + 1) + kRadauA[i][1] * F.col(a + 2) + kRadauA[i][2] * F.col(b));
+        }
+        // The inputs at the inner stages: linear between knots, like every trajectory reader's.
+        for (int i = 0; i < 2; ++i)
+          Eigen::Map<Eigen::VectorXd>(g + k * intervalRows + 3 * nx + i * m, m) =
+              input(z, a + i + 1) - ((1.0 - kRadauC[i]) * input(z, a) + kRadauC[i] * input(z, b));
       } else {
         defect = state(z, b) - state(z, a) - h / 2.0 * (F.col(a) + F.col(b));
       }
@@ -671,13 +705,26 @@ struct Transcription::Impl {
         top = &slackTop;
         bottom = &slackBottom;
       }
-      const double ws = hermiteSimpson ? h / 6.0 : h / 2.0;  // weight of f_a and f_b
-      pointBlock(w, row0, a, -1.0, -ws, nullptr, nullptr);
-      if (hermiteSimpson) pointBlock(w, row0, a + 1, 0.0, -4.0 * ws, nullptr, nullptr);
-      pointBlock(w, row0, b, 1.0, -ws, top, bottom);
+      if (radau) {
+        // Stage i's rows (the end stage's at row0): −I on x_a, then δ_ij I − h a_ij ∂f on x_{a+j}.
+        for (int i = 0; i < 3; ++i) {
+          const int r = row0 + (i == 2 ? 0 : (i + 1) * nx);
+          pointBlock(w, r, a, -1.0, 0.0, nullptr, nullptr);
+          for (int j = 0; j < 3; ++j)
+            pointBlock(w, r, a + j + 1, i == j ? 1.0 : 0.0, -h * kRadauA[i][j], i == 2 && j == 2 ? top : nullptr,
+                       i == 2 && j == 2 ? bottom : nullptr);
+          horizonColumn(w, r, -dhdT * (kRadauA[i][0] * F.col(a + 1) + kRadauA[i][1] * F.col(a + 2) +
+                                       kRadauA[i][2] * F.col(b)));
+        }
+      } else {
+        const double ws = hermiteSimpson ? h / 6.0 : h / 2.0;  // weight of f_a and f_b
+        pointBlock(w, row0, a, -1.0, -ws, nullptr, nullptr);
+        if (hermiteSimpson) pointBlock(w, row0, a + 1, 0.0, -4.0 * ws, nullptr, nullptr);
+        pointBlock(w, row0, b, 1.0, -ws, top, bottom);
+      }
       if (hermiteSimpson) {
         horizonColumn(w, row0, -dhdT / 6.0 * (F.col(a) + 4.0 * F.col(a + 1) + F.col(b)));
-      } else {
+      } else if (!radau) {
         horizonColumn(w, row0, -dhdT / 2.0 * (F.col(a) + F.col(b)));
       }
       if (nc > 0) {
@@ -698,6 +745,16 @@ struct Transcription::Impl {
           w.put(row2 + j, a * stride + nx + j, -0.5);
           w.put(row2 + j, (a + 1) * stride + nx + j, 1.0);
           w.put(row2 + j, b * stride + nx + j, -0.5);
+        }
+      }
+      if (radau) {  // u_{a+i} − ((1 − c_i) u_a + c_i u_b), i = 1, 2
+        for (int i = 0; i < 2; ++i) {
+          const int r = row0 + 3 * nx + i * m;
+          for (int j = 0; j < m; ++j) {
+            w.put(r + j, a * stride + nx + j, -(1.0 - kRadauC[i]));
+            w.put(r + j, (a + i + 1) * stride + nx + j, 1.0);
+            w.put(r + j, b * stride + nx + j, -kRadauC[i]);
+          }
         }
       }
     }
@@ -874,6 +931,12 @@ struct Transcription::Impl {
         C.col(a) += (-h / 6.0) * lam + (-h / 8.0) * lamH;
         C.col(a + 1) += (-4.0 * h / 6.0) * lam;
         C.col(b) += (-h / 6.0) * lam + (h / 8.0) * lamH;
+      } else if (radau) {
+        // Stage i's multipliers (the end stage's first) weigh f_{a+j} by −h a_ij.
+        const Eigen::Map<const Eigen::VectorXd> lam1(mult + k * intervalRows + nx, nx),
+            lam2(mult + k * intervalRows + 2 * nx, nx);
+        for (int j = 0; j < 3; ++j)
+          C.col(a + j + 1) += (-h * kRadauA[0][j]) * lam1 + (-h * kRadauA[1][j]) * lam2 + (-h * kRadauA[2][j]) * lam;
       } else {
         C.col(a) += (-h / 2.0) * lam;
         C.col(b) += (-h / 2.0) * lam;

@@ -23,7 +23,8 @@ using Problem = OptimalControlProblem;
 void bindOptimization(py::module_& m) {
   py::enum_<CollocationMethod>(m, "CollocationMethod")
       .value("HERMITE_SIMPSON", CollocationMethod::kHermiteSimpson)
-      .value("TRAPEZOIDAL", CollocationMethod::kTrapezoidal);
+      .value("TRAPEZOIDAL", CollocationMethod::kTrapezoidal)
+      .value("RADAU", CollocationMethod::kRadau);
   py::enum_<DerivativeMode>(m, "DerivativeMode")
       .value("EXACT", DerivativeMode::kExact)
       .value("FINITE_DIFFERENCE", DerivativeMode::kFiniteDifference);

@@ -37,8 +37,11 @@ class CollocationMethod:
       HERMITE_SIMPSON
 
       TRAPEZOIDAL
+
+      RADAU
     """
     HERMITE_SIMPSON: ClassVar[CollocationMethod]
+    RADAU: ClassVar[CollocationMethod]
     TRAPEZOIDAL: ClassVar[CollocationMethod]
     @property
     def value(self) -> int: ...

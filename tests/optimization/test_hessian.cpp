@@ -138,7 +138,7 @@ TEST_CASE("hessian: the Lagrangian Hessian agrees with differences of the exact 
   std::mt19937 rng(2030);
   for (const char* name : {"cart_pole_swingup", "acrobot_swingup", "paper_pendulum_transfer"}) {
     const OptimalControlProblem file = trellis::loadProblem(problemPath(name));
-    for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
+    for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal, CollocationMethod::kRadau}) {
       for (const bool freeHorizon : {false, true}) {
         OptimalControlProblem p = hessianCase(file, method, freeHorizon);
         p.Q(0, 1) = p.Q(1, 0) = 0.2;
@@ -160,14 +160,14 @@ TEST_CASE("hessian: the implicit dynamics form's Lagrangian Hessian agrees with 
   std::mt19937 rng(2031);
   for (const char* name : {"cart_pole_swingup", "acrobot_swingup", "paper_pendulum_transfer"}) {
     const OptimalControlProblem file = trellis::loadProblem(problemPath(name));
-    for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
+    for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal, CollocationMethod::kRadau}) {
       for (const bool freeHorizon : {false, true}) {
         OptimalControlProblem p = hessianCase(file, method, freeHorizon);
         p.dynamics = trellis::DynamicsForm::kImplicit;
         p.R = MatrixXd::Identity(p.nu(), p.nu()) * 0.4;
         p.accelerationWeights = VectorXd::LinSpaced(p.nq(), 0.3, 1.1);  // its diagonal block
         if (p.model->nc() > 0) p.forceUpper(0) = 50.0;
-        DYNAMIC_SECTION(name << (method == CollocationMethod::kHermiteSimpson ? " hermite_simpson" : " trapezoidal")
+        DYNAMIC_SECTION(name << (method == CollocationMethod::kHermiteSimpson ? " hermite_simpson" : method == CollocationMethod::kRadau ? " radau" : " trapezoidal")
                              << (freeHorizon ? " free T" : " fixed T")) {
           Transcription t(p);
           checkHessian(t, randomPoint(t, rng), 0.7, randomMultipliers(t, rng));
@@ -199,7 +199,7 @@ TEST_CASE("hessian: knife edges, alone and beside a holonomic row, on both forms
   for (const bool arm : {false, true}) {
     const auto model = trellis::test::skateModel(arm);
     std::mt19937 rng(arm ? 31 : 13);
-    for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
+    for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal, CollocationMethod::kRadau}) {
       for (const auto form : {trellis::DynamicsForm::kExplicit, trellis::DynamicsForm::kImplicit}) {
         for (const bool freeHorizon : {false, true}) {
           OptimalControlProblem p(model);
@@ -219,7 +219,7 @@ TEST_CASE("hessian: knife edges, alone and beside a holonomic row, on both forms
           p.initialFixed.assign(p.nx(), false);  // zero boundary states are off the distance row
           p.finalFixed.assign(p.nx(), false);
           DYNAMIC_SECTION((arm ? "knife edge + distance, " : "knife edge, ")
-                          << (method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : "trapezoidal")
+                          << (method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : method == CollocationMethod::kRadau ? "radau" : "trapezoidal")
                           << (form == trellis::DynamicsForm::kImplicit ? ", implicit" : ", explicit")
                           << (freeHorizon ? ", free T" : ", fixed T")) {
             Transcription t(p);
@@ -238,8 +238,8 @@ TEST_CASE("hessian: knife edges, alone and beside a holonomic row, on both forms
 TEST_CASE("hessian: constraint-force bounds add rows λ_r(x_p, u_p) with exact first and second derivatives",
           "[transcription][hessian][force_bounds]") {
   std::mt19937 rng(99);
-  for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
-    DYNAMIC_SECTION((method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : "trapezoidal")) {
+  for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal, CollocationMethod::kRadau}) {
+    DYNAMIC_SECTION((method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : method == CollocationMethod::kRadau ? "radau" : "trapezoidal")) {
       OptimalControlProblem p = trellis::loadProblem(problemPath("paper_pendulum_transfer"));
       p.knots = 3;
       p.method = method;
@@ -298,8 +298,8 @@ TEST_CASE("hessian: force combinations add rows cᵀλ(x_p, u_p) with exact firs
   // over every row, at a random point: values against the core's λ, Jacobian against central
   // differences of g, Hessian against differences of the exact gradient (checkHessian).
   std::mt19937 rng(2604);
-  for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
-    DYNAMIC_SECTION((method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : "trapezoidal")) {
+  for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal, CollocationMethod::kRadau}) {
+    DYNAMIC_SECTION((method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : method == CollocationMethod::kRadau ? "radau" : "trapezoidal")) {
       OptimalControlProblem p = trellis::loadProblem(problemPath("paper_pendulum_transfer"));
       const int nc = p.model->nc();
       REQUIRE(nc >= 1);

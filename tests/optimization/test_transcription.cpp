@@ -131,7 +131,7 @@ TEST_CASE("transcription: gradient and Jacobian agree with central differences",
   std::mt19937 rng(4242);
   for (const char* name : {"cart_pole_swingup", "acrobot_swingup", "paper_pendulum_transfer"}) {
     const OptimalControlProblem file = trellis::loadProblem(problemPath(name));
-    for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
+    for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal, CollocationMethod::kRadau}) {
       for (const bool freeHorizon : {false, true}) {
         OptimalControlProblem p = smaller(file, 5);
         p.method = method;
@@ -146,6 +146,7 @@ TEST_CASE("transcription: gradient and Jacobian agree with central differences",
         p.Qf = MatrixXd::Identity(p.nx(), p.nx()) * 3.0;
         p.goalState = VectorXd::LinSpaced(p.nx(), 0.1, 0.9);
         DYNAMIC_SECTION(name << (method == CollocationMethod::kHermiteSimpson ? " hermite_simpson"
+                                 : method == CollocationMethod::kRadau        ? " radau"
                                                                              : " trapezoidal")
                              << (freeHorizon ? " free T" : " fixed T")) {
           Transcription t(p);
@@ -162,7 +163,7 @@ TEST_CASE("transcription: knife edge and non-uniform mesh derivatives agree with
   // symmetric, unlike a Hessian), both methods, fixed and free T, on a non-uniform mesh.
   const auto model = trellis::test::skateModel();
   std::mt19937 rng(77);
-  for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
+  for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal, CollocationMethod::kRadau}) {
     for (const bool freeHorizon : {false, true}) {
       OptimalControlProblem p(model);
       p.method = method;
@@ -178,12 +179,14 @@ TEST_CASE("transcription: knife edge and non-uniform mesh derivatives agree with
       p.finalState << 1.0, 0.5, 0.3, 0.0, 0.0, 0.0;
       p.Q = MatrixXd::Identity(6, 6) * 0.4;
       p.goalState = p.finalState;
-      DYNAMIC_SECTION((method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : "trapezoidal")
+      DYNAMIC_SECTION((method == CollocationMethod::kHermiteSimpson ? "hermite_simpson" : method == CollocationMethod::kRadau ? "radau" : "trapezoidal")
                       << (freeHorizon ? " free T" : " fixed T")) {
         Transcription t(p);
         // One knife-edge row: A q̇ rows at every knot, μ slack only (no h rows, no γ).
         CHECK(t.numConstraints() ==
-              (p.knots - 1) * (method == CollocationMethod::kHermiteSimpson ? 2 * 6 + 2 : 6) + p.knots);
+              (p.knots - 1) * (method == CollocationMethod::kHermiteSimpson ? 2 * 6 + 2
+                                      : method == CollocationMethod::kRadau ? 3 * 6 + 2 * 2
+                                                                            : 6) + p.knots);
         checkDerivatives(t, randomPoint(t, rng));
         // The knots sit on the mesh.
         const VectorXd z = t.initialGuess();
@@ -202,7 +205,7 @@ TEST_CASE("transcription: the implicit dynamics form's derivatives agree with ce
   std::mt19937 rng(777);
   for (const char* name : {"cart_pole_swingup", "acrobot_swingup", "paper_pendulum_transfer"}) {
     const OptimalControlProblem file = trellis::loadProblem(problemPath(name));
-    for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal}) {
+    for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kTrapezoidal, CollocationMethod::kRadau}) {
       for (const bool freeHorizon : {false, true}) {
         OptimalControlProblem p = smaller(file, 4);
         p.dynamics = trellis::DynamicsForm::kImplicit;
@@ -224,7 +227,7 @@ TEST_CASE("transcription: the implicit dynamics form's derivatives agree with ce
           c.upper = 4.0;
           p.forceCombinations.push_back(c);
         }
-        DYNAMIC_SECTION(name << (method == CollocationMethod::kHermiteSimpson ? " hermite_simpson" : " trapezoidal")
+        DYNAMIC_SECTION(name << (method == CollocationMethod::kHermiteSimpson ? " hermite_simpson" : method == CollocationMethod::kRadau ? " radau" : " trapezoidal")
                              << (freeHorizon ? " free T" : " fixed T")) {
           Transcription t(p);
           const int n = p.nq(), P = t.numPoints();

@@ -41,6 +41,12 @@ class ProblemError : public std::runtime_error {
 enum class CollocationMethod {
   kHermiteSimpson,  ///< separated Hermite–Simpson, midpoint states and inputs are variables (O(h⁴))
   kTrapezoidal,     ///< trapezoidal rule (O(h²)), the cheap option
+  /// Radau IIA with 3 stages (c = (4 ∓ √6)/10, 1; O(h⁵)): stage states and inputs are variables,
+  /// the inputs linear between knots. L-stable — its stability function tends to 0 as λh → −∞,
+  /// where Hermite–Simpson's and the trapezoid's tend to ±1 — so stiff modes (light, damped
+  /// bodies: time constants far below h) decay within an interval as they do in the plant,
+  /// instead of being carried from knot to knot.
+  kRadau,
 };
 
 /// How the transcription imposes the dynamics at each collocation point (transcription.hpp).
