@@ -148,6 +148,12 @@ OptimalControlProblem makeBallTurnProblem(std::shared_ptr<const Model> model, co
   p.goalState = Eigen::VectorXd::Zero(2 * n);
   if (options.implicitForm) {
     p.dynamics = DynamicsForm::kImplicit;
+    // "Starting and ending at rest in a grasp equilibrium": q̈_I = 0 at both end knots too (the
+    // independent coordinates, as for the rates: A q̈ + Ȧ q̇ = 0 then fixes the others).
+    p.initialAccelerationFixed.assign(n, false);
+    p.finalAccelerationFixed.assign(n, false);
+    for (int i = 0; i < n; ++i) p.initialAccelerationFixed[i] = p.finalAccelerationFixed[i] = independent[i];
+    p.initialAccelerationFixed[yaw] = p.finalAccelerationFixed[yaw] = true;
     if (options.accelerationWeight > 0.0)
       p.accelerationWeights = Eigen::VectorXd::Constant(n, options.effortScale * options.accelerationWeight);
   }

@@ -227,6 +227,15 @@ void OptimalControlProblem::validate() const {
   if (!(timeWeight >= 0.0) || !std::isfinite(timeWeight)) {
     fail("problem: timeWeight = " + str(timeWeight) + " must be >= 0 and finite");
   }
+  for (const auto* flags : {&initialAccelerationFixed, &finalAccelerationFixed}) {
+    const std::string name = flags == &initialAccelerationFixed ? "initialAccelerationFixed" : "finalAccelerationFixed";
+    if (flags->empty()) continue;
+    if (static_cast<int>(flags->size()) != nq()) {
+      fail("problem: " + name + " has " + std::to_string(flags->size()) + " flags, the model has " +
+           std::to_string(nq()) + " coordinates");
+    }
+    if (dynamics != DynamicsForm::kImplicit) fail("problem: " + name + " needs dynamics = implicit (q̈ is a variable only there)");
+  }
   if (accelerationWeights.size() > 0) {
     const int n = nq();
     if (accelerationWeights.size() != n) {

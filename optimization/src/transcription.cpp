@@ -318,6 +318,10 @@ struct Transcription::Impl {
           if (lambda.allFinite()) z.segment(p * stride + nx + m + n, nc) = lambda;
         }
       }
+      for (int i = 0; i < n && !problem.initialAccelerationFixed.empty(); ++i)
+        if (problem.initialAccelerationFixed[i]) z(nx + m + i) = 0.0;
+      for (int i = 0; i < n && !problem.finalAccelerationFixed.empty(); ++i)
+        if (problem.finalAccelerationFixed[i]) z(knotPoint(N - 1) * stride + nx + m + i) = 0.0;
     }
     return z;
   }
@@ -337,6 +341,11 @@ struct Transcription::Impl {
       if (problem.initialFixed[i]) lower(i) = upper(i) = problem.initialState(i);
       if (problem.finalFixed[i]) lower(last + i) = upper(last + i) = problem.finalState(i);
     }
+    // Flagged accelerations at the end knots: q̈_i (implicit form, after x and u in the point's block) = 0.
+    for (int i = 0; i < n && !problem.initialAccelerationFixed.empty(); ++i)
+      if (problem.initialAccelerationFixed[i]) lower(nx + m + i) = upper(nx + m + i) = 0.0;
+    for (int i = 0; i < n && !problem.finalAccelerationFixed.empty(); ++i)
+      if (problem.finalAccelerationFixed[i]) lower(last + nx + m + i) = upper(last + nx + m + i) = 0.0;
     if (freeT) {
       lower(horizonIdx) = problem.minHorizon;
       upper(horizonIdx) = problem.maxHorizon;

@@ -71,6 +71,10 @@ void bindOptimization(py::module_& m) {
       .def("set_fixed_horizon", &Problem::setFixedHorizon, py::arg("T"))
       .def_readwrite("initial_fixed", &Problem::initialFixed, "nx flags (list of bool)")
       .def_readwrite("final_fixed", &Problem::finalFixed, "nx flags (list of bool)")
+      .def_readwrite("initial_acceleration_fixed", &Problem::initialAccelerationFixed,
+                     "nq flags (list of bool) or []: qdd_i = 0 at the first knot (implicit form only)")
+      .def_readwrite("final_acceleration_fixed", &Problem::finalAccelerationFixed,
+                     "nq flags (list of bool) or []: qdd_i = 0 at the last knot (implicit form only)")
       .def_readwrite("time_weight", &Problem::timeWeight)
       .def_readwrite("initial_guess", &Problem::initialGuess, "a Trajectory or None")
       .def_readwrite("hessian", &Problem::hessian,

@@ -653,6 +653,11 @@ class OptimalControlProblem:
     @dynamics.setter
     def dynamics(self, value: DynamicsForm) -> None: ...
     @property
+    def final_acceleration_fixed(self) -> List[bool]:
+        """nq flags (list of bool) or []: qdd_i = 0 at the last knot (implicit form only)"""
+    @final_acceleration_fixed.setter
+    def final_acceleration_fixed(self, value: List[bool]) -> None: ...
+    @property
     def final_fixed(self) -> List[bool]:
         """nx flags (list of bool)"""
     @final_fixed.setter
@@ -689,6 +694,11 @@ class OptimalControlProblem:
         """T (the initial guess when free)"""
     @horizon.setter
     def horizon(self, value: float) -> None: ...
+    @property
+    def initial_acceleration_fixed(self) -> List[bool]:
+        """nq flags (list of bool) or []: qdd_i = 0 at the first knot (implicit form only)"""
+    @initial_acceleration_fixed.setter
+    def initial_acceleration_fixed(self, value: List[bool]) -> None: ...
     @property
     def initial_fixed(self) -> List[bool]:
         """nx flags (list of bool)"""

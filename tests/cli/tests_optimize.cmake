@@ -105,6 +105,11 @@ trellis_cli_test(optimize.error.missing_file
 trellis_cli_test(optimize.error.missing_argument
   ARGS optimize
   CHECKS -DEXPECT_EXIT=2 ${_optimize_errors})
+# Radau IIA (L-stable, 3 stages): the same problem solved and consistent, the method named.
+trellis_cli_test(optimize.method_radau
+  ARGS optimize "${_problems}/cart_pole_swingup.json" --method radau --knots 21 --quiet
+  CHECKS "-DSTDOUT_REGEX=status: solved.*method: radau.*round_0: knots 21," -DSTDERR_EMPTY=ON)
+
 trellis_cli_test(optimize.error.bad_method
   ARGS optimize "${_problems}/cart_pole_swingup.json" --method euler
   CHECKS -DEXPECT_EXIT=2 ${_optimize_errors} "-DSTDERR_REGEX=--method: 'euler'")

@@ -391,3 +391,42 @@ TEST_CASE("transcription: the acceleration weights add the quadrature of q̈ᵀ 
   negative.accelerationWeights(1) = -0.1;
   CHECK_THROWS_WITH(negative.validate(), Catch::Contains("accelerationWeights[1] (" + p.model->configNames()[1] + ") = -0.1"));
 }
+
+TEST_CASE("transcription: flagged end accelerations are fixed at 0, implicit form only", "[transcription][implicit]") {
+  // initial/finalAccelerationFixed: the flagged q̈ of the first and last knot get the bounds 0, 0
+  // (and the guess 0 there); the others and every other point keep q̈ free. Both rules with
+  // interior points (HS midpoints, Radau stages), so the last knot's block is not P − 1 by luck.
+  const OptimalControlProblem file = trellis::loadProblem(problemPath("acrobot_swingup"));
+  for (const auto method : {CollocationMethod::kHermiteSimpson, CollocationMethod::kRadau}) {
+    OptimalControlProblem p = smaller(file, 4);
+    p.dynamics = trellis::DynamicsForm::kImplicit;
+    p.method = method;
+    const int n = p.nq(), m = p.nu();
+    p.initialAccelerationFixed = {true, false};
+    p.finalAccelerationFixed = {false, true};
+    REQUIRE(n == 2);
+    Transcription t(p);
+    Eigen::VectorXd lo, hi;
+    t.variableBounds(lo, hi);
+    const Eigen::VectorXd z = t.initialGuess();
+    const int first = t.stateIndex(t.knotPoint(0)) + 2 * n + m, last = t.stateIndex(t.knotPoint(p.knots - 1)) + 2 * n + m;
+    CHECK(lo(first) == 0.0);
+    CHECK(hi(first) == 0.0);
+    CHECK(z(first) == 0.0);
+    CHECK(std::isinf(lo(first + 1)));
+    CHECK(std::isinf(lo(last)));
+    CHECK(lo(last + 1) == 0.0);
+    CHECK(hi(last + 1) == 0.0);
+    CHECK(z(last + 1) == 0.0);
+    int fixedAccelerations = 0;  // no other q̈ is bounded
+    for (int q = 0; q < t.numPoints(); ++q)
+      for (int i = 0; i < n; ++i) fixedAccelerations += lo(t.stateIndex(q) + 2 * n + m + i) == hi(t.stateIndex(q) + 2 * n + m + i);
+    CHECK(fixedAccelerations == 2);
+  }
+  OptimalControlProblem bad = smaller(file, 4);
+  bad.initialAccelerationFixed = {true, true};
+  CHECK_THROWS_WITH(bad.validate(), Catch::Contains("initialAccelerationFixed needs dynamics = implicit"));
+  bad.dynamics = trellis::DynamicsForm::kImplicit;
+  bad.finalAccelerationFixed = {true};
+  CHECK_THROWS_WITH(bad.validate(), Catch::Contains("finalAccelerationFixed has 1 flags"));
+}

@@ -159,6 +159,17 @@ struct OptimalControlProblem {
   /// first two steps of the free-ball turn, ‖d‖ 144). A small weight gives it curvature (‖d‖ 7).
   /// C++ only (not in the problem file).
   Eigen::VectorXd accelerationWeights;
+  ///@{
+  /// q̈_i = 0 at the first / last knot for the flagged coordinates (n flags; empty: none) —
+  /// with q̇ = 0 there, an end that is an equilibrium: the start does not accelerate away, the end
+  /// holds. Implicit dynamics form only (the knot's q̈ variables get the bounds 0, 0; validate()
+  /// refuses them with the explicit form). On a constrained model flag the independent
+  /// coordinates only: the point's rows A q̈ + Ȧ q̇ = 0 fix the others, and flagging all leaves
+  /// those rows without a free variable (a rank-deficient program). Why: Radau's rows do not
+  /// involve the first knot's dynamics, and Hermite–Simpson's only through the quadrature, so a
+  /// rest-to-rest problem may otherwise start where the plant accelerates at once.
+  std::vector<bool> initialAccelerationFixed, finalAccelerationFixed;
+  ///@}
 
   /// The Hessian the solver uses unless OptimizerOptions::hessian overrides it (problem file
   /// "hessian": "exact" | "lbfgs"; default exact).
