@@ -38,7 +38,7 @@ int main(int argc, char** argv) {
   std::string scene = "hand_ball", out;
   bool diagnose = false;
   int evaluations = 0;
-  int nlpIterations = 0;  // --max-iterations: each Ipopt solve of --nlp (0: GraspNlpOptions' default)
+  int nlpIterations = 0;  // --max-iterations: each Ipopt solve of --nlp (0, not given: GraspNlpOptions' default)
   bool thumbBase = true;
   std::string startFile;
   bool nlp = false;
@@ -47,7 +47,16 @@ int main(int argc, char** argv) {
     if ((a == "--scene" || a == "--out") && i + 1 < argc) (a == "--scene" ? scene : out) = argv[++i];
     else if (a == "--diagnose") diagnose = true;
     else if (a == "--evaluations" && i + 1 < argc) evaluations = std::atoi(argv[++i]);
-    else if (a == "--max-iterations" && i + 1 < argc) nlpIterations = std::atoi(argv[++i]);  // ≤ 0: the default
+    else if (a == "--max-iterations" && i + 1 < argc) {
+      const std::string v = argv[++i];
+      char* end = nullptr;
+      const long k = std::strtol(v.c_str(), &end, 10);
+      if (end == v.c_str() || *end != '\0' || k < 1 || k > 1000000) {
+        std::cerr << "hand_ball_grasp: --max-iterations: '" << v << "' is not an integer in [1, 1000000]\n";
+        return 2;
+      }
+      nlpIterations = static_cast<int>(k);
+    }
     else if (a == "--no-thumb-base") thumbBase = false;
     else if (a == "--nlp") nlp = true;
     else if (a == "--start" && i + 1 < argc) startFile = argv[++i];
