@@ -6,6 +6,7 @@
 //                      [--rtol R] [--atol A] [--drift D] [--transport-substeps S]
 //                      [--quasi-static DEG [--knots N]] [--pulse NAME:A] [--write-reference CSV]
 //                      [--feedforward reference|average|consistent]
+//                      [--optimize DEG [--optimize-knots N]] [--redistribute N [--tension-floor F]]
 //
 // --reference: a trajectory CSV of the scene (Trajectory::writeCsv; e.g. the optimized turn);
 // without it the provisional reference: the scene's stored hold (q = s.q, q̇ = 0, u = s.u, a
@@ -22,13 +23,26 @@
 // the aggregate; exit 0 only when the gains are solved and every closed loop kept every contact
 // at every integrator step and converged (final / initial tracking error ≤ R, default 0.5);
 // 1 otherwise; 2 on bad arguments or files.
+// --redistribute N: the reference's motion kept and its tensions and contact forces redistributed
+// on N uniform knots (ball_reference.hpp: inverse dynamics, tensions in (F, u_max) with
+// --tension-floor F, default 0.3 N, contacts with λ_n ≥ margin + 0.05 N inside 90 % of the cone),
+// then checked as the optimizer checks its results (checkConsistency; an inconsistent one fails).
+// --optimize DEG: the reference is the turn by DEG degrees in T optimized first (ball_turn.hpp,
+// implicit Hermite–Simpson on --optimize-knots knots, default 11), then redistributed (201 knots
+// unless --redistribute says otherwise); the summary lines and each stage's time follow.
 #include "ball_feedback.hpp"
+#include "ball_reference.hpp"
+#include "ball_turn.hpp"
 #include "hand_feedback.hpp"
+
+#include <trellis/analysis/consistency.hpp>
 
 #include <trellis/analysis/simulation.hpp>
 #include <trellis/control/tvlqr.hpp>
 #include <trellis/core.hpp>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -92,7 +106,9 @@ int main(int argc, char** argv) {
   hand::BallFeedbackOptions options;
   double horizon = 2.0, quasiStaticDegrees = 0.0;
   std::string pulse;
-  int quasiStaticKnots = 21;
+  int quasiStaticKnots = 21, redistributeKnots = 0, optimizeKnots = 11;
+  double optimizeDegrees = 0.0;
+  double tensionFloor = 0.3;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const auto value = [&]() -> std::string {
@@ -117,6 +133,10 @@ int main(int argc, char** argv) {
       else if (a == "--quasi-static") quasiStaticDegrees = std::stod(value());
       else if (a == "--pulse") pulse = value();
       else if (a == "--knots") quasiStaticKnots = std::stoi(value());
+      else if (a == "--redistribute") redistributeKnots = std::stoi(value());
+      else if (a == "--optimize") optimizeDegrees = std::stod(value());
+      else if (a == "--optimize-knots") optimizeKnots = std::stoi(value());
+      else if (a == "--tension-floor") tensionFloor = std::stod(value());
       else if (a == "--feedforward") options.feedforward = parseEnum<SampledFeedforward>(value(), "feed-forward");
       else if (a == "--transport-substeps") options.transportSubsteps = std::stoi(value());
       else if (a == "--rtol") options.rtol = std::stod(value());
@@ -126,7 +146,8 @@ int main(int argc, char** argv) {
         std::cout << "usage: hand_ball_feedback [--reference CSV] [--scene NAME] [--runs N] [--seed S] "
                      "[--perturbation Z] [--rate HZ] [--horizon T] [--threads N] [--max-ratio R] [--gains CSV] "
                      "[--rtol R] [--atol A] [--drift D] [--transport-substeps S] [--quasi-static DEG [--knots N]] "
-                     "[--pulse NAME:A] [--write-reference CSV] [--feedforward reference|average|consistent]\n";
+                     "[--pulse NAME:A] [--write-reference CSV] [--feedforward reference|average|consistent] "
+                     "[--optimize DEG [--optimize-knots N]] [--redistribute N [--tension-floor F]]\n";
         return 0;
       } else {
         std::cerr << "hand_ball_feedback: unknown option '" << a << "' (--help lists them)\n";
@@ -140,10 +161,41 @@ int main(int argc, char** argv) {
   Scene s;
   hand::BallLimits limits;
   Trajectory reference;
+  const auto jobStart = std::chrono::steady_clock::now();
+  double stageSeconds[3] = {0.0, 0.0, 0.0};  // optimization, redistribution, consistency check
   try {
     s = loadScene(std::string(TRELLIS_EXAMPLE_SCENES_DIR) + "/" + scene + ".json");
     limits = hand::loadBallLimits(std::string(TRELLIS_HAND_DIR) + "/" + scene + "_limits.json", s.model);
-    if (!referencePath.empty()) {
+    if (optimizeDegrees != 0.0) {
+      // The turn optimized (ball_turn.hpp; the implicit form, Hermite–Simpson on a coarse mesh,
+      // from the quasi-static warm start): Ipopt must converge; its own check on the coarse mesh
+      // is reported, and the reference the gains use is the redistribution below.
+      if (redistributeKnots <= 0) redistributeKnots = 201;
+      hand::BallTurnOptions turn;
+      turn.angle = optimizeDegrees * std::numbers::pi / 180.0;
+      turn.horizon = horizon;
+      turn.knots = optimizeKnots;
+      turn.implicitForm = true;
+      const auto model = std::make_shared<const Model>(s.model);
+      const OptimalControlProblem problem = hand::makeBallTurnProblem(model, s.q, limits, turn);
+      OptimizerOptions oo;
+      oo.initialBarrier = 1e-4;
+      oo.initialBoundPush = 1e-6;
+      oo.maxRefinements = 0;
+      oo.maxIterations = 500;
+      const auto a = std::chrono::steady_clock::now();
+      const OptimizationResult opt = optimizeTrajectory(problem, oo);
+      stageSeconds[0] = std::chrono::duration<double>(std::chrono::steady_clock::now() - a).count();
+      std::printf("optimized the turn (%g deg in %g s, %d knots, implicit Hermite-Simpson): %s\n", optimizeDegrees, horizon,
+                  optimizeKnots, opt.describe().c_str());
+      std::fflush(stdout);
+      const bool converged = opt.ipoptStatus == "Solve_Succeeded" || opt.ipoptStatus == "Solved_To_Acceptable_Level";
+      if (!converged || opt.trajectory.size() != optimizeKnots) {
+        std::printf("the optimizer did not converge\nFAILED\n");
+        return 1;
+      }
+      reference = opt.trajectory;
+    } else if (!referencePath.empty()) {
       reference = Trajectory::readCsvFile(referencePath);
     } else if (quasiStaticDegrees != 0.0) {
       hand::BallTurnOptions turn;
@@ -157,6 +209,40 @@ int main(int argc, char** argv) {
       reference = hand::holdReference(s.model, s.q, s.u, horizon, 0.1);
     }
     reference.checkCompatible(s.model);
+    if (redistributeKnots > 0) {
+      // The motion kept, the tensions and contact forces redistributed on a dense grid so that
+      // the plant follows it (ball_reference.hpp); its consistency checked as the optimizer's is.
+      hand::InverseReferenceOptions ro;
+      ro.knots = redistributeKnots;
+      ro.tensionFloor = tensionFloor;
+      const auto a = std::chrono::steady_clock::now();
+      const hand::InverseReference inv = hand::inverseDynamicsReference(s.model, limits, reference, ro);
+      const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - a).count();
+      stageSeconds[1] = sec;
+      std::printf("redistributed on %d knots: %s (%.3f s, %d Newton iterations; |h| %.2g m, relative residual %.2g, "
+                  "min normal %.4f N, worst friction ratio %.4f, min tension margin %.3g N)\n",
+                  redistributeKnots, inv.ok ? "ok" : inv.message.c_str(), sec, inv.iterations, inv.maxConstraintResidual,
+                  inv.maxRelativeResidual, inv.minNormal, inv.worstFrictionRatio, inv.minTensionMargin);
+      if (!inv.ok) {
+        std::fflush(stdout);
+        return 1;
+      }
+      reference = inv.trajectory;
+      const auto b = std::chrono::steady_clock::now();
+      const ConsistencyResult c = checkConsistency(s.model, reference);
+      stageSeconds[2] = std::chrono::duration<double>(std::chrono::steady_clock::now() - b).count();
+      if (!c.ok()) {
+        std::printf("its consistency: %s\nFAILED\n", c.status.describe().c_str());
+        return 1;
+      }
+      std::printf("its consistency: %s (worst %.3g, median interval %.3g)\n", c.status.describe().c_str(), c.maxDefect,
+                  [&] {
+                    Eigen::VectorXd d = c.intervalDefects;
+                    std::sort(d.data(), d.data() + d.size());
+                    return d.size() ? d(d.size() / 2) : 0.0;
+                  }());
+      std::fflush(stdout);
+    }
     options.validate();
     if (!writeReference.empty()) reference.writeCsvFile(writeReference);
   } catch (const std::exception& e) {
@@ -165,7 +251,8 @@ int main(int argc, char** argv) {
   }
   std::printf("scene %s: %d coordinates, %d tendons, %d contact rows; reference %s: %d knots on [%g, %g] s\n",
               scene.c_str(), s.model.nq(), s.model.nu(), s.model.nc(),
-              !referencePath.empty() ? referencePath.c_str()
+              optimizeDegrees != 0.0 ? "the optimized turn, redistributed (ball_reference.hpp)"
+              : !referencePath.empty() ? referencePath.c_str()
               : quasiStaticDegrees != 0.0 ? "the quasi-static turn (ball_turn.hpp, not a solution of the dynamics)"
               : !pulse.empty()            ? "the plant's motion under a tension pulse"
                                           : "the stored hold",
@@ -190,6 +277,33 @@ int main(int argc, char** argv) {
   if (!gainsPath.empty() && r.lqr.ok()) r.lqr.gains.writeCsvFile(gainsPath);
   for (std::size_t k = 0; k < r.runs.size(); ++k) std::printf("run %zu: %s\n", k, r.runs[k].describe().c_str());
   std::printf("%s", r.summary().c_str());
+  {  // The job's figures in the words (over the reference's knots and every closed loop).
+    const int yaw = s.model.configIndex("ball_yaw");
+    const double turned = (reference.states()(yaw, reference.size() - 1) - reference.states()(yaw, 0)) * 180.0 / std::numbers::pi;
+    const hand::ContactForces f = hand::contactForces(s.model, limits, reference);
+    int failed = 0;
+    double worstRatio = 0.0, minNormal = 1e300, worstFriction = 0.0;
+    for (const hand::BallRun& run : r.runs) {
+      failed += run.ok() ? 0 : 1;
+      worstRatio = std::max(worstRatio, run.errorRatio);
+      minNormal = std::min(minNormal, run.minNormal);
+      worstFriction = std::max(worstFriction, run.worstFrictionRatio);
+    }
+    for (int k = 0; k < f.lambda.cols(); ++k) {
+      const hand::ContactMargins c = hand::contactMargins(f.lambda.col(k), limits);
+      minNormal = std::min(minNormal, c.minNormal);
+      worstFriction = std::max(worstFriction, c.worstFrictionRatio);
+    }
+    const double whole = std::chrono::duration<double>(std::chrono::steady_clock::now() - jobStart).count();
+    std::printf("ball rotation: %.3f deg\n", turned);
+    std::printf("min normal force: %.4f N (margin %.3f N; reference and all closed loops)\n", minNormal, limits.normalMin);
+    std::printf("worst friction ratio: %.4f (cone: 1)\n", worstFriction);
+    std::printf("worst final/initial: %.3g\n", worstRatio);
+    std::printf("N failed: %d of %zu\n", failed, r.runs.size());
+    std::printf("stages: optimization %.2f s, redistribution %.2f s, consistency check %.2f s, gains %.2f s, closed loops %.2f s\n",
+                stageSeconds[0], stageSeconds[1], stageSeconds[2], r.gainSeconds, r.closedLoopSeconds);
+    std::printf("whole job: %.2f s\n", whole);
+  }
   std::printf("%s\n", r.ok() ? "ok" : "FAILED");
   return r.ok() ? 0 : 1;
 }
