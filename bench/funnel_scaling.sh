@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # bench/funnel_scaling.sh — issue 29's figures for `trellis funnel`: closed loops per second per
-# core on the cart-pole swing-up and on the hand's main-job motion (one closed loop each, in the
+# core on the cart-pole swing-up and on the hand's holding motion (hand_hold_job) (one closed loop each, in the
 # funnel's configuration), and the scaling with threads and with MPI ranks (trellis-mpi), each
 # run checked byte for byte against the one-thread table. Prints a markdown table; every figure
 # is the median of REPETITIONS runs with the spread (min..max) beside it.
 #
 #   bench/funnel_scaling.sh [BUILD_DIR]        (default build/; needs cli/trellis, cli/trellis-mpi,
-#                                                examples/main_job/hand_main_job built)
+#                                                examples/hand/hand_hold_job built)
 # Environment: REPETITIONS (3), CART_SAMPLES (per level, 40), HAND_SAMPLES (per level, 3),
 # MAX_RANKS (8: 1, 2, 4, 8 ranks, oversubscribed beyond the cores to check the split).
 # mpirun --bind-to none: Open MPI binds each rank to a core by default (np <= 2), which on a shared
@@ -18,7 +18,7 @@ root="$(cd "$(dirname "$0")/.." && pwd)"
 build="${1:-$root/build}"
 trellis="$build/cli/trellis"
 mpi="$build/cli/trellis-mpi"
-hand_job="$build/examples/main_job/hand_main_job"
+hand_job="$build/examples/hand/hand_hold_job"
 reps="${REPETITIONS:-3}"
 cart_n="${CART_SAMPLES:-40}"
 hand_n="${HAND_SAMPLES:-3}"

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The hand's TV-LQR gains from Python — steps 1 and 5 of examples/main_job (hand_main_job.cpp)
+"""The hand's TV-LQR gains from Python — steps 1 and 5 of examples/hand/hand_hold_job.cpp (the main job before issue 26)
 with the same settings, then one closed loop:
 
 1. the reference motion of examples/scenes/hand.json (the digits flex and return over 3 s on the

@@ -1,0 +1,166 @@
+#!/usr/bin/env python3
+"""Plots of the hand turning a ball (examples/main_job/hand_main_job) from its CSV files.
+
+    plot_ball_turn.py --reference REFERENCE.csv [--closed CLOSED.csv ...] [--tracking TRACKING.csv]
+                      --limits LIMITS.json --out DIR
+
+REFERENCE.csv and CLOSED.csv: t, the coordinates, their rates (d<name>), the tendon tensions, and
+each contact's force in its frame (lambda_<digit>_n, lambda_<digit>_t1, lambda_<digit>_t2).
+TRACKING.csv: t, then ||x - x_ref|| of each run (run_<k>). LIMITS.json: examples/hand/
+hand_ball_limits.json (friction_coefficient, normal_force_min, tension_max per tendon).
+Writes DIR/ball_orientation.png (the ball's Z-Y-X angles against time), DIR/tensions.png (each
+tendon against 0 and its maximum), DIR/contacts.png (each contact's normal force against the
+margin and its friction ratio |lambda_t| / (mu lambda_n) against the cone's 1) and, with
+--tracking, DIR/tracking_error.png. The reference is black dashed over the closed loops (grey).
+Each PNG is written whole or not at all (a temporary file renamed). Matplotlib's Agg backend;
+Debian's python3-matplotlib is enough.
+"""
+import argparse
+import csv
+import json
+import math
+import os
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+
+def fail(message):
+    sys.exit(f"plot_ball_turn.py: {message}")
+
+
+def read_csv(path):
+    """{name: [floats]} of a CSV with a header row; exits naming the file, row and column on bad input."""
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.reader(f))
+    except OSError as e:
+        fail(f"{path}: {e.strerror}")
+    if len(rows) < 2:
+        fail(f"{path}: no data rows")
+    header = rows[0]
+    columns = {name: [] for name in header}
+    for i, row in enumerate(rows[1:], start=2):
+        if len(row) != len(header):
+            fail(f"{path}: row {i} has {len(row)} fields, the header {len(header)}")
+        for name, value in zip(header, row):
+            try:
+                columns[name].append(float(value) if value != "" else math.nan)
+            except ValueError:
+                fail(f"{path}: row {i}, column '{name}': '{value}' is not a number")
+    return header, columns
+
+
+def save(fig, out, name):
+    path = os.path.join(out, name)
+    tmp = path + ".tmp.png"
+    fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+    os.replace(tmp, path)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--reference", required=True)
+    ap.add_argument("--closed", action="append", default=[])
+    ap.add_argument("--tracking")
+    ap.add_argument("--limits", required=True)
+    ap.add_argument("--out", required=True)
+    a = ap.parse_args()
+    try:
+        with open(a.limits) as f:
+            limits = json.load(f)
+        mu = float(limits["friction_coefficient"])
+        normal_min = float(limits["normal_force_min"])
+        tension_max = {k: float(v) for k, v in limits["tension_max"].items()}
+    except (OSError, KeyError, ValueError, TypeError, AttributeError) as e:
+        fail(f"{a.limits}: {e}")
+    header, ref = read_csv(a.reference)
+    closed = [read_csv(p)[1] for p in a.closed]
+    for p, c in zip(a.closed, closed):
+        missing = [h for h in header if h not in c]
+        if missing:
+            fail(f"{p}: missing columns {', '.join(missing[:3])}")
+    t = ref["t"]
+    digits = [h[len("lambda_"):-len("_n")] for h in header if h.startswith("lambda_") and h.endswith("_n")]
+    if not digits:
+        fail(f"{a.reference}: no lambda_<digit>_n columns")
+    tendons = [h for h in header if h in tension_max]
+    if not tendons:
+        fail(f"{a.reference}: no tendon columns named in {a.limits}")
+
+    def draw(ax, key, transform=lambda v: v):
+        for c in closed:
+            ax.plot(c["t"], [transform(v) for v in c[key]], color="0.6", lw=0.7)
+        ax.plot(t, [transform(v) for v in ref[key]], "k--", lw=1.2)
+
+    # The ball's orientation.
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.4), constrained_layout=True)
+    for ax, key in zip(axes, ("ball_yaw", "ball_pitch", "ball_roll")):
+        if key not in ref:
+            fail(f"{a.reference}: no column '{key}'")
+        draw(ax, key, math.degrees)
+        ax.set_title(key)
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel("angle [deg]")
+    fig.suptitle("ball orientation (Z-Y-X angles): reference dashed, closed loops grey")
+    save(fig, a.out, "ball_orientation.png")
+
+    # Tensions against their bounds.
+    cols = 6
+    rows = math.ceil(len(tendons) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3 * cols, 2.2 * rows), constrained_layout=True, squeeze=False)
+    for ax, name in zip(axes.flat, tendons):
+        draw(ax, name)
+        ax.axhline(0.0, color="tab:red", lw=0.8)
+        ax.axhline(tension_max[name], color="tab:red", lw=0.8, ls=":")
+        top = max(max(ref[name]), *(max(c[name]) for c in closed)) if closed else max(ref[name])
+        ax.set_ylim(-0.05 * tension_max[name], max(1.15 * top, 0.1 * tension_max[name]))
+        ax.set_title(f"{name} (max {tension_max[name]:g} N)", fontsize=9)
+        ax.set_ylabel("tension [N]", fontsize=8)
+    for ax in list(axes.flat)[len(tendons):]:
+        ax.axis("off")
+    fig.suptitle("tendon tensions: reference dashed, closed loops grey; 0 red, u_max red dotted (off scale when far)")
+    save(fig, a.out, "tensions.png")
+
+    # Contacts: normal force and friction ratio.
+    def ratio(lam, k):
+        n, t1, t2 = lam[f"lambda_{d}_n"][k], lam[f"lambda_{d}_t1"][k], lam[f"lambda_{d}_t2"][k]
+        return math.hypot(t1, t2) / (mu * n) if n > 0 else math.inf
+
+    fig, axes = plt.subplots(2, len(digits), figsize=(3.2 * len(digits), 5.6), constrained_layout=True, squeeze=False)
+    for j, d in enumerate(digits):
+        ax = axes[0][j]
+        draw(ax, f"lambda_{d}_n")
+        ax.axhline(normal_min, color="tab:red", lw=0.8)
+        ax.set_title(f"{d}: normal force", fontsize=9)
+        ax.set_ylabel("lambda_n [N]", fontsize=8)
+        ax = axes[1][j]
+        for c in closed:
+            ax.plot(c["t"], [ratio(c, k) for k in range(len(c["t"]))], color="0.6", lw=0.7)
+        ax.plot(t, [ratio(ref, k) for k in range(len(t))], "k--", lw=1.2)
+        ax.axhline(1.0, color="tab:red", lw=0.8)
+        ax.set_ylim(0.0, 1.1)
+        ax.set_title(f"{d}: |lambda_t| / (mu lambda_n)", fontsize=9)
+        ax.set_xlabel("t [s]")
+    fig.suptitle(f"contacts (mu = {mu:g}): normal force against the margin {normal_min:g} N, friction ratio against the cone (1)")
+    save(fig, a.out, "contacts.png")
+
+    if a.tracking:
+        th, tr = read_csv(a.tracking)
+        fig, ax = plt.subplots(figsize=(7, 4), constrained_layout=True)
+        for name in th[1:]:
+            pts = [(x, y) for x, y in zip(tr["t"], tr[name]) if y > 0 and math.isfinite(y)]
+            if pts:
+                ax.semilogy([p[0] for p in pts], [p[1] for p in pts], lw=0.8)
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel("||x - x_ref|| [rad, m, rad/s, m/s]")
+        ax.set_title("tracking error of each closed loop at the reference's knots")
+        save(fig, a.out, "tracking_error.png")
+
+
+if __name__ == "__main__":
+    main()
