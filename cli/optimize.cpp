@@ -35,7 +35,8 @@ iterations (all rounds), cost, constraint_violation, bound_violation, max_slack,
 (of the returned solution), method, derivatives, hessian, consistency_defect (worst relative defect),
 consistency_where (state, interval, time), slack_defect (closed chains), refinement_rounds, one
 'round_K: knots N, iterations I, defect D' line per solve, solve_time_ms (wall clock, all
-rounds), solve_cpu_time_ms, and trajectory (the CSV written, if any).
+rounds), solve_cpu_time_ms, evaluation_time_ms, hessian_time_ms (of the evaluations, the
+Hessian's), check_time_ms (the a-posteriori checks; the rest is Ipopt with MUMPS), and trajectory (the CSV written, if any).
 
 The trajectory CSV (the knots; trellis::Trajectory layout) has one row per knot:
   t, <configs...>, d<configs...>, <inputs...>
@@ -203,7 +204,10 @@ int runOptimize(std::span<const std::string> args, std::ostream& out) {
         << formatNumber(r.maxDefect, 3) << '\n';
   }
   out << "solve_time_ms: " << formatNumber(1e3 * result.solveTime, 4) << '\n'
-      << "solve_cpu_time_ms: " << formatNumber(1e3 * result.solveCpuTime, 4) << '\n';
+      << "solve_cpu_time_ms: " << formatNumber(1e3 * result.solveCpuTime, 4) << '\n'
+      << "evaluation_time_ms: " << formatNumber(1e3 * result.evaluationTime, 4) << '\n'
+      << "hessian_time_ms: " << formatNumber(1e3 * result.hessianTime, 4) << '\n'
+      << "check_time_ms: " << formatNumber(1e3 * result.checkTime, 4) << '\n';
   if (outPath) out << "trajectory: " << *outPath << '\n';
   if (!result.hessianNote.empty()) out << "hessian_note: " << result.hessianNote << '\n';
   if (!result.ok()) {

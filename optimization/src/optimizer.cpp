@@ -67,6 +67,19 @@ struct StartPoint {
   bool multipliers = false;
 };
 
+/// Adds the wall time of its scope to `total` (the result's time split).
+class Timer {
+ public:
+  explicit Timer(double& total) : total_(total), start_(std::chrono::steady_clock::now()) {}
+  ~Timer() { total_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count(); }
+  Timer(const Timer&) = delete;
+  Timer& operator=(const Timer&) = delete;
+
+ private:
+  double& total_;
+  std::chrono::steady_clock::time_point start_;
+};
+
 /// The TNLP: forwards every evaluation to the Transcription and keeps the final iterate and
 /// multipliers. Nothing may throw through Ipopt: evaluation failures return false (Ipopt then
 /// shortens the step).
@@ -120,12 +133,15 @@ class CollocationNlp : public Ipopt::TNLP {
   }
 
   bool eval_f(Index, const Number* x, bool, Number& obj_value) override {
+    const Timer timer(evaluationTime_);
     return t_.evalCost(x, obj_value);
   }
   bool eval_grad_f(Index, const Number* x, bool, Number* grad_f) override {
+    const Timer timer(evaluationTime_);
     return t_.evalCostGradient(x, grad_f);
   }
   bool eval_g(Index, const Number* x, bool, Index, Number* g) override {
+    const Timer timer(evaluationTime_);
     return noteFailure(t_.evalConstraints(x, g));
   }
   bool eval_jac_g(Index, const Number* x, bool, Index, Index nele_jac, Index* iRow, Index* jCol,
@@ -139,6 +155,7 @@ class CollocationNlp : public Ipopt::TNLP {
       }
       return true;
     }
+    const Timer timer(evaluationTime_);
     return noteFailure(t_.evalJacobian(x, values));
   }
   bool eval_h(Index, const Number* x, bool, Number obj_factor, Index, const Number* lambda, bool,
@@ -152,6 +169,7 @@ class CollocationNlp : public Ipopt::TNLP {
       }
       return true;
     }
+    const Timer timer(evaluationTime_), hessianTimer(hessianTime_);
     return noteFailure(t_.evalHessian(x, obj_factor, lambda, values));
   }
 
@@ -192,6 +210,8 @@ class CollocationNlp : public Ipopt::TNLP {
   const Eigen::VectorXd& finalUpperMultipliers() const { return finalZU_; }
   bool haveFinal() const { return haveFinal_; }
   int iterations() const { return iterations_; }
+  double evaluationTime() const { return evaluationTime_; }  ///< wall seconds inside the evaluations
+  double hessianTime() const { return hessianTime_; }        ///< of which the Hessian's
   const std::string& evaluationError() const { return evaluationError_; }
   const std::string& callbackError() const { return callbackError_; }
 
@@ -208,6 +228,7 @@ class CollocationNlp : public Ipopt::TNLP {
   Eigen::VectorXd lower_, upper_, gLower_, gUpper_, finalZ_, finalLambda_, finalZL_, finalZU_;
   bool haveFinal_ = false;
   int iterations_ = 0;
+  double evaluationTime_ = 0.0, hessianTime_ = 0.0;
   std::string evaluationError_, callbackError_;
 };
 
@@ -413,6 +434,8 @@ OptimizationResult solveOnce(const OptimalControlProblem& problem, const Optimiz
   result.status.code = detail::classify(status);
   result.iterations = nlp->iterations();
   result.variables = nlp->finalVariables();
+  result.evaluationTime = nlp->evaluationTime();
+  result.hessianTime = nlp->hessianTime();
   result.constraintMultipliers = nlp->finalLambda();
   result.lowerBoundMultipliers = nlp->finalLowerMultipliers();
   result.upperBoundMultipliers = nlp->finalUpperMultipliers();
@@ -605,6 +628,7 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
   OptimizationResult result;
   int iterations = 0;
   long dynamics = 0, linearizations = 0, secondOrder = 0;
+  double evaluationTime = 0.0, hessianTime = 0.0, checkTime = 0.0;
   std::vector<RefinementRound> rounds;
   OptimalControlProblem previousProblem;
   for (int round = 0;; ++round) {
@@ -619,6 +643,8 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
     dynamics += result.dynamicsEvaluations;
     linearizations += result.linearizationEvaluations;
     secondOrder += result.secondOrderEvaluations;
+    evaluationTime += result.evaluationTime;
+    hessianTime += result.hessianTime;
     RefinementRound info;
     info.knots = problem.knots;
     info.iterations = result.iterations;
@@ -629,6 +655,7 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
     bool consistent = false;
     Eigen::VectorXd errors;
     if (result.ok() && result.trajectory.size() > 0) {
+      const Timer timer(checkTime);
       result.consistency = checkConsistency(*problem.model, result.trajectory, check);
       const Eigen::VectorXd slackShare = measureSlack(problem, options, result);
       info.maxDefect = result.consistency.maxDefect;
@@ -680,6 +707,9 @@ OptimizationResult optimizeTrajectory(const OptimalControlProblem& input,
   result.dynamicsEvaluations = dynamics;
   result.linearizationEvaluations = linearizations;
   result.secondOrderEvaluations = secondOrder;
+  result.evaluationTime = evaluationTime;
+  result.hessianTime = hessianTime;
+  result.checkTime = checkTime;
   result.rounds = std::move(rounds);
   result.solveTime = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   result.solveCpuTime = static_cast<double>(std::clock() - cpuStart) / CLOCKS_PER_SEC;
@@ -733,6 +763,9 @@ std::string OptimizationResult::json() const {
   j["rounds"] = std::move(list);
   j["solve_time_ms"] = toJson(1e3 * solveTime);
   j["solve_cpu_time_ms"] = toJson(1e3 * solveCpuTime);
+  j["evaluation_time_ms"] = toJson(1e3 * evaluationTime);
+  j["hessian_time_ms"] = toJson(1e3 * hessianTime);
+  j["check_time_ms"] = toJson(1e3 * checkTime);
   return j.dump();
 }
 

@@ -147,7 +147,7 @@ void bindOptimization(py::module_& m) {
   py::class_<OptimizationResult>(m, "OptimizationResult",
       "status (OptimizationCode), ok, message, t, index (the status: t and index name the worst "
       "interval when inconsistent), ipopt_status, iterations (all rounds), rounds, hessian, cost, "
-      "constraint_violation, bound_violation, max_slack, solve_time, solve_cpu_time, horizon, "
+      "constraint_violation, bound_violation, max_slack, solve_time, solve_cpu_time, evaluation_time, hessian_time, check_time, horizon, "
       "evaluation counts, the trajectory (knots), Hermite-Simpson midpoints, the NLP variables and "
       "multipliers; describe() and json() are the library's reports.")
       .def_property_readonly("status", [](const OptimizationResult& r) { return r.status.code; })
@@ -185,6 +185,9 @@ void bindOptimization(py::module_& m) {
       .def_readonly("max_slack", &OptimizationResult::maxSlack)
       .def_readonly("solve_time", &OptimizationResult::solveTime)
       .def_readonly("solve_cpu_time", &OptimizationResult::solveCpuTime)
+      .def_readonly("evaluation_time", &OptimizationResult::evaluationTime)
+      .def_readonly("hessian_time", &OptimizationResult::hessianTime)
+      .def_readonly("check_time", &OptimizationResult::checkTime)
       .def_readonly("horizon", &OptimizationResult::horizon)
       .def_readonly("dynamics_evaluations", &OptimizationResult::dynamicsEvaluations)
       .def_readonly("linearization_evaluations", &OptimizationResult::linearizationEvaluations)

@@ -119,7 +119,7 @@ trellis_cli_test(optimize.error.bad_method
 # solved and not solved (exit 4, "ok": false, the message, the rounds and where the defect is).
 trellis_cli_test(optimize.json
   ARGS optimize "${_problems}/cart_pole_swingup.json" --knots 8 --quiet --json
-  CHECKS "-DSTDOUT_REGEX=^\\{\"status\":\"solved\",\"ok\":true,\"message\":\"\",\"t\":null,\"index\":null,\"ipopt_status\":\"Solve_Succeeded\",\"iterations\":[1-9][0-9]*,\"cost\":[-0-9.e]+,.*\"knots\":[1-9][0-9]+,\"hessian\":\"exact\",.*\"refinement_rounds\":[1-9],\"rounds\":\\[\\{\"knots\":8,.*\\}\\],\"solve_time_ms\":[0-9.e+-]+,\"solve_cpu_time_ms\":[0-9.e+-]+,\"method\":\"hermite_simpson\",\"derivatives\":\"exact\",\"trajectory\":null\\}\n$"
+  CHECKS "-DSTDOUT_REGEX=^\\{\"status\":\"solved\",\"ok\":true,\"message\":\"\",\"t\":null,\"index\":null,\"ipopt_status\":\"Solve_Succeeded\",\"iterations\":[1-9][0-9]*,\"cost\":[-0-9.e]+,.*\"knots\":[1-9][0-9]+,\"hessian\":\"exact\",.*\"refinement_rounds\":[1-9],\"rounds\":\\[\\{\"knots\":8,.*\\}\\],\"solve_time_ms\":[0-9.e+-]+,\"solve_cpu_time_ms\":[0-9.e+-]+,\"evaluation_time_ms\":[0-9.e+-]+,\"hessian_time_ms\":[0-9.e+-]+,\"check_time_ms\":[0-9.e+-]+,\"method\":\"hermite_simpson\",\"derivatives\":\"exact\",\"trajectory\":null\\}\n$"
          -DSTDERR_EMPTY=ON)
 trellis_cli_test(optimize.json_inconsistent
   ARGS optimize "${_problems}/cart_pole_swingup.json" --knots 8 --max-refinements 0 --quiet --json

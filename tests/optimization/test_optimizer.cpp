@@ -169,6 +169,28 @@ TEST_CASE("optimizer: optimized trajectories are dynamically consistent", "[opti
   }
 }
 
+TEST_CASE("optimizer: the time split adds up within the solve's time", "[optimizer]") {
+  // evaluationTime (the callbacks), hessianTime (a part of it) and checkTime (the a-posteriori
+  // check) are disjoint parts of solveTime, each measured, none zero on a solve that did all three.
+  OptimalControlProblem p = trellis::loadProblem(problemPath("cart_pole_swingup"));
+  p.knots = 26;
+  trellis::OptimizerOptions o = singleSolve();
+  const OptimizationResult r = trellis::optimizeTrajectory(p, o);
+  checkSolved(p, r);
+  CHECK(r.evaluationTime > 0.0);
+  CHECK(r.hessianTime > 0.0);
+  CHECK(r.checkTime > 0.0);
+  CHECK(r.hessianTime < r.evaluationTime);
+  CHECK(r.evaluationTime + r.checkTime < r.solveTime);
+  const std::string j = r.json();
+  for (const char* key : {"\"evaluation_time_ms\"", "\"hessian_time_ms\"", "\"check_time_ms\""}) CHECK(j.find(key) != std::string::npos);
+  // L-BFGS: no Hessian evaluated, none timed.
+  o.hessian = trellis::HessianMode::kLimitedMemory;
+  const OptimizationResult l = trellis::optimizeTrajectory(p, o);
+  CHECK(l.hessianTime == 0.0);
+  CHECK(l.evaluationTime > 0.0);
+}
+
 TEST_CASE("optimizer: the closed chain keeps h = 0 and A q' = 0 at the knots", "[optimizer][constrained]") {
   const OptimalControlProblem p = trellis::loadProblem(problemPath("paper_pendulum_transfer"));
   const OptimizationResult r = trellis::optimizeTrajectory(p);

@@ -172,6 +172,13 @@ struct OptimizationResult {
   Eigen::VectorXd mesh;         ///< the returned solution's mesh τ (N entries)
   double solveTime = 0.0;      ///< wall-clock seconds of all rounds (Ipopt and checks)
   double solveCpuTime = 0.0;   ///< CPU seconds of the process during them (std::clock)
+  ///@{
+  /// Where solveTime went (wall seconds, all rounds): inside Ipopt's calls of the cost, the
+  /// constraints, their Jacobian and the Hessian (the transcription with the core's dynamics and
+  /// derivatives) — of which the Hessian's —, and in the a-posteriori checks. The rest of solveTime
+  /// is Ipopt itself with its linear solver (MUMPS) and the set-up.
+  double evaluationTime = 0.0, hessianTime = 0.0, checkTime = 0.0;
+  ///@}
   double horizon = 0.0;        ///< T of the returned iterate
   ///@{
   /// Forward dynamics, exact linearizations and second-order contractions evaluated, all rounds.
@@ -201,7 +208,8 @@ struct OptimizationResult {
   /// "constraint_violation", "bound_violation", "max_slack", "horizon", "knots", "hessian",
   /// "consistency_defect" (null when not checked), "consistency_checked", "consistency_where"
   /// (when checked: state, interval, time), "slack_defect" (with constraints), "refinement_rounds",
-  /// "rounds" ([{knots, iterations, defect, hessian}]), "solve_time_ms", "solve_cpu_time_ms"}.
+  /// "rounds" ([{knots, iterations, defect, hessian}]), "solve_time_ms", "solve_cpu_time_ms",
+  /// "evaluation_time_ms", "hessian_time_ms", "check_time_ms"}.
   std::string json() const;
 };
 
