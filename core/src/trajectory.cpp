@@ -27,6 +27,12 @@ const std::string kRatePrefix = "rate_";
 
 bool isRateColumn(const std::string& name) { return name.rfind(kRatePrefix, 0) == 0; }
 
+// The prefix of a constraint-force column (file comment): written for people and plots, skipped
+// by the reader.
+const std::string kForcePrefix = "lambda_";
+
+bool isForceColumn(const std::string& name) { return name.rfind(kForcePrefix, 0) == 0; }
+
 std::vector<std::string> columnNames(const std::vector<std::string>& configs,
                                      const std::vector<std::string>& inputs, bool rates = false) {
   std::vector<std::string> names{"t"};
@@ -259,6 +265,7 @@ Eigen::VectorXd Trajectory::input(double t) const {
 Trajectory Trajectory::readCsv(std::istream& in, const std::string& source) {
   int n = -1;
   int rateBlock = 0;  // the number of input columns (the rate columns, if any, follow them)
+  int forceColumns = 0;  // the trailing lambda_ columns, skipped
   const detail::NumericCsv csv = detail::readNumericCsv(
       in, source, [&](const std::vector<std::string>& header, int lineNo) {
         if (header[0] != "t") {
@@ -300,8 +307,24 @@ Trajectory Trajectory::readCsv(std::istream& in, const std::string& source) {
                                 ": expected 't', the configuration names, then 'd' + each "
                                 "configuration name, then the input names");
         }
+        // The constraint-force block, if any, closes the row: from the first lambda_ column after
+        // the states every column is one, and the reader leaves them out.
+        const int first = 1 + 2 * n;
+        int width = static_cast<int>(header.size());
+        for (int c = first; c < width; ++c) {
+          if (!isForceColumn(header[c])) continue;
+          for (int j = c; j < width; ++j) {
+            if (!isForceColumn(header[j])) {
+              throw TrajectoryError(source + ": line " + std::to_string(lineNo) + ": column " + std::to_string(j + 1) +
+                                    " ('" + header[j] + "') after the constraint-force column '" + header[c] +
+                                    "' (the lambda_ columns come last; an input name must not begin with 'lambda_')");
+            }
+          }
+          forceColumns = width - c;
+          width = c;
+          break;
+        }
         // Inputs up to the first rate_ column; from there exactly rate_<input> for every input.
-        const int first = 1 + 2 * n, width = static_cast<int>(header.size());
         int c = first;
         while (c < width && !isRateColumn(header[c])) ++c;
         rateBlock = c - first;
@@ -332,7 +355,7 @@ Trajectory Trajectory::readCsv(std::istream& in, const std::string& source) {
   const std::vector<std::string>& header = csv.header;
   std::vector<std::string> configs(header.begin() + 1, header.begin() + 1 + n);
   std::vector<std::string> inputs(header.begin() + 1 + 2 * n, header.begin() + 1 + 2 * n + rateBlock);
-  const bool rates = rateBlock < static_cast<int>(header.size()) - 1 - 2 * n;
+  const bool rates = rateBlock < static_cast<int>(header.size()) - forceColumns - 1 - 2 * n;
   const int m = static_cast<int>(inputs.size());
   const auto& rows = csv.rows;
   const int N = static_cast<int>(rows.size());

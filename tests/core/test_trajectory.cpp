@@ -221,6 +221,26 @@ TEST_CASE("trajectory input rule: cubic Hermite with input derivatives", "[traje
     REQUIRE(c.hasInputDerivatives());
     CHECK(c.inputDerivatives()(1, 1) == 8.0);
   }
+  SECTION("trailing constraint-force columns are skipped; one out of place is refused") {
+    // The hand's main job writes each contact's force after the inputs and rates (lambda_…).
+    std::istringstream with("t,x,dx,a,rate_a,lambda_pad_n,lambda_pad_t1\n0,1,2,3,4,5,6\n1,1,2,3,7,8,9\n");
+    const Trajectory w = Trajectory::readCsv(with);
+    CHECK(w.configNames() == std::vector<std::string>{"x"});
+    CHECK(w.inputNames() == std::vector<std::string>{"a"});
+    REQUIRE(w.hasInputDerivatives());
+    CHECK(w.inputDerivatives()(0, 1) == 7.0);
+    std::istringstream noRates("t,x,dx,a,b,lambda_n\n0,1,2,3,4,5\n1,1,2,3,4,6\n");
+    const Trajectory r = Trajectory::readCsv(noRates);
+    CHECK(r.inputNames() == std::vector<std::string>{"a", "b"});
+    CHECK_FALSE(r.hasInputDerivatives());
+    CHECK(r.inputs()(1, 1) == 4.0);
+    // A configuration named lambda_… is a state column (before the inputs), not a force.
+    std::istringstream config("t,lambda_q,dlambda_q,a\n0,1,2,3\n1,1,2,3\n");
+    CHECK(Trajectory::readCsv(config).configNames() == std::vector<std::string>{"lambda_q"});
+    std::istringstream bad("t,x,dx,a,lambda_n,b\n0,1,2,3,4,5\n");
+    CHECK_THROWS_WITH(Trajectory::readCsv(bad, "traj.csv"),
+                      Contains("traj.csv: line 1: column 6 ('b') after the constraint-force column 'lambda_n'"));
+  }
   SECTION("malformed or mismatched rate columns are refused, naming the column and row") {
     auto read = [](const std::string& s) {
       std::istringstream in(s);

@@ -215,6 +215,15 @@ def make_page(args, work):
     return page, scene, trajectories
 
 
+def rotation(kin, header, frame):
+    """The frame's world rotation matrix from `trellis kinematics`' unit quaternion (qw, qx, qy, qz)."""
+    import numpy
+    w, x, y, z = (kin[header.index(frame + "." + k)] for k in ("qw", "qx", "qy", "qz"))
+    return numpy.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
 def check_arrows(args, scene, trajectories, chosen, probe, result):
     """The page's force arrows against λ from the library (see the module's docstring, item 4)."""
     solid = [i for i, t in enumerate(result["trajectories"][:len(trajectories)]) if t["arrows"]]
@@ -267,9 +276,12 @@ def check_arrows(args, scene, trajectories, chosen, probe, result):
                         expected_force[{"x": 0, "y": 1, "z": 2}[c["axis"]]] += lam[r]
                     elif c["type"] == "distance":
                         expected_force += lam[r] * 2 * (position(c["frame1"]) - position(c["frame2"]))
+                    elif c["type"] == "point_on_plane":
+                        # λ n on the plane's body, n = R_plane n_plane, at the point body's point.
+                        expected_force += lam[r] * rotation(kin, kin_header, c["plane_frame"]).dot(numpy.array(c["normal"]))
                     else:
                         fail("check_arrows: constraint kind %s not handled by this test" % c["type"])
-                    expected_point = position(c["frame1"])
+                    expected_point = position(c["point_frame"] if c["type"] == "point_on_plane" else c["frame1"])
                 largest = max(largest, numpy.linalg.norm(expected_force))
                 worst_force = max(worst_force, numpy.abs(numpy.array(got[3:]) - expected_force).max())
                 worst_point = max(worst_point, numpy.abs(numpy.array(got[:3]) - expected_point).max())

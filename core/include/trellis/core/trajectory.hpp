@@ -9,6 +9,11 @@
 // and "d" + each, before the inputs). An input name must therefore not begin with "rate_": the
 // first column after the state columns that does begins the rate block, which must then be
 // exactly rate_<input> for every input (else TrajectoryError naming the column).
+// A file may end with constraint-force columns, every name beginning with "lambda_" (e.g. a
+// contact's force in its frame, lambda_index_n, as the hand's main job writes them): they are for
+// people and plots — the dynamics recompute λ from the state and input — and readCsv skips them;
+// from the first such column after the states every column must be one, so an input name must not
+// begin with "lambda_" either. writeCsv writes none.
 //
 // Interpolation rule (evaluate), h = t_{k+1} − t_k:
 //  - the state is a cubic Hermite spline through the knots using the knot derivatives
