@@ -118,7 +118,7 @@ class Design {
  public:
   Design(const Model& model, const Trajectory& motion, const std::vector<int>& drivers,
          const std::vector<int>& dependent)
-      : model_(model), motion_(motion), drivers_(drivers), dependent_(dependent), data_(model) {
+      : model_(model), drivers_(drivers), dependent_(dependent), data_(model) {
     const int n = model.nq(), N = motion.size();
     Eigen::VectorXd a0, a1;
     for (const int k : {0, N - 1}) {
@@ -184,7 +184,6 @@ class Design {
 
  private:
   const Model& model_;
-  const Trajectory& motion_;
   std::vector<int> drivers_, dependent_;
   Data data_;
   std::unique_ptr<QuinticSpline> spline_;
