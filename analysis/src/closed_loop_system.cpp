@@ -58,7 +58,12 @@ ClosedLoopSystem::ClosedLoopSystem(const Model& model, const InputLaw& law,
       uc_(m_),
       active_(Eigen::VectorXd::Ones(m_)),
       K_(m_, 2 * n_),
-      SK_(m_, 2 * n_) {
+      SK_(m_, 2 * n_),
+      jac_(2 * n_, 2 * n_),
+      newton_(n_, n_),
+      lu_(n_),
+      rhsB_(n_),
+      solB_(n_) {
   if (options.inputLower.size() == m_) lower_ = options.inputLower;
   if (options.inputUpper.size() == m_) upper_ = options.inputUpper;
   failState.resize(2 * n_);
@@ -243,6 +248,44 @@ int ClosedLoopSystem::jacobian(double t, ConstVectorMap y, ConstVectorMap /*fy*/
     SK_ = active_.asDiagonal() * K_;
     J.noalias() -= data_.B * SK_;
   }
+  return 0;
+}
+
+void ClosedLoopSystem::factorNewton(double gamma) {
+  const auto Aq = jac_.bottomLeftCorner(n_, n_);
+  const auto Av = jac_.bottomRightCorner(n_, n_);
+  newton_.noalias() = (-gamma * gamma) * Aq;
+  newton_.noalias() -= gamma * Av;
+  newton_.diagonal().array() += 1.0;
+  lu_.compute(newton_);
+  gammaLu_ = gamma;
+}
+
+int ClosedLoopSystem::preconditionerSetup(double t, ConstVectorMap y, ConstVectorMap fy, bool jacOk,
+                                          bool* jacUpdated, double gamma) {
+  *jacUpdated = false;
+  if (!jacOk || !haveJac_) {
+    haveJac_ = false;
+    const int r = jacobian(t, y, fy, MatrixMap(jac_.data(), jac_.rows(), jac_.cols()));
+    if (r != 0) return r;
+    haveJac_ = true;
+    ++structuredJacobians_;
+    *jacUpdated = true;
+  }
+  factorNewton(gamma);
+  return 0;
+}
+
+int ClosedLoopSystem::preconditionerSolve(double, ConstVectorMap, ConstVectorMap, ConstVectorMap r, VectorMap z,
+                                          double gamma) {
+  if (!haveJac_) return -1;
+  if (gamma != gammaLu_) factorNewton(gamma);
+  const auto r1 = r.head(n_);
+  rhsB_ = r.tail(n_);
+  rhsB_.noalias() += gamma * (jac_.bottomLeftCorner(n_, n_) * r1);
+  solB_ = lu_.solve(rhsB_);
+  z.head(n_) = r1 + gamma * solB_;
+  z.tail(n_) = solB_;
   return 0;
 }
 

@@ -21,6 +21,7 @@
 #include "trellis/core/data.hpp"
 
 #include <Eigen/Core>
+#include <Eigen/LU>
 
 #include <string>
 
@@ -43,6 +44,20 @@ class ClosedLoopSystem final : public OdeSystem {
   int rhs(double t, ConstVectorMap y, VectorMap ydot) override;
   bool hasJacobian() const override { return jacobianKnown_; }
   int jacobian(double t, ConstVectorMap y, ConstVectorMap fy, MatrixMap J) override;
+
+  /// The Newton solve (I − γJ) z = r of BDF by its structure (OdeLinearSolver::SystemSolve).
+  /// J = [[0, I], [A_q, A_v]] (x = [q; q̇], the same in deviation coordinates), so with
+  /// z = [a; b], r = [r₁; r₂]:  a = r₁ + γb,  (I − γA_v − γ²A_q) b = r₂ + γA_q r₁ —
+  /// one n×n LU instead of a 2n×2n one (8× fewer flops) and no copy or shift of a 2n×2n matrix.
+  /// Set-up recomputes J only when CVODES says it is stale (jacOk false); a solve with another
+  /// γ than the factored one refactors the n×n matrix, so every solve is exact for its γ.
+  bool hasPreconditioner() const override { return jacobianKnown_; }
+  int preconditionerSetup(double t, ConstVectorMap y, ConstVectorMap fy, bool jacOk, bool* jacUpdated,
+                          double gamma) override;
+  int preconditionerSolve(double t, ConstVectorMap y, ConstVectorMap fy, ConstVectorMap r, VectorMap z,
+                          double gamma) override;
+  /// Jacobians formed for the structured solve (CVODES counts only those of its dense solver).
+  long structuredJacobians() const { return structuredJacobians_; }
 
   /// out = sat(π(t, x)); clipped says whether any entry was clipped. On failure records it and
   /// returns false.
@@ -85,6 +100,14 @@ class ClosedLoopSystem final : public OdeSystem {
   Data data_;
   Eigen::VectorXd x_, q_, dq_, u_, held_, lower_, upper_, xr_, ur_, xrdot_, dx_, xc_, uc_, active_;
   Eigen::MatrixXd K_, SK_;
+  // The structured solve: J (2n×2n) at the last set-up, I − γA_v − γ²A_q factored at gammaLu_.
+  Eigen::MatrixXd jac_, newton_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
+  Eigen::VectorXd rhsB_, solB_;
+  double gammaLu_ = 0.0;
+  bool haveJac_ = false;
+  long structuredJacobians_ = 0;
+  void factorNewton(double gamma);
   // Right-hand-side failures are first reported as recoverable (CVODES retries with a smaller
   // step, which helps when only a trial point was bad). After kMaxRecoverableFailures in one
   // integrator call, or after a policy exception, every further call fails unrecoverably until

@@ -18,10 +18,15 @@ namespace trellis::detail {
 
 namespace {
 
-OdeOptions integratorOptions(const SimulationOptions& options) {
+/// BDF's Newton solves: by the system's structure where its Jacobian is known
+/// (ClosedLoopSystem::preconditionerSolve: one n×n LU), else dense with CVODES's difference
+/// quotient. Adams: fixed-point iterations.
+OdeOptions integratorOptions(const SimulationOptions& options, const ClosedLoopSystem& system) {
   const bool bdf = options.method == IntegrationMethod::kBDF;
-  OdeOptions ode = makeOdeOptions("closed-loop simulation", bdf ? OdeMethod::Bdf : OdeMethod::Adams,
-                                  bdf ? OdeLinearSolver::Dense : OdeLinearSolver::FixedPoint,
+  const OdeLinearSolver solver = !bdf                         ? OdeLinearSolver::FixedPoint
+                                 : system.hasPreconditioner() ? OdeLinearSolver::SystemSolve
+                                                              : OdeLinearSolver::Dense;
+  OdeOptions ode = makeOdeOptions("closed-loop simulation", bdf ? OdeMethod::Bdf : OdeMethod::Adams, solver,
                                   options.rtol, options.atol, options.maxSteps, options.maxStep);
   ode.exactJacobian = options.exactJacobian;
   return ode;
@@ -106,7 +111,7 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
 
   SimulationResult result;
   ClosedLoopSystem system(model, law, options);
-  OdeDriver driver(system, nx, integratorOptions(options));
+  OdeDriver driver(system, nx, integratorOptions(options, system));
   std::unique_ptr<ConstraintDrift> monitor;
   if (constrained) monitor = std::make_unique<ConstraintDrift>(model, options.projectionIterations);
   std::unique_ptr<StepChecker> checker;
@@ -269,7 +274,7 @@ SimulationResult runSimulation(const Model& model, const Eigen::VectorXd& x0, do
   result.steps = s.steps;
   result.rhsEvaluations = s.rhsEvaluations;
   result.linearRhsEvaluations = s.linearRhsEvaluations;
-  result.jacobianEvaluations = s.jacobianEvaluations;
+  result.jacobianEvaluations = s.jacobianEvaluations + system.structuredJacobians();
   result.restarts = s.restarts;
   result.checks = checker ? checker->count : 0;
   assembleResult(model, record, reference != nullptr, result);

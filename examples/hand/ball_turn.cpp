@@ -84,6 +84,16 @@ BallLimits loadBallLimits(const std::string& path, const Model& model) {
   return l;
 }
 
+OptimizerOptions ballTurnOptimizerOptions() {
+  OptimizerOptions oo;
+  oo.initialBarrier = 1e-4;
+  oo.initialBoundPush = 1e-6;
+  oo.maxRefinements = 0;
+  oo.maxIterations = 500;
+  oo.ordering = MumpsOrdering::kQamd;
+  return oo;
+}
+
 OptimalControlProblem makeBallTurnProblem(std::shared_ptr<const Model> model, const Eigen::VectorXd& q0,
                                           const BallLimits& limits, const BallTurnOptions& options) {
   if (options.facets < 3) throw std::invalid_argument("BallTurnOptions::facets = " + std::to_string(options.facets) + " must be >= 3");

@@ -178,11 +178,7 @@ int main(int argc, char** argv) {
       turn.implicitForm = true;
       const auto model = std::make_shared<const Model>(s.model);
       const OptimalControlProblem problem = hand::makeBallTurnProblem(model, s.q, limits, turn);
-      OptimizerOptions oo;
-      oo.initialBarrier = 1e-4;
-      oo.initialBoundPush = 1e-6;
-      oo.maxRefinements = 0;
-      oo.maxIterations = 500;
+      const OptimizerOptions oo = hand::ballTurnOptimizerOptions();  // ball_turn.hpp
       const auto a = std::chrono::steady_clock::now();
       const OptimizationResult opt = optimizeTrajectory(problem, oo);
       stageSeconds[0] = std::chrono::duration<double>(std::chrono::steady_clock::now() - a).count();

@@ -211,11 +211,7 @@ int main(int argc, char** argv) try {
   turn.implicitForm = true;
   const auto shared = std::make_shared<const Model>(model);
   const OptimalControlProblem problem = hand::makeBallTurnProblem(shared, scene.q, limits, turn);
-  OptimizerOptions oo;
-  oo.initialBarrier = 1e-4;   // the quasi-static warm start is near feasible: keep it (README)
-  oo.initialBoundPush = 1e-6;
-  oo.maxRefinements = 0;      // the coarse mesh's own check is reported; stage 3 makes the reference
-  oo.maxIterations = 500;
+  const OptimizerOptions oo = hand::ballTurnOptimizerOptions();  // ball_turn.hpp
   const OptimizationResult opt = optimizeTrajectory(problem, oo);
   const bool converged = (opt.ipoptStatus == "Solve_Succeeded" || opt.ipoptStatus == "Solved_To_Acceptable_Level") &&
                          opt.trajectory.size() == turn.knots;

@@ -32,6 +32,9 @@ void OptimizerOptions::validate() const {
   }
   if (!(maxCpuTime > 0.0)) bad("maxCpuTime must be > 0");
   if (limitedMemorySize < 1) bad("limitedMemorySize = " + std::to_string(limitedMemorySize) + " must be >= 1");
+  if (static_cast<int>(ordering) < 0 || static_cast<int>(ordering) > static_cast<int>(MumpsOrdering::kQamd)) {
+    bad("ordering = " + std::to_string(static_cast<int>(ordering)) + " is not a MumpsOrdering");
+  }
   if (!(consistencyTolerance > 0.0) || !std::isfinite(consistencyTolerance)) {
     bad("consistencyTolerance must be > 0 and finite");
   }
@@ -406,6 +409,11 @@ OptimizationResult solveOnce(const OptimalControlProblem& problem, const Optimiz
     o.SetStringValue("limited_memory_aug_solver", "extended");
   }
   o.SetStringValue("linear_solver", "mumps");
+  {
+    // ICNTL(7) codes: 0 AMD, 2 AMF, 3 SCOTCH, 4 PORD, 5 METIS, 6 QAMD, 7 automatic.
+    constexpr int kCode[] = {7, 0, 2, 3, 4, 5, 6};
+    o.SetIntegerValue("mumps_pivot_order", kCode[static_cast<int>(options.ordering)]);
+  }
   if (!warm) {
     o.SetNumericValue("mu_init", options.initialBarrier);
     o.SetNumericValue("bound_push", options.initialBoundPush);
