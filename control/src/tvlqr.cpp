@@ -17,12 +17,15 @@
 #include <Eigen/QR>
 
 #include <chrono>
+#include <exception>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <memory>
+#include <atomic>
 #include <optional>
+#include <thread>
 #include <sstream>
 #include <stdexcept>
 
@@ -84,6 +87,9 @@ void TvlqrOptions::validate() const {
   if (!(outputStep >= 0.0) || !std::isfinite(outputStep)) {
     throw std::invalid_argument("TvlqrOptions.outputStep = " + std::to_string(outputStep) +
                                 " is invalid (must be finite and >= 0)");
+  }
+  if (threads < 1) {
+    throw std::invalid_argument("TvlqrOptions.threads = " + std::to_string(threads) + " is invalid (must be >= 1)");
   }
   if (feedforwardIterations < 1) {
     throw std::invalid_argument("TvlqrOptions.feedforwardIterations = " + std::to_string(feedforwardIterations) +
@@ -464,138 +470,218 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
   std::vector<Eigen::VectorXd> uff, residual;
   {
     sol.feedforward = options.feedforward;
-    Eigen::VectorXd xa(nx), xb(nx), ua(nu), ub(nu), dk(nx);
-    SimulationOptions so;
+    SimulationOptions base;
     // The plant runs keep kRtol when rtol is left to the integrator's default (Radau's is looser
     // because its estimate is; the plant's BDF estimate is not).
-    so.rtol = options.sampled.rtol > 0.0 ? options.sampled.rtol : SampledDiscretizationOptions::kRtol;
-    so.atol = options.sampled.atol;
-    so.maxSteps = options.sampled.maxSteps;  // per interval, as for the discretization
+    base.rtol = options.sampled.rtol > 0.0 ? options.sampled.rtol : SampledDiscretizationOptions::kRtol;
+    base.atol = options.sampled.atol;
+    base.maxSteps = options.sampled.maxSteps;  // per interval, as for the discretization
     // BDF with the exact Jacobian: a held input is a "sampled" policy (∂u/∂x = 0, so ∂f/∂x = A),
     // one sample per run at its start.
-    so.method = IntegrationMethod::kBDF;
-    // An exactly constant stretch is time-invariant: (stretch start, h) → (ū, its defect). The
-    // lengths t_{k+1} − t_k of equal intervals differ by rounding (~1e-16 h): equal within 1e-9 h
-    // (the sample grid's own tolerance; ū moves by O(Δh) far below that).
-    struct Solved {
-      double stretch, h;
-      Eigen::VectorXd u, defect;
-    };
-    std::vector<Solved> constantSolved;
+    base.method = IntegrationMethod::kBDF;
+    // An exactly constant stretch is time-invariant: an interval of the same stretch and length
+    // as an earlier one has its ū and defect (sourceOf). The lengths t_{k+1} − t_k of equal
+    // intervals differ by rounding (~1e-16 h): equal within 1e-9 h (the sample grid's own
+    // tolerance; ū moves by O(Δh) far below that).
+    std::vector<std::size_t> sourceOf(N);
+    {
+      struct Source {
+        double stretch, h;
+        std::size_t k;
+      };
+      std::vector<Source> sources;  // one per distinct (stretch, length)
+      for (std::size_t k = 0; k < N; ++k) {
+        sourceOf[k] = k;
+        if (!structure.constantOn) continue;
+        const double a = times(static_cast<Eigen::Index>(k)), b = times(static_cast<Eigen::Index>(k + 1));
+        const double stretch = structure.constantOn(a, b);
+        if (std::isnan(stretch)) continue;
+        const auto same = std::find_if(sources.begin(), sources.end(), [&](const Source& c) {
+          return c.stretch == stretch && std::abs(c.h - (b - a)) <= 1e-9 * (b - a);
+        });
+        if (same != sources.end()) {
+          sourceOf[k] = same->k;
+        } else {
+          sources.push_back({stretch, b - a, k});
+        }
+      }
+    }
     std::vector<Eigen::VectorXd> offManifold(N + 1, Eigen::VectorXd::Zero(nx));  // P(x_ref(t_k)) − x_ref(t_k)
-    Eigen::VectorXd held(nu);
-    const Policy hold = [&held](double, const Eigen::VectorXd&, Eigen::VectorXd& u) { u = held; };
+    // What each interval gives (the intervals are independent: each starts from the reference at
+    // t_k and is weighed by S_{k+1}, both known): they run on options.threads threads and are
+    // gathered in order below, so the gains, the feed-forward and every status are the same on
+    // any number of threads.
+    struct Outcome {
+      Eigen::VectorXd u, defect;
+      double referenceDefect = 0.0;  // sqrt(f) of u_ref(t_k) held
+      long simulations = 0;
+      bool failed = false;
+      std::exception_ptr error;  // an exception thrown for this interval, rethrown in order
+      std::string what;
+      double t = 0.0;
+    };
+    std::vector<Outcome> outcomes(N);
+    // Intervals are handed out in order; after a failure at k only the later ones are skipped,
+    // so every interval before the first failure is computed (the gathering below needs them).
+    std::atomic<std::size_t> next{0}, firstFailure{N};
+    const auto noteFailure = [&firstFailure](std::size_t k) {
+      std::size_t seen = firstFailure.load();
+      while (k < seen && !firstFailure.compare_exchange_weak(seen, k)) {
+      }
+    };
+    const auto worker = [&]() {
+      Eigen::VectorXd xa(nx), xb(nx), ua(nu), ub(nu), dk(nx), held(nu);
+      const Policy hold = [&held](double, const Eigen::VectorXd&, Eigen::VectorXd& u) { u = held; };
+      SimulationOptions so = base;
+      for (std::size_t k = next++; k < N; k = next++) {
+        // A copy of a constant stretch's interval needs no run (constant stretches exist only
+        // without constraints, so it has no projection offset either).
+        if (k > firstFailure.load() || sourceOf[k] != k) continue;
+        Outcome& out = outcomes[k];
+        try {
+          const double a = times(static_cast<Eigen::Index>(k)), b = times(static_cast<Eigen::Index>(k + 1));
+          reference.evaluate(a, xa, ua);
+          Eigen::VectorXd ubar = intervalAverage(reference, a, b, xb, ub);
+          reference.evaluate(b, xb, ub);
+          if (sol.constrained) {
+            // Between knots the reference's spline leaves the constraints by its interpolation error;
+            // the plant's run starts from the projection of x_ref(t_k) (simulate projects it), so it
+            // ends compared with the projection of x_ref(t_{k+1}): otherwise the mass-metric
+            // projection's tangent part at the start would count as a defect every interval. The
+            // offset P(x_ref) − x_ref is what no loop on the constraints can follow (the prediction
+            // below adds it).
+            const Eigen::VectorXd xa0 = xa, xb0 = xb;
+            projectOntoConstraints(model, xa);
+            projectOntoConstraints(model, xb);
+            if (k == 0) offManifold[0] = xa - xa0;
+            offManifold[k + 1] = xb - xb0;
+          }
+          const Eigen::MatrixXd& W = sol.S[k + 1];
+          const Eigen::MatrixXd G = Tk[k + 1] * disc.intervals[k].Gamma;
+          so.sampleRate = 1.0 / (b - a);
+          so.outputStep = b - a;
+          // The defect dk of a held input v and its S-norm squared; false when the plant's run failed.
+          auto defect = [&](const Eigen::VectorXd& v, double& f) {
+            held = v;
+            const SimulationResult run = simulate(model, xa, a, b, hold, so);
+            ++out.simulations;
+            if (!run.ok()) {
+              out.failed = true;
+              out.what = "the plant's run over the sample interval [" + fmt(a, 17) + ", " + fmt(b, 17) +
+                         "] with a held input failed: " + run.status.describe();
+              out.t = run.status.t;
+              return false;
+            }
+            dk = run.trajectory.states().col(run.trajectory.size() - 1) - xb;
+            f = dk.dot(W * dk);
+            return true;
+          };
+          double f = 0.0;
+          if (!defect(ua, f)) {
+            noteFailure(k);
+            continue;
+          }
+          out.referenceDefect = std::sqrt(std::max(f, 0.0));
+          if (options.feedforward == SampledFeedforward::kReference) {
+            ubar = ua;
+          } else if (!defect(ubar, f)) {
+            noteFailure(k);
+            continue;
+          }
+          if (options.feedforward == SampledFeedforward::kConsistent) {
+            // Gauss–Newton with Γ as ∂d/∂ū (chord method, file comment), damped in the metric of
+            // the interval's input cost R_k (Levenberg–Marquardt, μ = 1e-3 σ_max, σ the generalized
+            // eigenvalues of (ΓᵀSΓ, R_k): what a unit of input cost buys in cost-to-go). Directions
+            // with σ ≪ μ — inputs that barely move the state, such as tendons pulling against each
+            // other — then move by at most |d|_S/(2√μ) per step instead of |d|_S/√σ (measured on the
+            // hand without it: held tensions of ±300 against |u_ref| ≤ 5.6); the fixed point
+            // (Γᵀ S d = 0 in the directions that matter) is unchanged. A step that does not lower
+            // dᵀSd is halved (at most 4 times), and none that lowers it ends the iteration.
+            const Eigen::MatrixXd H = G.transpose() * W * G;
+            const Eigen::MatrixXd& Rk = disc.intervals[k].R;
+            const Eigen::MatrixXd Hs = 0.5 * (H + H.transpose());
+            const Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> sigma(Hs, 0.5 * (Rk + Rk.transpose()),
+                                                                                  Eigen::EigenvaluesOnly);
+            const double mu = 1e-3 * std::max(sigma.eigenvalues().maxCoeff(), 0.0);
+            const Eigen::LDLT<Eigen::MatrixXd> damped(Hs + mu * Rk);
+            Eigen::VectorXd dBest = dk;
+            // A defect within the plant runs' own accuracy (10 (atol + rtol |x|) per entry) is
+            // resolved: further steps would chase the integration error (a held equilibrium).
+            const auto resolved = [&](const Eigen::VectorXd& dv) {
+              return (dv.array().abs() <= 10.0 * (so.atol + so.rtol * xb.array().abs())).all();
+            };
+            bool runFailed = false;
+            for (int it = 0; it < options.feedforwardIterations && f > 0.0 && mu > 0.0 && !resolved(dBest); ++it) {
+              const Eigen::VectorXd step = damped.solve(G.transpose() * (W * dBest));
+              if (!step.allFinite() || step.isZero(0.0)) break;
+              double scale = 1.0, fTrial = 0.0;
+              bool lowered = false;
+              Eigen::VectorXd trial;
+              for (int halving = 0; halving <= 4 && !lowered; ++halving, scale *= 0.5) {
+                trial = ubar - scale * step;
+                if (!defect(trial, fTrial)) {
+                  runFailed = true;
+                  break;
+                }
+                lowered = fTrial < f;
+              }
+              if (runFailed || !lowered) break;
+              const bool stalled = fTrial > (1.0 - 1e-6) * f;  // no longer worth a run
+              ubar = trial;
+              f = fTrial;
+              dBest = dk;
+              if (stalled) break;
+            }
+            if (runFailed) {
+              noteFailure(k);
+              continue;
+            }
+            dk = dBest;
+          }
+          out.u = std::move(ubar);
+          out.defect = dk;
+        } catch (...) {
+          out.error = std::current_exception();
+          noteFailure(k);
+        }
+      }
+    };
+    const int threads = static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(options.threads), std::max<std::size_t>(N, 1)));
+    {
+      std::vector<std::thread> pool;
+      for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
+      worker();
+      for (std::thread& t : pool) t.join();
+    }
+    // In order: the first failure decides, as a serial loop would have stopped there.
     for (std::size_t k = 0; k < N; ++k) {
-      const double a = times(static_cast<Eigen::Index>(k)), b = times(static_cast<Eigen::Index>(k + 1));
-      reference.evaluate(a, xa, ua);
-      Eigen::VectorXd ubar = intervalAverage(reference, a, b, xb, ub);
-      reference.evaluate(b, xb, ub);
-      if (sol.constrained) {
-        // Between knots the reference's spline leaves the constraints by its interpolation error;
-        // the plant's run starts from the projection of x_ref(t_k) (simulate projects it), so it
-        // ends compared with the projection of x_ref(t_{k+1}): otherwise the mass-metric
-        // projection's tangent part at the start would count as a defect every interval. The
-        // offset P(x_ref) − x_ref is what no loop on the constraints can follow (the prediction
-        // below adds it).
-        const Eigen::VectorXd xa0 = xa, xb0 = xb;
-        projectOntoConstraints(model, xa);
-        projectOntoConstraints(model, xb);
-        if (k == 0) offManifold[0] = xa - xa0;
-        offManifold[k + 1] = xb - xb0;
+      const Outcome& out = outcomes[k];
+      const Outcome& source = outcomes[sourceOf[k]];  // itself, or the first of its constant stretch
+      sol.feedforwardSimulations += out.simulations;
+      if (out.error) std::rethrow_exception(out.error);
+      if (out.failed) {
+        // With no feed-forward to compute the runs only serve the prediction: the gains stand.
+        if (options.feedforward == SampledFeedforward::kReference) {
+          sol.predictionFailure = out.what;
+          break;
+        }
+        sol.status.set(TvlqrCode::kFeedforwardFailure,
+                       out.what + " (feedforward = reference needs none of these runs; a looser sampled.rtol "
+                                  "may help)",
+                       out.t, static_cast<long>(k));
+        return sol;
+      }
+      if (source.u.size() == 0) {  // not reached: intervals up to the first failure are computed
+        sol.status.set(TvlqrCode::kFeedforwardFailure, "the feed-forward of interval " + std::to_string(k) +
+                                                           " was not computed", times(static_cast<Eigen::Index>(k)),
+                       static_cast<long>(k));
+        return sol;
       }
       const Eigen::MatrixXd& W = sol.S[k + 1];
-      const Eigen::MatrixXd G = Tk[k + 1] * disc.intervals[k].Gamma;
-      so.sampleRate = 1.0 / (b - a);
-      so.outputStep = b - a;
-      // The defect dk of a held input v and its S-norm squared; false when the plant's run failed.
-      auto defect = [&](const Eigen::VectorXd& v, double& f) {
-        held = v;
-        const SimulationResult run = simulate(model, xa, a, b, hold, so);
-        ++sol.feedforwardSimulations;
-        if (!run.ok()) {
-          const std::string what = "the plant's run over the sample interval [" + fmt(a, 17) + ", " + fmt(b, 17) +
-                                   "] with a held input failed: " + run.status.describe();
-          // With no feed-forward to compute the runs only serve the prediction: the gains stand.
-          if (options.feedforward == SampledFeedforward::kReference) {
-            sol.predictionFailure = what;
-          } else {
-            sol.status.set(TvlqrCode::kFeedforwardFailure,
-                           what + " (feedforward = reference needs none of these runs; a looser sampled.rtol "
-                                  "may help)",
-                           run.status.t, static_cast<long>(k));
-          }
-          return false;
-        }
-        dk = run.trajectory.states().col(run.trajectory.size() - 1) - xb;
-        f = dk.dot(W * dk);
-        return true;
-      };
-      const double stretch = structure.constantOn ? structure.constantOn(a, b) : std::numeric_limits<double>::quiet_NaN();
-      const auto cached = std::find_if(constantSolved.begin(), constantSolved.end(), [&](const Solved& c) {
-        return c.stretch == stretch && std::abs(c.h - (b - a)) <= 1e-9 * (b - a);
-      });
-      if (!std::isnan(stretch) && cached != constantSolved.end()) {
-        ubar = cached->u;
-        dk = cached->defect;
-      } else {
-        double f = 0.0;
-        if (!defect(ua, f)) {
-          if (!sol.predictionFailure.empty()) break;  // feedforward = reference: gains without prediction
-          return sol;
-        }
-        sol.referenceDefect = std::max(sol.referenceDefect, std::sqrt(std::max(f, 0.0)));
-        if (options.feedforward == SampledFeedforward::kReference) {
-          ubar = ua;
-        } else {
-          if (!defect(ubar, f)) return sol;
-        }
-        if (options.feedforward == SampledFeedforward::kConsistent) {
-          // Gauss–Newton with Γ as ∂d/∂ū (chord method, file comment), damped in the metric of
-          // the interval's input cost R_k (Levenberg–Marquardt, μ = 1e-3 σ_max, σ the generalized
-          // eigenvalues of (ΓᵀSΓ, R_k): what a unit of input cost buys in cost-to-go). Directions
-          // with σ ≪ μ — inputs that barely move the state, such as tendons pulling against each
-          // other — then move by at most |d|_S/(2√μ) per step instead of |d|_S/√σ (measured on the
-          // hand without it: held tensions of ±300 against |u_ref| ≤ 5.6); the fixed point
-          // (Γᵀ S d = 0 in the directions that matter) is unchanged. A step that does not lower
-          // dᵀSd is halved (at most 4 times), and none that lowers it ends the iteration.
-          const Eigen::MatrixXd H = G.transpose() * W * G;
-          const Eigen::MatrixXd& Rk = disc.intervals[k].R;
-          const Eigen::MatrixXd Hs = 0.5 * (H + H.transpose());
-          const Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> sigma(Hs, 0.5 * (Rk + Rk.transpose()),
-                                                                                Eigen::EigenvaluesOnly);
-          const double mu = 1e-3 * std::max(sigma.eigenvalues().maxCoeff(), 0.0);
-          const Eigen::LDLT<Eigen::MatrixXd> damped(Hs + mu * Rk);
-          Eigen::VectorXd dBest = dk;
-          // A defect within the plant runs' own accuracy (10 (atol + rtol |x|) per entry) is
-          // resolved: further steps would chase the integration error (a held equilibrium).
-          const auto resolved = [&](const Eigen::VectorXd& dv) {
-            return (dv.array().abs() <= 10.0 * (so.atol + so.rtol * xb.array().abs())).all();
-          };
-          for (int it = 0; it < options.feedforwardIterations && f > 0.0 && mu > 0.0 && !resolved(dBest); ++it) {
-            const Eigen::VectorXd step = damped.solve(G.transpose() * (W * dBest));
-            if (!step.allFinite() || step.isZero(0.0)) break;
-            double scale = 1.0, fTrial = 0.0;
-            bool lowered = false;
-            Eigen::VectorXd trial;
-            for (int halving = 0; halving <= 4 && !lowered; ++halving, scale *= 0.5) {
-              trial = ubar - scale * step;
-              if (!defect(trial, fTrial)) return sol;
-              lowered = fTrial < f;
-            }
-            if (!lowered) break;
-            const bool stalled = fTrial > (1.0 - 1e-6) * f;  // no longer worth a run
-            ubar = trial;
-            f = fTrial;
-            dBest = dk;
-            if (stalled) break;
-          }
-          dk = dBest;
-        }
-        if (!std::isnan(stretch)) constantSolved.push_back({stretch, b - a, ubar, dk});
-      }
-      sol.feedforwardDefect = std::max(sol.feedforwardDefect, std::sqrt(std::max(dk.dot(W * dk), 0.0)));
-      uff.push_back(ubar);
-      residual.push_back(dk);
+      sol.referenceDefect = std::max(sol.referenceDefect, out.referenceDefect);
+      sol.feedforwardDefect = std::max(sol.feedforwardDefect, std::sqrt(std::max(source.defect.dot(W * source.defect), 0.0)));
+      uff.push_back(source.u);
+      residual.push_back(source.defect);
     }
     if (!sol.predictionFailure.empty()) {
       const double nan = std::numeric_limits<double>::quiet_NaN();

@@ -222,6 +222,7 @@ BallFeedbackResult runBallFeedback(const Model& model, const BallLimits& limits,
   to.transport = feedbackTransport();
   to.transport.substeps = options.transportSubsteps;
   to.feedforward = options.feedforward;
+  to.threads = options.threads;  // the feed-forward's plant runs (tvlqr.hpp)
   to.riccati = feedbackRiccatiOptions();
   const auto gainStart = std::chrono::steady_clock::now();
   result.lqr = solveTvlqr(model, reference, feedbackWeights(model), to);

@@ -309,3 +309,67 @@ TEST_CASE("simulation: a batch equals the same runs one by one, on any number of
                                            {VectorXd::Zero(3)}, opt, 2),
                     Catch::Contains("initial state 0") && Catch::Contains("x0 has size 3"));
 }
+
+TEST_CASE("simulation: the structured Newton solve equals the dense (I − γJ)⁻¹", "[simulation][jacobian]") {
+  // BDF's Newton systems (I − γJ) z = r solved through J = [[0, I], [A_q, A_v]] with one n×n LU
+  // (closed_loop_system.hpp), against the dense 2n×2n solve of the same J: at the set-up's γ, at
+  // another γ (refactored), and with CVODES's "J still good" (no new Jacobian).
+  auto check = [](trellis::detail::ClosedLoopSystem& sys, double t, const VectorXd& y) {
+    const Eigen::Index nx = y.size(), n = nx / 2;
+    REQUIRE(sys.hasPreconditioner());
+    const MatrixXd J = exactJacobian(sys, t, y);
+    // The structure the solve relies on: ∂q̇/∂q = 0, ∂q̇/∂q̇ = I.
+    CHECK(J.topLeftCorner(n, n).cwiseAbs().maxCoeff() == 0.0);
+    CHECK(J.topRightCorner(n, n) == MatrixXd::Identity(n, n));
+    VectorXd f(nx), z(nx);
+    REQUIRE(sys.rhs(t, trellis::detail::ConstVectorMap(y.data(), nx), trellis::detail::VectorMap(f.data(), nx)) == 0);
+    const trellis::detail::ConstVectorMap ym(y.data(), nx), fm(f.data(), nx);
+    const VectorXd r = VectorXd::LinSpaced(nx, -1.0, 2.0).array().sin() + 0.1;
+    bool updated = false;
+    const double gammas[] = {1e-3, 2.7e-4, 5e-2};
+    REQUIRE(sys.preconditionerSetup(t, ym, fm, false, &updated, gammas[0]) == 0);
+    CHECK(updated);
+    const long jacobians = sys.structuredJacobians();
+    for (const double gamma : gammas) {
+      REQUIRE(sys.preconditionerSolve(t, ym, fm, trellis::detail::ConstVectorMap(r.data(), nx),
+                                      trellis::detail::VectorMap(z.data(), nx), gamma) == 0);
+      const MatrixXd newton = MatrixXd::Identity(nx, nx) - gamma * J;
+      const VectorXd expected = newton.partialPivLu().solve(r);
+      INFO("gamma = " << gamma);
+      CHECK((z - expected).cwiseAbs().maxCoeff() <= 1e-12 * expected.cwiseAbs().maxCoeff());
+      CHECK((newton * z - r).cwiseAbs().maxCoeff() <= 1e-12 * r.cwiseAbs().maxCoeff());
+    }
+    REQUIRE(sys.preconditionerSetup(t, ym, fm, true, &updated, gammas[2]) == 0);
+    CHECK_FALSE(updated);
+    CHECK(sys.structuredJacobians() == jacobians);
+  };
+
+  SECTION("the paper pendulum under time-varying feedback (constrained, deviation coordinates)") {
+    const PaperPendulumLoop loop;
+    trellis::detail::InputLaw law;
+    law.kind = trellis::detail::InputLaw::Kind::kFeedback;
+    law.reference = &loop.reference;
+    law.gains = &loop.gains;
+    trellis::detail::ClosedLoopSystem sys(loop.model, law, SimulationOptions{});
+    const double t = 0.537;
+    const VectorXd x = loop.reference.state(t) + (VectorXd(4) << 0.02, -0.01, 0.2, 0.1).finished();
+    VectorXd y(4);
+    sys.toIntegrator(t, x, y);
+    check(sys, t, y);
+  }
+  SECTION("the hand holding a free ball under a held input (26 coordinates, 15 contact rows)") {
+    const trellis::Scene scene = trellis::loadScene(TRELLIS_SOURCE_DIR "/examples/scenes/hand_ball.json");
+    const trellis::Policy hold = [&scene](double, const VectorXd&, VectorXd& u) { u = scene.u; };
+    trellis::detail::InputLaw law;
+    law.kind = trellis::detail::InputLaw::Kind::kPolicy;
+    law.policy = &hold;
+    SimulationOptions opt;
+    opt.sampleRate = 200.0;
+    trellis::detail::ClosedLoopSystem sys(scene.model, law, opt);
+    VectorXd x(2 * scene.model.nq());
+    x << scene.q, VectorXd::LinSpaced(scene.model.nq(), -0.3, 0.4);
+    bool clipped = false;
+    REQUIRE(sys.sample(0.0, x, clipped));
+    check(sys, 0.0, x);
+  }
+}

@@ -153,3 +153,60 @@ TEST_CASE("sampled gains: a failed plant run", "[sampled][feedforward]") {
   CHECK(std::isnan(gains.predictedDeviation));
   CHECK_THAT(gains.summary(), Catch::Contains("what the hold allows: not predicted (the plant's run"));
 }
+
+TEST_CASE("sampled gains: the feed-forward's plant runs give the same result on any number of threads",
+          "[sampled][feedforward]") {
+  // The intervals run on TvlqrOptions::threads and are gathered in order (tvlqr.hpp): K, the held
+  // feed-forward, the defects, the prediction and the run count are the same to the bit.
+  const trellis::Scene scene = trellis::loadScene(TRELLIS_SOURCE_DIR "/examples/scenes/paper_pendulum.json");
+  const trellis::Trajectory ref =
+      trellis::Trajectory::readCsvFile(TRELLIS_SOURCE_DIR "/examples/trajectories/paper_pendulum_swing.csv");
+  trellis::LqrWeights w;
+  w.Q = MatrixXd::Identity(4, 4);
+  w.R = 0.01 * MatrixXd::Identity(1, 1);
+  w.Qf = w.Q;
+  for (const SampledFeedforward ff : {SampledFeedforward::kConsistent, SampledFeedforward::kAverage}) {
+    trellis::TvlqrOptions opt;
+    opt.sampleRate = 50.0;
+    opt.feedforward = ff;
+    const trellis::TvlqrSolution one = trellis::solveTvlqr(scene.model, ref, w, opt);
+    REQUIRE(one.ok());
+    REQUIRE(one.gains.hasFeedforward());
+    for (const int threads : {2, 3}) {
+      opt.threads = threads;
+      const trellis::TvlqrSolution many = trellis::solveTvlqr(scene.model, ref, w, opt);
+      INFO(trellis::toString(ff) << " on " << threads << " threads");
+      REQUIRE(many.ok());
+      REQUIRE(many.gains.size() == one.gains.size());
+      for (int k = 0; k < one.gains.size(); ++k) {
+        CHECK(many.gains.gains()[k] == one.gains.gains()[k]);
+        CHECK(many.gains.feedforward()[k] == one.gains.feedforward()[k]);
+      }
+      CHECK(many.feedforwardSimulations == one.feedforwardSimulations);
+      CHECK(many.feedforwardDefect == one.feedforwardDefect);
+      CHECK(many.referenceDefect == one.referenceDefect);
+      CHECK(many.predictedDeviation == one.predictedDeviation);
+    }
+  }
+  // A held pose (one constant stretch): one interval's runs serve all (as on one thread).
+  const trellis::Model cart = trellis::ctest::makeCartPole();
+  trellis::Trajectory held(cart.configNames(), cart.inputNames(), (VectorXd(2) << 0.0, 1.0).finished(),
+                           MatrixXd::Zero(4, 2), MatrixXd::Zero(1, 2));
+  held.setStateDerivatives(MatrixXd::Zero(4, 2));
+  trellis::TvlqrOptions opt;
+  opt.sampleRate = 20.0;
+  opt.feedforward = SampledFeedforward::kAverage;
+  opt.threads = 2;
+  const trellis::TvlqrSolution pose = trellis::solveTvlqr(cart, held, w, opt);
+  REQUIRE(pose.ok());
+  CHECK(pose.feedforwardSimulations == 2);  // u_ref held and the average, once
+  // A failure is the first interval's on any count, and bad counts are refused.
+  opt.sampled.maxSteps = 1;
+  const trellis::TvlqrSolution failed = trellis::solveTvlqr(cart, held, w, opt);
+  REQUIRE_FALSE(failed.ok());
+  CHECK(failed.status.code == trellis::TvlqrCode::kFeedforwardFailure);
+  CHECK(failed.status.index == 0);
+  CHECK_THAT(failed.status.message, Catch::Contains("sample interval [0, 0.05"));
+  opt.threads = 0;
+  CHECK_THROWS_WITH(trellis::solveTvlqr(cart, held, w, opt), Catch::Contains("TvlqrOptions.threads = 0"));
+}

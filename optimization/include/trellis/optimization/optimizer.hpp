@@ -161,7 +161,7 @@ struct OptimizationResult {
   /// code; message (empty on success; else why, with Ipopt's status and the last evaluation
   /// failure, or for inconsistent the state, interval and time of the worst defect); for
   /// inconsistent, t and index are the worst interval's start time and index (else NaN, −1).
-  Status<OptimizationCode> status{OptimizationCode::kFailed};
+  Status<OptimizationCode> status{OptimizationCode::kFailed, {}};
   std::string ipoptStatus;     ///< Ipopt's ApplicationReturnStatus name, e.g. "Solve_Succeeded"
   /// Non-empty when the exact Hessian was asked for but not available
   /// (Transcription::hessianAvailable): why, and that L-BFGS was used.
