@@ -84,13 +84,14 @@ BallLimits loadBallLimits(const std::string& path, const Model& model) {
   return l;
 }
 
-OptimizerOptions ballTurnOptimizerOptions() {
+OptimizerOptions ballTurnOptimizerOptions(int threads) {
   OptimizerOptions oo;
   oo.initialBarrier = 1e-4;
   oo.initialBoundPush = 1e-6;
   oo.maxRefinements = 0;
   oo.maxIterations = 500;
   oo.ordering = MumpsOrdering::kQamd;
+  oo.threads = threads;
   return oo;
 }
 

@@ -80,8 +80,8 @@ OptimalControlProblem makeBallTurnProblem(std::shared_ptr<const Model> model, co
 /// the redistribution of ball_reference.hpp); at most 500 iterations; QAMD ordering of the KKT
 /// matrix — measured on the 20° turn, 11 knots (3 runs each, 2026-12-04): the factorizations take
 /// 7.7 s instead of 12.7 s with MUMPS's own choice (METIS), 70 iterations instead of 67, the same
-/// cost to 1e-4 (MumpsOrdering).
-OptimizerOptions ballTurnOptimizerOptions();
+/// cost to 1e-12 (MumpsOrdering); the Hessian's point blocks on `threads` threads (≥ 1).
+OptimizerOptions ballTurnOptimizerOptions(int threads = 1);
 
 /// The warm start: a quasi-static turn. At each of `knots` uniform knots the yaw follows the
 /// smooth rest-to-rest profile ψ(t) = angle (3s² − 2s³), s = t/T; the other coordinates solve

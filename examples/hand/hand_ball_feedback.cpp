@@ -178,7 +178,7 @@ int main(int argc, char** argv) {
       turn.implicitForm = true;
       const auto model = std::make_shared<const Model>(s.model);
       const OptimalControlProblem problem = hand::makeBallTurnProblem(model, s.q, limits, turn);
-      const OptimizerOptions oo = hand::ballTurnOptimizerOptions();  // ball_turn.hpp
+      const OptimizerOptions oo = hand::ballTurnOptimizerOptions(options.threads);  // ball_turn.hpp
       const auto a = std::chrono::steady_clock::now();
       const OptimizationResult opt = optimizeTrajectory(problem, oo);
       stageSeconds[0] = std::chrono::duration<double>(std::chrono::steady_clock::now() - a).count();

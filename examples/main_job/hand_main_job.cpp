@@ -81,7 +81,8 @@ options:
   --seed S              seed of the perturbed starts (default 1; same seed, same starts)
   --perturbation SIZE   norm of each start's deviation, tangent to the constraint manifold, in
                         [rad, m, rad/s, m/s] (default 0.01; > 0)
-  --threads N           closed loops at once, 1..64 (default: the machine's cores)
+  --threads N           threads for the closed loops, the gains' plant runs and the optimizer's
+                        Hessian blocks, 1..64 (default: the machine's cores)
   --no-plots            skip the PNG plots (they need python3-matplotlib)
   -h, --help            show this help
 
@@ -202,6 +203,9 @@ int main(int argc, char** argv) try {
                       limits.friction) +
                format(", normal force >= %.3f N", limits.normalMin));
 
+  // Closed loops, the gains' plant runs and the optimizer's Hessian blocks use this many threads.
+  const int threads = options.threads > 0 ? options.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+
   // 2. The turn, optimized ----------------------------------------------------------------------
   progress.begin("the turn optimized (Ipopt, exact Hessian)");
   hand::BallTurnOptions turn;
@@ -211,7 +215,7 @@ int main(int argc, char** argv) try {
   turn.implicitForm = true;
   const auto shared = std::make_shared<const Model>(model);
   const OptimalControlProblem problem = hand::makeBallTurnProblem(shared, scene.q, limits, turn);
-  const OptimizerOptions oo = hand::ballTurnOptimizerOptions();  // ball_turn.hpp
+  const OptimizerOptions oo = hand::ballTurnOptimizerOptions(threads);  // ball_turn.hpp
   const OptimizationResult opt = optimizeTrajectory(problem, oo);
   const bool converged = (opt.ipoptStatus == "Solve_Succeeded" || opt.ipoptStatus == "Solved_To_Acceptable_Level") &&
                          opt.trajectory.size() == turn.knots;
@@ -244,7 +248,7 @@ int main(int argc, char** argv) try {
   // same predicted deviation as the default "consistent" one (6.62e-3 against 6.57e-3) at a third
   // of the gains' time (7.9 s against 21 s: the consistent one runs the plant ~8 times per interval).
   fo.feedforward = SampledFeedforward::kAverage;
-  fo.threads = options.threads > 0 ? options.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  fo.threads = threads;
   const hand::BallFeedbackResult fb = hand::runBallFeedback(model, limits, reference, fo);
   if (!fb.lqr.ok()) throw std::runtime_error("the gains failed: " + fb.lqr.describe());
   for (std::size_t r = 0; r < fb.runs.size(); ++r)

@@ -32,6 +32,7 @@ void OptimizerOptions::validate() const {
   }
   if (!(maxCpuTime > 0.0)) bad("maxCpuTime must be > 0");
   if (limitedMemorySize < 1) bad("limitedMemorySize = " + std::to_string(limitedMemorySize) + " must be >= 1");
+  if (threads < 1) bad("threads = " + std::to_string(threads) + " must be >= 1");
   if (static_cast<int>(ordering) < 0 || static_cast<int>(ordering) > static_cast<int>(MumpsOrdering::kQamd)) {
     bad("ordering = " + std::to_string(static_cast<int>(ordering)) + " is not a MumpsOrdering");
   }
@@ -373,6 +374,7 @@ OptimizationResult solveOnce(const OptimalControlProblem& problem, const Optimiz
                              const OptimalControlProblem* previousProblem = nullptr,
                              const OptimizationResult* previous = nullptr) {
   Transcription transcription(problem, options.derivatives);  // validates the problem
+  transcription.setThreads(options.threads);
 
   HessianMode hessian = options.hessian.value_or(problem.hessian);
   std::string hessianNote;

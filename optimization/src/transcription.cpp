@@ -13,7 +13,12 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <sstream>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
 
 namespace trellis {
 
@@ -129,6 +134,18 @@ struct Transcription::Impl {
   Eigen::MatrixXd sumS, third, scratchNN;   // n×n
   // Implicit form: per point ∇²_z (νᵀr + ηᵀc) (N×N) and ∂²/∂y∂[q; q̇] ((n + nc)×2n), their weights.
   Eigen::MatrixXd HzzI, HyzI;
+  // The implicit Hessian's per-point blocks on `threads` threads (setThreads): each point's pair
+  // (HzzP, HyzP) and status; workers beyond the first own a Data and a workspace each.
+  int threads = 1;
+  std::vector<Eigen::MatrixXd> HzzP, HyzP;
+  std::vector<DynamicsStatus> statusP;
+  std::vector<char> activeP;
+  struct Worker {
+    Data data;
+    SecondOrderWorkspace secondOrder;
+    Eigen::VectorXd q, dq, u, acc, lam, nu, eta;
+  };
+  std::vector<std::unique_ptr<Worker>> workers;
   Eigen::VectorXd zeroN, zeroNc, thirdV;  // nonholonomic: q̇ = 0, λ = 0, ν = 0 and v of addThirdDerivative
   Eigen::VectorXd nuP, etaP;
 
@@ -927,6 +944,54 @@ struct Transcription::Impl {
     return true;
   }
 
+  /// The implicit form's second-order blocks ∇²_z(νᵀr + ηᵀc), ∂²/∂y∂x of every point whose
+  /// multipliers are not all zero (activeP), into HzzP, HyzP and statusP: the points are
+  /// independent, so they run on `threads` threads (point p on worker p mod threads; the first
+  /// worker is the transcription's own hessData/secondOrder) — the same values on any count.
+  void implicitBlocks(const double* z, const double* mult) {
+    const int count = std::max(1, std::min(threads, P));
+    if (static_cast<int>(HzzP.size()) != P) {
+      HzzP.assign(P, Eigen::MatrixXd::Zero(nx + m, nx + m));
+      HyzP.assign(P, Eigen::MatrixXd::Zero(n + nc, nx));
+      statusP.assign(P, DynamicsStatus{});
+      activeP.assign(P, 0);
+    }
+    while (static_cast<int>(workers.size()) + 1 < count) {
+      workers.push_back(std::make_unique<Worker>(Worker{Data(model), SecondOrderWorkspace(model, false, true),
+                                                        Eigen::VectorXd(n), Eigen::VectorXd(n), Eigen::VectorXd(m),
+                                                        Eigen::VectorXd(n), Eigen::VectorXd(nc), Eigen::VectorXd(n),
+                                                        Eigen::VectorXd(nc)}));
+    }
+    const auto run = [&](int w) {
+      Data& d = w == 0 ? hessData : workers[w - 1]->data;
+      SecondOrderWorkspace& ws = w == 0 ? secondOrder : workers[w - 1]->secondOrder;
+      Eigen::VectorXd& q_ = w == 0 ? hq : workers[w - 1]->q;
+      Eigen::VectorXd& dq_ = w == 0 ? hdq : workers[w - 1]->dq;
+      Eigen::VectorXd& u_ = w == 0 ? hu : workers[w - 1]->u;
+      Eigen::VectorXd& acc_ = w == 0 ? acc : workers[w - 1]->acc;
+      Eigen::VectorXd& lam_ = w == 0 ? lam : workers[w - 1]->lam;
+      Eigen::VectorXd& nu_ = w == 0 ? nuP : workers[w - 1]->nu;
+      Eigen::VectorXd& eta_ = w == 0 ? etaP : workers[w - 1]->eta;
+      for (int p = w; p < P; p += count) {
+        nu_ = Eigen::Map<const Eigen::VectorXd>(mult + dynStart + p * dynRows, n);
+        eta_ = Eigen::Map<const Eigen::VectorXd>(mult + dynStart + p * dynRows + n, nc);
+        activeP[p] = !nu_.isZero(0.0) || !eta_.isZero(0.0);
+        if (!activeP[p]) continue;
+        const double* zp = z + p * stride;
+        q_ = Eigen::Map<const Eigen::VectorXd>(zp, n);
+        dq_ = Eigen::Map<const Eigen::VectorXd>(zp + n, n);
+        u_ = Eigen::Map<const Eigen::VectorXd>(zp + nx, m);
+        acc_ = Eigen::Map<const Eigen::VectorXd>(zp + nx + m, n);
+        lam_ = Eigen::Map<const Eigen::VectorXd>(zp + nx + m + n, nc);
+        statusP[p] = computeImplicitSecondOrder(model, d, ws, q_, dq_, acc_, u_, lam_, nu_, eta_, HzzP[p], HyzP[p]);
+      }
+    };
+    std::vector<std::thread> pool;
+    for (int w = 1; w < count; ++w) pool.emplace_back(run, w);
+    run(0);
+    for (std::thread& t : pool) t.join();
+  }
+
   bool hessianValues(const double* z, double sigma, const double* mult, double* values) {
     if (!evaluate(z, true)) return false;  // f, and S_r at the knots
     const double T = horizonOf(z);
@@ -952,6 +1017,7 @@ struct Transcription::Impl {
       }
     }
     const int lastPoint = knotPoint(N - 1);
+    if (implicit) implicitBlocks(z, mult);
     for (int p = 0; p < P; ++p) {
       Eigen::MatrixXd& H = Hp[p];
       H.setZero();
@@ -964,22 +1030,13 @@ struct Transcription::Impl {
       bool dynamics = false;
       if (implicit) {
         // The implicit rows' multipliers (ν, η) weigh ∇²(νᵀr + ηᵀc) over [x; u; q̈; λ]; the defects
-        // and the force rows are linear in the point's variables.
-        nuP = Eigen::Map<const Eigen::VectorXd>(mult + dynStart + p * dynRows, n);
-        etaP = Eigen::Map<const Eigen::VectorXd>(mult + dynStart + p * dynRows + n, nc);
-        if (!nuP.isZero(0.0) || !etaP.isZero(0.0)) {
-          hq = x.head(n);
-          hdq = x.tail(n);
-          hu = uu;
-          acc = Eigen::Map<const Eigen::VectorXd>(z + p * stride + nx + m, n);
-          lam = Eigen::Map<const Eigen::VectorXd>(z + p * stride + nx + m + n, nc);
-          const DynamicsStatus status =
-              computeImplicitSecondOrder(model, hessData, secondOrder, hq, hdq, acc, hu, lam, nuP, etaP, HzzI, HyzI);
+        // and the force rows are linear in the point's variables. Blocks from implicitBlocks.
+        if (activeP[p]) {
           ++secondOrderCount;
-          if (!secondOrderOk(status, p, T, HzzI) || !secondOrderOk(status, p, T, HyzI)) return false;
-          H.topLeftCorner(nx + m, nx + m) += HzzI;
-          H.block(nx + m, 0, n + nc, nx) += HyzI;
-          H.block(0, nx + m, nx, n + nc) += HyzI.transpose();
+          if (!secondOrderOk(statusP[p], p, T, HzzP[p]) || !secondOrderOk(statusP[p], p, T, HyzP[p])) return false;
+          H.topLeftCorner(nx + m, nx + m) += HzzP[p];
+          H.block(nx + m, 0, n + nc, nx) += HyzP[p];
+          H.block(0, nx + m, nx, n + nc) += HyzP[p].transpose();
         }
       } else {
         hw = C.col(p).tail(n);
@@ -1149,6 +1206,11 @@ bool Transcription::evalHessian(const double* z, double objectiveFactor, const d
 }
 
 long Transcription::secondOrderEvaluations() const { return impl_->secondOrderCount; }
+
+void Transcription::setThreads(int threads) {
+  if (threads < 1) throw std::invalid_argument("Transcription::setThreads: threads = " + std::to_string(threads) + " must be >= 1");
+  impl_->threads = threads;
+}
 
 const std::string& Transcription::lastError() const { return impl_->error; }
 long Transcription::dynamicsEvaluations() const { return impl_->dynamicsCount; }

@@ -177,6 +177,33 @@ TEST_CASE("hessian: the implicit dynamics form's Lagrangian Hessian agrees with 
   }
 }
 
+TEST_CASE("hessian: the implicit form's point blocks on several threads give the same values",
+          "[transcription][hessian][implicit]") {
+  // Transcription::setThreads: the points' second-order blocks are independent (each thread its own
+  // Data and workspace) and gathered in point order: the values equal the one-thread ones to the bit,
+  // also where some points' multipliers are zero (those blocks are skipped on every count).
+  std::mt19937 rng(77);
+  const OptimalControlProblem file = trellis::loadProblem(problemPath("paper_pendulum_transfer"));
+  OptimalControlProblem p = hessianCase(file, CollocationMethod::kHermiteSimpson, true);
+  p.dynamics = trellis::DynamicsForm::kImplicit;
+  p.forceUpper(0) = 50.0;
+  Transcription one(p), many(p);
+  const VectorXd z = randomPoint(one, rng);
+  VectorXd mu = randomMultipliers(one, rng);
+  mu.head(mu.size() / 3).setZero();
+  VectorXd a(one.hessianRows().size()), b(a.size());
+  REQUIRE(one.evalHessian(z.data(), 0.7, mu.data(), a.data()));
+  for (const int threads : {2, 3, 64}) {
+    many.setThreads(threads);
+    REQUIRE(many.evalHessian(z.data(), 0.7, mu.data(), b.data()));
+    INFO(threads << " threads");
+    CHECK(a == b);
+    CHECK(many.secondOrderEvaluations() == one.secondOrderEvaluations() * (threads == 2 ? 1 : threads == 3 ? 2 : 3));
+  }
+  CHECK(a.cwiseAbs().maxCoeff() > 0.0);
+  CHECK_THROWS_WITH(many.setThreads(0), Catch::Contains("threads = 0"));
+}
+
 TEST_CASE("hessian: objective only and constraints only", "[transcription][hessian]") {
   const OptimalControlProblem p = [] {
     OptimalControlProblem q = trellis::loadProblem(problemPath("paper_pendulum_transfer"));

@@ -94,6 +94,9 @@ class Transcription {
   ///@}
 
   const OptimalControlProblem& problem() const;  ///< the validated problem it transcribes
+  /// Threads for the implicit form's per-point second-order blocks of the Hessian (≥ 1; the
+  /// points are independent: the same values on any count). Throws std::invalid_argument.
+  void setThreads(int threads);
 
   // ---- Sizes and layout ----------------------------------------------------------------------
   int numVariables() const;    ///< entries of z
