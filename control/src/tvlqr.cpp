@@ -16,18 +16,18 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
 
-#include <chrono>
-#include <exception>
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <limits>
 #include <memory>
-#include <atomic>
 #include <optional>
-#include <thread>
 #include <sstream>
 #include <stdexcept>
+#include <thread>
 
 namespace trellis {
 namespace {

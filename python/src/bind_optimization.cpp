@@ -39,6 +39,16 @@ void bindOptimization(py::module_& m) {
                          "derivatives) or LBFGS (limited-memory quasi-Newton).")
       .value("EXACT", HessianMode::kExact)
       .value("LBFGS", HessianMode::kLimitedMemory);
+  py::enum_<MumpsOrdering>(m, "MumpsOrdering",
+                           "MUMPS's fill-reducing ordering of Ipopt's KKT matrix (mumps_pivot_order): "
+                           "AUTO (MUMPS chooses), AMD, AMF, SCOTCH, PORD, METIS, QAMD.")
+      .value("AUTO", MumpsOrdering::kAuto)
+      .value("AMD", MumpsOrdering::kAmd)
+      .value("AMF", MumpsOrdering::kAmf)
+      .value("SCOTCH", MumpsOrdering::kScotch)
+      .value("PORD", MumpsOrdering::kPord)
+      .value("METIS", MumpsOrdering::kMetis)
+      .value("QAMD", MumpsOrdering::kQamd);
   py::enum_<OptimizationCode>(m, "OptimizationCode",
                               "The code of an OptimizationResult's status (SOLVED and "
                               "SOLVED_ACCEPTABLE are success).")
@@ -116,7 +126,8 @@ void bindOptimization(py::module_& m) {
 
   py::class_<OptimizerOptions>(m, "OptimizerOptions",
       "Ipopt options (keywords): print_level, max_iterations, tolerance, constraint_tolerance, "
-      "max_cpu_time, limited_memory_size, derivatives (DerivativeMode), hessian (HessianMode or None: "
+      "max_cpu_time, limited_memory_size, ordering (MumpsOrdering), threads (the implicit form's "
+      "Hessian blocks; the same iterates on any count), derivatives (DerivativeMode), hessian (HessianMode or None: "
       "the problem's), warm_start (refinement rounds start from the carried primal and multipliers), "
       "warm_start_barrier (Ipopt's mu_init then), consistency_tolerance, max_refinements, max_knots, "
       "max_split, refinement_band (neighbours of a cut interval halved too), unresolved_defect (a "
@@ -130,6 +141,8 @@ void bindOptimization(py::module_& m) {
       .def_readwrite("constraint_tolerance", &OptimizerOptions::constraintTolerance)
       .def_readwrite("max_cpu_time", &OptimizerOptions::maxCpuTime)
       .def_readwrite("limited_memory_size", &OptimizerOptions::limitedMemorySize)
+      .def_readwrite("ordering", &OptimizerOptions::ordering)
+      .def_readwrite("threads", &OptimizerOptions::threads)
       .def_readwrite("derivatives", &OptimizerOptions::derivatives)
       .def_readwrite("hessian", &OptimizerOptions::hessian)
       .def_readwrite("warm_start", &OptimizerOptions::warmStart)

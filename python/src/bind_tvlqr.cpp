@@ -87,11 +87,13 @@ void bindTvlqr(py::module_& m) {
       "Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f "
       "Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati "
       "(RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions), "
-      "feedforward (SampledFeedforward, sampled only), feedforward_iterations, infinite_horizon (a held "
+      "feedforward (SampledFeedforward, sampled only), feedforward_iterations, threads (sampled: the "
+      "feed-forward's plant runs; the same result on any count), infinite_horizon (a held "
       "pose only: Qf = S_inf of the CARE, or of the DARE when sampled).")
       .def(py::init(&makeFromKwargs<TvlqrOptions>))
       .def_readwrite("feedforward", &TvlqrOptions::feedforward)
       .def_readwrite("feedforward_iterations", &TvlqrOptions::feedforwardIterations)
+      .def_readwrite("threads", &TvlqrOptions::threads)
       .def_readwrite("infinite_horizon", &TvlqrOptions::infiniteHorizon)
       .def_readwrite("sample_rate", &TvlqrOptions::sampleRate)
       .def_readwrite("output_step", &TvlqrOptions::outputStep)

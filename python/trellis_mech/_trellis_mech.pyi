@@ -621,6 +621,41 @@ class ModelBuilder:
 class ModelError(ValueError):
     """Invalid model description (builder call or scene file); the message names the element, the field and the value."""
 
+class MumpsOrdering:
+    """MUMPS's fill-reducing ordering of Ipopt's KKT matrix (mumps_pivot_order): AUTO (MUMPS chooses), AMD, AMF, SCOTCH, PORD, METIS, QAMD.
+
+    Members:
+
+      AUTO
+
+      AMD
+
+      AMF
+
+      SCOTCH
+
+      PORD
+
+      METIS
+
+      QAMD
+    """
+    AMD: ClassVar[MumpsOrdering]
+    AMF: ClassVar[MumpsOrdering]
+    AUTO: ClassVar[MumpsOrdering]
+    METIS: ClassVar[MumpsOrdering]
+    PORD: ClassVar[MumpsOrdering]
+    QAMD: ClassVar[MumpsOrdering]
+    SCOTCH: ClassVar[MumpsOrdering]
+    @property
+    def value(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    def __init__(self, value: int) -> None: ...
+    def __int__(self) -> int: ...
+    def __eq__(self, other: object) -> bool: ...
+    def __ne__(self, other: object) -> bool: ...
+
 class NumericalError(RuntimeError):
     """A numerical failure that the C++ API throws (not a status): e.g. the dynamics fail where a function needs them, a singular Lyapunov equation."""
 
@@ -870,7 +905,7 @@ class OptimizationResult:
     def variables(self) -> numpy.typing.NDArray[numpy.float64]: ...
 
 class OptimizerOptions:
-    """Ipopt options (keywords): print_level, max_iterations, tolerance, constraint_tolerance, max_cpu_time, limited_memory_size, derivatives (DerivativeMode), hessian (HessianMode or None: the problem's), warm_start (refinement rounds start from the carried primal and multipliers), warm_start_barrier (Ipopt's mu_init then), consistency_tolerance, max_refinements, max_knots, max_split, refinement_band (neighbours of a cut interval halved too), unresolved_defect (a worst defect above it halves every interval), refinement_grading (0: off; else neighbouring new widths within this factor), on_iteration (a callable taking an IterationInfo and returning False to stop; an exception in it stops the solve)."""
+    """Ipopt options (keywords): print_level, max_iterations, tolerance, constraint_tolerance, max_cpu_time, limited_memory_size, ordering (MumpsOrdering), threads (the implicit form's Hessian blocks; the same iterates on any count), derivatives (DerivativeMode), hessian (HessianMode or None: the problem's), warm_start (refinement rounds start from the carried primal and multipliers), warm_start_barrier (Ipopt's mu_init then), consistency_tolerance, max_refinements, max_knots, max_split, refinement_band (neighbours of a cut interval halved too), unresolved_defect (a worst defect above it halves every interval), refinement_grading (0: off; else neighbouring new widths within this factor), on_iteration (a callable taking an IterationInfo and returning False to stop; an exception in it stops the solve)."""
     def __init__(self: OptimizerOptions, **kwargs) -> None: ...
     @property
     def consistency_tolerance(self) -> float: ...
@@ -917,6 +952,10 @@ class OptimizerOptions:
     @on_iteration.setter
     def on_iteration(self, value: Callable[[IterationInfo], bool]) -> None: ...
     @property
+    def ordering(self) -> MumpsOrdering: ...
+    @ordering.setter
+    def ordering(self, value: MumpsOrdering) -> None: ...
+    @property
     def print_level(self) -> int: ...
     @print_level.setter
     def print_level(self, value: int) -> None: ...
@@ -928,6 +967,10 @@ class OptimizerOptions:
     def refinement_grading(self) -> float: ...
     @refinement_grading.setter
     def refinement_grading(self, value: float) -> None: ...
+    @property
+    def threads(self) -> int: ...
+    @threads.setter
+    def threads(self, value: int) -> None: ...
     @property
     def tolerance(self) -> float: ...
     @tolerance.setter
@@ -1506,7 +1549,7 @@ class TransportStatus:
         """when it happened (NaN: not applicable)"""
 
 class TvlqrOptions:
-    """Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati (RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions), feedforward (SampledFeedforward, sampled only), feedforward_iterations, infinite_horizon (a held pose only: Qf = S_inf of the CARE, or of the DARE when sampled)."""
+    """Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati (RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions), feedforward (SampledFeedforward, sampled only), feedforward_iterations, threads (sampled: the feed-forward's plant runs; the same result on any count), infinite_horizon (a held pose only: Qf = S_inf of the CARE, or of the DARE when sampled)."""
     def __init__(self: TvlqrOptions, **kwargs) -> None: ...
     @property
     def feedforward(self) -> SampledFeedforward: ...
@@ -1536,6 +1579,10 @@ class TvlqrOptions:
     def sampled(self) -> SampledDiscretizationOptions: ...
     @sampled.setter
     def sampled(self, value: SampledDiscretizationOptions) -> None: ...
+    @property
+    def threads(self) -> int: ...
+    @threads.setter
+    def threads(self, value: int) -> None: ...
     @property
     def transport(self) -> TangentTransportOptions: ...
     @transport.setter

@@ -499,3 +499,9 @@ def test_sampled_feedforward_python_and_cli(tm, cli, tmp_path):
     assert not older.gains.has_feedforward and older.gains.feedforward is None
     drift = tm.simulate_closed_loop(model, ref, older.gains, ref.states[0], options=opts)
     assert drift.tracking_error.max() > 10 * result.tracking_error.max()  # measured 0.338
+    # TvlqrOptions.threads: the feed-forward's plant runs on threads, the same result to the bit.
+    threaded = tm.solve_tvlqr(model, ref, Q=10.0, R=1.0, options=tm.TvlqrOptions(sample_rate=100.0, threads=2))
+    assert threaded.ok and threaded.feedforward_simulations == sol.feedforward_simulations
+    np.testing.assert_array_equal(threaded.gains.feedforward, sol.gains.feedforward)
+    with pytest.raises(ValueError, match="TvlqrOptions.threads = 0"):
+        tm.solve_tvlqr(model, ref, Q=10.0, R=1.0, options=tm.TvlqrOptions(sample_rate=100.0, threads=0))

@@ -188,3 +188,22 @@ def test_acceleration_weights(tm):
     assert a.ok, a.message
     assert b.ok, b.message
     assert b.cost > a.cost
+
+
+def test_ordering_and_threads(tm):
+    # OptimizerOptions.ordering (MUMPS's fill-reducing ordering) and threads (the implicit form's
+    # Hessian blocks): every choice reaches the same optimum; threads give the same iterates.
+    p = tm.load_problem(str(PROBLEMS / "cart_pole_swingup.json"))
+    p.dynamics = tm.DynamicsForm.IMPLICIT
+    base = tm.optimize_trajectory(p, options=tm.OptimizerOptions(max_refinements=0))
+    assert base.ok, base.message
+    assert tm.OptimizerOptions().ordering == tm.MumpsOrdering.AUTO
+    assert tm.OptimizerOptions().threads == 1
+    for ordering in (tm.MumpsOrdering.AMD, tm.MumpsOrdering.QAMD, tm.MumpsOrdering.PORD):
+        r = tm.optimize_trajectory(p, options=tm.OptimizerOptions(max_refinements=0, ordering=ordering))
+        assert r.ok, r.message
+        assert abs(r.cost - base.cost) <= 1e-6 * abs(base.cost)
+    threaded = tm.optimize_trajectory(p, options=tm.OptimizerOptions(max_refinements=0, threads=2))
+    assert threaded.ok and threaded.iterations == base.iterations and threaded.cost == base.cost
+    with pytest.raises(ValueError, match="threads = 0"):
+        tm.optimize_trajectory(p, options=tm.OptimizerOptions(threads=0))
