@@ -44,7 +44,7 @@ struct TripletWriter {
 };
 
 /// Whether some constraint row of `model` is nonholonomic (a knife edge): its third-derivative
-/// terms then come from the recorded implicit residual (Impl::addThirdDerivative).
+/// terms then come from the recorded implicit residual (Impl::thirdTerm).
 bool anyNonholonomic(const Model& model) {
   for (const auto& c : model.constraints())
     if (!c.holonomic()) return true;
@@ -96,7 +96,7 @@ struct Transcription::Impl {
 
   std::vector<int> jacRows, jacCols;
 
-  Data data, constraintData;
+  Data data;
   // Cache of the last point at which the dynamics were evaluated.
   Eigen::VectorXd cachedZ;
   bool haveDynamics = false, haveLinearization = false;
@@ -109,7 +109,7 @@ struct Transcription::Impl {
   // N·nc blocks n×n: S_r(q_k)(i, j) = ∂A_{r,i}/∂q_j (= ∇²h_r for a holonomic row)
   std::vector<Eigen::MatrixXd> hessian;
   Eigen::MatrixXd slackTop, slackBottom;    // n×n: Σ γ_r ∇²h_r, Σ μ_r ∇²h_r (scratch)
-  Eigen::VectorXd q, dq, u, qp, dqp;
+  Eigen::VectorXd q, dq, u;
   // Implicit form: the point's q̈ and λ, the core's residuals and derivatives, per point the
   // residuals R (n + nc)×P and their Jacobian DR (n + nc)×stride.
   Eigen::VectorXd acc, lam;
@@ -130,24 +130,57 @@ struct Transcription::Impl {
   Eigen::MatrixXd Hz;                       // (2n + m)×(2n + m): one contraction
   Eigen::MatrixXd slackCross;               // (ncH + nc)×n per interval, stacked: ∂²L/∂s∂q_b
   Eigen::VectorXd horizonRow;               // P·stride: ∂²L/∂T∂z_p
-  Eigen::VectorXd hq, hdq, hu, hw, hwScaled, stateError, noRho, rhoScratch, rhoPoint;
-  Eigen::MatrixXd sumS, third, scratchNN;   // n×n
-  // Implicit form: per point ∇²_z (νᵀr + ηᵀc) (N×N) and ∂²/∂y∂[q; q̇] ((n + nc)×2n), their weights.
-  Eigen::MatrixXd HzzI, HyzI;
-  // The implicit Hessian's per-point blocks on `threads` threads (setThreads): each point's pair
-  // (HzzP, HyzP) and status; workers beyond the first own a Data and a workspace each.
+  Eigen::VectorXd hq, hdq, hu, hw, hwScaled, stateError, noRho, rhoPoint;
+  // The implicit form's per-point blocks ∇²_z (νᵀr + ηᵀc) ((2n + m)×(2n + m)) and ∂²/∂y∂[q; q̇]
+  // ((n + nc)×2n) with their status, computed on `threads` lanes (setThreads); each lane owns a
+  // Worker (a Data, a second-order workspace and its buffers).
   int threads = 1;
   std::vector<Eigen::MatrixXd> HzzP, HyzP;
   std::vector<DynamicsStatus> statusP;
   std::vector<char> activeP;
   struct Worker {
+    Worker(const Model& model, int n, int m, int nc, bool recording)
+        : data(model), secondOrder(model, false, recording), q(n), dq(n), u(m), acc(n), lam(nc), nu(n), eta(nc), hw(n),
+          thirdV(n), Hz(Eigen::MatrixXd::Zero(2 * n + m, 2 * n + m)), HzzI(Eigen::MatrixXd::Zero(2 * n + m, 2 * n + m)),
+          HyzI(Eigen::MatrixXd::Zero(n + nc, 2 * n)), sumS(n, n), third(n, n), scratch(n, n) {}
     Data data;
     SecondOrderWorkspace secondOrder;
-    Eigen::VectorXd q, dq, u, acc, lam, nu, eta;
+    Eigen::VectorXd q, dq, u, acc, lam, nu, eta, hw, thirdV;
+    Eigen::MatrixXd Hz, HzzI, HyzI, sumS, third, scratch;
   };
-  std::vector<std::unique_ptr<Worker>> workers;
-  Eigen::VectorXd zeroN, zeroNc, thirdV;  // nonholonomic: q̇ = 0, λ = 0, ν = 0 and v of addThirdDerivative
-  Eigen::VectorXd nuP, etaP;
+  std::vector<std::unique_ptr<Worker>> workers;  // workers[w] serves lane w (grown to `threads`)
+  // The third-derivative terms of the knots as tasks: computed on the lanes, added in the serial
+  // order (thirdDerivatives, applyThird).
+  struct ThirdTask {
+    int k = 0;                     // knot
+    const double* v = nullptr;     // the velocity-like vector
+    Eigen::VectorXd rho;           // the rows' weights
+    double scale = 0.0;
+    bool skip = true;              // v = 0 or ρ = 0: no term
+    DynamicsStatus status;
+    bool finite = true;
+    Eigen::MatrixXd increment;     // n×n, added to the point's q–q block
+  };
+  std::vector<ThirdTask> thirdTasks;
+  // knotConstraintHessians' per-knot outcome (gathered in knot order).
+  std::vector<std::string> knotFailure;
+  std::vector<char> knotOk;
+  std::vector<long> knotLinearizations;
+  int lanes() const { return std::max(1, std::min(threads, P)); }
+  void growWorkers(int count) {
+    // Recording as the transcription's own workspace: the implicit form and knife edges need it.
+    while (static_cast<int>(workers.size()) < count)
+      workers.push_back(std::make_unique<Worker>(model, n, m, nc, implicit || nonholonomic));
+  }
+  /// Runs lane(w) for w = 0 … count − 1, lane 0 on the calling thread.
+  template <class Lane>
+  static void onLanes(int count, const Lane& lane) {
+    std::vector<std::thread> pool;
+    for (int w = 1; w < count; ++w) pool.emplace_back(lane, w);
+    lane(0);
+    for (std::thread& t : pool) t.join();
+  }
+  Eigen::VectorXd zeroN, zeroNc;  // nonholonomic: q̇ = 0, λ = 0, ν = 0 (thirdTerm)
 
   Impl(OptimalControlProblem p, DerivativeMode mode)
       : problem((p.validate(), std::move(p))),
@@ -169,7 +202,6 @@ struct Transcription::Impl {
         perInterval(hermiteSimpson ? 2 : radau ? 3 : 1),
         stride(2 * model.nq() + model.nu() + (implicit ? model.nq() + model.nc() : 0)),
         data(model),
-        constraintData(model),
         numdiff(model),
         hessData(model),
         secondOrder(model, false, problem.dynamics == DynamicsForm::kImplicit || anyNonholonomic(model)) {
@@ -236,7 +268,7 @@ struct Transcription::Impl {
     hessian.assign(static_cast<std::size_t>(N) * nc, Eigen::MatrixXd::Zero(n, n));
     slackTop = Eigen::MatrixXd::Zero(n, n);
     slackBottom = Eigen::MatrixXd::Zero(n, n);
-    q.resize(n); dq.resize(n); u.resize(m); qp.resize(n); dqp.resize(n);
+    q.resize(n); dq.resize(n); u.resize(m);
     fdJ.resize(n, nx + m);
 
     // The pattern: run the value routine in structure mode (values are not looked at).
@@ -399,43 +431,67 @@ struct Transcription::Impl {
 
   /// ∇²h_r(q) for every constraint row, exactly: Ȧ q̇ = q̇ᵀ ∇²h q̇ (holonomic rows), so
   /// ∇²h_ii = drift(e_i) and ∇²h_ij = (drift(e_i + e_j) − drift(e_i) − drift(e_j)) / 2.
-  bool constraintHessians(int k, double T) {
+  bool constraintHessians(int k, double T, Worker& w, std::string& failure, long& linearizations) {
+    const int p = knotPoint(k);
+    w.q = state(cachedZ.data(), p).head(n);
     if (nonholonomic) {
       // S_r(i, ·) = ∂(A q̇)_r/∂q at q̇ = e_i: the core's ∂(A q̇)/∂q, one unit velocity at a time.
+      w.u = input(cachedZ.data(), p);
       for (int i = 0; i < n; ++i) {
-        dqp.setZero();
-        dqp(i) = 1.0;
-        ++linearizationCount;
-        const DynamicsStatus status = computeLinearization(model, constraintData, q, dqp, u);
-        if (!status.ok() || !constraintData.constraintVelocityJacobian.allFinite()) {
-          error = "the constraint derivatives failed at knot " + std::to_string(k) + " (t = " +
-                  std::to_string(T * tau(k)) + "): " + status.message;
+        w.dq.setZero();
+        w.dq(i) = 1.0;
+        ++linearizations;
+        const DynamicsStatus status = computeLinearization(model, w.data, w.q, w.dq, w.u);
+        if (!status.ok() || !w.data.constraintVelocityJacobian.allFinite()) {
+          failure = "the constraint derivatives failed at knot " + std::to_string(k) + " (t = " +
+                    std::to_string(T * tau(k)) + "): " + status.message;
           return false;
         }
         for (int r = 0; r < nc; ++r) {
-          hessian[k * nc + r].row(i) = constraintData.constraintVelocityJacobian.row(r);
+          hessian[k * nc + r].row(i) = w.data.constraintVelocityJacobian.row(r);
         }
       }
       return true;
     }
-    qp = q;
-    Eigen::VectorXd& v = dqp;
+    Eigen::VectorXd& v = w.dq;
     for (int i = 0; i < n; ++i) {
       v.setZero();
       v(i) = 1.0;
-      computeConstraints(model, constraintData, qp, v);
-      for (int r = 0; r < nc; ++r) hessian[k * nc + r](i, i) = constraintData.constraintDrift(r);
+      computeConstraints(model, w.data, w.q, v);
+      for (int r = 0; r < nc; ++r) hessian[k * nc + r](i, i) = w.data.constraintDrift(r);
     }
     for (int i = 0; i < n; ++i) {
       for (int j = i + 1; j < n; ++j) {
         v.setZero();
         v(i) = 1.0;
         v(j) = 1.0;
-        computeConstraints(model, constraintData, qp, v);
+        computeConstraints(model, w.data, w.q, v);
         for (int r = 0; r < nc; ++r) {
           Eigen::MatrixXd& H = hessian[k * nc + r];
-          H(i, j) = H(j, i) = 0.5 * (constraintData.constraintDrift(r) - H(i, i) - H(j, j));
+          H(i, j) = H(j, i) = 0.5 * (w.data.constraintDrift(r) - H(i, i) - H(j, j));
         }
+      }
+    }
+    return true;
+  }
+
+  /// S_r at every knot (constraintHessians), the knots on the lanes (each writes its own blocks);
+  /// the first failing knot's message, in knot order.
+  bool knotConstraintHessians(double T) {
+    const int count = std::max(1, std::min(threads, N));
+    growWorkers(count);
+    knotFailure.assign(N, std::string());
+    knotOk.assign(N, 1);
+    knotLinearizations.assign(N, 0);
+    onLanes(count, [&](int lane) {
+      for (int k = lane; k < N; k += count)
+        knotOk[k] = constraintHessians(k, T, *workers[lane], knotFailure[k], knotLinearizations[k]);
+    });
+    for (int k = 0; k < N; ++k) {
+      linearizationCount += knotLinearizations[k];
+      if (!knotOk[k]) {
+        error = knotFailure[k];
+        return false;
       }
     }
     return true;
@@ -483,12 +539,13 @@ struct Transcription::Impl {
       if (isKnot && nc > 0) {
         hValue.col(k) = data.constraintValue;
         Ac[k] = data.constraintJacobian;
-        if (linearize && !constraintHessians(k, T)) return false;
       }
       if (linearize && derivatives == DerivativeMode::kFiniteDifference) {
         if (!finiteDifferenceBlocks(p, T)) return false;
       }
     }
+    // The constraints' second derivatives at the knots (after every point: on the lanes).
+    if (linearize && nc > 0 && !knotConstraintHessians(T)) return false;
     haveDynamics = true;
     haveLinearization = haveLinearization || linearize;
     return true;
@@ -526,7 +583,6 @@ struct Transcription::Impl {
       hValue.col(k) = data.constraintValue;
       Ac[k] = data.constraintJacobian;
       Avq[k] = data.constraintVelocityJacobian;
-      if (linearize && !constraintHessians(k, T)) return false;
     }
     return true;
   }
@@ -835,7 +891,7 @@ struct Transcription::Impl {
   //    of interval k (λ its Simpson/trapezoid multipliers) give ∂²/∂γ_j∂q_b = −S_jᵀ λ_q,
   //    ∂²/∂μ_r∂q_b = −S_rᵀ λ_q̇, ∂²/∂q_b² = −Σ γ_j T_j[λ_q] − Σ μ_r T_r[λ_q̇]; the knot rows
   //    ν_j h_j(q) + ν'_r A_r(q) q̇ give ∂²/∂q² = Σ ν_j S_j + Σ ν'_r T_r[q̇] and ∂²/∂q̇_i∂q_a =
-  //    Σ ν'_r S_r(i, a), with T_r[v](a, b) = Σ_i v_i ∂³h_r/∂q_i∂q_a∂q_b (addThirdDerivative).
+  //    Σ ν'_r S_r(i, a), with T_r[v](a, b) = Σ_i v_i ∂³h_r/∂q_i∂q_a∂q_b (thirdTerm).
 
   void setUpHessian() {
     const int blockRows = ncH + nc;
@@ -854,20 +910,10 @@ struct Transcription::Impl {
     costQe = Eigen::VectorXd::Zero(nx);
     costRu = Eigen::VectorXd::Zero(m);
     noRho.resize(0);
-    rhoScratch = Eigen::VectorXd::Zero(nc);
     rhoPoint = Eigen::VectorXd::Zero(nc);
-    sumS = third = scratchNN = Eigen::MatrixXd::Zero(n, n);
     if (nonholonomic) {
-      zeroN = thirdV = Eigen::VectorXd::Zero(n);
+      zeroN = Eigen::VectorXd::Zero(n);
       zeroNc = Eigen::VectorXd::Zero(nc);
-    }
-    if (implicit || nonholonomic) {
-      HzzI = Eigen::MatrixXd::Zero(nx + m, nx + m);
-      HyzI = Eigen::MatrixXd::Zero(n + nc, nx);
-    }
-    if (implicit) {
-      nuP = Eigen::VectorXd::Zero(n);
-      etaP = Eigen::VectorXd::Zero(nc);
     }
     // Structure, lower triangle (row ≥ column): each point's [x; u] block whole, the slack rows
     // against the end knot's q, and the T row against every point variable.
@@ -898,7 +944,81 @@ struct Transcription::Impl {
     return false;
   }
 
-  /// out += scale · Σ_r ρ_r T_r[v] at knot k (holonomic rows). c_r = A_r(q) q̈ + q̇ᵀ ∇²h_r q̇
+
+  /// The implicit form's second-order blocks ∇²_z(νᵀr + ηᵀc), ∂²/∂y∂x of every point whose
+  /// multipliers are not all zero (activeP), into HzzP, HyzP and statusP: the points are
+  /// independent, so they run on `threads` threads (point p on worker p mod threads; the first
+  /// worker is the transcription's own hessData/secondOrder) — the same values on any count.
+  void implicitBlocks(const double* z, const double* mult) {
+    const int count = lanes();
+    if (static_cast<int>(HzzP.size()) != P) {
+      HzzP.assign(P, Eigen::MatrixXd::Zero(nx + m, nx + m));
+      HyzP.assign(P, Eigen::MatrixXd::Zero(n + nc, nx));
+      statusP.assign(P, DynamicsStatus{});
+      activeP.assign(P, 0);
+    }
+    growWorkers(count);
+    onLanes(count, [&](int lane) {
+      Worker& w = *workers[lane];
+      for (int p = lane; p < P; p += count) {
+        w.nu = Eigen::Map<const Eigen::VectorXd>(mult + dynStart + p * dynRows, n);
+        w.eta = Eigen::Map<const Eigen::VectorXd>(mult + dynStart + p * dynRows + n, nc);
+        activeP[p] = !w.nu.isZero(0.0) || !w.eta.isZero(0.0);
+        if (!activeP[p]) continue;
+        const double* zp = z + p * stride;
+        w.q = Eigen::Map<const Eigen::VectorXd>(zp, n);
+        w.dq = Eigen::Map<const Eigen::VectorXd>(zp + n, n);
+        w.u = Eigen::Map<const Eigen::VectorXd>(zp + nx, m);
+        w.acc = Eigen::Map<const Eigen::VectorXd>(zp + nx + m, n);
+        w.lam = Eigen::Map<const Eigen::VectorXd>(zp + nx + m + n, nc);
+        statusP[p] = computeImplicitSecondOrder(model, w.data, w.secondOrder, w.q, w.dq, w.acc, w.u, w.lam, w.nu, w.eta,
+                                                HzzP[p], HyzP[p]);
+      }
+    });
+  }
+
+  /// The knots' third-derivative terms (thirdTerm, in the Hessian's order: per interval the
+  /// defects' two, then per knot the constraint rows' one) computed on the lanes into thirdTasks.
+  void thirdDerivatives(const double* z, const double* mult) {
+    const std::size_t count = static_cast<std::size_t>(2 * (N - 1) + N);
+    if (thirdTasks.size() != count) {
+      thirdTasks.assign(count, ThirdTask{});
+      for (ThirdTask& t : thirdTasks) {
+        t.rho = Eigen::VectorXd::Zero(nc);
+        t.increment = Eigen::MatrixXd::Zero(n, n);
+      }
+    }
+    std::size_t i = 0;
+    for (int k = 0; k + 1 < N; ++k) {
+      const double* lamQ = mult + k * intervalRows;
+      ThirdTask& a = thirdTasks[i++];
+      a.k = k + 1;
+      a.v = lamQ;
+      a.rho.setZero();
+      for (int j = 0; j < ncH; ++j) a.rho(holonomicRows[j]) = z[slackOf(k) + j];
+      a.scale = -1.0;
+      ThirdTask& b = thirdTasks[i++];
+      b.k = k + 1;
+      b.v = lamQ + n;
+      b.rho = Eigen::Map<const Eigen::VectorXd>(z + slackOf(k) + ncH, nc);
+      b.scale = -1.0;
+    }
+    for (int k = 0; k < N; ++k) {
+      ThirdTask& c = thirdTasks[i++];
+      c.k = k;
+      c.v = z + knotPoint(k) * stride + n;
+      c.rho = Eigen::Map<const Eigen::VectorXd>(mult + knotRow(k) + ncH, nc);
+      c.scale = 1.0;
+    }
+    const int lanesUsed = std::max(1, std::min<int>(threads, static_cast<int>(count)));
+    growWorkers(lanesUsed);
+    onLanes(lanesUsed, [&](int lane) {
+      for (std::size_t t = static_cast<std::size_t>(lane); t < count; t += static_cast<std::size_t>(lanesUsed))
+        thirdTerm(*workers[lane], thirdTasks[t]);
+    });
+  }
+
+  /// One term: task.increment = scale · Σ_r ρ_r T_r[v] at knot k (holonomic rows). c_r = A_r(q) q̈ + q̇ᵀ ∇²h_r q̇
   /// vanishes identically along the forward dynamics, so its q–q̇ block of second derivatives is
   /// zero: S_rᵀ ∂q̈/∂q̇ + Σ_i A_{r,i} ∇²_{qq̇} q̈_i + 2 T_r[q̇] = 0. At q̇ = v/‖v‖ and the contraction
   /// w = A(q)ᵀ ρ this gives Σ_r ρ_r T_r[v] = −‖v‖/2 ((Σ ρ_r S_r)ᵀ ∂q̈/∂q̇ + H_{qq̇}) — exact, from
@@ -909,87 +1029,48 @@ struct Transcription::Impl {
   /// comes from the implicit residual c = A(q) q̈ + Ȧ q̇ at q̇ = 0 (the drift and all its
   /// q-derivatives vanish there), q̈ = v: the (q, q) block of ∇²(ηᵀc) with η = ρ, ν = 0
   /// (computeImplicitSecondOrder on the recorded pass) — for every row kind alike.
-  bool addThirdDerivative(int k, const double* v, const Eigen::VectorXd& rho, double scale,
-                          Eigen::Ref<Eigen::MatrixXd> out) {
-    const Eigen::Map<const Eigen::VectorXd> vel(v, n);
+  void thirdTerm(Worker& w, ThirdTask& task) {
+    const Eigen::Map<const Eigen::VectorXd> vel(task.v, n);
     const double norm = vel.norm();
-    if (norm == 0.0 || rho.isZero(0.0)) return true;
-    const int p = knotPoint(k);
+    task.skip = norm == 0.0 || task.rho.isZero(0.0);
+    if (task.skip) return;
+    const int k = task.k, p = knotPoint(k);
+    w.q = state(cachedZ.data(), p).head(n);
+    w.u = input(cachedZ.data(), p);
     if (nonholonomic) {
-      hq = state(cachedZ.data(), p).head(n);
-      hu = input(cachedZ.data(), p);
-      thirdV = vel;
-      const DynamicsStatus status = computeImplicitSecondOrder(model, hessData, secondOrder, hq, zeroN, thirdV, hu,
-                                                               zeroNc, zeroN, rho, HzzI, HyzI);
-      ++secondOrderCount;
-      if (!secondOrderOk(status, p, horizonOf(cachedZ.data()), HzzI)) return false;
-      out.noalias() += scale * HzzI.topLeftCorner(n, n);
-      return true;
+      w.thirdV = vel;
+      task.status = computeImplicitSecondOrder(model, w.data, w.secondOrder, w.q, zeroN, w.thirdV, w.u, zeroNc, zeroN,
+                                               task.rho, w.HzzI, w.HyzI);
+      task.finite = w.HzzI.allFinite();
+      task.increment = task.scale * w.HzzI.topLeftCorner(n, n);
+      return;
     }
-    hq = state(cachedZ.data(), p).head(n);
-    hdq = vel / norm;
-    hu = input(cachedZ.data(), p);
-    hw.noalias() = Ac[k].transpose() * rho;
-    sumS.setZero();
-    for (int r = 0; r < nc; ++r) sumS += rho(r) * hessian[k * nc + r];
-    const DynamicsStatus status =
-        computeSecondOrderContraction(model, hessData, secondOrder, hq, hdq, hu, hw, noRho, Hz);
-    ++secondOrderCount;
-    if (!secondOrderOk(status, p, horizonOf(cachedZ.data()), Hz)) return false;
-    third.noalias() = sumS.transpose() * hessData.dqdd_ddq;
-    third += Hz.block(0, n, n, n);
-    scratchNN = third.transpose();
-    third += scratchNN;  // symmetric part, ×2
-    out.noalias() -= (0.25 * scale * norm) * third;
-    return true;
+    w.dq = vel / norm;
+    w.hw.noalias() = Ac[k].transpose() * task.rho;
+    w.sumS.setZero();
+    for (int r = 0; r < nc; ++r) w.sumS += task.rho(r) * hessian[k * nc + r];
+    task.status = computeSecondOrderContraction(model, w.data, w.secondOrder, w.q, w.dq, w.u, w.hw, noRho, w.Hz);
+    task.finite = w.Hz.allFinite();
+    w.third.noalias() = w.sumS.transpose() * w.data.dqdd_ddq;
+    w.third += w.Hz.block(0, n, n, n);
+    w.scratch = w.third.transpose();
+    w.third += w.scratch;  // symmetric part, ×2
+    task.increment = (-(0.25 * task.scale * norm)) * w.third;
   }
 
-  /// The implicit form's second-order blocks ∇²_z(νᵀr + ηᵀc), ∂²/∂y∂x of every point whose
-  /// multipliers are not all zero (activeP), into HzzP, HyzP and statusP: the points are
-  /// independent, so they run on `threads` threads (point p on worker p mod threads; the first
-  /// worker is the transcription's own hessData/secondOrder) — the same values on any count.
-  void implicitBlocks(const double* z, const double* mult) {
-    const int count = std::max(1, std::min(threads, P));
-    if (static_cast<int>(HzzP.size()) != P) {
-      HzzP.assign(P, Eigen::MatrixXd::Zero(nx + m, nx + m));
-      HyzP.assign(P, Eigen::MatrixXd::Zero(n + nc, nx));
-      statusP.assign(P, DynamicsStatus{});
-      activeP.assign(P, 0);
+  /// Adds a computed term to its point's block (false, with the error, where its second
+  /// derivatives failed).
+  bool applyThird(const ThirdTask& task, Eigen::Ref<Eigen::MatrixXd> out) {
+    if (task.skip) return true;
+    ++secondOrderCount;
+    const int p = knotPoint(task.k);
+    if (!((task.status.ok() || task.status.code == DynamicsCode::kRedundantConstraints) && task.finite)) {
+      error = "the second derivatives of the dynamics failed at " + describePoint(p, horizonOf(cachedZ.data())) + ": " +
+              (task.status.message.empty() ? std::string("non-finite values") : task.status.message);
+      return false;
     }
-    while (static_cast<int>(workers.size()) + 1 < count) {
-      workers.push_back(std::make_unique<Worker>(Worker{Data(model), SecondOrderWorkspace(model, false, true),
-                                                        Eigen::VectorXd(n), Eigen::VectorXd(n), Eigen::VectorXd(m),
-                                                        Eigen::VectorXd(n), Eigen::VectorXd(nc), Eigen::VectorXd(n),
-                                                        Eigen::VectorXd(nc)}));
-    }
-    const auto run = [&](int w) {
-      Data& d = w == 0 ? hessData : workers[w - 1]->data;
-      SecondOrderWorkspace& ws = w == 0 ? secondOrder : workers[w - 1]->secondOrder;
-      Eigen::VectorXd& q_ = w == 0 ? hq : workers[w - 1]->q;
-      Eigen::VectorXd& dq_ = w == 0 ? hdq : workers[w - 1]->dq;
-      Eigen::VectorXd& u_ = w == 0 ? hu : workers[w - 1]->u;
-      Eigen::VectorXd& acc_ = w == 0 ? acc : workers[w - 1]->acc;
-      Eigen::VectorXd& lam_ = w == 0 ? lam : workers[w - 1]->lam;
-      Eigen::VectorXd& nu_ = w == 0 ? nuP : workers[w - 1]->nu;
-      Eigen::VectorXd& eta_ = w == 0 ? etaP : workers[w - 1]->eta;
-      for (int p = w; p < P; p += count) {
-        nu_ = Eigen::Map<const Eigen::VectorXd>(mult + dynStart + p * dynRows, n);
-        eta_ = Eigen::Map<const Eigen::VectorXd>(mult + dynStart + p * dynRows + n, nc);
-        activeP[p] = !nu_.isZero(0.0) || !eta_.isZero(0.0);
-        if (!activeP[p]) continue;
-        const double* zp = z + p * stride;
-        q_ = Eigen::Map<const Eigen::VectorXd>(zp, n);
-        dq_ = Eigen::Map<const Eigen::VectorXd>(zp + n, n);
-        u_ = Eigen::Map<const Eigen::VectorXd>(zp + nx, m);
-        acc_ = Eigen::Map<const Eigen::VectorXd>(zp + nx + m, n);
-        lam_ = Eigen::Map<const Eigen::VectorXd>(zp + nx + m + n, nc);
-        statusP[p] = computeImplicitSecondOrder(model, d, ws, q_, dq_, acc_, u_, lam_, nu_, eta_, HzzP[p], HyzP[p]);
-      }
-    };
-    std::vector<std::thread> pool;
-    for (int w = 1; w < count; ++w) pool.emplace_back(run, w);
-    run(0);
-    for (std::thread& t : pool) t.join();
+    out += task.increment;
+    return true;
   }
 
   bool hessianValues(const double* z, double sigma, const double* mult, double* values) {
@@ -1078,6 +1159,10 @@ struct Transcription::Impl {
       }
     }
     if (nc > 0) {
+      // The third-derivative terms on the lanes first, then added in this serial order (the
+      // same sums, bit for bit, on any number of threads).
+      thirdDerivatives(z, mult);
+      std::size_t task = 0;
       const int blockRows = ncH + nc;
       for (int k = 0; k + 1 < N; ++k) {
         const int b = knotPoint(k + 1);
@@ -1090,11 +1175,8 @@ struct Transcription::Impl {
         for (int r = 0; r < nc; ++r) {
           slackCross.row(k * blockRows + ncH + r).noalias() = -lv * hessian[(k + 1) * nc + r];
         }
-        rhoScratch.setZero();
-        for (int j = 0; j < ncH; ++j) rhoScratch(holonomicRows[j]) = z[slackOf(k) + j];
-        if (!addThirdDerivative(k + 1, lamQ, rhoScratch, -1.0, Hp[b].topLeftCorner(n, n))) return false;
-        rhoScratch = Eigen::Map<const Eigen::VectorXd>(z + slackOf(k) + ncH, nc);
-        if (!addThirdDerivative(k + 1, lamV, rhoScratch, -1.0, Hp[b].topLeftCorner(n, n))) return false;
+        if (!applyThird(thirdTasks[task++], Hp[b].topLeftCorner(n, n))) return false;  // γ_k with λ_q
+        if (!applyThird(thirdTasks[task++], Hp[b].topLeftCorner(n, n))) return false;  // μ_k with λ_v
       }
       for (int k = 0; k < N; ++k) {
         const int p = knotPoint(k);
@@ -1105,8 +1187,7 @@ struct Transcription::Impl {
           H.block(n, 0, n, n) += nu[ncH + r] * hessian[k * nc + r];
           H.block(0, n, n, n) += nu[ncH + r] * hessian[k * nc + r].transpose();
         }
-        rhoScratch = Eigen::Map<const Eigen::VectorXd>(nu + ncH, nc);
-        if (!addThirdDerivative(k, z + p * stride + n, rhoScratch, 1.0, H.topLeftCorner(n, n))) return false;
+        if (!applyThird(thirdTasks[task++], H.topLeftCorner(n, n))) return false;  // the knot's rows with q̇
       }
     }
     // Values in the structure's order.

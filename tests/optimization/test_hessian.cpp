@@ -202,6 +202,28 @@ TEST_CASE("hessian: the implicit form's point blocks on several threads give the
   }
   CHECK(a.cwiseAbs().maxCoeff() > 0.0);
   CHECK_THROWS_WITH(many.setThreads(0), Catch::Contains("threads = 0"));
+  // The knots' third-derivative terms too, on both forms, with a knife edge beside a holonomic row
+  // (the recorded implicit residual's path) and with the distance row alone.
+  for (const auto form : {trellis::DynamicsForm::kExplicit, trellis::DynamicsForm::kImplicit}) {
+    OptimalControlProblem q(trellis::test::skateModel(true));
+    q.dynamics = form;
+    q.knots = 5;
+    q.setFixedHorizon(2.0);
+    q.Q = MatrixXd::Identity(q.nx(), q.nx()) * 0.4;
+    q.R = MatrixXd::Identity(q.nu(), q.nu()) * 0.3;
+    q.initialFixed.assign(q.nx(), false);
+    q.finalFixed.assign(q.nx(), false);
+    Transcription serial(q), threaded(q);
+    threaded.setThreads(3);
+    const VectorXd zq = randomPoint(serial, rng);
+    const VectorXd muq = randomMultipliers(serial, rng);
+    VectorXd c(serial.hessianRows().size()), d(c.size());
+    REQUIRE(serial.evalHessian(zq.data(), 0.3, muq.data(), c.data()));
+    REQUIRE(threaded.evalHessian(zq.data(), 0.3, muq.data(), d.data()));
+    INFO((form == trellis::DynamicsForm::kImplicit ? "implicit" : "explicit") << " skate with arm");
+    CHECK(c == d);
+    CHECK(threaded.secondOrderEvaluations() == serial.secondOrderEvaluations());
+  }
 }
 
 TEST_CASE("hessian: objective only and constraints only", "[transcription][hessian]") {
