@@ -50,6 +50,20 @@ Run runAt(const trellis::Model& model, const trellis::Trajectory& ref, double ra
   return run;
 }
 
+/// The paper's pendulum (one distance constraint) along its stored swing, Q = I, R = 0.01, Qf = Q.
+struct PendulumSwing {
+  trellis::Scene scene = trellis::loadScene(TRELLIS_SOURCE_DIR "/examples/scenes/paper_pendulum.json");
+  trellis::Trajectory ref =
+      trellis::Trajectory::readCsvFile(TRELLIS_SOURCE_DIR "/examples/trajectories/paper_pendulum_swing.csv");
+  trellis::LqrWeights w = [] {
+    trellis::LqrWeights x;
+    x.Q = MatrixXd::Identity(4, 4);
+    x.R = 0.01 * MatrixXd::Identity(1, 1);
+    x.Qf = x.Q;
+    return x;
+  }();
+};
+
 }  // namespace
 
 TEST_CASE("sampled gains: the consistent feed-forward keeps the unperturbed loop on the reference",
@@ -99,13 +113,10 @@ TEST_CASE("sampled gains: the predicted deviation on a constrained scene", "[sam
   // The spline between knots leaves the constraint by its interpolation error: the prediction
   // measures the defects between projections and adds that offset. Measured: simulated 1.367e-5
   // against 1.37e-5 predicted (the first version, without the projections, predicted 9.1e-5).
-  const trellis::Scene scene = trellis::loadScene(TRELLIS_SOURCE_DIR "/examples/scenes/paper_pendulum.json");
-  const trellis::Trajectory ref =
-      trellis::Trajectory::readCsvFile(TRELLIS_SOURCE_DIR "/examples/trajectories/paper_pendulum_swing.csv");
-  trellis::LqrWeights w;
-  w.Q = MatrixXd::Identity(4, 4);
-  w.R = 0.01 * MatrixXd::Identity(1, 1);
-  w.Qf = w.Q;
+  const PendulumSwing swing;
+  const trellis::Scene& scene = swing.scene;
+  const trellis::Trajectory& ref = swing.ref;
+  const trellis::LqrWeights& w = swing.w;
   trellis::TvlqrOptions opt;
   opt.sampleRate = 100.0;
   const trellis::TvlqrSolution sol = trellis::solveTvlqr(scene.model, ref, w, opt);
@@ -158,13 +169,10 @@ TEST_CASE("sampled gains: the feed-forward's plant runs give the same result on 
           "[sampled][feedforward]") {
   // The intervals run on TvlqrOptions::threads and are gathered in order (tvlqr.hpp): K, the held
   // feed-forward, the defects, the prediction and the run count are the same to the bit.
-  const trellis::Scene scene = trellis::loadScene(TRELLIS_SOURCE_DIR "/examples/scenes/paper_pendulum.json");
-  const trellis::Trajectory ref =
-      trellis::Trajectory::readCsvFile(TRELLIS_SOURCE_DIR "/examples/trajectories/paper_pendulum_swing.csv");
-  trellis::LqrWeights w;
-  w.Q = MatrixXd::Identity(4, 4);
-  w.R = 0.01 * MatrixXd::Identity(1, 1);
-  w.Qf = w.Q;
+  const PendulumSwing swing;
+  const trellis::Scene& scene = swing.scene;
+  const trellis::Trajectory& ref = swing.ref;
+  const trellis::LqrWeights& w = swing.w;
   for (const SampledFeedforward ff : {SampledFeedforward::kConsistent, SampledFeedforward::kAverage}) {
     trellis::TvlqrOptions opt;
     opt.sampleRate = 50.0;
