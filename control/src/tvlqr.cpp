@@ -27,6 +27,7 @@
 #include <optional>
 #include <sstream>
 #include <stdexcept>
+#include <system_error>
 #include <thread>
 
 namespace trellis {
@@ -88,8 +89,8 @@ void TvlqrOptions::validate() const {
     throw std::invalid_argument("TvlqrOptions.outputStep = " + std::to_string(outputStep) +
                                 " is invalid (must be finite and >= 0)");
   }
-  if (threads < 1) {
-    throw std::invalid_argument("TvlqrOptions.threads = " + std::to_string(threads) + " is invalid (must be >= 1)");
+  if (threads < 1 || threads > 256) {
+    throw std::invalid_argument("TvlqrOptions.threads = " + std::to_string(threads) + " is invalid (must be in 1..256)");
   }
   if (feedforwardIterations < 1) {
     throw std::invalid_argument("TvlqrOptions.feedforwardIterations = " + std::to_string(feedforwardIterations) +
@@ -648,8 +649,13 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
     };
     const int threads = static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(options.threads), std::max<std::size_t>(N, 1)));
     {
+      // Workers take the next interval until none is left: fewer threads than asked (the system's
+      // limit) only take longer.
       std::vector<std::thread> pool;
-      for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
+      try {
+        for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
+      } catch (const std::system_error&) {
+      }
       worker();
       for (std::thread& t : pool) t.join();
     }

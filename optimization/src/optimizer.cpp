@@ -32,7 +32,9 @@ void OptimizerOptions::validate() const {
   }
   if (!(maxCpuTime > 0.0)) bad("maxCpuTime must be > 0");
   if (limitedMemorySize < 1) bad("limitedMemorySize = " + std::to_string(limitedMemorySize) + " must be >= 1");
-  if (threads < 1) bad("threads = " + std::to_string(threads) + " must be >= 1");
+  if (threads < 1 || threads > Transcription::kMaxThreads) {
+    bad("threads = " + std::to_string(threads) + " must be in 1.." + std::to_string(Transcription::kMaxThreads));
+  }
   if (static_cast<int>(ordering) < 0 || static_cast<int>(ordering) > static_cast<int>(MumpsOrdering::kQamd)) {
     bad("ordering = " + std::to_string(static_cast<int>(ordering)) + " is not a MumpsOrdering");
   }

@@ -17,6 +17,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -166,18 +167,25 @@ struct Transcription::Impl {
   std::vector<std::string> knotFailure;
   std::vector<char> knotOk;
   std::vector<long> knotLinearizations;
-  int lanes() const { return std::max(1, std::min(threads, P)); }
+  /// Lanes for `items` independent pieces of work: at most `threads`, at least 1.
+  int lanesFor(int items) const { return std::max(1, std::min(threads, items)); }
   void growWorkers(int count) {
     // Recording as the transcription's own workspace: the implicit form and knife edges need it.
     while (static_cast<int>(workers.size()) < count)
       workers.push_back(std::make_unique<Worker>(model, n, m, nc, implicit || nonholonomic));
   }
-  /// Runs lane(w) for w = 0 … count − 1, lane 0 on the calling thread.
+  /// Runs lane(w) for w = 0 … count − 1, lane 0 on the calling thread; lanes no thread could be
+  /// started for (the system's limit) run there too, so every lane's work is done.
   template <class Lane>
   static void onLanes(int count, const Lane& lane) {
     std::vector<std::thread> pool;
-    for (int w = 1; w < count; ++w) pool.emplace_back(lane, w);
+    int started = 1;
+    try {
+      for (; started < count; ++started) pool.emplace_back(lane, started);
+    } catch (const std::system_error&) {
+    }
     lane(0);
+    for (int w = started; w < count; ++w) lane(w);
     for (std::thread& t : pool) t.join();
   }
   Eigen::VectorXd zeroN, zeroNc;  // nonholonomic: q̇ = 0, λ = 0, ν = 0 (thirdTerm)
@@ -478,7 +486,7 @@ struct Transcription::Impl {
   /// S_r at every knot (constraintHessians), the knots on the lanes (each writes its own blocks);
   /// the first failing knot's message, in knot order.
   bool knotConstraintHessians(double T) {
-    const int count = std::max(1, std::min(threads, N));
+    const int count = lanesFor(N);
     growWorkers(count);
     knotFailure.assign(N, std::string());
     knotOk.assign(N, 1);
@@ -950,7 +958,7 @@ struct Transcription::Impl {
   /// independent, so they run on `threads` threads (point p on worker p mod threads; the first
   /// worker is the transcription's own hessData/secondOrder) — the same values on any count.
   void implicitBlocks(const double* z, const double* mult) {
-    const int count = lanes();
+    const int count = lanesFor(P);
     if (static_cast<int>(HzzP.size()) != P) {
       HzzP.assign(P, Eigen::MatrixXd::Zero(nx + m, nx + m));
       HyzP.assign(P, Eigen::MatrixXd::Zero(n + nc, nx));
@@ -1010,7 +1018,7 @@ struct Transcription::Impl {
       c.rho = Eigen::Map<const Eigen::VectorXd>(mult + knotRow(k) + ncH, nc);
       c.scale = 1.0;
     }
-    const int lanesUsed = std::max(1, std::min<int>(threads, static_cast<int>(count)));
+    const int lanesUsed = lanesFor(static_cast<int>(count));
     growWorkers(lanesUsed);
     onLanes(lanesUsed, [&](int lane) {
       for (std::size_t t = static_cast<std::size_t>(lane); t < count; t += static_cast<std::size_t>(lanesUsed))
@@ -1289,7 +1297,10 @@ bool Transcription::evalHessian(const double* z, double objectiveFactor, const d
 long Transcription::secondOrderEvaluations() const { return impl_->secondOrderCount; }
 
 void Transcription::setThreads(int threads) {
-  if (threads < 1) throw std::invalid_argument("Transcription::setThreads: threads = " + std::to_string(threads) + " must be >= 1");
+  if (threads < 1 || threads > kMaxThreads) {
+    throw std::invalid_argument("Transcription::setThreads: threads = " + std::to_string(threads) + " must be in 1.." +
+                                std::to_string(kMaxThreads));
+  }
   impl_->threads = threads;
 }
 

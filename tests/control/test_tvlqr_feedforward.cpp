@@ -217,4 +217,6 @@ TEST_CASE("sampled gains: the feed-forward's plant runs give the same result on 
   CHECK_THAT(failed.status.message, Catch::Contains("sample interval [0, 0.05"));
   opt.threads = 0;
   CHECK_THROWS_WITH(trellis::solveTvlqr(cart, held, w, opt), Catch::Contains("TvlqrOptions.threads = 0"));
+  opt.threads = 257;
+  CHECK_THROWS_WITH(trellis::solveTvlqr(cart, held, w, opt), Catch::Contains("TvlqrOptions.threads = 257"));
 }

@@ -202,6 +202,7 @@ TEST_CASE("hessian: the implicit form's point blocks on several threads give the
   }
   CHECK(a.cwiseAbs().maxCoeff() > 0.0);
   CHECK_THROWS_WITH(many.setThreads(0), Catch::Contains("threads = 0"));
+  CHECK_THROWS_WITH(many.setThreads(Transcription::kMaxThreads + 1), Catch::Contains("threads = 257 must be in 1..256"));
   // The knots' third-derivative terms too, on both forms, with a knife edge beside a holonomic row
   // (the recorded implicit residual's path) and with the distance row alone.
   for (const auto form : {trellis::DynamicsForm::kExplicit, trellis::DynamicsForm::kImplicit}) {

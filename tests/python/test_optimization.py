@@ -207,3 +207,5 @@ def test_ordering_and_threads(tm):
     assert threaded.ok and threaded.iterations == base.iterations and threaded.cost == base.cost
     with pytest.raises(ValueError, match="threads = 0"):
         tm.optimize_trajectory(p, options=tm.OptimizerOptions(threads=0))
+    with pytest.raises(ValueError, match="threads = 300 must be in 1..256"):
+        tm.optimize_trajectory(p, options=tm.OptimizerOptions(threads=300))

@@ -95,7 +95,7 @@ struct TvlqrOptions {
   /// Sampled only: the held feed-forward written beside K_k (file comment).
   SampledFeedforward feedforward = SampledFeedforward::kConsistent;
   int feedforwardIterations = 6;  ///< kConsistent: Gauss–Newton iterations per interval at most (≥ 1)
-  /// Sampled only: threads for the feed-forward's plant runs (≥ 1). The sample intervals are
+  /// Sampled only: threads for the feed-forward's plant runs (1..256). The sample intervals are
   /// independent (each starts on the reference and is weighed by the already solved S_{k+1}) and
   /// are gathered in order: the result is the same on any number of threads.
   int threads = 1;

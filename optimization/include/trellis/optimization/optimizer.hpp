@@ -74,8 +74,9 @@ struct OptimizerOptions {
   double maxCpuTime = 1e6;         ///< max_cpu_time, seconds
   int limitedMemorySize = 6;       ///< limited_memory_max_history
   MumpsOrdering ordering = MumpsOrdering::kAuto;  ///< mumps_pivot_order (MumpsOrdering)
-  /// Threads for the implicit form's Hessian blocks (Transcription::setThreads; ≥ 1): the same
-  /// iterates on any count. Ipopt and MUMPS (sequential) stay on the calling thread.
+  /// Threads for the Hessian's blocks and the knots' second derivatives (Transcription::setThreads;
+  /// 1..256): the same iterates on any count. Ipopt and MUMPS (sequential) stay on the calling
+  /// thread.
   int threads = 1;
   DerivativeMode derivatives = DerivativeMode::kExact;  ///< exact linearizations (or differences, for comparison)
   /// The Lagrangian Hessian; unset: the problem's (OptimalControlProblem::hessian, default exact).

@@ -94,9 +94,11 @@ class Transcription {
   ///@}
 
   const OptimalControlProblem& problem() const;  ///< the validated problem it transcribes
-  /// Threads for the implicit form's per-point second-order blocks of the Hessian (≥ 1; the
-  /// points are independent: the same values on any count). Throws std::invalid_argument.
+  /// Threads for the Hessian's per-point blocks, the knots' third-derivative terms and constraint
+  /// Hessians (1..kMaxThreads; independent pieces gathered in order: the same values on any
+  /// count). Throws std::invalid_argument.
   void setThreads(int threads);
+  static constexpr int kMaxThreads = 256;
 
   // ---- Sizes and layout ----------------------------------------------------------------------
   int numVariables() const;    ///< entries of z
