@@ -24,6 +24,7 @@
 //
 // usage: hand_hold_job [--out DIR] [--runs N] [--seed S] [--perturbation SIZE] [--no-plots]
 #include "hand_feedback.hpp"
+#include "job_options.hpp"
 #include "job_progress.hpp"
 #include "reference_motion.hpp"
 
@@ -102,14 +103,10 @@ Options parseOptions(int argc, char** argv) {
   Options o;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument("option " + a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--out") o.out = value();
-    else if (a == "--runs") o.runs = std::stoi(value());
-    else if (a == "--seed") o.seed = static_cast<unsigned>(std::stoul(value()));
-    else if (a == "--perturbation") o.perturbation = std::stod(value());
+    if (a == "--out") o.out = trellis::hand::optionValue(argc, argv, i);
+    else if (a == "--runs") o.runs = static_cast<int>(trellis::hand::integerOption(a, trellis::hand::optionValue(argc, argv, i), 1, 1000));
+    else if (a == "--seed") o.seed = static_cast<unsigned>(trellis::hand::integerOption(a, trellis::hand::optionValue(argc, argv, i), 0, 4294967295L));
+    else if (a == "--perturbation") o.perturbation = trellis::hand::positiveOption(a, trellis::hand::optionValue(argc, argv, i));
     else if (a == "--no-plots") o.plots = false;
     else if (a == "-h" || a == "--help") {
       std::printf("%s", kHelp);
@@ -118,8 +115,6 @@ Options parseOptions(int argc, char** argv) {
       throw std::invalid_argument("unknown option '" + a + "'");
     }
   }
-  if (o.runs < 1 || o.runs > 1000) throw std::invalid_argument("--runs " + std::to_string(o.runs) + " must be in 1..1000");
-  if (!(o.perturbation > 0.0)) throw std::invalid_argument("--perturbation must be > 0");
   return o;
 }
 

@@ -28,6 +28,7 @@
 //
 // usage: hand_main_job [--out DIR] [--runs N] [--seed S] [--perturbation SIZE] [--threads N] [--no-plots]
 #include "ball_feedback.hpp"
+#include "job_options.hpp"
 #include "job_progress.hpp"
 #include "ball_reference.hpp"
 #include "ball_turn.hpp"
@@ -108,47 +109,12 @@ Options parseOptions(int argc, char** argv) {
   Options o;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument("option " + a + " needs a value");
-      return argv[++i];
-    };
-    const auto integer = [&](const std::string& v) {
-      std::size_t used = 0;
-      long x = 0;
-      try {
-        x = std::stol(v, &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (used != v.size()) throw std::invalid_argument(a + " '" + v + "' is not an integer");
-      return x;
-    };
-    if (a == "--out") o.out = value();
-    else if (a == "--runs") {
-      const long r = integer(value());
-      if (r < 1 || r > 1000) throw std::invalid_argument("--runs " + std::to_string(r) + " must be in 1..1000");
-      o.runs = static_cast<int>(r);
-    } else if (a == "--seed") {
-      const long s = integer(value());
-      if (s < 0 || s > 4294967295L) throw std::invalid_argument("--seed " + std::to_string(s) + " must be in 0..4294967295");
-      o.seed = static_cast<unsigned>(s);
-    } else if (a == "--perturbation") {
-      const std::string v = value();
-      std::size_t used = 0;
-      double p = NAN;
-      try {
-        p = std::stod(v, &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (used != v.size() || !(p > 0.0) || !std::isfinite(p))
-        throw std::invalid_argument("--perturbation '" + v + "' must be a number > 0");
-      o.perturbation = p;
-    } else if (a == "--threads") {
-      const long t = integer(value());
-      if (t < 1 || t > 64) throw std::invalid_argument("--threads " + std::to_string(t) + " must be in 1..64");
-      o.threads = static_cast<int>(t);
-    } else if (a == "--no-plots") o.plots = false;
+    if (a == "--out") o.out = hand::optionValue(argc, argv, i);
+    else if (a == "--runs") o.runs = static_cast<int>(hand::integerOption(a, hand::optionValue(argc, argv, i), 1, 1000));
+    else if (a == "--seed") o.seed = static_cast<unsigned>(hand::integerOption(a, hand::optionValue(argc, argv, i), 0, 4294967295L));
+    else if (a == "--perturbation") o.perturbation = hand::positiveOption(a, hand::optionValue(argc, argv, i));
+    else if (a == "--threads") o.threads = static_cast<int>(hand::integerOption(a, hand::optionValue(argc, argv, i), 1, 64));
+    else if (a == "--no-plots") o.plots = false;
     else if (a == "-h" || a == "--help") {
       std::printf("%s", kHelp);
       std::exit(0);
