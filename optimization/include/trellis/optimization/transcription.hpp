@@ -98,7 +98,7 @@ class Transcription {
   /// Hessians (1..kMaxThreads; independent pieces gathered in order: the same values on any
   /// count). Throws std::invalid_argument.
   void setThreads(int threads);
-  static constexpr int kMaxThreads = 256;
+  static constexpr int kMaxThreads = 256;  ///< the largest thread count setThreads accepts
 
   // ---- Sizes and layout ----------------------------------------------------------------------
   int numVariables() const;    ///< entries of z
