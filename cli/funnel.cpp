@@ -83,7 +83,7 @@ options:
   --drift-tolerance D    constraint drift tolerated before projecting, and after it (a start whose
                          drift stays above D fails); default 10 (atol + rtol)
   --rtol X, --atol X     CVODES tolerances (defaults 1e-8, 1e-10)
-  --method M             adams (default) or bdf
+  --method M             adams (default), bdf or radau (as `trellis simulate --method`)
   --max-steps N          integrator steps per closed loop (default 500000)
   --samples-out FILE     every sample: index, t, level, success, code, final_level, dx0 (CSV)
   --plot FILE.svg        the funnel over time, projected on --plot-states (SVG)

@@ -95,7 +95,8 @@ options:
   --no-project           do not project onto the constraints (the drift is still reported)
   --output-step DT       output every DT (default: at the reference's knots)
   --rtol X, --atol X     CVODES tolerances (defaults 1e-8, 1e-10)
-  --method M             adams (default; non-stiff) or bdf (stiff: stiff springs, high gains)
+  --method M             adams (default; non-stiff), bdf (stiff: stiff springs, high gains) or
+                         radau (Radau IIA, stiff too; keeps its step across the samples of --rate)
   --max-steps N          limit on the integrator's internal steps (default 500000)
   -h, --help             show this help
 

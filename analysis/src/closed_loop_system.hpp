@@ -44,6 +44,8 @@ class ClosedLoopSystem final : public OdeSystem {
   int rhs(double t, ConstVectorMap y, VectorMap ydot) override;
   bool hasJacobian() const override { return jacobianKnown_; }
   int jacobian(double t, ConstVectorMap y, ConstVectorMap fy, MatrixMap J) override;
+  /// J = [[0, I], [A_q, A_v]] (the same in deviation coordinates): Radau's halved solves.
+  bool secondOrder() const override { return true; }
 
   /// The Newton solve (I − γJ) z = r of BDF by its structure (OdeLinearSolver::SystemSolve).
   /// J = [[0, I], [A_q, A_v]] (x = [q; q̇], the same in deviation coordinates), so with

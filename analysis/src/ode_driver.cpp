@@ -2,6 +2,7 @@
 #include "trellis/analysis/detail/ode_driver.hpp"
 
 #include "nvector_kernels.hpp"
+#include "radau_stepper.hpp"
 #include "sundials_raii.hpp"
 
 #include <cvodes/cvodes.h>
@@ -208,6 +209,10 @@ OdeDriver::OdeDriver(OdeSystem& system, Eigen::Index n, OdeOptions options)
   if (options_.quadratureSize < 0 || options_.rootCount < 0) {
     throw std::invalid_argument(what + ": negative quadrature or root count");
   }
+  if (options_.method == OdeMethod::Radau) {
+    radau_ = std::make_unique<RadauStepper>(system_, n, options_);
+    return;
+  }
 
   auto& cv = impl_->cv;
   cv.context.reset(createContext());
@@ -325,6 +330,14 @@ void OdeDriver::start(double t0, const Eigen::Ref<const Eigen::VectorXd>& y0,
     throw std::invalid_argument(what + ": start time or state is not finite (t = " +
                                 std::to_string(t0) + ")");
   }
+  if (radau_) {
+    if (started_) ++finished_.restarts;
+    radau_->start(t0, y0);
+    t_ = t0;
+    started_ = true;
+    system_.failure.clear();
+    return;
+  }
   auto& cv = impl_->cv;
   void* mem = cv.cvode.get();
   if (started_) {
@@ -351,7 +364,27 @@ void OdeDriver::start(double t0, const Eigen::Ref<const Eigen::VectorXd>& y0,
   system_.failure.clear();
 }
 
-ConstVectorMap OdeDriver::state() const { return view(impl_->cv.y.get()); }
+ConstVectorMap OdeDriver::state() const {
+  if (radau_) return ConstVectorMap(radau_->state().data(), n_);
+  return view(impl_->cv.y.get());
+}
+
+OdeStatus OdeDriver::radauFailed() {
+  OdeStatus st;
+  st.outcome = OdeOutcome::Failed;
+  st.flag = radau_->flag;
+  st.t = radau_->time();
+  std::ostringstream m;
+  m.precision(10);
+  char* name = CVodeGetReturnFlagName(st.flag);
+  m << options_.what << ": Radau step failed";
+  if (name) m << " (" << name << ")";
+  m << " at t = " << st.t << ", |y|inf = " << state().cwiseAbs().maxCoeff() << ": " << radau_->reason;
+  if (!system_.failure.empty()) m << ": " << system_.failure;
+  std::free(name);
+  st.message = m.str();
+  return st;
+}
 
 OdeStatus OdeDriver::failed(int flag, const char* call) {
   OdeStatus st;
@@ -375,6 +408,15 @@ OdeStatus OdeDriver::failed(int flag, const char* call) {
 
 OdeStatus OdeDriver::advanceTo(double tout) {
   if (!started_) throw std::logic_error(options_.what + ": advanceTo before start");
+  if (radau_) {
+    while (t_ < tout) {
+      if (!radau_->step(tout)) return radauFailed();
+      t_ = radau_->time();
+    }
+    OdeStatus st;
+    st.t = t_;
+    return st;
+  }
   void* mem = impl_->cv.cvode.get();
   OdeStatus st;
   if (tout == t_) {
@@ -400,6 +442,13 @@ OdeStatus OdeDriver::advanceTo(double tout) {
 
 OdeStatus OdeDriver::step(double tstop) {
   if (!started_) throw std::logic_error(options_.what + ": step before start");
+  if (radau_) {
+    if (!radau_->step(tstop)) return radauFailed();
+    t_ = radau_->time();
+    OdeStatus st;
+    st.t = t_;
+    return st;
+  }
   void* mem = impl_->cv.cvode.get();
   long used = 0;
   CVodeGetNumSteps(mem, &used);
@@ -418,6 +467,7 @@ OdeStatus OdeDriver::step(double tstop) {
 }
 
 bool OdeDriver::interpolate(double t, int k, Eigen::Ref<Eigen::VectorXd> out) {
+  if (radau_) return radau_->interpolate(t, k, out);
   auto& cv = impl_->cv;
   if (out.size() != n_) return false;
   if (CVodeGetDky(cv.cvode.get(), t, k, cv.dky.get()) < 0) return false;
@@ -426,22 +476,27 @@ bool OdeDriver::interpolate(double t, int k, Eigen::Ref<Eigen::VectorXd> out) {
 }
 
 void OdeDriver::quadrature(Eigen::Ref<Eigen::VectorXd> out) {
-  if (options_.quadratureSize == 0) throw std::logic_error(options_.what + ": no quadratures");
+  if (options_.quadratureSize == 0 || radau_) throw std::logic_error(options_.what + ": no quadratures");
   double tq = 0.0;
   check(CVodeGetQuad(impl_->cv.cvode.get(), &tq, impl_->quad.get()), "CVodeGetQuad", options_.what);
   out = view(impl_->quad.get());
 }
 
 void OdeDriver::rootDirections(int* directions) {
+  if (radau_) throw std::logic_error(options_.what + ": no root functions");
   check(CVodeGetRootInfo(impl_->cv.cvode.get(), directions), "CVodeGetRootInfo", options_.what);
 }
 
 void OdeDriver::setMaxStep(double h) {
+  if (radau_) {
+    radau_->setMaxStep(h);
+    return;
+  }
   check(CVodeSetMaxStep(impl_->cv.cvode.get(), h), "CVodeSetMaxStep", options_.what);
 }
 
 void OdeDriver::setQuadratureTolerances(double rtol, double atol) {
-  if (options_.quadratureSize == 0 || !options_.quadratureErrorControl) {
+  if (options_.quadratureSize == 0 || !options_.quadratureErrorControl || radau_) {
     throw std::logic_error(options_.what + ": quadrature tolerances without quadrature error control");
   }
   if (!(rtol > 0.0) || !(atol >= 0.0) || !std::isfinite(rtol) || !std::isfinite(atol)) {
@@ -454,6 +509,7 @@ void OdeDriver::setQuadratureTolerances(double rtol, double atol) {
 }
 
 int OdeDriver::lastOrder() const {
+  if (radau_) return radau_->stepsSinceStart() > 0 ? 3 : 0;  // the dense output's degree
   int q = 0;
   if (CVodeGetLastOrder(impl_->cv.cvode.get(), &q) < 0) return 0;
   return q;
@@ -482,6 +538,10 @@ void OdeDriver::collectCounters(OdeStats& into) const {
 
 OdeStats OdeDriver::stats() const {
   OdeStats s = finished_;
+  if (radau_) {
+    radau_->addStats(s);
+    return s;
+  }
   if (started_) collectCounters(s);
   int q = 0;
   double h = 0.0;

@@ -12,16 +12,27 @@
 #include "trellis/core/model.hpp"
 
 #include <memory>
+#include <stdexcept>
 #include <string>
 
 namespace trellis::detail {
 
 namespace {
 
-/// BDF's Newton solves: by the system's structure where its Jacobian is known
+/// Radau (radau_stepper.hpp): its own halved solves, the exact Jacobian required. BDF's Newton solves: by the system's structure where its Jacobian is known
 /// (ClosedLoopSystem::preconditionerSolve: one n×n LU), else dense with CVODES's difference
 /// quotient. Adams: fixed-point iterations.
 OdeOptions integratorOptions(const SimulationOptions& options, const ClosedLoopSystem& system) {
+  if (options.method == IntegrationMethod::kRadau) {
+    if (!system.hasJacobian()) {
+      throw std::invalid_argument(
+          "SimulationOptions.method = radau needs the exact Jacobian: a continuous Policy has no known "
+          "∂π/∂x and exactJacobian = false asks for a difference quotient (use bdf or adams there)");
+    }
+    OdeOptions ode = makeOdeOptions("closed-loop simulation", OdeMethod::Radau, OdeLinearSolver::Dense,
+                                    options.rtol, options.atol, options.maxSteps, options.maxStep);
+    return ode;
+  }
   const bool bdf = options.method == IntegrationMethod::kBDF;
   const OdeLinearSolver solver = !bdf                         ? OdeLinearSolver::FixedPoint
                                  : system.hasPreconditioner() ? OdeLinearSolver::SystemSolve

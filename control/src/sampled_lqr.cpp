@@ -4,6 +4,7 @@
 #include "trellis/control/sampled_lqr.hpp"
 
 #include "trellis/analysis/detail/ode_driver.hpp"
+#include "trellis/analysis/detail/radau_tableau.hpp"
 #include "trellis/core/detail/report_json.hpp"
 
 #include <Eigen/Cholesky>
@@ -651,34 +652,18 @@ class RadauIntegrator {
         rhsF_(3 * s.nx, s.nx + s.nu), luErrF_(s.nx) {
     control.maxSteps = maxSteps;
     control.method = "Radau";
-    const double r6 = std::sqrt(6.0);
-    const double a[3][3] = {{(88.0 - 7.0 * r6) / 360.0, (296.0 - 169.0 * r6) / 1800.0, (-2.0 + 3.0 * r6) / 225.0},
-                            {(296.0 + 169.0 * r6) / 1800.0, (88.0 + 7.0 * r6) / 360.0, (-2.0 - 3.0 * r6) / 225.0},
-                            {(16.0 - r6) / 36.0, (16.0 + r6) / 36.0, 1.0 / 9.0}};
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) a_[i][j] = a[i][j];
-    nodes_[0] = (4.0 - r6) / 10.0;
-    nodes_[1] = (4.0 + r6) / 10.0;
-    nodes_[2] = 1.0;
-    gamma0_ = (6.0 + std::cbrt(81.0) - std::cbrt(9.0)) / 30.0;
-    // a = T diag(γ0, μ, μ̄) T⁻¹: the twin's stage system decouples on it (twinStep).
-    Eigen::Matrix3d am;
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) am(i, j) = a_[i][j];
-    const Eigen::EigenSolver<Eigen::Matrix3d> eig(am);
-    int real = 0;
-    for (int k = 1; k < 3; ++k)
-      if (std::abs(eig.eigenvalues()(k).imag()) < std::abs(eig.eigenvalues()(real).imag())) real = k;
-    const int pos = eig.eigenvalues()((real + 1) % 3).imag() > 0.0 ? (real + 1) % 3 : (real + 2) % 3;
-    mu_ = eig.eigenvalues()(pos);
-    T_.col(0) = eig.eigenvectors().col(real).real().cast<std::complex<double>>();
-    T_.col(1) = eig.eigenvectors().col(pos);
-    T_.col(2) = eig.eigenvectors().col(pos).conjugate();
-    Tinv_ = T_.inverse();
+    // The method's constants, written once (radau_tableau.hpp).
+    const detail::RadauTableau& tab = detail::RadauTableau::get();
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) a_[i][j] = tab.a[i][j];
+      nodes_[i] = tab.c[i];
+      e_[i] = tab.e[i];
+    }
+    gamma0_ = tab.gamma0;
+    mu_ = tab.mu;
+    T_ = tab.T;
+    Tinv_ = tab.Tinv;
     stagesF_.resize(3 * nx_, c_);
-    e_[0] = gamma0_ * (-13.0 - 7.0 * r6) / 3.0;
-    e_[1] = gamma0_ * (-13.0 + 7.0 * r6) / 3.0;
-    e_[2] = gamma0_ * (-1.0 / 3.0);
     for (auto& x : A_) x.resize(nx_, nx_);
     for (auto& x : B_) x.resize(nx_, nu_);
     for (auto& x : Q_) x.resize(nx_, nx_);

@@ -55,6 +55,7 @@ void BallFeedbackOptions::validate() const {
   if (!(rtol > 0.0) || !std::isfinite(rtol)) bad("rtol", rtol, "> 0 and finite");
   if (!(atol > 0.0) || !std::isfinite(atol)) bad("atol", atol, "> 0 and finite");
   if (!(driftTolerance > 0.0) || !std::isfinite(driftTolerance)) bad("driftTolerance", driftTolerance, "> 0 and finite");
+  if (std::string(toString(method)) == "unknown") bad("method", static_cast<double>(method), "adams, bdf or radau");
 }
 
 std::string ContactCheck::operator()(double t, const Eigen::VectorXd& lambda) {
@@ -251,6 +252,7 @@ BallFeedbackResult runBallFeedback(const Model& model, const BallLimits& limits,
   base.rtol = options.rtol;
   base.atol = options.atol;
   base.driftTolerance = options.driftTolerance;
+  base.method = options.method;
   result.runs.resize(starts.size());
   const auto runOne = [&](std::size_t r) {
     const auto start = std::chrono::steady_clock::now();

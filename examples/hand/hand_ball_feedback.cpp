@@ -3,7 +3,7 @@
 //
 //   hand_ball_feedback [--reference CSV] [--scene NAME] [--runs N] [--seed S] [--perturbation Z]
 //                      [--rate HZ] [--horizon T] [--threads N] [--max-ratio R] [--gains CSV]
-//                      [--rtol R] [--atol A] [--drift D] [--transport-substeps S]
+//                      [--rtol R] [--atol A] [--drift D] [--method bdf|radau] [--transport-substeps S]
 //                      [--quasi-static DEG [--knots N]] [--pulse NAME:A] [--write-reference CSV]
 //                      [--feedforward reference|average|consistent]
 //                      [--optimize DEG [--optimize-knots N]] [--redistribute N [--tension-floor F]]
@@ -18,7 +18,7 @@
 // s.u + A sin²(πt/T) on tendon NAME (pulseReference below: moves, and satisfies the dynamics). NAME: a free-ball
 // scene of examples/scenes (default hand_ball) with examples/hand/NAME_limits.json. --gains writes
 // the gain schedule (with its feed-forward); --rtol, --atol, --drift: the closed loops' integrator
-// tolerances and projection threshold, --transport-substeps the tangent basis's steps per knot
+// tolerances and projection threshold, --method their integrator, --transport-substeps the tangent basis's steps per knot
 // interval (BallFeedbackOptions). Prints the gains' solve and time, one line per run,
 // the aggregate; exit 0 only when the gains are solved and every closed loop kept every contact
 // at every integrator step and converged (final / initial tracking error ≤ R, default 0.5);
@@ -142,10 +142,11 @@ int main(int argc, char** argv) {
       else if (a == "--rtol") options.rtol = std::stod(value());
       else if (a == "--atol") options.atol = std::stod(value());
       else if (a == "--drift") options.driftTolerance = std::stod(value());
+      else if (a == "--method") options.method = parseIntegrationMethod(value());
       else if (a == "--help") {
         std::cout << "usage: hand_ball_feedback [--reference CSV] [--scene NAME] [--runs N] [--seed S] "
                      "[--perturbation Z] [--rate HZ] [--horizon T] [--threads N] [--max-ratio R] [--gains CSV] "
-                     "[--rtol R] [--atol A] [--drift D] [--transport-substeps S] [--quasi-static DEG [--knots N]] "
+                     "[--rtol R] [--atol A] [--drift D] [--method bdf|radau] [--transport-substeps S] [--quasi-static DEG [--knots N]] "
                      "[--pulse NAME:A] [--write-reference CSV] [--feedforward reference|average|consistent] "
                      "[--optimize DEG [--optimize-knots N]] [--redistribute N [--tension-floor F]]\n";
         return 0;

@@ -49,7 +49,8 @@ void bindSimulation(py::module_& m) {
       .value("PROJECT", ConstraintHandling::kProject);
   py::enum_<IntegrationMethod>(m, "IntegrationMethod")
       .value("ADAMS", IntegrationMethod::kAdams)
-      .value("BDF", IntegrationMethod::kBDF);
+      .value("BDF", IntegrationMethod::kBDF)
+      .value("RADAU", IntegrationMethod::kRadau);
   bindStatus<SimulationCode>(m, "SimulationStatus",
       "Status of a simulation (code: ok, integrator_failure, dynamics_failure, non_finite, "
       "policy_failure, constraint_drift, check_failed); t: the time of the failure.");

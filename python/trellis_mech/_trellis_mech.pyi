@@ -432,9 +432,12 @@ class IntegrationMethod:
       ADAMS
 
       BDF
+
+      RADAU
     """
     ADAMS: ClassVar[IntegrationMethod]
     BDF: ClassVar[IntegrationMethod]
+    RADAU: ClassVar[IntegrationMethod]
     @property
     def value(self) -> int: ...
     @property

@@ -52,7 +52,12 @@ trellis_cli_files_test(gains.paper_pendulum_manifold
           "-DNUMBERS=initial :GREATER:0.04&&final :LESS:0.005&&max at later output times :LESS:1e-6"
   ARGS3 simulate "${_paper}" --trajectory "${_paper_swing}"
         --gains "${_data}/paper_pendulum_zero_gains.csv" --perturb theta1=0.05 --out @WORK@/open.csv
-  CHECKS3 "-DNUMBERS=final :GREATER:0.1")
+  CHECKS3 "-DNUMBERS=final :GREATER:0.1"
+  # The same closed loop by Radau IIA (--method radau): the same bounds.
+  ARGS4 simulate "${_paper}" --trajectory "${_paper_swing}" --gains @WORK@/gains.csv
+        --perturb theta1=0.05 --method radau --out @WORK@/radau.csv
+  CHECKS4 -DFILE=@WORK@/radau.csv -DFILE_ROWS=41
+          "-DNUMBERS=initial :GREATER:0.04&&final :LESS:0.005&&max at later output times :LESS:1e-6")
 
 # ---- sampled (zero-order-hold) gains --------------------------------------------------------------
 # --rate 50 on the 3 s upright reference: gains at the 150 sample times 0, 0.02, ..., 2.98 and at T

@@ -24,7 +24,7 @@ TEST_CASE("names: Riccati and integration methods round-trip; bad names list the
     CHECK(trellis::parseIntegrationMethod(trellis::toString(m)) == m);
   }
   CHECK_THROWS_WITH(trellis::parseIntegrationMethod("BDF"),
-                    Catch::Contains("'BDF' is not one of adams, bdf"));
+                    Catch::Contains("'BDF' is not one of adams, bdf, radau"));
   // LqrCode names are distinct and non-empty (they appear in messages and JSON).
   const std::string names[] = {trellis::toString(trellis::LqrCode::kOk),
                                trellis::toString(trellis::LqrCode::kNotStabilizable),

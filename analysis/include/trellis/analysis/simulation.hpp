@@ -1,8 +1,8 @@
 // trellis/analysis/simulation.hpp — open- and closed-loop simulation of the NONLINEAR plant.
 //
 // The state x = [q; q̇] (2n) evolves by ẋ = f(t, x) = [q̇; q̈(q, q̇, u)], q̈ from computeDynamics
-// (the KKT solve that enforces A q̈ + Ȧ q̇ = 0), integrated with SUNDIALS CVODES (the control
-// module's one driver). The input comes from a policy u = π(t, x) (m), clipped to the box
+// (the KKT solve that enforces A q̈ + Ȧ q̇ = 0), integrated through the one ODE driver: SUNDIALS
+// CVODES (Adams, BDF) or trellis's three-stage Radau IIA (IntegrationMethod::kRadau). The input comes from a policy u = π(t, x) (m), clipped to the box
 // [inputLower, inputUpper]:
 //  - continuous feedback (sampleRate = 0): u(t) = sat(π(t, x(t))) inside every right-hand side;
 //  - sampled feedback (sampleRate = f > 0): u_k = sat(π(s_k, x(s_k))) at s_k = t0 + k/f, held
@@ -15,7 +15,7 @@
 // the open loop π(t, x) = u_ref(t). x_ref is the reference's cubic Hermite spline, u_ref and K are
 // interpolated by Trajectory::evaluate and GainSchedule::evaluate (continuous in t).
 //
-// Jacobian (BDF). The Newton matrix needs ∂f/∂x. For the closed loop it is exact:
+// Jacobian (BDF, Radau). The Newton matrix needs ∂f/∂x. For the closed loop it is exact:
 //   ∂f/∂x = A(x, u) − B(x, u) S K(t),   S = diag(s_i), s_i = 0 where u_i is clipped, else 1,
 // with A, B from computeLinearization at the current state and input (a clipped input does not
 // move with x). Sampled and open loops have ∂u/∂x = 0, so ∂f/∂x = A. A generic Policy has no
@@ -32,8 +32,8 @@
 // Jacobian (exactJacobian = false) x itself is integrated: CVODES's increments, scaled to |y| and
 // atol, would drown in the rounding of x_ref + y. A Policy (simulate) always integrates x.
 //
-// Restarts. The integration restarts (order 1, a fresh step) only where the right-hand side
-// jumps: at the sample times of sampled feedback, at options.breakpoints, and after a projection
+// Restarts. The integration restarts (CVODES: order 1, a fresh step; Radau keeps its step size
+// and Jacobian) only where the right-hand side jumps: at the sample times of sampled feedback, at options.breakpoints, and after a projection
 // changed the state. u_ref(t) and K(t) are continuous, so the reference knots and the gain times
 // are NOT restart points: there f is continuous with a kink in t, which the error control steps
 // over like the kinks of saturation (switching of sat(·) is left to the error control too: on
@@ -91,21 +91,28 @@ enum class ConstraintHandling {
   kProject,  ///< project x0 and the state at every segment end onto h = 0, A q̇ = 0, then reinit
 };
 
-/// Linear multistep family used by CVODES.
+/// The integrator: CVODES's linear multistep families, or trellis's own implicit Runge–Kutta.
 enum class IntegrationMethod {
   kAdams,  ///< Adams–Moulton with fixed-point iterations: no Jacobian, for non-stiff systems
   kBDF,    ///< BDF with Newton iterations and a dense Jacobian (exact where known, see the file
            ///< comment): stiff systems (stiff springs, very high gains, the hand)
+  /// Three-stage Radau IIA (order 5, L-stable; RADAU5's step control, rtol met through its
+  /// transformed tolerance 0.1·rtol^{2/3} on the embedded estimate) with the exact Jacobian: a
+  /// one-step method, so a restart (every sample of a held input) keeps its step size and Jacobian
+  /// where BDF drops to order 1 and a small step. For sampled feedback and stiff loops; needs the
+  /// exact Jacobian (not a continuous Policy, not exactJacobian = false: refused).
+  kRadau,
 };
 
-/// Names: adams, bdf (toString).
+/// Names: adams, bdf, radau (toString).
 inline EnumNameTable<IntegrationMethod> enumNames(IntegrationMethod) {
   static constexpr EnumName<IntegrationMethod> table[] = {{IntegrationMethod::kAdams, "adams"},
-                                                          {IntegrationMethod::kBDF, "bdf"}};
+                                                          {IntegrationMethod::kBDF, "bdf"},
+                                                          {IntegrationMethod::kRadau, "radau"}};
   return table;
 }
 /// parseEnum<IntegrationMethod>(text, "integration method"): throws std::invalid_argument
-/// "integration method 'TEXT' is not one of adams, bdf".
+/// "integration method 'TEXT' is not one of adams, bdf, radau".
 IntegrationMethod parseIntegrationMethod(const std::string& text);
 
 /// The step check of SimulationOptions (file comment): t, x (2n), the applied u (m) and the
@@ -133,7 +140,7 @@ struct SimulationOptions {
   /// > 0: t0, t0 + h, t0 + 2h, …, and t1.
   double outputStep = 0.0;
   ConstraintHandling constraints = ConstraintHandling::kProject;  ///< project onto the constraints, or only report the drift
-  IntegrationMethod method = IntegrationMethod::kAdams;  ///< Adams (non-stiff) or BDF (stiff closed loops, e.g. high gains)
+  IntegrationMethod method = IntegrationMethod::kAdams;  ///< Adams (non-stiff), BDF (stiff closed loops, e.g. high gains) or Radau (stiff and sampled)
   double maxStep = 0.0;  ///< largest internal step; 0 = unlimited (≥ 0)
   /// Extra times where the policy jumps (integration restarts there). Times outside (t0, t1) are
   /// ignored. (Kinks need none: the reference knots and gain times are not restart points.)
@@ -144,7 +151,7 @@ struct SimulationOptions {
   double driftTolerance = 0.0;
   /// BDF only: the exact closed-loop Jacobian A − B S K (true) or CVODES's difference quotient
   /// (false; the fallback, 2n extra right-hand sides per Jacobian). A generic Policy always uses
-  /// the difference quotient unless sampled (then ∂f/∂x = A).
+  /// the difference quotient unless sampled (then ∂f/∂x = A). Radau needs it true.
   bool exactJacobian = true;
   /// Empty: none; else checked at t0, after every accepted integrator step and at every restart
   /// (file comment, "Step check").

@@ -48,6 +48,10 @@ class OdeSystem {
     return -1;
   }
 
+  /// J = [[0, I], [A_q, A_v]] in halves of y (y = [q; q̇]): OdeMethod::Radau then solves its
+  /// stage systems on half the unknowns (radau_stepper.hpp).
+  virtual bool secondOrder() const { return false; }
+
   /// Krylov (OdeLinearSolver::Gmres): Jv = J(t, y) v. jacTimesSetup is called once per Newton
   /// matrix update, before the products at that (t, y) (evaluate what every product reuses).
   virtual bool hasJacTimes() const { return false; }
@@ -79,7 +83,11 @@ class OdeSystem {
   std::string failure;
 };
 
-enum class OdeMethod { Bdf, Adams };
+/// Bdf, Adams: CVODES. Radau: trellis's own three-stage Radau IIA (radau_stepper.hpp) — a
+/// one-step method whose start() keeps its step size and Jacobian, for right-hand sides that jump
+/// often (held inputs); needs the exact Jacobian, has no quadratures or root functions, and
+/// ignores linearSolver and maxOrder.
+enum class OdeMethod { Bdf, Adams, Radau };
 
 enum class OdeLinearSolver {
   Dense,       ///< Newton with a dense direct solver: the exact Jacobian when the system has one
@@ -182,6 +190,8 @@ struct OdeStatus {
   bool tooMuchWork() const;
 };
 
+class RadauStepper;
+
 class OdeDriver {
  public:
   /// Creates the SUNDIALS context, vectors, solvers and CVODES memory for n states. The system
@@ -235,6 +245,8 @@ class OdeDriver {
   Eigen::Index n_;
   OdeOptions options_;
   std::unique_ptr<Impl> impl_;
+  std::unique_ptr<RadauStepper> radau_;  ///< OdeMethod::Radau (then impl_ holds no CVODES memory)
+  OdeStatus radauFailed();
   double t_ = 0.0;
   bool started_ = false;
   long stepsAtStart_ = 0;
