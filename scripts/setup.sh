@@ -13,10 +13,14 @@ packages=(
   libtinyxml2-dev        # URDF import (XML with line numbers)
   libsundials-dev        # CVODES: Riccati / trajectory integration (control, planned)
   # LAPACK: the Schur forms and inverses of the algebraic Riccati solvers (control/src/lapack.cpp),
-  # linked as the generic liblapack.so / libblas.so (Debian's alternatives). The reference
-  # implementation is what the suite is checked with; libopenblas-dev would take priority and make
-  # a CARE at n = 400 3x faster, but one CARE gain misses its 1e-9 test by 4x (docs/performance.md)
+  # linked as the generic liblapack.so / libblas.so (Debian's alternatives)
   liblapack-dev libblas-dev
+  # OpenBLAS, single-threaded: through Debian's alternatives it becomes libblas.so.3 and
+  # liblapack.so.3 for every program (MUMPS inside Ipopt included; `update-alternatives --config
+  # libblas.so.3-x86_64-linux-gnu` switches back). The main job's Ipopt/MUMPS 8.7 → 4.6 s, the
+  # whole job 26.9 → 22.1 s, a CARE at n = 400 ~3x faster; the suite passes on either BLAS
+  # (docs/performance.md). Serial: trellis runs its own threads beside it.
+  libopenblas0-serial
   openmpi-bin libopenmpi-dev  # trellis-mpi: `mpirun trellis-mpi funnel` (docs/funnels.md)
   coinor-libipopt-dev    # Ipopt: trajectory optimization (optimization, planned)
   catch2                 # Catch2 2.13: the test suite

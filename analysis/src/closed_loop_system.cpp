@@ -197,6 +197,7 @@ bool ClosedLoopSystem::control(double t, const Eigen::VectorXd& x, Eigen::Vector
 }
 
 int ClosedLoopSystem::rhs(double t, ConstVectorMap y, VectorMap ydot) {
+  lastValid_ = false;
   if (aborted_) return -1;
   if (!stateFrom(t, y)) return failureReturn();
   if (!x_.allFinite()) {
@@ -221,10 +222,13 @@ int ClosedLoopSystem::rhs(double t, ConstVectorMap y, VectorMap ydot) {
   ydot.head(n_) = dq_;
   ydot.tail(n_) = data_.qdd;
   if (deviation_) ydot -= xrdot_;
+  lastValid_ = true;
+  lastT_ = t;
   return 0;
 }
 
 int ClosedLoopSystem::jacobian(double t, ConstVectorMap y, ConstVectorMap /*fy*/, MatrixMap J) {
+  lastValid_ = false;  // data_ and x_, u_ now hold the linearization's point
   if (aborted_) return -1;
   if (!stateFrom(t, y)) return failureReturn();
   const bool feedback = !sampled_ && law_.kind == InputLaw::Kind::kFeedback;

@@ -58,6 +58,12 @@ class ClosedLoopSystem final : public OdeSystem {
                           double gamma) override;
   int preconditionerSolve(double t, ConstVectorMap y, ConstVectorMap fy, ConstVectorMap r, VectorMap z,
                           double gamma) override;
+  /// The constraint forces of the last right-hand side when it was evaluated at exactly (t, x)
+  /// with the input u, else nullptr. Radau evaluates f at every accepted step's end, where the
+  /// step check then needs λ: the same computeDynamics at the same point, so it is reused.
+  const Eigen::VectorXd* lambdaAt(double t, const Eigen::VectorXd& x, const Eigen::VectorXd& u) const {
+    return lastValid_ && t == lastT_ && x == x_ && u == u_ ? &data_.lambda : nullptr;
+  }
   /// Jacobians formed for the structured solve (CVODES counts only those of its dense solver).
   long structuredJacobians() const { return structuredJacobians_; }
 
@@ -107,6 +113,9 @@ class ClosedLoopSystem final : public OdeSystem {
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
   Eigen::VectorXd rhsB_, solB_;
   double gammaLu_ = 0.0;
+  // The last successful right-hand side's time (lambdaAt); invalid once data_ serves another call.
+  double lastT_ = 0.0;
+  bool lastValid_ = false;
   bool haveJac_ = false;
   long structuredJacobians_ = 0;
   void factorNewton(double gamma);

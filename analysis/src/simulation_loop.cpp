@@ -64,17 +64,25 @@ class StepChecker {
       what = system.failMessage;
       return false;
     }
-    q_ = x.head(n_);
-    dq_ = x.tail(n_);
-    const DynamicsStatus st = computeDynamics(model_, data_, q_, dq_, u_);
-    if (!st.ok()) {
-      code = st.code == DynamicsStatus::Code::kNonFinite ? SimulationCode::kNonFinite
-                                                          : SimulationCode::kDynamicsFailure;
-      what = "computeDynamics failed at the step check: " + st.message;
-      return false;
+    // λ of the right-hand side's own evaluation at this very point when there is one (Radau's
+    // step end), else computeDynamics here: the same function of (x, u) either way.
+    const Eigen::VectorXd* lambda = system.lambdaAt(t, x, u_);
+    if (lambda) {
+      ++reused;
+    } else {
+      q_ = x.head(n_);
+      dq_ = x.tail(n_);
+      const DynamicsStatus st = computeDynamics(model_, data_, q_, dq_, u_);
+      if (!st.ok()) {
+        code = st.code == DynamicsStatus::Code::kNonFinite ? SimulationCode::kNonFinite
+                                                            : SimulationCode::kDynamicsFailure;
+        what = "computeDynamics failed at the step check: " + st.message;
+        return false;
+      }
+      lambda = &data_.lambda;
     }
     try {
-      what = check_(t, x, u_, model_.nc() > 0 ? data_.lambda : noLambda_);
+      what = check_(t, x, u_, model_.nc() > 0 ? *lambda : noLambda_);
     } catch (const std::exception& e) {
       what = std::string("the step check threw: ") + e.what();
     } catch (...) {
@@ -86,7 +94,8 @@ class StepChecker {
     return false;
   }
 
-  long count = 0;  ///< points checked
+  long count = 0;   ///< points checked
+  long reused = 0;  ///< of which with the right-hand side's own λ (no evaluation of their own)
 
  private:
   const Model& model_;

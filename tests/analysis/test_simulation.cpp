@@ -542,6 +542,30 @@ TEST_CASE("simulation: the step check sees every integrator step and stops at a 
     CHECK(r.trajectory.states() == free.trajectory.states());
     CHECK_THAT(r.json(), Catch::Contains("\"checks\":" + std::to_string(r.checks)));
   }
+  SECTION("Radau: a step end's λ is the right-hand side's own evaluation there, equal to a fresh one") {
+    SimulationOptions opt = plain;
+    opt.method = trellis::IntegrationMethod::kRadau;
+    opt.sampleRate = 50.0;  // a held (zero) input: the exact Jacobian is known
+    const SimulationResult unchecked = trellis::simulate(model, x0, 0.0, T, zeroInput, opt);
+    REQUIRE(unchecked.ok());
+    long calls = 0;
+    double worstLambdaError = 0.0;
+    trellis::Data own(model);
+    opt.stepCheck = [&](double, const VectorXd& x, const VectorXd& u, const VectorXd& lambda) {
+      ++calls;
+      trellis::computeDynamics(model, own, x.head(n), x.tail(n), u);
+      worstLambdaError = std::max(worstLambdaError, (lambda - own.lambda).cwiseAbs().maxCoeff());
+      return std::string();
+    };
+    const SimulationResult r = trellis::simulate(model, x0, 0.0, T, zeroInput, opt);
+    REQUIRE(r.ok());
+    CHECK(r.checks == calls);
+    CHECK(r.checks >= r.steps + 1);
+    CHECK(worstLambdaError == 0.0);  // bit for bit: the same function of (x, u)
+    CHECK(r.trajectory.states() == unchecked.trajectory.states());
+    // Against BDF's run of the same swing: the same motion to the tolerances.
+    CHECK((r.trajectory.states() - free.trajectory.states()).cwiseAbs().maxCoeff() < 1e-5);
+  }
   SECTION("a bound that λ crosses mid-swing: check_failed at the first step end beyond it") {
     const double bound = 0.5 * (lambdaAt.maxCoeff() + lambdaAt.minCoeff());
     Eigen::Index first = 0;

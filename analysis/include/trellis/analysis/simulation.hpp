@@ -58,7 +58,8 @@
 // restart point after a new sample or a projection (where u or x jumps). At each such point the
 // simulator evaluates computeDynamics at (x, u) — u the input applied there (the held sample, or
 // sat(π(t, x))) — and passes t, x, u and the constraint forces λ to the check: one dynamics
-// evaluation per step beyond the integrator's own (none without a check). A violation ends the run
+// evaluation per step beyond the integrator's own (none without a check; none with Radau, which
+// evaluates every step end itself: its λ there is reused, the same function of the same (x, u)). A violation ends the run
 // with kCheckFailed, the check's text, the time and the state; the outputs reached are kept.
 // Between step ends the state is the integrator's interpolant and is not checked. Times may repeat
 // or go back: a restart at a sample time checks te again with the new input, and a projection at
