@@ -62,6 +62,11 @@ RadauStepper::RadauStepper(OdeSystem& system, Eigen::Index n, const OdeOptions& 
   if (options.quadratureSize > 0 || options.rootCount > 0) {
     throw std::invalid_argument(what + ": the Radau method has no quadratures or root functions");
   }
+  // Its error norm weighs each component by atol + rtol|y|: a zero weight at y_i = 0 is a division
+  // by zero, not a purely relative test.
+  if (options.atolVector.size() == n ? !(options.atolVector.array() > 0.0).all() : !(options.atol > 0.0)) {
+    throw std::invalid_argument(what + ": the Radau method needs atol > 0 (every component)");
+  }
   // RADAU5's transformation (file comment).
   rtol_ = 0.1 * std::pow(options.rtol, 2.0 / 3.0);
   const double ratio = rtol_ / options.rtol;

@@ -60,8 +60,8 @@ namespace trellis::detail {
 
 class RadauStepper {
  public:
-  /// Throws std::invalid_argument when the system has no exact Jacobian or options ask for
-  /// quadratures or root functions.
+  /// Throws std::invalid_argument when the system has no exact Jacobian, options ask for
+  /// quadratures or root functions, or an absolute tolerance is not positive.
   RadauStepper(OdeSystem& system, Eigen::Index n, const OdeOptions& options);
 
   /// (Re)starts at (t0, y0): keeps the step size, the Jacobian and its factorizations (the next

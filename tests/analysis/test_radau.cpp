@@ -339,6 +339,9 @@ TEST_CASE("radau: failures carry CVODES's flags, the time and the reason; bad se
     o.quadratureSize = 0;
     o.rootCount = 1;
     CHECK_THROWS_AS(OdeDriver(sys, 5, o), std::invalid_argument);
+    o.rootCount = 0;
+    o.atol = 0.0;
+    CHECK_THROWS_WITH(OdeDriver(sys, 5, o), Catch::Contains("needs atol > 0"));
   }
 }
 
