@@ -116,75 +116,106 @@ def main():
             ax.plot(c["t"], transform(c[key]), color="0.6", lw=0.7)
         ax.plot(t, transform(ref[key]), "k--", lw=1.2)
 
-    # The ball's orientation.
-    # Fixed margins: matplotlib's constrained layout measured 2 of the script's 3 s (20 closed loops).
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.4))
-    fig.subplots_adjust(left=0.06, right=0.98, bottom=0.15, top=0.82, wspace=0.3)
-    for ax, key in zip(axes, ("ball_yaw", "ball_pitch", "ball_roll")):
-        if key not in ref:
-            fail(f"{a.reference}: no column '{key}'")
-        draw(ax, key, np.degrees)
-        ax.set_title(key)
-        ax.set_xlabel("t [s]")
-        ax.set_ylabel("angle [deg]")
-    fig.suptitle("ball orientation (Z-Y-X angles): reference dashed, closed loops grey")
-    save(fig, a.out, "ball_orientation.png")
+    def orientation():
+        # The ball's orientation.
+        # Fixed margins: matplotlib's constrained layout measured 2 of the script's 3 s (20 closed loops).
+        fig, axes = plt.subplots(1, 3, figsize=(12, 3.4))
+        fig.subplots_adjust(left=0.06, right=0.98, bottom=0.15, top=0.82, wspace=0.3)
+        for ax, key in zip(axes, ("ball_yaw", "ball_pitch", "ball_roll")):
+            if key not in ref:
+                fail(f"{a.reference}: no column '{key}'")
+            draw(ax, key, np.degrees)
+            ax.set_title(key)
+            ax.set_xlabel("t [s]")
+            ax.set_ylabel("angle [deg]")
+        fig.suptitle("ball orientation (Z-Y-X angles): reference dashed, closed loops grey")
+        save(fig, a.out, "ball_orientation.png")
 
-    # Tensions against their bounds.
-    cols = 6
-    rows = math.ceil(len(tendons) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(3 * cols, 2.2 * rows), squeeze=False)
-    fig.subplots_adjust(left=0.05, right=0.99, bottom=0.04, top=0.93, wspace=0.35, hspace=0.45)
-    for ax, name in zip(axes.flat, tendons):
-        draw(ax, name)
-        ax.axhline(0.0, color="tab:red", lw=0.8)
-        ax.axhline(tension_max[name], color="tab:red", lw=0.8, ls=":")
-        top = max([float(np.max(ref[name]))] + [float(np.max(c[name])) for c in closed])
-        ax.set_ylim(-0.05 * tension_max[name], max(1.15 * top, 0.1 * tension_max[name]))
-        ax.set_title(f"{name} (max {tension_max[name]:g} N)", fontsize=9)
-        ax.set_ylabel("tension [N]", fontsize=8)
-    for ax in list(axes.flat)[len(tendons):]:
-        ax.axis("off")
-    fig.suptitle("tendon tensions: reference dashed, closed loops grey; 0 red, u_max red dotted (off scale when far)")
-    save(fig, a.out, "tensions.png")
+    def tensions():
+        # Tensions against their bounds.
+        cols = 6
+        rows = math.ceil(len(tendons) / cols)
+        fig, axes = plt.subplots(rows, cols, figsize=(3 * cols, 2.2 * rows), squeeze=False)
+        fig.subplots_adjust(left=0.05, right=0.99, bottom=0.04, top=0.93, wspace=0.35, hspace=0.45)
+        for ax, name in zip(axes.flat, tendons):
+            draw(ax, name)
+            ax.axhline(0.0, color="tab:red", lw=0.8)
+            ax.axhline(tension_max[name], color="tab:red", lw=0.8, ls=":")
+            top = max([float(np.max(ref[name]))] + [float(np.max(c[name])) for c in closed])
+            ax.set_ylim(-0.05 * tension_max[name], max(1.15 * top, 0.1 * tension_max[name]))
+            ax.set_title(f"{name} (max {tension_max[name]:g} N)", fontsize=9)
+            ax.set_ylabel("tension [N]", fontsize=8)
+        for ax in list(axes.flat)[len(tendons):]:
+            ax.axis("off")
+        fig.suptitle("tendon tensions: reference dashed, closed loops grey; 0 red, u_max red dotted (off scale when far)")
+        save(fig, a.out, "tensions.png")
 
-    # Contacts: normal force and friction ratio.
-    def ratio(lam):
-        n, t1, t2 = lam[f"lambda_{d}_n"], lam[f"lambda_{d}_t1"], lam[f"lambda_{d}_t2"]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(n > 0, np.hypot(t1, t2) / (mu * n), np.inf)
+    def contacts():
+        # Contacts: normal force and friction ratio.
+        def ratio(lam):
+            n, t1, t2 = lam[f"lambda_{d}_n"], lam[f"lambda_{d}_t1"], lam[f"lambda_{d}_t2"]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                return np.where(n > 0, np.hypot(t1, t2) / (mu * n), np.inf)
 
-    fig, axes = plt.subplots(2, len(digits), figsize=(3.2 * len(digits), 5.6), squeeze=False)
-    fig.subplots_adjust(left=0.06, right=0.98, bottom=0.09, top=0.88, wspace=0.35, hspace=0.3)
-    for j, d in enumerate(digits):
-        ax = axes[0][j]
-        draw(ax, f"lambda_{d}_n")
-        ax.axhline(normal_min, color="tab:red", lw=0.8)
-        ax.set_title(f"{d}: normal force", fontsize=9)
-        ax.set_ylabel("lambda_n [N]", fontsize=8)
-        ax = axes[1][j]
-        for c in closed:
-            ax.plot(c["t"], ratio(c), color="0.6", lw=0.7)
-        ax.plot(t, ratio(ref), "k--", lw=1.2)
-        ax.axhline(1.0, color="tab:red", lw=0.8)
-        ax.set_ylim(0.0, 1.1)
-        ax.set_title(f"{d}: |lambda_t| / (mu lambda_n)", fontsize=9)
-        ax.set_xlabel("t [s]")
-    fig.suptitle(f"contacts (mu = {mu:g}): normal force against the margin {normal_min:g} N, friction ratio against the cone (1)")
-    save(fig, a.out, "contacts.png")
+        fig, axes = plt.subplots(2, len(digits), figsize=(3.2 * len(digits), 5.6), squeeze=False)
+        fig.subplots_adjust(left=0.06, right=0.98, bottom=0.09, top=0.88, wspace=0.35, hspace=0.3)
+        for j, d in enumerate(digits):
+            ax = axes[0][j]
+            draw(ax, f"lambda_{d}_n")
+            ax.axhline(normal_min, color="tab:red", lw=0.8)
+            ax.set_title(f"{d}: normal force", fontsize=9)
+            ax.set_ylabel("lambda_n [N]", fontsize=8)
+            ax = axes[1][j]
+            for c in closed:
+                ax.plot(c["t"], ratio(c), color="0.6", lw=0.7)
+            ax.plot(t, ratio(ref), "k--", lw=1.2)
+            ax.axhline(1.0, color="tab:red", lw=0.8)
+            ax.set_ylim(0.0, 1.1)
+            ax.set_title(f"{d}: |lambda_t| / (mu lambda_n)", fontsize=9)
+            ax.set_xlabel("t [s]")
+        fig.suptitle(f"contacts (mu = {mu:g}): normal force against the margin {normal_min:g} N, friction ratio against the cone (1)")
+        save(fig, a.out, "contacts.png")
 
-    if a.tracking:
-        th, tr = read_csv(a.tracking)
-        fig, ax = plt.subplots(figsize=(7, 4))
-        fig.subplots_adjust(left=0.13, right=0.97, bottom=0.12, top=0.92)
-        for name in th[1:]:
-            keep = (tr[name] > 0) & np.isfinite(tr[name])
-            if keep.any():
-                ax.semilogy(tr["t"][keep], tr[name][keep], lw=0.8)
-        ax.set_xlabel("t [s]")
-        ax.set_ylabel("||x - x_ref|| [rad, m, rad/s, m/s]")
-        ax.set_title("tracking error of each closed loop at the reference's knots")
-        save(fig, a.out, "tracking_error.png")
+    def tracking():
+        if a.tracking:
+            th, tr = read_csv(a.tracking)
+            fig, ax = plt.subplots(figsize=(7, 4))
+            fig.subplots_adjust(left=0.13, right=0.97, bottom=0.12, top=0.92)
+            for name in th[1:]:
+                keep = (tr[name] > 0) & np.isfinite(tr[name])
+                if keep.any():
+                    ax.semilogy(tr["t"][keep], tr[name][keep], lw=0.8)
+            ax.set_xlabel("t [s]")
+            ax.set_ylabel("||x - x_ref|| [rad, m, rad/s, m/s]")
+            ax.set_title("tracking error of each closed loop at the reference's knots")
+            save(fig, a.out, "tracking_error.png")
+
+    # The figures are independent: the tensions' 23 axes (about half of the drawing, which is
+    # mostly matplotlib's tick layout) in a child process, the other three here.
+    sys.stdout.flush()
+    sys.stderr.flush()
+    child = os.fork() if hasattr(os, "fork") else None
+    if child == 0:
+        code = 0
+        try:
+            tensions()
+        except SystemExit as e:  # fail(): its message
+            print(e, file=sys.stderr)
+            code = 1
+        except BaseException as e:  # noqa: BLE001 - any error is the child's failure
+            print(f"plot_ball_turn.py: tensions.png: {e!r}", file=sys.stderr)
+            code = 1
+        sys.stderr.flush()
+        os._exit(code)
+    if child is None:
+        tensions()
+    orientation()
+    contacts()
+    tracking()
+    if child:
+        _, status = os.waitpid(child, 0)
+        if not (os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0):
+            fail("tensions.png was not written (its process failed, see above)")
 
 
 if __name__ == "__main__":
