@@ -144,8 +144,10 @@ std::string BallRun::describe() const {
   line += format(" | min lambda_n %.4g N, worst friction ratio %.4g", minNormal, worstFrictionRatio);
   line += format(" | error %.3g -> %.3g (ratio %.3g), ball orientation %.3g deg", initialError, finalError, errorRatio,
                  orientationError * 180.0 / std::numbers::pi);
-  line += format(" | %.3f s, %.0f steps, %.0f checks, %.0f Jacobians", seconds, static_cast<double>(simulation.steps),
-                 static_cast<double>(simulation.checks), static_cast<double>(simulation.jacobianEvaluations));
+  line += format(" | %.3f s, %.0f steps, %.0f right-hand sides,", seconds, static_cast<double>(simulation.steps),
+                 static_cast<double>(simulation.rhsEvaluations));
+  line += format(" %.0f checks, %.0f Jacobians", static_cast<double>(simulation.checks),
+                 static_cast<double>(simulation.jacobianEvaluations));
   return line;
 }
 
