@@ -19,9 +19,10 @@ namespace trellis::detail {
 
 namespace {
 
-/// Radau (radau_stepper.hpp): its own halved solves, the exact Jacobian required. BDF's Newton solves: by the system's structure where its Jacobian is known
-/// (ClosedLoopSystem::preconditionerSolve: one n×n LU), else dense with CVODES's difference
-/// quotient. Adams: fixed-point iterations.
+/// Radau (radau_stepper.hpp): its own halved solves, the exact Jacobian required. BDF's Newton
+/// solves: by the system's structure where its Jacobian is known (ClosedLoopSystem::
+/// preconditionerSolve: one n×n LU), else dense with CVODES's difference quotient. Adams:
+/// fixed-point iterations.
 OdeOptions integratorOptions(const SimulationOptions& options, const ClosedLoopSystem& system) {
   if (options.method == IntegrationMethod::kRadau) {
     if (!system.hasJacobian()) {
@@ -67,9 +68,7 @@ class StepChecker {
     // λ of the right-hand side's own evaluation at this very point when there is one (Radau's
     // step end), else computeDynamics here: the same function of (x, u) either way.
     const Eigen::VectorXd* lambda = system.lambdaAt(t, x, u_);
-    if (lambda) {
-      ++reused;
-    } else {
+    if (!lambda) {
       q_ = x.head(n_);
       dq_ = x.tail(n_);
       const DynamicsStatus st = computeDynamics(model_, data_, q_, dq_, u_);
@@ -94,8 +93,7 @@ class StepChecker {
     return false;
   }
 
-  long count = 0;   ///< points checked
-  long reused = 0;  ///< of which with the right-hand side's own λ (no evaluation of their own)
+  long count = 0;  ///< points checked
 
  private:
   const Model& model_;
