@@ -409,6 +409,11 @@ OdeStatus OdeDriver::failed(int flag, const char* call) {
 OdeStatus OdeDriver::advanceTo(double tout) {
   if (!started_) throw std::logic_error(options_.what + ": advanceTo before start");
   if (radau_) {
+    if (!(tout >= t_)) {
+      radau_->flag = CV_ILL_INPUT;
+      radau_->reason = "the target time " + std::to_string(tout) + " is behind the current time";
+      return radauFailed();
+    }
     while (t_ < tout) {
       if (!radau_->step(tout)) return radauFailed();
       t_ = radau_->time();

@@ -313,6 +313,14 @@ TEST_CASE("radau: failures carry CVODES's flags, the time and the reason; bad se
     CHECK(st.t <= 0.4);
     CHECK(st.t > 0.3);  // it crept up to the wall
   }
+  SECTION("a target behind the current time") {
+    LinearForced sys(stiffLinear());
+    OdeDriver d(sys, 5, radauOptions(1e-8, 1e-10));
+    d.start(1.0, start5());
+    const auto st = d.advanceTo(0.5);
+    REQUIRE(st.outcome == OdeOutcome::Failed);
+    CHECK_THAT(st.message, Catch::Contains("behind the current time"));
+  }
   SECTION("the step budget") {
     LinearForced sys(stiffLinear());
     OdeOptions o = radauOptions(1e-10, 1e-12);

@@ -1,5 +1,6 @@
 // trellis/analysis/detail/ode_driver.hpp (internal: for trellis's own libraries, not an API) — the
-// one CVODES driver of trellis.
+// one ODE driver of trellis: CVODES (BDF, Adams) and, behind the same calls, its own Radau IIA
+// stepper (OdeMethod::Radau, analysis/src/radau_stepper.hpp).
 //
 // Every integration in analysis/ and control/ (Riccati equation, tangent-basis transport, manifold
 // Riccati, Gramian, closed-loop simulation, sampled-data discretization, consistency check) goes
