@@ -1,4 +1,6 @@
-// Tests for control/src/ode_driver.hpp (private): the one CVODES driver of trellis::control.
+// Tests for trellis/analysis/detail/ode_driver.hpp (internal): the ODE driver on CVODES (its Radau
+// engine: test_radau.cpp).
+#include "ode_test_systems.hpp"
 #include "trellis/analysis/detail/ode_driver.hpp"
 
 #include <catch2/catch.hpp>
@@ -24,13 +26,7 @@ namespace {
 // the quadrature ∫ yᵀy dt and the root function y_0.
 class Linear : public OdeSystem {
  public:
-  Linear() : A(5, 5) {
-    A << -1, 0, 0, 0, 0,   //
-        0.5, -10, 0, 0, 0,  //
-        0, 1, -1000, 0, 0,  //
-        0, 0, 0, -2, 3,     //
-        0, 0, 0, -3, -2;
-  }
+  Linear() : A(trellis::test::stiffLinearMatrix()) {}
   int rhs(double t, ConstVectorMap y, VectorMap ydot) override {
     ++rhsCalls;
     if (t > failAfter) {
@@ -59,11 +55,7 @@ class Linear : public OdeSystem {
   double failAfter = 1e300;
 };
 
-Eigen::VectorXd y0() {
-  Eigen::VectorXd y(5);
-  y << 1, -1, 2, 1, 0.5;
-  return y;
-}
+Eigen::VectorXd y0() { return trellis::test::stiffLinearStart(); }
 
 }  // namespace
 

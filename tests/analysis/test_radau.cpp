@@ -4,6 +4,7 @@
 // problem against CVODES at a tight tolerance, restarts that keep the step, failures, and the
 // simulator with sampled feedback against BDF.
 #include "control_test_support.hpp"
+#include "ode_test_systems.hpp"
 
 #include "trellis/analysis/detail/ode_driver.hpp"
 #include "trellis/analysis/detail/radau_tableau.hpp"
@@ -68,17 +69,8 @@ class LinearForced : public OdeSystem {
   bool second_;
 };
 
-MatrixXd stiffLinear() {
-  MatrixXd A(5, 5);
-  A << -1, 0, 0, 0, 0,   //
-      0.5, -10, 0, 0, 0,  //
-      0, 1, -1000, 0, 0,  //
-      0, 0, 0, -2, 3,     //
-      0, 0, 0, -3, -2;
-  return A;
-}
-
-VectorXd start5() { return (VectorXd(5) << 1, -1, 2, 1, 0.5).finished(); }
+MatrixXd stiffLinear() { return trellis::test::stiffLinearMatrix(); }
+VectorXd start5() { return trellis::test::stiffLinearStart(); }
 
 /// q̈ = −K q − D q̇ for 3 coordinates: a stiff spring (ω = 300) beside slow ones, coupled.
 MatrixXd oscillator() {
