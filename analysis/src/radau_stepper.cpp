@@ -70,8 +70,9 @@ RadauStepper::RadauStepper(OdeSystem& system, Eigen::Index n, const OdeOptions& 
   // RADAU5's transformation (file comment).
   rtol_ = 0.1 * std::pow(options.rtol, 2.0 / 3.0);
   const double ratio = rtol_ / options.rtol;
-  atol_ = options.atol * ratio;
-  if (options.atolVector.size() == n) atolVector_ = options.atolVector * ratio;
+  // One absolute tolerance per component, the scalar's copied when no vector is given.
+  atol_ = options.atolVector.size() == n ? Eigen::VectorXd(options.atolVector * ratio)
+                                         : Eigen::VectorXd::Constant(n, options.atol * ratio);
   newtonTolerance_ = std::max(10.0 * kEps / rtol_, std::min(0.03, std::sqrt(rtol_)));
   const Eigen::Index m = secondOrder_ ? half_ : n_;
   y_ = Eigen::VectorXd::Zero(n_);
@@ -191,8 +192,7 @@ double RadauStepper::initialStep(double tstop) {
   if (initialStep_ > 0.0) return std::min(initialStep_, span);
   // Hairer, Nørsett & Wanner's estimate for the estimate's order 3: h ~ (0.01/|y''|)^{1/4},
   // |y''| from one explicit Euler step of h0 = 0.01 |y|/|f|.
-  errScale_ = atol_ + rtol_ * y_.cwiseAbs().array();
-  if (atolVector_.size() == n_) errScale_ += atolVector_ - Eigen::VectorXd::Constant(n_, atol_);
+  errScale_ = atol_.array() + rtol_ * y_.cwiseAbs().array();
   const double d0 = rms(y_, errScale_), d1 = rms(f0_, errScale_);
   double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
   h0 = std::min(h0, span);
@@ -212,8 +212,7 @@ RadauStepper::Attempt RadauStepper::attempt(double h, bool landing, double tstop
     if (!refreshJacobian()) return Attempt::kFailed;
   }
   if (!haveFactors_ || h != factoredH_) factor(h);
-  scale_ = atol_ + rtol_ * y_.cwiseAbs().array();
-  if (atolVector_.size() == n_) scale_ += atolVector_ - Eigen::VectorXd::Constant(n_, atol_);
+  scale_ = atol_.array() + rtol_ * y_.cwiseAbs().array();
 
   // Newton's start: the last step's collocation polynomial extrapolated (across a start() only
   // from the last step's end: the state is continuous there, the right-hand side's jump is what
@@ -297,8 +296,7 @@ RadauStepper::Attempt RadauStepper::attempt(double h, bool landing, double tstop
   rhsErr_ = (tab.d[0] / h) * Z_.col(0) + (tab.d[1] / h) * Z_.col(1) + (tab.d[2] / h) * Z_.col(2);
   tmpN_ = f0_ + rhsErr_;
   solveReal(tmpN_, err_);
-  errScale_ = atol_ + rtol_ * y_.cwiseAbs().cwiseMax(y1_.cwiseAbs()).array();
-  if (atolVector_.size() == n_) errScale_ += atolVector_ - Eigen::VectorXd::Constant(n_, atol_);
+  errScale_ = atol_.array() + rtol_ * y_.cwiseAbs().cwiseMax(y1_.cwiseAbs()).array();
   double errn = std::max(rms(err_, errScale_), 1e-10);
   if (errn >= 1.0 && (afterStart_ || lastRejected_)) {
     tmpN_ = y_ + err_;

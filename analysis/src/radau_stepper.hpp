@@ -97,8 +97,8 @@ class RadauStepper {
   OdeSystem& system_;
   Eigen::Index n_, half_;
   bool secondOrder_;
-  double rtol_, atol_;  // RADAU5's transformed tolerances (file comment)
-  Eigen::VectorXd atolVector_;
+  double rtol_;           // RADAU5's transformed tolerances (file comment)
+  Eigen::VectorXd atol_;  // per component
   double newtonTolerance_;
   long maxSteps_;
   double maxStep_;
