@@ -20,7 +20,7 @@ constexpr double kEps = std::numeric_limits<double>::epsilon();
 constexpr double kSafe = 0.9;       // step-size safety factor
 constexpr double kGrowMax = 8.0;    // h_new / h at most
 constexpr double kShrinkMax = 5.0;  // h / h_new at most
-constexpr double kKeepJacobian = 0.1;  // Newton contraction below which J is kept (file comment)
+constexpr double kKeepJacobian = 1e-3;  // Newton contraction below which J is kept (file comment)
 
 std::string number(double v) {
   std::ostringstream m;
