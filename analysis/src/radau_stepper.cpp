@@ -319,10 +319,13 @@ RadauStepper::Attempt RadauStepper::attempt(double h, bool landing, double tstop
     return Attempt::kRejected;
   }
   // Accepted.
-  if (predictive_) {  // Gustafsson's controller
-    const double facgus =
-        std::clamp((hAccepted_ / h) * std::pow(errn * errn / errAccepted_, 0.25) / kSafe, 1.0 / kGrowMax, kShrinkMax);
-    quot = std::max(quot, facgus);
+  if (predictive_) {
+    // Gustafsson's predictive controller, h_new = s h (h/h_acc) (err_acc/err)^{1/4} (1/err)^{1/4},
+    // taken alone (RADAU5 takes the smaller of it and the standard step): it follows the trend
+    // of the error per h⁴, which after a restart falls step by step as the fast transient dies
+    // (hand loop: the standard step grew ~1.3× per step at err ≈ 0.2, this one ~1.5× at err
+    // 0.3–0.7 with no rejection; 12 → 9 steps per 5 ms sample).
+    quot = std::clamp((hAccepted_ / h) * std::pow(errn * errn / errAccepted_, 0.25) / kSafe, 1.0 / kGrowMax, kShrinkMax);
   }
   predictive_ = true;
   hAccepted_ = h;
