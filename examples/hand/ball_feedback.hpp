@@ -82,8 +82,9 @@ struct BallFeedbackOptions {
   /// 4 860 steps instead of 21 400, 0.62–0.63 s per run instead of 0.72–0.73, the same min λ_n,
   /// worst friction ratio (4 digits), final errors (4.63e-5, as both give at rtol 1e-9) and
   /// orientation errors. Its steps are set by the fast finger modes' transient after each tension
-  /// jump (|λ| up to 6e3 s⁻¹: ~12 per 5 ms sample), so the contacts are checked at ~12 points per
-  /// sample instead of ~54.
+  /// jump (|λ| up to 6e3 s⁻¹: ~9 per 5 ms sample since its step control follows the transient's
+  /// decay, 3 770 steps and 0.48 s per run), so the contacts are checked at ~10 points per
+  /// sample instead of BDF's ~54.
   IntegrationMethod method = IntegrationMethod::kRadau;
   /// Throws std::invalid_argument naming the field and its value.
   void validate() const;
