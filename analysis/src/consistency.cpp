@@ -1,6 +1,7 @@
-// consistency.cpp — the a-posteriori check of consistency.hpp, integrated with the control
-// module's one CVODES driver (ode_driver.hpp): Adams with fixed-point iterations, per-component
-// absolute tolerances scaled to the state's range, a fresh start at every knot.
+// consistency.cpp — the a-posteriori check of consistency.hpp, integrated with the module's one
+// ODE driver (ode_driver.hpp): Radau IIA with the core's exact Jacobian by default (Adams or BDF
+// on request), per-component absolute tolerances scaled to the state's range, a restart at every
+// knot.
 #include "trellis/analysis/consistency.hpp"
 
 #include "trellis/analysis/detail/ode_driver.hpp"
@@ -8,6 +9,7 @@
 
 #include "trellis/core/data.hpp"
 #include "trellis/core/dynamics.hpp"
+#include "trellis/core/linearization.hpp"
 #include "trellis/core/model.hpp"
 #include "trellis/core/reference.hpp"
 
@@ -33,6 +35,10 @@ void ConsistencyOptions::validate() const {
     throw std::invalid_argument("ConsistencyOptions.rangeFloor must be >= 0 and finite");
   }
   if (maxStepsPerInterval < 1) throw std::invalid_argument("ConsistencyOptions.maxStepsPerInterval must be >= 1");
+  if (method != IntegrationMethod::kAdams && method != IntegrationMethod::kBDF && method != IntegrationMethod::kRadau) {
+    throw std::invalid_argument("ConsistencyOptions.method = " + std::to_string(static_cast<int>(method)) +
+                                " is not adams, bdf or radau");
+  }
 }
 
 namespace {
@@ -63,6 +69,28 @@ class Integrand final : public detail::OdeSystem {
     }
     ydot.head(n) = dq_;
     ydot.tail(n) = data_.qdd;
+    return 0;
+  }
+
+  // J = ∂f/∂x = [[0, I], [∂q̈/∂q, ∂q̈/∂q̇]] at u(t): the core's exact linearization (u depends on t
+  // only). Its failure is the integrator's (reported with the interval).
+  bool hasJacobian() const override { return true; }
+  bool secondOrder() const override { return true; }
+  int jacobian(double t, detail::ConstVectorMap y, detail::ConstVectorMap, detail::MatrixMap J) override {
+    const int n = model_.nq();
+    q_ = y.head(n);
+    dq_ = y.tail(n);
+    if (!q_.allFinite() || !dq_.allFinite()) return 1;
+    reference_.evaluate(std::clamp(t, reference_.startTime(), reference_.endTime()));
+    const DynamicsStatus status = computeLinearization(model_, data_, q_, dq_, reference_.u());
+    if (!status.ok() || !data_.A.allFinite()) {
+      if (failure.empty()) {
+        failure = "the linearization failed at t = " + std::to_string(t) + ": " +
+                  (status.message.empty() ? std::string("non-finite A") : status.message);
+      }
+      return 1;
+    }
+    J = data_.A;
     return 0;
   }
 
@@ -121,9 +149,13 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
 
   Integrand integrand(model, reference);
   // The driver's step budget restarts at every start(): maxStepsPerInterval per interval.
+  const bool adams = options.method == IntegrationMethod::kAdams;
   detail::OdeOptions ode = detail::makeOdeOptions(
-      "checkConsistency", detail::OdeMethod::Adams, detail::OdeLinearSolver::FixedPoint,
-      options.rtol, detail::OdeOptions{}.atol, options.maxStepsPerInterval);
+      "checkConsistency",
+      adams ? detail::OdeMethod::Adams
+            : options.method == IntegrationMethod::kBDF ? detail::OdeMethod::Bdf : detail::OdeMethod::Radau,
+      adams ? detail::OdeLinearSolver::FixedPoint : detail::OdeLinearSolver::Dense, options.rtol,
+      detail::OdeOptions{}.atol, options.maxStepsPerInterval);
   ode.atolVector = options.atolFraction * result.stateScale;
   detail::OdeDriver driver(integrand, nx, ode);
 
@@ -175,6 +207,7 @@ ConsistencyResult checkConsistency(const Model& model, const Trajectory& input,
   const detail::OdeStats stats = driver.stats();
   result.steps = stats.steps;
   result.rhsEvaluations = stats.rhsEvaluations;
+  result.jacobianEvaluations = stats.jacobianEvaluations;
   if (!integrated) return result;
   const int i = result.worstState;
   result.worstStateName = i < n ? trajectory.configNames()[i] : "d" + trajectory.configNames()[i - n];
@@ -207,6 +240,7 @@ std::string ConsistencyResult::json() const {
   j["worst_state"] = worstStateName;
   j["steps"] = steps;
   j["rhs_evaluations"] = rhsEvaluations;
+  j["jacobian_evaluations"] = jacobianEvaluations;
   return j.dump();
 }
 
