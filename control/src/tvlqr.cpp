@@ -22,6 +22,7 @@
 #include <cmath>
 #include <cstdio>
 #include <exception>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -416,6 +417,231 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
 
   // Sampled: reduced system on the transported basis (T = I without constraints).
   sol.method = "sampled-zoh";
+  sol.feedforward = options.feedforward;
+  const Eigen::VectorXd times = sampleTimes(reference.startTime(), reference.endTime(), options.sampleRate);
+  const std::size_t N = static_cast<std::size_t>(times.size() - 1);
+  // Exactly constant stretches of the reference (a held pose) are discretized by the exponential;
+  // not on a constrained scene (the transported basis T(t) is integrated, not constant by
+  // construction) nor with time-varying weights.
+  // The knots are where the reference's interpolant (so A(t)) may have a kink.
+  SampledStructure structure;
+  if (!sol.constrained && !weights.Qfun && !weights.Rfun) structure.constantOn = ConstantStretches(reference);
+  structure.breakpoints.assign(reference.times().data(), reference.times().data() + reference.times().size());
+
+  // The plant runs of the held feed-forward (file comment): per interval the defect d_k that u_ref(t_k)
+  // held leaves at t_{k+1}, and that of the written ū_k, in the metric of S_{k+1} once the gains
+  // exist. Only kConsistent's iteration needs the gains (S_{k+1}, Γ_k) during its runs; every other
+  // feed-forward's runs depend on the reference alone, so they start here, on threads − 1 workers
+  // beside the transport and the discretization on this thread (which then joins them): the hand's
+  // 400 runs took ~1.4 s after a ~1.2 s serial discretization on 2 threads.
+  SimulationOptions base;
+  // The plant runs keep kRtol when rtol is left to the integrator's default (Radau's is looser
+  // because its estimate is; the plant's BDF estimate is not).
+  base.rtol = options.sampled.rtol > 0.0 ? options.sampled.rtol : SampledDiscretizationOptions::kRtol;
+  base.atol = options.sampled.atol;
+  base.maxSteps = options.sampled.maxSteps;  // per interval, as for the discretization
+  // BDF with the exact Jacobian: a held input is a "sampled" policy (∂u/∂x = 0, so ∂f/∂x = A),
+  // one sample per run at its start. (Radau IIA, which needs no start-up, was measured in its
+  // place: each run starts with the transient of its own input, so its steps are set by that,
+  // not by the restart — the 6-link swing's gains 132 → 120 ms at 100 Hz but 35 → 38 ms at
+  // 10 Hz, the hand's the same within noise; not taken.)
+  base.method = IntegrationMethod::kBDF;
+  // An exactly constant stretch is time-invariant: an interval of the same stretch and length
+  // as an earlier one has its ū and defect (sourceOf). The lengths t_{k+1} − t_k of equal
+  // intervals differ by rounding (~1e-16 h): equal within 1e-9 h (the sample grid's own
+  // tolerance; ū moves by O(Δh) far below that).
+  std::vector<std::size_t> sourceOf(N);
+  {
+    struct Source {
+      double stretch, h;
+      std::size_t k;
+    };
+    std::vector<Source> sources;  // one per distinct (stretch, length)
+    for (std::size_t k = 0; k < N; ++k) {
+      sourceOf[k] = k;
+      if (!structure.constantOn) continue;
+      const double a = times(static_cast<Eigen::Index>(k)), b = times(static_cast<Eigen::Index>(k + 1));
+      const double stretch = structure.constantOn(a, b);
+      if (std::isnan(stretch)) continue;
+      const auto same = std::find_if(sources.begin(), sources.end(), [&](const Source& c) {
+        return c.stretch == stretch && std::abs(c.h - (b - a)) <= 1e-9 * (b - a);
+      });
+      if (same != sources.end()) {
+        sourceOf[k] = same->k;
+      } else {
+        sources.push_back({stretch, b - a, k});
+      }
+    }
+  }
+  std::vector<Eigen::VectorXd> offManifold(N + 1, Eigen::VectorXd::Zero(nx));  // P(x_ref(t_k)) − x_ref(t_k)
+  // What each interval gives (the intervals are independent: each starts from the reference at
+  // t_k), gathered in order below, so the gains, the feed-forward and every status are the same
+  // on any number of threads and whether the runs started early or not.
+  struct Outcome {
+    Eigen::VectorXd u, defect;  // the held input written and the defect it leaves
+    Eigen::VectorXd referenceDefect;  // the defect of u_ref(t_k) held
+    long simulations = 0;
+    bool failed = false;
+    std::exception_ptr error;  // an exception thrown for this interval, rethrown in order
+    std::string what;
+    double t = 0.0;
+  };
+  std::vector<Outcome> outcomes(N);
+  // Intervals are handed out in order; after a failure at k only the later ones are skipped,
+  // so every interval before the first failure is computed (the gathering below needs them).
+  std::atomic<std::size_t> next{0}, firstFailure{N};
+  std::atomic<bool> abandon{false};  // the solve failed before the gathering: stop taking intervals
+  const auto noteFailure = [&firstFailure](std::size_t k) {
+    std::size_t seen = firstFailure.load();
+    while (k < seen && !firstFailure.compare_exchange_weak(seen, k)) {
+    }
+  };
+  // kConsistent's runs read the gains (set before its workers start).
+  const std::vector<Eigen::MatrixXd>* gainS = nullptr;   // sol.S
+  const std::vector<Eigen::MatrixXd>* basisAt = nullptr;  // T(t_k)
+  const SampledDiscretization* discretization = nullptr;
+  const auto worker = [&]() {
+    Eigen::VectorXd xa(nx), xb(nx), ua(nu), ub(nu), dk(nx), held(nu);
+    const Policy hold = [&held](double, const Eigen::VectorXd&, Eigen::VectorXd& u) { u = held; };
+    SimulationOptions so = base;
+    for (std::size_t k = next++; k < N; k = next++) {
+      // A copy of a constant stretch's interval needs no run (constant stretches exist only
+      // without constraints, so it has no projection offset either).
+      if (abandon.load() || k > firstFailure.load() || sourceOf[k] != k) continue;
+      Outcome& out = outcomes[k];
+      try {
+        const double a = times(static_cast<Eigen::Index>(k)), b = times(static_cast<Eigen::Index>(k + 1));
+        reference.evaluate(a, xa, ua);
+        Eigen::VectorXd ubar = intervalAverage(reference, a, b, xb, ub);
+        reference.evaluate(b, xb, ub);
+        if (sol.constrained) {
+          // Between knots the reference's spline leaves the constraints by its interpolation error;
+          // the plant's run starts from the projection of x_ref(t_k) (simulate projects it), so it
+          // ends compared with the projection of x_ref(t_{k+1}): otherwise the mass-metric
+          // projection's tangent part at the start would count as a defect every interval. The
+          // offset P(x_ref) − x_ref is what no loop on the constraints can follow (the prediction
+          // below adds it).
+          const Eigen::VectorXd xa0 = xa, xb0 = xb;
+          projectOntoConstraints(model, xa);
+          projectOntoConstraints(model, xb);
+          if (k == 0) offManifold[0] = xa - xa0;
+          offManifold[k + 1] = xb - xb0;
+        }
+        so.sampleRate = 1.0 / (b - a);
+        so.outputStep = b - a;
+        // The defect dk of a held input v; false when the plant's run failed.
+        auto defect = [&](const Eigen::VectorXd& v) {
+          held = v;
+          const SimulationResult run = simulate(model, xa, a, b, hold, so);
+          ++out.simulations;
+          if (!run.ok()) {
+            out.failed = true;
+            out.what = "the plant's run over the sample interval [" + fmt(a, 17) + ", " + fmt(b, 17) +
+                       "] with a held input failed: " + run.status.describe();
+            out.t = run.status.t;
+            return false;
+          }
+          dk = run.trajectory.states().col(run.trajectory.size() - 1) - xb;
+          return true;
+        };
+        if (!defect(ua)) {
+          noteFailure(k);
+          continue;
+        }
+        out.referenceDefect = dk;
+        if (options.feedforward == SampledFeedforward::kReference) {
+          ubar = ua;
+        } else if (!defect(ubar)) {
+          noteFailure(k);
+          continue;
+        }
+        if (options.feedforward == SampledFeedforward::kConsistent) {
+          // Gauss–Newton with Γ as ∂d/∂ū (chord method, file comment), damped in the metric of
+          // the interval's input cost R_k (Levenberg–Marquardt, μ = 1e-3 σ_max, σ the generalized
+          // eigenvalues of (ΓᵀSΓ, R_k): what a unit of input cost buys in cost-to-go). Directions
+          // with σ ≪ μ — inputs that barely move the state, such as tendons pulling against each
+          // other — then move by at most |d|_S/(2√μ) per step instead of |d|_S/√σ (measured on the
+          // hand without it: held tensions of ±300 against |u_ref| ≤ 5.6); the fixed point
+          // (Γᵀ S d = 0 in the directions that matter) is unchanged. A step that does not lower
+          // dᵀSd is halved (at most 4 times), and none that lowers it ends the iteration.
+          const Eigen::MatrixXd& W = (*gainS)[k + 1];
+          const Eigen::MatrixXd G = (*basisAt)[k + 1] * discretization->intervals[k].Gamma;
+          double f = dk.dot(W * dk);
+          const Eigen::MatrixXd H = G.transpose() * W * G;
+          const Eigen::MatrixXd& Rk = discretization->intervals[k].R;
+          const Eigen::MatrixXd Hs = 0.5 * (H + H.transpose());
+          const Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> sigma(Hs, 0.5 * (Rk + Rk.transpose()),
+                                                                                Eigen::EigenvaluesOnly);
+          const double mu = 1e-3 * std::max(sigma.eigenvalues().maxCoeff(), 0.0);
+          const Eigen::LDLT<Eigen::MatrixXd> damped(Hs + mu * Rk);
+          Eigen::VectorXd dBest = dk;
+          // A defect within the plant runs' own accuracy (10 (atol + rtol |x|) per entry) is
+          // resolved: further steps would chase the integration error (a held equilibrium).
+          const auto resolved = [&](const Eigen::VectorXd& dv) {
+            return (dv.array().abs() <= 10.0 * (so.atol + so.rtol * xb.array().abs())).all();
+          };
+          bool runFailed = false;
+          for (int it = 0; it < options.feedforwardIterations && f > 0.0 && mu > 0.0 && !resolved(dBest); ++it) {
+            const Eigen::VectorXd step = damped.solve(G.transpose() * (W * dBest));
+            if (!step.allFinite() || step.isZero(0.0)) break;
+            double scale = 1.0, fTrial = 0.0;
+            bool lowered = false;
+            Eigen::VectorXd trial;
+            for (int halving = 0; halving <= 4 && !lowered; ++halving, scale *= 0.5) {
+              trial = ubar - scale * step;
+              if (!defect(trial)) {
+                runFailed = true;
+                break;
+              }
+              fTrial = dk.dot(W * dk);
+              lowered = fTrial < f;
+            }
+            if (runFailed || !lowered) break;
+            const bool stalled = fTrial > (1.0 - 1e-6) * f;  // no longer worth a run
+            ubar = trial;
+            f = fTrial;
+            dBest = dk;
+            if (stalled) break;
+          }
+          if (runFailed) {
+            noteFailure(k);
+            continue;
+          }
+          dk = dBest;
+        }
+        out.u = std::move(ubar);
+        out.defect = dk;
+      } catch (...) {
+        out.error = std::current_exception();
+        noteFailure(k);
+      }
+    }
+  };
+  const int threads = static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(options.threads), std::max<std::size_t>(N, 1)));
+  // Workers take the next interval until none is left: fewer threads than asked (the system's
+  // limit) only take longer. Leaving early (a failure below, an exception) abandons the runs not
+  // yet started and joins the rest.
+  struct Pool {
+    std::vector<std::thread> threads;
+    std::atomic<bool>& abandon;
+    void start(int count, const std::function<void()>& work) {
+      try {
+        for (int t = 0; t < count; ++t) threads.emplace_back(work);
+      } catch (const std::system_error&) {
+      }
+    }
+    void join() {
+      for (std::thread& t : threads) t.join();
+      threads.clear();
+    }
+    ~Pool() {
+      abandon = true;
+      join();
+    }
+  } pool{{}, abandon};
+  const std::function<void()> work = worker;
+  if (options.feedforward != SampledFeedforward::kConsistent) pool.start(threads - 1, work);
+
   const TangentBasisTrajectory basis = transportTangentBasis(model, reference, options.transport);
   sol.transportSteps = basis.steps();
   if (!basis.ok()) {
@@ -426,14 +652,6 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
   const int d = basis.dimension();
   sol.dimension = d;
   const detail::ReducedProblem problem = detail::makeReducedProblem(model, basis, weights);
-  const Eigen::VectorXd times = sampleTimes(reference.startTime(), reference.endTime(), options.sampleRate);
-  // Exactly constant stretches of the reference (a held pose) are discretized by the exponential;
-  // not on a constrained scene (the transported basis T(t) is integrated, not constant by
-  // construction) nor with time-varying weights.
-  // The knots are where the reference's interpolant (so A(t)) may have a kink.
-  SampledStructure structure;
-  if (!sol.constrained && !weights.Qfun && !weights.Rfun) structure.constantOn = ConstantStretches(reference);
-  structure.breakpoints.assign(reference.times().data(), reference.times().data() + reference.times().size());
   const SampledDiscretization disc =
       discretizeSampledData(times, d, nu, problem.linearization, problem.weights, options.sampled, structure);
   sol.steps = disc.steps;
@@ -452,7 +670,6 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
     sol.status.set(TvlqrCode::kRecursionFailure, rec.status.describe(), rec.status.t, rec.status.index);
     return sol;
   }
-  const std::size_t N = disc.intervals.size();
   std::vector<Eigen::MatrixXd> K;
   sol.minEigenvalueS = std::numeric_limits<double>::infinity();
   sol.maxEigenvalueS = -std::numeric_limits<double>::infinity();
@@ -470,198 +687,12 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
   // r_k it leaves at each next sample (for every choice: u_ref(t_k) held too).
   std::vector<Eigen::VectorXd> uff, residual;
   {
-    sol.feedforward = options.feedforward;
-    SimulationOptions base;
-    // The plant runs keep kRtol when rtol is left to the integrator's default (Radau's is looser
-    // because its estimate is; the plant's BDF estimate is not).
-    base.rtol = options.sampled.rtol > 0.0 ? options.sampled.rtol : SampledDiscretizationOptions::kRtol;
-    base.atol = options.sampled.atol;
-    base.maxSteps = options.sampled.maxSteps;  // per interval, as for the discretization
-    // BDF with the exact Jacobian: a held input is a "sampled" policy (∂u/∂x = 0, so ∂f/∂x = A),
-    // one sample per run at its start. (Radau IIA, which needs no start-up, was measured in its
-    // place: each run starts with the transient of its own input, so its steps are set by that,
-    // not by the restart — the 6-link swing's gains 132 → 120 ms at 100 Hz but 35 → 38 ms at
-    // 10 Hz, the hand's the same within noise; not taken.)
-    base.method = IntegrationMethod::kBDF;
-    // An exactly constant stretch is time-invariant: an interval of the same stretch and length
-    // as an earlier one has its ū and defect (sourceOf). The lengths t_{k+1} − t_k of equal
-    // intervals differ by rounding (~1e-16 h): equal within 1e-9 h (the sample grid's own
-    // tolerance; ū moves by O(Δh) far below that).
-    std::vector<std::size_t> sourceOf(N);
-    {
-      struct Source {
-        double stretch, h;
-        std::size_t k;
-      };
-      std::vector<Source> sources;  // one per distinct (stretch, length)
-      for (std::size_t k = 0; k < N; ++k) {
-        sourceOf[k] = k;
-        if (!structure.constantOn) continue;
-        const double a = times(static_cast<Eigen::Index>(k)), b = times(static_cast<Eigen::Index>(k + 1));
-        const double stretch = structure.constantOn(a, b);
-        if (std::isnan(stretch)) continue;
-        const auto same = std::find_if(sources.begin(), sources.end(), [&](const Source& c) {
-          return c.stretch == stretch && std::abs(c.h - (b - a)) <= 1e-9 * (b - a);
-        });
-        if (same != sources.end()) {
-          sourceOf[k] = same->k;
-        } else {
-          sources.push_back({stretch, b - a, k});
-        }
-      }
-    }
-    std::vector<Eigen::VectorXd> offManifold(N + 1, Eigen::VectorXd::Zero(nx));  // P(x_ref(t_k)) − x_ref(t_k)
-    // What each interval gives (the intervals are independent: each starts from the reference at
-    // t_k and is weighed by S_{k+1}, both known): they run on options.threads threads and are
-    // gathered in order below, so the gains, the feed-forward and every status are the same on
-    // any number of threads.
-    struct Outcome {
-      Eigen::VectorXd u, defect;
-      double referenceDefect = 0.0;  // sqrt(f) of u_ref(t_k) held
-      long simulations = 0;
-      bool failed = false;
-      std::exception_ptr error;  // an exception thrown for this interval, rethrown in order
-      std::string what;
-      double t = 0.0;
-    };
-    std::vector<Outcome> outcomes(N);
-    // Intervals are handed out in order; after a failure at k only the later ones are skipped,
-    // so every interval before the first failure is computed (the gathering below needs them).
-    std::atomic<std::size_t> next{0}, firstFailure{N};
-    const auto noteFailure = [&firstFailure](std::size_t k) {
-      std::size_t seen = firstFailure.load();
-      while (k < seen && !firstFailure.compare_exchange_weak(seen, k)) {
-      }
-    };
-    const auto worker = [&]() {
-      Eigen::VectorXd xa(nx), xb(nx), ua(nu), ub(nu), dk(nx), held(nu);
-      const Policy hold = [&held](double, const Eigen::VectorXd&, Eigen::VectorXd& u) { u = held; };
-      SimulationOptions so = base;
-      for (std::size_t k = next++; k < N; k = next++) {
-        // A copy of a constant stretch's interval needs no run (constant stretches exist only
-        // without constraints, so it has no projection offset either).
-        if (k > firstFailure.load() || sourceOf[k] != k) continue;
-        Outcome& out = outcomes[k];
-        try {
-          const double a = times(static_cast<Eigen::Index>(k)), b = times(static_cast<Eigen::Index>(k + 1));
-          reference.evaluate(a, xa, ua);
-          Eigen::VectorXd ubar = intervalAverage(reference, a, b, xb, ub);
-          reference.evaluate(b, xb, ub);
-          if (sol.constrained) {
-            // Between knots the reference's spline leaves the constraints by its interpolation error;
-            // the plant's run starts from the projection of x_ref(t_k) (simulate projects it), so it
-            // ends compared with the projection of x_ref(t_{k+1}): otherwise the mass-metric
-            // projection's tangent part at the start would count as a defect every interval. The
-            // offset P(x_ref) − x_ref is what no loop on the constraints can follow (the prediction
-            // below adds it).
-            const Eigen::VectorXd xa0 = xa, xb0 = xb;
-            projectOntoConstraints(model, xa);
-            projectOntoConstraints(model, xb);
-            if (k == 0) offManifold[0] = xa - xa0;
-            offManifold[k + 1] = xb - xb0;
-          }
-          const Eigen::MatrixXd& W = sol.S[k + 1];
-          const Eigen::MatrixXd G = Tk[k + 1] * disc.intervals[k].Gamma;
-          so.sampleRate = 1.0 / (b - a);
-          so.outputStep = b - a;
-          // The defect dk of a held input v and its S-norm squared; false when the plant's run failed.
-          auto defect = [&](const Eigen::VectorXd& v, double& f) {
-            held = v;
-            const SimulationResult run = simulate(model, xa, a, b, hold, so);
-            ++out.simulations;
-            if (!run.ok()) {
-              out.failed = true;
-              out.what = "the plant's run over the sample interval [" + fmt(a, 17) + ", " + fmt(b, 17) +
-                         "] with a held input failed: " + run.status.describe();
-              out.t = run.status.t;
-              return false;
-            }
-            dk = run.trajectory.states().col(run.trajectory.size() - 1) - xb;
-            f = dk.dot(W * dk);
-            return true;
-          };
-          double f = 0.0;
-          if (!defect(ua, f)) {
-            noteFailure(k);
-            continue;
-          }
-          out.referenceDefect = std::sqrt(std::max(f, 0.0));
-          if (options.feedforward == SampledFeedforward::kReference) {
-            ubar = ua;
-          } else if (!defect(ubar, f)) {
-            noteFailure(k);
-            continue;
-          }
-          if (options.feedforward == SampledFeedforward::kConsistent) {
-            // Gauss–Newton with Γ as ∂d/∂ū (chord method, file comment), damped in the metric of
-            // the interval's input cost R_k (Levenberg–Marquardt, μ = 1e-3 σ_max, σ the generalized
-            // eigenvalues of (ΓᵀSΓ, R_k): what a unit of input cost buys in cost-to-go). Directions
-            // with σ ≪ μ — inputs that barely move the state, such as tendons pulling against each
-            // other — then move by at most |d|_S/(2√μ) per step instead of |d|_S/√σ (measured on the
-            // hand without it: held tensions of ±300 against |u_ref| ≤ 5.6); the fixed point
-            // (Γᵀ S d = 0 in the directions that matter) is unchanged. A step that does not lower
-            // dᵀSd is halved (at most 4 times), and none that lowers it ends the iteration.
-            const Eigen::MatrixXd H = G.transpose() * W * G;
-            const Eigen::MatrixXd& Rk = disc.intervals[k].R;
-            const Eigen::MatrixXd Hs = 0.5 * (H + H.transpose());
-            const Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> sigma(Hs, 0.5 * (Rk + Rk.transpose()),
-                                                                                  Eigen::EigenvaluesOnly);
-            const double mu = 1e-3 * std::max(sigma.eigenvalues().maxCoeff(), 0.0);
-            const Eigen::LDLT<Eigen::MatrixXd> damped(Hs + mu * Rk);
-            Eigen::VectorXd dBest = dk;
-            // A defect within the plant runs' own accuracy (10 (atol + rtol |x|) per entry) is
-            // resolved: further steps would chase the integration error (a held equilibrium).
-            const auto resolved = [&](const Eigen::VectorXd& dv) {
-              return (dv.array().abs() <= 10.0 * (so.atol + so.rtol * xb.array().abs())).all();
-            };
-            bool runFailed = false;
-            for (int it = 0; it < options.feedforwardIterations && f > 0.0 && mu > 0.0 && !resolved(dBest); ++it) {
-              const Eigen::VectorXd step = damped.solve(G.transpose() * (W * dBest));
-              if (!step.allFinite() || step.isZero(0.0)) break;
-              double scale = 1.0, fTrial = 0.0;
-              bool lowered = false;
-              Eigen::VectorXd trial;
-              for (int halving = 0; halving <= 4 && !lowered; ++halving, scale *= 0.5) {
-                trial = ubar - scale * step;
-                if (!defect(trial, fTrial)) {
-                  runFailed = true;
-                  break;
-                }
-                lowered = fTrial < f;
-              }
-              if (runFailed || !lowered) break;
-              const bool stalled = fTrial > (1.0 - 1e-6) * f;  // no longer worth a run
-              ubar = trial;
-              f = fTrial;
-              dBest = dk;
-              if (stalled) break;
-            }
-            if (runFailed) {
-              noteFailure(k);
-              continue;
-            }
-            dk = dBest;
-          }
-          out.u = std::move(ubar);
-          out.defect = dk;
-        } catch (...) {
-          out.error = std::current_exception();
-          noteFailure(k);
-        }
-      }
-    };
-    const int threads = static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(options.threads), std::max<std::size_t>(N, 1)));
-    {
-      // Workers take the next interval until none is left: fewer threads than asked (the system's
-      // limit) only take longer.
-      std::vector<std::thread> pool;
-      try {
-        for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
-      } catch (const std::system_error&) {
-      }
-      worker();
-      for (std::thread& t : pool) t.join();
-    }
+    gainS = &sol.S;
+    basisAt = &Tk;
+    discretization = &disc;
+    if (options.feedforward == SampledFeedforward::kConsistent) pool.start(threads - 1, work);
+    worker();
+    pool.join();
     // In order: the first failure decides, as a serial loop would have stopped there.
     for (std::size_t k = 0; k < N; ++k) {
       const Outcome& out = outcomes[k];
@@ -687,7 +718,8 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
         return sol;
       }
       const Eigen::MatrixXd& W = sol.S[k + 1];
-      sol.referenceDefect = std::max(sol.referenceDefect, out.referenceDefect);
+      if (out.referenceDefect.size() > 0)
+        sol.referenceDefect = std::max(sol.referenceDefect, std::sqrt(std::max(out.referenceDefect.dot(W * out.referenceDefect), 0.0)));
       sol.feedforwardDefect = std::max(sol.feedforwardDefect, std::sqrt(std::max(source.defect.dot(W * source.defect), 0.0)));
       uff.push_back(source.u);
       residual.push_back(source.defect);

@@ -215,6 +215,21 @@ TEST_CASE("sampled gains: the feed-forward's plant runs give the same result on 
   CHECK(failed.status.code == trellis::TvlqrCode::kFeedforwardFailure);
   CHECK(failed.status.index == 0);
   CHECK_THAT(failed.status.message, Catch::Contains("sample interval [0, 0.05"));
+  // The runs of kAverage and kReference start beside the discretization (they need no gains): a
+  // discretization that fails while they run is the verdict, on any count, and nothing is left
+  // running (the swing's intervals are integrated: one step is too few for each).
+  for (const int threads : {1, 2, 3}) {
+    trellis::TvlqrOptions o;
+    o.sampleRate = 50.0;
+    o.feedforward = SampledFeedforward::kAverage;
+    o.threads = threads;
+    o.sampled.maxSteps = 1;
+    const trellis::TvlqrSolution early = trellis::solveTvlqr(scene.model, ref, w, o);
+    INFO(threads << " threads: " << early.describe());
+    REQUIRE_FALSE(early.ok());
+    CHECK(early.status.code == trellis::TvlqrCode::kDiscretizationFailure);
+    CHECK_THAT(early.status.message, Catch::Contains("maxSteps = 1"));
+  }
   opt.threads = 0;
   CHECK_THROWS_WITH(trellis::solveTvlqr(cart, held, w, opt), Catch::Contains("TvlqrOptions.threads = 0"));
   opt.threads = 257;

@@ -97,7 +97,9 @@ struct TvlqrOptions {
   int feedforwardIterations = 6;  ///< kConsistent: Gauss–Newton iterations per interval at most (≥ 1)
   /// Sampled only: threads for the feed-forward's plant runs (1..256). The sample intervals are
   /// independent (each starts on the reference and is weighed by the already solved S_{k+1}) and
-  /// are gathered in order: the result is the same on any number of threads.
+  /// are gathered in order: the result is the same on any number of threads. The runs of every
+  /// feed-forward but kConsistent need no gains: threads − 1 of them start beside the transport
+  /// and the discretization, which run on the calling thread.
   int threads = 1;
   /// A held pose only: Qf := S∞ of the CARE (DARE when sampled) at the pose (file comment);
   /// weights.Qf is then not used. Throws std::invalid_argument for a reference that is not a held
