@@ -95,15 +95,16 @@ RadauStepper::RadauStepper(OdeSystem& system, Eigen::Index n, const OdeOptions& 
   G1_.resize(n_);
   dW1_.resize(n_);
   J_ = Eigen::MatrixXd::Zero(n_, n_);
-  if (secondOrder_) aqComplex_.resize(half_, half_);
   realMatrix_.resize(m, m);
-  complexMatrix_.resize(m, m);
   realLu_ = Eigen::PartialPivLU<Eigen::MatrixXd>(m);
-  complexLu_ = Eigen::PartialPivLU<Eigen::MatrixXcd>(m);
+  complexLu_.resize(m);
   rb_.resize(m);
   sb_.resize(m);
+  hr_.resize(m);
+  hi_.resize(m);
+  pr_.resize(m);
+  pi_.resize(m);
   cb_.resize(m);
-  csb_.resize(m);
 }
 
 void RadauStepper::start(double t0, const Eigen::Ref<const Eigen::VectorXd>& y0) {
@@ -142,7 +143,6 @@ bool RadauStepper::refreshJacobian() {
     reason = r != 0 ? "the Jacobian failed" : "the Jacobian is not finite";
     return false;
   }
-  if (secondOrder_) aqComplex_ = J_.bottomLeftCorner(half_, half_).cast<Complex>();
   haveJacobian_ = jacobianCurrent_ = true;
   needJacobian_ = false;
   haveFactors_ = false;
@@ -158,16 +158,22 @@ void RadauStepper::factor(double h) {
     const auto Av = J_.bottomRightCorner(half_, half_);
     realMatrix_ = -Aq - sigma0_ * Av;
     realMatrix_.diagonal().array() += sigma0_ * sigma0_;
-    complexMatrix_ = -aqComplex_ - sigma1_ * Av.cast<Complex>();
-    complexMatrix_.diagonal().array() += sigma1_ * sigma1_;
+    // σ1²I − σ1 A_v − A_q with σ1 = a + ib: real part a² − b² − a A_v − A_q, imaginary 2ab − b A_v.
+    const Complex s2 = sigma1_ * sigma1_;
+    complexLu_.re() = -Aq - sigma1_.real() * Av;
+    complexLu_.re().diagonal().array() += s2.real();
+    complexLu_.im() = -sigma1_.imag() * Av;
+    complexLu_.im().diagonal().array() += s2.imag();
   } else {
     realMatrix_ = -J_;
     realMatrix_.diagonal().array() += sigma0_;
-    complexMatrix_ = -J_.cast<Complex>();
-    complexMatrix_.diagonal().array() += sigma1_;
+    complexLu_.re() = -J_;
+    complexLu_.re().diagonal().array() += sigma1_.real();
+    complexLu_.im().setZero();
+    complexLu_.im().diagonal().setConstant(sigma1_.imag());
   }
   realLu_.compute(realMatrix_);
-  complexLu_.compute(complexMatrix_);
+  complexLu_.factor();
   factoredH_ = h;
   haveFactors_ = true;
   ++factorizations_;
@@ -178,7 +184,103 @@ void RadauStepper::solveReal(const Eigen::VectorXd& r, Eigen::VectorXd& z) {
 }
 
 void RadauStepper::solveComplex(const Eigen::VectorXcd& r, Eigen::VectorXcd& z) {
-  shiftedSolve(secondOrder_, half_, sigma1_, complexLu_, aqComplex_, r, z, cb_, csb_);
+  if (!secondOrder_) {
+    cb_ = r;
+    complexLu_.solve(cb_);
+    z = cb_;
+    return;
+  }
+  // shiftedSolve's b = (σ1²I − σ1A_v − A_q)⁻¹ (σ1 r₂ + A_q r₁), A_q r₁ as two real products.
+  const auto Aq = J_.bottomLeftCorner(half_, half_);
+  hr_.head(half_) = r.head(half_).real();
+  hi_.head(half_) = r.head(half_).imag();
+  pr_.head(half_).noalias() = Aq * hr_.head(half_);
+  pi_.head(half_).noalias() = Aq * hi_.head(half_);
+  for (Eigen::Index i = 0; i < half_; ++i) cb_[i] = Complex(pr_[i], pi_[i]) + sigma1_ * r[half_ + i];
+  complexLu_.solve(cb_);
+  z.tail(half_) = cb_;
+  z.head(half_) = (r.head(half_) + cb_) / sigma1_;
+}
+
+void SplitComplexLu::resize(Eigen::Index n) {
+  re_.resize(n, n);
+  im_.resize(n, n);
+  pivot_.resize(n);
+  xr_.resize(n);
+  xi_.resize(n);
+}
+
+void SplitComplexLu::factor() {
+  const Eigen::Index n = re_.rows();
+  for (Eigen::Index k = 0; k < n; ++k) {
+    Eigen::Index p = k;
+    double best = re_(k, k) * re_(k, k) + im_(k, k) * im_(k, k);
+    for (Eigen::Index i = k + 1; i < n; ++i) {
+      const double v = re_(i, k) * re_(i, k) + im_(i, k) * im_(i, k);
+      if (v > best) {
+        best = v;
+        p = i;
+      }
+    }
+    pivot_[k] = static_cast<int>(p);
+    if (p != k) {
+      re_.row(k).swap(re_.row(p));
+      im_.row(k).swap(im_.row(p));
+    }
+    // L's column: divided by the pivot, 1/u = conj(u)/|u|².
+    const double inv = 1.0 / best, ur = re_(k, k) * inv, ui = -im_(k, k) * inv;
+    for (Eigen::Index i = k + 1; i < n; ++i) {
+      const double a = re_(i, k), b = im_(i, k);
+      re_(i, k) = a * ur - b * ui;
+      im_(i, k) = a * ui + b * ur;
+    }
+    // The trailing update, column by column: M_ij −= l_i u_kj.
+    const double* lr = &re_(0, k);
+    const double* li = &im_(0, k);
+    for (Eigen::Index j = k + 1; j < n; ++j) {
+      const double ar = re_(k, j), ai = im_(k, j);
+      double* cr = &re_(0, j);
+      double* ci = &im_(0, j);
+      for (Eigen::Index i = k + 1; i < n; ++i) {
+        cr[i] -= lr[i] * ar - li[i] * ai;
+        ci[i] -= lr[i] * ai + li[i] * ar;
+      }
+    }
+  }
+}
+
+void SplitComplexLu::solve(Eigen::VectorXcd& x) {
+  const Eigen::Index n = re_.rows();
+  for (Eigen::Index k = 0; k < n; ++k) {
+    std::swap(x[k], x[pivot_[k]]);
+    xr_[k] = x[k].real();
+    xi_[k] = x[k].imag();
+  }
+  // L y = P x (unit lower), column by column.
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const double yr = xr_[k], yi = xi_[k];
+    const double* lr = &re_(0, k);
+    const double* li = &im_(0, k);
+    for (Eigen::Index i = k + 1; i < n; ++i) {
+      xr_[i] -= lr[i] * yr - li[i] * yi;
+      xi_[i] -= lr[i] * yi + li[i] * yr;
+    }
+  }
+  // U z = y, column by column from the last.
+  for (Eigen::Index k = n - 1; k >= 0; --k) {
+    const double ur = re_(k, k), ui = im_(k, k), inv = 1.0 / (ur * ur + ui * ui);
+    const double a = xr_[k], b = xi_[k];
+    const double zr = (a * ur + b * ui) * inv, zi = (b * ur - a * ui) * inv;
+    xr_[k] = zr;
+    xi_[k] = zi;
+    const double* cr = &re_(0, k);
+    const double* ci = &im_(0, k);
+    for (Eigen::Index i = 0; i < k; ++i) {
+      xr_[i] -= cr[i] * zr - ci[i] * zi;
+      xi_[i] -= cr[i] * zi + ci[i] * zr;
+    }
+  }
+  for (Eigen::Index k = 0; k < n; ++k) x[k] = Complex(xr_[k], xi_[k]);
 }
 
 double RadauStepper::rms(const Eigen::Ref<const Eigen::MatrixXd>& v, const Eigen::VectorXd& scale) const {

@@ -64,6 +64,26 @@
 
 namespace trellis::detail {
 
+/// LU with partial pivoting of a complex matrix held as its real and imaginary parts: the updates
+/// are real multiply-adds the compiler vectorizes, where std::complex's products (with their
+/// NaN/Inf branches) are not — 26×26 (the hand's halved complex system): 6.1 µs against 15.6 µs
+/// for Eigen's PartialPivLU<MatrixXcd>, the same pivots (the largest |z| of the column).
+class SplitComplexLu {
+ public:
+  void resize(Eigen::Index n);
+  /// The matrix to factor: fill re() and im(), then factor() (in place).
+  Eigen::MatrixXd& re() { return re_; }
+  Eigen::MatrixXd& im() { return im_; }  ///< see re()
+  void factor();
+  /// x ← M⁻¹ x (non-finite where a pivot is zero: the caller's finiteness checks see it).
+  void solve(Eigen::VectorXcd& x);
+
+ private:
+  Eigen::MatrixXd re_, im_;
+  Eigen::VectorXi pivot_;
+  Eigen::VectorXd xr_, xi_;
+};
+
 class RadauStepper {
  public:
   /// Throws std::invalid_argument when the system has no exact Jacobian, options ask for
@@ -117,16 +137,14 @@ class RadauStepper {
   Eigen::VectorXd W0_, G0_, dW0_;
   Eigen::VectorXcd W1_, G1_, dW1_;
   Eigen::MatrixXd J_;
-  Eigen::MatrixXcd aqComplex_;  // A_q as complex (second-order systems)
   double sigma0_ = 0.0;
   std::complex<double> sigma1_;
   // Factorizations at (J, factoredH_): full n×n or, for second-order systems, n/2×n/2.
   Eigen::MatrixXd realMatrix_;
-  Eigen::MatrixXcd complexMatrix_;
   Eigen::PartialPivLU<Eigen::MatrixXd> realLu_;
-  Eigen::PartialPivLU<Eigen::MatrixXcd> complexLu_;
-  Eigen::VectorXd rb_, sb_;
-  Eigen::VectorXcd cb_, csb_;
+  SplitComplexLu complexLu_;
+  Eigen::VectorXd rb_, sb_, hr_, hi_, pr_, pi_;
+  Eigen::VectorXcd cb_;
   double factoredH_ = 0.0;
   bool haveJacobian_ = false, jacobianCurrent_ = false, haveFactors_ = false, f0Valid_ = false;
   bool haveStep_ = false, extrapolate_ = false, afterStart_ = true, lastRejected_ = false, needJacobian_ = false;
