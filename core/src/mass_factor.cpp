@@ -355,15 +355,69 @@ void solveChainArticulated(const DataWorkspace& ws, double* x, Eigen::Index stri
 }
 }  // namespace
 
+namespace {
+/// x ← M_b⁻¹ x, one column, on an unbranched block of NB < kDenseChain joints under the tree
+/// factor (h: the block's storage from (bs, bs), column stride ld): solveTreeBlock with its one
+/// run per joint (the ancestors of i are 0 … i − 1) fixed at compile time, same operations.
+template <int NB>
+inline void solveChainTreeBlock(const double* h, Eigen::Index ld, double* x) {
+  for (int i = NB - 1; i > 0; --i) subtractScaled(x, h + i * ld, x[i], i);
+  for (int i = 0; i < NB; ++i) x[i] /= h[i * ld + i];
+  for (int i = 1; i < NB; ++i) x[i] -= dotRun(h + i * ld, x, i);
+}
+/// The same on an unbranched block of NB ≥ kDenseChain joints under its dense factor L Lᵀ
+/// (f: from (bs, bs)): L y = x in axpy form, then Lᵀ z = y in dot form, on contiguous columns.
+template <int NB>
+inline void solveChainDenseBlock(const double* f, Eigen::Index ld, int nb, double* x) {
+  const int n = NB > 0 ? NB : nb;
+  for (int k = 0; k < n; ++k) {
+    const double* fk = f + k * ld;
+    x[k] /= fk[k];
+    subtractScaled(x + k + 1, fk + k + 1, x[k], n - k - 1);
+  }
+  for (int k = n - 1; k >= 0; --k) x[k] = (x[k] - dotRun(f + k * ld + k + 1, x + k + 1, n - k - 1)) / f[k * ld + k];
+}
+/// Every column of solveMassColumns on one block: the block's kind is looked at once, the digit
+/// and ball sizes get fixed loops (the hand's contacts: 3 columns on a 4-joint digit and on the
+/// 6-joint free ball each).
+template <class F>
+inline void forColumns(double* x, Eigen::Index stride, int cols, F&& f) {
+  for (int c = 0; c < cols; ++c) f(x + c * stride);
+}
+}  // namespace
+
 void solveMassColumns(const Model& model, Data& data, double* x, Eigen::Index stride, int cols, int lo, int hi) {
   auto& ws = detail::workspace(data);
+  const ModelTopology& topo = model.topology();
   if (!ws.articulatedCurrent) {
-    for (int c = 0; c < cols; ++c)
-      solveMassVector(model, data, Eigen::Map<Eigen::VectorXd>(x + c * stride, model.nq()), lo, hi);
+    // Block by block, all columns in each (only the blocks inside [lo, hi): a contact's rows touch
+    // two of the hand's six).
+    const Eigen::MatrixXd& H = ws.massFactor;
+    const Eigen::Index ld = H.outerStride();
+    for (size_t b = 0; b + 1 < topo.blockStart.size(); ++b) {
+      const int bs = topo.blockStart[b], be = topo.blockStart[b + 1];
+      if (be <= lo || bs >= hi) continue;
+      const double* h = &H(bs, bs);
+      double* xb = x + bs;
+      if (topo.runStart[static_cast<size_t>(be - 1)] != bs) {
+        forColumns(xb, stride, cols, [&](double* y) { solveTreeBlock(model, data, y - bs, bs, be); });
+        continue;
+      }
+      static_assert(kDenseChain == 6, "the cases below follow denseBlock");
+      switch (be - bs) {  // unbranched: the tree factor below kDenseChain joints, else the dense one
+        case 1: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<1>(h, ld, y); }); break;
+        case 2: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<2>(h, ld, y); }); break;
+        case 3: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<3>(h, ld, y); }); break;
+        case 4: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<4>(h, ld, y); }); break;
+        case 5: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<5>(h, ld, y); }); break;
+        case 6: forColumns(xb, stride, cols, [&](double* y) { solveChainDenseBlock<6>(h, ld, 6, y); }); break;
+        default: forColumns(xb, stride, cols, [&](double* y) { solveChainDenseBlock<0>(h, ld, be - bs, y); }); break;
+      }
+    }
     return;
   }
-  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
-    const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];
+  for (size_t b = 0; b + 1 < topo.blockStart.size(); ++b) {
+    const int bs = topo.blockStart[b], be = topo.blockStart[b + 1];
     if (be <= lo || bs >= hi) continue;
     int c = 0;
     for (; c + 3 <= cols; c += 3) solveChainArticulated<3>(ws, x + c * stride, stride, bs, be);
@@ -373,27 +427,7 @@ void solveMassColumns(const Model& model, Data& data, double* x, Eigen::Index st
 }
 
 void solveMassVector(const Model& model, Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi) {
-  auto& ws = detail::workspace(data);
-  if (ws.articulatedCurrent) {
-    solveMassColumns(model, data, x.data(), x.size(), 1, lo, hi);
-    return;
-  }
-  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
-    const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];
-    if (be <= lo || bs >= hi) continue;
-    if (denseBlock(model, bs, be)) {
-      // L y = x in axpy form, then Lᵀ z = y in dot form, both on contiguous columns of L.
-      const Eigen::MatrixXd& F = ws.massFactor;
-      double* xp = x.data();
-      for (int k = bs; k < be; ++k) {
-        xp[k] /= F(k, k);
-        subtractScaled(xp + k + 1, &F(0, k) + k + 1, xp[k], be - k - 1);
-      }
-      for (int k = be - 1; k >= bs; --k) xp[k] = (xp[k] - dotRun(&F(0, k) + k + 1, xp + k + 1, be - k - 1)) / F(k, k);
-    } else {
-      solveTreeBlock(model, data, x.data(), bs, be);
-    }
-  }
+  solveMassColumns(model, data, x.data(), x.size(), 1, lo, hi);
 }
 
 bool blocksAreChains(const Model& model) {
