@@ -52,6 +52,7 @@ DataWorkspace::DataWorkspace(const Model& model)
   articulatedModel = suitsArticulatedFactor(model);
   articulatedColumns = Eigen::Matrix<double, 6, Eigen::Dynamic>::Zero(6, n);
   massInverseAt = Eigen::MatrixXd::Zero(n, nc);
+  jacobianT = Eigen::MatrixXd::Zero(n, nc);
   schur = Eigen::MatrixXd::Zero(nc, nc);
   correctionWork = Eigen::VectorXd::Zero(2 * nc * n + 2 * nc * nc + nc);
   correctionRuns.assign(static_cast<size_t>(nc), RowRun{});

@@ -77,6 +77,7 @@ struct DataWorkspace {
 
   // ---- The KKT system [M Aᵀ; A 0] (dynamics.cpp) ----------------------------------------------
   Eigen::MatrixXd massInverseAt;         ///< n×nc: M⁻¹ Aᵀ
+  Eigen::MatrixXd jacobianT;             ///< n×nc: Aᵀ on each row's segments, 0 elsewhere (factorizeKkt)
   Eigen::MatrixXd schur;                 ///< nc×nc: D A M⁻¹ Aᵀ D, rows normalized by D
   Eigen::VectorXd constraintScale;       ///< nc: largest possible ‖A_r‖ (see factorizeKkt)
   Eigen::VectorXd schurScale;            ///< nc: D = 1 / constraintScale

@@ -137,6 +137,54 @@ void evaluateConstraints(const Model& model, Data& data, Eigen::VectorXd* h, Eig
   }
 }
 
+namespace {
+/// out(k, l) = a_k · u_l over the coordinate ranges cut[0 … nCut) for the K columns a_k = a + k lda
+/// and the L columns u_l = u + l ldu, two coordinates per step: the K + L columns share their
+/// loads (a contact's 3 rows against another's in 9 running sums).
+template <int K, int L>
+void crossDots(const double* a, Eigen::Index lda, const double* u, Eigen::Index ldu, const int (*cut)[2], int nCut,
+               double (*out)[3]) {
+  Pack acc[K][L];
+  double tail[K][L];
+  for (int k = 0; k < K; ++k)
+    for (int l = 0; l < L; ++l) {
+      acc[k][l] = Pack::Zero();
+      tail[k][l] = 0.0;
+    }
+  for (int c = 0; c < nCut; ++c) {
+    int i = cut[c][0];
+    for (; i + 1 < cut[c][1]; i += 2) {
+      Pack ak[K];
+      for (int k = 0; k < K; ++k) ak[k] = loadPack(a + k * lda + i);
+      for (int l = 0; l < L; ++l) {
+        const Pack ul = loadPack(u + l * ldu + i);
+        for (int k = 0; k < K; ++k) acc[k][l] += ak[k] * ul;
+      }
+    }
+    if (i < cut[c][1])
+      for (int k = 0; k < K; ++k)
+        for (int l = 0; l < L; ++l) tail[k][l] += a[k * lda + i] * u[l * ldu + i];
+  }
+  for (int k = 0; k < K; ++k)
+    for (int l = 0; l < L; ++l) out[k][l] = acc[k][l][0] + acc[k][l][1] + tail[k][l];
+}
+/// crossDots for K, L in 1 … 3 at run time.
+void crossDots(int k, int l, const double* a, Eigen::Index lda, const double* u, Eigen::Index ldu, const int (*cut)[2],
+               int nCut, double (*out)[3]) {
+  switch (3 * (k - 1) + l - 1) {
+    case 0: crossDots<1, 1>(a, lda, u, ldu, cut, nCut, out); break;
+    case 1: crossDots<1, 2>(a, lda, u, ldu, cut, nCut, out); break;
+    case 2: crossDots<1, 3>(a, lda, u, ldu, cut, nCut, out); break;
+    case 3: crossDots<2, 1>(a, lda, u, ldu, cut, nCut, out); break;
+    case 4: crossDots<2, 2>(a, lda, u, ldu, cut, nCut, out); break;
+    case 5: crossDots<2, 3>(a, lda, u, ldu, cut, nCut, out); break;
+    case 6: crossDots<3, 1>(a, lda, u, ldu, cut, nCut, out); break;
+    case 7: crossDots<3, 2>(a, lda, u, ldu, cut, nCut, out); break;
+    default: crossDots<3, 3>(a, lda, u, ldu, cut, nCut, out); break;
+  }
+}
+}  // namespace
+
 void factorizeKkt(const Model& model, Data& data) {
   auto& ws = detail::workspace(data);
   DynamicsStatus& st = data.status;
@@ -228,29 +276,49 @@ void factorizeKkt(const Model& model, Data& data) {
   for (size_t b = 0; b + 1 < ws.rowRunStart.size(); ++b) {
     const int b0 = ws.rowRunStart[b], b1 = ws.rowRunStart[b + 1];
     for (int r = b0; r < b1; ++r) {
-      auto x = ws.massInverseAt.col(r);
-      x.setZero();
+      auto at = ws.jacobianT.col(r);  // zero off the row's segments, which the model fixes
       forRowSegments(topo, ws, r, [&](int lo, int hi) {
-        x.segment(lo, hi - lo) = data.constraintJacobian.row(r).segment(lo, hi - lo).transpose();
+        at.segment(lo, hi - lo) = data.constraintJacobian.row(r).segment(lo, hi - lo).transpose();
       });
+      ws.massInverseAt.col(r) = at;
     }
     forRowSegments(topo, ws, b0, [&](int lo, int hi) {
       solveMassColumns(model, data, ws.massInverseAt.col(b0).data(), ws.massInverseAt.outerStride(), b1 - b0, lo, hi);
     });
   }
+  // A M⁻¹ Aᵀ(r, s) = A_r · (M⁻¹Aᵀ)_s over the segments the two rows share, run pair by run pair
+  // (the rows of a run share their segments: the intersections once per pair of runs, 15 for the
+  // hand's 5 contacts instead of 120 row pairs), up to 3 rows against 3 in one pass (crossDots),
+  // on the contiguous copy Aᵀ. Only s ≤ r is summed, so that the matrix is exactly symmetric.
   ws.schur.setZero();
+  const double* At = ws.jacobianT.data();
+  const double* Ud = ws.massInverseAt.data();
+  const Eigen::Index ld = ws.jacobianT.outerStride(), ldU = ws.massInverseAt.outerStride();
   for (size_t g = 0; g + 1 < topo.rowGroupStart.size(); ++g) {
-    for (int r = topo.rowGroupStart[g]; r < topo.rowGroupStart[g + 1]; ++r) {
-      for (int s = topo.rowGroupStart[g]; s <= r; ++s) {
-        double v = 0.0;
-        forRowSegments(topo, ws, r, [&](int rlo, int rhi) {
-          forRowSegments(topo, ws, s, [&](int slo, int shi) {
+    const int g0 = topo.rowGroupStart[g], g1 = topo.rowGroupStart[g + 1];
+    size_t first = 0;  // the group's first run
+    while (ws.rowRunStart[first] < g0) ++first;
+    for (size_t R = first; ws.rowRunStart[R] < g1; ++R) {
+      for (size_t S = first; S <= R; ++S) {
+        int cut[4][2], nCut = 0;
+        forRowSegments(topo, ws, ws.rowRunStart[R], [&](int rlo, int rhi) {
+          forRowSegments(topo, ws, ws.rowRunStart[S], [&](int slo, int shi) {
             const int lo = std::max(rlo, slo), hi = std::min(rhi, shi);
-            if (hi > lo) v += data.constraintJacobian.row(r).segment(lo, hi - lo).dot(ws.massInverseAt.col(s).segment(lo, hi - lo));
+            if (hi > lo) {
+              cut[nCut][0] = lo;
+              cut[nCut++][1] = hi;
+            }
           });
         });
-        ws.schur(r, s) = v;
-        ws.schur(s, r) = v;
+        const int rEnd = ws.rowRunStart[R + 1], sEnd = ws.rowRunStart[S + 1];
+        for (int r = ws.rowRunStart[R]; r < rEnd; r += 3)
+          for (int s = ws.rowRunStart[S]; s < sEnd && (R != S || s <= r); s += 3) {
+            const int nr = std::min(3, rEnd - r), ns = std::min(3, sEnd - s);
+            double out[3][3];
+            crossDots(nr, ns, At + r * ld, ld, Ud + s * ldU, ldU, cut, nCut, out);
+            for (int k = 0; k < nr; ++k)
+              for (int l = 0; l < ns && s + l <= r + k; ++l) ws.schur(r + k, s + l) = ws.schur(s + l, r + k) = out[k][l];
+          }
       }
     }
   }
