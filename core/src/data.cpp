@@ -13,13 +13,12 @@ DataWorkspace::DataWorkspace(const Model& model)
     // The factorizations are built at their size here (not assigned later); the body factors an
     // identity once because Eigen 3.4's size constructors leave the ComputationInfo flag
     // uninitialized, and copying a Data copies it (UBSan: invalid enum load).
-    : schurLLT(model.nc()),
-      schurLDLT(model.nc()),
+    : schurLDLT(model.nc()),
       basisQR(2 * model.nq(), model.nholonomic() + model.nc()) {
   const int n = model.nq(), m = model.nu(), nc = model.nc();
   const int nh = model.nholonomic();
   const int cols = 2 * n + m;
-  schurLLT.compute(Eigen::MatrixXd::Identity(nc, nc));
+  schurFactor = Eigen::MatrixXd::Identity(nc, nc);
   schurLDLT.compute(Eigen::MatrixXd::Identity(nc, nc));
   jointR.assign(n, Eigen::Matrix3d::Identity());
   jointP.assign(n, Eigen::Vector3d::Zero());

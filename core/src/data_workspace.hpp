@@ -81,7 +81,7 @@ struct DataWorkspace {
   Eigen::MatrixXd schur;                 ///< nc×nc: D A M⁻¹ Aᵀ D, rows normalized by D
   Eigen::VectorXd constraintScale;       ///< nc: largest possible ‖A_r‖ (see factorizeKkt)
   Eigen::VectorXd schurScale;            ///< nc: D = 1 / constraintScale
-  Eigen::LLT<Eigen::MatrixXd> schurLLT;
+  Eigen::MatrixXd schurFactor;           ///< nc×nc: Ŝ = L Lᵀ, L in the lower triangle (factorizeKkt)
   Eigen::VectorXd correctionWork;        ///< ≥ nc n + 2 nc² + nc: one row group's operands (correctForConstraints)
   std::vector<RowRun> correctionRuns;    ///< nc: one group's runs of rows (correctForConstraints)
   /// nc: the coordinates [rowGapLo[r], rowGapHi[r]) inside the range [rowLo[r], rowHi[r]) of

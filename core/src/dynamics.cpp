@@ -183,6 +183,34 @@ void crossDots(int k, int l, const double* a, Eigen::Index lda, const double* u,
     default: crossDots<3, 3>(a, lda, u, ldu, cut, nCut, out); break;
   }
 }
+/// S = L Lᵀ for the symmetric positive definite S (its lower triangle read), L into the lower
+/// triangle of F (the strict upper triangle of F is not written), left-looking column by column,
+/// two earlier columns per pass: L(k:, k) = (S(k:, k) − Σ_{t<k} L(k, t) L(k:, t)) / L(k, k).
+/// False at a pivot not above 0 (or NaN): S is not numerically positive definite. Eigen's LLT
+/// spent ~6× the instructions on the hand with a ball's 15 rows (the set-up of its blocked and
+/// matrix–vector kernels per column, and an l1 norm only its rcond() reads).
+bool choleskyLower(const Eigen::MatrixXd& S, Eigen::MatrixXd& F) {
+  const int n = static_cast<int>(S.rows());
+  for (int k = 0; k < n; ++k) {
+    double* y = &F(k, k);
+    const double* s = &S(k, k);
+    const int len = n - k;
+    int i = 0;
+    for (; i + 1 < len; i += 2) storePack(y + i, loadPack(s + i));
+    if (i < len) y[i] = s[i];
+    int t = 0;
+    for (; t + 1 < k; t += 2) subtractScaled2(y, &F(k, t), F(k, t), &F(k, t + 1), F(k, t + 1), len);
+    if (t < k) subtractScaled(y, &F(k, t), F(k, t), len);
+    const double d = y[0];
+    if (!(d > 0.0)) return false;
+    const double l = std::sqrt(d), r = 1.0 / l;
+    const Pack rv = Pack::Constant(r);
+    for (i = 1; i + 1 < len; i += 2) storePack(y + i, loadPack(y + i) * rv);
+    if (i < len) y[i] *= r;
+    y[0] = l;
+  }
+  return true;
+}
 }  // namespace
 
 void factorizeKkt(const Model& model, Data& data) {
@@ -289,7 +317,7 @@ void factorizeKkt(const Model& model, Data& data) {
   // A M⁻¹ Aᵀ(r, s) = A_r · (M⁻¹Aᵀ)_s over the segments the two rows share, run pair by run pair
   // (the rows of a run share their segments: the intersections once per pair of runs, 15 for the
   // hand's 5 contacts instead of 120 row pairs), up to 3 rows against 3 in one pass (crossDots),
-  // on the contiguous copy Aᵀ. Only s ≤ r is summed, so that the matrix is exactly symmetric.
+  // on the contiguous copy Aᵀ. Only the lower triangle s ≤ r: the scaling below mirrors it.
   ws.schur.setZero();
   const double* At = ws.jacobianT.data();
   const double* Ud = ws.massInverseAt.data();
@@ -317,7 +345,7 @@ void factorizeKkt(const Model& model, Data& data) {
             double out[3][3];
             crossDots(nr, ns, At + r * ld, ld, Ud + s * ldU, ldU, cut, nCut, out);
             for (int k = 0; k < nr; ++k)
-              for (int l = 0; l < ns && s + l <= r + k; ++l) ws.schur(r + k, s + l) = ws.schur(s + l, r + k) = out[k][l];
+              for (int l = 0; l < ns && s + l <= r + k; ++l) ws.schur(r + k, s + l) = out[k][l];
           }
       }
     }
@@ -333,15 +361,19 @@ void factorizeKkt(const Model& model, Data& data) {
     ws.schurScale[r] = s > 0 ? 1.0 / std::sqrt(s) : s == 0.0 ? 0.0 : 1.0;
     zeroRows += s == 0.0;
   }
-  ws.schur = ws.schurScale.asDiagonal() * ws.schur * ws.schurScale.asDiagonal();
+  for (int k = 0; k < nc; ++k) {
+    double* col = &ws.schur(0, k);
+    const double dk = ws.schurScale[k];
+    for (int i = k; i < nc; ++i) ws.schur(k, i) = col[i] = ws.schurScale[i] * col[i] * dk;
+  }
   if (zeroRows > 0)
     for (int r = 0; r < nc; ++r)
       if (ws.schurScale[r] == 0.0) ws.schur(r, r) = 1.0;
-  ws.schurLLT.compute(ws.schur);
+  const bool definite = choleskyLower(ws.schur, ws.schurFactor);
   const double sScale = ws.schur.diagonal().maxCoeff();
-  if (ws.schurLLT.info() == Eigen::Success && sScale > 0) {
-    // (min L_ii / max L_ii)² tracks λ_min/λ_max of Ŝ without the allocations of LLT::rcond().
-    const auto diag = ws.schurLLT.matrixLLT().diagonal();
+  if (definite && sScale > 0) {
+    // (min L_ii / max L_ii)² tracks λ_min/λ_max of Ŝ.
+    const auto diag = ws.schurFactor.diagonal();
     const double ratio = diag.minCoeff() / diag.maxCoeff();
     const double rcond = ratio * ratio;
     st.constraintConditioning = std::min(kinematic, rcond);
@@ -584,7 +616,7 @@ void correctGroupInRuns(const Model& model, Data& data, double* X, Eigen::Index 
                         double* Lambda, Eigen::Index lStride, int g0, int g1) {
   auto& ws = detail::workspace(data);
   const ModelTopology& topo = model.topology();
-  const Eigen::MatrixXd &A = data.constraintJacobian, &U = ws.massInverseAt, &LL = ws.schurLLT.matrixLLT();
+  const Eigen::MatrixXd &A = data.constraintJacobian, &U = ws.massInverseAt, &LL = ws.schurFactor;
   const int ng = g1 - g0;
   double* ag = ws.correctionWork.data();  // the runs' rows of A, compact (≤ ng n)
   double* sg = ag + ng * model.nq();      // the group's Cholesky factor (ng²), t (ng), Lᵀ (ng²)
@@ -639,7 +671,7 @@ void correctForConstraints(const Model& model, Data& data, Eigen::Ref<Eigen::Mat
     // factor of Ŝ; every operand is a few contiguous numbers (a digit: 3 rows on 4 coordinates).
     const bool runGroups = ws.anyGroupInRuns && ws.correctInRuns;
     if (runGroups) correctGroupsInRuns(model, data, X.data(), X.outerStride(), X.cols(), Lambda.data(), Lambda.outerStride());
-    const Eigen::MatrixXd &A = data.constraintJacobian, &U = ws.massInverseAt, &LL = ws.schurLLT.matrixLLT();
+    const Eigen::MatrixXd &A = data.constraintJacobian, &U = ws.massInverseAt, &LL = ws.schurFactor;
     for (size_t g = 0; g + 1 < model.topology().rowGroupStart.size(); ++g) {
       const int g0 = model.topology().rowGroupStart[g], g1 = model.topology().rowGroupStart[g + 1], ng = g1 - g0;
       int lo = model.nq(), hi = 0;

@@ -9,23 +9,6 @@
 
 namespace trellis::detail {
 namespace {
-/// y −= a x over len entries.
-inline void subtractScaled(double* y, const double* x, double a, int len) {
-  const Pack av = Pack::Constant(a);
-  int t = 0;
-  for (; t + 3 < len; t += 4) {
-    storePack(y + t, loadPack(y + t) - av * loadPack(x + t));
-    storePack(y + t + 2, loadPack(y + t + 2) - av * loadPack(x + t + 2));
-  }
-  for (; t < len; ++t) y[t] -= a * x[t];
-}
-/// y −= a0 x0 + a1 x1 over len entries (two columns per pass over y).
-inline void subtractScaled2(double* y, const double* x0, double a0, const double* x1, double a1, int len) {
-  const Pack a0v = Pack::Constant(a0), a1v = Pack::Constant(a1);
-  int t = 0;
-  for (; t + 1 < len; t += 2) storePack(y + t, loadPack(y + t) - a0v * loadPack(x0 + t) - a1v * loadPack(x1 + t));
-  for (; t < len; ++t) y[t] -= a0 * x0[t] + a1 * x1[t];
-}
 /// The four dot products of columns (a0, a1) with (b0, b1) over len entries, in one pass:
 /// out = {a0·b0, a1·b0, a0·b1, a1·b1}.
 inline void dot2x2(const double* a0, const double* a1, const double* b0, const double* b1, int len, double* out) {
@@ -316,7 +299,7 @@ namespace {
 /// are the running bias and acceleration of the parent): the columns share the loads of S_i,
 /// U_i, D_i and their recursions run side by side instead of one after the other.
 template <int K>
-void solveChainArticulated(const DataWorkspace& ws, double* x, Eigen::Index stride, int bs, int be) {
+__attribute__((noinline)) void solveChainArticulated(const DataWorkspace& ws, double* x, Eigen::Index stride, int bs, int be) {
   Pack p[K][3], a[K][3];
   for (int c = 0; c < K; ++c)
     for (int t = 0; t < 3; ++t) p[c][t] = a[c][t] = Pack::Zero();
@@ -386,38 +369,42 @@ inline void forColumns(double* x, Eigen::Index stride, int cols, F&& f) {
 }
 }  // namespace
 
-void solveMassColumns(const Model& model, Data& data, double* x, Eigen::Index stride, int cols, int lo, int hi) {
-  auto& ws = detail::workspace(data);
+/// solveMassColumns with the tree and dense factors: block by block, all columns in each (only
+/// the blocks inside [lo, hi): a contact's rows touch two of the hand's six).
+static inline __attribute__((always_inline)) void solveFactorColumns(const Model& model, Data& data, double* x, Eigen::Index stride, int cols, int lo, int hi) {
   const ModelTopology& topo = model.topology();
-  if (!ws.articulatedCurrent) {
-    // Block by block, all columns in each (only the blocks inside [lo, hi): a contact's rows touch
-    // two of the hand's six).
-    const Eigen::MatrixXd& H = ws.massFactor;
-    const Eigen::Index ld = H.outerStride();
-    for (size_t b = 0; b + 1 < topo.blockStart.size(); ++b) {
-      const int bs = topo.blockStart[b], be = topo.blockStart[b + 1];
-      if (be <= lo || bs >= hi) continue;
-      const double* h = &H(bs, bs);
-      double* xb = x + bs;
-      if (topo.runStart[static_cast<size_t>(be - 1)] != bs) {
-        forColumns(xb, stride, cols, [&](double* y) { solveTreeBlock(model, data, y - bs, bs, be); });
-        continue;
-      }
-      static_assert(kDenseChain == 6, "the cases below follow denseBlock");
-      switch (be - bs) {  // unbranched: the tree factor below kDenseChain joints, else the dense one
-        case 1: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<1>(h, ld, y); }); break;
-        case 2: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<2>(h, ld, y); }); break;
-        case 3: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<3>(h, ld, y); }); break;
-        case 4: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<4>(h, ld, y); }); break;
-        case 5: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<5>(h, ld, y); }); break;
-        case 6: forColumns(xb, stride, cols, [&](double* y) { solveChainDenseBlock<6>(h, ld, 6, y); }); break;
-        default: forColumns(xb, stride, cols, [&](double* y) { solveChainDenseBlock<0>(h, ld, be - bs, y); }); break;
-      }
-    }
-    return;
-  }
+  const Eigen::MatrixXd& H = detail::workspace(data).massFactor;
+  const Eigen::Index ld = H.outerStride();
   for (size_t b = 0; b + 1 < topo.blockStart.size(); ++b) {
     const int bs = topo.blockStart[b], be = topo.blockStart[b + 1];
+    if (be <= lo || bs >= hi) continue;
+    const double* h = &H(bs, bs);
+    double* xb = x + bs;
+    if (topo.runStart[static_cast<size_t>(be - 1)] != bs) {
+      forColumns(xb, stride, cols, [&](double* y) { solveTreeBlock(model, data, y - bs, bs, be); });
+      continue;
+    }
+    static_assert(kDenseChain == 6, "the cases below follow denseBlock");
+    switch (be - bs) {  // unbranched: the tree factor below kDenseChain joints, else the dense one
+      case 1: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<1>(h, ld, y); }); break;
+      case 2: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<2>(h, ld, y); }); break;
+      case 3: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<3>(h, ld, y); }); break;
+      case 4: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<4>(h, ld, y); }); break;
+      case 5: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<5>(h, ld, y); }); break;
+      case 6: forColumns(xb, stride, cols, [&](double* y) { solveChainDenseBlock<6>(h, ld, 6, y); }); break;
+      default: forColumns(xb, stride, cols, [&](double* y) { solveChainDenseBlock<0>(h, ld, be - bs, y); }); break;
+    }
+  }
+}
+
+void solveMassColumns(const Model& model, Data& data, double* x, Eigen::Index stride, int cols, int lo, int hi) {
+  auto& ws = detail::workspace(data);
+  if (!ws.articulatedCurrent) {
+    solveFactorColumns(model, data, x, stride, cols, lo, hi);
+    return;
+  }
+  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
+    const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];
     if (be <= lo || bs >= hi) continue;
     int c = 0;
     for (; c + 3 <= cols; c += 3) solveChainArticulated<3>(ws, x + c * stride, stride, bs, be);
