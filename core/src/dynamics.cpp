@@ -123,6 +123,26 @@ void evaluateConstraints(const Model& model, Data& data, Eigen::VectorXd* h, Eig
       r = end - 1;
       continue;
     }
+    if (cs[r].type == ConstraintType::kPointOnPlane) {
+      // A contact's rows (up to three on one pair of points): the points once, ∂p_b/∂q_j once
+      // for all rows; row k's scale is ‖n_a,k‖ times the pair's ‖Σ_sides ‖∂p_b/∂q_j‖‖.
+      int end = r + 1;
+      while (end < model.nc() && end - r < PointOnPlaneKind::kContactRows && PointOnPlaneKind::samePair(cs[r], cs[end]))
+        ++end;
+      PointOnPlaneKind::pairValues(data, &cs[r], end - r, [&](int k, const ConstraintEval& e) {
+        if (h) (*h)[r + k] = e.h;
+        if (hdot) (*hdot)[r + k] = e.hdot;
+        if (c) (*c)[r + k] = e.c;
+      });
+      if (A) {
+        ws.tmpN.setZero();
+        PointOnPlaneKind::addPairJacobianRows(model, data, &cs[r], end - r, r, *A, ws.tmpN);
+        const double scale = ws.tmpN.norm();
+        for (int k = r; k < end; ++k) ws.constraintScale[k] = cs[k].direction.norm() * scale;
+      }
+      r = end - 1;
+      continue;
+    }
     const ConstraintEval e = evaluateConstraint(data, cs[r]);
     if (h) (*h)[r] = e.h;
     if (hdot) (*hdot)[r] = e.hdot;
