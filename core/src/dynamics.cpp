@@ -204,7 +204,8 @@ void crossDots(int k, int l, const double* a, Eigen::Index lda, const double* u,
   }
 }
 /// S = L Lᵀ for the symmetric positive definite S (its lower triangle read), L into the lower
-/// triangle of F (the strict upper triangle of F is not written), left-looking column by column,
+/// triangle of F and Lᵀ into its strict upper one (each row of L then contiguous too: the run
+/// kernel's forward substitution reads it in place), left-looking column by column,
 /// two earlier columns per pass: L(k:, k) = (S(k:, k) − Σ_{t<k} L(k, t) L(k:, t)) / L(k, k).
 /// False at a pivot not above 0 (or NaN): S is not numerically positive definite. Eigen's LLT
 /// spent ~6× the instructions on the hand with a ball's 15 rows (the set-up of its blocked and
@@ -228,6 +229,7 @@ bool choleskyLower(const Eigen::MatrixXd& S, Eigen::MatrixXd& F) {
     for (i = 1; i + 1 < len; i += 2) storePack(y + i, loadPack(y + i) * rv);
     if (i < len) y[i] *= r;
     y[0] = l;
+    for (i = 1; i < len; ++i) F(k, k + i) = y[i];
   }
   return true;
 }
@@ -586,37 +588,49 @@ inline void inThrees(int count, F&& f) {
   if (count - k == 1) f(std::integral_constant<int, 1>{}, k);
 }
 
+/// One row group's operands for the run kernel (correctRunColumns), all read in place: row r of
+/// A_g is column g0 + r of Aᵀ (ws.jacobianT, at a + r aStride), column r of (M⁻¹Aᵀ)_g at
+/// u + r uStride, the group's block of the Cholesky factor of Ŝ at f (column stride fStride: row
+/// r of L in the strict upper triangle of column r, column r below its diagonal; choleskyLower),
+/// 1 / L_rr at lInv.
+struct RunColumns {
+  int ng;
+  const double *a, *u, *f, *lInv, *d;
+  Eigen::Index aStride, uStride, fStride;
+  double* t;                ///< ng entries of workspace
+  double* x;                ///< X, column 0 (coordinate 0)
+  Eigen::Index xStride;
+  double* lambda;           ///< C on the group's rows, column 0; overwritten with Λ
+  Eigen::Index lStride, cols;
+};
+
 /// correctGroupColumns for a group whose rows live on different segments (loops across the tree: each
 /// contact row on one digit's block and the free ball's, not on the other digits'): the group's
-/// rows in runs on the same segments (DataWorkspace::rowRunStart), each run's rows of A stored
-/// compactly on its segments (at a + run.a, row k at k (len[0] + len[1])), M⁻¹Aᵀ and X read in
-/// place on those segments only (RowRun, data_workspace.hpp). Same operations as
-/// correctGroupColumns without the zeros.
-/// Here g.a holds the compact rows, g.u and g.x point at coordinate 0.
-void correctRunColumns(const GroupColumns& g, const RowRun* runs, int nRuns) {
+/// rows in runs on the same segments (DataWorkspace::rowRunStart), A, M⁻¹Aᵀ and X read in place
+/// on those segments only (RowRun, data_workspace.hpp). Same operations as correctGroupColumns
+/// without the zeros.
+void correctRunColumns(const RunColumns& g, const RowRun* runs, int nRuns) {
   const int ng = g.ng;
   double* t = g.t;
-  const double* lt = t + ng;  // Lᵀ row-major: lt[r ng + q] = L(q, r) for q > r
   double* x = g.x;
   double* lam = g.lambda;
   for (Eigen::Index c = 0; c < g.cols; ++c, x += g.xStride, lam += g.lStride) {
     for (int b = 0; b < nRuns; ++b) {
       const RowRun& run = runs[b];
-      const int w = run.len[0] + run.len[1];
       double* tb = t + run.first;
       for (int k = 0; k < run.count; ++k) tb[k] = 0.0;
       inThrees(run.count, [&](auto nb, int k) {
-        const double* a = g.a + run.a + k * w;
-        runDots<decltype(nb)::value>(a, w, x + run.lo[0], run.len[0], tb + k);
-        runDots<decltype(nb)::value>(a + run.len[0], w, x + run.lo[1], run.len[1], tb + k);
+        const double* a = g.a + (run.first + k) * g.aStride;
+        runDots<decltype(nb)::value>(a + run.lo[0], g.aStride, x + run.lo[0], run.len[0], tb + k);
+        runDots<decltype(nb)::value>(a + run.lo[1], g.aStride, x + run.lo[1], run.len[1], tb + k);
       });
       for (int k = 0; k < run.count; ++k) tb[k] = lam[run.first + k] - tb[k];
     }
     // Λ = D L⁻ᵀ L⁻¹ D t, as in correctGroupColumns; each substitution step a contiguous dot
-    // product, with Lᵀ stored row by row beside L (a group of 15 rows: 105 terms each way).
-    for (int r = 0; r < ng; ++r) t[r] = (t[r] * g.d[r] - dotRun(g.l + r * ng, t, r)) * g.l[r * ng + r];
+    // product (a row of L, then a column; a group of 15 rows: 105 terms each way).
+    for (int r = 0; r < ng; ++r) t[r] = (t[r] * g.d[r] - dotRun(g.f + r * g.fStride, t, r)) * g.lInv[r];
     for (int r = ng - 1; r >= 0; --r) {
-      t[r] = (t[r] - dotRun(lt + r * ng + r + 1, t + r + 1, ng - r - 1)) * g.l[r * ng + r];
+      t[r] = (t[r] - dotRun(g.f + r * g.fStride + r + 1, t + r + 1, ng - r - 1)) * g.lInv[r];
       lam[r] = t[r] * g.d[r];
     }
     for (int b = 0; b < nRuns; ++b) {
@@ -636,34 +650,27 @@ void correctGroupInRuns(const Model& model, Data& data, double* X, Eigen::Index 
                         double* Lambda, Eigen::Index lStride, int g0, int g1) {
   auto& ws = detail::workspace(data);
   const ModelTopology& topo = model.topology();
-  const Eigen::MatrixXd &A = data.constraintJacobian, &U = ws.massInverseAt, &LL = ws.schurFactor;
+  const Eigen::MatrixXd &At = ws.jacobianT, &U = ws.massInverseAt, &F = ws.schurFactor;
   const int ng = g1 - g0;
-  double* ag = ws.correctionWork.data();  // the runs' rows of A, compact (≤ ng n)
-  double* sg = ag + ng * model.nq();      // the group's Cholesky factor (ng²), t (ng), Lᵀ (ng²)
+  double* t = ws.correctionWork.data();  // t (ng), then 1 / L_rr (ng)
+  double* lInv = t + ng;
+  for (int r = 0; r < ng; ++r) lInv[r] = 1.0 / F(g0 + r, g0 + r);
   RowRun* runs = ws.correctionRuns.data();
-  int nRuns = 0, a = 0;
+  int nRuns = 0;
   for (size_t b = 0; b + 1 < ws.rowRunStart.size(); ++b) {
     const int b0 = ws.rowRunStart[b], b1 = ws.rowRunStart[b + 1];
     if (b0 < g0 || b0 >= g1) continue;
     RowRun& run = runs[nRuns++];
-    run = RowRun{b0 - g0, b1 - b0, {0, 0}, {0, 0}, a};
+    run = RowRun{b0 - g0, b1 - b0, {0, 0}, {0, 0}};
     int s = 0;
     forRowSegments(topo, ws, b0, [&](int lo, int hi) {
       run.lo[s] = lo;
       run.len[s++] = hi - lo;
     });
-    for (int r = b0; r < b1; ++r)
-      for (int k = 0; k < 2; ++k)
-        for (int i = 0; i < run.len[k]; ++i) ag[a++] = A(r, run.lo[k] + i);
   }
-  double* lt = sg + ng * ng + ng;  // after t: Lᵀ, row-major
-  for (int r = 0; r < ng; ++r)
-    for (int t = 0; t < ng; ++t) {
-      sg[r * ng + t] = t < r ? LL(g0 + r, g0 + t) : t == r ? 1.0 / LL(g0 + r, g0 + r) : 0.0;
-      lt[r * ng + t] = t > r ? LL(g0 + t, g0 + r) : 0.0;
-    }
-  const GroupColumns g{ng, 0, ag, U.data() + g0 * U.outerStride(), sg, ws.schurScale.data() + g0, U.outerStride(),
-                       sg + ng * ng, X, xStride, Lambda + g0, lStride, cols};
+  const RunColumns g{ng, At.data() + g0 * At.outerStride(), U.data() + g0 * U.outerStride(), &F(g0, g0), lInv,
+                     ws.schurScale.data() + g0, At.outerStride(), U.outerStride(), F.outerStride(), t, X, xStride,
+                     Lambda + g0, lStride, cols};
   correctRunColumns(g, runs, nRuns);
 }
 
