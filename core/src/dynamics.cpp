@@ -282,11 +282,19 @@ void factorizeKkt(const Model& model, Data& data) {
   // gradient itself vanishes (a distance constraint whose points coincide). s_r = 0: no joint
   // moves the row's points at all. (2) Are the rows dependent? The Schur complement scaled to
   // unit diagonal, Ŝ = D A M⁻¹ Aᵀ D, answers that independently of how each h is scaled.
+  // Aᵀ, contiguous (ws.jacobianT: zero off each row's segments, which the model fixes).
+  const ModelTopology& topo = model.topology();
+  for (int r = 0; r < nc; ++r) {
+    auto at = ws.jacobianT.col(r);
+    forRowSegments(topo, ws, r, [&](int lo, int hi) {
+      at.segment(lo, hi - lo) = data.constraintJacobian.row(r).segment(lo, hi - lo).transpose();
+    });
+  }
   double kinematic = 1.0;
   int worstRow = 0;
   for (int r = 0; r < nc; ++r) {
     const double s = ws.constraintScale[r];
-    const double k = s > 0 ? data.constraintJacobian.row(r).norm() / s : 0.0;
+    const double k = s > 0 ? ws.jacobianT.col(r).norm() / s : 0.0;  // ‖A_r‖
     if (k < kinematic) {
       kinematic = k;
       worstRow = r;
@@ -332,16 +340,9 @@ void factorizeKkt(const Model& model, Data& data) {
   // rows of a run in one sweep: solveMassColumns; a contact between a digit and a free ball
   // solves on those two blocks only); then A M⁻¹ Aᵀ over the segments two rows share, whose
   // entries between groups of rows on disjoint blocks are exactly zero.
-  const ModelTopology& topo = model.topology();
   for (size_t b = 0; b + 1 < ws.rowRunStart.size(); ++b) {
     const int b0 = ws.rowRunStart[b], b1 = ws.rowRunStart[b + 1];
-    for (int r = b0; r < b1; ++r) {
-      auto at = ws.jacobianT.col(r);  // zero off the row's segments, which the model fixes
-      forRowSegments(topo, ws, r, [&](int lo, int hi) {
-        at.segment(lo, hi - lo) = data.constraintJacobian.row(r).segment(lo, hi - lo).transpose();
-      });
-      ws.massInverseAt.col(r) = at;
-    }
+    for (int r = b0; r < b1; ++r) ws.massInverseAt.col(r) = ws.jacobianT.col(r);
     forRowSegments(topo, ws, b0, [&](int lo, int hi) {
       solveMassColumns(model, data, ws.massInverseAt.col(b0).data(), ws.massInverseAt.outerStride(), b1 - b0, lo, hi);
     });
