@@ -154,6 +154,8 @@ inline Vector3d bodyDirectionDisplacement(const Direction& dir, const Constraint
 /// h = n·(p_a − p_b) with the normal n = R_a n_a turning with the plane body a. The row is the
 /// force n on the plane body and −n on the point body, both at the point p_b (natural size ‖n_a‖).
 struct PointOnPlaneKind {
+  /// The rows of one contact on one pair of points (normal and two tangents) taken together.
+  static constexpr int kContactRows = 3;
   static ConstraintEval value(const Data& data, const Constraint& c) {
     const PointKin a = pointKin(data, c.a), b = pointKin(data, c.b);
     const PointKin n = directionKin(data, c.a.joint, c.direction);
@@ -194,6 +196,40 @@ struct PointOnPlaneKind {
     return {tn.p.dot(d) + n.p.dot(td), tn.v.dot(d) + n.v.dot(td) + tn.p.dot(dd) + n.p.dot(tdd),
             tn.a.dot(d) + n.a.dot(td) + 2.0 * (tn.v.dot(dd) + n.v.dot(tdd)) + tn.p.dot(ddd) + n.p.dot(tddd)};
   }
+  /// The values of `count` consecutive rows on one pair (samePair), value's operations with the
+  /// two points evaluated once.
+  template <class Out>
+  static void pairValues(const Data& data, const Constraint* rows, int count, Out&& out) {
+    const PointKin a = pointKin(data, rows[0].a), b = pointKin(data, rows[0].b);
+    const Vector3d d = a.p - b.p, dd = a.v - b.v, ddd = a.a - b.a;
+    for (int k = 0; k < count; ++k) {
+      const PointKin n = directionKin(data, rows[k].a.joint, rows[k].direction);
+      out(k, ConstraintEval{n.p.dot(d), n.v.dot(d) + n.p.dot(dd), n.a.dot(d) + 2.0 * n.v.dot(dd) + n.p.dot(ddd)});
+    }
+  }
+  /// Rows firstRow … firstRow + count − 1 of A for `count` ≤ kContactRows consecutive rows on one
+  /// pair (samePair): each row's force n_k on the plane body and −n_k on the point body, both at
+  /// p_b, with ∂p_b/∂q_j formed once for all the rows (addConstraintJacobianRow's sums otherwise);
+  /// bound(j) += ‖∂p_b/∂q_j‖ per side, which row k's natural scale ‖n_a,k‖ multiplies.
+  template <class Mat>
+  static void addPairJacobianRows(const Model& model, const Data& data, const Constraint* rows, int count, int firstRow,
+                                  Mat& A, Eigen::VectorXd& bound) {
+    auto& ws = detail::workspace(data);
+    const Vector3d pb = pointPosition(data, rows[0].b);
+    Vector3d n[kContactRows];
+    for (int k = 0; k < count; ++k) n[k] = bodyDirection(data, rows[k]);
+    for (int side = 0; side < 2; ++side) {
+      for (int j = side == 0 ? rows[0].a.joint : rows[0].b.joint; j != kWorld; j = model.joints()[j].parent) {
+        const Vector3d dp = lin(ws.S[j]) + ang(ws.S[j]).cross(pb);
+        for (int k = 0; k < count; ++k) {
+          const double g = n[k].dot(dp);
+          if (side == 0) A(firstRow + k, j) += g;
+          else A(firstRow + k, j) -= g;  // (−n)·dp, exactly
+        }
+        bound[j] += dp.norm();
+      }
+    }
+  }
   /// Whether rows x and y are point-on-plane rows on the same two body points (and plane body).
   static bool samePair(const Constraint& x, const Constraint& y) {
     return x.type == ConstraintType::kPointOnPlane && y.type == ConstraintType::kPointOnPlane && x.a.joint == y.a.joint &&
@@ -216,7 +252,6 @@ struct PointOnPlaneKind {
   /// constraintTangents' work for one contact: the tangents ev[k] of the rows rows[0 … count − 1]
   /// that lie on rows[0]'s pair (samePair; at most kContactRows of the `available` rows), the
   /// pair's tangent once; returns count. Out of line, as contactWrenchTangents.
-  static constexpr int kContactRows = 3;
   static __attribute__((noinline)) int contactTangents(const Data& data, const Direction& dir, const Constraint* rows,
                                                       int available, ConstraintEval* ev) {
     const PairTangent pt = pairTangent(data, dir, rows[0]);

@@ -13,13 +13,12 @@ DataWorkspace::DataWorkspace(const Model& model)
     // The factorizations are built at their size here (not assigned later); the body factors an
     // identity once because Eigen 3.4's size constructors leave the ComputationInfo flag
     // uninitialized, and copying a Data copies it (UBSan: invalid enum load).
-    : schurLLT(model.nc()),
-      schurLDLT(model.nc()),
+    : schurLDLT(model.nc()),
       basisQR(2 * model.nq(), model.nholonomic() + model.nc()) {
   const int n = model.nq(), m = model.nu(), nc = model.nc();
   const int nh = model.nholonomic();
   const int cols = 2 * n + m;
-  schurLLT.compute(Eigen::MatrixXd::Identity(nc, nc));
+  schurFactor = Eigen::MatrixXd::Identity(nc, nc);
   schurLDLT.compute(Eigen::MatrixXd::Identity(nc, nc));
   jointR.assign(n, Eigen::Matrix3d::Identity());
   jointP.assign(n, Eigen::Vector3d::Zero());
@@ -52,6 +51,7 @@ DataWorkspace::DataWorkspace(const Model& model)
   articulatedModel = suitsArticulatedFactor(model);
   articulatedColumns = Eigen::Matrix<double, 6, Eigen::Dynamic>::Zero(6, n);
   massInverseAt = Eigen::MatrixXd::Zero(n, nc);
+  jacobianT = Eigen::MatrixXd::Zero(n, nc);
   schur = Eigen::MatrixXd::Zero(nc, nc);
   correctionWork = Eigen::VectorXd::Zero(2 * nc * n + 2 * nc * nc + nc);
   correctionRuns.assign(static_cast<size_t>(nc), RowRun{});

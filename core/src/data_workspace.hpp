@@ -19,7 +19,6 @@ namespace trellis::detail {
 struct RowRun {
   int first, count;   ///< the group's rows first … first + count − 1 (relative to the group)
   int lo[2], len[2];  ///< the two coordinate segments of the rows (len 0: none)
-  int a;              ///< offset of the run's rows of A, stored compactly on the segments
 };
 
 struct DataWorkspace {
@@ -77,10 +76,11 @@ struct DataWorkspace {
 
   // ---- The KKT system [M Aᵀ; A 0] (dynamics.cpp) ----------------------------------------------
   Eigen::MatrixXd massInverseAt;         ///< n×nc: M⁻¹ Aᵀ
+  Eigen::MatrixXd jacobianT;             ///< n×nc: Aᵀ on each row's segments, 0 elsewhere (factorizeKkt)
   Eigen::MatrixXd schur;                 ///< nc×nc: D A M⁻¹ Aᵀ D, rows normalized by D
   Eigen::VectorXd constraintScale;       ///< nc: largest possible ‖A_r‖ (see factorizeKkt)
   Eigen::VectorXd schurScale;            ///< nc: D = 1 / constraintScale
-  Eigen::LLT<Eigen::MatrixXd> schurLLT;
+  Eigen::MatrixXd schurFactor;           ///< nc×nc: Ŝ = L Lᵀ, L in the lower triangle, Lᵀ in the strict upper (factorizeKkt)
   Eigen::VectorXd correctionWork;        ///< ≥ nc n + 2 nc² + nc: one row group's operands (correctForConstraints)
   std::vector<RowRun> correctionRuns;    ///< nc: one group's runs of rows (correctForConstraints)
   /// nc: the coordinates [rowGapLo[r], rowGapHi[r]) inside the range [rowLo[r], rowHi[r]) of

@@ -99,6 +99,32 @@ void addConfigurationForces(const Model& model, const Eigen::VectorXd& q, const 
   forEachForceElement(model, [&](auto kind, const auto& e, size_t) { decltype(kind)::generalizedForce(q, dq, u, e, Q); });
 }
 
+namespace {
+/// evaluateConstraints for a contact's rows from row r on (up to three point-on-plane rows on one
+/// pair of points): the points once, ∂p_b/∂q_j once for all rows; row k's scale is ‖n_a,k‖ times
+/// the pair's ‖Σ_sides ‖∂p_b/∂q_j‖‖. Returns the row after them. Out of line: inlined, it cost
+/// the models without contacts ~100 instructions per call (callgrind, planar 20-chain).
+__attribute__((noinline)) int evaluateContactRows(const Model& model, Data& data, int r, Eigen::VectorXd* h,
+                                                  Eigen::VectorXd* hdot, Eigen::VectorXd* c, Eigen::MatrixXd* A) {
+  auto& ws = detail::workspace(data);
+  const auto& cs = model.constraints();
+  int end = r + 1;
+  while (end < model.nc() && end - r < PointOnPlaneKind::kContactRows && PointOnPlaneKind::samePair(cs[r], cs[end])) ++end;
+  PointOnPlaneKind::pairValues(data, &cs[r], end - r, [&](int k, const ConstraintEval& e) {
+    if (h) (*h)[r + k] = e.h;
+    if (hdot) (*hdot)[r + k] = e.hdot;
+    if (c) (*c)[r + k] = e.c;
+  });
+  if (A) {
+    ws.tmpN.setZero();
+    PointOnPlaneKind::addPairJacobianRows(model, data, &cs[r], end - r, r, *A, ws.tmpN);
+    const double scale = ws.tmpN.norm();
+    for (int k = r; k < end; ++k) ws.constraintScale[k] = cs[k].direction.norm() * scale;
+  }
+  return end;
+}
+}  // namespace
+
 void evaluateConstraints(const Model& model, Data& data, Eigen::VectorXd* h, Eigen::VectorXd* hdot,
                          Eigen::VectorXd* c, Eigen::MatrixXd* A) {
   auto& ws = detail::workspace(data);
@@ -123,6 +149,10 @@ void evaluateConstraints(const Model& model, Data& data, Eigen::VectorXd* h, Eig
       r = end - 1;
       continue;
     }
+    if (cs[r].type == ConstraintType::kPointOnPlane) {
+      r = evaluateContactRows(model, data, r, h, hdot, c, A) - 1;
+      continue;
+    }
     const ConstraintEval e = evaluateConstraint(data, cs[r]);
     if (h) (*h)[r] = e.h;
     if (hdot) (*hdot)[r] = e.hdot;
@@ -136,6 +166,84 @@ void evaluateConstraints(const Model& model, Data& data, Eigen::VectorXd* h, Eig
     }
   }
 }
+
+namespace {
+/// out(k, l) = a_k · u_l over the coordinate ranges cut[0 … nCut) for the K columns a_k = a + k lda
+/// and the L columns u_l = u + l ldu, two coordinates per step: the K + L columns share their
+/// loads (a contact's 3 rows against another's in 9 running sums).
+template <int K, int L>
+void crossDots(const double* a, Eigen::Index lda, const double* u, Eigen::Index ldu, const int (*cut)[2], int nCut,
+               double (*out)[3]) {
+  Pack acc[K][L];
+  double tail[K][L];
+  for (int k = 0; k < K; ++k)
+    for (int l = 0; l < L; ++l) {
+      acc[k][l] = Pack::Zero();
+      tail[k][l] = 0.0;
+    }
+  for (int c = 0; c < nCut; ++c) {
+    int i = cut[c][0];
+    for (; i + 1 < cut[c][1]; i += 2) {
+      Pack ak[K];
+      for (int k = 0; k < K; ++k) ak[k] = loadPack(a + k * lda + i);
+      for (int l = 0; l < L; ++l) {
+        const Pack ul = loadPack(u + l * ldu + i);
+        for (int k = 0; k < K; ++k) acc[k][l] += ak[k] * ul;
+      }
+    }
+    if (i < cut[c][1])
+      for (int k = 0; k < K; ++k)
+        for (int l = 0; l < L; ++l) tail[k][l] += a[k * lda + i] * u[l * ldu + i];
+  }
+  for (int k = 0; k < K; ++k)
+    for (int l = 0; l < L; ++l) out[k][l] = acc[k][l][0] + acc[k][l][1] + tail[k][l];
+}
+/// crossDots for K, L in 1 … 3 at run time.
+void crossDots(int k, int l, const double* a, Eigen::Index lda, const double* u, Eigen::Index ldu, const int (*cut)[2],
+               int nCut, double (*out)[3]) {
+  switch (3 * (k - 1) + l - 1) {
+    case 0: crossDots<1, 1>(a, lda, u, ldu, cut, nCut, out); break;
+    case 1: crossDots<1, 2>(a, lda, u, ldu, cut, nCut, out); break;
+    case 2: crossDots<1, 3>(a, lda, u, ldu, cut, nCut, out); break;
+    case 3: crossDots<2, 1>(a, lda, u, ldu, cut, nCut, out); break;
+    case 4: crossDots<2, 2>(a, lda, u, ldu, cut, nCut, out); break;
+    case 5: crossDots<2, 3>(a, lda, u, ldu, cut, nCut, out); break;
+    case 6: crossDots<3, 1>(a, lda, u, ldu, cut, nCut, out); break;
+    case 7: crossDots<3, 2>(a, lda, u, ldu, cut, nCut, out); break;
+    default: crossDots<3, 3>(a, lda, u, ldu, cut, nCut, out); break;
+  }
+}
+/// S = L Lᵀ for the symmetric positive definite S (its lower triangle read), L into the lower
+/// triangle of F and Lᵀ into its strict upper one (each row of L then contiguous too: the run
+/// kernel's forward substitution reads it in place), left-looking column by column,
+/// two earlier columns per pass: L(k:, k) = (S(k:, k) − Σ_{t<k} L(k, t) L(k:, t)) / L(k, k).
+/// False at a pivot not above 0 (or NaN): S is not numerically positive definite. Eigen's LLT
+/// spent ~6× the instructions on the hand with a ball's 15 rows (the set-up of its blocked and
+/// matrix–vector kernels per column, and an l1 norm only its rcond() reads).
+bool choleskyLower(const Eigen::MatrixXd& S, Eigen::MatrixXd& F) {
+  const int n = static_cast<int>(S.rows());
+  for (int k = 0; k < n; ++k) {
+    double* y = &F(k, k);
+    const double* s = &S(k, k);
+    const int len = n - k;
+    int i = 0;
+    for (; i + 1 < len; i += 2) storePack(y + i, loadPack(s + i));
+    if (i < len) y[i] = s[i];
+    int t = 0;
+    for (; t + 1 < k; t += 2) subtractScaled2(y, &F(k, t), F(k, t), &F(k, t + 1), F(k, t + 1), len);
+    if (t < k) subtractScaled(y, &F(k, t), F(k, t), len);
+    const double d = y[0];
+    if (!(d > 0.0)) return false;
+    const double l = std::sqrt(d), r = 1.0 / l;
+    const Pack rv = Pack::Constant(r);
+    for (i = 1; i + 1 < len; i += 2) storePack(y + i, loadPack(y + i) * rv);
+    if (i < len) y[i] *= r;
+    y[0] = l;
+    for (i = 1; i < len; ++i) F(k, k + i) = y[i];
+  }
+  return true;
+}
+}  // namespace
 
 void factorizeKkt(const Model& model, Data& data) {
   auto& ws = detail::workspace(data);
@@ -174,11 +282,19 @@ void factorizeKkt(const Model& model, Data& data) {
   // gradient itself vanishes (a distance constraint whose points coincide). s_r = 0: no joint
   // moves the row's points at all. (2) Are the rows dependent? The Schur complement scaled to
   // unit diagonal, Ŝ = D A M⁻¹ Aᵀ D, answers that independently of how each h is scaled.
+  // Aᵀ, contiguous (ws.jacobianT: zero off each row's segments, which the model fixes).
+  const ModelTopology& topo = model.topology();
+  for (int r = 0; r < nc; ++r) {
+    auto at = ws.jacobianT.col(r);
+    forRowSegments(topo, ws, r, [&](int lo, int hi) {
+      at.segment(lo, hi - lo) = data.constraintJacobian.row(r).segment(lo, hi - lo).transpose();
+    });
+  }
   double kinematic = 1.0;
   int worstRow = 0;
   for (int r = 0; r < nc; ++r) {
     const double s = ws.constraintScale[r];
-    const double k = s > 0 ? data.constraintJacobian.row(r).norm() / s : 0.0;
+    const double k = s > 0 ? ws.jacobianT.col(r).norm() / s : 0.0;  // ‖A_r‖
     if (k < kinematic) {
       kinematic = k;
       worstRow = r;
@@ -224,33 +340,46 @@ void factorizeKkt(const Model& model, Data& data) {
   // rows of a run in one sweep: solveMassColumns; a contact between a digit and a free ball
   // solves on those two blocks only); then A M⁻¹ Aᵀ over the segments two rows share, whose
   // entries between groups of rows on disjoint blocks are exactly zero.
-  const ModelTopology& topo = model.topology();
   for (size_t b = 0; b + 1 < ws.rowRunStart.size(); ++b) {
     const int b0 = ws.rowRunStart[b], b1 = ws.rowRunStart[b + 1];
-    for (int r = b0; r < b1; ++r) {
-      auto x = ws.massInverseAt.col(r);
-      x.setZero();
-      forRowSegments(topo, ws, r, [&](int lo, int hi) {
-        x.segment(lo, hi - lo) = data.constraintJacobian.row(r).segment(lo, hi - lo).transpose();
-      });
-    }
+    for (int r = b0; r < b1; ++r) ws.massInverseAt.col(r) = ws.jacobianT.col(r);
     forRowSegments(topo, ws, b0, [&](int lo, int hi) {
       solveMassColumns(model, data, ws.massInverseAt.col(b0).data(), ws.massInverseAt.outerStride(), b1 - b0, lo, hi);
     });
   }
+  // A M⁻¹ Aᵀ(r, s) = A_r · (M⁻¹Aᵀ)_s over the segments the two rows share, run pair by run pair
+  // (the rows of a run share their segments: the intersections once per pair of runs, 15 for the
+  // hand's 5 contacts instead of 120 row pairs), up to 3 rows against 3 in one pass (crossDots),
+  // on the contiguous copy Aᵀ. Only the lower triangle s ≤ r: the scaling below mirrors it.
   ws.schur.setZero();
+  const double* At = ws.jacobianT.data();
+  const double* Ud = ws.massInverseAt.data();
+  const Eigen::Index ld = ws.jacobianT.outerStride(), ldU = ws.massInverseAt.outerStride();
   for (size_t g = 0; g + 1 < topo.rowGroupStart.size(); ++g) {
-    for (int r = topo.rowGroupStart[g]; r < topo.rowGroupStart[g + 1]; ++r) {
-      for (int s = topo.rowGroupStart[g]; s <= r; ++s) {
-        double v = 0.0;
-        forRowSegments(topo, ws, r, [&](int rlo, int rhi) {
-          forRowSegments(topo, ws, s, [&](int slo, int shi) {
+    const int g0 = topo.rowGroupStart[g], g1 = topo.rowGroupStart[g + 1];
+    size_t first = 0;  // the group's first run
+    while (ws.rowRunStart[first] < g0) ++first;
+    for (size_t R = first; ws.rowRunStart[R] < g1; ++R) {
+      for (size_t S = first; S <= R; ++S) {
+        int cut[4][2], nCut = 0;
+        forRowSegments(topo, ws, ws.rowRunStart[R], [&](int rlo, int rhi) {
+          forRowSegments(topo, ws, ws.rowRunStart[S], [&](int slo, int shi) {
             const int lo = std::max(rlo, slo), hi = std::min(rhi, shi);
-            if (hi > lo) v += data.constraintJacobian.row(r).segment(lo, hi - lo).dot(ws.massInverseAt.col(s).segment(lo, hi - lo));
+            if (hi > lo) {
+              cut[nCut][0] = lo;
+              cut[nCut++][1] = hi;
+            }
           });
         });
-        ws.schur(r, s) = v;
-        ws.schur(s, r) = v;
+        const int rEnd = ws.rowRunStart[R + 1], sEnd = ws.rowRunStart[S + 1];
+        for (int r = ws.rowRunStart[R]; r < rEnd; r += 3)
+          for (int s = ws.rowRunStart[S]; s < sEnd && (R != S || s <= r); s += 3) {
+            const int nr = std::min(3, rEnd - r), ns = std::min(3, sEnd - s);
+            double out[3][3];
+            crossDots(nr, ns, At + r * ld, ld, Ud + s * ldU, ldU, cut, nCut, out);
+            for (int k = 0; k < nr; ++k)
+              for (int l = 0; l < ns && s + l <= r + k; ++l) ws.schur(r + k, s + l) = out[k][l];
+          }
       }
     }
   }
@@ -265,15 +394,19 @@ void factorizeKkt(const Model& model, Data& data) {
     ws.schurScale[r] = s > 0 ? 1.0 / std::sqrt(s) : s == 0.0 ? 0.0 : 1.0;
     zeroRows += s == 0.0;
   }
-  ws.schur = ws.schurScale.asDiagonal() * ws.schur * ws.schurScale.asDiagonal();
+  for (int k = 0; k < nc; ++k) {
+    double* col = &ws.schur(0, k);
+    const double dk = ws.schurScale[k];
+    for (int i = k; i < nc; ++i) ws.schur(k, i) = col[i] = ws.schurScale[i] * col[i] * dk;
+  }
   if (zeroRows > 0)
     for (int r = 0; r < nc; ++r)
       if (ws.schurScale[r] == 0.0) ws.schur(r, r) = 1.0;
-  ws.schurLLT.compute(ws.schur);
+  const bool definite = choleskyLower(ws.schur, ws.schurFactor);
   const double sScale = ws.schur.diagonal().maxCoeff();
-  if (ws.schurLLT.info() == Eigen::Success && sScale > 0) {
-    // (min L_ii / max L_ii)² tracks λ_min/λ_max of Ŝ without the allocations of LLT::rcond().
-    const auto diag = ws.schurLLT.matrixLLT().diagonal();
+  if (definite && sScale > 0) {
+    // (min L_ii / max L_ii)² tracks λ_min/λ_max of Ŝ.
+    const auto diag = ws.schurFactor.diagonal();
     const double ratio = diag.minCoeff() / diag.maxCoeff();
     const double rcond = ratio * ratio;
     st.constraintConditioning = std::min(kinematic, rcond);
@@ -466,37 +599,49 @@ inline void inThrees(int count, F&& f) {
   if (count - k == 1) f(std::integral_constant<int, 1>{}, k);
 }
 
+/// One row group's operands for the run kernel (correctRunColumns), all read in place: row r of
+/// A_g is column g0 + r of Aᵀ (ws.jacobianT, at a + r aStride), column r of (M⁻¹Aᵀ)_g at
+/// u + r uStride, the group's block of the Cholesky factor of Ŝ at f (column stride fStride: row
+/// r of L in the strict upper triangle of column r, column r below its diagonal; choleskyLower),
+/// 1 / L_rr at lInv.
+struct RunColumns {
+  int ng;
+  const double *a, *u, *f, *lInv, *d;
+  Eigen::Index aStride, uStride, fStride;
+  double* t;                ///< ng entries of workspace
+  double* x;                ///< X, column 0 (coordinate 0)
+  Eigen::Index xStride;
+  double* lambda;           ///< C on the group's rows, column 0; overwritten with Λ
+  Eigen::Index lStride, cols;
+};
+
 /// correctGroupColumns for a group whose rows live on different segments (loops across the tree: each
 /// contact row on one digit's block and the free ball's, not on the other digits'): the group's
-/// rows in runs on the same segments (DataWorkspace::rowRunStart), each run's rows of A stored
-/// compactly on its segments (at a + run.a, row k at k (len[0] + len[1])), M⁻¹Aᵀ and X read in
-/// place on those segments only (RowRun, data_workspace.hpp). Same operations as
-/// correctGroupColumns without the zeros.
-/// Here g.a holds the compact rows, g.u and g.x point at coordinate 0.
-void correctRunColumns(const GroupColumns& g, const RowRun* runs, int nRuns) {
+/// rows in runs on the same segments (DataWorkspace::rowRunStart), A, M⁻¹Aᵀ and X read in place
+/// on those segments only (RowRun, data_workspace.hpp). Same operations as correctGroupColumns
+/// without the zeros.
+void correctRunColumns(const RunColumns& g, const RowRun* runs, int nRuns) {
   const int ng = g.ng;
   double* t = g.t;
-  const double* lt = t + ng;  // Lᵀ row-major: lt[r ng + q] = L(q, r) for q > r
   double* x = g.x;
   double* lam = g.lambda;
   for (Eigen::Index c = 0; c < g.cols; ++c, x += g.xStride, lam += g.lStride) {
     for (int b = 0; b < nRuns; ++b) {
       const RowRun& run = runs[b];
-      const int w = run.len[0] + run.len[1];
       double* tb = t + run.first;
       for (int k = 0; k < run.count; ++k) tb[k] = 0.0;
       inThrees(run.count, [&](auto nb, int k) {
-        const double* a = g.a + run.a + k * w;
-        runDots<decltype(nb)::value>(a, w, x + run.lo[0], run.len[0], tb + k);
-        runDots<decltype(nb)::value>(a + run.len[0], w, x + run.lo[1], run.len[1], tb + k);
+        const double* a = g.a + (run.first + k) * g.aStride;
+        runDots<decltype(nb)::value>(a + run.lo[0], g.aStride, x + run.lo[0], run.len[0], tb + k);
+        runDots<decltype(nb)::value>(a + run.lo[1], g.aStride, x + run.lo[1], run.len[1], tb + k);
       });
       for (int k = 0; k < run.count; ++k) tb[k] = lam[run.first + k] - tb[k];
     }
     // Λ = D L⁻ᵀ L⁻¹ D t, as in correctGroupColumns; each substitution step a contiguous dot
-    // product, with Lᵀ stored row by row beside L (a group of 15 rows: 105 terms each way).
-    for (int r = 0; r < ng; ++r) t[r] = (t[r] * g.d[r] - dotRun(g.l + r * ng, t, r)) * g.l[r * ng + r];
+    // product (a row of L, then a column; a group of 15 rows: 105 terms each way).
+    for (int r = 0; r < ng; ++r) t[r] = (t[r] * g.d[r] - dotRun(g.f + r * g.fStride, t, r)) * g.lInv[r];
     for (int r = ng - 1; r >= 0; --r) {
-      t[r] = (t[r] - dotRun(lt + r * ng + r + 1, t + r + 1, ng - r - 1)) * g.l[r * ng + r];
+      t[r] = (t[r] - dotRun(g.f + r * g.fStride + r + 1, t + r + 1, ng - r - 1)) * g.lInv[r];
       lam[r] = t[r] * g.d[r];
     }
     for (int b = 0; b < nRuns; ++b) {
@@ -516,34 +661,27 @@ void correctGroupInRuns(const Model& model, Data& data, double* X, Eigen::Index 
                         double* Lambda, Eigen::Index lStride, int g0, int g1) {
   auto& ws = detail::workspace(data);
   const ModelTopology& topo = model.topology();
-  const Eigen::MatrixXd &A = data.constraintJacobian, &U = ws.massInverseAt, &LL = ws.schurLLT.matrixLLT();
+  const Eigen::MatrixXd &At = ws.jacobianT, &U = ws.massInverseAt, &F = ws.schurFactor;
   const int ng = g1 - g0;
-  double* ag = ws.correctionWork.data();  // the runs' rows of A, compact (≤ ng n)
-  double* sg = ag + ng * model.nq();      // the group's Cholesky factor (ng²), t (ng), Lᵀ (ng²)
+  double* t = ws.correctionWork.data();  // t (ng), then 1 / L_rr (ng)
+  double* lInv = t + ng;
+  for (int r = 0; r < ng; ++r) lInv[r] = 1.0 / F(g0 + r, g0 + r);
   RowRun* runs = ws.correctionRuns.data();
-  int nRuns = 0, a = 0;
+  int nRuns = 0;
   for (size_t b = 0; b + 1 < ws.rowRunStart.size(); ++b) {
     const int b0 = ws.rowRunStart[b], b1 = ws.rowRunStart[b + 1];
     if (b0 < g0 || b0 >= g1) continue;
     RowRun& run = runs[nRuns++];
-    run = RowRun{b0 - g0, b1 - b0, {0, 0}, {0, 0}, a};
+    run = RowRun{b0 - g0, b1 - b0, {0, 0}, {0, 0}};
     int s = 0;
     forRowSegments(topo, ws, b0, [&](int lo, int hi) {
       run.lo[s] = lo;
       run.len[s++] = hi - lo;
     });
-    for (int r = b0; r < b1; ++r)
-      for (int k = 0; k < 2; ++k)
-        for (int i = 0; i < run.len[k]; ++i) ag[a++] = A(r, run.lo[k] + i);
   }
-  double* lt = sg + ng * ng + ng;  // after t: Lᵀ, row-major
-  for (int r = 0; r < ng; ++r)
-    for (int t = 0; t < ng; ++t) {
-      sg[r * ng + t] = t < r ? LL(g0 + r, g0 + t) : t == r ? 1.0 / LL(g0 + r, g0 + r) : 0.0;
-      lt[r * ng + t] = t > r ? LL(g0 + t, g0 + r) : 0.0;
-    }
-  const GroupColumns g{ng, 0, ag, U.data() + g0 * U.outerStride(), sg, ws.schurScale.data() + g0, U.outerStride(),
-                       sg + ng * ng, X, xStride, Lambda + g0, lStride, cols};
+  const RunColumns g{ng, At.data() + g0 * At.outerStride(), U.data() + g0 * U.outerStride(), &F(g0, g0), lInv,
+                     ws.schurScale.data() + g0, At.outerStride(), U.outerStride(), F.outerStride(), t, X, xStride,
+                     Lambda + g0, lStride, cols};
   correctRunColumns(g, runs, nRuns);
 }
 
@@ -571,7 +709,7 @@ void correctForConstraints(const Model& model, Data& data, Eigen::Ref<Eigen::Mat
     // factor of Ŝ; every operand is a few contiguous numbers (a digit: 3 rows on 4 coordinates).
     const bool runGroups = ws.anyGroupInRuns && ws.correctInRuns;
     if (runGroups) correctGroupsInRuns(model, data, X.data(), X.outerStride(), X.cols(), Lambda.data(), Lambda.outerStride());
-    const Eigen::MatrixXd &A = data.constraintJacobian, &U = ws.massInverseAt, &LL = ws.schurLLT.matrixLLT();
+    const Eigen::MatrixXd &A = data.constraintJacobian, &U = ws.massInverseAt, &LL = ws.schurFactor;
     for (size_t g = 0; g + 1 < model.topology().rowGroupStart.size(); ++g) {
       const int g0 = model.topology().rowGroupStart[g], g1 = model.topology().rowGroupStart[g + 1], ng = g1 - g0;
       int lo = model.nq(), hi = 0;

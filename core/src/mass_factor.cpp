@@ -9,23 +9,6 @@
 
 namespace trellis::detail {
 namespace {
-/// y −= a x over len entries.
-inline void subtractScaled(double* y, const double* x, double a, int len) {
-  const Pack av = Pack::Constant(a);
-  int t = 0;
-  for (; t + 3 < len; t += 4) {
-    storePack(y + t, loadPack(y + t) - av * loadPack(x + t));
-    storePack(y + t + 2, loadPack(y + t + 2) - av * loadPack(x + t + 2));
-  }
-  for (; t < len; ++t) y[t] -= a * x[t];
-}
-/// y −= a0 x0 + a1 x1 over len entries (two columns per pass over y).
-inline void subtractScaled2(double* y, const double* x0, double a0, const double* x1, double a1, int len) {
-  const Pack a0v = Pack::Constant(a0), a1v = Pack::Constant(a1);
-  int t = 0;
-  for (; t + 1 < len; t += 2) storePack(y + t, loadPack(y + t) - a0v * loadPack(x0 + t) - a1v * loadPack(x1 + t));
-  for (; t < len; ++t) y[t] -= a0 * x0[t] + a1 * x1[t];
-}
 /// The four dot products of columns (a0, a1) with (b0, b1) over len entries, in one pass:
 /// out = {a0·b0, a1·b0, a0·b1, a1·b1}.
 inline void dot2x2(const double* a0, const double* a1, const double* b0, const double* b1, int len, double* out) {
@@ -316,7 +299,7 @@ namespace {
 /// are the running bias and acceleration of the parent): the columns share the loads of S_i,
 /// U_i, D_i and their recursions run side by side instead of one after the other.
 template <int K>
-void solveChainArticulated(const DataWorkspace& ws, double* x, Eigen::Index stride, int bs, int be) {
+__attribute__((noinline)) void solveChainArticulated(const DataWorkspace& ws, double* x, Eigen::Index stride, int bs, int be) {
   Pack p[K][3], a[K][3];
   for (int c = 0; c < K; ++c)
     for (int t = 0; t < 3; ++t) p[c][t] = a[c][t] = Pack::Zero();
@@ -355,11 +338,83 @@ void solveChainArticulated(const DataWorkspace& ws, double* x, Eigen::Index stri
 }
 }  // namespace
 
+namespace {
+/// x ← M_b⁻¹ x, one column, on an unbranched block of NB < kDenseChain joints under the tree
+/// factor (h: the block's storage from (bs, bs), column stride ld): solveTreeBlock with its one
+/// run per joint (the ancestors of i are 0 … i − 1) fixed at compile time, same operations.
+template <int NB>
+inline void solveChainTreeBlock(const double* h, Eigen::Index ld, double* x) {
+#pragma GCC unroll 8
+  for (int i = NB - 1; i > 0; --i) subtractScaled(x, h + i * ld, x[i], i);
+#pragma GCC unroll 8
+  for (int i = 0; i < NB; ++i) x[i] /= h[i * ld + i];
+#pragma GCC unroll 8
+  for (int i = 1; i < NB; ++i) x[i] -= dotRun(h + i * ld, x, i);
+}
+/// The same on an unbranched block of nb ≥ kDenseChain joints under its dense factor L Lᵀ
+/// (f: from (bs, bs)): L y = x in axpy form, then Lᵀ z = y in dot form, on contiguous columns.
+inline void solveChainDenseBlock(const double* f, Eigen::Index ld, int nb, double* x) {
+  for (int k = 0; k < nb; ++k) {
+    const double* fk = f + k * ld;
+    x[k] /= fk[k];
+    subtractScaled(x + k + 1, fk + k + 1, x[k], nb - k - 1);
+  }
+  for (int k = nb - 1; k >= 0; --k) x[k] = (x[k] - dotRun(f + k * ld + k + 1, x + k + 1, nb - k - 1)) / f[k * ld + k];
+}
+/// solveChainDenseBlock for NB joints, unrolled (a free body's 6: −4.7k instructions of the
+/// hand with a ball's q̈, which solves 16 columns on it; the tree kernels above likewise).
+template <int NB>
+inline void solveChainDenseBlock(const double* f, Eigen::Index ld, double* x) {
+#pragma GCC unroll 8
+  for (int k = 0; k < NB; ++k) {
+    const double* fk = f + k * ld;
+    x[k] /= fk[k];
+    subtractScaled(x + k + 1, fk + k + 1, x[k], NB - k - 1);
+  }
+#pragma GCC unroll 8
+  for (int k = NB - 1; k >= 0; --k) x[k] = (x[k] - dotRun(f + k * ld + k + 1, x + k + 1, NB - k - 1)) / f[k * ld + k];
+}
+/// Every column of solveMassColumns on one block: the block's kind is looked at once, the digit
+/// and ball sizes get fixed loops (the hand's contacts: 3 columns on a 4-joint digit and on the
+/// 6-joint free ball each).
+template <class F>
+inline void forColumns(double* x, Eigen::Index stride, int cols, F&& f) {
+  for (int c = 0; c < cols; ++c) f(x + c * stride);
+}
+}  // namespace
+
+/// solveMassColumns with the tree and dense factors: block by block, all columns in each (only
+/// the blocks inside [lo, hi): a contact's rows touch two of the hand's six).
+static inline __attribute__((always_inline)) void solveFactorColumns(const Model& model, Data& data, double* x, Eigen::Index stride, int cols, int lo, int hi) {
+  const ModelTopology& topo = model.topology();
+  const Eigen::MatrixXd& H = detail::workspace(data).massFactor;
+  const Eigen::Index ld = H.outerStride();
+  for (size_t b = 0; b + 1 < topo.blockStart.size(); ++b) {
+    const int bs = topo.blockStart[b], be = topo.blockStart[b + 1];
+    if (be <= lo || bs >= hi) continue;
+    const double* h = &H(bs, bs);
+    double* xb = x + bs;
+    if (topo.runStart[static_cast<size_t>(be - 1)] != bs) {
+      forColumns(xb, stride, cols, [&](double* y) { solveTreeBlock(model, data, y - bs, bs, be); });
+      continue;
+    }
+    static_assert(kDenseChain == 6, "the cases below follow denseBlock");
+    switch (be - bs) {  // unbranched: the tree factor below kDenseChain joints, else the dense one
+      case 1: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<1>(h, ld, y); }); break;
+      case 2: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<2>(h, ld, y); }); break;
+      case 3: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<3>(h, ld, y); }); break;
+      case 4: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<4>(h, ld, y); }); break;
+      case 5: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<5>(h, ld, y); }); break;
+      case 6: forColumns(xb, stride, cols, [&](double* y) { solveChainDenseBlock<6>(h, ld, y); }); break;
+      default: forColumns(xb, stride, cols, [&](double* y) { solveChainDenseBlock(h, ld, be - bs, y); }); break;
+    }
+  }
+}
+
 void solveMassColumns(const Model& model, Data& data, double* x, Eigen::Index stride, int cols, int lo, int hi) {
   auto& ws = detail::workspace(data);
   if (!ws.articulatedCurrent) {
-    for (int c = 0; c < cols; ++c)
-      solveMassVector(model, data, Eigen::Map<Eigen::VectorXd>(x + c * stride, model.nq()), lo, hi);
+    solveFactorColumns(model, data, x, stride, cols, lo, hi);
     return;
   }
   for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
@@ -373,27 +428,7 @@ void solveMassColumns(const Model& model, Data& data, double* x, Eigen::Index st
 }
 
 void solveMassVector(const Model& model, Data& data, Eigen::Ref<Eigen::VectorXd> x, int lo, int hi) {
-  auto& ws = detail::workspace(data);
-  if (ws.articulatedCurrent) {
-    solveMassColumns(model, data, x.data(), x.size(), 1, lo, hi);
-    return;
-  }
-  for (size_t b = 0; b + 1 < model.topology().blockStart.size(); ++b) {
-    const int bs = model.topology().blockStart[b], be = model.topology().blockStart[b + 1];
-    if (be <= lo || bs >= hi) continue;
-    if (denseBlock(model, bs, be)) {
-      // L y = x in axpy form, then Lᵀ z = y in dot form, both on contiguous columns of L.
-      const Eigen::MatrixXd& F = ws.massFactor;
-      double* xp = x.data();
-      for (int k = bs; k < be; ++k) {
-        xp[k] /= F(k, k);
-        subtractScaled(xp + k + 1, &F(0, k) + k + 1, xp[k], be - k - 1);
-      }
-      for (int k = be - 1; k >= bs; --k) xp[k] = (xp[k] - dotRun(&F(0, k) + k + 1, xp + k + 1, be - k - 1)) / F(k, k);
-    } else {
-      solveTreeBlock(model, data, x.data(), bs, be);
-    }
-  }
+  solveMassColumns(model, data, x.data(), x.size(), 1, lo, hi);
 }
 
 bool blocksAreChains(const Model& model) {

@@ -30,4 +30,22 @@ inline double dotRun(const double* x, const double* y, int len) {
   return s;
 }
 
+/// y −= a x over len entries.
+inline void subtractScaled(double* y, const double* x, double a, int len) {
+  const Pack av = Pack::Constant(a);
+  int t = 0;
+  for (; t + 3 < len; t += 4) {
+    storePack(y + t, loadPack(y + t) - av * loadPack(x + t));
+    storePack(y + t + 2, loadPack(y + t + 2) - av * loadPack(x + t + 2));
+  }
+  for (; t < len; ++t) y[t] -= a * x[t];
+}
+/// y −= a0 x0 + a1 x1 over len entries (two columns per pass over y).
+inline void subtractScaled2(double* y, const double* x0, double a0, const double* x1, double a1, int len) {
+  const Pack a0v = Pack::Constant(a0), a1v = Pack::Constant(a1);
+  int t = 0;
+  for (; t + 1 < len; t += 2) storePack(y + t, loadPack(y + t) - a0v * loadPack(x0 + t) - a1v * loadPack(x1 + t));
+  for (; t < len; ++t) y[t] -= a0 * x0[t] + a1 * x1[t];
+}
+
 }  // namespace trellis::detail
