@@ -337,7 +337,11 @@ TEST_CASE("simulation: the structured Newton solve equals the dense (I − γJ)�
       const VectorXd expected = newton.partialPivLu().solve(r);
       INFO("gamma = " << gamma);
       CHECK((z - expected).cwiseAbs().maxCoeff() <= 1e-12 * expected.cwiseAbs().maxCoeff());
-      CHECK((newton * z - r).cwiseAbs().maxCoeff() <= 1e-12 * r.cwiseAbs().maxCoeff());
+      // The residual as a backward error, entry by entry against |N||z| + |r| (what rounding in a
+      // stable solve is proportional to; |r| alone is not when γ|J| ≫ 1: the free-ball hand's
+      // J has entries to 7e4, and |z| ≈ 100 |r| at γ = 0.05).
+      const VectorXd scale = newton.cwiseAbs() * z.cwiseAbs() + r.cwiseAbs();
+      CHECK(((newton * z - r).cwiseAbs().array() / scale.array()).maxCoeff() <= 1e-13);
     }
     REQUIRE(sys.preconditionerSetup(t, ym, fm, true, &updated, gammas[2]) == 0);
     CHECK_FALSE(updated);
