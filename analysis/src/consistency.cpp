@@ -52,21 +52,9 @@ class Integrand final : public detail::OdeSystem {
 
   int rhs(double t, detail::ConstVectorMap y, detail::VectorMap ydot) override {
     const int n = model_.nq();
-    q_ = y.head(n);
-    dq_ = y.tail(n);
-    if (!q_.allFinite() || !dq_.allFinite()) {
-      if (failure.empty()) failure = "the state became non-finite at t = " + std::to_string(t);
-      return 1;
-    }
-    reference_.evaluate(std::clamp(t, reference_.startTime(), reference_.endTime()));
+    if (!at(t, y)) return 1;
     const DynamicsStatus status = computeDynamics(model_, data_, q_, dq_, reference_.u());
-    if (!status.ok() || !data_.qdd.allFinite()) {
-      if (failure.empty()) {
-        failure = "the dynamics failed at t = " + std::to_string(t) + ": " +
-                  (status.message.empty() ? std::string("non-finite q''") : status.message);
-      }
-      return 1;
-    }
+    if (!status.ok() || !data_.qdd.allFinite()) return failed(t, "the dynamics", status, "non-finite q''");
     ydot.head(n) = dq_;
     ydot.tail(n) = data_.qdd;
     return 0;
@@ -77,24 +65,35 @@ class Integrand final : public detail::OdeSystem {
   bool hasJacobian() const override { return true; }
   bool secondOrder() const override { return true; }
   int jacobian(double t, detail::ConstVectorMap y, detail::ConstVectorMap, detail::MatrixMap J) override {
-    const int n = model_.nq();
-    q_ = y.head(n);
-    dq_ = y.tail(n);
-    if (!q_.allFinite() || !dq_.allFinite()) return 1;
-    reference_.evaluate(std::clamp(t, reference_.startTime(), reference_.endTime()));
+    if (!at(t, y)) return 1;
     const DynamicsStatus status = computeLinearization(model_, data_, q_, dq_, reference_.u());
-    if (!status.ok() || !data_.A.allFinite()) {
-      if (failure.empty()) {
-        failure = "the linearization failed at t = " + std::to_string(t) + ": " +
-                  (status.message.empty() ? std::string("non-finite A") : status.message);
-      }
-      return 1;
-    }
+    if (!status.ok() || !data_.A.allFinite()) return failed(t, "the linearization", status, "non-finite A");
     J = data_.A;
     return 0;
   }
 
  private:
+  /// q, q̇ from y and u(t) from the reference; false (failure set) for a non-finite state.
+  bool at(double t, detail::ConstVectorMap y) {
+    const int n = model_.nq();
+    q_ = y.head(n);
+    dq_ = y.tail(n);
+    if (!q_.allFinite() || !dq_.allFinite()) {
+      if (failure.empty()) failure = "the state became non-finite at t = " + std::to_string(t);
+      return false;
+    }
+    reference_.evaluate(std::clamp(t, reference_.startTime(), reference_.endTime()));
+    return true;
+  }
+  /// The first failure of an interval, kept (what failed, and why); 1: recoverable.
+  int failed(double t, const char* what, const DynamicsStatus& status, const char* nonFinite) {
+    if (failure.empty()) {
+      failure = std::string(what) + " failed at t = " + std::to_string(t) + ": " +
+                (status.message.empty() ? std::string(nonFinite) : status.message);
+    }
+    return 1;
+  }
+
   const Model& model_;
   ReferenceEvaluator& reference_;
   Data data_;
