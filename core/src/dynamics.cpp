@@ -100,28 +100,36 @@ void addConfigurationForces(const Model& model, const Eigen::VectorXd& q, const 
 }
 
 namespace {
-/// evaluateConstraints for a contact's rows from row r on (up to three point-on-plane rows on one
-/// pair of points): the points once, ∂p_b/∂q_j once for all rows; row k's scale is ‖n_a,k‖ times
-/// the pair's ‖Σ_sides ‖∂p_b/∂q_j‖‖. Returns the row after them. Out of line: inlined, it cost
-/// the models without contacts ~100 instructions per call (callgrind, planar 20-chain).
-__attribute__((noinline)) int evaluateContactRows(const Model& model, Data& data, int r, Eigen::VectorXd* h,
-                                                  Eigen::VectorXd* hdot, Eigen::VectorXd* c, Eigen::MatrixXd* A) {
+/// evaluateConstraints for the consecutive rows from row r on one pair of points (Kind::samePair;
+/// at most maxRows of them): the points and their gradients once for all rows; row k's scale is
+/// Kind's row factor (1 for a point row, ‖n_a,k‖ for a point-on-plane row) times the pair's
+/// ‖Σ_sides ‖∂p_b/∂q_j‖‖. Returns the row after them.
+template <class Kind>
+inline int evaluatePairRows(const Model& model, Data& data, int r, int maxRows, Eigen::VectorXd* h,
+                            Eigen::VectorXd* hdot, Eigen::VectorXd* c, Eigen::MatrixXd* A) {
   auto& ws = detail::workspace(data);
   const auto& cs = model.constraints();
   int end = r + 1;
-  while (end < model.nc() && end - r < PointOnPlaneKind::kContactRows && PointOnPlaneKind::samePair(cs[r], cs[end])) ++end;
-  PointOnPlaneKind::pairValues(data, &cs[r], end - r, [&](int k, const ConstraintEval& e) {
+  while (end < model.nc() && end - r < maxRows && Kind::samePair(cs[r], cs[end])) ++end;
+  Kind::pairValues(data, &cs[r], end - r, [&](int k, const ConstraintEval& e) {
     if (h) (*h)[r + k] = e.h;
     if (hdot) (*hdot)[r + k] = e.hdot;
     if (c) (*c)[r + k] = e.c;
   });
   if (A) {
     ws.tmpN.setZero();
-    PointOnPlaneKind::addPairJacobianRows(model, data, &cs[r], end - r, r, *A, ws.tmpN);
+    Kind::addPairJacobianRows(model, data, &cs[r], end - r, r, *A, ws.tmpN);
     const double scale = ws.tmpN.norm();
-    for (int k = r; k < end; ++k) ws.constraintScale[k] = cs[k].direction.norm() * scale;
+    for (int k = r; k < end; ++k)
+      ws.constraintScale[k] = std::is_same_v<Kind, PointOnPlaneKind> ? cs[k].direction.norm() * scale : scale;
   }
   return end;
+}
+/// The contact rows (up to three point-on-plane rows on one pair) out of line: inlined, they cost
+/// the models without contacts ~100 instructions per call (callgrind, planar 20-chain).
+__attribute__((noinline)) int evaluateContactRows(const Model& model, Data& data, int r, Eigen::VectorXd* h,
+                                                  Eigen::VectorXd* hdot, Eigen::VectorXd* c, Eigen::MatrixXd* A) {
+  return evaluatePairRows<PointOnPlaneKind>(model, data, r, PointOnPlaneKind::kContactRows, h, hdot, c, A);
 }
 }  // namespace
 
@@ -133,20 +141,7 @@ void evaluateConstraints(const Model& model, Data& data, Eigen::VectorXd* h, Eig
   for (int r = 0; r < model.nc(); ++r) {
     if (cs[r].type == ConstraintType::kPoint) {
       // Consecutive rows on one point pair: the points and their gradients once for all rows.
-      int end = r + 1;
-      while (end < model.nc() && PointKind::samePair(cs[r], cs[end])) ++end;
-      PointKind::pairValues(data, &cs[r], end - r, [&](int k, const ConstraintEval& e) {
-        if (h) (*h)[r + k] = e.h;
-        if (hdot) (*hdot)[r + k] = e.hdot;
-        if (c) (*c)[r + k] = e.c;
-      });
-      if (A) {
-        ws.tmpN.setZero();
-        PointKind::addPairJacobianRows(model, data, &cs[r], end - r, r, *A, ws.tmpN);
-        const double scale = ws.tmpN.norm();
-        for (int k = r; k < end; ++k) ws.constraintScale[k] = scale;
-      }
-      r = end - 1;
+      r = evaluatePairRows<PointKind>(model, data, r, model.nc(), h, hdot, c, A) - 1;
       continue;
     }
     if (cs[r].type == ConstraintType::kPointOnPlane) {

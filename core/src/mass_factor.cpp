@@ -353,26 +353,19 @@ inline void solveChainTreeBlock(const double* h, Eigen::Index ld, double* x) {
 }
 /// The same on an unbranched block of nb ≥ kDenseChain joints under its dense factor L Lᵀ
 /// (f: from (bs, bs)): L y = x in axpy form, then Lᵀ z = y in dot form, on contiguous columns.
-inline void solveChainDenseBlock(const double* f, Eigen::Index ld, int nb, double* x) {
+/// NB > 0 fixes nb = NB at compile time, unrolled (a free body's 6: −4.7k instructions of the hand
+/// with a ball's q̈, which solves 16 columns on it; the tree kernels above likewise); NB = 0 reads nb.
+template <int NB>
+inline void solveChainDenseBlock(const double* f, Eigen::Index ld, int nbRuntime, double* x) {
+  const int nb = NB > 0 ? NB : nbRuntime;
+#pragma GCC unroll 8
   for (int k = 0; k < nb; ++k) {
     const double* fk = f + k * ld;
     x[k] /= fk[k];
     subtractScaled(x + k + 1, fk + k + 1, x[k], nb - k - 1);
   }
+#pragma GCC unroll 8
   for (int k = nb - 1; k >= 0; --k) x[k] = (x[k] - dotRun(f + k * ld + k + 1, x + k + 1, nb - k - 1)) / f[k * ld + k];
-}
-/// solveChainDenseBlock for NB joints, unrolled (a free body's 6: −4.7k instructions of the
-/// hand with a ball's q̈, which solves 16 columns on it; the tree kernels above likewise).
-template <int NB>
-inline void solveChainDenseBlock(const double* f, Eigen::Index ld, double* x) {
-#pragma GCC unroll 8
-  for (int k = 0; k < NB; ++k) {
-    const double* fk = f + k * ld;
-    x[k] /= fk[k];
-    subtractScaled(x + k + 1, fk + k + 1, x[k], NB - k - 1);
-  }
-#pragma GCC unroll 8
-  for (int k = NB - 1; k >= 0; --k) x[k] = (x[k] - dotRun(f + k * ld + k + 1, x + k + 1, NB - k - 1)) / f[k * ld + k];
 }
 /// Every column of solveMassColumns on one block: the block's kind is looked at once, the digit
 /// and ball sizes get fixed loops (the hand's contacts: 3 columns on a 4-joint digit and on the
@@ -405,8 +398,8 @@ static inline __attribute__((always_inline)) void solveFactorColumns(const Model
       case 3: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<3>(h, ld, y); }); break;
       case 4: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<4>(h, ld, y); }); break;
       case 5: forColumns(xb, stride, cols, [&](double* y) { solveChainTreeBlock<5>(h, ld, y); }); break;
-      case 6: forColumns(xb, stride, cols, [&](double* y) { solveChainDenseBlock<6>(h, ld, y); }); break;
-      default: forColumns(xb, stride, cols, [&](double* y) { solveChainDenseBlock(h, ld, be - bs, y); }); break;
+      case 6: forColumns(xb, stride, cols, [&](double* y) { solveChainDenseBlock<6>(h, ld, 6, y); }); break;
+      default: forColumns(xb, stride, cols, [&](double* y) { solveChainDenseBlock<0>(h, ld, be - bs, y); }); break;
     }
   }
 }
