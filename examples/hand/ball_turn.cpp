@@ -87,7 +87,7 @@ BallLimits loadBallLimits(const std::string& path, const Model& model) {
 OptimizerOptions ballTurnOptimizerOptions(int threads) {
   OptimizerOptions oo;
   oo.initialBarrier = 1e-4;
-  oo.initialBoundPush = 1e-6;
+  oo.initialBoundPush = 1e-2;
   oo.maxRefinements = 0;
   oo.maxIterations = 500;
   oo.ordering = MumpsOrdering::kQamd;

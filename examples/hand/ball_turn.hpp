@@ -75,8 +75,14 @@ OptimalControlProblem makeBallTurnProblem(std::shared_ptr<const Model> model, co
                                           const BallLimits& limits, const BallTurnOptions& options);
 
 /// Ipopt's settings for the coarse implicit turn (the main job's and hand_ball_feedback
-/// --optimize's): the quasi-static warm start is near feasible, so μ_init 1e-4 and bound push 1e-6
-/// keep it; no refinement rounds (the coarse mesh's check is reported, the plant's reference is
+/// --optimize's): the quasi-static warm start is near feasible, so μ_init 1e-4 keeps it, but
+/// bound push and fraction 1e-2 (Ipopt's defaults), not 1e-6: with variables 1e-6 inside their
+/// bounds the first ~12 iterations crawled (step sizes 1e-5…1e-2, cut by the fraction-to-the-
+/// boundary rule). Measured 2026-12-05, the same optimum (cost to 1e-11) in every case, iterations
+/// 1e-6 → 1e-2: the 20° turn on 11 knots 64–70 → 41 (inertia corrections 23–32 → 6); 10° 56 → 51,
+/// 25° 79 → 56, 9 knots 82 → 55, 15 knots 59 → 58, the pinch at 5° on 7 knots 43 → 40 and on 5
+/// knots 69 → 48 (μ_init 1e-3 with it was faster on some but found a costlier optimum on 10° and
+/// 15 knots: not taken); no refinement rounds (the coarse mesh's check is reported, the plant's reference is
 /// the redistribution of ball_reference.hpp); at most 500 iterations; QAMD ordering of the KKT
 /// matrix — measured on the 20° turn, 11 knots (3 runs each, 2026-12-04): the factorizations take
 /// 7.7 s instead of 12.7 s with MUMPS's own choice (METIS), 70 iterations instead of 67, the same
