@@ -187,7 +187,8 @@ std::string TvlqrSolution::summary() const {
         << "sqrt(d'S d) " << fmt(referenceDefect, 3) << "\n";
     } else {
       o << "feed-forward: " << toString(feedforward) << " (uff_k held with K_k); largest defect at the next sample "
-        << "sqrt(d'S d) " << fmt(feedforwardDefect, 3) << " (u_ref(t_k) held: " << fmt(referenceDefect, 3) << "), "
+        << "sqrt(d'S d) " << fmt(feedforwardDefect, 3) << " (u_ref(t_k) held: "
+        << (std::isnan(referenceDefect) && predictionFailure.empty() ? std::string("not measured") : fmt(referenceDefect, 3)) << "), "
         << feedforwardSimulations << " plant runs\n";
     }
     if (predictionFailure.empty()) {
@@ -544,11 +545,13 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
           dk = run.trajectory.states().col(run.trajectory.size() - 1) - xb;
           return true;
         };
-        if (!defect(ua)) {
-          noteFailure(k);
-          continue;
+        if (options.feedforward == SampledFeedforward::kReference || options.measureHeldReference) {
+          if (!defect(ua)) {
+            noteFailure(k);
+            continue;
+          }
+          out.referenceDefect = dk;
         }
-        out.referenceDefect = dk;
         if (options.feedforward == SampledFeedforward::kReference) {
           ubar = ua;
         } else if (!defect(ubar)) {
@@ -724,6 +727,8 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
       uff.push_back(source.u);
       residual.push_back(source.defect);
     }
+    if (options.feedforward != SampledFeedforward::kReference && !options.measureHeldReference)
+      sol.referenceDefect = std::numeric_limits<double>::quiet_NaN();  // no run held u_ref(t_k)
     if (!sol.predictionFailure.empty()) {
       const double nan = std::numeric_limits<double>::quiet_NaN();
       sol.predictedDeviation = sol.referenceDefect = sol.feedforwardDefect = nan;

@@ -226,6 +226,9 @@ BallFeedbackResult runBallFeedback(const Model& model, const BallLimits& limits,
   to.transport.substeps = options.transportSubsteps;
   to.feedforward = options.feedforward;
   to.threads = options.threads;  // the feed-forward's plant runs (tvlqr.hpp)
+  // The report reads the feed-forward's defect and the prediction, not the comparison with u_ref(t_k)
+  // held: that run per interval (half of kAverage's plant runs) is left out.
+  to.measureHeldReference = false;
   to.riccati = feedbackRiccatiOptions();
   const auto gainStart = std::chrono::steady_clock::now();
   result.lqr = solveTvlqr(model, reference, feedbackWeights(model), to);

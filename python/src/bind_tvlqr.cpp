@@ -87,12 +87,14 @@ void bindTvlqr(py::module_& m) {
       "Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f "
       "Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati "
       "(RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions), "
-      "feedforward (SampledFeedforward, sampled only), feedforward_iterations, threads (sampled: the "
+      "feedforward (SampledFeedforward, sampled only), feedforward_iterations, measure_held_reference "
+      "(sampled: also run u_ref(t_k) held, for reference_defect), threads (sampled: the "
       "feed-forward's plant runs; the same result on any count), infinite_horizon (a held "
       "pose only: Qf = S_inf of the CARE, or of the DARE when sampled).")
       .def(py::init(&makeFromKwargs<TvlqrOptions>))
       .def_readwrite("feedforward", &TvlqrOptions::feedforward)
       .def_readwrite("feedforward_iterations", &TvlqrOptions::feedforwardIterations)
+      .def_readwrite("measure_held_reference", &TvlqrOptions::measureHeldReference)
       .def_readwrite("threads", &TvlqrOptions::threads)
       .def_readwrite("infinite_horizon", &TvlqrOptions::infiniteHorizon)
       .def_readwrite("sample_rate", &TvlqrOptions::sampleRate)
@@ -141,7 +143,7 @@ void bindTvlqr(py::module_& m) {
       .def_readonly("feedforward_defect", &TvlqrSolution::feedforwardDefect,
                     "largest sqrt(d^T S_k+1 d) left at the next sample by the feed-forward written")
       .def_readonly("reference_defect", &TvlqrSolution::referenceDefect,
-                    "the same for u_ref(t_k) held")
+                    "the same for u_ref(t_k) held (NaN: not measured, TvlqrOptions.measure_held_reference)")
       .def_readonly("feedforward_simulations", &TvlqrSolution::feedforwardSimulations)
       .def_readonly("predicted_deviation", &TvlqrSolution::predictedDeviation,
                     "what the hold allows: the defects propagated by the sampled closed loop, the "

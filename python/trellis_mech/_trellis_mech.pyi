@@ -1552,7 +1552,7 @@ class TransportStatus:
         """when it happened (NaN: not applicable)"""
 
 class TvlqrOptions:
-    """Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati (RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions), feedforward (SampledFeedforward, sampled only), feedforward_iterations, threads (sampled: the feed-forward's plant runs; the same result on any count), infinite_horizon (a held pose only: Qf = S_inf of the CARE, or of the DARE when sampled)."""
+    """Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati (RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions), feedforward (SampledFeedforward, sampled only), feedforward_iterations, measure_held_reference (sampled: also run u_ref(t_k) held, for reference_defect), threads (sampled: the feed-forward's plant runs; the same result on any count), infinite_horizon (a held pose only: Qf = S_inf of the CARE, or of the DARE when sampled)."""
     def __init__(self: TvlqrOptions, **kwargs) -> None: ...
     @property
     def feedforward(self) -> SampledFeedforward: ...
@@ -1566,6 +1566,10 @@ class TvlqrOptions:
     def infinite_horizon(self) -> bool: ...
     @infinite_horizon.setter
     def infinite_horizon(self, value: bool) -> None: ...
+    @property
+    def measure_held_reference(self) -> bool: ...
+    @measure_held_reference.setter
+    def measure_held_reference(self, value: bool) -> None: ...
     @property
     def output_step(self) -> float: ...
     @output_step.setter
@@ -1646,7 +1650,7 @@ class TvlqrSolution:
         """feedforward = REFERENCE only: why a plant run failed (the gains stand; the prediction is NaN), else empty"""
     @property
     def reference_defect(self) -> float:
-        """the same for u_ref(t_k) held"""
+        """the same for u_ref(t_k) held (NaN: not measured, TvlqrOptions.measure_held_reference)"""
     @property
     def rhs_evaluations(self) -> int: ...
     @property

@@ -108,6 +108,52 @@ TEST_CASE("sampled gains: the interval average sits between u_ref(t_k) and the c
   CHECK(average.maxError < 0.1);
 }
 
+TEST_CASE("sampled gains: without the held reference's runs only referenceDefect changes",
+          "[sampled][feedforward]") {
+  // TvlqrOptions::measureHeldReference = false skips the plant's run with u_ref(t_k) held: the
+  // gains, the feed-forward written, its defect and the prediction are the same to the bit (on
+  // a constrained scene, with the projections, and on 1 and 2 threads), the runs are fewer by one
+  // per interval, and referenceDefect is NaN and reported as not measured.
+  const PendulumSwing swing;
+  for (const SampledFeedforward ff : {SampledFeedforward::kAverage, SampledFeedforward::kConsistent}) {
+    for (const int threads : {1, 2}) {
+      INFO(trellis::toString(ff) << " on " << threads << " threads");
+      trellis::TvlqrOptions opt;
+      opt.sampleRate = 50.0;
+      opt.feedforward = ff;
+      opt.threads = threads;
+      const trellis::TvlqrSolution all = trellis::solveTvlqr(swing.scene.model, swing.ref, swing.w, opt);
+      opt.measureHeldReference = false;
+      const trellis::TvlqrSolution fewer = trellis::solveTvlqr(swing.scene.model, swing.ref, swing.w, opt);
+      REQUIRE(all.ok());
+      REQUIRE(fewer.ok());
+      REQUIRE(fewer.gains.size() == all.gains.size());
+      for (int k = 0; k < all.gains.size(); ++k) {
+        CHECK(fewer.gains.gains()[k] == all.gains.gains()[k]);
+        CHECK(fewer.gains.feedforward()[k] == all.gains.feedforward()[k]);
+      }
+      CHECK(fewer.feedforwardDefect == all.feedforwardDefect);
+      CHECK(fewer.predictedDeviation == all.predictedDeviation);
+      CHECK(std::isfinite(all.referenceDefect));
+      CHECK(all.referenceDefect > 0.0);
+      CHECK(std::isnan(fewer.referenceDefect));
+      const long intervals = all.gains.size() - 1;  // one row per sample and one at T
+      CHECK(all.feedforwardSimulations - fewer.feedforwardSimulations == intervals);
+      CHECK_THAT(fewer.summary(), Catch::Contains("(u_ref(t_k) held: not measured)"));
+      CHECK_THAT(fewer.json(), Catch::Contains("\"reference_defect\":null"));
+    }
+  }
+  // Without a feed-forward the held reference's run is the one that gives the prediction: kept.
+  trellis::TvlqrOptions opt;
+  opt.sampleRate = 50.0;
+  opt.feedforward = SampledFeedforward::kReference;
+  opt.measureHeldReference = false;
+  const trellis::TvlqrSolution plain = trellis::solveTvlqr(swing.scene.model, swing.ref, swing.w, opt);
+  REQUIRE(plain.ok());
+  CHECK(std::isfinite(plain.referenceDefect));
+  CHECK(std::isfinite(plain.predictedDeviation));
+}
+
 TEST_CASE("sampled gains: the predicted deviation on a constrained scene", "[sampled][feedforward]") {
   // The paper's pendulum (one distance constraint) along its swing at 100 Hz, Q = I, R = 0.01.
   // The spline between knots leaves the constraint by its interpolation error: the prediction

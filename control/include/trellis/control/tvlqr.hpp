@@ -95,6 +95,11 @@ struct TvlqrOptions {
   /// Sampled only: the held feed-forward written beside K_k (file comment).
   SampledFeedforward feedforward = SampledFeedforward::kConsistent;
   int feedforwardIterations = 6;  ///< kConsistent: Gauss–Newton iterations per interval at most (≥ 1)
+  /// Sampled, a feed-forward other than kReference: also run the plant with u_ref(t_k) held over
+  /// every interval, for TvlqrSolution::referenceDefect (what the feed-forward gains against the
+  /// plain hold). It is one more plant run per interval, half of kAverage's runs, and changes
+  /// nothing else; false: referenceDefect is NaN ("not measured").
+  bool measureHeldReference = true;
   /// Sampled only: threads for the feed-forward's plant runs (1..256). The sample intervals are
   /// independent (each starts on the reference and is weighed by the already solved S_{k+1}) and
   /// are gathered in order: the result is the same on any number of threads. The runs of every
@@ -174,7 +179,7 @@ struct TvlqrSolution {
   /// largest defect √(dᵀ S_{k+1} d) it leaves (file comment) and the same for u_ref(t_k) held.
   SampledFeedforward feedforward = SampledFeedforward::kReference;
   double feedforwardDefect = 0.0;  ///< max_k √(dᵀ S_{k+1} d) with the feed-forward written
-  double referenceDefect = 0.0;    ///< the same with u_ref(t_k) held
+  double referenceDefect = 0.0;    ///< the same with u_ref(t_k) held (NaN: not measured, TvlqrOptions::measureHeldReference)
   long feedforwardSimulations = 0;  ///< plant simulations over one interval for the feed-forward
   /// Sampled: what the hold allows — the largest ‖e_k‖₂ (full state, the simulator's tracking
   /// error's norm) of the defects r_k left by the feed-forward written, propagated by the sampled
