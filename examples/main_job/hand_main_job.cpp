@@ -42,6 +42,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -56,7 +57,12 @@
 #include <thread>
 #include <vector>
 
+#include <fcntl.h>
+#include <spawn.h>
 #include <sys/wait.h>
+#include <unistd.h>
+
+extern char** environ;
 
 namespace {
 
@@ -126,6 +132,72 @@ Options parseOptions(int argc, char** argv) {
 }
 
 
+/// The plot script started at the job's beginning (scripts/plot_ball_turn.py --arguments-on-stdin):
+/// its Python and matplotlib imports, ~0.4 s, run on the core the optimizer's serial MUMPS phases
+/// leave idle, and it draws as soon as the CSV files exist, while the gains' CSV and the 3D view
+/// are written. A job that fails before the plots closes the pipe with nothing sent: the script
+/// then exits (status 3) drawing nothing.
+class Plotter {
+ public:
+  /// Starts `python script --arguments-on-stdin`; started() is false when it could not be.
+  Plotter(const char* python, const std::string& script) {
+    int fds[2];
+    if (pipe2(fds, O_CLOEXEC) != 0) return;
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_adddup2(&actions, fds[0], STDIN_FILENO);  // dup2 clears CLOEXEC
+    std::string exe = python, path = script, flag = "--arguments-on-stdin";
+    char* argv[] = {exe.data(), path.data(), flag.data(), nullptr};
+    const int spawned = posix_spawnp(&pid_, python, &actions, nullptr, argv, environ);
+    posix_spawn_file_actions_destroy(&actions);
+    close(fds[0]);
+    if (spawned != 0) {
+      pid_ = -1;
+      close(fds[1]);
+      return;
+    }
+    fd_ = fds[1];
+  }
+  Plotter(const Plotter&) = delete;
+  Plotter& operator=(const Plotter&) = delete;
+  /// An unfinished plotter (the job failed before the plots) gets EOF and is reaped.
+  ~Plotter() {
+    if (fd_ >= 0) close(fd_);
+    if (pid_ > 0) waitpid(pid_, nullptr, 0);
+  }
+  bool started() const { return pid_ > 0; }
+
+  /// Sends the arguments (each ended by NUL) and closes the pipe; false when the script is gone.
+  bool send(const std::vector<std::string>& args) {
+    if (fd_ < 0) return false;
+    std::string data;
+    for (const std::string& a : args) data += a + '\0';
+    bool ok = true;
+    for (std::size_t done = 0; ok && done < data.size();) {
+      const ssize_t n = write(fd_, data.data() + done, data.size() - done);  // EPIPE: SIGPIPE is ignored
+      if (n > 0) done += static_cast<std::size_t>(n);
+      else ok = n < 0 && errno == EINTR;
+    }
+    close(fd_);
+    fd_ = -1;
+    return ok;
+  }
+  /// Waits for the script: true when it exited with status 0.
+  bool wait() {
+    if (pid_ <= 0) return false;
+    int status = 0;
+    pid_t r;
+    do r = waitpid(pid_, &status, 0);
+    while (r < 0 && errno == EINTR);
+    pid_ = -1;
+    return r > 0 && WIFEXITED(status) && WEXITSTATUS(status) == 0;
+  }
+
+ private:
+  pid_t pid_ = -1;
+  int fd_ = -1;
+};
+
 /// A trajectory's CSV with its contact forces: Trajectory's columns (t, coordinates, d<coordinate>,
 /// inputs; no input rates) and lambda_<digit>_n/_t1/_t2, written whole or not at all.
 void writeWithContacts(const std::string& path, const Model& model, const hand::BallLimits& limits,
@@ -153,8 +225,15 @@ void writeWithContacts(const std::string& path, const Model& model, const hand::
 
 int main(int argc, char** argv) try {
   std::signal(SIGXFSZ, SIG_IGN);  // beyond a file-size limit a write fails (EFBIG) and is reported
+  std::signal(SIGPIPE, SIG_IGN);  // a plot script that died early is a failed write (EPIPE), reported
   const Options options = parseOptions(argc, argv);
   const auto jobStart = Clock::now();
+  std::unique_ptr<Plotter> plotter;
+  if (options.plots) {
+    std::fflush(stdout);
+    const char* python = std::filesystem::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
+    plotter = std::make_unique<Plotter>(python, std::string(TRELLIS_SOURCE_DIR) + "/scripts/plot_ball_turn.py");
+  }
   Progress progress(6);
   std::filesystem::create_directories(options.out);
 
@@ -224,8 +303,8 @@ int main(int argc, char** argv) try {
 
   // 5. Files and the 3D view ----------------------------------------------------------------------
   progress.begin("files, 3D view, plots");
+  // The plots' CSV files first, then the plot script draws while the gains and the view are written.
   writeWithContacts(options.out + "/reference.csv", model, limits, reference);
-  fb.lqr.gains.writeCsvFile(options.out + "/gains.csv");
   const int files = std::min(options.runs, kMaxClosedLoopFiles);
   std::vector<ViewTrajectory> shown{{"reference", reference, false}};
   {
@@ -251,21 +330,21 @@ int main(int argc, char** argv) try {
     writeWithContacts(options.out + "/closed_loop_" + std::to_string(r) + ".csv", model, limits, t);
     shown.push_back({"closed loop " + std::to_string(r), t, true});
   }
+  bool plotsOk = true;
+  if (plotter) {
+    // --name=value: a path that begins with '-' stays a value.
+    std::vector<std::string> args{"--out=" + options.out, "--limits=" + limitsPath, "--reference=" + options.out + "/reference.csv",
+                                  "--tracking=" + options.out + "/tracking_error.csv"};
+    for (int r = 0; r < files; ++r)
+      if (fb.runs[r].simulation.trajectory.size() > 0) args.push_back("--closed=" + options.out + "/closed_loop_" + std::to_string(r) + ".csv");
+    plotsOk = plotter->started() && plotter->send(args);
+  }
+  fb.lqr.gains.writeCsvFile(options.out + "/gains.csv");
   ViewOptions viewOptions;
   viewOptions.title = "human hand turning a ball: reference and closed loops";
   const ViewReport view = writeView(options.out + "/hand.html", scene, scene.q, shown, viewOptions);
-  bool plotsOk = true;
-  if (options.plots) {
-    std::ostringstream cmd;
-    const char* python = std::filesystem::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
-    cmd << python << " \"" << TRELLIS_SOURCE_DIR << "/scripts/plot_ball_turn.py\" --out \"" << options.out
-        << "\" --limits \"" << limitsPath << "\" --reference \"" << options.out << "/reference.csv\" --tracking \""
-        << options.out << "/tracking_error.csv\"";
-    for (int r = 0; r < files; ++r)
-      if (fb.runs[r].simulation.trajectory.size() > 0) cmd << " --closed \"" << options.out << "/closed_loop_" << r << ".csv\"";
-    std::fflush(stdout);
-    const int status = std::system(cmd.str().c_str());
-    plotsOk = status != -1 && WIFEXITED(status) && WEXITSTATUS(status) == 0;
+  if (plotter) {
+    plotsOk = plotter->wait() && plotsOk;
     if (!plotsOk) std::fprintf(stderr, "hand_main_job: error: the plots failed (scripts/plot_ball_turn.py; python3-matplotlib missing?)\n");
   }
   progress.end(format("hand.html %.2f MB, %.0f closed-loop files", static_cast<double>(view.bytes) / 1e6, files) +
