@@ -73,7 +73,8 @@ RadauStepper::RadauStepper(OdeSystem& system, Eigen::Index n, const OdeOptions& 
   // One absolute tolerance per component, the scalar's copied when no vector is given.
   atol_ = options.atolVector.size() == n ? Eigen::VectorXd(options.atolVector * ratio)
                                          : Eigen::VectorXd::Constant(n, options.atol * ratio);
-  newtonTolerance_ = std::max(10.0 * kEps / rtol_, std::min(0.03, std::sqrt(rtol_)));
+  newtonTolerance_ = options.newtonTolerance > 0.0 ? options.newtonTolerance
+                                                  : std::max(10.0 * kEps / rtol_, std::min(0.03, std::sqrt(rtol_)));
   const Eigen::Index m = secondOrder_ ? half_ : n_;
   y_ = Eigen::VectorXd::Zero(n_);
   f0_.resize(n_);

@@ -32,6 +32,7 @@ OdeOptions integratorOptions(const SimulationOptions& options, const ClosedLoopS
     }
     OdeOptions ode = makeOdeOptions("closed-loop simulation", OdeMethod::Radau, OdeLinearSolver::Dense,
                                     options.rtol, options.atol, options.maxSteps, options.maxStep);
+    ode.newtonTolerance = options.newtonTolerance;
     return ode;
   }
   const bool bdf = options.method == IntegrationMethod::kBDF;

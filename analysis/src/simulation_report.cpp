@@ -65,6 +65,8 @@ void SimulationOptions::validate() const {
   if (!(rtol > 0.0) || !std::isfinite(rtol)) bad("rtol", rtol, "> 0 and finite");
   if (!(atol > 0.0) || !std::isfinite(atol)) bad("atol", atol, "> 0 and finite");
   if (maxSteps <= 0) bad("maxSteps", static_cast<double>(maxSteps), "> 0");
+  if (!(newtonTolerance >= 0.0 && newtonTolerance < 1.0))
+    bad("newtonTolerance", newtonTolerance, "0 (RADAU5's default) or in (0, 1)");
   if (!(sampleRate >= 0.0) || !std::isfinite(sampleRate))
     bad("sampleRate", sampleRate, ">= 0 and finite");
   if (!(outputStep >= 0.0) || !std::isfinite(outputStep))

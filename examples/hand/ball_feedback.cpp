@@ -54,6 +54,7 @@ void BallFeedbackOptions::validate() const {
   if (transportSubsteps < 1) bad("transportSubsteps", transportSubsteps, ">= 1");
   if (!(rtol > 0.0) || !std::isfinite(rtol)) bad("rtol", rtol, "> 0 and finite");
   if (!(atol > 0.0) || !std::isfinite(atol)) bad("atol", atol, "> 0 and finite");
+  if (!(newtonTolerance >= 0.0 && newtonTolerance < 1.0)) bad("newtonTolerance", newtonTolerance, "0 or in (0, 1)");
   if (!(driftTolerance > 0.0) || !std::isfinite(driftTolerance)) bad("driftTolerance", driftTolerance, "> 0 and finite");
   if (std::string(toString(method)) == "unknown") bad("method", static_cast<double>(method), "adams, bdf or radau");
 }
@@ -258,6 +259,7 @@ BallFeedbackResult runBallFeedback(const Model& model, const BallLimits& limits,
   base.atol = options.atol;
   base.driftTolerance = options.driftTolerance;
   base.method = options.method;
+  base.newtonTolerance = options.method == IntegrationMethod::kRadau ? options.newtonTolerance : 0.0;
   result.runs.resize(starts.size());
   const auto runOne = [&](std::size_t r) {
     const auto start = std::chrono::steady_clock::now();

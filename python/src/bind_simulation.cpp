@@ -60,7 +60,8 @@ void bindSimulation(py::module_& m) {
       "continuous feedback; f > 0: sampled at f Hz with zero-order hold), input_lower / "
       "input_upper (nu,) box, output_step, constraints (ConstraintHandling), method, max_step, "
       "breakpoints, projection_iterations, drift_tolerance (0: 10 (atol + rtol); projection above "
-      "it), exact_jacobian (BDF: exact A - B S K, else difference quotients).");
+      "it), exact_jacobian (BDF: exact A - B S K, else difference quotients), newton_tolerance (Radau: "
+      "Newton's stopping test in units of the step's tolerance; 0: RADAU5's default).");
   simulationOptions
       .def(py::init(&makeFromKwargs<SimulationOptions>))
       .def_readwrite("rtol", &SimulationOptions::rtol)
@@ -75,6 +76,7 @@ void bindSimulation(py::module_& m) {
       .def_readwrite("projection_iterations", &SimulationOptions::projectionIterations)
       .def_readwrite("drift_tolerance", &SimulationOptions::driftTolerance)
       .def_readwrite("exact_jacobian", &SimulationOptions::exactJacobian)
+      .def_readwrite("newton_tolerance", &SimulationOptions::newtonTolerance)
       .def("validate", &SimulationOptions::validate);
   realArrayProperty(simulationOptions, "input_lower", &SimulationOptions::inputLower,
                     "(nu,) lower bounds on the applied input (empty: none); copied in and out");

@@ -143,6 +143,12 @@ struct SimulationOptions {
   ConstraintHandling constraints = ConstraintHandling::kProject;  ///< project onto the constraints, or only report the drift
   IntegrationMethod method = IntegrationMethod::kAdams;  ///< Adams (non-stiff), BDF (stiff closed loops, e.g. high gains) or Radau (stiff and sampled)
   double maxStep = 0.0;  ///< largest internal step; 0 = unlimited (≥ 0)
+  /// Radau only: Newton's stopping test κ, in units of the step's error tolerance (the iteration
+  /// stops when its estimated remaining error is ≤ κ; RADAU5's fnewt). 0: RADAU5's default
+  /// min(0.03, √rtol') with rtol' = 0.1 rtol^(2/3) (6.8e-3 at rtol 1e-5). Larger κ, fewer
+  /// iterations: the iteration's error stays a fraction κ of what the step's error estimate
+  /// allows. (0 or in (0, 1))
+  double newtonTolerance = 0.0;
   /// Extra times where the policy jumps (integration restarts there). Times outside (t0, t1) are
   /// ignored. (Kinks need none: the reference knots and gain times are not restart points.)
   std::vector<double> breakpoints;

@@ -115,6 +115,7 @@ struct OdeOptions {
   double maxStep = 0.0;        ///< 0: no limit
   double initialStep = 0.0;    ///< 0: CVODES's estimate
   int maxOrder = 0;            ///< 0: CVODES's default (5 for BDF, 12 for Adams)
+  double newtonTolerance = 0.0;  ///< Radau: Newton's stopping test κ; 0: RADAU5's min(0.03, √rtol')
   int quadratureSize = 0;
   bool quadratureErrorControl = false;
   double quadratureRtol = 1e-8;
