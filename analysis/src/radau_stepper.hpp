@@ -17,7 +17,8 @@
 // coordinates) each solve (σI − J)[a; b] = [r₁; r₂] is
 //   (σ² I − σ A_v − A_q) b = σ r₂ + A_q r₁,  a = (r₁ + b)/σ,
 // on n/2 unknowns (8× fewer flops per factorization). The iteration stops when the contraction
-// estimate θ predicts the remaining error below κ = min(0.03, √rtol′) of the tolerance, and fails
+// estimate θ predicts the remaining error below κ of the tolerance (OdeOptions::newtonTolerance;
+// 0: RADAU5's min(0.03, √rtol′)), and fails
 // (h shrinks, J is refreshed) when θ ≥ 0.99 or the prediction over the remaining iterations (at
 // most 7) misses. The result y + Z_3 (c_3 = 1).
 //
@@ -55,6 +56,7 @@
 #pragma once
 
 #include "trellis/analysis/detail/ode_driver.hpp"
+#include "trellis/analysis/detail/split_complex_lu.hpp"
 
 #include <Eigen/Core>
 #include <Eigen/LU>
@@ -63,26 +65,6 @@
 #include <string>
 
 namespace trellis::detail {
-
-/// LU with partial pivoting of a complex matrix held as its real and imaginary parts: the updates
-/// are real multiply-adds the compiler vectorizes, where std::complex's products (with their
-/// NaN/Inf branches) are not — 26×26 (the hand's halved complex system): 6.1 µs against 15.6 µs
-/// for Eigen's PartialPivLU<MatrixXcd>, the same pivots (the largest |z| of the column).
-class SplitComplexLu {
- public:
-  void resize(Eigen::Index n);
-  /// The matrix to factor: fill re() and im(), then factor() (in place).
-  Eigen::MatrixXd& re() { return re_; }
-  Eigen::MatrixXd& im() { return im_; }  ///< see re()
-  void factor();
-  /// x ← M⁻¹ x (non-finite where a pivot is zero: the caller's finiteness checks see it).
-  void solve(Eigen::VectorXcd& x);
-
- private:
-  Eigen::MatrixXd re_, im_;
-  Eigen::VectorXi pivot_;
-  Eigen::VectorXd xr_, xi_;
-};
 
 class RadauStepper {
  public:

@@ -5,6 +5,7 @@
 
 #include "trellis/analysis/detail/ode_driver.hpp"
 #include "trellis/analysis/detail/radau_tableau.hpp"
+#include "trellis/analysis/detail/split_complex_lu.hpp"
 #include "trellis/core/detail/report_json.hpp"
 
 #include <Eigen/Cholesky>
@@ -664,6 +665,9 @@ class RadauIntegrator {
     T_ = tab.T;
     Tinv_ = tab.Tinv;
     stagesF_.resize(3 * nx_, c_);
+    luC_.resize(nx_);
+    cVr_.resize(nx_, c_);
+    cVi_.resize(nx_, c_);
     for (auto& x : A_) x.resize(nx_, nx_);
     for (auto& x : B_) x.resize(nx_, nu_);
     for (auto& x : Q_) x.resize(nx_, nx_);
@@ -895,18 +899,22 @@ class RadauIntegrator {
     errM_ = (-gamma0_ * d) * Af_;  // γ0: a's real eigenvalue
     errM_.diagonal().array() += 1.0;
     luErrF_.compute(errM_);
-    cM_ = (-mu_ * d) * Af_.cast<std::complex<double>>();
-    cM_.diagonal().array() += 1.0;
-    luC_.compute(cM_);
+    // I − δμ A_f in split storage (split_complex_lu.hpp: 2–3× Eigen's complex LU at these sizes).
+    luC_.re() = (-mu_.real() * d) * Af_;
+    luC_.re().diagonal().array() += 1.0;
+    luC_.im() = (-mu_.imag() * d) * Af_;
+    luC_.factor();
     rY_ = Tinv_(0, 0).real() * rhsF_.topRows(n) + Tinv_(0, 1).real() * rhsF_.middleRows(n, n) +
           Tinv_(0, 2).real() * rhsF_.bottomRows(n);
     v0_ = luErrF_.solve(rY_);
-    cR_ = Tinv_(1, 0) * rhsF_.topRows(n).cast<std::complex<double>>();
-    cR_ += Tinv_(1, 1) * rhsF_.middleRows(n, n).cast<std::complex<double>>();
-    cR_ += Tinv_(1, 2) * rhsF_.bottomRows(n).cast<std::complex<double>>();
-    cV_ = luC_.solve(cR_);
-    for (int i = 0; i < 3; ++i) {
-      stagesF_.middleRows(i * n, n) = T_(i, 0).real() * v0_ + 2.0 * (T_(i, 1) * cV_).real();
+    cVr_ = Tinv_(1, 0).real() * rhsF_.topRows(n) + Tinv_(1, 1).real() * rhsF_.middleRows(n, n) +
+           Tinv_(1, 2).real() * rhsF_.bottomRows(n);
+    cVi_ = Tinv_(1, 0).imag() * rhsF_.topRows(n) + Tinv_(1, 1).imag() * rhsF_.middleRows(n, n) +
+           Tinv_(1, 2).imag() * rhsF_.bottomRows(n);
+    luC_.solve(cVr_, cVi_);
+    for (int i = 0; i < 3; ++i) {  // 2 Re(T_i1 V_1)
+      stagesF_.middleRows(i * n, n) =
+          T_(i, 0).real() * v0_ + (2.0 * T_(i, 1).real()) * cVr_ - (2.0 * T_(i, 1).imag()) * cVi_;
     }
     rWf_.setZero(c_, c_);
     WnF_ = W0_;
@@ -959,8 +967,8 @@ class RadauIntegrator {
   Eigen::Matrix3cd T_, Tinv_;  ///< a's eigenvectors (columns: γ0, μ, μ̄) and their inverse
   std::complex<double> mu_;
   Eigen::MatrixXd v0_;
-  Eigen::MatrixXcd cM_, cR_, cV_;
-  Eigen::PartialPivLU<Eigen::MatrixXcd> luC_;
+  Eigen::MatrixXd cVr_, cVi_;  // the complex stage system's right-hand side and solution, split
+  detail::SplitComplexLu luC_;
   BlockExponential blockExponential_;
 };
 
