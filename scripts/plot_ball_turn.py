@@ -86,11 +86,21 @@ def read_csv_checked(path):
 
 
 def save(fig, out, name):
+    """The figure as out/name, whole or not at all: drawn to a temporary file, then renamed; a
+    failure on the way removes the temporary file and names the path."""
     path = os.path.join(out, name)
     tmp = path + ".tmp.png"
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    os.replace(tmp, path)
+    try:
+        fig.savefig(tmp, dpi=100)
+        os.replace(tmp, path)
+    except OSError as e:
+        try:
+            os.remove(tmp)
+        except OSError:
+            pass
+        fail(f"{path}: {e.strerror or e}")
+    finally:
+        plt.close(fig)
 
 
 def arguments():
@@ -237,13 +247,16 @@ def main():
         os._exit(code)
     if child is None:
         tensions()
-    orientation()
-    contacts()
-    tracking()
-    if child:
-        _, status = os.waitpid(child, 0)
-        if not (os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0):
-            fail("tensions.png was not written (its process failed, see above)")
+    status = 0
+    try:
+        orientation()
+        contacts()
+        tracking()
+    finally:  # a failure here still waits for the child: nothing is left drawing after the exit
+        if child:
+            _, status = os.waitpid(child, 0)
+    if child and not (os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0):
+        fail("tensions.png was not written (its process failed, see above)")
 
 
 if __name__ == "__main__":

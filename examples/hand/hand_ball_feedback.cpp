@@ -34,6 +34,7 @@
 #include "ball_reference.hpp"
 #include "ball_turn.hpp"
 #include "hand_feedback.hpp"
+#include "job_options.hpp"
 
 #include <trellis/analysis/consistency.hpp>
 
@@ -118,31 +119,39 @@ int main(int argc, char** argv) {
       }
       return argv[++i];
     };
+    // A name parser's message with the option in front ("--method: integration method 'x' is not one of …").
+    const auto named = [&a](auto parse) {
+      try {
+        return parse();
+      } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument(a + ": " + e.what());
+      }
+    };
     try {
       if (a == "--reference") referencePath = value();
       else if (a == "--scene") scene = value();
       else if (a == "--gains") gainsPath = value();
       else if (a == "--write-reference") writeReference = value();
-      else if (a == "--runs") options.runs = std::stoi(value());
-      else if (a == "--seed") options.seed = static_cast<unsigned>(std::stoul(value()));
-      else if (a == "--perturbation") options.perturbation = std::stod(value());
-      else if (a == "--rate") options.sampleRate = std::stod(value());
-      else if (a == "--horizon") horizon = std::stod(value());
-      else if (a == "--threads") options.threads = std::stoi(value());
-      else if (a == "--max-ratio") options.maxErrorRatio = std::stod(value());
-      else if (a == "--quasi-static") quasiStaticDegrees = std::stod(value());
+      else if (a == "--runs") options.runs = static_cast<int>(hand::integerOption(a, value(), 0, 1000));
+      else if (a == "--seed") options.seed = static_cast<unsigned>(hand::integerOption(a, value(), 0, 4294967295L));
+      else if (a == "--perturbation") options.perturbation = hand::numberOption(a, value());
+      else if (a == "--rate") options.sampleRate = hand::numberOption(a, value());
+      else if (a == "--horizon") horizon = hand::numberOption(a, value());
+      else if (a == "--threads") options.threads = static_cast<int>(hand::integerOption(a, value(), 1, 64));
+      else if (a == "--max-ratio") options.maxErrorRatio = hand::numberOption(a, value());
+      else if (a == "--quasi-static") quasiStaticDegrees = hand::numberOption(a, value());
       else if (a == "--pulse") pulse = value();
-      else if (a == "--knots") quasiStaticKnots = std::stoi(value());
-      else if (a == "--redistribute") redistributeKnots = std::stoi(value());
-      else if (a == "--optimize") optimizeDegrees = std::stod(value());
-      else if (a == "--optimize-knots") optimizeKnots = std::stoi(value());
-      else if (a == "--tension-floor") tensionFloor = std::stod(value());
-      else if (a == "--feedforward") options.feedforward = parseEnum<SampledFeedforward>(value(), "feed-forward");
-      else if (a == "--transport-substeps") options.transportSubsteps = std::stoi(value());
-      else if (a == "--rtol") options.rtol = std::stod(value());
-      else if (a == "--atol") options.atol = std::stod(value());
-      else if (a == "--drift") options.driftTolerance = std::stod(value());
-      else if (a == "--method") options.method = parseIntegrationMethod(value());
+      else if (a == "--knots") quasiStaticKnots = static_cast<int>(hand::integerOption(a, value(), 2, 100000));
+      else if (a == "--redistribute") redistributeKnots = static_cast<int>(hand::integerOption(a, value(), 0, 100000));
+      else if (a == "--optimize") optimizeDegrees = hand::numberOption(a, value());
+      else if (a == "--optimize-knots") optimizeKnots = static_cast<int>(hand::integerOption(a, value(), 2, 10000));
+      else if (a == "--tension-floor") tensionFloor = hand::numberOption(a, value());
+      else if (a == "--feedforward") options.feedforward = named([&] { return parseEnum<SampledFeedforward>(value(), "feed-forward"); });
+      else if (a == "--transport-substeps") options.transportSubsteps = static_cast<int>(hand::integerOption(a, value(), 1, 1000));
+      else if (a == "--rtol") options.rtol = hand::numberOption(a, value());
+      else if (a == "--atol") options.atol = hand::numberOption(a, value());
+      else if (a == "--drift") options.driftTolerance = hand::numberOption(a, value());
+      else if (a == "--method") options.method = named([&] { return parseIntegrationMethod(value()); });
       else if (a == "--help") {
         std::cout << "usage: hand_ball_feedback [--reference CSV] [--scene NAME] [--runs N] [--seed S] "
                      "[--perturbation Z] [--rate HZ] [--horizon T] [--threads N] [--max-ratio R] [--gains CSV] "
@@ -154,8 +163,8 @@ int main(int argc, char** argv) {
         std::cerr << "hand_ball_feedback: unknown option '" << a << "' (--help lists them)\n";
         return 2;
       }
-    } catch (const std::exception&) {
-      std::cerr << "hand_ball_feedback: " << a << ": '" << argv[i] << "' is not a number\n";
+    } catch (const std::exception& e) {  // the parsers name the option, the text and the rule
+      std::cerr << "hand_ball_feedback: error: " << e.what() << "\n";
       return 2;
     }
   }

@@ -1,5 +1,6 @@
 // examples/hand/job_options.hpp — the hand jobs' command-line values (hand_main_job,
-// hand_hold_job): a whole argument read as an integer in a range or as a positive finite number,
+// hand_hold_job, hand_ball_feedback): a whole argument read as an integer in a range, a finite
+// number, or a positive finite number,
 // or std::invalid_argument naming the option and the text ("--runs '3x' is not an integer",
 // "--runs 0 must be in 1..1000") — never a prefix taken silently, never a wrapped negative.
 #pragma once
@@ -44,6 +45,21 @@ inline double positiveOption(const std::string& option, const std::string& text)
   }
   if (text.empty() || used != text.size() || !(x > 0.0) || !std::isfinite(x)) {
     throw std::invalid_argument(option + " '" + text + "' must be a number > 0");
+  }
+  return x;
+}
+
+/// `text` whole as a finite number (its sign is the caller's options' validate() to judge).
+inline double numberOption(const std::string& option, const std::string& text) {
+  std::size_t used = 0;
+  double x = NAN;
+  try {
+    x = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (text.empty() || used != text.size() || !std::isfinite(x)) {
+    throw std::invalid_argument(option + " '" + text + "' is not a finite number");
   }
   return x;
 }
