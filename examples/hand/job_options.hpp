@@ -34,8 +34,8 @@ inline long integerOption(const std::string& option, const std::string& text, lo
   return x;
 }
 
-/// `text` whole as a finite number > 0.
-inline double positiveOption(const std::string& option, const std::string& text) {
+/// `text` whole as a number (std::stod over all of it), or NaN.
+inline double wholeNumber(const std::string& text) {
   std::size_t used = 0;
   double x = NAN;
   try {
@@ -43,24 +43,20 @@ inline double positiveOption(const std::string& option, const std::string& text)
   } catch (const std::exception&) {
     used = 0;
   }
-  if (text.empty() || used != text.size() || !(x > 0.0) || !std::isfinite(x)) {
-    throw std::invalid_argument(option + " '" + text + "' must be a number > 0");
-  }
+  return !text.empty() && used == text.size() ? x : NAN;
+}
+
+/// `text` whole as a finite number > 0.
+inline double positiveOption(const std::string& option, const std::string& text) {
+  const double x = wholeNumber(text);
+  if (!(x > 0.0) || !std::isfinite(x)) throw std::invalid_argument(option + " '" + text + "' must be a number > 0");
   return x;
 }
 
 /// `text` whole as a finite number (its sign is the caller's options' validate() to judge).
 inline double numberOption(const std::string& option, const std::string& text) {
-  std::size_t used = 0;
-  double x = NAN;
-  try {
-    x = std::stod(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (text.empty() || used != text.size() || !std::isfinite(x)) {
-    throw std::invalid_argument(option + " '" + text + "' is not a finite number");
-  }
+  const double x = wholeNumber(text);
+  if (!std::isfinite(x)) throw std::invalid_argument(option + " '" + text + "' is not a finite number");
   return x;
 }
 
