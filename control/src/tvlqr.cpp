@@ -182,16 +182,21 @@ std::string TvlqrSolution::summary() const {
       << fmt(maxGainDeviation, 3) << " over the rows\n";
   }
   if (sampleRate > 0.0) {
+    // kReference with no plant run (measureHeldReference false): the defects are not measured.
+    const bool measured =
+        !(feedforward == SampledFeedforward::kReference && predictionFailure.empty() && std::isnan(referenceDefect));
     if (feedforward == SampledFeedforward::kReference) {
       o << "feed-forward: none written (the controller applies u_ref(t_k), held); largest defect at the next sample "
-        << "sqrt(d'S d) " << fmt(referenceDefect, 3) << "\n";
+        << "sqrt(d'S d) " << (measured ? fmt(referenceDefect, 3) : std::string("not measured (no plant runs)")) << "\n";
     } else {
       o << "feed-forward: " << toString(feedforward) << " (uff_k held with K_k); largest defect at the next sample "
         << "sqrt(d'S d) " << fmt(feedforwardDefect, 3) << " (u_ref(t_k) held: "
         << (std::isnan(referenceDefect) && predictionFailure.empty() ? std::string("not measured") : fmt(referenceDefect, 3)) << "), "
         << feedforwardSimulations << " plant runs\n";
     }
-    if (predictionFailure.empty()) {
+    if (!measured) {
+      o << "what the hold allows: not predicted (no plant runs: feedforward reference, measureHeldReference false)\n";
+    } else if (predictionFailure.empty()) {
       o << "what the hold allows: the defects left, propagated by the sampled closed loop, predict a largest "
         << "|x - x_ref| of " << fmt(predictedDeviation, 3) << " at the samples of the unperturbed loop (first order)\n";
     } else {
@@ -643,7 +648,10 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
     }
   } pool{{}, abandon};
   const std::function<void()> work = worker;
-  if (options.feedforward != SampledFeedforward::kConsistent) pool.start(threads - 1, work);
+  // kReference without the held reference's runs: no plant run at all (the gains alone; the
+  // defects and the prediction are not measured).
+  const bool plantRuns = options.feedforward != SampledFeedforward::kReference || options.measureHeldReference;
+  if (plantRuns && options.feedforward != SampledFeedforward::kConsistent) pool.start(threads - 1, work);
 
   const TangentBasisTrajectory basis = transportTangentBasis(model, reference, options.transport);
   sol.transportSteps = basis.steps();
@@ -689,7 +697,10 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
   // The held feed-forward (file comment), in the metric of S_{k+1} (set above), and the defect
   // r_k it leaves at each next sample (for every choice: u_ref(t_k) held too).
   std::vector<Eigen::VectorXd> uff, residual;
-  {
+  if (!plantRuns) {
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    sol.predictedDeviation = sol.referenceDefect = sol.feedforwardDefect = nan;
+  } else {
     gainS = &sol.S;
     basisAt = &Tk;
     discretization = &disc;

@@ -1556,7 +1556,7 @@ class TransportStatus:
         """when it happened (NaN: not applicable)"""
 
 class TvlqrOptions:
-    """Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati (RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions), feedforward (SampledFeedforward, sampled only), feedforward_iterations, measure_held_reference (sampled: also run u_ref(t_k) held, for reference_defect), threads (sampled: the feed-forward's plant runs; the same result on any count), infinite_horizon (a held pose only: Qf = S_inf of the CARE, or of the DARE when sampled)."""
+    """Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f Hz), output_step (continuous: tabulate K every output_step; 0: at the knots), riccati (RiccatiOptions), sampled (SampledDiscretizationOptions), transport (TangentTransportOptions), feedforward (SampledFeedforward, sampled only), feedforward_iterations, measure_held_reference (sampled: also run u_ref(t_k) held, for reference_defect; with feedforward reference, False runs no plant at all: the gains alone), threads (sampled: the feed-forward's plant runs; the same result on any count), infinite_horizon (a held pose only: Qf = S_inf of the CARE, or of the DARE when sampled)."""
     def __init__(self: TvlqrOptions, **kwargs) -> None: ...
     @property
     def feedforward(self) -> SampledFeedforward: ...

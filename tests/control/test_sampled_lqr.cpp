@@ -854,6 +854,73 @@ TEST_CASE("sampled LQR: the Radau and Magnus integrations agree with CVODES on t
   }
 }
 
+TEST_CASE("sampled LQR: Radau's halved stage solve of a mechanical system equals the full solve",
+          "[sampled][radau]") {
+  // x = [q; v] with A = [[0, I], [Aq, Av]], B = [0; Bv] takes the halved stage system (3p×3p
+  // instead of 3nx×3nx, and p×p filters and twin solves); the same system written as [v; q] is not
+  // detected and takes the full ones. With P that permutation the blocks must be P-congruent
+  // (Φ' = PΦPᵀ, Γ' = PΓ, the cost likewise) to rounding, on the same steps (the error norms are
+  // permutation-invariant). The stiff time-varying pair (|λ|h ≈ 140) and, from t = 1, an A whose
+  // q̇ row is no longer the identity (the full solve also inside the [q; v] run: both paths, one
+  // interval after the other, against CVODES).
+  for (const bool breakFromOne : {false, true}) {
+    INFO((breakFromOne ? "structure broken from t = 1" : "mechanical throughout"));
+    const trellis::LinearizationCallback lin = [breakFromOne](double t, MatrixXd& A, MatrixXd& B) {
+      A = MatrixXd::Zero(4, 4);
+      A.topRightCorner(2, 2).setIdentity();
+      if (breakFromOne && t >= 1.0) A(0, 2) = 1.0 + 0.1 * (t - 1.0);
+      A.bottomLeftCorner(2, 2) << -1e4, 30.0 + 20.0 * std::sin(2.0 * t), 30.0 + 20.0 * std::sin(2.0 * t), -10.0;
+      A.bottomRightCorner(2, 2) << -1400.0 * (1.0 + 0.2 * std::cos(t)), 2.0, 2.0, -0.5;
+      B = MatrixXd::Zero(4, 2);
+      B.bottomRows(2) << 1.0, 0.3 * std::cos(3.0 * t), 0.0, 1.0;
+      return trellis::ReferenceStatus{};
+    };
+    Eigen::PermutationMatrix<Eigen::Dynamic> P(4);  // [q; v] → [v; q]
+    P.indices() << 2, 3, 0, 1;
+    const trellis::LinearizationCallback swapped = [&](double t, MatrixXd& A, MatrixXd& B) {
+      MatrixXd A0, B0;
+      lin(t, A0, B0);
+      A = P * A0 * P.transpose();
+      B = P * B0;
+      return trellis::ReferenceStatus{};
+    };
+    LqrWeights w, ws;
+    w.Q = (MatrixXd(4, 4) << 10, 1, 0.5, 0, 1, 10, 0, 0.2, 0.5, 0, 1, 0.1, 0, 0.2, 0.1, 1).finished();
+    w.R = (MatrixXd(2, 2) << 1.0, 0.2, 0.2, 2.0).finished();
+    w.Qf = w.Q;
+    ws.Q = P * w.Q * P.transpose();
+    ws.R = w.R;
+    ws.Qf = ws.Q;
+    const VectorXd times = trellis::sampleTimes(0.0, 2.0, 10.0);
+    const auto halved = trellis::discretizeSampledData(times, 4, 2, lin, w);
+    const auto full = trellis::discretizeSampledData(times, 4, 2, swapped, ws);
+    REQUIRE(halved.ok());
+    REQUIRE(full.ok());
+    CHECK(halved.steps == full.steps);
+    for (std::size_t k = 0; k < full.intervals.size(); ++k) {
+      INFO("interval " << k);
+      SampledInterval back = full.intervals[k];
+      back.Phi = P.transpose() * full.intervals[k].Phi * P;
+      back.Gamma = P.transpose() * full.intervals[k].Gamma;
+      back.Q = P.transpose() * full.intervals[k].Q * P;
+      back.N = P.transpose() * full.intervals[k].N;
+      CHECK(intervalDifference(back, halved.intervals[k]) < 1e-11);
+    }
+    // Both right, not only equal: the gains against CVODES at rtol 1e-12.
+    trellis::SampledDiscretizationOptions bdf;
+    bdf.integrator = trellis::SampledIntegrator::kBdf;
+    bdf.rtol = 1e-12;
+    bdf.atol = 1e-14;
+    const auto ref = trellis::discretizeSampledData(times, 4, 2, lin, w, bdf);
+    REQUIRE(ref.ok());
+    const auto a = trellis::solveSampledRiccatiRecursion(halved.intervals, w.Qf);
+    const auto b = trellis::solveSampledRiccatiRecursion(ref.intervals, w.Qf);
+    REQUIRE(a.ok());
+    REQUIRE(b.ok());
+    CHECK(gainDifference(b.K, a.K) < 1e-8);
+  }
+}
+
 TEST_CASE("sampled LQR: the Magnus exponential over whole intervals checks itself against its halves",
           "[sampled][magnus]") {
   trellis::SampledDiscretizationOptions bdf;  // the reference: every interval by CVODES, tight

@@ -108,7 +108,7 @@ TEST_CASE("sampled gains: the interval average sits between u_ref(t_k) and the c
   CHECK(average.maxError < 0.1);
 }
 
-TEST_CASE("sampled gains: without the held reference's runs only referenceDefect changes",
+TEST_CASE("sampled gains: without the held reference's runs only referenceDefect changes (the gains alone with kReference)",
           "[sampled][feedforward]") {
   // TvlqrOptions::measureHeldReference = false skips the plant's run with u_ref(t_k) held: the
   // gains, the feed-forward written, its defect and the prediction are the same to the bit (on
@@ -143,15 +143,36 @@ TEST_CASE("sampled gains: without the held reference's runs only referenceDefect
       CHECK_THAT(fewer.json(), Catch::Contains("\"reference_defect\":null"));
     }
   }
-  // Without a feed-forward the held reference's run is the one that gives the prediction: kept.
-  trellis::TvlqrOptions opt;
-  opt.sampleRate = 50.0;
-  opt.feedforward = SampledFeedforward::kReference;
-  opt.measureHeldReference = false;
-  const trellis::TvlqrSolution plain = trellis::solveTvlqr(swing.scene.model, swing.ref, swing.w, opt);
-  REQUIRE(plain.ok());
-  CHECK(std::isfinite(plain.referenceDefect));
-  CHECK(std::isfinite(plain.predictedDeviation));
+  // Without a feed-forward the held reference's runs are the only ones (they give the defect and
+  // the prediction): measureHeldReference = false leaves the gains alone — the same to the bit,
+  // no plant run, the three figures NaN and said to be not measured (summary and JSON).
+  for (const int threads : {1, 2}) {
+    INFO("reference on " << threads << " threads");
+    trellis::TvlqrOptions opt;
+    opt.sampleRate = 50.0;
+    opt.feedforward = SampledFeedforward::kReference;
+    opt.threads = threads;
+    const trellis::TvlqrSolution measured = trellis::solveTvlqr(swing.scene.model, swing.ref, swing.w, opt);
+    opt.measureHeldReference = false;
+    const trellis::TvlqrSolution alone = trellis::solveTvlqr(swing.scene.model, swing.ref, swing.w, opt);
+    REQUIRE(measured.ok());
+    REQUIRE(alone.ok());
+    REQUIRE(alone.gains.size() == measured.gains.size());
+    for (int k = 0; k < measured.gains.size(); ++k) CHECK(alone.gains.gains()[k] == measured.gains.gains()[k]);
+    CHECK(std::isfinite(measured.referenceDefect));
+    CHECK(std::isfinite(measured.predictedDeviation));
+    CHECK(measured.feedforwardSimulations == measured.gains.size() - 1);
+    CHECK(alone.feedforwardSimulations == 0);
+    CHECK(std::isnan(alone.referenceDefect));
+    CHECK(std::isnan(alone.feedforwardDefect));
+    CHECK(std::isnan(alone.predictedDeviation));
+    CHECK(alone.predictionFailure.empty());
+    CHECK_THAT(alone.summary(), Catch::Contains("sqrt(d'S d) not measured (no plant runs)"));
+    CHECK_THAT(alone.summary(), Catch::Contains("what the hold allows: not predicted (no plant runs"));
+    CHECK_THAT(measured.summary(), !Catch::Contains("not measured"));
+    CHECK_THAT(alone.json(), Catch::Contains("\"predicted_deviation\":null"));
+    CHECK_THAT(alone.json(), Catch::Contains("\"feedforward_defect\":null"));
+  }
 }
 
 TEST_CASE("sampled gains: the predicted deviation on a constrained scene", "[sampled][feedforward]") {

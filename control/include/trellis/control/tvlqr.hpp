@@ -95,10 +95,12 @@ struct TvlqrOptions {
   /// Sampled only: the held feed-forward written beside K_k (file comment).
   SampledFeedforward feedforward = SampledFeedforward::kConsistent;
   int feedforwardIterations = 6;  ///< kConsistent: Gauss–Newton iterations per interval at most (≥ 1)
-  /// Sampled, a feed-forward other than kReference: also run the plant with u_ref(t_k) held over
-  /// every interval, for TvlqrSolution::referenceDefect (what the feed-forward gains against the
-  /// plain hold). It is one more plant run per interval, half of kAverage's runs, and changes
-  /// nothing else; false: referenceDefect is NaN ("not measured").
+  /// Sampled: run the plant with u_ref(t_k) held over every interval, for
+  /// TvlqrSolution::referenceDefect. With a feed-forward other than kReference it is what the
+  /// feed-forward gains against the plain hold: one more plant run per interval, half of
+  /// kAverage's runs, changing nothing else. With kReference these are the only plant runs (they
+  /// also give feedforwardDefect and predictedDeviation): false then computes the gains alone,
+  /// with no plant run, and the three are NaN ("not measured"). false: referenceDefect is NaN.
   bool measureHeldReference = true;
   /// Sampled only: threads for the feed-forward's plant runs (1..256). The sample intervals are
   /// independent (each starts on the reference and is weighed by the already solved S_{k+1}) and
