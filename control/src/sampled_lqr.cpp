@@ -651,7 +651,8 @@ class ShiftedSolve {
       return;
     }
     const Eigen::Index p = Aq_.rows();
-    t_.noalias() = Aq_ * X.topRows(p);
+    t_.resize(p, X.cols());
+    detail::matmul(p, X.cols(), p, 1.0, Aq_.data(), p, X.data(), X.rows(), false, t_.data(), p, false);
     X.bottomRows(p) += kappa_ * t_;
     t_ = lu_.solve(X.bottomRows(p));
     X.bottomRows(p) = t_;
@@ -695,8 +696,10 @@ class ComplexShiftedSolve {
     }
     const Eigen::Index p = Aq_.rows();
     const double kr = kappa_.real(), ki = kappa_.imag();
-    tr_.noalias() = Aq_ * Xr.topRows(p);
-    ti_.noalias() = Aq_ * Xi.topRows(p);
+    tr_.resize(p, Xr.cols());
+    ti_.resize(p, Xi.cols());
+    detail::matmul(p, Xr.cols(), p, 1.0, Aq_.data(), p, Xr.data(), Xr.rows(), false, tr_.data(), p, false);
+    detail::matmul(p, Xi.cols(), p, 1.0, Aq_.data(), p, Xi.data(), Xi.rows(), false, ti_.data(), p, false);
     Xr.bottomRows(p) += kr * tr_ - ki * ti_;
     Xi.bottomRows(p) += kr * ti_ + ki * tr_;
     lu_.solve(Xr.bottomRows(p), Xi.bottomRows(p));
@@ -758,7 +761,7 @@ class RadauIntegrator {
  public:
   RadauIntegrator(Discretizer& s, double rtol, long maxSteps)
       : s_(s), nx_(s.nx), nu_(s.nu), c_(s.nx + s.nu), rtol_(rtol),
-        M_(3 * s.nx, 3 * s.nx), rhs_(3 * s.nx, s.nx + s.nu), lu_(3 * s.nx),
+        M_(3 * s.nx, 3 * s.nx), rhs_(3 * s.nx, s.nx + s.nu),
         rhsF_(3 * s.nx, s.nx + s.nu) {
     control.maxSteps = maxSteps;
     control.method = "Radau";
@@ -778,7 +781,6 @@ class RadauIntegrator {
     const Eigen::Index p = nx_ / 2;
     MM_.resize(3 * p, 3 * p);
     rhsM_.resize(3 * p, c_);
-    luM_ = Eigen::PartialPivLU<Eigen::MatrixXd>(3 * p);
     cVr_.resize(nx_, c_);
     cVi_.resize(nx_, c_);
     for (auto& x : A_) x.resize(nx_, nx_);
@@ -981,7 +983,8 @@ class RadauIntegrator {
     }
     // The start's rate: f_n = A_n Y_n + [0 B_n], g_n = Y_nᵀ Q_n Y_n + blkdiag(0, R_n) (Q_n Y_n and
     // g_n: the previous step's last stage's, or computed once for all attempts from Y_n).
-    f0_.noalias() = A0_ * Y;
+    f0_.resize(n, c_);
+    detail::matmul(n, c_, n, 1.0, A0_.data(), n, Y.data(), n, false, f0_.data(), n, false);
     f0_.rightCols(nu_) += B0_;
     if (!startCached_) {
       stageCost(Q0_, R0_, Y.data(), n, QY0_, g0_);
@@ -1077,13 +1080,14 @@ class RadauIntegrator {
       }
     }
     luM_.compute(MM_);
-    vM_.noalias() = luM_.solve(rhsM_);
+    vM_.noalias() = luM_.solve(rhsM_);  // the velocity stages
+    const Eigen::MatrixXd& vStages = vM_;
     // The stages: Yq_i = Yq_n + δ Σ_l a_il Yv_l, Yv_i (rows i·nx … of stages_, column stride 3nx).
     for (int i = 0; i < 3; ++i) {
       const double w0 = d * a_[i][0], w1 = d * a_[i][1], w2 = d * a_[i][2];
       for (Eigen::Index col = 0; col < c; ++col) {
         const double* yq = Y.data() + col * n;
-        const double* v = vM_.data() + col * m3;
+        const double* v = vStages.data() + col * m3;
         double* dst = stages_.data() + col * 3 * n + i * n;
         for (Eigen::Index r = 0; r < p; ++r) dst[r] = yq[r] + w0 * v[r] + w1 * v[p + r] + w2 * v[2 * p + r];
         for (Eigen::Index r = 0; r < p; ++r) dst[p + r] = v[i * p + r];
@@ -1129,7 +1133,8 @@ class RadauIntegrator {
       rWf_ += (d * (e_[0] * a_[0][j] + e_[1] * a_[1][j] + e_[2] * a_[2][j])) * gj;
       WnF_ += (d * a_[2][j]) * gj;
     }
-    f0f_.noalias() = Af_ * Y0_;
+    f0f_.resize(n, c_);
+    detail::matmul(n, c_, n, 1.0, Af_.data(), n, Y0_.data(), n, false, f0f_.data(), n, false);
     f0f_.rightCols(nu_) += Bf_;
     if (!startCachedF_) {
       stageCost(Qf_, Rf_, Y0_.data(), n, QY0F_, g0F_);
