@@ -751,11 +751,15 @@ class ComplexShiftedSolve {
 /// the difference is zero and one step per interval is exact. The twin's step costs no
 /// linearization: with its constant A_f the stage system decouples on a = T diag(γ0, μ, μ̄) T⁻¹
 /// into one real and one complex nx×nx solve (the real one is the estimate's I − γ0δA_f).
-/// Where the time goes (callgrind, the 6-link swing at 100 Hz, docs/performance.md 2026-12-03):
-/// of the steps' instructions ~15 % the three linearizations, ~42 % the stage solve and
-/// quadrature, ~36 % the twin, ~5 % the estimate (and one block exponential per interval, ~9 % of
-/// the whole); the step size is set by the embedded estimate (mostly its cost row), not by the
-/// growth limit.
+/// A mechanical system (x = [q; v], A = [[0, I], [Aq, Av]], B = [0; Bv] exactly, checked per
+/// step) halves every solve: the stage system to 3p×3p (p = nx/2, mechanicalStages), the filters
+/// and the twin's real and complex solves to p×p (ShiftedSolve, ComplexShiftedSolve); any other
+/// A takes the full ones. The stage cost, the estimate's products and the exponential's doublings
+/// run through matmul (dense_kernels.hpp).
+/// Where the time goes (callgrind, the 6-link swing at 100 Hz, docs/performance.md 2026-12-05): of
+/// the integration's ~0.85 G instructions ~27 % the three linearizations per step, ~30 % the rest
+/// of the step (stage solve, quadrature, estimate), ~25 % the twin, ~12 % the block exponentials;
+/// the step size is set by the embedded estimate (mostly its cost row), not by the growth limit.
 /// Q Y and g = YᵀQY + blkdiag(0, R) at a step's last stage are the next step's start's: kept.
 class RadauIntegrator {
  public:

@@ -13,7 +13,8 @@
 // discretizeSampledData integrates the intervals that are not constant, by default
 // (SampledIntegrator::kRadau), with the three-stage Radau IIA collocation of the variational
 // equation Ẏ = A(s)Y + [0 B(s)], Y = [Φ(s, t_k) Γ(s)], and the method's own quadrature of the
-// cost on its stages: one linear solve per step (the problem is linear), L-stable (a stiff A does
+// cost on its stages: one linear solve per step (the problem is linear; halved for a mechanical
+// A = [[0, I], [Aq, Av]], B = [0; Bv]: the position stages substituted), L-stable (a stiff A does
 // not limit the step), A, B, Q, R at the three nodes only (the start's are the previous step's
 // end), the error by Hairer's embedded estimate (RADAU5: the difference to a third-order
 // companion, filtered by (I − γ0δA)⁻¹ so the damped stiff part does not count; one more nx×nx
