@@ -40,6 +40,20 @@ trellis::ReferenceStatus tvSystem(double t, MatrixXd& A, MatrixXd& B) {
   return {};
 }
 
+/// A stiff (|λ| up to ~1.4e3: λh ≈ 140 at 10 Hz) time-varying mechanical pair: x = [q; v],
+/// A = [[0, I], [Aq(t), Av(t)]] with a slowly varying coupling, B = [0; Bv(t)] (nx = 4, m = 2).
+/// qdotDrift > 0 breaks the structure from t = 1: q̇₀ = (1 + qdotDrift (t − 1)) v₀.
+trellis::ReferenceStatus stiffPair(double t, MatrixXd& A, MatrixXd& B, double qdotDrift = 0.0) {
+  A = MatrixXd::Zero(4, 4);
+  A.topRightCorner(2, 2).setIdentity();
+  if (qdotDrift > 0.0 && t >= 1.0) A(0, 2) = 1.0 + qdotDrift * (t - 1.0);
+  A.bottomLeftCorner(2, 2) << -1e4, 30.0 + 20.0 * std::sin(2.0 * t), 30.0 + 20.0 * std::sin(2.0 * t), -10.0;
+  A.bottomRightCorner(2, 2) << -1400.0 * (1.0 + 0.2 * std::cos(t)), 2.0, 2.0, -0.5;
+  B = MatrixXd::Zero(4, 2);
+  B.bottomRows(2) << 1.0, 0.3 * std::cos(3.0 * t), 0.0, 1.0;
+  return {};
+}
+
 /// Independent reference: classical RK4 with `steps` fixed steps on Y = [Φ Γ] and the cost W.
 SampledInterval rk4Interval(double a, double b, const MatrixXd& Q, const MatrixXd& R, int steps) {
   const int nx = 2, m = 1, c = nx + m;
@@ -815,15 +829,7 @@ TEST_CASE("sampled LQR: the Radau and Magnus integrations agree with CVODES on t
   }
   SECTION("stiff (λh ≈ 140) and time-varying") {
     // The stiff oscillator pair of the exponential test with a slowly varying coupling and input.
-    const trellis::LinearizationCallback lin = [](double t, MatrixXd& A, MatrixXd& B) {
-      A = MatrixXd::Zero(4, 4);
-      A.topRightCorner(2, 2).setIdentity();
-      A.bottomLeftCorner(2, 2) << -1e4, 30.0 + 20.0 * std::sin(2.0 * t), 30.0 + 20.0 * std::sin(2.0 * t), -10.0;
-      A.bottomRightCorner(2, 2) << -1400.0 * (1.0 + 0.2 * std::cos(t)), 2.0, 2.0, -0.5;
-      B = MatrixXd::Zero(4, 2);
-      B.bottomRows(2) << 1.0, 0.3 * std::cos(3.0 * t), 0.0, 1.0;
-      return trellis::ReferenceStatus{};
-    };
+    const trellis::LinearizationCallback lin = [](double t, MatrixXd& A, MatrixXd& B) { return stiffPair(t, A, B); };
     LqrWeights w;
     w.Q = VectorXd((VectorXd(4) << 10.0, 10.0, 1.0, 1.0).finished()).asDiagonal();
     w.R = MatrixXd::Identity(2, 2);
@@ -866,14 +872,7 @@ TEST_CASE("sampled LQR: Radau's halved stage solve of a mechanical system equals
   for (const bool breakFromOne : {false, true}) {
     INFO((breakFromOne ? "structure broken from t = 1" : "mechanical throughout"));
     const trellis::LinearizationCallback lin = [breakFromOne](double t, MatrixXd& A, MatrixXd& B) {
-      A = MatrixXd::Zero(4, 4);
-      A.topRightCorner(2, 2).setIdentity();
-      if (breakFromOne && t >= 1.0) A(0, 2) = 1.0 + 0.1 * (t - 1.0);
-      A.bottomLeftCorner(2, 2) << -1e4, 30.0 + 20.0 * std::sin(2.0 * t), 30.0 + 20.0 * std::sin(2.0 * t), -10.0;
-      A.bottomRightCorner(2, 2) << -1400.0 * (1.0 + 0.2 * std::cos(t)), 2.0, 2.0, -0.5;
-      B = MatrixXd::Zero(4, 2);
-      B.bottomRows(2) << 1.0, 0.3 * std::cos(3.0 * t), 0.0, 1.0;
-      return trellis::ReferenceStatus{};
+      return stiffPair(t, A, B, breakFromOne ? 0.1 : 0.0);
     };
     Eigen::PermutationMatrix<Eigen::Dynamic> P(4);  // [q; v] → [v; q]
     P.indices() << 2, 3, 0, 1;

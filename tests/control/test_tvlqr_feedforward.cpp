@@ -16,6 +16,7 @@
 
 #include <cmath>
 #include <string>
+#include <utility>
 
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
@@ -108,6 +109,23 @@ TEST_CASE("sampled gains: the interval average sits between u_ref(t_k) and the c
   CHECK(average.maxError < 0.1);
 }
 
+namespace {
+
+/// solveTvlqr at 50 Hz with `ff` on `threads` threads, with (first) and without (second) the held
+/// reference's plant runs (TvlqrOptions::measureHeldReference).
+std::pair<trellis::TvlqrSolution, trellis::TvlqrSolution> withAndWithoutHeld(const PendulumSwing& swing,
+                                                                             SampledFeedforward ff, int threads) {
+  trellis::TvlqrOptions opt;
+  opt.sampleRate = 50.0;
+  opt.feedforward = ff;
+  opt.threads = threads;
+  trellis::TvlqrSolution with = trellis::solveTvlqr(swing.scene.model, swing.ref, swing.w, opt);
+  opt.measureHeldReference = false;
+  return {std::move(with), trellis::solveTvlqr(swing.scene.model, swing.ref, swing.w, opt)};
+}
+
+}  // namespace
+
 TEST_CASE("sampled gains: without the held reference's runs only referenceDefect changes (the gains alone with kReference)",
           "[sampled][feedforward]") {
   // TvlqrOptions::measureHeldReference = false skips the plant's run with u_ref(t_k) held: the
@@ -118,13 +136,7 @@ TEST_CASE("sampled gains: without the held reference's runs only referenceDefect
   for (const SampledFeedforward ff : {SampledFeedforward::kAverage, SampledFeedforward::kConsistent}) {
     for (const int threads : {1, 2}) {
       INFO(trellis::toString(ff) << " on " << threads << " threads");
-      trellis::TvlqrOptions opt;
-      opt.sampleRate = 50.0;
-      opt.feedforward = ff;
-      opt.threads = threads;
-      const trellis::TvlqrSolution all = trellis::solveTvlqr(swing.scene.model, swing.ref, swing.w, opt);
-      opt.measureHeldReference = false;
-      const trellis::TvlqrSolution fewer = trellis::solveTvlqr(swing.scene.model, swing.ref, swing.w, opt);
+      const auto [all, fewer] = withAndWithoutHeld(swing, ff, threads);
       REQUIRE(all.ok());
       REQUIRE(fewer.ok());
       REQUIRE(fewer.gains.size() == all.gains.size());
@@ -148,13 +160,7 @@ TEST_CASE("sampled gains: without the held reference's runs only referenceDefect
   // no plant run, the three figures NaN and said to be not measured (summary and JSON).
   for (const int threads : {1, 2}) {
     INFO("reference on " << threads << " threads");
-    trellis::TvlqrOptions opt;
-    opt.sampleRate = 50.0;
-    opt.feedforward = SampledFeedforward::kReference;
-    opt.threads = threads;
-    const trellis::TvlqrSolution measured = trellis::solveTvlqr(swing.scene.model, swing.ref, swing.w, opt);
-    opt.measureHeldReference = false;
-    const trellis::TvlqrSolution alone = trellis::solveTvlqr(swing.scene.model, swing.ref, swing.w, opt);
+    const auto [measured, alone] = withAndWithoutHeld(swing, SampledFeedforward::kReference, threads);
     REQUIRE(measured.ok());
     REQUIRE(alone.ok());
     REQUIRE(alone.gains.size() == measured.gains.size());
