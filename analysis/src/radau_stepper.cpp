@@ -29,22 +29,6 @@ std::string number(double v) {
   return m.str();
 }
 
-/// (σI − J) z = r by the factorization of σI − J, or for J = [[0, I], [A_q, A_v]] by that of
-/// σ²I − σA_v − A_q: b = (σ²I − σA_v − A_q)⁻¹ (σ r₂ + A_q r₁), a = (r₁ + b)/σ.
-template <class Scalar, class Lu, class Matrix, class Vector>
-void shiftedSolve(bool secondOrder, Eigen::Index half, Scalar sigma, const Lu& lu, const Matrix& Aq,
-                  const Vector& r, Vector& z, Vector& rb, Vector& sb) {
-  if (!secondOrder) {
-    z = lu.solve(r);
-    return;
-  }
-  rb.noalias() = Aq * r.head(half);
-  rb += sigma * r.tail(half);
-  sb = lu.solve(rb);
-  z.tail(half) = sb;
-  z.head(half) = (r.head(half) + sb) / sigma;
-}
-
 }  // namespace
 
 RadauStepper::RadauStepper(OdeSystem& system, Eigen::Index n, const OdeOptions& options)
@@ -75,7 +59,6 @@ RadauStepper::RadauStepper(OdeSystem& system, Eigen::Index n, const OdeOptions& 
                                          : Eigen::VectorXd::Constant(n, options.atol * ratio);
   newtonTolerance_ = options.newtonTolerance > 0.0 ? options.newtonTolerance
                                                   : std::max(10.0 * kEps / rtol_, std::min(0.03, std::sqrt(rtol_)));
-  const Eigen::Index m = secondOrder_ ? half_ : n_;
   y_ = Eigen::VectorXd::Zero(n_);
   f0_.resize(n_);
   y1_.resize(n_);
@@ -96,16 +79,10 @@ RadauStepper::RadauStepper(OdeSystem& system, Eigen::Index n, const OdeOptions& 
   G1_.resize(n_);
   dW1_.resize(n_);
   J_ = Eigen::MatrixXd::Zero(n_, n_);
-  realMatrix_.resize(m, m);
-  realLu_ = Eigen::PartialPivLU<Eigen::MatrixXd>(m);
-  complexLu_.resize(m);
-  rb_.resize(m);
-  sb_.resize(m);
-  hr_.resize(m);
-  hi_.resize(m);
-  pr_.resize(m);
-  pi_.resize(m);
-  cb_.resize(m);
+  realSolve_.resize(n_, secondOrder_, 1);
+  complexSolve_.resize(n_, secondOrder_, 1);
+  zr_.resize(n_);
+  zi_.resize(n_);
 }
 
 void RadauStepper::start(double t0, const Eigen::Ref<const Eigen::VectorXd>& y0) {
@@ -154,53 +131,29 @@ void RadauStepper::factor(double h) {
   const RadauTableau& tab = RadauTableau::get();
   sigma0_ = 1.0 / (tab.gamma0 * h);
   sigma1_ = 1.0 / (tab.mu * h);
-  if (secondOrder_) {
-    const auto Aq = J_.bottomLeftCorner(half_, half_);
-    const auto Av = J_.bottomRightCorner(half_, half_);
-    realMatrix_ = -Aq - sigma0_ * Av;
-    realMatrix_.diagonal().array() += sigma0_ * sigma0_;
-    // σ1²I − σ1 A_v − A_q with σ1 = a + ib: real part a² − b² − a A_v − A_q, imaginary 2ab − b A_v.
-    const Complex s2 = sigma1_ * sigma1_;
-    complexLu_.re() = -Aq - sigma1_.real() * Av;
-    complexLu_.re().diagonal().array() += s2.real();
-    complexLu_.im() = -sigma1_.imag() * Av;
-    complexLu_.im().diagonal().array() += s2.imag();
-  } else {
-    realMatrix_ = -J_;
-    realMatrix_.diagonal().array() += sigma0_;
-    complexLu_.re() = -J_;
-    complexLu_.re().diagonal().array() += sigma1_.real();
-    complexLu_.im().setZero();
-    complexLu_.im().diagonal().setConstant(sigma1_.imag());
-  }
-  realLu_.compute(realMatrix_);
-  complexLu_.factor();
+  // σI − J = σ (I − κJ) with κ = 1/σ (shifted_solve.hpp; halved for a second-order J).
+  realSolve_.factor(J_, tab.gamma0 * h, secondOrder_);
+  complexSolve_.factor(J_, tab.mu * h, secondOrder_);
   factoredH_ = h;
   haveFactors_ = true;
   ++factorizations_;
 }
 
+// (σ0 I − J) z = r is (I − κ0 J) z = κ0 r.
 void RadauStepper::solveReal(const Eigen::VectorXd& r, Eigen::VectorXd& z) {
-  shiftedSolve(secondOrder_, half_, sigma0_, realLu_, J_.bottomLeftCorner(half_, half_), r, z, rb_, sb_);
+  z = r / sigma0_;
+  realSolve_.solve(z);
 }
 
 void RadauStepper::solveComplex(const Eigen::VectorXcd& r, Eigen::VectorXcd& z) {
-  if (!secondOrder_) {
-    cb_ = r;
-    complexLu_.solve(cb_);
-    z = cb_;
-    return;
+  const Complex kappa = 1.0 / sigma1_;
+  for (Eigen::Index i = 0; i < n_; ++i) {
+    const Complex v = kappa * r[i];
+    zr_[i] = v.real();
+    zi_[i] = v.imag();
   }
-  // shiftedSolve's b = (σ1²I − σ1A_v − A_q)⁻¹ (σ1 r₂ + A_q r₁), A_q r₁ as two real products.
-  const auto Aq = J_.bottomLeftCorner(half_, half_);
-  hr_.head(half_) = r.head(half_).real();
-  hi_.head(half_) = r.head(half_).imag();
-  pr_.head(half_).noalias() = Aq * hr_.head(half_);
-  pi_.head(half_).noalias() = Aq * hi_.head(half_);
-  for (Eigen::Index i = 0; i < half_; ++i) cb_[i] = Complex(pr_[i], pi_[i]) + sigma1_ * r[half_ + i];
-  complexLu_.solve(cb_);
-  z.tail(half_) = cb_;
-  z.head(half_) = (r.head(half_) + cb_) / sigma1_;
+  complexSolve_.solve(zr_, zi_);
+  for (Eigen::Index i = 0; i < n_; ++i) z[i] = Complex(zr_[i], zi_[i]);
 }
 
 double RadauStepper::rms(const Eigen::Ref<const Eigen::MatrixXd>& v, const Eigen::VectorXd& scale) const {

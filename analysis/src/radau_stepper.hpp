@@ -14,9 +14,8 @@
 //   (σ_k I − J) ΔW_k = Σ_i T⁻¹_ki F_i − σ_k W_k,  σ_0 = 1/(γ0 h) real, σ_1 = 1/(μ h) complex,
 // (W_2 = conj W_1): one real and one complex linear system of J's size, factored once per (J, h).
 // When the system declares J = [[0, I], [A_q, A_v]] (OdeSystem::secondOrder: y = [q; q̇], n/2
-// coordinates) each solve (σI − J)[a; b] = [r₁; r₂] is
-//   (σ² I − σ A_v − A_q) b = σ r₂ + A_q r₁,  a = (r₁ + b)/σ,
-// on n/2 unknowns (8× fewer flops per factorization). The iteration stops when the contraction
+// coordinates) each solve σ(I − J/σ) z = r halves to n/2 unknowns (shifted_solve.hpp: 8× fewer
+// flops per factorization). The iteration stops when the contraction
 // estimate θ predicts the remaining error below κ of the tolerance (OdeOptions::newtonTolerance;
 // 0: RADAU5's min(0.03, √rtol′)), and fails
 // (h shrinks, J is refreshed) when θ ≥ 0.99 or the prediction over the remaining iterations (at
@@ -56,7 +55,7 @@
 #pragma once
 
 #include "trellis/analysis/detail/ode_driver.hpp"
-#include "trellis/analysis/detail/split_complex_lu.hpp"
+#include "trellis/analysis/detail/shifted_solve.hpp"
 
 #include <Eigen/Core>
 #include <Eigen/LU>
@@ -122,11 +121,9 @@ class RadauStepper {
   double sigma0_ = 0.0;
   std::complex<double> sigma1_;
   // Factorizations at (J, factoredH_): full n×n or, for second-order systems, n/2×n/2.
-  Eigen::MatrixXd realMatrix_;
-  Eigen::PartialPivLU<Eigen::MatrixXd> realLu_;
-  SplitComplexLu complexLu_;
-  Eigen::VectorXd rb_, sb_, hr_, hi_, pr_, pi_;
-  Eigen::VectorXcd cb_;
+  ShiftedSolve realSolve_;
+  ComplexShiftedSolve complexSolve_;
+  Eigen::VectorXd zr_, zi_;  // the complex solve's right-hand side and solution, split
   double factoredH_ = 0.0;
   bool haveJacobian_ = false, jacobianCurrent_ = false, haveFactors_ = false, f0Valid_ = false;
   bool haveStep_ = false, extrapolate_ = false, afterStart_ = true, lastRejected_ = false, needJacobian_ = false;

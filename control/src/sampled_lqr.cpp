@@ -6,7 +6,7 @@
 #include "trellis/analysis/detail/dense_kernels.hpp"
 #include "trellis/analysis/detail/ode_driver.hpp"
 #include "trellis/analysis/detail/radau_tableau.hpp"
-#include "trellis/analysis/detail/split_complex_lu.hpp"
+#include "trellis/analysis/detail/shifted_solve.hpp"
 #include "trellis/core/detail/report_json.hpp"
 
 #include <Eigen/Cholesky>
@@ -146,7 +146,6 @@ class BlockExponential {
     // The products through matmul (dense_kernels.hpp; column-major, leading dimension c; the
     // transposed factors copied): at these sizes Eigen's general product spends ~2× the
     // instructions on packing. t = W E, W += Eᵀ t (only E's top rows [Φ Γ] are not [0 I]).
-    const auto Phi = E.topLeftCorner(nx, nx);
     const auto Gamma = E.topRightCorner(nx, nu);
     for (int i = 0; i < s; ++i) {
       detail::matmul(c, nx, nx, 1.0, W.data(), c, E.data(), c, false, t_.data(), c, false);
@@ -607,7 +606,8 @@ class MagnusIntegrator {
 };
 
 /// Whether x = [q; v] has the mechanical structure q̇ = v with the inputs on v̇, exactly:
-/// A = [[0, I], [Aq, Av]], B = [0; Bv] (p = nx/2 rows each). The shifted solves below then halve.
+/// A = [[0, I], [Aq, Av]], B = [0; Bv] (p = nx/2 rows each). The shifted solves then halve
+/// (shifted_solve.hpp).
 bool mechanicalPair(const Eigen::MatrixXd& A, const Eigen::MatrixXd& B) {
   const Eigen::Index nx = A.rows(), p = nx / 2;
   if (p == 0 || 2 * p != nx) return false;
@@ -623,96 +623,6 @@ bool mechanicalPair(const Eigen::MatrixXd& A, const Eigen::MatrixXd& B) {
   }
   return true;
 }
-
-/// X ← (I − κA)⁻¹ X for a real κ, every column. For a mechanical A = [[0, I], [Aq, Av]] the
-/// rows xq − κ xv = rq, xv − κ (Aq xq + Av xv) = rv give
-///   (I − κAv − κ²Aq) xv = rv + κ Aq rq,   xq = rq + κ xv:
-/// one p×p LU (p = nx/2) instead of the nx×nx one, 8× fewer flops to factor, 4× to solve.
-class ShiftedSolve {
- public:
-  void factor(const Eigen::MatrixXd& A, double kappa, bool mechanical) {
-    mech_ = mechanical;
-    kappa_ = kappa;
-    const Eigen::Index n = A.rows(), p = n / 2;
-    if (mech_) {
-      Aq_ = A.bottomLeftCorner(p, p);
-      M_ = (-kappa) * A.bottomRightCorner(p, p) - (kappa * kappa) * Aq_;
-      M_.diagonal().array() += 1.0;
-    } else {
-      M_ = (-kappa) * A;
-      M_.diagonal().array() += 1.0;
-    }
-    lu_.compute(M_);
-  }
-  void solve(Eigen::MatrixXd& X) {
-    if (!mech_) {
-      t_ = lu_.solve(X);
-      X = t_;
-      return;
-    }
-    const Eigen::Index p = Aq_.rows();
-    t_.resize(p, X.cols());
-    detail::matmul(p, X.cols(), p, 1.0, Aq_.data(), p, X.data(), X.rows(), false, t_.data(), p, false);
-    X.bottomRows(p) += kappa_ * t_;
-    t_ = lu_.solve(X.bottomRows(p));
-    X.bottomRows(p) = t_;
-    X.topRows(p) += kappa_ * t_;
-  }
-
- private:
-  bool mech_ = false;
-  double kappa_ = 0.0;
-  Eigen::MatrixXd M_, Aq_, t_;
-  Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
-};
-
-/// The same for a complex κ, X = Xr + i Xi: (I − κA) in split storage (split_complex_lu.hpp),
-/// halved for a mechanical A as above (κ² and κ Aq rq complex).
-class ComplexShiftedSolve {
- public:
-  void factor(const Eigen::MatrixXd& A, std::complex<double> kappa, bool mechanical) {
-    mech_ = mechanical;
-    kappa_ = kappa;
-    const Eigen::Index n = A.rows(), p = n / 2;
-    if (mech_) {
-      Aq_ = A.bottomLeftCorner(p, p);
-      const std::complex<double> k2 = kappa * kappa;
-      lu_.resize(p);
-      lu_.re() = (-kappa.real()) * A.bottomRightCorner(p, p) - k2.real() * Aq_;
-      lu_.re().diagonal().array() += 1.0;
-      lu_.im() = (-kappa.imag()) * A.bottomRightCorner(p, p) - k2.imag() * Aq_;
-    } else {
-      lu_.resize(n);
-      lu_.re() = (-kappa.real()) * A;
-      lu_.re().diagonal().array() += 1.0;
-      lu_.im() = (-kappa.imag()) * A;
-    }
-    lu_.factor();
-  }
-  void solve(Eigen::MatrixXd& Xr, Eigen::MatrixXd& Xi) {
-    if (!mech_) {
-      lu_.solve(Xr, Xi);
-      return;
-    }
-    const Eigen::Index p = Aq_.rows();
-    const double kr = kappa_.real(), ki = kappa_.imag();
-    tr_.resize(p, Xr.cols());
-    ti_.resize(p, Xi.cols());
-    detail::matmul(p, Xr.cols(), p, 1.0, Aq_.data(), p, Xr.data(), Xr.rows(), false, tr_.data(), p, false);
-    detail::matmul(p, Xi.cols(), p, 1.0, Aq_.data(), p, Xi.data(), Xi.rows(), false, ti_.data(), p, false);
-    Xr.bottomRows(p) += kr * tr_ - ki * ti_;
-    Xi.bottomRows(p) += kr * ti_ + ki * tr_;
-    lu_.solve(Xr.bottomRows(p), Xi.bottomRows(p));
-    Xr.topRows(p) += kr * Xr.bottomRows(p) - ki * Xi.bottomRows(p);
-    Xi.topRows(p) += kr * Xi.bottomRows(p) + ki * Xr.bottomRows(p);
-  }
-
- private:
-  bool mech_ = false;
-  std::complex<double> kappa_;
-  Eigen::MatrixXd Aq_, tr_, ti_;
-  detail::SplitComplexLu lu_;
-};
 
 /// The three-stage Radau IIA collocation (order 5, L-stable, stiffly accurate) of the variational
 /// equation Ẏ = A(t)Y + [0 B(t)], Y = [Φ Γ] (nx×c) from [I 0] at the interval's start, and the cost
@@ -1113,7 +1023,7 @@ class RadauIntegrator {
     // one real nx×nx system (λ = γ0: the estimate's matrix, factored here for both) and one
     // complex (μ; μ̄'s solution is its conjugate), U_i = T_i0 V_0 + 2 Re(T_i1 V_1).
     errSolveF_.factor(Af_, gamma0_ * d, mechF_);  // γ0: a's real eigenvalue
-    // I − δμ A_f in split storage (split_complex_lu.hpp: 2–3× Eigen's complex LU at these sizes).
+    // I − δμ A_f in split storage (shifted_solve.hpp).
     complexSolveF_.factor(Af_, mu_ * d, mechF_);
     v0_ = Tinv_(0, 0).real() * rhsF_.topRows(n) + Tinv_(0, 1).real() * rhsF_.middleRows(n, n) +
           Tinv_(0, 2).real() * rhsF_.bottomRows(n);
@@ -1165,7 +1075,7 @@ class RadauIntegrator {
   Eigen::MatrixXd A_[3], B_[3], Q_[3], R_[3], A0_, B0_, Q0_, R0_;
   Eigen::MatrixXd M_, rhs_, stages_, QY_, Yn_, Wn_, g_, f0_, rY_, rW_, errY_, errW_, eW_;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
-  ShiftedSolve errSolve_;  ///< the estimate's filter I − γ0δA_n
+  detail::ShiftedSolve errSolve_;  ///< the estimate's filter I − γ0δA_n
   // The halved stage system of a mechanical step (mechanicalStages).
   bool mech0_ = false;  ///< A_n, B_n mechanical (the filter halves)
   Eigen::MatrixXd MM_, rhsM_, vM_, aqY_[3];
@@ -1179,12 +1089,12 @@ class RadauIntegrator {
   Eigen::MatrixXd QY0_, g0_, QYn_, gn_, QY0F_, g0F_, QYnF_, gnF_;
   bool startCached_ = false, startCachedF_ = false;
   bool mechF_ = false;  ///< A_f, B_f mechanical (the twin's solves halve)
-  ShiftedSolve errSolveF_;  ///< I − γ0δA_f: the twin's real stage solve and its filter
+  detail::ShiftedSolve errSolveF_;  ///< I − γ0δA_f: the twin's real stage solve and its filter
   Eigen::Matrix3cd T_, Tinv_;  ///< a's eigenvectors (columns: γ0, μ, μ̄) and their inverse
   std::complex<double> mu_;
   Eigen::MatrixXd v0_;
   Eigen::MatrixXd cVr_, cVi_;  // the complex stage system's right-hand side and solution, split
-  ComplexShiftedSolve complexSolveF_;  ///< I − δμA_f
+  detail::ComplexShiftedSolve complexSolveF_;  ///< I − δμA_f
   BlockExponential blockExponential_;
 };
 
