@@ -601,6 +601,16 @@ double gainDifference(const std::vector<MatrixXd>& expected, const std::vector<M
   return diff / scale;
 }
 
+/// The recursion's gains on both discretizations (each must succeed) and gainDifference of them.
+double recursionGainDifference(const trellis::SampledDiscretization& expected,
+                               const trellis::SampledDiscretization& got, const MatrixXd& Qf) {
+  const auto e = trellis::solveSampledRiccatiRecursion(expected.intervals, Qf);
+  const auto g = trellis::solveSampledRiccatiRecursion(got.intervals, Qf);
+  REQUIRE(e.ok());
+  REQUIRE(g.ok());
+  return gainDifference(e.K, g.K);
+}
+
 /// max over the blocks of |got − expected| relative to the block's own max |entry|.
 double intervalDifference(const SampledInterval& e, const SampledInterval& g) {
   auto rel = [](const MatrixXd& x, const MatrixXd& y) {
@@ -794,18 +804,12 @@ TEST_CASE("sampled LQR: the Radau and Magnus integrations agree with CVODES on t
       INFO("interval " << k);
       CHECK(intervalDifference(ref.intervals[k], magnus.intervals[k]) < 1e-9);
     }
-    const auto a = trellis::solveSampledRiccatiRecursion(magnus.intervals, w.Qf);
-    const auto b = trellis::solveSampledRiccatiRecursion(ref.intervals, w.Qf);
-    REQUIRE(a.ok());
-    REQUIRE(b.ok());
-    CHECK(gainDifference(b.K, a.K) < 1e-8);
+    CHECK(recursionGainDifference(ref, magnus, w.Qf) < 1e-8);
     CHECK(magnus.steps < ref.steps);  // no restart per interval
     // The gains at the method's default rtol.
     const auto byDefault = trellis::discretizeSampledData(times, 2, 1, &tvSystem, w, fast);
     REQUIRE(byDefault.ok());
-    const auto c = trellis::solveSampledRiccatiRecursion(byDefault.intervals, w.Qf);
-    REQUIRE(c.ok());
-    CHECK(gainDifference(b.K, c.K) < 1e-8);
+    CHECK(recursionGainDifference(ref, byDefault, w.Qf) < 1e-8);
   }
   SECTION("a state weight that drops 1e6-fold from one interval to the next") {
     // Radau measures the cost's error against (among others) the previous interval's cost rate:
@@ -839,11 +843,7 @@ TEST_CASE("sampled LQR: the Radau and Magnus integrations agree with CVODES on t
     const auto ref = trellis::discretizeSampledData(times, 4, 2, lin, w, bdf);
     REQUIRE(magnus.ok());
     REQUIRE(ref.ok());
-    const auto a = trellis::solveSampledRiccatiRecursion(magnus.intervals, w.Qf);
-    const auto b = trellis::solveSampledRiccatiRecursion(ref.intervals, w.Qf);
-    REQUIRE(a.ok());
-    REQUIRE(b.ok());
-    CHECK(gainDifference(b.K, a.K) < 1e-8);
+    CHECK(recursionGainDifference(ref, magnus, w.Qf) < 1e-8);
   }
   SECTION("solveTvlqr along the cart-pole's swing, knots every 10 ms") {
     const Model model = trellis::ctest::makeCartPole();
@@ -912,11 +912,7 @@ TEST_CASE("sampled LQR: Radau's halved stage solve of a mechanical system equals
     bdf.atol = 1e-14;
     const auto ref = trellis::discretizeSampledData(times, 4, 2, lin, w, bdf);
     REQUIRE(ref.ok());
-    const auto a = trellis::solveSampledRiccatiRecursion(halved.intervals, w.Qf);
-    const auto b = trellis::solveSampledRiccatiRecursion(ref.intervals, w.Qf);
-    REQUIRE(a.ok());
-    REQUIRE(b.ok());
-    CHECK(gainDifference(b.K, a.K) < 1e-8);
+    CHECK(recursionGainDifference(ref, halved, w.Qf) < 1e-8);
   }
 }
 
