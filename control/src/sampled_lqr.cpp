@@ -64,6 +64,9 @@ Eigen::VectorXd sampleTimes(double t0, double T, double rate) {
 
 namespace {
 
+/// Every entry finite (one branch-free pass: dense_kernels.hpp).
+bool finite(const Eigen::MatrixXd& X) { return detail::finiteEntries(X.data(), X.size()); }
+
 /// W ← (W + Wᵀ)/2 in place, without a temporary (W = 0.5 (W + Wᵀ) needs one: assigned lazily, it
 /// would read entries it has already overwritten).
 void symmetrize(Eigen::MatrixXd& W) {
@@ -268,7 +271,7 @@ class Discretizer final : public detail::LinearOdeSystem {
       fail(t, std::string("callback threw at t = ") + std::to_string(t) + ": " + e.what());
       return false;
     }
-    if (!A.allFinite() || !B.allFinite() || !Q.allFinite() || !R.allFinite()) {
+    if (!finite(A) || !finite(B) || !finite(Q) || !finite(R)) {
       fail(t, "A, B, Q or R has a non-finite entry at t = " + std::to_string(t));
       return false;
     }
@@ -770,7 +773,7 @@ class RadauIntegrator {
         err = stepError();
       }
       factor = std::isfinite(err) ? std::clamp(0.9 * std::pow(std::max(err, 1e-30), -0.25), 0.2, 6.0) : 0.2;
-      if (!(err <= 1.0 && Yn_.allFinite() && Wn_.allFinite() && YnF_.allFinite() && WnF_.allFinite())) {
+      if (!(err <= 1.0 && finite(Yn_) && finite(Wn_) && finite(YnF_) && finite(WnF_))) {
         rejected = true;
           return StepOutcome::kRejected;
       }
