@@ -7,7 +7,8 @@
 //    reference is exactly constant and the sampled path uses the block exponential);
 //  - `swing`: its free swing for 2 s from q_i = 0.3 rad (u = 0, simulated at rtol 1e-11, knots
 //    every 20 ms): a time-varying reference, every interval integrated.
-// Weights Q = I, R = I, Qf = I; solveTvlqr with its default tolerances (continuous: Riccati rtol
+// Weights Q = I, R = I, Qf = I; the sampled rows time the gains alone (feed-forward reference
+// without the held reference's plant runs); solveTvlqr with its default tolerances (continuous: Riccati rtol
 // 1e-8, atol 1e-10; sampled: rtol kRadauRtol = 1e-6 for Radau, kRtol = 1e-10 for Magnus and BDF,
 // atol 1e-12).
 //
