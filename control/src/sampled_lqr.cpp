@@ -836,8 +836,8 @@ class RadauIntegrator {
     // The twin's estimate, subtracted: what is estimated is the error of the difference Y − Y_f
     // (the estimate is linear in the stages: that of the pair, its Jacobian blkdiag(A_n, A_f)).
     // eW = err_Yᵀ Q_n Y_n − err_Y,fᵀ Q_f Y_f,n (Q Y at the start: step(), twinStep()).
-    transposedProduct(errY_, QY0_, 1.0, false, eW_);
-    transposedProduct(errYf_, QY0F_, -1.0, true, eW_);
+    transposedProduct(errY_.data(), nx_, QY0_, 1.0, false, false, eW_);
+    transposedProduct(errYf_.data(), nx_, QY0F_, -1.0, false, true, eW_);
     errW_ = rW_;
     errW_ -= rWf_;
     errW_ += (gamma0_ * d_) * (eW_ + eW_.transpose());
@@ -920,29 +920,28 @@ class RadauIntegrator {
     return true;
   }
 
-  /// C = α XᵀY (accumulate: C += α XᵀY) for X, Y nx×c, through matmul with Xᵀ copied (yt_).
-  void transposedProduct(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, double alpha, bool accumulate,
-                         Eigen::MatrixXd& C) {
-    const Eigen::Index n = X.rows(), c = X.cols();
-    yt_ = X.transpose();
-    C.resize(c, Y.cols());
-    detail::matmul(c, Y.cols(), n, alpha, yt_.data(), c, Y.data(), n, false, C.data(), c, false, accumulate);
+  /// C = α XᵀZ (accumulate: C += α XᵀZ; upperOnly as matmul's) for X nx×c (column stride ldx)
+  /// and Z nx×c, through the blocked matmul of dense_kernels.hpp with Xᵀ copied (yt_): at these
+  /// sizes Eigen's general product spends ~2× the instructions on its packing.
+  void transposedProduct(const double* X, Eigen::Index ldx, const Eigen::MatrixXd& Z, double alpha, bool upperOnly,
+                         bool accumulate, Eigen::MatrixXd& C) {
+    const Eigen::Index n = nx_, c = c_;
+    yt_.resize(c, n);
+    for (Eigen::Index j = 0; j < c; ++j) {
+      for (Eigen::Index i = 0; i < n; ++i) yt_(j, i) = X[i + j * ldx];
+    }
+    C.resize(c, c);
+    detail::matmul(c, c, n, alpha, yt_.data(), c, Z.data(), n, false, C.data(), c, upperOnly, accumulate);
   }
 
   /// At a stage Y (nx×c, column stride ld): QY = Q Y and g = Yᵀ Q Y + blkdiag(0, R) (symmetric:
-  /// its upper triangle by the blocked product of dense_kernels.hpp, then mirrored — at these
-  /// sizes Eigen's general product spends ~2× the instructions on its packing).
+  /// its upper triangle, then mirrored).
   void stageCost(const Eigen::MatrixXd& Q, const Eigen::MatrixXd& R, const double* Y, Eigen::Index ld,
                  Eigen::MatrixXd& qy, Eigen::MatrixXd& g) {
     const Eigen::Index n = nx_, c = c_;
     qy.resize(n, c);
-    g.resize(c, c);
-    yt_.resize(c, n);
     detail::matmul(n, c, n, 1.0, Q.data(), n, Y, ld, false, qy.data(), n, false);
-    for (Eigen::Index j = 0; j < c; ++j) {
-      for (Eigen::Index i = 0; i < n; ++i) yt_(j, i) = Y[i + j * ld];
-    }
-    detail::matmul(c, c, n, 1.0, yt_.data(), c, qy.data(), n, false, g.data(), c, true);
+    transposedProduct(Y, ld, qy, 1.0, true, false, g);
     for (Eigen::Index j = 0; j < c; ++j) {
       for (Eigen::Index i = 0; i < j; ++i) g(j, i) = g(i, j);
     }
@@ -998,20 +997,18 @@ class RadauIntegrator {
     }
     luM_.compute(MM_);
     vM_.noalias() = luM_.solve(rhsM_);  // the velocity stages
-    const Eigen::MatrixXd& vStages = vM_;
     // The stages: Yq_i = Yq_n + δ Σ_l a_il Yv_l, Yv_i (rows i·nx … of stages_, column stride 3nx).
     for (int i = 0; i < 3; ++i) {
       const double w0 = d * a_[i][0], w1 = d * a_[i][1], w2 = d * a_[i][2];
       for (Eigen::Index col = 0; col < c; ++col) {
         const double* yq = Y.data() + col * n;
-        const double* v = vStages.data() + col * m3;
+        const double* v = vM_.data() + col * m3;
         double* dst = stages_.data() + col * 3 * n + i * n;
         for (Eigen::Index r = 0; r < p; ++r) dst[r] = yq[r] + w0 * v[r] + w1 * v[p + r] + w2 * v[2 * p + r];
         for (Eigen::Index r = 0; r < p; ++r) dst[p + r] = v[i * p + r];
       }
     }
   }
-
 
   /// The same step of the frozen twin Ẏ_f = A_f Y_f + [0 B_f] (from Y0_, W0_ with Q_f, R_f): its
   /// result in (YnF_, WnF_), its estimate's parts in errYf_ and rWf_. A_f is constant, so the
