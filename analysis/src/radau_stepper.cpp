@@ -34,7 +34,6 @@ std::string number(double v) {
 RadauStepper::RadauStepper(OdeSystem& system, Eigen::Index n, const OdeOptions& options)
     : system_(system),
       n_(n),
-      half_(n / 2),
       secondOrder_(system.secondOrder() && n % 2 == 0),
       maxSteps_(options.maxSteps),
       maxStep_(options.maxStep),

@@ -102,7 +102,7 @@ class RadauStepper {
   double rms(const Eigen::Ref<const Eigen::MatrixXd>& v, const Eigen::VectorXd& scale) const;
 
   OdeSystem& system_;
-  Eigen::Index n_, half_;
+  Eigen::Index n_;
   bool secondOrder_;
   double rtol_;           // RADAU5's transformed tolerances (file comment)
   Eigen::VectorXd atol_;  // per component
