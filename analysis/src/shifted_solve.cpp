@@ -10,7 +10,7 @@ void ShiftedSolve::resize(Eigen::Index n, bool secondOrder, Eigen::Index columns
   M_.resize(m, m);
   Aq_.resize(n / 2, n / 2);
   t_.resize(m, columns);
-  lu_ = Eigen::PartialPivLU<Eigen::MatrixXd>(m);
+  lu_.resize(m, columns);
 }
 
 void ShiftedSolve::factor(const Eigen::MatrixXd& A, double kappa, bool secondOrder) {
@@ -24,22 +24,20 @@ void ShiftedSolve::factor(const Eigen::MatrixXd& A, double kappa, bool secondOrd
     M_ = (-kappa) * A;
   }
   M_.diagonal().array() += 1.0;
-  lu_.compute(M_);
+  lu_.factor(M_);
 }
 
 void ShiftedSolve::solve(Eigen::Ref<Eigen::MatrixXd> X) {
   if (!secondOrder_) {
-    t_ = lu_.solve(X);
-    X = t_;
+    lu_.solve(X);
     return;
   }
   const Eigen::Index p = Aq_.rows(), cols = X.cols();
   t_.resize(p, cols);
   matmul(p, cols, p, 1.0, Aq_.data(), p, X.data(), X.outerStride(), false, t_.data(), p, false);
   X.bottomRows(p) += kappa_ * t_;
-  t_ = lu_.solve(X.bottomRows(p));
-  X.bottomRows(p) = t_;
-  X.topRows(p) += kappa_ * t_;
+  lu_.solve(X.bottomRows(p));
+  X.topRows(p) += kappa_ * X.bottomRows(p);
 }
 
 void ComplexShiftedSolve::resize(Eigen::Index n, bool secondOrder, Eigen::Index columns) {

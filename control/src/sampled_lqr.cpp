@@ -7,6 +7,7 @@
 #include "trellis/analysis/detail/ode_driver.hpp"
 #include "trellis/analysis/detail/radau_tableau.hpp"
 #include "trellis/analysis/detail/shifted_solve.hpp"
+#include "trellis/analysis/detail/small_lu.hpp"
 #include "trellis/core/detail/report_json.hpp"
 
 #include <Eigen/Cholesky>
@@ -18,9 +19,12 @@
 #include <complex>
 #include <cstdlib>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <sstream>
 #include <stdexcept>
+#include <utility>
+#include <vector>
 
 namespace trellis {
 
@@ -112,20 +116,27 @@ class BlockExponential {
     z_ = scale * Z;
     p_ = (scale / pScale) * P;
     constexpr double b0 = 30240.0, b1 = 15120.0, b2 = 3360.0, b3 = 420.0, b4 = 30.0, b5 = 1.0;
+    // The c×c products through matmul (dense_kernels.hpp): C = α X Y (+ C when accumulating).
+    const auto mm = [c](Eigen::MatrixXd& C, const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, double alpha,
+                        bool accumulate) {
+      C.resize(c, c);
+      detail::matmul(c, c, c, alpha, X.data(), c, Y.data(), c, false, C.data(), c, false, accumulate);
+    };
     // X²: (z²)ᵀ, U₂ = p z − zᵀp, z²;  X⁴: U₄ = U₂z² + (z²)ᵀU₂ = U₂z² − (U₂z²)ᵀ.
-    r2_.noalias() = z_ * z_;
-    t_.noalias() = p_ * z_;
+    mm(r2_, z_, z_, 1.0, false);
+    mm(t_, p_, z_, 1.0, false);
     u2_ = t_ - t_.transpose();
-    r4_.noalias() = r2_ * r2_;
-    t_.noalias() = u2_ * r2_;
+    mm(r4_, r2_, r2_, 1.0, false);
+    mm(t_, u2_, r2_, 1.0, false);
     u4_ = t_ - t_.transpose();
     // Y = b5X⁴ + b3X² + b1I; the odd part U = X Y: corners (−R_Uᵀ, −zᵀU_Y + pR_Y, zR_Y).
     rY_ = b5 * r4_ + b3 * r2_;
     rY_.diagonal().array() += b1;
     uY_ = b5 * u4_ + b3 * u2_;
-    rU_.noalias() = z_ * rY_;
-    uU_.noalias() = p_ * rY_;
-    uU_.noalias() -= z_.transpose() * uY_;
+    mm(rU_, z_, rY_, 1.0, false);
+    mm(uU_, p_, rY_, 1.0, false);
+    eT_ = z_.transpose();
+    mm(uU_, eT_, uY_, -1.0, true);
     // The even part V = b4X⁴ + b2X² + b0I; p = V + U, q = V − U.
     rp_ = b4 * r4_ + b2 * r2_;
     rp_.diagonal().array() += b0;
@@ -134,15 +145,18 @@ class BlockExponential {
     up_ = b4 * u4_ + b2 * u2_;
     uq_ = up_ - uU_;
     up_ += uU_;
-    luq_.compute(rq_);
-    E = luq_.solve(rp_);
+    luq_.factor(rq_);
+    E = rp_;
+    luq_.solve(E);
     // The held input's rows are exactly [0 I] (u̇ = 0); the approximant returns them to rounding.
     E.bottomRows(nu).setZero();
     E.bottomRightCorner(nu, nu).setIdentity();
-    up_.noalias() -= uq_ * E;
-    lup_.compute(rp_.transpose());
-    t_ = lup_.solve(up_);  // F₁₂ = e^{−zᵀ}·W(z)/pScale
-    W.noalias() = pScale * (E.transpose() * t_);
+    mm(up_, uq_, E, -1.0, true);
+    lup_.factor(rp_, true);  // p(X)'s corner: rp_ᵀ
+    t_ = up_;
+    lup_.solve(t_);  // F₁₂ = e^{−zᵀ}·W(z)/pScale
+    eT_ = E.transpose();
+    mm(W, eT_, t_, pScale, false);
     symmetrize(W);
     // The doublings on E = [[Φ, Γ], [0, I]]: W ← W + EᵀWE, E ← E² = [[Φ², ΦΓ + Γ], [0, I]].
     const Eigen::Index nx = c - nu;
@@ -166,7 +180,7 @@ class BlockExponential {
 
  private:
   Eigen::MatrixXd z_, p_, r2_, u2_, r4_, u4_, rY_, uY_, rU_, uU_, rp_, rq_, up_, uq_, t_, eT_;
-  Eigen::PartialPivLU<Eigen::MatrixXd> luq_, lup_;
+  detail::SmallLu luq_, lup_;
 };
 
 }  // namespace
@@ -206,6 +220,8 @@ void discretizeConstantInterval(const Eigen::MatrixXd& A, const Eigen::MatrixXd&
 
 namespace {
 
+class ChebyshevLinearization;
+
 /// The variational equation Y = [Φ Γ] (nx × (nx+m), column-major) and the cost quadrature
 /// W = ∫ [Φ Γ]ᵀ Q [Φ Γ] + blkdiag(0, R) ((nx+m)² entries), for OdeDriver.
 class Discretizer final : public detail::LinearOdeSystem {
@@ -230,7 +246,13 @@ class Discretizer final : public detail::LinearOdeSystem {
         R(nu_, nu_), QY(nx_, nx_ + nu_), LUmat(nx_, nx_), lu(nx_), Aprec(nx_, nx_) {
     if (!w.Qfun) Q = w.Q;
     if (!w.Rfun) R = w.R;
+    // A constant diagonal Q (the usual weights): Q Y is a row scaling (RadauIntegrator::stageCost).
+    qDiagonal = !w.Qfun && Q.isDiagonal(0.0);
+    if (qDiagonal) qd = Q.diagonal();
   }
+
+  bool qDiagonal = false;  ///< Q constant and diagonal (exactly): qd holds it
+  Eigen::VectorXd qd;
 
   void fail(double t, const std::string& m) {
     if (!failed) {
@@ -240,45 +262,43 @@ class Discretizer final : public detail::LinearOdeSystem {
     }
   }
 
-  /// A, B (and Q, R if callbacks) at t, cached on t.
-  bool evaluate(double t) {
-    if (cacheValid && t == cachedT) return true;
-    cacheValid = false;
+  /// The exact A(t), B(t) from the callback into (Ax, Bx): sizes and finiteness checked, a failure
+  /// recorded (fail) with the time. Counts the linearizations.
+  bool linearizeExact(double t, Eigen::MatrixXd& Ax, Eigen::MatrixXd& Bx) {
     // A user's callback may throw: caught here, at the integrator's C boundary (the library's
     // own callbacks return their failure as the status).
     try {
-      const ReferenceStatus st = lin(t, A, B);
+      const ReferenceStatus st = lin(t, Ax, Bx);
       ++linearizations;
       if (!st.ok()) {
         fail(t, st.message);
         return false;
       }
-      if (A.rows() != nx || A.cols() != nx || B.rows() != nx || B.cols() != nu) {
+      if (Ax.rows() != nx || Ax.cols() != nx || Bx.rows() != nx || Bx.cols() != nu) {
         std::ostringstream m;
-        m << "linearization callback returned A " << A.rows() << "x" << A.cols() << ", B " << B.rows()
-          << "x" << B.cols() << " at t = " << t << " (expected " << nx << "x" << nx << ", " << nx
+        m << "linearization callback returned A " << Ax.rows() << "x" << Ax.cols() << ", B " << Bx.rows()
+          << "x" << Bx.cols() << " at t = " << t << " (expected " << nx << "x" << nx << ", " << nx
           << "x" << nu << ")";
         fail(t, m.str());
-        return false;
-      }
-      if (w.Qfun) w.Qfun(t, Q);
-      if (w.Rfun) w.Rfun(t, R);
-      if (Q.rows() != nx || Q.cols() != nx || R.rows() != nu || R.cols() != nu) {
-        fail(t, "Q(t)/R(t) callback returned a wrong size at t = " + std::to_string(t));
         return false;
       }
     } catch (const std::exception& e) {
       fail(t, std::string("callback threw at t = ") + std::to_string(t) + ": " + e.what());
       return false;
     }
-    if (!finite(A) || !finite(B) || !finite(Q) || !finite(R)) {
-      fail(t, "A, B, Q or R has a non-finite entry at t = " + std::to_string(t));
+    if (!finite(Ax) || !finite(Bx)) {
+      fail(t, "A or B has a non-finite entry at t = " + std::to_string(t));
       return false;
     }
-    cachedT = t;
-    cacheValid = true;
     return true;
   }
+
+  /// A, B (and Q, R if callbacks) at t, cached on t: A, B from the interpolant where the
+  /// discretization made one (ChebyshevLinearization) and `interpolated` allows it, else exact.
+  bool evaluate(double t, bool interpolated = true);
+  bool cachedCheb = false;  ///< the cached A, B came from the interpolant
+
+  std::unique_ptr<ChebyshevLinearization> cheb;  ///< A(t), B(t) between breakpoints (kRadau)
 
   // Ẏ = A Y + [0 B]: a linear ODE (detail::LinearOdeSystem), J V = A V (one A per column).
   bool prepareAt(double t) override { return evaluate(t); }
@@ -332,6 +352,324 @@ class Discretizer final : public detail::LinearOdeSystem {
     return Z.allFinite() ? 0 : 1;
   }
 };
+
+/// A(t), B(t) between consecutive stops (the breakpoints: the reference's knots, where A may have
+/// a kink) by barycentric interpolation of exact linearizations at Chebyshev–Lobatto nodes, for
+/// a caller that says they are analytic there (SampledStructure::smoothBetweenBreakpoints: a
+/// reference interpolated by polynomials between its knots, linearized exactly). Why: Radau takes
+/// three linearizations per step, ~9 steps per 10 ms interval on the stiff chain (~28 % of the
+/// integration), while A(t) along a swing is reproduced to rounding (~2e-14 of max |A|) by 9
+/// nodes per 20 ms knot span. The check, per piece: the Chebyshev coefficients' tail
+/// |c_{n−2}| + |c_{n−1}| of every entry (the interpolation error's estimate) against kTol times
+/// the entries' scale, in the coordinates that balance A at the piece's middle (Osborne: D A D⁻¹
+/// with rows and columns of equal norm, D in powers of 2) — so the verdict does not depend on the
+/// states' units: A's entries against the largest balanced |A_ij|, B's columns each against its
+/// own largest balanced entry (nor on the inputs' units); then one verification against the exact
+/// linearization at a point that is not a node. 9 nodes, else 17 (the 9 are among them), else the
+/// piece is halved (to kMaxDepth), else it is evaluated exactly at every t (a fallback, counted).
+/// A piece holds its values (nx² + nx·m) × n, a query costs one product with n columns.
+class ChebyshevLinearization {
+ public:
+  static constexpr int kMaxNodes = 17, kMaxDepth = 3, kCache = 4;
+  static constexpr double kTol = 1e-12;
+
+  ChebyshevLinearization(int nx, int nu, std::vector<double> stops);
+
+  /// A, B at t (the interpolant of the piece holding t, built on first use, or the exact ones);
+  /// false when a callback failed (s.failed, with its message and time).
+  bool at(double t, Discretizer& s, Eigen::MatrixXd& A, Eigen::MatrixXd& B);
+
+  long pieces = 0;     ///< pieces interpolated (built)
+  long fallbacks = 0;  ///< pieces whose check failed at the deepest split: evaluated exactly
+
+ private:
+  /// One piece [lo, hi]: its n nodes, weights and values (direct: none, A and B exact at every t).
+  struct Piece {
+    double lo = std::numeric_limits<double>::quiet_NaN(), hi = lo;
+    int n = 0;
+    bool direct = false;
+    double x[kMaxNodes] = {}, w[kMaxNodes] = {};
+    Eigen::MatrixXd Pv;                 ///< the varying entries' values (first varying.size() rows)
+    Eigen::VectorXd base;               ///< every entry at the first node (the constant ones' value)
+    std::vector<Eigen::Index> varying;  ///< the entries that vary over the nodes
+  };
+  /// Builds the piece [lo, hi] into p; false when its check fails (or a callback failed: s.failed).
+  bool build(double lo, double hi, Discretizer& s, Piece& p);
+  /// The n-node candidate (in P_) passes the tail check.
+  bool tailsPass(int n);
+  /// The scaled size of `err` (an e-vector like a column of P_) against the candidate's scales:
+  /// max over entries of |err| / (kTol · scale); ≤ 1 passes.
+  double scaledError(const Eigen::VectorXd& err) const;
+  /// v_ = the piece's interpolant at t (A's entries, then B's).
+  void interpolate(const Piece& p, double t);
+  void unpack(Eigen::MatrixXd& A, Eigen::MatrixXd& B) const;
+
+  int nx_, nu_;
+  Eigen::Index e_;
+  std::vector<double> stops_;
+  double spanLo_ = std::numeric_limits<double>::quiet_NaN();
+  std::vector<std::pair<double, double>> failed_;  ///< pieces of the current span whose check failed
+  Piece cache_[kCache];  ///< the pieces last used (a step may straddle two; rejections step back)
+  int current_ = 0, next_ = 0;
+  // Scratch of build(): the 17-node grid's values, the candidate's columns, the balancing D of A
+  // at the middle node and the scales.
+  Eigen::MatrixXd V_, P_;
+  Eigen::VectorXd d_, scaleB_;
+  double scaleA_ = 0.0;
+  Eigen::MatrixXd Ax_, Bx_;
+  Eigen::VectorXd tail_, v_, cb_, exact_, pv_;
+};
+
+bool Discretizer::evaluate(double t, bool interpolated) {
+  const bool useCheb = interpolated && cheb;
+  if (cacheValid && t == cachedT && cachedCheb == useCheb) return true;
+  cacheValid = false;
+  if (!(useCheb ? cheb->at(t, *this, A, B) : linearizeExact(t, A, B))) return false;
+  cachedCheb = useCheb;
+  try {
+    if (w.Qfun) w.Qfun(t, Q);
+    if (w.Rfun) w.Rfun(t, R);
+  } catch (const std::exception& e) {
+    fail(t, std::string("callback threw at t = ") + std::to_string(t) + ": " + e.what());
+    return false;
+  }
+  if (Q.rows() != nx || Q.cols() != nx || R.rows() != nu || R.cols() != nu) {
+    fail(t, "Q(t)/R(t) callback returned a wrong size at t = " + std::to_string(t));
+    return false;
+  }
+  if (!finite(Q) || !finite(R)) {
+    fail(t, "A, B, Q or R has a non-finite entry at t = " + std::to_string(t));
+    return false;
+  }
+  cachedT = t;
+  cacheValid = true;
+  return true;
+}
+
+ChebyshevLinearization::ChebyshevLinearization(int nx, int nu, std::vector<double> stops)
+    : nx_(nx), nu_(nu), e_(static_cast<Eigen::Index>(nx) * (nx + nu)), stops_(std::move(stops)),
+      V_(e_, kMaxNodes), P_(e_, kMaxNodes), d_(nx), scaleB_(nu), Ax_(nx, nx), Bx_(nx, nu), tail_(e_), v_(e_),
+      cb_(kMaxNodes), exact_(e_), pv_(e_) {
+  for (Piece& p : cache_) {
+    p.Pv.resize(e_, kMaxNodes);
+    p.base.resize(e_);
+    p.varying.reserve(static_cast<std::size_t>(e_));
+  }
+}
+
+bool ChebyshevLinearization::at(double t, Discretizer& s, Eigen::MatrixXd& A, Eigen::MatrixXd& B) {
+  if (!(t >= stops_.front() && t <= stops_.back())) return s.linearizeExact(t, A, B);
+  const Piece* piece = nullptr;
+  for (int i = 0; i < kCache && !piece; ++i) {
+    const int j = (current_ + i) % kCache;
+    if (t >= cache_[j].lo && t <= cache_[j].hi) {
+      piece = &cache_[j];
+      current_ = j;
+    }
+  }
+  if (!piece) {
+    // The span stops_[i] ≤ t ≤ stops_[i+1], then its pieces down to the one that holds t.
+    const auto it = std::upper_bound(stops_.begin(), stops_.end(), t);
+    std::size_t i = static_cast<std::size_t>(it - stops_.begin());
+    i = i == 0 ? 0 : std::min(i - 1, stops_.size() - 2);
+    double lo = stops_[i], hi = stops_[i + 1];
+    if (!(lo == spanLo_)) {
+      failed_.clear();
+      spanLo_ = lo;
+    }
+    Piece& slot = cache_[next_];
+    current_ = next_;
+    next_ = (next_ + 1) % kCache;
+    for (int depth = 0;; ++depth) {
+      const bool knownBad = std::find(failed_.begin(), failed_.end(), std::make_pair(lo, hi)) != failed_.end();
+      if (!knownBad) {
+        if (build(lo, hi, s, slot)) {
+          ++pieces;
+          break;
+        }
+        if (s.failed) return false;
+        failed_.emplace_back(lo, hi);
+      }
+      if (depth == kMaxDepth) {
+        slot.lo = lo;
+        slot.hi = hi;
+        slot.direct = true;
+        if (!knownBad) ++fallbacks;
+        break;
+      }
+      const double mid = 0.5 * (lo + hi);
+      (t <= mid ? hi : lo) = mid;
+    }
+    piece = &slot;
+  }
+  if (piece->direct) return s.linearizeExact(t, A, B);
+  interpolate(*piece, t);
+  unpack(A, B);
+  return true;
+}
+
+bool ChebyshevLinearization::build(double lo, double hi, Discretizer& s, Piece& p) {
+  p.lo = p.hi = std::numeric_limits<double>::quiet_NaN();  // no piece until this one passes
+  p.direct = false;
+  const double mid = 0.5 * (lo + hi), half = 0.5 * (hi - lo);
+  const int last = kMaxNodes - 1;
+  double grid[kMaxNodes];
+  for (int k = 0; k < kMaxNodes; ++k) grid[k] = mid + half * std::cos(M_PI * k / last);
+  grid[0] = hi;
+  grid[last] = lo;
+  grid[last / 2] = mid;
+  auto node = [&](int k) {
+    if (!s.linearizeExact(grid[k], Ax_, Bx_)) return false;
+    V_.col(k).head(static_cast<Eigen::Index>(nx_) * nx_) = Eigen::Map<const Eigen::VectorXd>(Ax_.data(), Ax_.size());
+    V_.col(k).tail(static_cast<Eigen::Index>(nx_) * nu_) = Eigen::Map<const Eigen::VectorXd>(Bx_.data(), Bx_.size());
+    return true;
+  };
+  // The balancing of A at the middle node (Osborne's iteration on the off-diagonal 1-norms).
+  if (!node(last / 2)) return false;
+  d_.setOnes();
+  for (int sweep = 0; sweep < 30; ++sweep) {
+    bool moved = false;
+    for (int i = 0; i < nx_; ++i) {
+      double c = 0.0, r = 0.0;
+      for (int j = 0; j < nx_; ++j) {
+        if (j == i) continue;
+        c += std::abs(Ax_(j, i)) * d_(j) / d_(i);
+        r += std::abs(Ax_(i, j)) * d_(i) / d_(j);
+      }
+      if (!(c > 0.0) || !(r > 0.0)) continue;
+      int ex = 0;
+      std::frexp(std::sqrt(c / r), &ex);  // f = 2^(ex−1) ≈ √(c/r): row i × f, column i ÷ f
+      const double f = std::ldexp(1.0, ex - 1);
+      if (c / f + r * f < 0.95 * (c + r)) {
+        d_(i) *= f;
+        moved = true;
+      }
+    }
+    if (!moved) break;
+  }
+  for (int n : {9, kMaxNodes}) {
+    const int stride = last / (n - 1);
+    for (int k = 0; k < n; ++k) {
+      const int g = k * stride;
+      if (n == 9 || k % 2 == 1) {  // the 17-node grid's odd nodes are new
+        if (g != last / 2 && !node(g)) return false;
+      }
+      P_.col(k) = V_.col(g);
+      p.x[k] = grid[g];
+      p.w[k] = (k % 2 == 0 ? 1.0 : -1.0) * (k == 0 || k == n - 1 ? 0.5 : 1.0);
+    }
+    p.n = n;
+    // The scales: the largest balanced |A_ij| and each column's largest balanced |B_ij| over the nodes.
+    scaleA_ = 0.0;
+    scaleB_.setZero();
+    for (int k = 0; k < n; ++k) {
+      for (int j = 0; j < nx_; ++j) {
+        for (int i = 0; i < nx_; ++i) scaleA_ = std::max(scaleA_, std::abs(P_(i + j * nx_, k)) * d_(i) / d_(j));
+      }
+      for (int j = 0; j < nu_; ++j) {
+        for (int i = 0; i < nx_; ++i) {
+          scaleB_(j) = std::max(scaleB_(j), std::abs(P_(static_cast<Eigen::Index>(nx_) * nx_ + i + j * nx_, k)) * d_(i));
+        }
+      }
+    }
+    if (!tailsPass(n)) continue;
+    // The entries that vary over the nodes; the others keep the nodes' common value exactly (A's
+    // [0 I] rows, B's zeros: the structure the integrator detects, mechanicalPair, survives).
+    p.varying.clear();
+    for (Eigen::Index r = 0; r < e_; ++r) {
+      for (int k = 1; k < n; ++k) {
+        if (P_(r, k) != P_(r, 0)) {
+          p.varying.push_back(r);
+          break;
+        }
+      }
+    }
+    p.base = P_.col(0);
+    for (int k = 0; k < n; ++k) {
+      for (std::size_t r = 0; r < p.varying.size(); ++r) p.Pv(static_cast<Eigen::Index>(r), k) = P_(p.varying[r], k);
+    }
+    // One verification where no node is (a fraction of the piece between the 17-node grid's).
+    const double tv = lo + 0.2718281828459045 * (hi - lo);
+    if (!s.linearizeExact(tv, Ax_, Bx_)) return false;
+    exact_.head(static_cast<Eigen::Index>(nx_) * nx_) = Eigen::Map<const Eigen::VectorXd>(Ax_.data(), Ax_.size());
+    exact_.tail(static_cast<Eigen::Index>(nx_) * nu_) = Eigen::Map<const Eigen::VectorXd>(Bx_.data(), Bx_.size());
+    interpolate(p, tv);
+    tail_ = v_ - exact_;
+    if (scaledError(tail_) <= 10.0) {
+      p.lo = lo;
+      p.hi = hi;
+      return true;
+    }
+  }
+  return false;
+}
+
+bool ChebyshevLinearization::tailsPass(int n) {
+  // c_j = (2/(n−1)) Σ'' f_k cos(πjk/(n−1)) (Σ'': the end terms halved; c_{n−1} halved again).
+  cb_.setZero(kMaxNodes);
+  tail_.setZero();
+  for (int j : {n - 2, n - 1}) {
+    for (int k = 0; k < n; ++k) {
+      double c = (2.0 / (n - 1)) * std::cos(M_PI * j * k / (n - 1));
+      if (k == 0 || k == n - 1) c *= 0.5;
+      if (j == n - 1) c *= 0.5;
+      cb_(k) = c;
+    }
+    v_.noalias() = P_.leftCols(n) * cb_.head(n);
+    tail_ += v_.cwiseAbs();
+  }
+  return scaledError(tail_) <= 1.0;
+}
+
+double ChebyshevLinearization::scaledError(const Eigen::VectorXd& err) const {
+  double worst = 0.0;
+  const double floorA = kTol * scaleA_;
+  for (int j = 0; j < nx_; ++j) {
+    for (int i = 0; i < nx_; ++i) {
+      const double e = std::abs(err(i + j * nx_)) * d_(i) / d_(j);
+      if (e > 0.0) worst = std::max(worst, floorA > 0.0 ? e / floorA : std::numeric_limits<double>::infinity());
+    }
+  }
+  for (int j = 0; j < nu_; ++j) {
+    const double floorB = kTol * scaleB_(j);
+    for (int i = 0; i < nx_; ++i) {
+      const double e = std::abs(err(static_cast<Eigen::Index>(nx_) * nx_ + i + j * nx_)) * d_(i);
+      if (e > 0.0) worst = std::max(worst, floorB > 0.0 ? e / floorB : std::numeric_limits<double>::infinity());
+    }
+  }
+  return std::isfinite(worst) ? worst : std::numeric_limits<double>::infinity();
+}
+
+void ChebyshevLinearization::interpolate(const Piece& p, double t) {
+  v_ = p.base;
+  const Eigen::Index nv = static_cast<Eigen::Index>(p.varying.size());
+  int at = -1;
+  double sum = 0.0;
+  for (int k = 0; k < p.n; ++k) {
+    if (t == p.x[k]) {
+      at = k;
+      break;
+    }
+    cb_(k) = p.w[k] / (t - p.x[k]);
+    sum += cb_(k);
+  }
+  if (nv == 0) return;
+  if (at >= 0) {
+    for (Eigen::Index r = 0; r < nv; ++r) v_(p.varying[r]) = p.Pv(r, at);
+    return;
+  }
+  // v = P c / Σc (the barycentric formula) on the entries that vary: one product through matmul
+  // (dense_kernels.hpp).
+  detail::matmul(nv, 1, p.n, 1.0 / sum, p.Pv.data(), e_, cb_.data(), p.n, false, pv_.data(), nv, false);
+  for (Eigen::Index r = 0; r < nv; ++r) v_(p.varying[r]) = pv_(r);
+}
+
+void ChebyshevLinearization::unpack(Eigen::MatrixXd& A, Eigen::MatrixXd& B) const {
+  A.resize(nx_, nx_);
+  B.resize(nx_, nu_);
+  A = Eigen::Map<const Eigen::MatrixXd>(v_.data(), nx_, nx_);
+  B = Eigen::Map<const Eigen::MatrixXd>(v_.data() + static_cast<Eigen::Index>(nx_) * nx_, nx_, nu_);
+}
 
 /// The adaptive step control both integrators share: steps from a to b that end on every
 /// breakpoint inside (a knot: A(t) may have a kink there) and on b, at most maxSteps of them, none
@@ -669,17 +1007,19 @@ bool mechanicalPair(const Eigen::MatrixXd& A, const Eigen::MatrixXd& B) {
 /// and the twin's real and complex solves to p×p (ShiftedSolve, ComplexShiftedSolve); any other
 /// A takes the full ones. The stage cost, the estimate's products and the exponential's doublings
 /// run through matmul (dense_kernels.hpp).
-/// Where the time goes (callgrind, the 6-link swing at 100 Hz, docs/performance.md 2026-12-05): of
-/// the integration's ~0.85 G instructions ~27 % the three linearizations per step, ~30 % the rest
-/// of the step (stage solve, quadrature, estimate), ~25 % the twin, ~12 % the block exponentials;
-/// the step size is set by the embedded estimate (mostly its cost row), not by the growth limit.
+/// Where the time goes (callgrind, the 6-link swing at 100 Hz, docs/performance.md 2026-12-05,
+/// third session): of the integration's ~0.51 G instructions (0.86 G before the interpolated
+/// linearization and the small-LU kernels) ~14 % A, B (1 080 exact linearizations for 5 254 node
+/// evaluations, ChebyshevLinearization), ~40 % the rest of the step (stage solve, quadrature,
+/// estimate), ~28 % the twin, ~13 % the block exponentials; the step size is set by the embedded
+/// estimate (mostly its cost row), not by the growth limit. The stage cost's Q Y is a row scaling
+/// for a constant diagonal Q.
 /// Q Y and g = YᵀQY + blkdiag(0, R) at a step's last stage are the next step's start's: kept.
 class RadauIntegrator {
  public:
   RadauIntegrator(Discretizer& s, double rtol, long maxSteps)
       : s_(s), nx_(s.nx), nu_(s.nu), c_(s.nx + s.nu), rtol_(rtol),
-        M_(3 * s.nx, 3 * s.nx), rhs_(3 * s.nx, s.nx + s.nu),
-        rhsF_(3 * s.nx, s.nx + s.nu) {
+        M_(3 * s.nx, 3 * s.nx), rhs_(3 * s.nx, s.nx + s.nu) {
     control.maxSteps = maxSteps;
     control.method = "Radau";
     // The method's constants, written once (radau_tableau.hpp).
@@ -698,6 +1038,7 @@ class RadauIntegrator {
     const Eigen::Index p = nx_ / 2;
     MM_.resize(3 * p, 3 * p);
     rhsM_.resize(3 * p, c_);
+    vM_.resize(3 * p, c_);  // swapped with rhsM_ by every solve
     cVr_.resize(nx_, c_);
     cVi_.resize(nx_, c_);
     for (auto& x : A_) x.resize(nx_, nx_);
@@ -880,8 +1221,9 @@ class RadauIntegrator {
           rhs_.block(i * n, n, n, nu_) += (d * a_[i][j]) * B_[j];
         }
       }
-      lu_.compute(M_);
-      stages_.noalias() = lu_.solve(rhs_);
+      lu_.factor(M_);
+      lu_.solve(rhs_);
+      stages_.swap(rhs_);  // rhs_ is rewritten whole at the next step
     }
     // g_i = Y_iᵀ Q_i Y_i + blkdiag(0, R_i) at the stages; W_{n+1} = W_n + d Σ b_i g_i (b = a's last
     // row), and the cost's stage increments Z^W_i = d Σ_j a_ij g_j for the estimate.
@@ -940,7 +1282,13 @@ class RadauIntegrator {
                  Eigen::MatrixXd& qy, Eigen::MatrixXd& g) {
     const Eigen::Index n = nx_, c = c_;
     qy.resize(n, c);
-    detail::matmul(n, c, n, 1.0, Q.data(), n, Y, ld, false, qy.data(), n, false);
+    if (s_.qDiagonal) {  // Q = diag(q) (constant): Q Y scales Y's rows
+      for (Eigen::Index j = 0; j < c; ++j) {
+        for (Eigen::Index i = 0; i < n; ++i) qy(i, j) = s_.qd(i) * Y[i + j * ld];
+      }
+    } else {
+      detail::matmul(n, c, n, 1.0, Q.data(), n, Y, ld, false, qy.data(), n, false);
+    }
     transposedProduct(Y, ld, qy, 1.0, true, false, g);
     for (Eigen::Index j = 0; j < c; ++j) {
       for (Eigen::Index i = 0; i < j; ++i) g(j, i) = g(i, j);
@@ -995,8 +1343,9 @@ class RadauIntegrator {
         }
       }
     }
-    luM_.compute(MM_);
-    vM_.noalias() = luM_.solve(rhsM_);  // the velocity stages
+    luM_.factor(MM_);
+    luM_.solve(rhsM_);
+    vM_.swap(rhsM_);  // the velocity stages (rhsM_ is rewritten whole at the next step)
     // The stages: Yq_i = Yq_n + δ Σ_l a_il Yv_l, Yv_i (rows i·nx … of stages_, column stride 3nx).
     for (int i = 0; i < 3; ++i) {
       const double w0 = d * a_[i][0], w1 = d * a_[i][1], w2 = d * a_[i][2];
@@ -1015,23 +1364,26 @@ class RadauIntegrator {
   /// stage matrix is I − δ (a ⊗ A_f) and the forcing's stage sums are δ c_i [0 B_f].
   void twinStep(double d) {
     const Eigen::Index n = nx_;
-    for (int i = 0; i < 3; ++i) {
-      rhsF_.middleRows(i * n, n) = Y0_;
-      rhsF_.block(i * n, n, n, nu_) += (d * nodes_[i]) * Bf_;
-    }
     // (I − δ a⊗A_f) U = r with a = T Λ T⁻¹: V = (T⁻¹⊗I) U solves (I − δλ_k A_f) V_k = Σ_i T⁻¹_ki r_i,
     // one real nx×nx system (λ = γ0: the estimate's matrix, factored here for both) and one
-    // complex (μ; μ̄'s solution is its conjugate), U_i = T_i0 V_0 + 2 Re(T_i1 V_1).
+    // complex (μ; μ̄'s solution is its conjugate), U_i = T_i0 V_0 + 2 Re(T_i1 V_1). The stage
+    // right-hand sides are r_i = Y_f + δ c_i [0 B_f], so Σ_i T⁻¹_ki r_i = (Σ_i T⁻¹_ki) Y_f +
+    // δ (Σ_i T⁻¹_ki c_i) [0 B_f]: scaled copies, no stacked right-hand side.
     errSolveF_.factor(Af_, gamma0_ * d, mechF_);  // γ0: a's real eigenvalue
     // I − δμ A_f in split storage (shifted_solve.hpp).
     complexSolveF_.factor(Af_, mu_ * d, mechF_);
-    v0_ = Tinv_(0, 0).real() * rhsF_.topRows(n) + Tinv_(0, 1).real() * rhsF_.middleRows(n, n) +
-          Tinv_(0, 2).real() * rhsF_.bottomRows(n);
+    std::complex<double> sum[2], sumC[2];
+    for (int k = 0; k < 2; ++k) {
+      sum[k] = Tinv_(k, 0) + Tinv_(k, 1) + Tinv_(k, 2);
+      sumC[k] = d * (Tinv_(k, 0) * nodes_[0] + Tinv_(k, 1) * nodes_[1] + Tinv_(k, 2) * nodes_[2]);
+    }
+    v0_ = sum[0].real() * Y0_;
+    v0_.rightCols(nu_) += sumC[0].real() * Bf_;
     errSolveF_.solve(v0_);
-    cVr_ = Tinv_(1, 0).real() * rhsF_.topRows(n) + Tinv_(1, 1).real() * rhsF_.middleRows(n, n) +
-           Tinv_(1, 2).real() * rhsF_.bottomRows(n);
-    cVi_ = Tinv_(1, 0).imag() * rhsF_.topRows(n) + Tinv_(1, 1).imag() * rhsF_.middleRows(n, n) +
-           Tinv_(1, 2).imag() * rhsF_.bottomRows(n);
+    cVr_ = sum[1].real() * Y0_;
+    cVr_.rightCols(nu_) += sumC[1].real() * Bf_;
+    cVi_ = sum[1].imag() * Y0_;
+    cVi_.rightCols(nu_) += sumC[1].imag() * Bf_;
     complexSolveF_.solve(cVr_, cVi_);
     for (int i = 0; i < 3; ++i) {  // 2 Re(T_i1 V_1)
       stagesF_.middleRows(i * n, n) =
@@ -1074,16 +1426,16 @@ class RadauIntegrator {
   double t0_ = std::numeric_limits<double>::quiet_NaN();  ///< where A0_.. were evaluated
   Eigen::MatrixXd A_[3], B_[3], Q_[3], R_[3], A0_, B0_, Q0_, R0_;
   Eigen::MatrixXd M_, rhs_, stages_, QY_, Yn_, Wn_, g_, f0_, rY_, rW_, errY_, errW_, eW_;
-  Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
+  detail::SmallLu lu_;
   detail::ShiftedSolve errSolve_;  ///< the estimate's filter I − γ0δA_n
   // The halved stage system of a mechanical step (mechanicalStages).
   bool mech0_ = false;  ///< A_n, B_n mechanical (the filter halves)
   Eigen::MatrixXd MM_, rhsM_, vM_, aqY_[3];
   Eigen::MatrixXd yt_;  ///< stageCost's Yᵀ
-  Eigen::PartialPivLU<Eigen::MatrixXd> luM_;
+  detail::SmallLu luM_;
   // The frozen twin: A, B, Q, R at the interval's start, its exact blocks (Ef_, Wf_), its Radau
   // state and step (as above).
-  Eigen::MatrixXd Af_, Bf_, Qf_, Rf_, zf_, pf_, Ef_, Wf_, Y0_, W0_, YnF_, WnF_, rhsF_, stagesF_, f0f_, errYf_,
+  Eigen::MatrixXd Af_, Bf_, Qf_, Rf_, zf_, pf_, Ef_, Wf_, Y0_, W0_, YnF_, WnF_, stagesF_, f0f_, errYf_,
       rWf_, errYd_;
   // Q Y and g = YᵀQY + blkdiag(0, R) at the step's start (…0_) and end (…n_), both systems.
   Eigen::MatrixXd QY0_, g0_, QYn_, gn_, QY0F_, g0F_, QYnF_, gnF_;
@@ -1115,6 +1467,8 @@ std::string SampledDiscretization::json() const {
   j["constant_intervals"] = constantIntervals;
   j["exponentials"] = exponentials;
   j["bisections"] = bisections;
+  j["interpolation_pieces"] = interpolationPieces;
+  j["interpolation_fallbacks"] = interpolationFallbacks;
   return j.dump();
 }
 
@@ -1208,7 +1562,7 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
     }
     if (std::isfinite(c)) {
       // Constant on [a, b]: the exact exponential of its A, B, Q, R (no integration).
-      if (!s.evaluate(c)) {
+      if (!s.evaluate(c, false)) {  // exact: the sharing below compares A, B
         out.status.set(SampledCode::kCallbackFailure,
                        "sampled-data discretization: interval " + std::to_string(k) + " [" + std::to_string(a) +
                            ", " + std::to_string(b) + "], constant, evaluated at t = " + std::to_string(c) + ": " +
@@ -1255,7 +1609,18 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
         if (!magnus) magnus.emplace(s, rtol, options.maxSteps);
         done = magnus->integrate(a, b, structure.breakpoints, magnusE, magnusW);
       } else {
-        if (!radau) radau.emplace(s, rtol, options.maxSteps);
+        if (!radau) {
+          radau.emplace(s, rtol, options.maxSteps);
+          if (options.interpolateLinearization && structure.smoothBetweenBreakpoints) {
+            // The pieces end on the breakpoints inside [t_0, t_N] (ChebyshevLinearization).
+            std::vector<double> stops{times(0)};
+            for (const double t : structure.breakpoints) {
+              if (t > stops.back() && t < times(times.size() - 1)) stops.push_back(t);
+            }
+            stops.push_back(times(times.size() - 1));
+            s.cheb = std::make_unique<ChebyshevLinearization>(nx, nu, std::move(stops));
+          }
+        }
         done = radau->integrate(a, b, structure.breakpoints, magnusE, magnusW);
         magnusE.conservativeResize(nx + nu, nx + nu);  // [[Φ, Γ], [0, I]] from Y = [Φ Γ]
         magnusE.bottomRows(nu).setZero();
@@ -1337,6 +1702,10 @@ SampledDiscretization discretizeSampledData(const Eigen::VectorXd& times, int nx
   if (radau) {
     out.steps += radau->control.steps;
     out.exponentials += radau->exponentials;
+  }
+  if (s.cheb) {
+    out.interpolationPieces = s.cheb->pieces;
+    out.interpolationFallbacks = s.cheb->fallbacks;
   }
   out.linearizations = s.linearizations;
   return out;

@@ -433,6 +433,9 @@ TvlqrSolution solveTvlqr(const Model& model, const Trajectory& input, const LqrW
   SampledStructure structure;
   if (!sol.constrained && !weights.Qfun && !weights.Rfun) structure.constantOn = ConstantStretches(reference);
   structure.breakpoints.assign(reference.times().data(), reference.times().data() + reference.times().size());
+  // Between knots the reference is polynomial and A, B its exact linearization: analytic there
+  // unless a constraint basis is transported along it (its dense output has joints of its own).
+  structure.smoothBetweenBreakpoints = !sol.constrained;
 
   // The plant runs of the held feed-forward (file comment): per interval the defect d_k that u_ref(t_k)
   // held leaves at t_{k+1}, and that of the written ū_k, in the metric of S_{k+1} once the gains

@@ -75,13 +75,17 @@ void bindTvlqr(py::module_& m) {
       "default; MAGNUS for non-stiff systems; BDF: CVODES per interval), rtol, atol (BDF only), "
       "max_steps, and "
       "exact_constant_intervals (default True: intervals where the reference is exactly constant, "
-      "e.g. a held pose, by the exact block exponential instead of the integration).")
+      "e.g. a held pose, by the exact block exponential instead of the integration), "
+      "interpolate_linearization (default True: with RADAU along an unconstrained reference, A(t), "
+      "B(t) between knots from a checked Chebyshev interpolant of exact linearizations, to 1e-12 "
+      "of their balanced scale, else exact).")
       .def(py::init(&makeFromKwargs<SampledDiscretizationOptions>))
       .def_readwrite("integrator", &SampledDiscretizationOptions::integrator)
       .def_readwrite("rtol", &SampledDiscretizationOptions::rtol)
       .def_readwrite("atol", &SampledDiscretizationOptions::atol)
       .def_readwrite("max_steps", &SampledDiscretizationOptions::maxSteps)
-      .def_readwrite("exact_constant_intervals", &SampledDiscretizationOptions::exactConstantIntervals);
+      .def_readwrite("exact_constant_intervals", &SampledDiscretizationOptions::exactConstantIntervals)
+      .def_readwrite("interpolate_linearization", &SampledDiscretizationOptions::interpolateLinearization);
 
   py::class_<TvlqrOptions>(m, "TvlqrOptions",
       "Options of solve_tvlqr (keywords): sample_rate (0: continuous; f > 0: zero-order hold at f "

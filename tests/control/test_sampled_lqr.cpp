@@ -1013,3 +1013,121 @@ TEST_CASE("sampled LQR: Radau's embedded estimate at its default rtol on the sti
     CHECK_THROWS_WITH(tight.sampled.validate(), Catch::Contains("rtol = -1e-06"));
   }
 }
+
+TEST_CASE("sampled LQR: Radau's A(t), B(t) interpolated between knots agree with the exact ones, and are exact where not smooth",
+          "[sampled][radau][interpolation]") {
+  // SampledStructure::smoothBetweenBreakpoints: A, B from a checked Chebyshev interpolant of exact
+  // linearizations per piece between breakpoints (sampled_lqr.cpp, ChebyshevLinearization). The
+  // blocks and gains against the same integration with A, B exact at every node.
+  LqrWeights w;
+  w.Q = VectorXd((VectorXd(4) << 10.0, 10.0, 1.0, 1.0).finished()).asDiagonal();
+  w.R = MatrixXd::Identity(2, 2);
+  w.Qf = w.Q;
+  const VectorXd times = trellis::sampleTimes(0.0, 0.5, 100.0);
+  trellis::SampledStructure knots;
+  for (int i = 0; i <= 25; ++i) knots.breakpoints.push_back(0.02 * i);  // knots every 20 ms
+  knots.smoothBetweenBreakpoints = true;
+  trellis::SampledDiscretizationOptions on, off;
+  off.interpolateLinearization = false;
+  auto compare = [&](const trellis::LinearizationCallback& lin, const trellis::SampledStructure& s, long* pieces,
+                     long* fallbacks) {
+    const auto a = trellis::discretizeSampledData(times, 4, 2, lin, w, on, s);
+    const auto b = trellis::discretizeSampledData(times, 4, 2, lin, w, off, s);
+    REQUIRE(a.ok());
+    REQUIRE(b.ok());
+    CHECK(b.interpolationPieces == 0);
+    double worst = 0.0;
+    for (std::size_t k = 0; k < a.intervals.size(); ++k) worst = std::max(worst, intervalDifference(b.intervals[k], a.intervals[k]));
+    INFO("pieces " << a.interpolationPieces << ", fallbacks " << a.interpolationFallbacks << ", linearizations "
+                   << a.linearizations << " against " << b.linearizations);
+    CHECK(worst < 1e-10);
+    CHECK(recursionGainDifference(b, a, w.Qf) < 1e-10);
+    CHECK(a.steps == b.steps);  // the same steps: A, B agree to far below what the estimate sees
+    *pieces = a.interpolationPieces;
+    *fallbacks = a.interpolationFallbacks;
+    return a.linearizations < b.linearizations;
+  };
+  long pieces = 0, fallbacks = 0;
+  SECTION("smooth between the knots: every span interpolated, far fewer linearizations") {
+    const trellis::LinearizationCallback lin = [](double t, MatrixXd& A, MatrixXd& B) { return stiffPair(t, A, B); };
+    CHECK(compare(lin, knots, &pieces, &fallbacks));
+    CHECK(pieces == 25);
+    CHECK(fallbacks == 0);
+    // Without the caller's word nothing is interpolated.
+    trellis::SampledStructure unknown = knots;
+    unknown.smoothBetweenBreakpoints = false;
+    const auto d = trellis::discretizeSampledData(times, 4, 2, lin, w, on, unknown);
+    REQUIRE(d.ok());
+    CHECK(d.interpolationPieces == 0);
+    CHECK_THAT(d.json(), Catch::Contains("\"interpolation_pieces\":0"));
+  }
+  SECTION("a kink and a jump the caller did not declare: those pieces halved, then evaluated exactly") {
+    for (const bool jump : {false, true}) {
+      INFO((jump ? "jump" : "kink") << " at t = 0.1537");
+      const trellis::LinearizationCallback lin = [jump](double t, MatrixXd& A, MatrixXd& B) {
+        stiffPair(t, A, B);
+        const double s = t - 0.1537;
+        A(3, 0) += jump ? (s > 0.0 ? 40.0 : 0.0) : 400.0 * std::abs(s);
+        B(2, 1) += jump ? 0.0 : 3.0 * std::abs(s);
+        return trellis::ReferenceStatus{};
+      };
+      compare(lin, knots, &pieces, &fallbacks);
+      CHECK(fallbacks == 1);  // the one piece (1/8 of a span) that holds the kink
+      CHECK(pieces >= 25 + 2);  // the span's other pieces, interpolated
+    }
+  }
+  SECTION("the check's verdicts do not depend on the states' units") {
+    // x' = D x: A' = D A D⁻¹, B' = D B, Q' = D⁻¹ Q D⁻¹ (the same cost); the same pieces and
+    // fallbacks (a kink included).
+    const VectorXd dvec = (VectorXd(4) << 1e3, 1.0, 1e-2, 7.0).finished();
+    const MatrixXd D = dvec.asDiagonal(), Di = dvec.cwiseInverse().asDiagonal();
+    auto base = [](double t, MatrixXd& A, MatrixXd& B) {
+      stiffPair(t, A, B);
+      A(3, 0) += 400.0 * std::abs(t - 0.1537);
+      return trellis::ReferenceStatus{};
+    };
+    const trellis::LinearizationCallback lin = base;
+    const trellis::LinearizationCallback scaled = [&](double t, MatrixXd& A, MatrixXd& B) {
+      base(t, A, B);
+      A = D * A * Di;
+      B = D * B;
+      return trellis::ReferenceStatus{};
+    };
+    LqrWeights ws = w;
+    ws.Q = Di * w.Q * Di;
+    ws.Qf = Di * w.Qf * Di;
+    const auto a = trellis::discretizeSampledData(times, 4, 2, lin, w, on, knots);
+    const auto b = trellis::discretizeSampledData(times, 4, 2, scaled, ws, on, knots);
+    REQUIRE(a.ok());
+    REQUIRE(b.ok());
+    CHECK(a.interpolationPieces == b.interpolationPieces);
+    CHECK(a.interpolationFallbacks == b.interpolationFallbacks);
+    CHECK(a.interpolationFallbacks == 1);
+    // Each against its own exact-A integration (the integrator's step control is not what is
+    // tested here).
+    const auto offA = trellis::discretizeSampledData(times, 4, 2, lin, w, off, knots);
+    const auto offB = trellis::discretizeSampledData(times, 4, 2, scaled, ws, off, knots);
+    CHECK(recursionGainDifference(offA, a, w.Qf) < 1e-10);
+    CHECK(recursionGainDifference(offB, b, ws.Qf) < 1e-10);
+  }
+}
+
+TEST_CASE("solveTvlqr sampled: an unconstrained reference's linearization is interpolated between knots, the gains unchanged",
+          "[sampled][radau][interpolation]") {
+  // The 6-link chain's swing at 100 Hz (knots every 20 ms): the same gains as with A, B exact at
+  // every node, from a fraction of the linearizations.
+  const Model model = trellis::ctest::makeDampedChain(6);
+  const SimulationResult swing = chainSwing(model, 0.3);
+  REQUIRE(swing.ok());
+  const LqrWeights w = unitWeights(12, 6);
+  trellis::TvlqrOptions on, off;
+  on.sampleRate = off.sampleRate = 100.0;
+  off.sampled.interpolateLinearization = false;
+  const trellis::TvlqrSolution a = trellis::solveTvlqr(model, swing.trajectory, w, on);
+  const trellis::TvlqrSolution b = trellis::solveTvlqr(model, swing.trajectory, w, off);
+  REQUIRE(a.ok());
+  REQUIRE(b.ok());
+  INFO("linearizations " << a.linearizations << " against " << b.linearizations);
+  CHECK(gainDifference(b.gains.gains(), a.gains.gains()) < 1e-10);
+  CHECK(3 * a.linearizations < b.linearizations);
+}

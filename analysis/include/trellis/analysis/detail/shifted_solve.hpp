@@ -8,15 +8,16 @@
 // For a second-order A = [[0, I], [Aq, Av]] (x = [q; v], p = n/2 each) the rows
 //   xq − κ xv = rq,  xv − κ (Aq xq + Av xv) = rv
 // give (I − κAv − κ²Aq) xv = rv + κ Aq rq and xq = rq + κ xv: one p×p factorization instead of
-// the n×n one (8× fewer flops) and half the substitution. The complex solve keeps the matrix in
-// split storage (split_complex_lu.hpp); the A_q products run through matmul (dense_kernels.hpp).
+// the n×n one (8× fewer flops) and half the substitution. The real solve is a SmallLu (row
+// operations across all the columns: small_lu.hpp), the complex one keeps the matrix in split
+// storage (split_complex_lu.hpp); the A_q products run through matmul (dense_kernels.hpp).
 // Allocates only in resize() (and on a first call with another size or column count).
 #pragma once
 
+#include "trellis/analysis/detail/small_lu.hpp"
 #include "trellis/analysis/detail/split_complex_lu.hpp"
 
 #include <Eigen/Core>
-#include <Eigen/LU>
 
 #include <complex>
 
@@ -35,7 +36,7 @@ class ShiftedSolve {
   bool secondOrder_ = false;
   double kappa_ = 0.0;
   Eigen::MatrixXd M_, Aq_, t_;
-  Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
+  SmallLu lu_;
 };
 
 class ComplexShiftedSolve {
