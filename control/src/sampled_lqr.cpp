@@ -20,6 +20,7 @@
 #include <cstdlib>
 #include <limits>
 #include <memory>
+#include <numbers>
 #include <optional>
 #include <sstream>
 #include <stdexcept>
@@ -514,7 +515,7 @@ bool ChebyshevLinearization::build(double lo, double hi, Discretizer& s, Piece& 
   const double mid = 0.5 * (lo + hi), half = 0.5 * (hi - lo);
   const int last = kMaxNodes - 1;
   double grid[kMaxNodes];
-  for (int k = 0; k < kMaxNodes; ++k) grid[k] = mid + half * std::cos(M_PI * k / last);
+  for (int k = 0; k < kMaxNodes; ++k) grid[k] = mid + half * std::cos(std::numbers::pi * k / last);
   grid[0] = hi;
   grid[last] = lo;
   grid[last / 2] = mid;
@@ -610,7 +611,7 @@ bool ChebyshevLinearization::tailsPass(int n) {
   tail_.setZero();
   for (int j : {n - 2, n - 1}) {
     for (int k = 0; k < n; ++k) {
-      double c = (2.0 / (n - 1)) * std::cos(M_PI * j * k / (n - 1));
+      double c = (2.0 / (n - 1)) * std::cos(std::numbers::pi * j * k / (n - 1));
       if (k == 0 || k == n - 1) c *= 0.5;
       if (j == n - 1) c *= 0.5;
       cb_(k) = c;
@@ -1008,7 +1009,7 @@ bool mechanicalPair(const Eigen::MatrixXd& A, const Eigen::MatrixXd& B) {
 /// A takes the full ones. The stage cost, the estimate's products and the exponential's doublings
 /// run through matmul (dense_kernels.hpp).
 /// Where the time goes (callgrind, the 6-link swing at 100 Hz, docs/performance.md 2026-12-05,
-/// third session): of the integration's ~0.51 G instructions (0.86 G before the interpolated
+/// fourth session): of the integration's ~0.51 G instructions (0.86 G before the interpolated
 /// linearization and the small-LU kernels) ~14 % A, B (1 080 exact linearizations for 5 254 node
 /// evaluations, ChebyshevLinearization), ~40 % the rest of the step (stage solve, quadrature,
 /// estimate), ~28 % the twin, ~13 % the block exponentials; the step size is set by the embedded
